@@ -1,0 +1,1 @@
+//! `bvh`: to be written (see the module table in the crate docs).

@@ -1,0 +1,24 @@
+//! # guidebake (driver)
+//!
+//! The std half of guidebake: scenes in, memory-mapped texel files, the streaming guided
+//! bake, EXR lightmaps out, and the benchmark harness. The SIMD kernels live in
+//! [`guidebake_kernels`]; this crate feeds them.
+//!
+//! | module | what |
+//! |---|---|
+//! | [`texels`] | the texel file: streaming writer, validating memory-mapped reader |
+//! | [`scene`] | glTF / OBJ scenes, lights, sky |
+//! | [`bvh`] | obvhs build, flattened into the kernels' node layout; robust ray origins |
+//! | [`prepare`] | lightmap UV rasterization into texel tiles |
+//! | [`synth`] | procedural worlds of any size, streamed |
+//! | [`preview`] | PNG figures and tone-mapped previews |
+//! | [`cmd`] | the `guidebake` subcommands |
+#![deny(unsafe_op_in_unsafe_fn)]
+
+pub mod bvh;
+pub mod cmd;
+pub mod prepare;
+pub mod preview;
+pub mod scene;
+pub mod synth;
+pub mod texels;

@@ -1,0 +1,48 @@
+//! The `guidebake` command line. See README.md for the two commands a new user runs first.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use guidebake::cmd;
+
+/// guidebake: a CPU lightmap baker with ray guiding (Silvennoinen & Sloan 2019).
+#[derive(Debug, Parser)]
+#[command(name = "guidebake", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Render the presorted Sobol packets (paper Figure 3) to a PNG.
+    Samples(cmd::samples::SamplesArgs),
+    /// Rasterize a scene's lightmap UVs into a memory-mapped texel file.
+    Prepare(cmd::prepare::PrepareArgs),
+    /// Write a procedural world of N texels and its scene, streaming.
+    Synth(cmd::synth::SynthArgs),
+    /// Print a texel file's header and counts; dump chosen texels as JSON.
+    Inspect(cmd::inspect::InspectArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Samples(a) => cmd::samples::run(a),
+        Command::Prepare(a) => cmd::prepare::run(a),
+        Command::Synth(a) => cmd::synth::run(a),
+        Command::Inspect(a) => cmd::inspect::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("guidebake: {e}");
+            let mut source = e.source();
+            while let Some(s) = source {
+                eprintln!("  caused by: {s}");
+                source = s.source();
+            }
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! `prepare`: to be written (see the module table in the crate docs).

@@ -1,0 +1,1 @@
+//! `preview`: to be written (see the module table in the crate docs).

@@ -1,0 +1,1 @@
+//! `scene`: to be written (see the module table in the crate docs).

@@ -1,0 +1,1 @@
+//! `synth`: to be written (see the module table in the crate docs).

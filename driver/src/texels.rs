@@ -1,0 +1,1 @@
+//! `texels`: to be written (see the module table in the crate docs).

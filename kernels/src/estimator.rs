@@ -1,0 +1,1 @@
+//! `estimator`: to be written (see the module table in the crate docs).

@@ -1,0 +1,1 @@
+//! `guide`: to be written (see the module table in the crate docs).

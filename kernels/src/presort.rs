@@ -1,0 +1,1 @@
+//! `presort`: to be written (see the module table in the crate docs).

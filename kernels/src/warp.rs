@@ -1,0 +1,1 @@
+//! `warp`: to be written (see the module table in the crate docs).
