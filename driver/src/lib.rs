@@ -11,12 +11,14 @@
 //! | [`bvh`] | obvhs build, flattened into the kernels' node layout; robust ray origins |
 //! | [`prepare`] | lightmap UV rasterization into texel tiles |
 //! | [`synth`] | procedural worlds of any size, streamed |
+//! | [`output`] | result file, journal of finished tiles, ρ, EXR pages |
 //! | [`preview`] | PNG figures and tone-mapped previews |
 //! | [`cmd`] | the `guidebake` subcommands |
 #![deny(unsafe_op_in_unsafe_fn)]
 
 pub mod bvh;
 pub mod cmd;
+pub mod output;
 pub mod prepare;
 pub mod preview;
 pub mod scene;
