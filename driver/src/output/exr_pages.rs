@@ -245,7 +245,7 @@ mod tests {
                 .channel_data
                 .list
                 .iter()
-                .find(|c| c.name == exr::prelude::Text::from(name))
+                .find(|c| c.name == *name)
                 .unwrap();
             c.sample_data.values_as_f32().collect::<Vec<f32>>()
         };
