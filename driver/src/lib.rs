@@ -8,6 +8,7 @@
 //! |---|---|
 //! | [`texels`] | the texel file: streaming writer, validating memory-mapped reader |
 //! | [`scene`] | glTF / OBJ scenes, lights, sky |
+//! | [`bake`] | the streaming bake: shards, resume, the bounded tile pipeline |
 //! | [`bvh`] | obvhs build, flattened into the kernels' node layout; robust ray origins |
 //! | [`prepare`] | lightmap UV rasterization into texel tiles |
 //! | [`synth`] | procedural worlds of any size, streamed |
@@ -16,6 +17,7 @@
 //! | [`cmd`] | the `guidebake` subcommands |
 #![deny(unsafe_op_in_unsafe_fn)]
 
+pub mod bake;
 pub mod bvh;
 pub mod cmd;
 pub mod output;

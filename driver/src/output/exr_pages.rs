@@ -120,9 +120,10 @@ impl PageImage {
             for y in 0..self.height {
                 for x in 0..self.width {
                     if !filled[y * self.width + x]
-                        && let Some(mean) = self.neighbour_mean(&filled, x, y) {
-                            next.push((y * self.width + x, mean));
-                        }
+                        && let Some(mean) = self.neighbour_mean(&filled, x, y)
+                    {
+                        next.push((y * self.width + x, mean));
+                    }
                 }
             }
             if next.is_empty() {

@@ -230,12 +230,13 @@ impl Journal {
             )));
         }
         if let Some((tiles, bake_id)) = expect
-            && (header.tile_count != tiles || header.bake_id != bake_id) {
-                return Err(mismatch(format!(
-                    "belongs to another bake (tiles {}, id {:016x}; this bake: tiles {tiles}, id {bake_id:016x})",
-                    header.tile_count, header.bake_id
-                )));
-            }
+            && (header.tile_count != tiles || header.bake_id != bake_id)
+        {
+            return Err(mismatch(format!(
+                "belongs to another bake (tiles {}, id {:016x}; this bake: tiles {tiles}, id {bake_id:016x})",
+                header.tile_count, header.bake_id
+            )));
+        }
         let records = intact_records(&bytes[HEADER_BYTES as usize..], header.tile_count);
         let intact_len = HEADER_BYTES + records.len() as u64 * RECORD_BYTES;
         if writable && intact_len != len {

@@ -207,12 +207,13 @@ impl ResultFile {
             )));
         }
         if let Some((texels, bake_id)) = expect
-            && (header.texel_count != texels || header.bake_id != bake_id) {
-                return Err(mismatch(format!(
-                    "belongs to another bake (texels {}, id {:016x}; this bake: texels {texels}, id {bake_id:016x})",
-                    header.texel_count, header.bake_id
-                )));
-            }
+            && (header.texel_count != texels || header.bake_id != bake_id)
+        {
+            return Err(mismatch(format!(
+                "belongs to another bake (texels {}, id {:016x}; this bake: texels {texels}, id {bake_id:016x})",
+                header.texel_count, header.bake_id
+            )));
+        }
         let texel_count = header.texel_count;
         Ok((
             Self {
