@@ -14,6 +14,7 @@
 //! | [`synth`] | procedural worlds of any size, streamed |
 //! | [`output`] | result file, journal of finished tiles, ρ, EXR pages |
 //! | [`preview`] | PNG figures and tone-mapped previews |
+//! | [`transport`] | light transport: next-event estimation of analytic lights |
 //! | [`cmd`] | the `guidebake` subcommands |
 #![deny(unsafe_op_in_unsafe_fn)]
 
@@ -26,3 +27,4 @@ pub mod preview;
 pub mod scene;
 pub mod synth;
 pub mod texels;
+pub mod transport;
