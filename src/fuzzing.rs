@@ -34,7 +34,9 @@ impl Drop for ScratchFile {
 /// whole, intact records, and the file is truncated to exactly those.
 pub fn journal(data: &[u8]) {
     let file = ScratchFile::with(data);
-    let Ok((_, header, records)) = Journal::open(&file.0, true, None) else { return };
+    let Ok((_, header, records)) = Journal::open(&file.0, true, None) else {
+        return;
+    };
     assert!(records.iter().all(|r| r.tile < header.tile_count));
     let len = std::fs::metadata(&file.0).expect("still there").len();
     assert_eq!(len, 64 + 48 * records.len() as u64, "torn tail truncated");
@@ -46,13 +48,17 @@ pub fn journal(data: &[u8]) {
 /// record can be read.
 pub fn result_file(data: &[u8]) {
     let file = ScratchFile::with(data);
-    let Ok((results, header)) = ResultFile::open(&file.0, false, None) else { return };
+    let Ok((results, header)) = ResultFile::open(&file.0, false, None) else {
+        return;
+    };
     assert_eq!(results.texel_count(), header.texel_count);
     let mut buffer = [TexelResult::default(); 64];
     let mut first = 0;
     while first < header.texel_count {
         let n = (header.texel_count - first).min(64) as usize;
-        results.read(first, &mut buffer[..n]).expect("declared records are readable");
+        results
+            .read(first, &mut buffer[..n])
+            .expect("declared records are readable");
         first += n as u64;
     }
     assert!(results.read(header.texel_count, &mut buffer[..1]).is_err());

@@ -18,10 +18,20 @@ fn every_corpus_input_passes_its_target() {
             let path = entry.expect("readable corpus directory").path();
             let bytes = std::fs::read(&path).expect("readable corpus file");
             let outcome = std::panic::catch_unwind(|| body(&bytes));
-            assert!(outcome.is_ok(), "fuzz target {name} fails on {}", path.display());
+            assert!(
+                outcome.is_ok(),
+                "fuzz target {name} fails on {}",
+                path.display()
+            );
             replayed += 1;
         }
     }
-    assert!(replayed >= TARGETS.len(), "the corpus is not empty ({replayed} inputs)");
-    println!("replayed {replayed} fuzz corpus inputs over {} targets", TARGETS.len());
+    assert!(
+        replayed >= TARGETS.len(),
+        "the corpus is not empty ({replayed} inputs)"
+    );
+    println!(
+        "replayed {replayed} fuzz corpus inputs over {} targets",
+        TARGETS.len()
+    );
 }

@@ -9,6 +9,7 @@
 //! | [`texels`] | the texel file: streaming writer, validating memory-mapped reader |
 //! | [`scene`] | glTF / OBJ scenes, lights, sky |
 //! | [`bake`] | the streaming bake: shards, resume, the bounded tile pipeline |
+//! | [`demo`] | the bundled default scene: a room lit through a door ajar |
 //! | [`bvh`] | obvhs build, flattened into the kernels' node layout; robust ray origins |
 //! | [`prepare`] | lightmap UV rasterization into texel tiles |
 //! | [`synth`] | procedural worlds of any size, streamed |
@@ -21,6 +22,7 @@
 pub mod bake;
 pub mod bvh;
 pub mod cmd;
+pub mod demo;
 pub mod output;
 pub mod prepare;
 pub mod preview;
