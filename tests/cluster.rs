@@ -99,10 +99,12 @@ fn random_texels_respect_both_limits() {
             ClusterParams {
                 max_texels: 16,
                 max_normal_angle_deg: 30.0,
+                normal_split: true,
             },
             ClusterParams {
                 max_texels: 1000,
                 max_normal_angle_deg: 90.0,
+                normal_split: false,
             },
         ] {
             cluster(&p, &n, &params);
@@ -256,8 +258,8 @@ fn box_corner_faces_separate_under_a_tighter_cone() {
         &p,
         &n,
         &ClusterParams {
-            max_texels: 64,
             max_normal_angle_deg: 30.0,
+            ..Default::default()
         },
     );
     eprintln!(
@@ -267,7 +269,23 @@ fn box_corner_faces_separate_under_a_tighter_cone() {
         tight.ranges.len(),
         count_mixed(&tight)
     );
+    let spatial = cluster(
+        &p,
+        &n,
+        &ClusterParams {
+            max_normal_angle_deg: 30.0,
+            normal_split: false,
+            ..Default::default()
+        },
+    );
+    eprintln!(
+        "corner, 30°, purely spatial splits: {} clusters",
+        spatial.ranges.len()
+    );
     assert_eq!(count_mixed(&tight), 0);
+    assert_eq!(count_mixed(&spatial), 0);
+    // splitting a crease by normal keeps clusters large: 3 faces × 256 texels need ≥ 12
+    assert!(tight.ranges.len() <= 32, "{} clusters", tight.ranges.len());
     // clusters are compact: at most 64 texels each, so at least 3·256/64 of them
     assert!(default.ranges.len() >= 12);
 }
