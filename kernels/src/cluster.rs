@@ -503,8 +503,8 @@ mod tests {
         let p: [[f32; 3]; 16] = core::array::from_fn(|i| [i as f32, 0.0, 0.0]);
         let n: [[f32; 3]; 16] = core::array::from_fn(|i| [0.0, libm::sinf(i as f32), 1.0]);
         let params = ClusterParams {
-            max_texels: 64,
             max_normal_angle_deg: 0.0,
+            ..Default::default()
         };
         let (_, count) = run(&p, &n, &params);
         assert_eq!(
