@@ -5,5 +5,8 @@
 //! run bakes ([`shard`]), and the bounded worker/writer [`pipeline`] that commits finished
 //! tiles to the [result file and journal](crate::output).
 
+pub mod gather;
 pub mod pipeline;
+pub mod settings;
 pub mod shard;
+pub mod world;
