@@ -7,6 +7,7 @@
 
 pub mod gather;
 pub mod pipeline;
+pub mod run;
 pub mod settings;
 pub mod shard;
 pub mod world;
