@@ -224,7 +224,7 @@ mod tests {
             u32::MAX - 1,
             u32::MAX,
         ];
-        let mut check = |lanes: [u32; 8]| {
+        let check = |lanes: [u32; 8]| {
             let [x, y] = sobol_2d_x8(u32x8::new(lanes));
             for (i, &l) in lanes.iter().enumerate() {
                 assert_eq!([x.to_array()[i], y.to_array()[i]], sobol_2d(l), "index {l}");
