@@ -180,7 +180,7 @@ pub fn tonemap_reinhard(rgb: [f32; 3], exposure: f32) -> [u8; 3] {
 /// neighbours (consecutive packets) never get similar colours.
 pub fn categorical_color(i: usize) -> [u8; 3] {
     let hue = (i as f64 * 0.618_033_988_749_895).fract();
-    let value = if i % 2 == 0 { 0.95 } else { 0.75 };
+    let value = if i.is_multiple_of(2) { 0.95 } else { 0.75 };
     hsv_to_rgb8(hue as f32, 0.85, value)
 }
 
