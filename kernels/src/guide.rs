@@ -76,6 +76,8 @@ pub struct GuideParams {
     /// Depth cap; the root has depth 0 (default 10, clamped to [`MAX_DEPTH`]).
     pub max_depth: u32,
     /// Ambient floor on every leaf's density relative to the mean (default [`DEFAULT_AMBIENT`]).
+    /// 0 lets leaves without flux get probability 0 (and the warp never goes there), which
+    /// biases an estimator if radiance arrives there after all; for tests and inspection.
     pub ambient: f32,
     /// Smoothing strength α ∈ [0, 1] (default [`DEFAULT_ALPHA`]); 0 disables smoothing,
     /// 1 makes every node uniform over its children.
@@ -428,17 +430,23 @@ fn smooth(nodes: &mut [Node], alpha: f64) {
             nodes[i].py = [1.0, 1.0];
             continue;
         };
-        let raw: [f64; 4] = core::array::from_fn(|q| f64::from(nodes[c + q].mass));
-        let sum: f64 = raw.iter().sum();
+        let mut raw: [f64; 4] = core::array::from_fn(|q| f64::from(nodes[c + q].mass));
+        let mut sum: f64 = raw.iter().sum();
+        if !(sum > 0.0) {
+            // Only with `ambient = 0`: a node without flux spreads its (zero) mass evenly.
+            (raw, sum) = ([0.25; 4], 1.0);
+        }
         let parent = f64::from(n.mass);
         let m: [f64; 4] =
             core::array::from_fn(|q| parent * ((1.0 - alpha) * raw[q] / sum + alpha * 0.25));
         for q in 0..4 {
             nodes[c + q].mass = m[q] as f32;
         }
-        let total = m[0] + m[1] + m[2] + m[3];
-        nodes[i].px = ((m[0] + m[2]) / total) as f32;
-        nodes[i].py = [(m[0] / (m[0] + m[2])) as f32, (m[1] / (m[1] + m[3])) as f32];
+        // A ratio 0/0 (zero-mass parent, only with `ambient = 0`) becomes ½: the node is
+        // unreachable by sampling, and `pdf` there is 0 through its parent's factor.
+        let ratio = |a: f64, b: f64| if b > 0.0 { (a / b) as f32 } else { 0.5 };
+        nodes[i].px = ratio(m[0] + m[2], m[0] + m[1] + m[2] + m[3]);
+        nodes[i].py = [ratio(m[0], m[0] + m[2]), ratio(m[1], m[1] + m[3])];
     }
 }
 
