@@ -41,10 +41,13 @@ fn welford_accuracy(n: usize, seed: u64) {
     let offset: Vec<f32> = (0..n)
         .map(|_| (1e5 + 1e-2 * rng.next_f64()) as f32)
         .collect();
-    for (name, xs) in [
-        ("log-uniform 1e-4..1e5", &wide),
-        ("1e5 + U(0, 1e-2)", &offset),
-    ] {
+    // the offset case is ill-conditioned (mean²/variance ≈ 1e15): Welford's deltas carry the
+    // mean's rounding (1e5 · 2⁻⁵³ ≈ 1e-11) into deviations of ~1e-2, so ~1e-9 is what f64 gives
+    let cases = [
+        ("log-uniform 1e-4..1e5", &wide, 1e-12),
+        ("1e5 + U(0, 1e-2)", &offset, 1e-8),
+    ];
+    for (name, xs, var_bound) in cases {
         let mut w = Welford::new();
         let mut naive = (0.0f32, 0.0f32);
         for &x in xs.iter() {
