@@ -70,6 +70,45 @@
 //! never shifts hue by weighting channels differently.
 //!
 //! Nothing here allocates; nothing in the per-sample or per-texel paths returns `Result`.
+//!
+//! # Example: a streaming baker
+//! Pass 1 bakes each texel's iterations into [`Welford`] batches (kept, e.g., in a
+//! memory-mapped file: they are `Pod`), and reduces the global statistics per thread; pass 2
+//! merges the reductions (in any order) and writes the final values.
+//!
+//! ```
+//! use guidebake_kernels::estimator::{
+//!     GraybillDeal, IterationVariance, RhoAccumulator, Welford, combine_weighted, plain_average,
+//! };
+//! // Radiance the baker's own gather would return for texel t, iteration k, sample i.
+//! let gather = |t: usize, k: usize, i: usize| {
+//!     let noise = ((t * 31 + k * 7 + i * 13) % 17) as f32 / 17.0;
+//!     [1.0 + noise / (k + 1) as f32, 0.8, 0.5]
+//! };
+//! const K: usize = 3;
+//! let texels = 100;
+//! let gd = GraybillDeal::default();
+//! // pass 1, per worker: batches per texel and iteration, global sums
+//! let mut batches = vec![[Welford::new(); K]; texels];
+//! let (mut rho, mut muller) = (RhoAccumulator::new(), IterationVariance::<K>::new());
+//! for (t, texel) in batches.iter_mut().enumerate() {
+//!     for (k, batch) in texel.iter_mut().enumerate() {
+//!         for i in 0..(16 << k) {
+//!             batch.push(gather(t, k, i));
+//!         }
+//!     }
+//!     rho.add_texel(&plain_average(texel), &gd.combine(texel));
+//!     muller.add_texel(texel);
+//! }
+//! // (workers' and shards' accumulators would be merged here: `rho.merge(&other)`)
+//! // pass 2: the global factors, then every texel
+//! let (r, weights) = (rho.rho(), muller.weights());
+//! for texel in &batches {
+//!     let guided = gd.combine(texel).corrected_rgb(r).expect("texel has samples");
+//!     let production = combine_weighted(texel, &weights).value().unwrap().rgb;
+//!     assert!(guided.iter().chain(&production).all(|c| c.is_finite()));
+//! }
+//! ```
 
 use bytemuck::{Pod, Zeroable};
 
