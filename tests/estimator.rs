@@ -166,7 +166,7 @@ fn graybill_deal_beats_the_plain_average_on_unequal_variances() {
 fn firefly_batch(rng: &mut Pcg32, scale: f64, n: u32) -> Welford {
     let mut w = Welford::new();
     for _ in 0..n {
-        let v = if rng.next_u32() % 64 == 0 {
+        let v = if rng.next_u32().is_multiple_of(64) {
             40.0
         } else {
             rng.next_f64()

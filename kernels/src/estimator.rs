@@ -166,10 +166,10 @@ impl Welford {
         let x = [c[0], c[1], c[2], luminance(c)];
         self.count += 1;
         let inv_n = 1.0 / self.count as f64;
-        for ch in 0..4 {
-            let delta = x[ch] - self.mean[ch];
-            self.mean[ch] += delta * inv_n;
-            self.m2[ch] += delta * (x[ch] - self.mean[ch]);
+        for ((&x, mean), m2) in x.iter().zip(&mut self.mean).zip(&mut self.m2) {
+            let delta = x - *mean;
+            *mean += delta * inv_n;
+            *m2 += delta * (x - *mean);
         }
     }
 
@@ -306,8 +306,8 @@ fn weighted_mean(
         }
         let w = weight(k, b);
         total += w;
-        for ch in 0..4 {
-            sum[ch] += w * b.mean[ch];
+        for (s, &m) in sum.iter_mut().zip(&b.mean) {
+            *s += w * m;
         }
     }
     let mean = if total > 0.0 && total.is_finite() {
