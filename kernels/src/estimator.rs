@@ -461,9 +461,10 @@ impl<const K: usize> IterationVariance<K> {
     }
 
     /// Mean over texels of the variance of iteration k's estimate, or `None` if no texel
-    /// contributed to iteration k.
+    /// contributed to iteration k (or k ≥ K).
     pub fn mean_variance(&self, k: usize) -> Option<f64> {
-        (self.texels[k] > 0).then(|| self.sums[k].value() / self.texels[k] as f64)
+        let texels = *self.texels.get(k)?;
+        (texels > 0).then(|| self.sums[k].value() / texels as f64)
     }
 
     /// One weight per iteration, ∝ 1 / mean variance, scaled so the largest is 1. Iterations
