@@ -402,3 +402,60 @@ fn rho_is_one_without_data() {
     );
     assert_eq!((s.texels(), s.skipped(), s.rho()), (0, 1, 1.0));
 }
+
+/// The paper's setting: iteration 0 is unguided (heavy-tailed: rare bright hits), later
+/// iterations are guided (same mean, low variance). Graybill–Deal·ρ beats the plain average per
+/// texel and keeps the global mean.
+#[test]
+fn graybill_deal_with_rho_wins_when_guiding_lowers_variance() {
+    let mut rng = Pcg32::new(4242, 9);
+    let texels = 3000;
+    let gd = GraybillDeal::default();
+    let mean = 0.5 * 15.0 / 16.0 + 16.0 / 16.0; // unguided: U(0,1), or 16 with p = 1/16
+    let mut rho = RhoAccumulator::new();
+    let mut rows = Vec::new();
+    for t in 0..texels {
+        let scale = 0.5 + (t % 5) as f64 * 0.5;
+        let mut batches = [Welford::new(); 4];
+        for _ in 0..32 {
+            let v = if rng.next_u32().is_multiple_of(16) {
+                16.0
+            } else {
+                rng.next_f64()
+            };
+            batches[0].push(grey(v * scale));
+        }
+        for b in &mut batches[1..] {
+            (0..32).for_each(|_| b.push(grey(mean * scale * (0.5 + rng.next_f64()))));
+        }
+        let (avg, w) = (plain_average(&batches), gd.combine(&batches));
+        rho.add_texel(&avg, &w);
+        rows.push((
+            mean * scale,
+            avg.luminance().unwrap(),
+            w.luminance().unwrap(),
+        ));
+    }
+    let r = rho.rho();
+    let err = |f: &dyn Fn(&(f64, f64, f64)) -> f64| {
+        (rows.iter().map(|x| (f(x) - x.0).powi(2)).sum::<f64>() / texels as f64).sqrt()
+    };
+    let (e_avg, e_gd, e_gd_rho) = (err(&|x| x.1), err(&|x| x.2), err(&|x| x.2 * r));
+    let truth: f64 = rows.iter().map(|x| x.0).sum();
+    let corrected: f64 = rows.iter().map(|x| x.2 * r).sum();
+    eprintln!(
+        "unguided heavy-tailed iteration + 3 guided ones, {texels} texels: per-texel RMSE \
+         average {e_avg:.4}, GD {e_gd:.4}, GD·ρ {e_gd_rho:.4} (ratio {:.3}), ρ = {r:.4}, \
+         GD·ρ global mean / truth {:.4}",
+        e_gd_rho / e_avg,
+        corrected / truth
+    );
+    // Only ~12 % better: in 13 % of texels the unguided batch caught no bright hit, looks
+    // low-variance and takes the weight with a mean far too low (GD's bias, per texel; ρ only
+    // fixes the global mean).
+    assert!(
+        e_gd_rho < 0.95 * e_avg,
+        "GD·ρ {e_gd_rho} vs average {e_avg}"
+    );
+    assert!((corrected / truth - 1.0).abs() < 0.01);
+}
