@@ -413,7 +413,8 @@ fn graybill_deal_with_rho_wins_when_guiding_lowers_variance() {
     let gd = GraybillDeal::default();
     let mean = 0.5 * 15.0 / 16.0 + 16.0 / 16.0; // unguided: U(0,1), or 16 with p = 1/16
     let mut rho = RhoAccumulator::new();
-    let mut rows = Vec::new();
+    let mut muller = IterationVariance::<4>::new();
+    let (mut rows, mut all) = (Vec::new(), Vec::new());
     for t in 0..texels {
         let scale = 0.5 + (t % 5) as f64 * 0.5;
         let mut batches = [Welford::new(); 4];
@@ -430,6 +431,8 @@ fn graybill_deal_with_rho_wins_when_guiding_lowers_variance() {
         }
         let (avg, w) = (plain_average(&batches), gd.combine(&batches));
         rho.add_texel(&avg, &w);
+        muller.add_texel(&batches);
+        all.push(batches);
         rows.push((
             mean * scale,
             avg.luminance().unwrap(),
@@ -437,6 +440,14 @@ fn graybill_deal_with_rho_wins_when_guiding_lowers_variance() {
         ));
     }
     let r = rho.rho();
+    let weights = muller.weights();
+    let e_muller = (all
+        .iter()
+        .zip(&rows)
+        .map(|(b, x)| (combine_weighted(b, &weights).luminance().unwrap() - x.0).powi(2))
+        .sum::<f64>()
+        / texels as f64)
+        .sqrt();
     let err = |f: &dyn Fn(&(f64, f64, f64)) -> f64| {
         (rows.iter().map(|x| (f(x) - x.0).powi(2)).sum::<f64>() / texels as f64).sqrt()
     };
@@ -446,9 +457,14 @@ fn graybill_deal_with_rho_wins_when_guiding_lowers_variance() {
     eprintln!(
         "unguided heavy-tailed iteration + 3 guided ones, {texels} texels: per-texel RMSE \
          average {e_avg:.4}, GD {e_gd:.4}, GD·ρ {e_gd_rho:.4} (ratio {:.3}), ρ = {r:.4}, \
-         GD·ρ global mean / truth {:.4}",
+         GD·ρ global mean / truth {:.4}; Müller {e_muller:.4} (ratio {:.3})",
         e_gd_rho / e_avg,
-        corrected / truth
+        corrected / truth,
+        e_muller / e_avg
+    );
+    assert!(
+        e_muller < 0.7 * e_avg,
+        "Müller {e_muller} vs average {e_avg}"
     );
     // Only ~12 % better: in 13 % of texels the unguided batch caught no bright hit, looks
     // low-variance and takes the weight with a mean far too low (GD's bias, per texel; ρ only
