@@ -15,9 +15,11 @@
 //!   swapped when `d[kz] < 0`), 2D edge functions `U, V, W`, recomputed in `f64` when one is
 //!   exactly zero, no backface culling. Rays through a closed mesh's shared edges and
 //!   vertices never slip through.
-//! - **Box test.** Slabs with `(b − o) · (1/d)`, the far distance scaled by `1 + 2γ₃`
-//!   (pbrt-v4 §6.8.2, Ize 2013) so that rounding never culls a box the ray touches;
-//!   `1/d` is clamped to `±f32::MAX` so a zero direction component gives no NaN.
+//! - **Box test.** Slabs with `(b − o) · (1/d)`; the interval is widened by 32 ulps (pbrt-v4
+//!   §6.8.2's `1 + 2γ₃` plus room for the triangle test's rounding of `t`, see `SLACK`) so
+//!   that rounding never culls a box holding a hit the oracle accepts. Planes are taken near
+//!   first by the direction's sign bits and a NaN plane distance (`0 · ∞`, a ray running inside
+//!   a box face) leaves the interval unconstrained, so rays along faces are kept.
 //! - **Packet traversal** ([`intersect8`], [`occluded8`]): one shared stack; a child is
 //!   visited when any lane's interval meets its box; when both children are hit the lanes
 //!   vote on which is nearer and that one is visited first. Triangles are tested for all eight
@@ -38,9 +40,6 @@
 //! Deviations and limits:
 //! - Rays with `tmin < 0` are not traced (they never hit): the conservative box bound assumes
 //!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
-//! - Boxes thinner than about `1e-38 · |d|` around an origin whose direction component is
-//!   exactly zero may be culled (the `±f32::MAX` clamp); such a ray runs inside the box's
-//!   plane, where the watertight test reports no hit anyway.
 //! - The tree depth is capped at [`MAX_DEPTH`]; [`BvhRef::new`] rejects deeper trees.
 
 use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
@@ -56,9 +55,13 @@ pub const MAX_DEPTH: usize = 128;
 
 const STACK: usize = MAX_DEPTH + 2;
 
-/// Far-distance inflation for a conservative slab test: `1 + 2γ₃`, `γₙ = nε/(1 − nε)`
-/// with `ε = 2⁻²⁴` (pbrt-v4 §6.8.2).
-const ROBUST: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+/// Slack of the conservative slab test: the box interval is widened to
+/// `[tmin · (1 − 2⁻¹⁸), min(far, tmax) · (1 + 2⁻¹⁸)]`. pbrt-v4's `1 + 2γ₃` (§6.8.2, about 3 ulps)
+/// covers the slab arithmetic; the triangle test's own rounding of `t` can put a hit that the
+/// oracle accepts at `t = tmax` (or `tmin`) a few ulps beyond a box face, so we keep 32 ulps.
+const SLACK: f32 = 1.0 / (1u32 << 18) as f32;
+const FAR_UP: f32 = 1.0 + SLACK;
+const NEAR_DOWN: f32 = 1.0 - SLACK;
 
 /// One BVH node: the boxes of its two children, one 64-byte cache line.
 ///
@@ -219,11 +222,6 @@ impl<'a> BvhRef<'a> {
 // ---------------------------------------------------------------------------------------------
 // Single ray: precomputation, box and triangle tests (the reference arithmetic).
 
-/// `1/d` with ±∞ clamped to ±`f32::MAX` (so `0 · (1/d)` is never NaN).
-fn safe_inv(d: f32) -> f32 {
-    (1.0 / d).clamp(-f32::MAX, f32::MAX)
-}
-
 /// Per-ray constants of the box and watertight tests.
 #[derive(Clone, Copy, Debug)]
 struct Pre {
@@ -253,7 +251,7 @@ impl Pre {
         }
         Self {
             org: ray.org.to_array(),
-            inv: d.map(safe_inv),
+            inv: d.map(|d| 1.0 / d),
             k: [kx, ky, kz],
             s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
             tmin: ray.tmin,
@@ -267,17 +265,27 @@ impl Pre {
 }
 
 /// Entry distance of slot `slot` if the ray's `[tmin, tmax]` meets its box.
+///
+/// Slab planes are taken in the order of the direction's sign bits (near plane first) and a
+/// plane whose distance is NaN (`0 · ∞`: the ray runs inside that plane) does not constrain the
+/// interval, so rays along a box face are kept. `if t > near` keeps `near` for NaN `t`, as
+/// `_mm256_max_ps(t, near)` does in [`Pre8::box8`].
 fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
-    let mut near = pre.tmin;
-    let mut far = f32::INFINITY;
+    let mut near = pre.tmin * NEAR_DOWN;
+    let mut far = tmax;
     for axis in 0..3 {
-        let t0 = (node.lo[axis][slot] - pre.org[axis]) * pre.inv[axis];
-        let t1 = (node.hi[axis][slot] - pre.org[axis]) * pre.inv[axis];
-        near = near.max(t0.min(t1));
-        far = far.min(t0.max(t1));
+        let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
+        let (pn, pf) = if pre.inv[axis].is_sign_negative() {
+            (hi, lo)
+        } else {
+            (lo, hi)
+        };
+        let tn = (pn - pre.org[axis]) * pre.inv[axis];
+        let tf = (pf - pre.org[axis]) * pre.inv[axis];
+        near = if tn > near { tn } else { near };
+        far = if tf < far { tf } else { far };
     }
-    let far = (far * ROBUST).min(tmax);
-    (near <= far).then_some(near)
+    (near <= far * FAR_UP).then_some(near)
 }
 
 /// Edge functions in `f64`, Woop et al. 2013's fallback when one is exactly zero.
@@ -475,9 +483,15 @@ struct Pre8 {
     s: [f32x8; 3],
     /// `sel[i][j]`: lanes whose `k[i] == j` (for `j` in 0..2; else 2).
     sel: [[f32x8; 2]; 3],
+    /// Lanes whose direction has the sign bit set, per axis.
+    neg: [f32x8; 3],
+    /// The shared direction sign bits when all traced lanes have the same ones.
+    octant: Option<[bool; 3]>,
     /// The shared permutation when all traced lanes have the same one.
     uniform: Option<[usize; 3]>,
     tmin: f32x8,
+    /// `tmin · (1 − 2⁻¹⁸)` for the box test.
+    tmin_down: f32x8,
     lanes: [Pre; LANES],
     /// Bit mask of traced lanes.
     traced: u8,
@@ -508,6 +522,11 @@ impl Pre8 {
         let first = lanes[traced.trailing_zeros().min(7) as usize].perm_id();
         let same = (0..LANES).all(|i| traced >> i & 1 == 0 || lanes[i].perm_id() == first);
         let uniform = same.then(|| lanes[traced.trailing_zeros().min(7) as usize].k);
+        let lead = &lanes[traced.trailing_zeros().min(7) as usize];
+        let signs = |p: &Pre| p.inv.map(f32::is_sign_negative);
+        let octant = (0..LANES)
+            .all(|i| traced >> i & 1 == 0 || signs(&lanes[i]) == signs(lead))
+            .then(|| signs(lead));
         let is = |i: usize, j: usize| col(&|p| if p.k[i] == j { f32::from_bits(!0) } else { 0.0 });
         Self {
             org: [0, 1, 2].map(|a| col(&|p| p.org[a])),
@@ -515,27 +534,51 @@ impl Pre8 {
             porg: [0, 1, 2].map(|a| col(&|p| p.org[p.k[a]])),
             s: [0, 1, 2].map(|a| col(&|p| p.s[a])),
             sel: [0, 1, 2].map(|i| [is(i, 0), is(i, 1)]),
+            neg: [0, 1, 2].map(|a| {
+                col(&|p| {
+                    if p.inv[a].is_sign_negative() {
+                        f32::from_bits(!0)
+                    } else {
+                        0.0
+                    }
+                })
+            }),
+            octant,
             uniform,
             tmin: col(&|p| p.tmin),
+            tmin_down: col(&|p| p.tmin * NEAR_DOWN),
             lanes,
             traced,
         }
     }
 
-    /// Lanes whose interval meets slot `slot`'s box, and their entry distances.
+    /// Lanes whose interval meets slot `slot`'s box, and their entry distances: [`box1`] for
+    /// eight lanes, near planes picked once per packet when all lanes share the direction
+    /// signs (a coherent packet), per lane otherwise.
     #[inline(always)]
     fn box8(&self, node: &Node, slot: usize, tmax: f32x8) -> (f32x8, f32x8) {
-        let slab = |axis: usize| {
-            let t0 = (f32x8::splat(node.lo[axis][slot]) - self.org[axis]) * self.inv[axis];
-            let t1 = (f32x8::splat(node.hi[axis][slot]) - self.org[axis]) * self.inv[axis];
-            (t0.fast_min(t1), t0.fast_max(t1))
-        };
-        let (nx, fx) = slab(0);
-        let (ny, fy) = slab(1);
-        let (nz, fz) = slab(2);
-        let near = nx.fast_max(ny).fast_max(nz.fast_max(self.tmin));
-        let far = (fx.fast_min(fy).fast_min(fz) * f32x8::splat(ROBUST)).fast_min(tmax);
-        (near.simd_le(far), near)
+        let mut near = self.tmin_down;
+        let mut far = tmax;
+        for axis in 0..3 {
+            let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
+            let (pn, pf) = match self.octant {
+                Some(neg) if neg[axis] => (f32x8::splat(hi), f32x8::splat(lo)),
+                Some(_) => (f32x8::splat(lo), f32x8::splat(hi)),
+                None => {
+                    let (lo, hi) = (f32x8::splat(lo), f32x8::splat(hi));
+                    (
+                        self.neg[axis].bitselect(hi, lo),
+                        self.neg[axis].bitselect(lo, hi),
+                    )
+                }
+            };
+            let tn = (pn - self.org[axis]) * self.inv[axis];
+            let tf = (pf - self.org[axis]) * self.inv[axis];
+            // fast_max(a, b) is maxps(a, b): `b` when either is NaN, like `box1`.
+            near = tn.fast_max(near);
+            far = tf.fast_min(far);
+        }
+        (near.simd_le(far * f32x8::splat(FAR_UP)), near)
     }
 
     /// Vertex `v` relative to the origin in each lane's permuted axes.
