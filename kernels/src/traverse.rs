@@ -846,3 +846,231 @@ pub fn offset_origin(p: Vec3, n: Vec3) -> Vec3 {
     };
     Vec3::new(axis(p.x, n.x), axis(p.y, n.y), axis(p.z, n.z))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::Pcg32;
+    use std::vec::Vec;
+
+    /// Test-only builder: median split on the longest axis, leaves of at most 3 triangles.
+    fn build(soup: &[[Vec3; 3]]) -> (Vec<Node>, Vec<Tri>) {
+        let mut items: Vec<(u32, [Vec3; 3])> = soup
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (i as u32, *t))
+            .collect();
+        let mut nodes = std::vec![Node::EMPTY];
+        let mut tris = Vec::new();
+        if items.len() <= 3 {
+            fill(&mut nodes, 0, 0, &mut items, &mut tris);
+            return (nodes, tris);
+        }
+        let mid = items.len() / 2;
+        split(&mut items);
+        let (l, r) = items.split_at_mut(mid);
+        fill(&mut nodes, 0, 0, l, &mut tris);
+        fill(&mut nodes, 0, 1, r, &mut tris);
+        (nodes, tris)
+    }
+
+    fn bounds(items: &[(u32, [Vec3; 3])]) -> (Vec3, Vec3) {
+        items
+            .iter()
+            .flat_map(|(_, t)| t.iter())
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
+                (lo.min(p), hi.max(p))
+            })
+    }
+
+    fn split(items: &mut [(u32, [Vec3; 3])]) {
+        let (lo, hi) = bounds(items);
+        let axis = (hi - lo).max_position();
+        items.sort_by(|a, b| {
+            let c = |t: &[Vec3; 3]| t[0][axis] + t[1][axis] + t[2][axis];
+            c(&a.1).total_cmp(&c(&b.1))
+        });
+    }
+
+    fn fill(
+        nodes: &mut Vec<Node>,
+        parent: usize,
+        slot: usize,
+        items: &mut [(u32, [Vec3; 3])],
+        tris: &mut Vec<Tri>,
+    ) {
+        let (lo, hi) = bounds(items);
+        nodes[parent].set_box(slot, lo, hi);
+        if items.len() <= 3 {
+            nodes[parent].child[slot] = tris.len() as u32;
+            nodes[parent].meta[slot] = LEAF | items.len() as u32;
+            tris.extend(items.iter().map(|(p, t)| Tri::new(*t, *p)));
+            return;
+        }
+        let index = nodes.len();
+        nodes.push(Node::EMPTY);
+        nodes[parent].child[slot] = index as u32;
+        nodes[parent].meta[slot] = 0;
+        split(items);
+        let mid = items.len() / 2;
+        let (l, r) = items.split_at_mut(mid);
+        fill(nodes, index, 0, l, tris);
+        fill(nodes, index, 1, r, tris);
+    }
+
+    fn v3(rng: &mut Pcg32, s: f32) -> Vec3 {
+        Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * s
+    }
+
+    fn soup(rng: &mut Pcg32, n: usize) -> Vec<[Vec3; 3]> {
+        (0..n)
+            .map(|_| {
+                let c = v3(rng, 4.0);
+                [c + v3(rng, 0.5), c + v3(rng, 0.5), c + v3(rng, 0.5)]
+            })
+            .collect()
+    }
+
+    /// A ray from edge values: axis-aligned, zero and signed-zero components, shared origins.
+    fn ray(rng: &mut Pcg32, org: Vec3) -> Ray {
+        let special = [0.0, -0.0, 1.0, -1.0, 1e-20, 0.5];
+        let mut c = || {
+            if rng.next_u32() % 3 == 0 {
+                special[(rng.next_u32() % 6) as usize]
+            } else {
+                rng.next_f32() * 2.0 - 1.0
+            }
+        };
+        let d = Vec3::new(c(), c(), c());
+        let tmax = if rng.next_u32() % 3 == 0 {
+            1.0 + 4.0 * rng.next_f32()
+        } else {
+            f32::INFINITY
+        };
+        Ray::new(org, d, 0.0, tmax)
+    }
+
+    #[test]
+    fn packet_equals_scalar_equals_brute_force_for_1_to_8_lanes() {
+        let mut rng = Pcg32::new(41, 2);
+        let soup = soup(&mut rng, 150);
+        let (nodes, tris) = build(&soup);
+        let bvh = BvhRef::new(&nodes, &tris).unwrap();
+        for trial in 0..300 {
+            let lanes = trial % LANES + 1;
+            let shared = v3(&mut rng, 4.5);
+            let rays: Vec<Ray> = (0..lanes)
+                .map(|_| {
+                    let org = if trial % 2 == 0 {
+                        shared
+                    } else {
+                        v3(&mut rng, 4.5)
+                    };
+                    ray(&mut rng, org)
+                })
+                .collect();
+            let packet = Ray8::from_rays(&rays);
+            let mut hits = Hit8::NONE;
+            let mask = intersect8(&bvh, &packet, &mut hits);
+            let blocked = occluded8(&bvh, &packet);
+            for lane in 0..LANES {
+                let r = packet.lane(lane);
+                let oracle = intersect_brute(&tris, &r);
+                assert_eq!(intersect1(&bvh, &r), oracle, "{r:?}");
+                assert_eq!(hits.lane(lane), oracle, "lane {lane} of {lanes}: {r:?}");
+                assert_eq!(mask >> lane & 1 == 1, oracle.is_some());
+                assert_eq!(occluded1(&bvh, &r), occluded_brute(&tris, &r));
+                assert_eq!(blocked >> lane & 1 == 1, occluded_brute(&tris, &r));
+                if lane >= lanes {
+                    assert_eq!(hits.lane(lane), None, "inactive lane written");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn triangle_test_8_wide_matches_scalar_bit_for_bit() {
+        // Mixed shear permutations in one packet take the per-lane blend path.
+        let mut rng = Pcg32::new(5, 8);
+        let mut hits = 0;
+        for _ in 0..2000 {
+            let t = Tri::new([v3(&mut rng, 2.0), v3(&mut rng, 2.0), v3(&mut rng, 2.0)], 3);
+            let rays: [Ray; LANES] = core::array::from_fn(|_| {
+                let o = v3(&mut rng, 2.0) - Vec3::splat(0.5);
+                // Aim at a point of the triangle's plane, inside or just outside it.
+                let (a, b) = (rng.next_f32() * 1.2 - 0.1, rng.next_f32() * 1.2 - 0.1);
+                let [p0, p1, p2] = t.v.map(Vec3::from);
+                Ray::new(
+                    o,
+                    p0 + (p1 - p0) * a + (p2 - p0) * b - o,
+                    0.0,
+                    f32::INFINITY,
+                )
+            });
+            let pre = Pre8::new(&Ray8::from_rays(&rays));
+            let r = pre.tri8(&t);
+            for (i, ray) in rays.iter().enumerate() {
+                let want = tri1(&Pre::new(ray), &t);
+                let lane = r.ok.to_bitmask() >> i & 1 == 1;
+                if r.any_zero.to_bitmask() >> i & 1 == 1 {
+                    continue; // resolved by the scalar f64 fallback in `closest8`
+                }
+                assert_eq!(lane, want.is_some(), "{ray:?}");
+                if let Some((tt, _, _)) = want {
+                    assert_eq!(r.t.as_array()[i].to_bits(), tt.to_bits());
+                    hits += 1;
+                }
+            }
+        }
+        assert!(hits > 4000, "the test must exercise hits ({hits})");
+    }
+
+    #[test]
+    fn layout_errors_are_reported() {
+        let mut bad = Node::EMPTY;
+        assert_eq!(BvhRef::new(&[], &[]).unwrap_err(), LayoutError::NoNodes);
+        bad.meta = [0, LEAF];
+        assert_eq!(
+            BvhRef::new(&[bad], &[]).unwrap_err(),
+            LayoutError::BadChild { node: 0, slot: 0 }
+        );
+        bad.meta = [LEAF | 2, LEAF];
+        assert_eq!(
+            BvhRef::new(&[bad], &[]).unwrap_err(),
+            LayoutError::BadLeaf { node: 0, slot: 0 }
+        );
+        // A chain deeper than MAX_DEPTH.
+        let chain: Vec<Node> = (0..MAX_DEPTH as u32 + 2)
+            .map(|i| Node {
+                child: [i + 1, 0],
+                meta: [0, LEAF],
+                ..Node::EMPTY
+            })
+            .chain([Node::EMPTY])
+            .collect();
+        assert!(matches!(
+            BvhRef::new(&chain, &[]),
+            Err(LayoutError::TooDeep { .. })
+        ));
+    }
+
+    #[test]
+    fn offset_origin_moves_along_the_normal_at_every_scale() {
+        for p in [
+            Vec3::ZERO,
+            Vec3::splat(0.01),
+            Vec3::new(1.0e6, -1.0e6, 3.0),
+            Vec3::splat(-5.0e4),
+        ] {
+            let n = Vec3::new(0.6, -0.8, 0.0);
+            let q = offset_origin(p, n);
+            let moved = q - p;
+            assert!(
+                moved.x > 0.0 && moved.y < 0.0 && moved.z == 0.0,
+                "{p} -> {q}"
+            );
+            // Scale-aware: a fixed number of ulps, so the move grows with |p|.
+            assert!(moved.length() < 1e-4_f32.max(p.abs().max_element() * 1e-4));
+        }
+    }
+}
