@@ -10,13 +10,17 @@ use guidebake_kernels::packet::{LANES, Ray8};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::offset_origin;
 
-/// `../shared/scenes/converted` beside the workspace, if present.
+/// `../shared/scenes/converted` beside the workspace (or `../../shared` when the workspace is
+/// a git worktree one level further down), if present.
 pub fn converted_dir() -> Option<PathBuf> {
-    let dir = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/scenes/converted"
-    ));
-    dir.is_dir().then(|| dir.to_path_buf())
+    [
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/scenes/converted"),
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/scenes/converted"),
+    ]
+    .into_iter()
+    .map(Path::new)
+    .find(|dir| dir.is_dir())
+    .map(Path::to_path_buf)
 }
 
 /// World-space triangles of every mesh primitive in a glTF binary (node transforms applied).
@@ -211,7 +215,7 @@ pub fn presort(points: &mut [[f32; 2]]) {
 /// Gather packets: for each texel, `per_texel` cosine directions from a stratified-random
 /// point set (fixed per bench, like the presorted Sobol set) rotated per texel
 /// (Cranley–Patterson) and ordered after rotation so each 8 are coherent; origin offset
-/// robustly from the surface. Two-sided surfaces: the normal faces a random side.
+/// robustly from the surface.
 pub fn gather_packets(soup: &[[Vec3; 3]], texels: usize, per_texel: usize, seed: u64) -> Vec<Ray8> {
     assert_eq!(per_texel % LANES, 0);
     let mut rng = Pcg32::new(seed, 17);
@@ -225,9 +229,22 @@ pub fn gather_packets(soup: &[[Vec3; 3]], texels: usize, per_texel: usize, seed:
             [x.min(1.0 - f32::EPSILON), y.min(1.0 - f32::EPSILON)]
         })
         .collect();
+    let centre = soup
+        .iter()
+        .flatten()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
+            (lo.min(p), hi.max(p))
+        });
+    let centre = (centre.0 + centre.1) * 0.5;
     let mut packets = Vec::with_capacity(texels * per_texel / LANES);
     for s in surface_points(soup, texels, seed ^ 0x5eed) {
-        let n = if rng.next_u32() & 1 == 0 { s.n } else { -s.n };
+        // Two-sided surfaces: gather from the side facing the scene's centre (the inside of a
+        // room), as a lightmap texel would.
+        let n = if s.n.dot(centre - s.p) >= 0.0 {
+            s.n
+        } else {
+            -s.n
+        };
         let org = offset_origin(s.p, n);
         let (du, dv) = (rng.next_f32(), rng.next_f32());
         let mut pts: Vec<[f32; 2]> = base
