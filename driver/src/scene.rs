@@ -924,13 +924,24 @@ mod tests {
     use super::*;
 
     fn scenes_dir() -> Option<PathBuf> {
-        let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/scenes"));
-        if p.is_dir() {
-            Some(p)
-        } else {
-            println!("skipping: {} is absent", p.display());
-            None
+        // `../shared/scenes` beside the workspace; worktrees under `/work/wt/NAME` find it one
+        // level further up; `GUIDEBAKE_SCENES` overrides both.
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+        let candidates = std::env::var_os("GUIDEBAKE_SCENES")
+            .map(PathBuf::from)
+            .into_iter()
+            .chain(
+                [
+                    format!("{root}/../shared/scenes"),
+                    format!("{root}/../../shared/scenes"),
+                ]
+                .map(PathBuf::from),
+            );
+        let found = candidates.into_iter().find(|p| p.is_dir());
+        if found.is_none() {
+            println!("skipping: ../shared/scenes is absent");
         }
+        found
     }
 
     #[test]
