@@ -294,7 +294,10 @@ fn cells(stats: &[Option<MeshUv>], d: f64, max: u32) -> Vec<Option<u32>> {
 }
 
 /// Shelf packing: returns per mesh (page, x, y) and the number of pages.
-fn shelf_pack(cells: &[Option<u32>], page: (u32, u32)) -> (Vec<Option<(u32, u32, u32)>>, u32) {
+/// A cell's place: (page, x, y).
+type Place = (u32, u32, u32);
+
+fn shelf_pack(cells: &[Option<u32>], page: (u32, u32)) -> (Vec<Option<Place>>, u32) {
     let mut order: Vec<usize> = (0..cells.len()).filter(|&i| cells[i].is_some()).collect();
     order.sort_by_key(|&i| std::cmp::Reverse(cells[i]));
     let mut out = vec![None; cells.len()];

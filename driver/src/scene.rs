@@ -686,10 +686,11 @@ mod obj_source {
             .as_ref()
             .and_then(|t| image::open(dir.join(t)).ok())
             .and_then(|img| average_srgb8(img.to_rgb8().as_raw(), 3));
+        // tobj parses `Ke` into `emissive`; older files spell it as an unknown parameter.
         let ke = m
-            .unknown_param
-            .get("Ke")
-            .and_then(|s| parse_vec3(s))
+            .emissive
+            .map(Vec3::from)
+            .or_else(|| m.unknown_param.get("Ke").and_then(|s| parse_vec3(s)))
             .unwrap_or(Vec3::ZERO);
         Material {
             name: m.name.clone(),

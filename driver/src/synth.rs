@@ -350,7 +350,7 @@ fn write_glb(path: &Path, placed: &[Placed], pages: u32) -> Result<Vec<MeshRecor
     let mut push_view = |bin: &mut Vec<u8>, data: &[u8], target: u32| {
         let offset = bin.len();
         bin.extend_from_slice(data);
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         views.push(
@@ -418,7 +418,7 @@ fn write_glb(path: &Path, placed: &[Placed], pages: u32) -> Result<Vec<MeshRecor
         "buffers": [{"byteLength": bin.len()}],
     });
     let mut json = serde_json::to_vec(&doc).map_err(|e| io_err(path)(std::io::Error::other(e)))?;
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();

@@ -113,7 +113,8 @@ fn bad_texel_files_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     type Check = fn(&TexelFileError) -> bool;
-    let cases: Vec<(&str, Box<dyn FnOnce(&mut Vec<u8>)>, Check, &str)> = vec![
+    type Edit = Box<dyn FnOnce(&mut Vec<u8>)>;
+    let cases: Vec<(&str, Edit, Check, &str)> = vec![
         (
             "truncated",
             Box::new(|b| b.truncate(b.len() - 10)),
