@@ -1,1 +1,315 @@
-//! `bvh`: to be written (see the module table in the crate docs).
+//! # bvh: obvhs builds the tree, we flatten it into the kernels' layout
+//!
+//! The bake traces with [`guidebake_kernels::traverse`] (8-wide packets, Silvennoinen & Sloan
+//! 2019 §2.4). Building a good tree is obvhs's job: PLOC (Meister & Bittner 2018) plus
+//! reinsertion and leaf collapsing ([`obvhs::bvh2::builder::build_bvh2_from_tris`]). This module
+//! picks the build parameters ([`Preset`]), then flattens obvhs's binary tree into
+//! [`Node`]s (two child boxes per 64-byte node) and copies the triangles into leaf order as
+//! [`Tri`]s for the watertight test.
+//!
+//! Deviations: obvhs's own traversals ignore `tmin` in the node test; ours honour it. With the
+//! spatial-split presets a triangle can sit in several leaves; it is then copied once per leaf
+//! (same primitive id, so hits are unchanged).
+//!
+//! The input is a plain triangle soup: primitive id = index in the slice, so this module does
+//! not depend on the scene loader.
+//!
+//! Ray origins leaving a surface should be offset with
+//! [`guidebake_kernels::traverse::offset_origin`] (Wächter & Binder, Ray Tracing Gems ch. 6).
+
+use std::time::{Duration, Instant};
+
+use glam::{Vec3, Vec3A};
+use guidebake_kernels::traverse::{BvhRef, LEAF, LayoutError, Node, Tri};
+use obvhs::{
+    BvhBuildParams,
+    bvh2::{Bvh2, builder::build_bvh2_from_tris},
+    triangle::Triangle,
+};
+
+/// obvhs's build presets ([`BvhBuildParams`]), from fastest build to best tree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Preset {
+    /// `BvhBuildParams::fastest_build` (one triangle per leaf, no reinsertion).
+    FastestBuild,
+    /// `BvhBuildParams::very_fast_build`.
+    VeryFastBuild,
+    /// `BvhBuildParams::fast_build`.
+    FastBuild,
+    /// `BvhBuildParams::medium_build`.
+    MediumBuild,
+    /// `BvhBuildParams::slow_build` (spatial splits).
+    SlowBuild,
+    /// `BvhBuildParams::very_slow_build` (spatial splits, full reinsertion).
+    VerySlowBuild,
+}
+
+impl Preset {
+    /// Every preset, fastest build first.
+    pub const ALL: [Preset; 6] = [
+        Preset::FastestBuild,
+        Preset::VeryFastBuild,
+        Preset::FastBuild,
+        Preset::MediumBuild,
+        Preset::SlowBuild,
+        Preset::VerySlowBuild,
+    ];
+
+    /// The bake's choice, by measurement (docs/traverse.md, "Build presets"): the preset whose
+    /// build time plus trace time is smallest for a bake-sized ray budget.
+    pub const DEFAULT: Preset = Preset::MediumBuild;
+
+    /// obvhs's parameters for this preset.
+    pub fn params(self) -> BvhBuildParams {
+        match self {
+            Preset::FastestBuild => BvhBuildParams::fastest_build(),
+            Preset::VeryFastBuild => BvhBuildParams::very_fast_build(),
+            Preset::FastBuild => BvhBuildParams::fast_build(),
+            Preset::MediumBuild => BvhBuildParams::medium_build(),
+            Preset::SlowBuild => BvhBuildParams::slow_build(),
+            Preset::VerySlowBuild => BvhBuildParams::very_slow_build(),
+        }
+    }
+
+    /// Short name (bench ids, docs).
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::FastestBuild => "fastest",
+            Preset::VeryFastBuild => "very_fast",
+            Preset::FastBuild => "fast",
+            Preset::MediumBuild => "medium",
+            Preset::SlowBuild => "slow",
+            Preset::VerySlowBuild => "very_slow",
+        }
+    }
+}
+
+/// Why a BVH could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum BvhError {
+    /// A vertex has a NaN or infinite coordinate.
+    #[error("triangle {triangle}: vertex {vertex} is not finite: {value:?}")]
+    NonFinite {
+        /// Index of the triangle in the soup.
+        triangle: usize,
+        /// Vertex 0, 1 or 2.
+        vertex: usize,
+        /// Its coordinates.
+        value: [f32; 3],
+    },
+    /// More triangles than 32-bit primitive ids can name.
+    #[error("{count} triangles: at most {} are supported", u32::MAX - 1)]
+    TooMany {
+        /// Triangles given.
+        count: usize,
+    },
+    /// The flattened tree is not a valid kernel layout (deeper than the traversal stack).
+    #[error("the flattened BVH is not a valid kernel layout: {0:?}")]
+    Layout(LayoutError),
+}
+
+/// A BVH in the kernels' layout, owning its nodes and leaf-ordered triangles.
+#[derive(Clone, Debug)]
+pub struct Bvh {
+    nodes: Vec<Node>,
+    tris: Vec<Tri>,
+    build_time: Duration,
+    preset: Preset,
+}
+
+impl Bvh {
+    /// Builds a BVH over `soup` (primitive id = index) with obvhs and flattens it.
+    ///
+    /// An empty soup gives a valid tree that every ray misses.
+    ///
+    /// # Errors
+    /// [`BvhError::NonFinite`] for a NaN/∞ vertex, [`BvhError::TooMany`] past `u32::MAX − 1`
+    /// triangles, [`BvhError::Layout`] if the tree is deeper than the kernels' stack.
+    pub fn build(soup: &[[Vec3; 3]], preset: Preset) -> Result<Self, BvhError> {
+        check_soup(soup)?;
+        let start = Instant::now();
+        let triangles: Vec<Triangle> = soup
+            .iter()
+            .map(|t| Triangle {
+                v0: Vec3A::from(t[0]),
+                v1: Vec3A::from(t[1]),
+                v2: Vec3A::from(t[2]),
+            })
+            .collect();
+        let mut core = Duration::ZERO;
+        let bvh2 = if soup.is_empty() {
+            None
+        } else {
+            Some(build_bvh2_from_tris(&triangles, preset.params(), &mut core))
+        };
+        let (nodes, tris) = match &bvh2 {
+            None => (vec![Node::EMPTY], Vec::new()),
+            Some(bvh2) => flatten(bvh2, soup),
+        };
+        BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
+        Ok(Self {
+            nodes,
+            tris,
+            build_time: start.elapsed(),
+            preset,
+        })
+    }
+
+    /// The kernels' view for [`guidebake_kernels::traverse`]'s functions. Validates the layout
+    /// again (linear in the node count): take it once, not per ray.
+    pub fn view(&self) -> BvhRef<'_> {
+        // `build` validated this exact layout and nothing mutates it since.
+        BvhRef::new(&self.nodes, &self.tris).expect("layout validated by Bvh::build")
+    }
+
+    /// Nodes, root first.
+    pub fn nodes(&self) -> &[Node] {
+        &self.nodes
+    }
+
+    /// Triangles in leaf order.
+    pub fn tris(&self) -> &[Tri] {
+        &self.tris
+    }
+
+    /// Wall time of [`Bvh::build`] (obvhs build plus flattening).
+    pub fn build_time(&self) -> Duration {
+        self.build_time
+    }
+
+    /// The preset it was built with.
+    pub fn preset(&self) -> Preset {
+        self.preset
+    }
+}
+
+fn check_soup(soup: &[[Vec3; 3]]) -> Result<(), BvhError> {
+    if soup.len() >= u32::MAX as usize {
+        return Err(BvhError::TooMany { count: soup.len() });
+    }
+    for (triangle, t) in soup.iter().enumerate() {
+        if let Some(vertex) = t.iter().position(|v| !v.is_finite()) {
+            return Err(BvhError::NonFinite {
+                triangle,
+                vertex,
+                value: t[vertex].to_array(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Flattens obvhs's binary tree (children of inner node `i` at `first_index` and
+/// `first_index + 1`) into two-child-box nodes, depth first, triangles in leaf order.
+fn flatten(bvh2: &Bvh2, soup: &[[Vec3; 3]]) -> (Vec<Node>, Vec<Tri>) {
+    let mut nodes = vec![Node::EMPTY];
+    let mut tris = Vec::with_capacity(soup.len());
+    let root = &bvh2.nodes[0];
+    if root.is_leaf() {
+        fill_slot(&mut nodes, 0, 0, bvh2, 0, soup, &mut tris);
+        return (nodes, tris);
+    }
+    // (obvhs index of the left child, our node index)
+    let mut pending = vec![(root.first_index as usize, 0usize)];
+    while let Some((left, ours)) = pending.pop() {
+        for slot in 0..2 {
+            if let Some(inner) =
+                fill_slot(&mut nodes, ours, slot, bvh2, left + slot, soup, &mut tris)
+            {
+                pending.push(inner);
+            }
+        }
+    }
+    (nodes, tris)
+}
+
+/// Writes obvhs node `from` into slot `slot` of our node `ours`; for an inner node allocates
+/// its flattened node and returns `(its left child, its index)` to process.
+fn fill_slot(
+    nodes: &mut Vec<Node>,
+    ours: usize,
+    slot: usize,
+    bvh2: &Bvh2,
+    from: usize,
+    soup: &[[Vec3; 3]],
+    tris: &mut Vec<Tri>,
+) -> Option<(usize, usize)> {
+    let src = &bvh2.nodes[from];
+    nodes[ours].set_box(slot, src.aabb().min.into(), src.aabb().max.into());
+    if src.is_leaf() {
+        let first = tris.len();
+        let range = src.first_index as usize..(src.first_index + src.prim_count) as usize;
+        for &prim in &bvh2.primitive_indices[range] {
+            tris.push(Tri::new(soup[prim as usize], prim));
+        }
+        nodes[ours].child[slot] = first as u32;
+        nodes[ours].meta[slot] = LEAF | src.prim_count;
+        None
+    } else {
+        let index = nodes.len();
+        nodes.push(Node::EMPTY);
+        nodes[ours].child[slot] = index as u32;
+        nodes[ours].meta[slot] = 0;
+        Some((src.first_index as usize, index))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use guidebake_kernels::packet::Ray;
+    use guidebake_kernels::traverse::{intersect_brute, intersect1};
+
+    fn quad() -> Vec<[Vec3; 3]> {
+        vec![
+            [Vec3::ZERO, Vec3::X, Vec3::Y],
+            [Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y],
+        ]
+    }
+
+    #[test]
+    fn rejects_non_finite_vertices_naming_the_triangle() {
+        let mut soup = quad();
+        soup[1][2] = Vec3::new(0.0, f32::NAN, 0.0);
+        let err = Bvh::build(&soup, Preset::DEFAULT).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                BvhError::NonFinite {
+                    triangle: 1,
+                    vertex: 2,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn empty_and_single_triangle_soups_trace() {
+        let ray = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
+        let empty = Bvh::build(&[], Preset::DEFAULT).unwrap();
+        assert_eq!(intersect1(&empty.view(), &ray), None);
+        let one = Bvh::build(&quad()[..1], Preset::DEFAULT).unwrap();
+        let hit = intersect1(&one.view(), &ray).unwrap();
+        assert_eq!((hit.prim, hit.t), (0, 1.0));
+    }
+
+    #[test]
+    fn every_preset_keeps_every_triangle() {
+        let soup = quad();
+        for preset in Preset::ALL {
+            let bvh = Bvh::build(&soup, preset).unwrap();
+            let mut prims: Vec<u32> = bvh.tris().iter().map(|t| t.prim).collect();
+            prims.sort_unstable();
+            prims.dedup();
+            assert_eq!(prims, [0, 1], "{preset:?}");
+            let ray = Ray::new(Vec3::new(0.7, 0.7, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
+            assert_eq!(
+                intersect1(&bvh.view(), &ray),
+                intersect_brute(bvh.tris(), &ray)
+            );
+            assert_eq!(intersect1(&bvh.view(), &ray).unwrap().prim, 1);
+        }
+    }
+}

@@ -1,1 +1,326 @@
-//! `packet`: to be written (see the module table in the crate docs).
+//! # packet: `Ray8` / `Hit8`, eight rays in structure-of-arrays form
+//!
+//! Silvennoinen & Sloan 2019, §2.4: a texel's final-gather rays leave one origin and, once the
+//! Sobol points are presorted, each group of eight directions is coherent. [`Ray8`] carries such
+//! a group (or any eight rays) lane by lane for the 8-wide traversal in
+//! [`traverse`](crate::traverse); [`Ray`] / [`Hit`] are the single-ray forms used by the scalar
+//! reference and by callers that fill packets lane by lane.
+//!
+//! Conventions (Embree's `RTCRay8`, with its inactive-lane rule):
+//! - a lane is **active** when `tmin <= tmax`; an inactive lane has `tmin = +∞`, `tmax = −∞`
+//!   ([`Ray8::INACTIVE`]) and the traversal leaves its `Hit8` lane untouched;
+//! - a lane is **traceable** when it is active, its origin and direction are finite, and the
+//!   direction's largest component is at least `f32::MIN_POSITIVE` ([`Ray::is_traceable`]).
+//!   Active lanes that are not traceable (NaN/∞ components, zero direction) never hit; their
+//!   `Hit8` lanes are left untouched as well, so NaN and ∞ never reach an output;
+//! - masks are all-ones or all-zeros per lane (`f32x8` compare results); bit masks are `u8`
+//!   with bit `i` for lane `i`.
+//!
+//! Hits are reported on `[tmin, tmax]`, both ends included; `t` is the ray parameter, so
+//! directions need not be unit length.
+
+use glam::Vec3;
+use wide::{f32x8, u32x8};
+
+/// Number of lanes in a packet.
+pub const LANES: usize = 8;
+
+/// Primitive id of a lane that has not hit anything.
+pub const NO_HIT: u32 = u32::MAX;
+
+/// One ray: `origin + t · dir` for `t` in `[tmin, tmax]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    /// Origin.
+    pub org: Vec3,
+    /// Direction (any length above `f32::MIN_POSITIVE` in its largest component).
+    pub dir: Vec3,
+    /// Smallest accepted hit distance (inclusive).
+    pub tmin: f32,
+    /// Largest accepted hit distance (inclusive); `f32::INFINITY` for an unbounded ray.
+    pub tmax: f32,
+}
+
+impl Ray {
+    /// A ray over `[tmin, tmax]`.
+    pub const fn new(org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
+        Self {
+            org,
+            dir,
+            tmin,
+            tmax,
+        }
+    }
+
+    /// The inactive ray: `tmin = +∞`, `tmax = −∞`.
+    pub const INACTIVE: Self = Self::new(Vec3::ZERO, Vec3::ZERO, f32::INFINITY, f32::NEG_INFINITY);
+
+    /// Whether the ray is active (`tmin <= tmax`; false when either is NaN).
+    pub fn is_active(&self) -> bool {
+        self.tmin <= self.tmax
+    }
+
+    /// Whether the traversal will trace this ray: active, finite origin and direction, and a
+    /// direction whose largest component is at least `f32::MIN_POSITIVE`.
+    pub fn is_traceable(&self) -> bool {
+        self.is_active()
+            && self.org.is_finite()
+            && self.dir.is_finite()
+            && self.dir.abs().max_element() >= f32::MIN_POSITIVE
+    }
+}
+
+/// One hit: distance, barycentrics and primitive id.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit.
+    pub t: f32,
+    /// Barycentric weight of the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric weight of the triangle's third vertex.
+    pub v: f32,
+    /// Primitive id (index into the caller's triangle soup).
+    pub prim: u32,
+}
+
+/// Eight rays, structure of arrays, 32-byte aligned lanes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(32))]
+pub struct Ray8 {
+    /// Origins, x, y, z.
+    pub org: [f32x8; 3],
+    /// Directions, x, y, z.
+    pub dir: [f32x8; 3],
+    /// Smallest accepted hit distances.
+    pub tmin: f32x8,
+    /// Largest accepted hit distances.
+    pub tmax: f32x8,
+}
+
+impl Ray8 {
+    /// All eight lanes inactive.
+    pub const INACTIVE: Self = Self {
+        org: [f32x8::ZERO; 3],
+        dir: [f32x8::ZERO; 3],
+        tmin: f32x8::splat(f32::INFINITY),
+        tmax: f32x8::splat(f32::NEG_INFINITY),
+    };
+
+    /// Eight rays from up to eight single rays; lanes past `rays.len()` are inactive.
+    ///
+    /// # Panics
+    /// If `rays.len() > 8`.
+    pub fn from_rays(rays: &[Ray]) -> Self {
+        assert!(rays.len() <= LANES, "a Ray8 holds at most 8 rays");
+        let mut packet = Self::INACTIVE;
+        for (lane, ray) in rays.iter().enumerate() {
+            packet.set_lane(lane, ray);
+        }
+        packet
+    }
+
+    /// Eight rays sharing one origin (a texel's gather packet), all over `[tmin, tmax]`.
+    pub fn from_origin(org: Vec3, dirs: &[Vec3; LANES], tmin: f32, tmax: f32) -> Self {
+        let column = |f: fn(&Vec3) -> f32| f32x8::new(core::array::from_fn(|i| f(&dirs[i])));
+        Self {
+            org: [
+                f32x8::splat(org.x),
+                f32x8::splat(org.y),
+                f32x8::splat(org.z),
+            ],
+            dir: [column(|d| d.x), column(|d| d.y), column(|d| d.z)],
+            tmin: f32x8::splat(tmin),
+            tmax: f32x8::splat(tmax),
+        }
+    }
+
+    /// Writes lane `lane`.
+    ///
+    /// # Panics
+    /// If `lane >= 8`.
+    pub fn set_lane(&mut self, lane: usize, ray: &Ray) {
+        let put = |v: &mut f32x8, x: f32| v.as_mut_array()[lane] = x;
+        put(&mut self.org[0], ray.org.x);
+        put(&mut self.org[1], ray.org.y);
+        put(&mut self.org[2], ray.org.z);
+        put(&mut self.dir[0], ray.dir.x);
+        put(&mut self.dir[1], ray.dir.y);
+        put(&mut self.dir[2], ray.dir.z);
+        put(&mut self.tmin, ray.tmin);
+        put(&mut self.tmax, ray.tmax);
+    }
+
+    /// Reads lane `lane`.
+    ///
+    /// # Panics
+    /// If `lane >= 8`.
+    pub fn lane(&self, lane: usize) -> Ray {
+        let get = |v: &f32x8| v.as_array()[lane];
+        Ray {
+            org: Vec3::new(get(&self.org[0]), get(&self.org[1]), get(&self.org[2])),
+            dir: Vec3::new(get(&self.dir[0]), get(&self.dir[1]), get(&self.dir[2])),
+            tmin: get(&self.tmin),
+            tmax: get(&self.tmax),
+        }
+    }
+
+    /// Lane mask of active lanes (`tmin <= tmax`).
+    pub fn active(&self) -> f32x8 {
+        self.tmin.simd_le(self.tmax)
+    }
+
+    /// Lane mask of traceable lanes, lane for lane equal to [`Ray::is_traceable`].
+    pub fn traceable(&self) -> f32x8 {
+        let finite = |v: &[f32x8; 3]| v[0].is_finite() & v[1].is_finite() & v[2].is_finite();
+        let largest = self.dir[0]
+            .abs()
+            .max(self.dir[1].abs())
+            .max(self.dir[2].abs());
+        self.active()
+            & finite(&self.org)
+            & finite(&self.dir)
+            & largest.simd_ge(f32x8::splat(f32::MIN_POSITIVE))
+    }
+}
+
+/// Eight hits, structure of arrays. A lane the traversal did not hit keeps its old value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(32))]
+pub struct Hit8 {
+    /// Ray parameters of the hits.
+    pub t: f32x8,
+    /// Barycentric weights of the second vertices.
+    pub u: f32x8,
+    /// Barycentric weights of the third vertices.
+    pub v: f32x8,
+    /// Primitive ids, [`NO_HIT`] where nothing was hit.
+    pub prim: u32x8,
+}
+
+impl Hit8 {
+    /// No lane hit: `t = +∞`, barycentrics 0, primitive [`NO_HIT`].
+    pub const NONE: Self = Self {
+        t: f32x8::splat(f32::INFINITY),
+        u: f32x8::ZERO,
+        v: f32x8::ZERO,
+        prim: u32x8::splat(NO_HIT),
+    };
+
+    /// Lane `lane` as a [`Hit`], or `None` when its primitive is [`NO_HIT`].
+    ///
+    /// # Panics
+    /// If `lane >= 8`.
+    pub fn lane(&self, lane: usize) -> Option<Hit> {
+        let prim = self.prim.as_array()[lane];
+        (prim != NO_HIT).then(|| Hit {
+            t: self.t.as_array()[lane],
+            u: self.u.as_array()[lane],
+            v: self.v.as_array()[lane],
+            prim,
+        })
+    }
+
+    /// Writes lane `lane`.
+    ///
+    /// # Panics
+    /// If `lane >= 8`.
+    pub fn set_lane(&mut self, lane: usize, hit: &Hit) {
+        self.t.as_mut_array()[lane] = hit.t;
+        self.u.as_mut_array()[lane] = hit.u;
+        self.v.as_mut_array()[lane] = hit.v;
+        self.prim.as_mut_array()[lane] = hit.prim;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::Pcg32;
+
+    fn random_ray(rng: &mut Pcg32) -> Ray {
+        let mut f = || rng.next_f32() * 2.0 - 1.0;
+        Ray::new(
+            Vec3::new(f(), f(), f()),
+            Vec3::new(f(), f(), f()),
+            0.0,
+            f32::INFINITY,
+        )
+    }
+
+    #[test]
+    fn lanes_round_trip_and_unset_lanes_are_inactive() {
+        let mut rng = Pcg32::new(7, 1);
+        for n in 0..=LANES {
+            let rays: [Ray; LANES] = core::array::from_fn(|_| random_ray(&mut rng));
+            let packet = Ray8::from_rays(&rays[..n]);
+            for lane in 0..LANES {
+                if lane < n {
+                    assert_eq!(packet.lane(lane), rays[lane]);
+                } else {
+                    assert_eq!(packet.lane(lane), Ray::INACTIVE);
+                }
+            }
+            assert_eq!(packet.active().to_bitmask(), (1u32 << n) - 1);
+        }
+    }
+
+    #[test]
+    fn traceable_mask_matches_the_scalar_rule() {
+        let specials = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            f32::MIN_POSITIVE,
+            f32::MIN_POSITIVE / 2.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            1e30,
+        ];
+        let mut rng = Pcg32::new(3, 9);
+        for _ in 0..400 {
+            let mut pick = || specials[(rng.next_u32() % specials.len() as u32) as usize];
+            let rays: [Ray; LANES] = core::array::from_fn(|_| {
+                Ray::new(
+                    Vec3::new(pick(), pick(), pick()),
+                    Vec3::new(pick(), pick(), pick()),
+                    pick(),
+                    pick(),
+                )
+            });
+            let packet = Ray8::from_rays(&rays);
+            let mask = packet.traceable().to_bitmask();
+            let active = packet.active().to_bitmask();
+            for (lane, ray) in rays.iter().enumerate() {
+                assert_eq!(mask >> lane & 1 == 1, ray.is_traceable(), "{ray:?}");
+                assert_eq!(active >> lane & 1 == 1, ray.is_active(), "{ray:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn shared_origin_packet_matches_lanes() {
+        let dirs: [Vec3; LANES] = core::array::from_fn(|i| Vec3::new(i as f32, 1.0, -2.0));
+        let org = Vec3::new(1.0, 2.0, 3.0);
+        let packet = Ray8::from_origin(org, &dirs, 0.5, 9.0);
+        for (lane, dir) in dirs.iter().enumerate() {
+            assert_eq!(packet.lane(lane), Ray::new(org, *dir, 0.5, 9.0));
+        }
+    }
+
+    #[test]
+    fn hit_lanes_round_trip() {
+        let mut hits = Hit8::NONE;
+        assert_eq!(hits.lane(3), None);
+        let hit = Hit {
+            t: 2.0,
+            u: 0.25,
+            v: 0.5,
+            prim: 17,
+        };
+        hits.set_lane(3, &hit);
+        assert_eq!(hits.lane(3), Some(hit));
+        assert_eq!(hits.lane(2), None);
+    }
+}

@@ -1,1 +1,805 @@
-//! `traverse`: to be written (see the module table in the crate docs).
+//! # traverse: 8-wide packet BVH traversal, with the scalar single ray beside it
+//!
+//! Silvennoinen & Sloan 2019, §2.4: a texel's final-gather packet shares one origin and, once
+//! the Sobol points are presorted, its eight directions are coherent; tracing the eight rays
+//! together turns that coherence into speed. This module traces [`Ray8`] packets through a
+//! kernel-owned, flat, binary BVH ([`Node`], [`Tri`]) that the driver fills from the tree obvhs
+//! builds.
+//!
+//! - **Layout.** A [`Node`] is one 64-byte cache line holding the boxes of its *two children*
+//!   (so one node visit tests two boxes for all eight lanes), their indices and their leaf
+//!   counts. A [`Tri`] stores its three vertices (not edges: the watertight test needs the
+//!   vertices themselves) and its primitive id, in leaf order.
+//! - **Ray/triangle test.** Woop, Benthin & Wald, *Watertight Ray/Triangle Intersection*,
+//!   JCGT 2(1), 2013: shear into the ray's space (`kz` = largest direction axis, `kx`/`ky`
+//!   swapped when `d[kz] < 0`), 2D edge functions `U, V, W`, recomputed in `f64` when one is
+//!   exactly zero, no backface culling. Rays through a closed mesh's shared edges and
+//!   vertices never slip through.
+//! - **Box test.** Slabs with `(b − o) · (1/d)`, the far distance scaled by `1 + 2γ₃`
+//!   (pbrt-v4 §6.8.2, Ize 2013) so that rounding never culls a box the ray touches;
+//!   `1/d` is clamped to `±f32::MAX` so a zero direction component gives no NaN.
+//! - **Packet traversal** ([`intersect8`], [`occluded8`]): one shared stack; a child is
+//!   visited when any lane's interval meets its box; when both children are hit the lanes
+//!   vote on which is nearer and that one is visited first. Triangles are tested for all eight
+//!   lanes at once; when every lane of the packet has the same shear permutation (the usual
+//!   case for a coherent packet) the vertices are permuted once per triangle as scalars,
+//!   otherwise per lane with blends.
+//! - **Scalar reference** ([`intersect1`], [`occluded1`]) walks the same nodes with the same
+//!   box and triangle arithmetic, and [`intersect_brute`] / [`occluded_brute`] test every
+//!   triangle: the test oracle.
+//!
+//! **Results are exact, not approximate.** The scalar and 8-wide triangle tests perform the
+//! same IEEE operations in the same order (no FMA contraction), so `t`, `u`, `v` agree bit for
+//! bit across [`intersect_brute`], [`intersect1`] and [`intersect8`]. Equal `t` from several
+//! triangles is resolved by the **tie rule**: the smallest primitive id wins. Hits are accepted
+//! on `[tmin, tmax]`, both ends included (`tmax` is clamped to `f32::MAX`, so `t = ∞` is never
+//! reported).
+//!
+//! Deviations and limits:
+//! - Rays with `tmin < 0` are not traced (they never hit): the conservative box bound assumes
+//!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
+//! - Boxes thinner than about `1e-38 · |d|` around an origin whose direction component is
+//!   exactly zero may be culled (the `±f32::MAX` clamp); such a ray runs inside the box's
+//!   plane, where the watertight test reports no hit anyway.
+//! - The tree depth is capped at [`MAX_DEPTH`]; [`BvhRef::new`] rejects deeper trees.
+
+use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use wide::{f32x8, u32x8};
+
+/// `meta` bit marking a leaf child (the low bits count its triangles).
+pub const LEAF: u32 = 1 << 31;
+
+/// Deepest tree [`BvhRef::new`] accepts (root at depth 0); bounds the traversal stack.
+pub const MAX_DEPTH: usize = 128;
+
+const STACK: usize = MAX_DEPTH + 2;
+
+/// Far-distance inflation for a conservative slab test: `1 + 2γ₃`, `γₙ = nε/(1 − nε)`
+/// with `ε = 2⁻²⁴` (pbrt-v4 §6.8.2).
+const ROBUST: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+
+/// One BVH node: the boxes of its two children, one 64-byte cache line.
+///
+/// Child `c` is an inner node when `meta[c] == 0` (its index is `child[c]`), else a leaf of
+/// `meta[c] & !LEAF` triangles starting at `child[c]`. An empty slot is a leaf of zero
+/// triangles. Node 0 is the root.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[repr(C, align(64))]
+pub struct Node {
+    /// Box minima, `lo[axis][child]`.
+    pub lo: [[f32; 2]; 3],
+    /// Box maxima, `hi[axis][child]`.
+    pub hi: [[f32; 2]; 3],
+    /// Node index (inner child) or first triangle (leaf child).
+    pub child: [u32; 2],
+    /// `0` for an inner child, `LEAF | count` for a leaf.
+    pub meta: [u32; 2],
+}
+
+const _: () = assert!(core::mem::size_of::<Node>() == 64);
+const _: () = assert!(core::mem::align_of::<Node>() == 64);
+
+impl Node {
+    /// A node whose two slots are empty leaves (the root of an empty tree).
+    pub const EMPTY: Self = Self {
+        lo: [[0.0; 2]; 3],
+        hi: [[0.0; 2]; 3],
+        child: [0; 2],
+        meta: [LEAF; 2],
+    };
+
+    /// Sets slot `slot`'s box.
+    pub fn set_box(&mut self, slot: usize, lo: Vec3, hi: Vec3) {
+        for axis in 0..3 {
+            self.lo[axis][slot] = lo[axis];
+            self.hi[axis][slot] = hi[axis];
+        }
+    }
+}
+
+/// One triangle: its vertices and its primitive id, 48 bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[repr(C, align(16))]
+pub struct Tri {
+    /// Vertices `v[vertex][axis]`.
+    pub v: [[f32; 3]; 3],
+    /// Primitive id reported in hits.
+    pub prim: u32,
+    /// Padding (zero).
+    pub pad: [u32; 2],
+}
+
+const _: () = assert!(core::mem::size_of::<Tri>() == 48);
+
+impl Tri {
+    /// A triangle with primitive id `prim`.
+    pub fn new(v: [Vec3; 3], prim: u32) -> Self {
+        Self {
+            v: v.map(|p| p.to_array()),
+            prim,
+            pad: [0; 2],
+        }
+    }
+}
+
+/// Why [`BvhRef::new`] rejected a node/triangle layout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LayoutError {
+    /// The node slice is empty (an empty tree is one [`Node::EMPTY`]).
+    NoNodes,
+    /// An inner child does not point forward to an existing node.
+    BadChild {
+        /// Node holding the slot.
+        node: u32,
+        /// Slot (0 or 1).
+        slot: u8,
+    },
+    /// A leaf's triangle range runs past the triangle slice.
+    BadLeaf {
+        /// Node holding the slot.
+        node: u32,
+        /// Slot (0 or 1).
+        slot: u8,
+    },
+    /// The tree is deeper than [`MAX_DEPTH`].
+    TooDeep {
+        /// First node found too deep.
+        node: u32,
+    },
+}
+
+/// A validated view of a flat BVH: nodes (root first) and triangles in leaf order.
+#[derive(Clone, Copy, Debug)]
+pub struct BvhRef<'a> {
+    nodes: &'a [Node],
+    tris: &'a [Tri],
+}
+
+impl<'a> BvhRef<'a> {
+    /// Checks every child index, leaf range and the depth, once, so traversal can trust them.
+    ///
+    /// # Errors
+    /// The first [`LayoutError`] found, walking depth first from the root.
+    pub fn new(nodes: &'a [Node], tris: &'a [Tri]) -> Result<Self, LayoutError> {
+        if nodes.is_empty() {
+            return Err(LayoutError::NoNodes);
+        }
+        let mut stack = [(0u32, 0usize); STACK];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let (index, depth) = stack[sp];
+            if depth > MAX_DEPTH {
+                return Err(LayoutError::TooDeep { node: index });
+            }
+            let node = &nodes[index as usize];
+            for slot in 0..2 {
+                let (child, meta) = (node.child[slot], node.meta[slot]);
+                if meta == 0 {
+                    if child <= index || child as usize >= nodes.len() {
+                        return Err(LayoutError::BadChild {
+                            node: index,
+                            slot: slot as u8,
+                        });
+                    }
+                    stack[sp] = (child, depth + 1);
+                    sp += 1;
+                } else {
+                    let end = child as u64 + u64::from(meta & !LEAF);
+                    if end > tris.len() as u64 {
+                        return Err(LayoutError::BadLeaf {
+                            node: index,
+                            slot: slot as u8,
+                        });
+                    }
+                }
+            }
+        }
+        Ok(Self { nodes, tris })
+    }
+
+    /// The nodes, root first.
+    pub fn nodes(&self) -> &'a [Node] {
+        self.nodes
+    }
+
+    /// The triangles, in leaf order.
+    pub fn tris(&self) -> &'a [Tri] {
+        self.tris
+    }
+
+    fn leaf(&self, first: u32, meta: u32) -> &'a [Tri] {
+        let first = first as usize;
+        &self.tris[first..first + (meta & !LEAF) as usize]
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Single ray: precomputation, box and triangle tests (the reference arithmetic).
+
+/// `1/d` with ±∞ clamped to ±`f32::MAX` (so `0 · (1/d)` is never NaN).
+fn safe_inv(d: f32) -> f32 {
+    (1.0 / d).clamp(-f32::MAX, f32::MAX)
+}
+
+/// Per-ray constants of the box and watertight tests.
+#[derive(Clone, Copy, Debug)]
+struct Pre {
+    org: [f32; 3],
+    inv: [f32; 3],
+    /// Shear permutation `[kx, ky, kz]`.
+    k: [usize; 3],
+    /// Shear `[d[kx]/d[kz], d[ky]/d[kz], 1/d[kz]]`.
+    s: [f32; 3],
+    tmin: f32,
+}
+
+impl Pre {
+    fn new(ray: &Ray) -> Self {
+        let d = ray.dir.to_array();
+        let a = ray.dir.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if d[kz] < 0.0 {
+            core::mem::swap(&mut kx, &mut ky);
+        }
+        Self {
+            org: ray.org.to_array(),
+            inv: d.map(safe_inv),
+            k: [kx, ky, kz],
+            s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
+            tmin: ray.tmin,
+        }
+    }
+
+    /// Permutation id `kz * 2 + swapped`, equal for lanes with the same shear axes.
+    fn perm_id(&self) -> u32 {
+        (self.k[2] * 2 + usize::from(self.k[0] != (self.k[2] + 1) % 3)) as u32
+    }
+}
+
+/// Entry distance of slot `slot` if the ray's `[tmin, tmax]` meets its box.
+fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
+    let mut near = pre.tmin;
+    let mut far = f32::INFINITY;
+    for axis in 0..3 {
+        let t0 = (node.lo[axis][slot] - pre.org[axis]) * pre.inv[axis];
+        let t1 = (node.hi[axis][slot] - pre.org[axis]) * pre.inv[axis];
+        near = near.max(t0.min(t1));
+        far = far.min(t0.max(t1));
+    }
+    let far = (far * ROBUST).min(tmax);
+    (near <= far).then_some(near)
+}
+
+/// Edge functions in `f64`, Woop et al. 2013's fallback when one is exactly zero.
+fn uvw_f64(a: [f32; 2], b: [f32; 2], c: [f32; 2]) -> [f32; 3] {
+    let d = |p: f32| f64::from(p);
+    [
+        (d(c[0]) * d(b[1]) - d(c[1]) * d(b[0])) as f32,
+        (d(a[0]) * d(c[1]) - d(a[1]) * d(c[0])) as f32,
+        (d(b[0]) * d(a[1]) - d(b[1]) * d(a[0])) as f32,
+    ]
+}
+
+/// Watertight ray/triangle test (Woop, Benthin & Wald 2013, two-sided): `(t, u, v)` of the
+/// hit, before any comparison with the ray's interval. `u`, `v` weight vertices 1 and 2.
+///
+/// This is the reference the 8-wide [`tri8`] reproduces operation for operation.
+fn tri1(pre: &Pre, tri: &Tri) -> Option<(f32, f32, f32)> {
+    let [kx, ky, kz] = pre.k;
+    let rel = |v: &[f32; 3]| {
+        [
+            v[kx] - pre.org[kx],
+            v[ky] - pre.org[ky],
+            v[kz] - pre.org[kz],
+        ]
+    };
+    let (a, b, c) = (rel(&tri.v[0]), rel(&tri.v[1]), rel(&tri.v[2]));
+    let shear = |p: [f32; 3]| [p[0] - pre.s[0] * p[2], p[1] - pre.s[1] * p[2]];
+    let (a2, b2, c2) = (shear(a), shear(b), shear(c));
+    let mut u = c2[0] * b2[1] - c2[1] * b2[0];
+    let mut v = a2[0] * c2[1] - a2[1] * c2[0];
+    let mut w = b2[0] * a2[1] - b2[1] * a2[0];
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        [u, v, w] = uvw_f64(a2, b2, c2);
+    }
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+    let tt = u * (pre.s[2] * a[2]) + v * (pre.s[2] * b[2]) + w * (pre.s[2] * c[2]);
+    Some((tt / det, v / det, w / det))
+}
+
+/// Closest-hit acceptance with the tie rule (equal `t`: smaller primitive id wins).
+fn accept(t: f32, prim: u32, tmin: f32, best: &Hit) -> bool {
+    t >= tmin && t <= best.t && (t < best.t || prim < best.prim)
+}
+
+/// Intersects `tri` and keeps the hit if [`accept`] says so.
+fn closest1(pre: &Pre, tri: &Tri, best: &mut Hit) {
+    if let Some((t, u, v)) = tri1(pre, tri)
+        && accept(t, tri.prim, pre.tmin, best)
+    {
+        *best = Hit {
+            t,
+            u,
+            v,
+            prim: tri.prim,
+        };
+    }
+}
+
+/// The start of a closest-hit search: `t = min(tmax, f32::MAX)`, no primitive.
+fn no_hit(tmax: f32) -> Hit {
+    Hit {
+        t: tmax.min(f32::MAX),
+        u: 0.0,
+        v: 0.0,
+        prim: NO_HIT,
+    }
+}
+
+/// Closest hit of one ray, testing every triangle: the oracle for the traversals.
+pub fn intersect_brute(tris: &[Tri], ray: &Ray) -> Option<Hit> {
+    if !traceable(ray) {
+        return None;
+    }
+    let pre = Pre::new(ray);
+    let mut best = no_hit(ray.tmax);
+    for tri in tris {
+        closest1(&pre, tri, &mut best);
+    }
+    (best.prim != NO_HIT).then_some(best)
+}
+
+/// Whether any triangle blocks the ray on `[tmin, tmax]`, testing every triangle: the oracle.
+pub fn occluded_brute(tris: &[Tri], ray: &Ray) -> bool {
+    traceable(ray) && {
+        let pre = Pre::new(ray);
+        let tmax = ray.tmax.min(f32::MAX);
+        tris.iter().any(|tri| occludes1(&pre, tri, tmax))
+    }
+}
+
+fn occludes1(pre: &Pre, tri: &Tri, tmax: f32) -> bool {
+    tri1(pre, tri).is_some_and(|(t, _, _)| t >= pre.tmin && t <= tmax)
+}
+
+/// [`Ray::is_traceable`] plus `tmin ≥ 0` (see the module docs).
+fn traceable(ray: &Ray) -> bool {
+    ray.is_traceable() && ray.tmin >= 0.0
+}
+
+/// Closest hit of one ray: the scalar reference traversal.
+///
+/// Returns `None` for a miss and for rays that are not traced (inactive, non-finite, zero
+/// direction, `tmin < 0`).
+pub fn intersect1(bvh: &BvhRef<'_>, ray: &Ray) -> Option<Hit> {
+    if !traceable(ray) {
+        return None;
+    }
+    let pre = Pre::new(ray);
+    let mut best = no_hit(ray.tmax);
+    walk1(bvh, &pre, (0, 0), |leaf| {
+        for tri in leaf {
+            closest1(&pre, tri, &mut best);
+        }
+        best.t
+    });
+    (best.prim != NO_HIT).then_some(best)
+}
+
+/// Whether anything blocks one ray on `[tmin, tmax]`: the scalar reference, with early exit.
+pub fn occluded1(bvh: &BvhRef<'_>, ray: &Ray) -> bool {
+    if !traceable(ray) {
+        return false;
+    }
+    let pre = Pre::new(ray);
+    let tmax = ray.tmax.min(f32::MAX);
+    let mut hit = false;
+    walk1(bvh, &pre, (0, 0), |leaf| {
+        hit = leaf.iter().any(|tri| occludes1(&pre, tri, tmax));
+        if hit { f32::NEG_INFINITY } else { tmax }
+    });
+    hit
+}
+
+/// Depth-first walk of one ray from `start` (a `(child, meta)` entry). `visit` tests a leaf's
+/// triangles and returns the ray's new `tmax` (−∞ stops the walk).
+fn walk1<'a>(
+    bvh: &BvhRef<'a>,
+    pre: &Pre,
+    start: (u32, u32),
+    mut visit: impl FnMut(&'a [Tri]) -> f32,
+) -> f32 {
+    let mut tmax = visit(&[]);
+    let mut stack = [(0u32, 0u32); STACK];
+    stack[0] = start;
+    let mut sp = 1;
+    while sp > 0 {
+        sp -= 1;
+        let (child, meta) = stack[sp];
+        if meta != 0 {
+            tmax = visit(bvh.leaf(child, meta));
+            if tmax == f32::NEG_INFINITY {
+                break;
+            }
+            continue;
+        }
+        let node = &bvh.nodes[child as usize];
+        let entry = |slot: usize| (node.child[slot], node.meta[slot]);
+        match (box1(node, 0, pre, tmax), box1(node, 1, pre, tmax)) {
+            (Some(n0), Some(n1)) => {
+                let (near, far) = if n1 < n0 { (1, 0) } else { (0, 1) };
+                stack[sp] = entry(far);
+                stack[sp + 1] = entry(near);
+                sp += 2;
+            }
+            (Some(_), None) => {
+                stack[sp] = entry(0);
+                sp += 1;
+            }
+            (None, Some(_)) => {
+                stack[sp] = entry(1);
+                sp += 1;
+            }
+            (None, None) => {}
+        }
+    }
+    tmax
+}
+
+// ---------------------------------------------------------------------------------------------
+// Eight rays.
+
+/// Per-packet constants. Lanes that are not traced carry `tmin = +∞` and harmless finite
+/// values everywhere else.
+struct Pre8 {
+    org: [f32x8; 3],
+    inv: [f32x8; 3],
+    /// Permuted origin `o[kx], o[ky], o[kz]` per lane.
+    porg: [f32x8; 3],
+    s: [f32x8; 3],
+    /// `sel[i][j]`: lanes whose `k[i] == j` (for `j` in 0..2; else 2).
+    sel: [[f32x8; 2]; 3],
+    /// The shared permutation when all traced lanes have the same one.
+    uniform: Option<[usize; 3]>,
+    tmin: f32x8,
+    lanes: [Pre; LANES],
+    /// Bit mask of traced lanes.
+    traced: u8,
+}
+
+fn mask_of(bits: u8) -> f32x8 {
+    f32x8::new(core::array::from_fn(|i| {
+        if bits >> i & 1 == 1 {
+            f32::from_bits(u32::MAX)
+        } else {
+            0.0
+        }
+    }))
+}
+
+impl Pre8 {
+    fn new(rays: &Ray8) -> Self {
+        let traced = (rays.traceable() & rays.tmin.simd_ge(f32x8::ZERO)).to_bitmask() as u8;
+        let stub = Pre::new(&Ray::new(Vec3::ZERO, Vec3::X, f32::INFINITY, 0.0));
+        let lanes: [Pre; LANES] = core::array::from_fn(|i| {
+            if traced >> i & 1 == 1 {
+                Pre::new(&rays.lane(i))
+            } else {
+                stub
+            }
+        });
+        let col = |f: &dyn Fn(&Pre) -> f32| f32x8::new(core::array::from_fn(|i| f(&lanes[i])));
+        let first = lanes[traced.trailing_zeros().min(7) as usize].perm_id();
+        let same = (0..LANES).all(|i| traced >> i & 1 == 0 || lanes[i].perm_id() == first);
+        let uniform = same.then(|| lanes[traced.trailing_zeros().min(7) as usize].k);
+        let is = |i: usize, j: usize| col(&|p| if p.k[i] == j { f32::from_bits(!0) } else { 0.0 });
+        Self {
+            org: [0, 1, 2].map(|a| col(&|p| p.org[a])),
+            inv: [0, 1, 2].map(|a| col(&|p| p.inv[a])),
+            porg: [0, 1, 2].map(|a| col(&|p| p.org[p.k[a]])),
+            s: [0, 1, 2].map(|a| col(&|p| p.s[a])),
+            sel: [0, 1, 2].map(|i| [is(i, 0), is(i, 1)]),
+            uniform,
+            tmin: col(&|p| p.tmin),
+            lanes,
+            traced,
+        }
+    }
+
+    /// Lanes whose interval meets slot `slot`'s box, and their entry distances.
+    #[inline(always)]
+    fn box8(&self, node: &Node, slot: usize, tmax: f32x8) -> (f32x8, f32x8) {
+        let slab = |axis: usize| {
+            let t0 = (f32x8::splat(node.lo[axis][slot]) - self.org[axis]) * self.inv[axis];
+            let t1 = (f32x8::splat(node.hi[axis][slot]) - self.org[axis]) * self.inv[axis];
+            (t0.fast_min(t1), t0.fast_max(t1))
+        };
+        let (nx, fx) = slab(0);
+        let (ny, fy) = slab(1);
+        let (nz, fz) = slab(2);
+        let near = nx.fast_max(ny).fast_max(nz.fast_max(self.tmin));
+        let far = (fx.fast_min(fy).fast_min(fz) * f32x8::splat(ROBUST)).fast_min(tmax);
+        (near.simd_le(far), near)
+    }
+
+    /// Vertex `v` relative to the origin in each lane's permuted axes.
+    #[inline(always)]
+    fn rel(&self, v: &[f32; 3]) -> [f32x8; 3] {
+        match self.uniform {
+            Some(k) => [0, 1, 2].map(|i| f32x8::splat(v[k[i]]) - self.porg[i]),
+            None => {
+                let c = v.map(f32x8::splat);
+                [0, 1, 2].map(|i| {
+                    let pick = self.sel[i][0].bitselect(c[0], self.sel[i][1].bitselect(c[1], c[2]));
+                    pick - self.porg[i]
+                })
+            }
+        }
+    }
+
+    /// [`tri1`] for eight lanes: `(t, U, V, W, det, ok)` where `ok` marks lanes with a hit
+    /// computed in `f32`, and `zero` lanes that need the scalar `f64` fallback.
+    #[inline(always)]
+    fn tri8(&self, tri: &Tri) -> Tri8 {
+        let a = self.rel(&tri.v[0]);
+        let b = self.rel(&tri.v[1]);
+        let c = self.rel(&tri.v[2]);
+        let shear = |p: &[f32x8; 3]| [p[0] - self.s[0] * p[2], p[1] - self.s[1] * p[2]];
+        let (a2, b2, c2) = (shear(&a), shear(&b), shear(&c));
+        let u = c2[0] * b2[1] - c2[1] * b2[0];
+        let v = a2[0] * c2[1] - a2[1] * c2[0];
+        let w = b2[0] * a2[1] - b2[1] * a2[0];
+        let zero = f32x8::ZERO;
+        let any_zero = u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero);
+        let neg = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
+        let pos = u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero);
+        let det = u + v + w;
+        let sz = self.s[2];
+        let tt = u * (sz * a[2]) + v * (sz * b[2]) + w * (sz * c[2]);
+        let ok = !(neg & pos) & det.simd_ne(zero) & !any_zero;
+        Tri8 {
+            t: tt / det,
+            v,
+            w,
+            det,
+            ok,
+            any_zero,
+        }
+    }
+}
+
+struct Tri8 {
+    t: f32x8,
+    v: f32x8,
+    w: f32x8,
+    det: f32x8,
+    ok: f32x8,
+    any_zero: f32x8,
+}
+
+/// Closest-hit state of a packet.
+struct Best8 {
+    t: f32x8,
+    u: f32x8,
+    v: f32x8,
+    prim: u32x8,
+}
+
+impl Best8 {
+    fn lane(&self, i: usize) -> Hit {
+        Hit {
+            t: self.t.as_array()[i],
+            u: self.u.as_array()[i],
+            v: self.v.as_array()[i],
+            prim: self.prim.as_array()[i],
+        }
+    }
+}
+
+fn closest8(pre: &Pre8, tri: &Tri, best: &mut Best8) {
+    let r = pre.tri8(tri);
+    let live = pre.tmin.simd_le(best.t);
+    let cand = r.ok & r.t.simd_ge(pre.tmin) & r.t.simd_le(best.t);
+    let strict = cand & r.t.simd_lt(best.t);
+    if strict.any() {
+        let m: u32x8 = bytemuck::cast(strict);
+        best.t = strict.bitselect(r.t, best.t);
+        best.u = strict.bitselect(r.v / r.det, best.u);
+        best.v = strict.bitselect(r.w / r.det, best.v);
+        best.prim = m.bitselect(u32x8::splat(tri.prim), best.prim);
+    }
+    // Rare lanes: exact ties on t (tie rule) and zero edge functions (f64 fallback).
+    let rare = ((cand & !strict) | (r.any_zero & live)).to_bitmask();
+    if rare != 0 {
+        for i in 0..LANES {
+            if rare >> i & 1 == 1 {
+                let mut hit = best.lane(i);
+                closest1(&pre.lanes[i], tri, &mut hit);
+                set_lane(best, i, &hit);
+            }
+        }
+    }
+}
+
+fn set_lane(best: &mut Best8, i: usize, hit: &Hit) {
+    best.t.as_mut_array()[i] = hit.t;
+    best.u.as_mut_array()[i] = hit.u;
+    best.v.as_mut_array()[i] = hit.v;
+    best.prim.as_mut_array()[i] = hit.prim;
+}
+
+/// Lanes `tri` blocks on `[tmin, tmax]`, as a bit mask.
+fn occludes8(pre: &Pre8, tri: &Tri, tmax: f32x8) -> u8 {
+    let r = pre.tri8(tri);
+    let hit = r.ok & r.t.simd_ge(pre.tmin) & r.t.simd_le(tmax);
+    let mut bits = hit.to_bitmask() as u8;
+    let zero = (r.any_zero & pre.tmin.simd_le(tmax)).to_bitmask() as u8;
+    for i in 0..LANES {
+        if zero >> i & 1 == 1 && occludes1(&pre.lanes[i], tri, tmax.as_array()[i]) {
+            bits |= 1 << i;
+        }
+    }
+    bits
+}
+
+/// Depth-first walk of a packet. `visit` tests a leaf and returns the packet's new `tmax`
+/// (all lanes −∞ stops the walk).
+fn walk8<'a>(
+    bvh: &BvhRef<'a>,
+    pre: &Pre8,
+    mut tmax: f32x8,
+    mut visit: impl FnMut(&'a [Tri]) -> f32x8,
+) {
+    let mut stack = [(0u32, 0u32); STACK];
+    let mut sp = 1;
+    while sp > 0 {
+        sp -= 1;
+        let (child, meta) = stack[sp];
+        if meta != 0 {
+            tmax = visit(bvh.leaf(child, meta));
+            if !pre.tmin.simd_le(tmax).any() {
+                return;
+            }
+            continue;
+        }
+        let node = &bvh.nodes[child as usize];
+        let entry = |slot: usize| (node.child[slot], node.meta[slot]);
+        let (m0, n0) = pre.box8(node, 0, tmax);
+        let (m1, n1) = pre.box8(node, 1, tmax);
+        let (b0, b1) = (m0.to_bitmask(), m1.to_bitmask());
+        match (b0 != 0, b1 != 0) {
+            (true, true) => {
+                // The lanes hitting both boxes vote for the nearer one.
+                let closer1 = (n1.simd_lt(n0) & m0 & m1).to_bitmask().count_ones();
+                let (near, far) = if 2 * closer1 > (b0 & b1).count_ones() {
+                    (1, 0)
+                } else {
+                    (0, 1)
+                };
+                stack[sp] = entry(far);
+                stack[sp + 1] = entry(near);
+                sp += 2;
+            }
+            (true, false) => {
+                stack[sp] = entry(0);
+                sp += 1;
+            }
+            (false, true) => {
+                stack[sp] = entry(1);
+                sp += 1;
+            }
+            (false, false) => {}
+        }
+    }
+}
+
+/// Closest hits of eight rays: the packet traversal.
+///
+/// Lanes that are not traced (inactive, non-finite, zero direction, `tmin < 0`) and lanes that
+/// miss leave their `hits` lane untouched. Returns the bit mask of lanes that hit. Each hit
+/// equals [`intersect1`]'s for that lane, bit for bit.
+pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
+    let pre = Pre8::new(rays);
+    if pre.traced == 0 {
+        return 0;
+    }
+    let traced = mask_of(pre.traced);
+    let tmax = traced.bitselect(
+        rays.tmax.fast_min(f32x8::splat(f32::MAX)),
+        f32x8::splat(f32::NEG_INFINITY),
+    );
+    let mut best = Best8 {
+        t: tmax,
+        u: f32x8::ZERO,
+        v: f32x8::ZERO,
+        prim: u32x8::splat(NO_HIT),
+    };
+    walk8(bvh, &pre, tmax, |leaf| {
+        for tri in leaf {
+            closest8(&pre, tri, &mut best);
+        }
+        best.t
+    });
+    let hit_mask = best.prim.simd_ne(u32x8::splat(NO_HIT));
+    let f: f32x8 = bytemuck::cast(hit_mask);
+    hits.t = f.bitselect(best.t, hits.t);
+    hits.u = f.bitselect(best.u, hits.u);
+    hits.v = f.bitselect(best.v, hits.v);
+    hits.prim = hit_mask.bitselect(best.prim, hits.prim);
+    f.to_bitmask() as u8
+}
+
+/// Which of eight rays are blocked on `[tmin, tmax]`: packet traversal with early exit (a lane
+/// drops out when blocked, the walk ends when all have). Returns the bit mask of blocked lanes;
+/// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
+pub fn occluded8(bvh: &BvhRef<'_>, rays: &Ray8) -> u8 {
+    let pre = Pre8::new(rays);
+    if pre.traced == 0 {
+        return 0;
+    }
+    let traced = mask_of(pre.traced);
+    let mut tmax = traced.bitselect(
+        rays.tmax.fast_min(f32x8::splat(f32::MAX)),
+        f32x8::splat(f32::NEG_INFINITY),
+    );
+    let mut blocked = 0u8;
+    walk8(bvh, &pre, tmax, |leaf| {
+        for tri in leaf {
+            let bits = occludes8(&pre, tri, tmax);
+            if bits != 0 {
+                blocked |= bits;
+                tmax = mask_of(bits).bitselect(f32x8::splat(f32::NEG_INFINITY), tmax);
+                if blocked == pre.traced {
+                    break;
+                }
+            }
+        }
+        tmax
+    });
+    blocked
+}
+
+// ---------------------------------------------------------------------------------------------
+// Ray origins.
+
+/// Offsets a surface point along its geometric normal so a ray leaving it does not hit its own
+/// surface, with an offset that scales with the point's magnitude (Wächter & Binder, *A Fast
+/// and Robust Method for Avoiding Self-Intersection*, Ray Tracing Gems ch. 6, 2019): near the
+/// origin a fixed float offset, elsewhere a fixed number of ulps.
+///
+/// `n` must be the side the ray leaves from (flip it for rays into the back side); it need not
+/// be unit length but should be about unit scale.
+pub fn offset_origin(p: Vec3, n: Vec3) -> Vec3 {
+    const ORIGIN: f32 = 1.0 / 32.0;
+    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+    const INT_SCALE: f32 = 256.0;
+    let axis = |p: f32, n: f32| {
+        let of_i = (INT_SCALE * n) as i32;
+        let stepped =
+            f32::from_bits(
+                (p.to_bits() as i32).wrapping_add(if p < 0.0 { -of_i } else { of_i }) as u32,
+            );
+        if p.abs() < ORIGIN {
+            p + FLOAT_SCALE * n
+        } else {
+            stepped
+        }
+    };
+    Vec3::new(axis(p.x, n.x), axis(p.y, n.y), axis(p.z, n.z))
+}
