@@ -385,10 +385,30 @@ fn per_mesh_layout(
             }
         })
         .collect();
+    // Without --size, a single page shrinks to what the packing used (32-texel multiples).
+    let used = if one_page || n > 1 {
+        page
+    } else {
+        let extent = |f: fn(&(u32, u32, u32), u32) -> u32| {
+            places
+                .iter()
+                .zip(&cs)
+                .filter_map(|(p, c)| Some(f(&(*p)?, (*c)?)))
+                .max()
+                .unwrap_or(1)
+        };
+        let w = extent(|p, c| p.1 + c + GUTTER)
+            .next_multiple_of(TILE_SIZE)
+            .min(page.0);
+        let h = extent(|p, c| p.2 + c + GUTTER)
+            .next_multiple_of(TILE_SIZE)
+            .min(page.1);
+        (w, h)
+    };
     let pages = vec![
         PageRecord {
-            width: page.0,
-            height: page.1
+            width: used.0,
+            height: used.1
         };
         n as usize
     ];
