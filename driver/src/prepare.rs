@@ -179,6 +179,15 @@ pub fn prepare(
     out: &Path,
     opts: PrepareOptions,
 ) -> Result<PrepareReport, PrepareError> {
+    if scene.triangles.len() >= (PARTIAL_BIT - 1) as usize {
+        return Err(PrepareError::Resolution {
+            path: scene.path.clone(),
+            message: format!(
+                "{} triangles; prepare supports fewer than 2^31",
+                scene.triangles.len()
+            ),
+        });
+    }
     let stats = mesh_uv_stats(scene);
     let missing: Vec<String> = scene
         .meshes_without_lightmap_uvs()
