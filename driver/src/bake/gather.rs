@@ -125,6 +125,7 @@ struct GatherTexel {
     dpdu: Vec3,
     dpdv: Vec3,
     jitter: bool,
+    triangle: u32,
 }
 
 impl<'w> TileBaker<'w> {
@@ -371,6 +372,7 @@ fn gather_texel(t: &TexelRecord, id: u64) -> GatherTexel {
         dpdu: Vec3::from(t.dpdu),
         dpdv: Vec3::from(t.dpdv),
         jitter: t.flags & FLAG_PARTIAL == 0,
+        triangle: t.triangle,
     }
 }
 
@@ -384,7 +386,8 @@ struct IterationCtx<'a> {
 
 impl IterationCtx<'_> {
     /// The origin of packet `packet`: a point of the texel's footprint (its centre for
-    /// partly covered texels, whose footprint may leave the surface), offset from it.
+    /// partly covered texels), brought back onto the texel's triangle and off its edges so
+    /// no origin lies past a wall's corner, then offset from the surface.
     fn origin(&self, t: &GatherTexel, packet: u32) -> Vec3 {
         let mut p = t.position;
         if t.jitter {
@@ -395,7 +398,7 @@ impl IterationCtx<'_> {
             );
             p += t.dpdu * (to_unit(r[0]) - 0.5) + t.dpdv * (to_unit(r[1]) - 0.5);
         }
-        offset_origin(p, t.normal)
+        offset_origin(self.world.onto_triangle(t.triangle, p), t.normal)
     }
 
     fn to_world(&self, t: &GatherTexel, d: Vec3) -> Vec3 {

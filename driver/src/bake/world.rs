@@ -32,6 +32,7 @@ pub struct Surface {
 #[derive(Debug)]
 pub struct World {
     bvh: Bvh,
+    corners: Vec<[Vec3; 3]>,
     surfaces: Vec<Surface>,
     lights: Vec<Light>,
     sky: Sky,
@@ -48,7 +49,8 @@ impl World {
     /// # Errors
     /// [`BvhError`] when the BVH cannot be built (a non-finite vertex).
     pub fn new(scene: &Scene, preset: Preset) -> Result<Self, BvhError> {
-        let bvh = Bvh::build(&scene.triangle_positions(), preset)?;
+        let corners = scene.triangle_positions();
+        let bvh = Bvh::build(&corners, preset)?;
         let surfaces = scene
             .triangles
             .iter()
@@ -63,11 +65,24 @@ impl World {
             .collect();
         Ok(Self {
             bvh,
+            corners,
             surfaces,
             lights: lights_of(scene),
             sky_black: sky_is_black(&scene.sky),
             sky: scene.sky.clone(),
         })
+    }
+
+    /// The point of triangle `prim` closest to `p`, moved a thousandth of the way towards the
+    /// triangle's centroid: a ray origin on the triangle, never exactly on an edge it shares
+    /// with a neighbouring wall (where it could slip through the corner and see the sky).
+    /// `p` itself when `prim` is not a triangle of the scene.
+    pub fn onto_triangle(&self, prim: u32, p: Vec3) -> Vec3 {
+        let Some(&[a, b, c]) = self.corners.get(prim as usize) else {
+            return p;
+        };
+        let q = closest_point_on_triangle(p, a, b, c);
+        q + ((a + b + c) / 3.0 - q) * 1e-3
     }
 
     /// The BVH, for tracing.
@@ -176,6 +191,43 @@ impl World {
     }
 }
 
+/// Closest point to `p` on triangle `abc` (Ericson, *Real-Time Collision Detection*, 5.1.5).
+pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denom, vc * denom);
+    if !(v.is_finite() && w.is_finite()) {
+        return a; // degenerate triangle
+    }
+    a + ab * v + ac * w
+}
+
 fn lanes_traced(packet: &Ray8) -> u8 {
     let tmin = packet.tmin.to_array();
     (0..LANES).fold(0, |m, i| if tmin[i].is_finite() { m | 1 << i } else { m })
@@ -249,4 +301,30 @@ fn power_of(light: &Light) -> f32 {
 /// Lanes of a packet as an array (for per-lane shading after a packet trace).
 pub fn lanes(v: f32x8) -> [f32; LANES] {
     v.to_array()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn closest_points_lie_on_the_triangle() {
+        let (a, b, c) = (Vec3::ZERO, Vec3::X, Vec3::Y);
+        assert_eq!(
+            closest_point_on_triangle(Vec3::new(0.2, 0.2, 5.0), a, b, c),
+            Vec3::new(0.2, 0.2, 0.0)
+        );
+        assert_eq!(
+            closest_point_on_triangle(Vec3::new(-1.0, -1.0, 0.0), a, b, c),
+            a
+        );
+        assert_eq!(
+            closest_point_on_triangle(Vec3::new(0.5, -3.0, 1.0), a, b, c),
+            Vec3::new(0.5, 0.0, 0.0)
+        );
+        let q = closest_point_on_triangle(Vec3::new(1.0, 1.0, 0.0), a, b, c);
+        assert!((q - Vec3::new(0.5, 0.5, 0.0)).length() < 1e-6);
+        let degenerate = closest_point_on_triangle(Vec3::ONE, a, a, a);
+        assert!(degenerate.is_finite());
+    }
 }

@@ -200,8 +200,9 @@ impl PageImage {
 }
 
 impl PageImage {
-    /// Writes a tone-mapped sRGB preview (Reinhard, exposure set so the mean covered pixel's
-    /// luminance maps to ½) as a PNG, through a temporary name.
+    /// Writes a tone-mapped sRGB preview (Reinhard, exposure set so the median covered
+    /// pixel's luminance maps to ½: a few very bright texels, such as a sunlit patch or a
+    /// surface facing the sky, do not darken the rest) as a PNG, through a temporary name.
     ///
     /// # Errors
     /// [`PreviewError`](crate::preview::PreviewError) naming the file.
