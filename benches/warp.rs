@@ -12,12 +12,13 @@
 //!
 //! Run: `cargo bench --bench warp -- --warm-up-time 1 --measurement-time 3`
 
-use criterion::{BatchSize, Criterion, Throughput, black_box, criterion_group, criterion_main};
+use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::warp::{self, Warped};
+use std::hint::black_box;
 use wide::f32x8;
 
 /// Gather samples per texel and texels per timed iteration.

@@ -520,8 +520,9 @@ fn smooth(nodes: &mut [Node], alpha: f64) {
         };
         let mut raw: [f64; 4] = core::array::from_fn(|q| f64::from(nodes[c + q].mass));
         let mut sum: f64 = raw.iter().sum();
-        if !(sum > 0.0) {
+        if sum <= 0.0 {
             // Only with `ambient = 0`: a node without flux spreads its (zero) mass evenly.
+            // (Masses are finite and ≥ 0 here: the records were checked, the floor clamped.)
             (raw, sum) = ([0.25; 4], 1.0);
         }
         let parent = f64::from(n.mass);
