@@ -346,6 +346,7 @@ fn root_leaf(count: u32) -> Node {
 
 /// Builds the guide from `records` into `storage` (see the module docs for the rule).
 /// `records` is reordered in place; rejected records end up after the accepted ones.
+/// Records beyond the first `u32::MAX` are ignored (node record counts are `u32`).
 ///
 /// # Panics
 /// If `storage` is empty. Parameters out of range are clamped (depth to [`MAX_DEPTH`], α and

@@ -30,7 +30,7 @@
 //! lanes part descends **per lane**; the leaves are then gathered and placed 8-wide.
 //!
 //! # One kernel, two widths
-//! The arithmetic — the final placement ([`place`]) and the input clamp — is written once
+//! The arithmetic — the final placement (`place`) and the input clamp — is written once
 //! over a small [`Value`] trait implemented by `f32` and `f32x8` (as Mitsuba templates its
 //! warps on a scalar-or-packet type); the descent is comparisons only. Both widths use the
 //! same IEEE operations in the same order (no fused multiply-add), so they agree **bit for
