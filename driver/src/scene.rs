@@ -686,10 +686,11 @@ mod obj_source {
             .as_ref()
             .and_then(|t| image::open(dir.join(t)).ok())
             .and_then(|img| average_srgb8(img.to_rgb8().as_raw(), 3));
+        // tobj parses `Ke` into `emissive`; older files spell it as an unknown parameter.
         let ke = m
-            .unknown_param
-            .get("Ke")
-            .and_then(|s| parse_vec3(s))
+            .emissive
+            .map(Vec3::from)
+            .or_else(|| m.unknown_param.get("Ke").and_then(|s| parse_vec3(s)))
             .unwrap_or(Vec3::ZERO);
         Material {
             name: m.name.clone(),
@@ -919,18 +920,97 @@ pub fn load_equirect(path: &Path) -> Result<Sky, SceneError> {
     })
 }
 
+/// Sky and sun on the command line (`#[command(flatten)]` into a subcommand's arguments);
+/// they override the scene file's.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct LightArgs {
+    /// Constant sky radiance `R,G,B`.
+    #[arg(long, value_parser = parse_rgb, conflicts_with = "sky_exr")]
+    pub sky_constant: Option<Vec3>,
+    /// Equirectangular sky EXR (latitude-longitude, +Y up).
+    #[arg(long)]
+    pub sky_exr: Option<PathBuf>,
+    /// Direction towards the sun `X,Y,Z`.
+    #[arg(long, value_parser = parse_rgb, requires = "sun_irradiance")]
+    pub sun_direction: Option<Vec3>,
+    /// Sun irradiance `R,G,B` on a plane facing it.
+    #[arg(long, value_parser = parse_rgb, requires = "sun_direction")]
+    pub sun_irradiance: Option<Vec3>,
+    /// Sun angular radius in degrees.
+    #[arg(long, default_value_t = 0.267)]
+    pub sun_radius_deg: f32,
+}
+
+/// Parses `A,B,C` into a vector.
+///
+/// # Errors
+/// A message unless there are exactly three finite numbers.
+pub fn parse_rgb(s: &str) -> Result<Vec3, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|c| c.trim().parse::<f32>().map_err(|e| format!("'{s}': {e}")))
+        .collect::<Result<_, _>>()?;
+    match v.as_slice() {
+        [a, b, c] if v.iter().all(|x| x.is_finite()) => Ok(Vec3::new(*a, *b, *c)),
+        _ => Err(format!("'{s}' is not three finite numbers A,B,C")),
+    }
+}
+
+impl LightArgs {
+    /// Applies the overrides to `scene`.
+    ///
+    /// # Errors
+    /// [`SceneError::SceneFile`] (naming the scene) for an invalid sun or sky value,
+    /// [`SceneError::Sky`] when the EXR cannot be read.
+    pub fn apply(&self, scene: &mut Scene) -> Result<(), SceneError> {
+        let bad = |message: String| SceneError::SceneFile {
+            path: scene.path.clone(),
+            message: format!("command line: {message}"),
+        };
+        if let (Some(d), Some(irr)) = (self.sun_direction, self.sun_irradiance) {
+            let spec = SunSpec {
+                direction: d.to_array(),
+                angular_radius_deg: self.sun_radius_deg,
+                irradiance: irr.to_array(),
+            };
+            scene.sun = Some(spec.to_sun().map_err(bad)?);
+        }
+        if let Some(c) = self.sky_constant {
+            if c.min_element() < 0.0 {
+                return Err(bad(format!("sky constant {c} must be non-negative")));
+            }
+            scene.sky = Sky::Constant(c);
+        }
+        if let Some(p) = &self.sky_exr {
+            scene.sky = load_equirect(p)?;
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn scenes_dir() -> Option<PathBuf> {
-        let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/scenes"));
-        if p.is_dir() {
-            Some(p)
-        } else {
-            println!("skipping: {} is absent", p.display());
-            None
+        // `../shared/scenes` beside the workspace; worktrees under `/work/wt/NAME` find it one
+        // level further up; `GUIDEBAKE_SCENES` overrides both.
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+        let candidates = std::env::var_os("GUIDEBAKE_SCENES")
+            .map(PathBuf::from)
+            .into_iter()
+            .chain(
+                [
+                    format!("{root}/../shared/scenes"),
+                    format!("{root}/../../shared/scenes"),
+                ]
+                .map(PathBuf::from),
+            );
+        let found = candidates.into_iter().find(|p| p.is_dir());
+        if found.is_none() {
+            println!("skipping: ../shared/scenes is absent");
         }
+        found
     }
 
     #[test]
@@ -1016,6 +1096,46 @@ mod tests {
         assert_eq!(
             s.triangle_material(lamp.first_triangle as usize).emission,
             Vec3::ONE
+        );
+    }
+
+    #[test]
+    fn command_line_lights_override_and_validate() {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            lights: LightArgs,
+        }
+        let mut b = SceneBuilder::new(Path::new("x.glb"));
+        b.begin_mesh("m".into());
+        let mut scene = b.finish(vec![], vec![]);
+        let cli = Cli::try_parse_from([
+            "t",
+            "--sun-direction",
+            "0,0,3",
+            "--sun-irradiance",
+            "1,2,3",
+            "--sky-constant",
+            "0.5,0.5,0.5",
+        ])
+        .unwrap();
+        cli.lights.apply(&mut scene).unwrap();
+        assert_eq!(scene.sun.as_ref().unwrap().direction, Vec3::Z);
+        assert_eq!(scene.sky, Sky::Constant(Vec3::splat(0.5)));
+        assert!(
+            Cli::try_parse_from(["t", "--sun-direction", "0,0,1"]).is_err(),
+            "irradiance is required"
+        );
+        assert!(Cli::try_parse_from(["t", "--sky-constant", "1,nan,1"]).is_err());
+        let cli =
+            Cli::try_parse_from(["t", "--sun-direction", "0,0,0", "--sun-irradiance", "1,1,1"])
+                .unwrap();
+        let e = cli.lights.apply(&mut scene).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("x.glb: bad scene file: command line: sun direction"),
+            "{e}"
         );
     }
 

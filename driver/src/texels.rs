@@ -433,9 +433,8 @@ impl TexelWriter {
         let tiles_out =
             BufWriter::new(File::create(&tiles_tmp).map_err(io("create temporary tile file"))?);
         let pages_offset = align_up(size_of::<Header>() as u64);
-        let meshes_offset = align_up(pages_offset + (pages.len() * size_of::<PageRecord>()) as u64);
-        let texels_offset =
-            align_up(meshes_offset + (meshes.len() * size_of::<MeshRecord>()) as u64);
+        let meshes_offset = align_up(pages_offset + size_of_val(pages) as u64);
+        let texels_offset = align_up(meshes_offset + size_of_val(meshes) as u64);
         let header = Header {
             magic: MAGIC,
             version: VERSION,
@@ -1128,7 +1127,7 @@ mod tests {
             let mut tile = Vec::new();
             for y in ty..ty + th {
                 for x in tx..tx + tw {
-                    if rng.next_u32() % 3 != 0 {
+                    if !rng.next_u32().is_multiple_of(3) {
                         tile.push(random_texel(&mut rng, page, x as u16, y as u16));
                     }
                 }

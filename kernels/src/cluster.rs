@@ -275,7 +275,7 @@ fn validate(
     }
     let bad_normal = |v: &[f32; 3]| {
         let l2 = dot(*v, *v);
-        !(l2.is_finite() && l2 > 0.0) || !v.iter().all(|c| c.is_finite())
+        !(l2.is_finite() && l2 > 0.0 && v.iter().all(|c| c.is_finite()))
     };
     if let Some(index) = normals.iter().position(bad_normal) {
         return Err(ClusterError::InvalidNormal { index });

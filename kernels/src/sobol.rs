@@ -6,7 +6,9 @@
 //! rotation (a toroidal shift). Dimension 0 is the van der Corput radical inverse (bit
 //! reversal of the index); dimension 1 uses the generator matrix of the primitive polynomial
 //! x + 1 (direction numbers v₁ = 2³¹, vₖ = vₖ₋₁ ⊕ (vₖ₋₁ ≫ 1), Joe & Kuo's second dimension),
-//! as in Kollig & Keller 2002. The first 2^k points of these two dimensions form a
+//! as in Kollig & Keller 2002, evaluated without a loop over the index bits: the matrix is
+//! Pascal's triangle mod 2, so a five-step superset transform and a bit reversal compute it
+//! (see `sobol_dim1`). The first 2^k points of these two dimensions form a
 //! (0, k, 2)-net in base 2: every elementary interval of area 2^-k holds exactly one point.
 //!
 //! The rotation is a wrapping `u32` add per axis — the toroidal shift in fixed point, exact and
@@ -24,7 +26,9 @@
 use wide::{f32x8, i32x8, u32x8};
 
 /// Direction numbers of the second Sobol dimension: `V[k] = V[k-1] ^ (V[k-1] >> 1)`,
-/// `V[0] = 1 << 31`. Bit k of the index contributes `V[k]`.
+/// `V[0] = 1 << 31`. Bit k of the index contributes `V[k]`. Kept as the definition the fast
+/// evaluation below is tested against.
+#[cfg(test)]
 const DIRECTIONS_1: [u32; 32] = {
     let mut v = [0u32; 32];
     v[0] = 1 << 31;
@@ -35,6 +39,15 @@ const DIRECTIONS_1: [u32; 32] = {
     }
     v
 };
+
+/// The masks of the superset transform: bit j is set iff bit `b` of j is clear.
+const SUPERSET_MASKS: [(u32, u32); 5] = [
+    (1, 0x5555_5555),
+    (2, 0x3333_3333),
+    (4, 0x0F0F_0F0F),
+    (8, 0x00FF_00FF),
+    (16, 0x0000_FFFF),
+];
 
 /// The largest `f32` below 1: 1 − 2⁻²⁴.
 pub const ONE_MINUS_EPSILON: f32 = 1.0 - 1.0 / 16_777_216.0;
@@ -47,16 +60,18 @@ pub fn sobol_2d(index: u32) -> [u32; 2] {
     [index.reverse_bits(), sobol_dim1(index)]
 }
 
-/// Dimension 1: XOR of the direction numbers of the index's set bits.
+/// Dimension 1. By definition it is the XOR of the direction numbers `V[k]` of the index's
+/// set bits k, and `V[k]` holds binary digit j (weight 2^-(j+1)) iff C(k, j) is odd — by
+/// Lucas' theorem iff j ⊆ k as bit sets (the Pascal matrix mod 2). So digit j of the result is
+/// the XOR of index bits k over all supersets k ⊇ j: a superset transform over the 5-bit
+/// positions, done in five shift-mask-XOR steps, then the digits are bit-reversed into place.
 #[inline]
 fn sobol_dim1(index: u32) -> u32 {
-    let mut bits = index;
-    let mut x = 0;
-    while bits != 0 {
-        x ^= DIRECTIONS_1[bits.trailing_zeros() as usize];
-        bits &= bits - 1;
+    let mut x = index;
+    for (shift, mask) in SUPERSET_MASKS {
+        x ^= (x >> shift) & mask;
     }
-    x
+    x.reverse_bits()
 }
 
 /// Eight Sobol points at once: lane i is [`sobol_2d`] of lane i of `index`.
@@ -79,18 +94,14 @@ fn reverse_bits_x8(x: u32x8) -> u32x8 {
     (x >> 16) | (x << 16)
 }
 
-/// Dimension 1 without branches: each index bit, spread to a full-lane mask, selects its
-/// direction number.
+/// [`sobol_dim1`] for eight lanes: the same five steps and bit reversal.
 #[inline]
 fn sobol_dim1_x8(index: u32x8) -> u32x8 {
-    let mut x = u32x8::splat(0);
-    let one = u32x8::splat(1);
-    for (k, &v) in DIRECTIONS_1.iter().enumerate() {
-        // 0 - bit is all ones where the bit is set, zero elsewhere.
-        let mask = u32x8::splat(0) - ((index >> k as u32) & one);
-        x ^= mask & u32x8::splat(v);
+    let mut x = index;
+    for (shift, mask) in SUPERSET_MASKS {
+        x ^= (x >> shift) & u32x8::splat(mask);
     }
-    x
+    reverse_bits_x8(x)
 }
 
 /// The Cranley–Patterson offset of (`seed`, `texel`, `iteration`): two hashed 32-bit shifts.
@@ -169,6 +180,23 @@ mod tests {
         }
     }
 
+    /// The superset-transform evaluation equals the definition (XOR of direction numbers).
+    #[test]
+    fn fast_dimension_1_equals_the_direction_number_definition() {
+        let by_definition = |index: u32| {
+            (0..32)
+                .filter(|k| index >> k & 1 == 1)
+                .fold(0, |x, k| x ^ DIRECTIONS_1[k])
+        };
+        let mut rng = Pcg32::new(1, 1);
+        for i in (0..70_000)
+            .chain((0..70_000).map(|_| rng.next_u32()))
+            .chain([u32::MAX, 1 << 31])
+        {
+            assert_eq!(sobol_dim1(i), by_definition(i), "index {i}");
+        }
+    }
+
     /// Against an independent generator: Antonov–Saleev's Gray-code recursion produces point
     /// `gray(i) = i ^ (i >> 1)` by flipping one direction number per step.
     #[test]
@@ -224,7 +252,7 @@ mod tests {
             u32::MAX - 1,
             u32::MAX,
         ];
-        let mut check = |lanes: [u32; 8]| {
+        let check = |lanes: [u32; 8]| {
             let [x, y] = sobol_2d_x8(u32x8::new(lanes));
             for (i, &l) in lanes.iter().enumerate() {
                 assert_eq!([x.to_array()[i], y.to_array()[i]], sobol_2d(l), "index {l}");

@@ -15,9 +15,11 @@
 //!   swapped when `d[kz] < 0`), 2D edge functions `U, V, W`, recomputed in `f64` when one is
 //!   exactly zero, no backface culling. Rays through a closed mesh's shared edges and
 //!   vertices never slip through.
-//! - **Box test.** Slabs with `(b − o) · (1/d)`, the far distance scaled by `1 + 2γ₃`
-//!   (pbrt-v4 §6.8.2, Ize 2013) so that rounding never culls a box the ray touches;
-//!   `1/d` is clamped to `±f32::MAX` so a zero direction component gives no NaN.
+//! - **Box test.** Slabs with `(b − o) · (1/d)`; the interval is widened by 32 ulps (pbrt-v4
+//!   §6.8.2's `1 + 2γ₃` plus room for the triangle test's rounding of `t`, see `SLACK`) so
+//!   that rounding never culls a box holding a hit the oracle accepts. Planes are taken near
+//!   first by the direction's sign bits and a NaN plane distance (`0 · ∞`, a ray running inside
+//!   a box face) leaves the interval unconstrained, so rays along faces are kept.
 //! - **Packet traversal** ([`intersect8`], [`occluded8`]): one shared stack; a child is
 //!   visited when any lane's interval meets its box; when both children are hit the lanes
 //!   vote on which is nearer and that one is visited first. Triangles are tested for all eight
@@ -38,9 +40,6 @@
 //! Deviations and limits:
 //! - Rays with `tmin < 0` are not traced (they never hit): the conservative box bound assumes
 //!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
-//! - Boxes thinner than about `1e-38 · |d|` around an origin whose direction component is
-//!   exactly zero may be culled (the `±f32::MAX` clamp); such a ray runs inside the box's
-//!   plane, where the watertight test reports no hit anyway.
 //! - The tree depth is capped at [`MAX_DEPTH`]; [`BvhRef::new`] rejects deeper trees.
 
 use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
@@ -56,9 +55,13 @@ pub const MAX_DEPTH: usize = 128;
 
 const STACK: usize = MAX_DEPTH + 2;
 
-/// Far-distance inflation for a conservative slab test: `1 + 2γ₃`, `γₙ = nε/(1 − nε)`
-/// with `ε = 2⁻²⁴` (pbrt-v4 §6.8.2).
-const ROBUST: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+/// Slack of the conservative slab test: the box interval is widened to
+/// `[tmin · (1 − 2⁻¹⁸), min(far, tmax) · (1 + 2⁻¹⁸)]`. pbrt-v4's `1 + 2γ₃` (§6.8.2, about 3 ulps)
+/// covers the slab arithmetic; the triangle test's own rounding of `t` can put a hit that the
+/// oracle accepts at `t = tmax` (or `tmin`) a few ulps beyond a box face, so we keep 32 ulps.
+const SLACK: f32 = 1.0 / (1u32 << 18) as f32;
+const FAR_UP: f32 = 1.0 + SLACK;
+const NEAR_DOWN: f32 = 1.0 - SLACK;
 
 /// One BVH node: the boxes of its two children, one 64-byte cache line.
 ///
@@ -219,11 +222,6 @@ impl<'a> BvhRef<'a> {
 // ---------------------------------------------------------------------------------------------
 // Single ray: precomputation, box and triangle tests (the reference arithmetic).
 
-/// `1/d` with ±∞ clamped to ±`f32::MAX` (so `0 · (1/d)` is never NaN).
-fn safe_inv(d: f32) -> f32 {
-    (1.0 / d).clamp(-f32::MAX, f32::MAX)
-}
-
 /// Per-ray constants of the box and watertight tests.
 #[derive(Clone, Copy, Debug)]
 struct Pre {
@@ -253,7 +251,7 @@ impl Pre {
         }
         Self {
             org: ray.org.to_array(),
-            inv: d.map(safe_inv),
+            inv: d.map(|d| 1.0 / d),
             k: [kx, ky, kz],
             s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
             tmin: ray.tmin,
@@ -267,17 +265,27 @@ impl Pre {
 }
 
 /// Entry distance of slot `slot` if the ray's `[tmin, tmax]` meets its box.
+///
+/// Slab planes are taken in the order of the direction's sign bits (near plane first) and a
+/// plane whose distance is NaN (`0 · ∞`: the ray runs inside that plane) does not constrain the
+/// interval, so rays along a box face are kept. `if t > near` keeps `near` for NaN `t`, as
+/// `_mm256_max_ps(t, near)` does in [`Pre8::box8`].
 fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
-    let mut near = pre.tmin;
-    let mut far = f32::INFINITY;
+    let mut near = pre.tmin * NEAR_DOWN;
+    let mut far = tmax;
     for axis in 0..3 {
-        let t0 = (node.lo[axis][slot] - pre.org[axis]) * pre.inv[axis];
-        let t1 = (node.hi[axis][slot] - pre.org[axis]) * pre.inv[axis];
-        near = near.max(t0.min(t1));
-        far = far.min(t0.max(t1));
+        let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
+        let (pn, pf) = if pre.inv[axis].is_sign_negative() {
+            (hi, lo)
+        } else {
+            (lo, hi)
+        };
+        let tn = (pn - pre.org[axis]) * pre.inv[axis];
+        let tf = (pf - pre.org[axis]) * pre.inv[axis];
+        near = if tn > near { tn } else { near };
+        far = if tf < far { tf } else { far };
     }
-    let far = (far * ROBUST).min(tmax);
-    (near <= far).then_some(near)
+    (near <= far * FAR_UP).then_some(near)
 }
 
 /// Edge functions in `f64`, Woop et al. 2013's fallback when one is exactly zero.
@@ -475,9 +483,15 @@ struct Pre8 {
     s: [f32x8; 3],
     /// `sel[i][j]`: lanes whose `k[i] == j` (for `j` in 0..2; else 2).
     sel: [[f32x8; 2]; 3],
+    /// Lanes whose direction has the sign bit set, per axis.
+    neg: [f32x8; 3],
+    /// The shared direction sign bits when all traced lanes have the same ones.
+    octant: Option<[bool; 3]>,
     /// The shared permutation when all traced lanes have the same one.
     uniform: Option<[usize; 3]>,
     tmin: f32x8,
+    /// `tmin · (1 − 2⁻¹⁸)` for the box test.
+    tmin_down: f32x8,
     lanes: [Pre; LANES],
     /// Bit mask of traced lanes.
     traced: u8,
@@ -508,6 +522,11 @@ impl Pre8 {
         let first = lanes[traced.trailing_zeros().min(7) as usize].perm_id();
         let same = (0..LANES).all(|i| traced >> i & 1 == 0 || lanes[i].perm_id() == first);
         let uniform = same.then(|| lanes[traced.trailing_zeros().min(7) as usize].k);
+        let lead = &lanes[traced.trailing_zeros().min(7) as usize];
+        let signs = |p: &Pre| p.inv.map(f32::is_sign_negative);
+        let octant = (0..LANES)
+            .all(|i| traced >> i & 1 == 0 || signs(&lanes[i]) == signs(lead))
+            .then(|| signs(lead));
         let is = |i: usize, j: usize| col(&|p| if p.k[i] == j { f32::from_bits(!0) } else { 0.0 });
         Self {
             org: [0, 1, 2].map(|a| col(&|p| p.org[a])),
@@ -515,27 +534,51 @@ impl Pre8 {
             porg: [0, 1, 2].map(|a| col(&|p| p.org[p.k[a]])),
             s: [0, 1, 2].map(|a| col(&|p| p.s[a])),
             sel: [0, 1, 2].map(|i| [is(i, 0), is(i, 1)]),
+            neg: [0, 1, 2].map(|a| {
+                col(&|p| {
+                    if p.inv[a].is_sign_negative() {
+                        f32::from_bits(!0)
+                    } else {
+                        0.0
+                    }
+                })
+            }),
+            octant,
             uniform,
             tmin: col(&|p| p.tmin),
+            tmin_down: col(&|p| p.tmin * NEAR_DOWN),
             lanes,
             traced,
         }
     }
 
-    /// Lanes whose interval meets slot `slot`'s box, and their entry distances.
+    /// Lanes whose interval meets slot `slot`'s box, and their entry distances: [`box1`] for
+    /// eight lanes, near planes picked once per packet when all lanes share the direction
+    /// signs (a coherent packet), per lane otherwise.
     #[inline(always)]
     fn box8(&self, node: &Node, slot: usize, tmax: f32x8) -> (f32x8, f32x8) {
-        let slab = |axis: usize| {
-            let t0 = (f32x8::splat(node.lo[axis][slot]) - self.org[axis]) * self.inv[axis];
-            let t1 = (f32x8::splat(node.hi[axis][slot]) - self.org[axis]) * self.inv[axis];
-            (t0.fast_min(t1), t0.fast_max(t1))
-        };
-        let (nx, fx) = slab(0);
-        let (ny, fy) = slab(1);
-        let (nz, fz) = slab(2);
-        let near = nx.fast_max(ny).fast_max(nz.fast_max(self.tmin));
-        let far = (fx.fast_min(fy).fast_min(fz) * f32x8::splat(ROBUST)).fast_min(tmax);
-        (near.simd_le(far), near)
+        let mut near = self.tmin_down;
+        let mut far = tmax;
+        for axis in 0..3 {
+            let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
+            let (pn, pf) = match self.octant {
+                Some(neg) if neg[axis] => (f32x8::splat(hi), f32x8::splat(lo)),
+                Some(_) => (f32x8::splat(lo), f32x8::splat(hi)),
+                None => {
+                    let (lo, hi) = (f32x8::splat(lo), f32x8::splat(hi));
+                    (
+                        self.neg[axis].bitselect(hi, lo),
+                        self.neg[axis].bitselect(lo, hi),
+                    )
+                }
+            };
+            let tn = (pn - self.org[axis]) * self.inv[axis];
+            let tf = (pf - self.org[axis]) * self.inv[axis];
+            // fast_max(a, b) is maxps(a, b): `b` when either is NaN, like `box1`.
+            near = tn.fast_max(near);
+            far = tf.fast_min(far);
+        }
+        (near.simd_le(far * f32x8::splat(FAR_UP)), near)
     }
 
     /// Vertex `v` relative to the origin in each lane's permuted axes.
@@ -802,4 +845,232 @@ pub fn offset_origin(p: Vec3, n: Vec3) -> Vec3 {
         }
     };
     Vec3::new(axis(p.x, n.x), axis(p.y, n.y), axis(p.z, n.z))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::Pcg32;
+    use std::vec::Vec;
+
+    /// Test-only builder: median split on the longest axis, leaves of at most 3 triangles.
+    fn build(soup: &[[Vec3; 3]]) -> (Vec<Node>, Vec<Tri>) {
+        let mut items: Vec<(u32, [Vec3; 3])> = soup
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (i as u32, *t))
+            .collect();
+        let mut nodes = std::vec![Node::EMPTY];
+        let mut tris = Vec::new();
+        if items.len() <= 3 {
+            fill(&mut nodes, 0, 0, &mut items, &mut tris);
+            return (nodes, tris);
+        }
+        let mid = items.len() / 2;
+        split(&mut items);
+        let (l, r) = items.split_at_mut(mid);
+        fill(&mut nodes, 0, 0, l, &mut tris);
+        fill(&mut nodes, 0, 1, r, &mut tris);
+        (nodes, tris)
+    }
+
+    fn bounds(items: &[(u32, [Vec3; 3])]) -> (Vec3, Vec3) {
+        items
+            .iter()
+            .flat_map(|(_, t)| t.iter())
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
+                (lo.min(p), hi.max(p))
+            })
+    }
+
+    fn split(items: &mut [(u32, [Vec3; 3])]) {
+        let (lo, hi) = bounds(items);
+        let axis = (hi - lo).max_position();
+        items.sort_by(|a, b| {
+            let c = |t: &[Vec3; 3]| t[0][axis] + t[1][axis] + t[2][axis];
+            c(&a.1).total_cmp(&c(&b.1))
+        });
+    }
+
+    fn fill(
+        nodes: &mut Vec<Node>,
+        parent: usize,
+        slot: usize,
+        items: &mut [(u32, [Vec3; 3])],
+        tris: &mut Vec<Tri>,
+    ) {
+        let (lo, hi) = bounds(items);
+        nodes[parent].set_box(slot, lo, hi);
+        if items.len() <= 3 {
+            nodes[parent].child[slot] = tris.len() as u32;
+            nodes[parent].meta[slot] = LEAF | items.len() as u32;
+            tris.extend(items.iter().map(|(p, t)| Tri::new(*t, *p)));
+            return;
+        }
+        let index = nodes.len();
+        nodes.push(Node::EMPTY);
+        nodes[parent].child[slot] = index as u32;
+        nodes[parent].meta[slot] = 0;
+        split(items);
+        let mid = items.len() / 2;
+        let (l, r) = items.split_at_mut(mid);
+        fill(nodes, index, 0, l, tris);
+        fill(nodes, index, 1, r, tris);
+    }
+
+    fn v3(rng: &mut Pcg32, s: f32) -> Vec3 {
+        Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * s
+    }
+
+    fn soup(rng: &mut Pcg32, n: usize) -> Vec<[Vec3; 3]> {
+        (0..n)
+            .map(|_| {
+                let c = v3(rng, 4.0);
+                [c + v3(rng, 0.5), c + v3(rng, 0.5), c + v3(rng, 0.5)]
+            })
+            .collect()
+    }
+
+    /// A ray from edge values: axis-aligned, zero and signed-zero components, shared origins.
+    fn ray(rng: &mut Pcg32, org: Vec3) -> Ray {
+        let special = [0.0, -0.0, 1.0, -1.0, 1e-20, 0.5];
+        let mut c = || {
+            if rng.next_u32() % 3 == 0 {
+                special[(rng.next_u32() % 6) as usize]
+            } else {
+                rng.next_f32() * 2.0 - 1.0
+            }
+        };
+        let d = Vec3::new(c(), c(), c());
+        let tmax = if rng.next_u32() % 3 == 0 {
+            1.0 + 4.0 * rng.next_f32()
+        } else {
+            f32::INFINITY
+        };
+        Ray::new(org, d, 0.0, tmax)
+    }
+
+    #[test]
+    fn packet_equals_scalar_equals_brute_force_for_1_to_8_lanes() {
+        let mut rng = Pcg32::new(41, 2);
+        let soup = soup(&mut rng, 150);
+        let (nodes, tris) = build(&soup);
+        let bvh = BvhRef::new(&nodes, &tris).unwrap();
+        for trial in 0..300 {
+            let lanes = trial % LANES + 1;
+            let shared = v3(&mut rng, 4.5);
+            let rays: Vec<Ray> = (0..lanes)
+                .map(|_| {
+                    let org = if trial % 2 == 0 {
+                        shared
+                    } else {
+                        v3(&mut rng, 4.5)
+                    };
+                    ray(&mut rng, org)
+                })
+                .collect();
+            let packet = Ray8::from_rays(&rays);
+            let mut hits = Hit8::NONE;
+            let mask = intersect8(&bvh, &packet, &mut hits);
+            let blocked = occluded8(&bvh, &packet);
+            for lane in 0..LANES {
+                let r = packet.lane(lane);
+                let oracle = intersect_brute(&tris, &r);
+                assert_eq!(intersect1(&bvh, &r), oracle, "{r:?}");
+                assert_eq!(hits.lane(lane), oracle, "lane {lane} of {lanes}: {r:?}");
+                assert_eq!(mask >> lane & 1 == 1, oracle.is_some());
+                assert_eq!(occluded1(&bvh, &r), occluded_brute(&tris, &r));
+                assert_eq!(blocked >> lane & 1 == 1, occluded_brute(&tris, &r));
+                if lane >= lanes {
+                    assert_eq!(hits.lane(lane), None, "inactive lane written");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn triangle_test_8_wide_matches_scalar_bit_for_bit() {
+        // Mixed shear permutations in one packet take the per-lane blend path.
+        let mut rng = Pcg32::new(5, 8);
+        let mut hits = 0;
+        for _ in 0..2000 {
+            let t = Tri::new([v3(&mut rng, 2.0), v3(&mut rng, 2.0), v3(&mut rng, 2.0)], 3);
+            let rays: [Ray; LANES] = core::array::from_fn(|_| {
+                let o = v3(&mut rng, 2.0) - Vec3::splat(0.5);
+                // Aim at a point of the triangle's plane, inside or just outside it.
+                let (a, b) = (rng.next_f32() * 1.2 - 0.1, rng.next_f32() * 1.2 - 0.1);
+                let [p0, p1, p2] = t.v.map(Vec3::from);
+                Ray::new(
+                    o,
+                    p0 + (p1 - p0) * a + (p2 - p0) * b - o,
+                    0.0,
+                    f32::INFINITY,
+                )
+            });
+            let pre = Pre8::new(&Ray8::from_rays(&rays));
+            let r = pre.tri8(&t);
+            for (i, ray) in rays.iter().enumerate() {
+                let want = tri1(&Pre::new(ray), &t);
+                let lane = r.ok.to_bitmask() >> i & 1 == 1;
+                if r.any_zero.to_bitmask() >> i & 1 == 1 {
+                    continue; // resolved by the scalar f64 fallback in `closest8`
+                }
+                assert_eq!(lane, want.is_some(), "{ray:?}");
+                if let Some((tt, _, _)) = want {
+                    assert_eq!(r.t.as_array()[i].to_bits(), tt.to_bits());
+                    hits += 1;
+                }
+            }
+        }
+        assert!(hits > 4000, "the test must exercise hits ({hits})");
+    }
+
+    #[test]
+    fn layout_errors_are_reported() {
+        let mut bad = Node::EMPTY;
+        assert_eq!(BvhRef::new(&[], &[]).unwrap_err(), LayoutError::NoNodes);
+        bad.meta = [0, LEAF];
+        assert_eq!(
+            BvhRef::new(&[bad], &[]).unwrap_err(),
+            LayoutError::BadChild { node: 0, slot: 0 }
+        );
+        bad.meta = [LEAF | 2, LEAF];
+        assert_eq!(
+            BvhRef::new(&[bad], &[]).unwrap_err(),
+            LayoutError::BadLeaf { node: 0, slot: 0 }
+        );
+        // A chain deeper than MAX_DEPTH.
+        let chain: Vec<Node> = (0..MAX_DEPTH as u32 + 2)
+            .map(|i| Node {
+                child: [i + 1, 0],
+                meta: [0, LEAF],
+                ..Node::EMPTY
+            })
+            .chain([Node::EMPTY])
+            .collect();
+        assert!(matches!(
+            BvhRef::new(&chain, &[]),
+            Err(LayoutError::TooDeep { .. })
+        ));
+    }
+
+    #[test]
+    fn offset_origin_moves_along_the_normal_at_every_scale() {
+        for p in [
+            Vec3::ZERO,
+            Vec3::splat(0.01),
+            Vec3::new(1.0e6, -1.0e6, 3.0),
+            Vec3::splat(-5.0e4),
+        ] {
+            let n = Vec3::new(0.6, -0.8, 0.0);
+            let q = offset_origin(p, n);
+            let moved = q - p;
+            assert!(
+                moved.x > 0.0 && moved.y < 0.0 && moved.z == 0.0,
+                "{p} -> {q}"
+            );
+            // Scale-aware: a fixed number of ulps, so the move grows with |p|.
+            assert!(moved.length() < 1e-4_f32.max(p.abs().max_element() * 1e-4));
+        }
+    }
 }

@@ -5,5 +5,9 @@
 //! run bakes ([`shard`]), and the bounded worker/writer [`pipeline`] that commits finished
 //! tiles to the [result file and journal](crate::output).
 
+pub mod gather;
 pub mod pipeline;
+pub mod run;
+pub mod settings;
 pub mod shard;
+pub mod world;

@@ -7,3 +7,4 @@
 //! without the sun, so no light is counted twice.
 
 pub mod lights;
+pub mod sky;

@@ -1,0 +1,615 @@
+//! Group `traverse`: rays/s of the 8-wide packet traversal against the scalar reference,
+//! obvhs's own CwBvh traversal and (feature `embree`) Embree 3, on the same ray sets:
+//! coherent gather packets, shadow rays towards a light, incoherent random rays; scenes: the
+//! Veach ajar room (if `../shared/scenes` is present) and a procedural ~1M-triangle city.
+//!
+//! Every comparator's results are checked against the scalar reference once before timing.
+//!
+//! `cargo bench --bench traverse -- --warm-up-time 1 --measurement-time 5`
+//! `cargo bench --bench traverse --features embree -- --warm-up-time 1 --measurement-time 5`
+//! Set `TRAVERSE_PRESETS=1` to also time every obvhs build preset (build time vs trace time).
+
+#[path = "common/traverse_scenes.rs"]
+mod scenes;
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use glam::{Vec3, Vec3A};
+use guidebake::bvh::{Bvh, Preset};
+use guidebake_kernels::packet::{Hit8, LANES, Ray8};
+use guidebake_kernels::traverse::{
+    BvhRef, intersect_brute, intersect1, intersect8, occluded1, occluded8,
+};
+use obvhs::cwbvh::{CwBvh, builder::build_cwbvh_from_tris};
+use obvhs::ray::{Ray as ORay, RayHit};
+use obvhs::triangle::Triangle;
+
+/// Gather set: texels × 256 directions.
+const TEXELS: usize = 256;
+const PER_TEXEL: usize = 256;
+
+struct Scene {
+    name: &'static str,
+    soup: Vec<[Vec3; 3]>,
+    bvh: Bvh,
+    cw: CwBvh,
+    cw_tris: Vec<Triangle>,
+    light: Vec3,
+}
+
+fn scene(name: &'static str, soup: Vec<[Vec3; 3]>, light: Vec3) -> Scene {
+    let bvh = Bvh::build(&soup, Preset::DEFAULT).expect("scene BVH");
+    let cw_tris: Vec<Triangle> = soup
+        .iter()
+        .map(|t| Triangle {
+            v0: t[0].into(),
+            v1: t[1].into(),
+            v2: t[2].into(),
+        })
+        .collect();
+    let mut core = std::time::Duration::ZERO;
+    let cw = build_cwbvh_from_tris(&cw_tris, Preset::DEFAULT.params(), &mut core);
+    // obvhs traversal indexes primitives in BVH order: lay the triangles out in that order.
+    let cw_tris = cw
+        .primitive_indices
+        .iter()
+        .map(|&i| cw_tris[i as usize])
+        .collect();
+    Scene {
+        name,
+        soup,
+        bvh,
+        cw,
+        cw_tris,
+        light,
+    }
+}
+
+fn scenes() -> Vec<Scene> {
+    let mut out = Vec::new();
+    match scenes::converted_dir() {
+        Some(dir) => {
+            let soup = scenes::load_glb(&dir.join("bitterli_veach_ajar_no_teapots.glb"));
+            let (lo, hi) = bounds(&soup);
+            out.push(scene(
+                "ajar",
+                soup,
+                (lo + hi) * 0.5 + Vec3::new(0.0, 0.3 * (hi.y - lo.y), 0.0),
+            ));
+        }
+        None => println!("skipping the ajar room: ../shared/scenes/converted not found"),
+    }
+    let city = scenes::city(106, 3, 4);
+    out.push(scene("city1m", city, Vec3::new(53.0, 12.0, 53.0)));
+    out
+}
+
+fn bounds(soup: &[[Vec3; 3]]) -> (Vec3, Vec3) {
+    soup.iter()
+        .flatten()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
+            (lo.min(p), hi.max(p))
+        })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tracers. Each returns a checksum (hits, or the sum of prim ids) so the work is not elided.
+
+fn packet8(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+    let mut sum = 0u64;
+    for p in packets {
+        let mut hits = Hit8::NONE;
+        intersect8(view, p, &mut hits);
+        sum += hits
+            .prim
+            .to_array()
+            .iter()
+            .map(|&x| u64::from(x))
+            .sum::<u64>();
+    }
+    sum
+}
+
+fn scalar(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+    let mut sum = 0u64;
+    for p in packets {
+        for lane in 0..LANES {
+            sum +=
+                intersect1(view, &p.lane(lane)).map_or(u64::from(u32::MAX), |h| u64::from(h.prim));
+        }
+    }
+    sum
+}
+
+fn occl8(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+    packets
+        .iter()
+        .map(|p| u64::from(occluded8(view, p).count_ones()))
+        .sum()
+}
+
+fn occl1(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+    packets
+        .iter()
+        .map(|p| (0..LANES).filter(|&l| occluded1(view, &p.lane(l))).count() as u64)
+        .sum()
+}
+
+fn oray(p: &Ray8, lane: usize) -> ORay {
+    let r = p.lane(lane);
+    ORay::new(Vec3A::from(r.org), Vec3A::from(r.dir), r.tmin, r.tmax)
+}
+
+fn obvhs_closest(s: &Scene, packets: &[Ray8]) -> u64 {
+    let mut sum = 0u64;
+    for p in packets {
+        for lane in 0..LANES {
+            let mut hit = RayHit::none();
+            let prim = if s.cw.ray_traverse(oray(p, lane), &mut hit, |ray, id| {
+                s.cw_tris[id].intersect(ray)
+            }) {
+                s.cw.primitive_indices[hit.primitive_id as usize]
+            } else {
+                u32::MAX
+            };
+            sum += u64::from(prim);
+        }
+    }
+    sum
+}
+
+fn obvhs_occluded(s: &Scene, packets: &[Ray8]) -> u64 {
+    let mut n = 0u64;
+    for p in packets {
+        for lane in 0..LANES {
+            n += u64::from(
+                !s.cw
+                    .ray_traverse_miss(oray(p, lane), |ray, id| s.cw_tris[id].intersect(ray)),
+            );
+        }
+    }
+    n
+}
+
+/// Per-ray agreement of a comparator's primitive ids with the scalar reference; the watertight
+/// and Möller tests may legitimately differ on rays through edges, so a tiny rate is allowed.
+fn check_prims(what: &str, reference: &[u32], other: &[u32]) {
+    let differ = reference.iter().zip(other).filter(|(a, b)| a != b).count();
+    let rate = differ as f64 / reference.len() as f64;
+    println!(
+        "check {what}: {differ} of {} rays differ from the scalar reference",
+        reference.len()
+    );
+    assert!(
+        rate < 2e-3,
+        "{what}: {differ} of {} rays differ",
+        reference.len()
+    );
+}
+
+fn prims_of(view: &BvhRef<'_>, packets: &[Ray8]) -> Vec<u32> {
+    packets
+        .iter()
+        .flat_map(|p| {
+            (0..LANES).map(move |l| intersect1(view, &p.lane(l)).map_or(u32::MAX, |h| h.prim))
+        })
+        .collect()
+}
+
+fn check_ours(s: &Scene, view: &BvhRef<'_>, packets: &[Ray8], reference: &[u32]) {
+    // Brute force on a sample (it is O(triangles) per ray), exact equality everywhere else.
+    for p in packets.iter().step_by(packets.len() / 16 + 1) {
+        for l in 0..LANES {
+            let r = p.lane(l);
+            assert_eq!(
+                intersect1(view, &r),
+                intersect_brute(view.tris(), &r),
+                "{}: scalar vs brute",
+                s.name
+            );
+        }
+    }
+    let mut got = Vec::with_capacity(reference.len());
+    for p in packets {
+        let mut hits = Hit8::NONE;
+        intersect8(view, p, &mut hits);
+        got.extend(hits.prim.to_array());
+    }
+    assert_eq!(got, reference, "{}: packet8 vs scalar", s.name);
+}
+
+fn bench(c: &mut Criterion) {
+    #[cfg(feature = "embree")]
+    embree_rt::ftz_daz();
+    let mut group = c.benchmark_group("traverse");
+    for s in scenes() {
+        let view = s.bvh.view();
+        println!(
+            "{}: {} triangles, {} nodes, {} leaf triangles, build {:?}",
+            s.name,
+            s.soup.len(),
+            view.nodes().len(),
+            view.tris().len(),
+            s.bvh.build_time()
+        );
+        let sets = [
+            (
+                "gather",
+                scenes::gather_packets(&s.soup, TEXELS, PER_TEXEL, 1),
+            ),
+            (
+                "shadow",
+                scenes::shadow_packets(&s.soup, s.light, 0.5, TEXELS * PER_TEXEL / LANES, 2),
+            ),
+            (
+                "incoherent",
+                scenes::incoherent_packets(&s.soup, TEXELS * PER_TEXEL / LANES / 4, 3),
+            ),
+        ];
+        #[cfg(feature = "embree")]
+        let em = embree_rt::EmbreeScene::new(&s.soup);
+        for (kind, packets) in &sets {
+            let rays = (packets.len() * LANES) as u64;
+            group.throughput(Throughput::Elements(rays));
+            let id = |what: &str| format!("{}/{kind}_{what}", s.name);
+            let reference = prims_of(&view, packets);
+            if *kind == "shadow" {
+                let blocked: Vec<u32> = packets
+                    .iter()
+                    .flat_map(|p| (0..LANES).map(move |l| u32::from(occluded1(&view, &p.lane(l)))))
+                    .collect();
+                let packet_blocked: Vec<u32> = packets
+                    .iter()
+                    .flat_map(|p| {
+                        let m = occluded8(&view, p);
+                        (0..LANES).map(move |l| u32::from(m >> l & 1))
+                    })
+                    .collect();
+                assert_eq!(
+                    blocked, packet_blocked,
+                    "{}: occluded8 vs occluded1",
+                    s.name
+                );
+                let ob: Vec<u32> = packets
+                    .iter()
+                    .flat_map(|p| {
+                        (0..LANES).map(|l| {
+                            u32::from(!s.cw.ray_traverse_miss(oray(p, l), |ray, i| {
+                                s.cw_tris[i].intersect(ray)
+                            }))
+                        })
+                    })
+                    .collect();
+                check_prims(&id("obvhs"), &blocked, &ob);
+                #[cfg(feature = "embree")]
+                check_prims(
+                    &id("embree_occluded8"),
+                    &blocked,
+                    &em.occluded8_all(packets, true),
+                );
+                group.bench_function(id("occluded8"), |b| {
+                    b.iter(|| occl8(&view, black_box(packets)))
+                });
+                group.bench_function(id("scalar"), |b| {
+                    b.iter(|| occl1(&view, black_box(packets)))
+                });
+                group.bench_function(id("obvhs"), |b| {
+                    b.iter(|| obvhs_occluded(&s, black_box(packets)))
+                });
+                #[cfg(feature = "embree")]
+                for coherent in [true, false] {
+                    let name = if coherent {
+                        "embree_occluded8_coherent"
+                    } else {
+                        "embree_occluded8_incoherent"
+                    };
+                    group.bench_function(id(name), |b| {
+                        b.iter(|| em.occluded8_count(black_box(packets), coherent))
+                    });
+                }
+                continue;
+            }
+            check_ours(&s, &view, packets, &reference);
+            let ob: Vec<u32> = packets
+                .iter()
+                .flat_map(|p| {
+                    (0..LANES).map(|l| {
+                        let mut hit = RayHit::none();
+                        if s.cw.ray_traverse(oray(p, l), &mut hit, |ray, id| {
+                            s.cw_tris[id].intersect(ray)
+                        }) {
+                            s.cw.primitive_indices[hit.primitive_id as usize]
+                        } else {
+                            u32::MAX
+                        }
+                    })
+                })
+                .collect();
+            check_prims(&id("obvhs_cwbvh"), &reference, &ob);
+            #[cfg(feature = "embree")]
+            {
+                check_prims(
+                    &id("embree_intersect8"),
+                    &reference,
+                    &em.intersect8_prims(packets, true),
+                );
+                check_prims(
+                    &id("embree_intersect1"),
+                    &reference,
+                    &em.intersect1_prims(packets, true),
+                );
+            }
+            group.bench_function(id("packet8"), |b| {
+                b.iter(|| packet8(&view, black_box(packets)))
+            });
+            group.bench_function(id("scalar"), |b| {
+                b.iter(|| scalar(&view, black_box(packets)))
+            });
+            group.bench_function(id("obvhs_cwbvh"), |b| {
+                b.iter(|| obvhs_closest(&s, black_box(packets)))
+            });
+            #[cfg(feature = "embree")]
+            for coherent in [true, false] {
+                let tag = if coherent { "coherent" } else { "incoherent" };
+                group.bench_function(id(&format!("embree_intersect8_{tag}")), |b| {
+                    b.iter(|| em.intersect8_sum(black_box(packets), coherent))
+                });
+                group.bench_function(id(&format!("embree_intersect1_{tag}")), |b| {
+                    b.iter(|| em.intersect1_sum(black_box(packets), coherent))
+                });
+            }
+        }
+        if std::env::var_os("TRAVERSE_PRESETS").is_some() {
+            presets(&s, &sets[0].1);
+        }
+    }
+    group.finish();
+}
+
+/// Build time vs gather trace time of every obvhs preset (printed, one run each; not a criterion
+/// measurement: a build is seconds long on the 1M scene).
+fn presets(s: &Scene, packets: &[Ray8]) {
+    for preset in Preset::ALL {
+        let bvh = Bvh::build(&s.soup, preset).expect("preset BVH");
+        let view = bvh.view();
+        let mut best = f64::INFINITY;
+        for _ in 0..5 {
+            let start = Instant::now();
+            black_box(packet8(&view, packets));
+            best = best.min(start.elapsed().as_secs_f64());
+        }
+        let mrays = (packets.len() * LANES) as f64 / best / 1e6;
+        println!(
+            "preset {} {:>10}: build {:>8.1} ms, {} nodes, gather packet8 {:.2} Mrays/s",
+            s.name,
+            preset.name(),
+            bvh.build_time().as_secs_f64() * 1e3,
+            view.nodes().len(),
+            mrays
+        );
+    }
+}
+
+#[cfg(feature = "embree")]
+mod embree_rt {
+    //! Embree 3 through `embree::sys`: one triangle geometry, build quality HIGH, FTZ/DAZ on,
+    //! 32-byte aligned valid masks, COHERENT or INCOHERENT context flags.
+    use embree::sys::*;
+    use glam::Vec3;
+    use guidebake_kernels::packet::{LANES, Ray8};
+
+    /// Flush-to-zero and denormals-are-zero, as Embree recommends.
+    pub fn ftz_daz() {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let mut csr: u32 = 0;
+            // SAFETY: stmxcsr/ldmxcsr read and write this thread's MXCSR only; setting FTZ
+            // (bit 15) and DAZ (bit 6) changes denormal handling, nothing else.
+            unsafe {
+                core::arch::asm!("stmxcsr [{}]", in(reg) &mut csr, options(nostack));
+                csr |= (1 << 15) | (1 << 6);
+                core::arch::asm!("ldmxcsr [{}]", in(reg) &csr, options(nostack, readonly));
+            }
+        }
+    }
+
+    #[repr(C, align(32))]
+    struct Valid([i32; 8]);
+
+    pub struct EmbreeScene {
+        device: RTCDevice,
+        scene: RTCScene,
+    }
+
+    fn context(coherent: bool) -> RTCIntersectContext {
+        RTCIntersectContext {
+            flags: if coherent {
+                RTCIntersectContextFlags::COHERENT
+            } else {
+                RTCIntersectContextFlags::INCOHERENT
+            },
+            filter: None,
+            instID: [u32::MAX],
+        }
+    }
+
+    impl EmbreeScene {
+        pub fn new(soup: &[[Vec3; 3]]) -> Self {
+            // SAFETY: plain Embree C API use: the device and scene live as long as `self`; the
+            // buffers Embree allocates are written within their `soup.len()`-sized bounds.
+            unsafe {
+                let device = rtcNewDevice(c"threads=1".as_ptr());
+                assert!(!device.is_null(), "rtcNewDevice failed");
+                let scene = rtcNewScene(device);
+                rtcSetSceneBuildQuality(scene, RTCBuildQuality::HIGH);
+                let geom = rtcNewGeometry(device, RTCGeometryType::TRIANGLE);
+                rtcSetGeometryBuildQuality(geom, RTCBuildQuality::HIGH);
+                let n = soup.len();
+                let vb = rtcSetNewGeometryBuffer(
+                    geom,
+                    RTCBufferType::VERTEX,
+                    0,
+                    RTCFormat::FLOAT3,
+                    12,
+                    3 * n,
+                ) as *mut f32;
+                let ib =
+                    rtcSetNewGeometryBuffer(geom, RTCBufferType::INDEX, 0, RTCFormat::UINT3, 12, n)
+                        as *mut u32;
+                assert!(!vb.is_null() && !ib.is_null());
+                let verts = std::slice::from_raw_parts_mut(vb, 9 * n);
+                let idx = std::slice::from_raw_parts_mut(ib, 3 * n);
+                for (i, t) in soup.iter().enumerate() {
+                    for k in 0..3 {
+                        verts[9 * i + 3 * k..9 * i + 3 * k + 3].copy_from_slice(&t[k].to_array());
+                        idx[3 * i + k] = (3 * i + k) as u32;
+                    }
+                }
+                rtcCommitGeometry(geom);
+                rtcAttachGeometry(scene, geom);
+                rtcReleaseGeometry(geom);
+                rtcCommitScene(scene);
+                Self { device, scene }
+            }
+        }
+
+        fn rayhit8(p: &Ray8) -> (Valid, RTCRayHit8) {
+            let lanes = |v: wide::f32x8| v.to_array();
+            let active = p.active().to_bitmask();
+            let valid = Valid(std::array::from_fn(|i| {
+                if active >> i & 1 == 1 { -1 } else { 0 }
+            }));
+            // SAFETY: RTCRayHit8 is plain old data (floats and integers); all-zero is valid.
+            let mut rh: RTCRayHit8 = unsafe { std::mem::zeroed() };
+            rh.ray.org_x = lanes(p.org[0]);
+            rh.ray.org_y = lanes(p.org[1]);
+            rh.ray.org_z = lanes(p.org[2]);
+            rh.ray.dir_x = lanes(p.dir[0]);
+            rh.ray.dir_y = lanes(p.dir[1]);
+            rh.ray.dir_z = lanes(p.dir[2]);
+            rh.ray.tnear = lanes(p.tmin);
+            rh.ray.tfar = lanes(p.tmax);
+            rh.ray.mask = [u32::MAX; 8];
+            rh.hit.geomID = [u32::MAX; 8];
+            rh.hit.primID = [u32::MAX; 8];
+            (valid, rh)
+        }
+
+        fn intersect8(&self, p: &Ray8, coherent: bool) -> [u32; 8] {
+            let (valid, mut rh) = Self::rayhit8(p);
+            let mut ctx = context(coherent);
+            // SAFETY: `valid` and `rh` are 32-byte aligned and live across the call.
+            unsafe { rtcIntersect8(valid.0.as_ptr(), self.scene, &mut ctx, &mut rh) };
+            std::array::from_fn(|i| {
+                if rh.hit.geomID[i] == u32::MAX {
+                    u32::MAX
+                } else {
+                    rh.hit.primID[i]
+                }
+            })
+        }
+
+        fn intersect1(&self, p: &Ray8, lane: usize, coherent: bool) -> u32 {
+            let r = p.lane(lane);
+            // SAFETY: RTCRayHit is plain old data; all-zero is valid.
+            let mut rh: RTCRayHit = unsafe { std::mem::zeroed() };
+            rh.ray.org_x = r.org.x;
+            rh.ray.org_y = r.org.y;
+            rh.ray.org_z = r.org.z;
+            rh.ray.dir_x = r.dir.x;
+            rh.ray.dir_y = r.dir.y;
+            rh.ray.dir_z = r.dir.z;
+            rh.ray.tnear = r.tmin;
+            rh.ray.tfar = r.tmax;
+            rh.ray.mask = u32::MAX;
+            rh.hit.geomID = u32::MAX;
+            let mut ctx = context(coherent);
+            // SAFETY: `rh` and `ctx` live across the call.
+            unsafe { rtcIntersect1(self.scene, &mut ctx, &mut rh) };
+            if rh.hit.geomID == u32::MAX {
+                u32::MAX
+            } else {
+                rh.hit.primID
+            }
+        }
+
+        fn occluded8(&self, p: &Ray8, coherent: bool) -> u8 {
+            let (valid, mut rh) = Self::rayhit8(p);
+            let mut ctx = context(coherent);
+            // SAFETY: `valid` and the ray are 32-byte aligned and live across the call.
+            unsafe { rtcOccluded8(valid.0.as_ptr(), self.scene, &mut ctx, &mut rh.ray) };
+            (0..LANES).fold(0, |m, i| {
+                m | u8::from(rh.ray.tfar[i] == f32::NEG_INFINITY) << i
+            })
+        }
+
+        pub fn intersect8_prims(&self, packets: &[Ray8], coherent: bool) -> Vec<u32> {
+            packets
+                .iter()
+                .flat_map(|p| self.intersect8(p, coherent))
+                .collect()
+        }
+
+        pub fn intersect1_prims(&self, packets: &[Ray8], coherent: bool) -> Vec<u32> {
+            packets
+                .iter()
+                .flat_map(|p| (0..LANES).map(move |l| self.intersect1(p, l, coherent)))
+                .collect()
+        }
+
+        pub fn occluded8_all(&self, packets: &[Ray8], coherent: bool) -> Vec<u32> {
+            packets
+                .iter()
+                .flat_map(|p| {
+                    let m = self.occluded8(p, coherent);
+                    (0..LANES).map(move |l| u32::from(m >> l & 1))
+                })
+                .collect()
+        }
+
+        pub fn intersect8_sum(&self, packets: &[Ray8], coherent: bool) -> u64 {
+            packets
+                .iter()
+                .map(|p| {
+                    self.intersect8(p, coherent)
+                        .iter()
+                        .map(|&x| u64::from(x))
+                        .sum::<u64>()
+                })
+                .sum()
+        }
+
+        pub fn intersect1_sum(&self, packets: &[Ray8], coherent: bool) -> u64 {
+            packets
+                .iter()
+                .map(|p| {
+                    (0..LANES)
+                        .map(|l| u64::from(self.intersect1(p, l, coherent)))
+                        .sum::<u64>()
+                })
+                .sum()
+        }
+
+        pub fn occluded8_count(&self, packets: &[Ray8], coherent: bool) -> u64 {
+            packets
+                .iter()
+                .map(|p| u64::from(self.occluded8(p, coherent).count_ones()))
+                .sum()
+        }
+    }
+
+    impl Drop for EmbreeScene {
+        fn drop(&mut self) {
+            // SAFETY: created in `new`, released once here.
+            unsafe {
+                rtcReleaseScene(self.scene);
+                rtcReleaseDevice(self.device);
+            }
+        }
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
