@@ -12,12 +12,13 @@
 //!
 //! Run: `cargo bench --bench warp -- --warm-up-time 1 --measurement-time 3`
 
-use criterion::{BatchSize, Criterion, Throughput, black_box, criterion_group, criterion_main};
+use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::warp::{self, Warped};
+use std::hint::black_box;
 use wide::f32x8;
 
 /// Gather samples per texel and texels per timed iteration.
@@ -163,6 +164,65 @@ fn uniform_share(g: &Guide<'_>, points: &[[f32; 2]]) -> f64 {
     same as f64 / n as f64
 }
 
+/// The four warp variants timed round-robin, 31 rounds, medians printed: on a shared,
+/// noisy machine the ratios of one interleaved run are steadier than criterion's sequential
+/// groups (each of which can land in a different load phase).
+fn interleaved(g: &Guide<'_>, pts: &Points) {
+    let (su, sp) = (soa(&pts.unsorted), soa(&pts.presorted));
+    let mut out = vec![
+        Warped {
+            u: [0.0; 2],
+            pdf: 0.0
+        };
+        pts.unsorted.len()
+    ];
+    let zero = f32x8::splat(0.0);
+    let mut out8 = vec![
+        warp::Warped8 {
+            x: zero,
+            y: zero,
+            pdf: zero
+        };
+        su.len()
+    ];
+    let mut times: [Vec<f64>; 4] = Default::default();
+    for round in 0..31 {
+        // Rotate which variant goes first, so none always meets the same phase of the round.
+        for k in (0..4).map(|j| (j + round) % 4) {
+            let t = std::time::Instant::now();
+            for _ in 0..4 {
+                match k {
+                    0 => scalar(g, black_box(&pts.unsorted), &mut out),
+                    1 => scalar(g, black_box(&pts.presorted), &mut out),
+                    2 => x8(g, black_box(&su), &mut out8),
+                    _ => x8(g, black_box(&sp), &mut out8),
+                }
+            }
+            times[k].push(t.elapsed().as_secs_f64() / 4.0);
+        }
+        black_box((&out, &out8));
+    }
+    let names = [
+        "scalar_unsorted",
+        "scalar_presorted",
+        "x8_unsorted",
+        "x8_presorted",
+    ];
+    let n = pts.unsorted.len() as f64;
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let m: Vec<f64> = times.iter_mut().map(median).collect();
+    for (name, t) in names.iter().zip(&m) {
+        eprintln!(
+            "interleaved median warp/{name}: {:.1} Msamples/s ({:.2}x scalar_unsorted)",
+            n / t / 1e6,
+            m[0] / t
+        );
+    }
+}
+
 fn bench(c: &mut Criterion) {
     let learned = second_iteration_records();
     let mut storage = vec![Node::default(); 4096];
@@ -179,6 +239,8 @@ fn bench(c: &mut Criterion) {
         100.0 * uniform_share(&g, &pts.presorted[..4096]),
         100.0 * uniform_share(&g, &pts.unsorted[..4096]),
     );
+
+    interleaved(&g, &pts);
 
     let mut group = c.benchmark_group("warp");
     group.throughput(Throughput::Elements(pts.unsorted.len() as u64));

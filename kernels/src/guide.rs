@@ -25,9 +25,12 @@
 //!    interpolated toward the parent's average (a quarter) by α ([`DEFAULT_ALPHA`] = 0.25):
 //!    `m_child' = m_parent' · ((1 − α)·m_child / m_parent + α/4)`, with `m_parent'` the
 //!    already smoothed parent mass. Masses stay normalized.
-//! 6. stores per interior node what the warp needs: the marginal probability `px` of the
-//!    left half and the conditionals `py[h]` of the lower half given the x-half `h`
-//!    (Clarberg et al. 2005, see [`crate::warp`]).
+//! 6. derives what the warp needs (Clarberg et al. 2005, see [`crate::warp`]): from the
+//!    marginal probability `px` of a node's left half and the conditionals `py[h]` of its
+//!    lower half given the x-half `h`, the split **thresholds in primary sample space** — the
+//!    warp's per-level rescaling folded into the tree — and for each leaf the rectangle of
+//!    primary sample space that maps onto it and its density (that rectangle's area over the
+//!    leaf's area).
 //!
 //! If no record survives, or the accepted flux sums to zero, the guide is the uniform density
 //! (a root leaf): there is nothing to learn from.
@@ -39,6 +42,80 @@
 //! every level that was split is complete and the nodes that would split further simply stay
 //! leaves: the guide is the best coarser tree that fits, still a valid normalized density.
 //! The number of refused splits is reported in [`BuildStats::capacity_refusals`].
+//!
+//! # Embedding: guide + warp + estimator in a baker with its own ray tracer
+//! One texel (in a real baker: every texel of a cluster shares the guide), three learning
+//! iterations: iteration 0 gathers with the uniform guide (the cosine baseline), each later
+//! one with the guide learned from the previous iteration's samples. Samples are presorted
+//! Sobol packets warped 8-wide; the caller's tracer is `trace`. The per-iteration batches
+//! are combined with Graybill–Deal, and ρ is accumulated for the global bias correction.
+//! ```
+//! use glam::Vec3;
+//! use guidebake_kernels::estimator::{GraybillDeal, RhoAccumulator, Welford, luminance, plain_average};
+//! use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
+//! use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere};
+//! use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
+//! use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
+//! use guidebake_kernels::warp;
+//! use wide::f32x8;
+//!
+//! // The baker's own tracer: radiance arriving from `dir` (a bright window, a dim room).
+//! fn trace(dir: Vec3) -> [f32; 3] {
+//!     if dir.x > 0.8 { [40.0, 36.0, 30.0] } else { [0.1, 0.1, 0.12] }
+//! }
+//!
+//! const N: u32 = 256; // gather samples per texel and iteration, a multiple of 8
+//! let order = presorted(N); // once per N
+//! let mut packet_order = vec![0u32; N as usize];
+//! let (normal, texel) = (Vec3::Z, 42u64);
+//! let (t, b) = orthonormal_basis(normal);
+//! let mut storage = vec![Node::default(); 1024]; // fixed memory, reused per cluster
+//! let (mut learn, mut next) = (Vec::<Record>::new(), Vec::<Record>::new());
+//! let mut batches = [Welford::new(); 3];
+//! for (k, batch) in batches.iter_mut().enumerate() {
+//!     let g = if k == 0 {
+//!         Guide::uniform(&mut storage)
+//!     } else {
+//!         guide::build(&mut learn, &GuideParams::default(), &mut storage).0
+//!     };
+//!     let r = rotation(7, texel, k as u32);
+//!     reorder_after_rotation_into(&order, r, &mut packet_order); // coherent after the wrap
+//!     next.clear();
+//!     for packet in packet_order.chunks_exact(8) {
+//!         let p: [[u32; 2]; 8] = core::array::from_fn(|l| rotate(sobol_2d(packet[l]), r));
+//!         let x = f32x8::new(p.map(|q| to_unit(q[0])));
+//!         let y = f32x8::new(p.map(|q| to_unit(q[1])));
+//!         let w = warp::sample8(&g, x, y);
+//!         let (wx, wy, pdf) = (w.x.to_array(), w.y.to_array(), w.pdf.to_array());
+//!         for l in 0..8 {
+//!             let local = sample_cosine_hemisphere([wx[l], wy[l]]);
+//!             let radiance = trace(t * local.x + b * local.y + normal * local.z);
+//!             // p(ω) = pdf · cosθ/π, so L·cosθ/p(ω) = π·L/pdf: an irradiance sample.
+//!             batch.push(radiance.map(|c| core::f32::consts::PI * c / pdf[l]));
+//!             // Learning flux: luminance over the density that drew the sample.
+//!             let lum = luminance(radiance.map(f64::from)) as f32;
+//!             next.push(Record { u: [wx[l], wy[l]], flux: lum / pdf[l] });
+//!         }
+//!     }
+//!     core::mem::swap(&mut learn, &mut next);
+//! }
+//! let combined = GraybillDeal::default().combine(&batches);
+//! let average = plain_average(&batches);
+//! let mut rho = RhoAccumulator::new(); // one per thread or shard, merged at the end
+//! rho.add_texel(&average, &combined);
+//! let e = combined.value().expect("the texel has finite samples");
+//! assert!(e.rgb.iter().all(|c| c.is_finite() && *c > 0.0));
+//! assert!(rho.rho().is_finite());
+//! // Reference: the unguided estimator with 2¹⁶ Sobol samples.
+//! let m = 1u32 << 16;
+//! let reference = (0..m)
+//!     .map(|i| {
+//!         let l = sample_cosine_hemisphere(sobol_2d(i).map(to_unit));
+//!         luminance(trace(t * l.x + b * l.y + normal * l.z).map(f64::from))
+//!     })
+//!     .sum::<f64>() * core::f64::consts::PI / f64::from(m);
+//! assert!((e.luminance / reference - 1.0).abs() < 0.1, "{} vs {reference}", e.luminance);
+//! ```
 //!
 //! # Deviations from the paper
 //! The paper does not state its floor or depth cap; ours are parameters with the defaults
@@ -99,14 +176,27 @@ impl Default for GuideParams {
 /// A node of the directional quadtree. Children of an interior node are four consecutive
 /// nodes, quadrants in the order (x low, y low), (x high, y low), (x low, y high),
 /// (x high, y high).
+///
+/// Two spaces meet here: the node's *square* (`origin`, `size`) is where the warp puts
+/// points, its *source rectangle* `[lo, hi)` is the part of the primary sample space the warp
+/// maps onto that square.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Node {
-    /// Marginal probability of the left half (x < ½ of the node).
-    pub(crate) px: f32,
-    /// Probability of the lower half given the left (`py[0]`) or right (`py[1]`) half.
-    pub(crate) py: [f32; 2],
-    /// Probability mass of the node (the root has 1).
+    /// Interior: the warp goes right if `u.x >= t[0]`, then up if `u.y >= t[1 + right]`
+    /// (thresholds in primary sample space). Leaf: unused (0).
+    pub(crate) t: [f32; 3],
+    /// Lower corner of the source rectangle.
+    pub(crate) lo: [f32; 2],
+    /// Upper corner of the source rectangle (exclusive).
+    pub(crate) hi: [f32; 2],
+    /// Lower corner of the node's square.
+    pub(crate) origin: [f32; 2],
+    /// Side of the node's square (a power of two).
+    pub(crate) size: f32,
+    /// Density on the square inside the node: source area over square area.
+    pub(crate) pdf: f32,
+    /// Probability mass of the node after floor, normalization and smoothing (root 1).
     pub(crate) mass: f32,
     /// First record of the node during the build (records are partitioned in place).
     first: u32,
@@ -132,13 +222,23 @@ impl Node {
     pub fn mass(&self) -> f32 {
         self.mass
     }
-    /// Marginal probability of the node's left half (interior nodes; 1 for a leaf).
-    pub fn px(&self) -> f32 {
-        self.px
+    /// Split thresholds in primary sample space: x, then y given the left or the right half
+    /// (interior nodes; zeros for a leaf).
+    pub fn thresholds(&self) -> [f32; 3] {
+        self.t
     }
-    /// Conditional probability of the lower half given x-half `h` (0 left, 1 right).
-    pub fn py(&self, h: usize) -> f32 {
-        self.py[h]
+    /// The source rectangle `[lo, hi)` of primary sample space that the warp maps onto the
+    /// node's square.
+    pub fn source(&self) -> ([f32; 2], [f32; 2]) {
+        (self.lo, self.hi)
+    }
+    /// The node's square: lower corner and side.
+    pub fn square(&self) -> ([f32; 2], f32) {
+        (self.origin, self.size)
+    }
+    /// Density on the square inside the node (the warp's pdf for a leaf).
+    pub fn pdf(&self) -> f32 {
+        self.pdf
     }
     /// Depth of the node (root 0).
     pub fn depth(&self) -> u32 {
@@ -218,34 +318,24 @@ impl<'a> Guide<'a> {
 
     /// Visits every leaf with its square and density (for inspection, tests and plots).
     pub fn for_each_leaf(&self, mut f: impl FnMut(Leaf)) {
-        self.visit(0, [0.0, 0.0], 1.0, 1.0, &mut f);
-    }
-
-    fn visit(&self, i: usize, o: [f32; 2], size: f32, pdf: f32, f: &mut impl FnMut(Leaf)) {
-        let n = self.nodes[i];
-        let Some(c) = n.first_child() else {
+        for n in self.nodes.iter().filter(|n| n.is_leaf()) {
             f(Leaf {
-                origin: o,
-                size,
-                pdf,
+                origin: n.origin,
+                size: n.size,
+                pdf: n.pdf,
             });
-            return;
-        };
-        let h = size * 0.5;
-        for q in 0..4 {
-            let (hx, hy) = (q & 1, q >> 1);
-            let fx = if hx == 0 { n.px } else { 1.0 - n.px };
-            let fy = if hy == 0 { n.py[hx] } else { 1.0 - n.py[hx] };
-            let o2 = [o[0] + h * hx as f32, o[1] + h * hy as f32];
-            self.visit(c + q, o2, h, pdf * (fx * fy * 4.0), f);
         }
     }
 }
 
 fn root_leaf(count: u32) -> Node {
     Node {
-        px: 1.0,
-        py: [1.0, 1.0],
+        t: [0.0; 3],
+        lo: [0.0; 2],
+        hi: [1.0; 2],
+        origin: [0.0; 2],
+        size: 1.0,
+        pdf: 1.0,
         mass: 1.0,
         first: 0,
         count,
@@ -256,6 +346,7 @@ fn root_leaf(count: u32) -> Node {
 
 /// Builds the guide from `records` into `storage` (see the module docs for the rule).
 /// `records` is reordered in place; rejected records end up after the accepted ones.
+/// Records beyond the first `u32::MAX` are ignored (node record counts are `u32`).
 ///
 /// # Panics
 /// If `storage` is empty. Parameters out of range are clamped (depth to [`MAX_DEPTH`], α and
@@ -330,10 +421,6 @@ fn subdivide(
     nodes[0].mass = stats.total_flux as f32;
     let mut len = 1usize;
     let mut next = 0usize;
-    // During the build `px` holds the node's origin x, `py[0]` its origin y and `py[1]` its
-    // side; `smooth` overwrites them with the warp's probabilities.
-    nodes[0].px = 0.0;
-    nodes[0].py = [0.0, 1.0];
     while next < len {
         let n = nodes[next];
         let wants = n.count >= params.min_records && f64::from(n.mass) >= min_flux;
@@ -355,10 +442,9 @@ fn subdivide(
 }
 
 /// Splits node `i` into four children at `first`, partitioning its records by quadrant.
-/// During the build `px` holds the node's origin x, `py[0]` its origin y, `py[1]` its size.
 fn split(records: &mut [Record], nodes: &mut [Node], i: usize, first: usize) {
     let n = nodes[i];
-    let (ox, oy, size) = (n.px, n.py[0], n.py[1]);
+    let ([ox, oy], size) = (n.origin, n.size);
     let h = size * 0.5;
     let (mx, my) = (ox + h, oy + h);
     let range = &mut records[n.first as usize..(n.first + n.count) as usize];
@@ -374,13 +460,14 @@ fn split(records: &mut [Record], nodes: &mut [Node], i: usize, first: usize) {
         let flux: f64 = recs.iter().map(|r| f64::from(r.flux)).sum();
         let (hx, hy) = ((q & 1) as f32, (q >> 1) as f32);
         nodes[first + q] = Node {
-            px: ox + h * hx,
-            py: [oy + h * hy, h],
+            origin: [ox + h * hx, oy + h * hy],
+            size: h,
             mass: flux as f32,
             first: start as u32,
             count: counts[q] as u32,
             child: 0,
             depth: n.depth + 1,
+            ..Node::default()
         };
     }
     nodes[i].child = first as u16;
@@ -400,14 +487,14 @@ fn partition(records: &mut [Record], pred: impl Fn(&Record) -> bool) -> usize {
 
 /// Floors the leaves, sums masses bottom-up and normalizes. Children always follow their
 /// parent in breadth-first order, so one reverse pass sums every node after its children.
-/// On entry a leaf's `mass` holds its accepted flux and `py[1]` its side. Masses are stored
+/// On entry a leaf's `mass` holds its accepted flux. Masses are stored
 /// in f32 between passes (relative error ~1e-7, far below the sampling noise).
 fn set_masses(nodes: &mut [Node], floor: f64) {
     for i in (0..nodes.len()).rev() {
         let n = nodes[i];
         let m = match n.first_child() {
             None => {
-                let area = f64::from(n.py[1]) * f64::from(n.py[1]);
+                let area = f64::from(n.size) * f64::from(n.size);
                 f64::from(n.mass).max(floor * area)
             }
             Some(c) => (c..c + 4).map(|k| f64::from(nodes[k].mass)).sum(),
@@ -421,33 +508,55 @@ fn set_masses(nodes: &mut [Node], floor: f64) {
     nodes[0].mass = 1.0;
 }
 
-/// Hierarchical smoothing (§2.3) and the warp's per-node probabilities, top-down.
+/// Hierarchical smoothing (§2.3) and the warp's thresholds, top-down: when node `i` is
+/// visited its mass and source rectangle are final, and it fixes its children's.
 fn smooth(nodes: &mut [Node], alpha: f64) {
     for i in 0..nodes.len() {
         let n = nodes[i];
         let Some(c) = n.first_child() else {
-            nodes[i].px = 1.0;
-            nodes[i].py = [1.0, 1.0];
+            let area = |lo: f32, hi: f32| f64::from(hi) - f64::from(lo);
+            let size = f64::from(n.size);
+            nodes[i].pdf = (area(n.lo[0], n.hi[0]) * area(n.lo[1], n.hi[1]) / (size * size)) as f32;
             continue;
         };
         let mut raw: [f64; 4] = core::array::from_fn(|q| f64::from(nodes[c + q].mass));
         let mut sum: f64 = raw.iter().sum();
-        if !(sum > 0.0) {
+        if sum <= 0.0 {
             // Only with `ambient = 0`: a node without flux spreads its (zero) mass evenly.
+            // (Masses are finite and ≥ 0 here: the records were checked, the floor clamped.)
             (raw, sum) = ([0.25; 4], 1.0);
         }
         let parent = f64::from(n.mass);
         let m: [f64; 4] =
             core::array::from_fn(|q| parent * ((1.0 - alpha) * raw[q] / sum + alpha * 0.25));
-        for q in 0..4 {
-            nodes[c + q].mass = m[q] as f32;
-        }
         // A ratio 0/0 (zero-mass parent, only with `ambient = 0`) becomes ½: the node is
-        // unreachable by sampling, and `pdf` there is 0 through its parent's factor.
-        let ratio = |a: f64, b: f64| if b > 0.0 { (a / b) as f32 } else { 0.5 };
-        nodes[i].px = ratio(m[0] + m[2], m[0] + m[1] + m[2] + m[3]);
-        nodes[i].py = [ratio(m[0], m[0] + m[2]), ratio(m[1], m[1] + m[3])];
+        // unreachable by sampling.
+        let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.5 };
+        let px = ratio(m[0] + m[2], m[0] + m[1] + m[2] + m[3]);
+        let py = [ratio(m[0], m[0] + m[2]), ratio(m[1], m[1] + m[3])];
+        let tx = split_at(n.lo[0], n.hi[0], px);
+        let ty = [
+            split_at(n.lo[1], n.hi[1], py[0]),
+            split_at(n.lo[1], n.hi[1], py[1]),
+        ];
+        nodes[i].t = [tx, ty[0], ty[1]];
+        nodes[i].pdf = (parent / (f64::from(n.size) * f64::from(n.size))) as f32;
+        for (q, &mass) in m.iter().enumerate() {
+            let (hx, hy) = (q & 1, q >> 1);
+            let k = &mut nodes[c + q];
+            k.mass = mass as f32;
+            k.lo = [[n.lo[0], tx][hx], [n.lo[1], ty[hx]][hy]];
+            k.hi = [[tx, n.hi[0]][hx], [ty[hx], n.hi[1]][hy]];
+        }
     }
+}
+
+/// The threshold that gives `[lo, t)` the share `p` of `[lo, hi)`, rounded to f32 and kept
+/// inside the interval. Children inherit these exact f32 values as their bounds, so the
+/// source rectangles tile the square without gaps or overlaps.
+fn split_at(lo: f32, hi: f32, p: f64) -> f32 {
+    let t = f64::from(lo) + (f64::from(hi) - f64::from(lo)) * p;
+    (t as f32).clamp(lo, hi)
 }
 
 #[cfg(test)]

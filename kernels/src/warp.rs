@@ -7,39 +7,52 @@
 //! by the conditional `py[half]`, rescales the coordinate it used into [0,1) again, and
 //! continues in the chosen child; in the leaf the remaining coordinates place the point
 //! uniformly in the leaf's square. The density of the result on the square is the product of
-//! `4 · P(x-half) · P(y-half | x-half)` over the path, which is the leaf's mass over its area.
+//! `4 · P(x-half) · P(y-half | x-half)` over the path: the leaf's mass over its area.
+//!
+//! # Rescaling folded into the tree (deviation, same warp)
+//! The composition of the per-level rescalings is affine on each node: a node receives
+//! exactly the points of one rectangle `[lo, hi)` of primary sample space (its *source
+//! rectangle*), and its split "x < px in the node's rescaled frame" is `u.x < lo.x +
+//! (hi.x − lo.x)·px` in the original one. [`crate::guide::build`] computes these thresholds
+//! once (in f64, rounded to f32, children inheriting the rounded values so the rectangles
+//! tile the square exactly), so the descent is compare-only and `u` is rescaled once, in the
+//! leaf: `w = origin + (u − lo)/(hi − lo) · size`. It is the same map as rescaling at every
+//! level, with less rounding (one division instead of one per level) and no arithmetic on
+//! the descent's critical path. The leaf's density is stored as the area of its source
+//! rectangle over the area of its square, so it is exactly the density of the map as
+//! rounded.
 //!
 //! The triple: [`sample`] (u → warped point and its pdf), [`pdf`] (point → density on the
 //! square) and [`invert`] (warped point → u). [`sample8`] is the 8-wide packet version on
 //! `wide::f32x8`: a presorted packet (paper §2.4, Figure 3) mostly walks one path, so it runs
-//! a **uniform fast path** with the node's values splatted while all lanes sit in the same
-//! node, and switches to **per-lane** node indices (gathered loads, masked updates) from the
-//! first node where the lanes part.
+//! a **uniform fast path** — one 8-wide compare per axis against the node's splatted
+//! thresholds — while all lanes sit in the same node, and from the first node where the
+//! lanes part descends **per lane**; the leaves are then gathered and placed 8-wide.
 //!
 //! # One kernel, two widths
-//! The arithmetic of a level is written once ([`descend`]) over a small [`Value`] trait
-//! implemented by `f32` and `f32x8` (as Mitsuba templates its warps on a scalar-or-packet
-//! type); the scalar and 8-wide versions differ only in how they walk the tree. Both use the
+//! The arithmetic — the final placement (`place`) and the input clamp — is written once
+//! over a small [`Value`] trait implemented by `f32` and `f32x8` (as Mitsuba templates its
+//! warps on a scalar-or-packet type); the descent is comparisons only. Both widths use the
 //! same IEEE operations in the same order (no fused multiply-add), so they agree **bit for
 //! bit**; the tests check it on every build, with and without AVX2.
 //!
 //! # Staying inside [0,1)
-//! Rescaling `x / px` can round up to exactly 1 when `x` is just below `px`, and
-//! `origin + x·size` can round up onto the leaf's upper edge (at depth ≥ 2 the leaf's
-//! resolution is finer than the f32 spacing near 1). Both are clamped: a rescaled
-//! coordinate to [`ONE_MINUS_EPS`], the largest f32 below 1, and the final point to the
-//! largest f32 below the leaf's upper edge. The clamp keeps the warped point in [0,1) *and*
-//! in the leaf that produced it, so `pdf(sample(u).u) == sample(u).pdf` exactly. It moves a
-//! point by at most one ulp, a bias far below f32 sampling resolution.
+//! `(u − lo)/(hi − lo)` can round up to exactly 1 when `u` is just below `hi`, and
+//! `origin + t·size` can round up onto the leaf's upper edge (at depth ≥ 2 the leaf's
+//! resolution is finer than the f32 spacing near 1). Both are clamped: the rescaled
+//! coordinate to [`ONE_MINUS_EPS`], the largest f32 below 1, and the point to the largest f32
+//! below the leaf's upper edge. The clamp keeps the warped point in [0,1) *and* in the leaf
+//! that produced it, so `pdf(sample(u).u) == sample(u).pdf` exactly. It moves a point by at
+//! most one ulp, far below the sampling resolution.
 //!
 //! # Preconditions
 //! Inputs must lie in [0,1)² (`debug_assert!`). In release builds a negative or NaN
 //! coordinate is treated as 0 and one ≥ 1 as [`ONE_MINUS_EPS`], in both widths alike.
 //!
 //! # Deviation
-//! Clarberg et al. warp a wavelet-defined image; we warp a quadtree whose per-node
-//! probabilities are precomputed by [`crate::guide::build`]. [`invert`] has no 8-wide
-//! version: nothing on the hot path needs it.
+//! Clarberg et al. warp a wavelet-defined image; we warp a quadtree built by
+//! [`crate::guide::build`]. [`invert`] and [`pdf`] have no 8-wide versions: nothing on the
+//! hot path needs them yet.
 
 use crate::guide::{Guide, Node};
 use core::ops::{Add, Div, Mul, Sub};
@@ -135,82 +148,113 @@ impl Value for f32x8 {
     }
 }
 
-/// The state of a descent: the point in the current node's frame, the node's square and the
-/// density accumulated so far.
-#[derive(Clone, Copy, Debug)]
-struct State<V> {
-    x: V,
-    y: V,
-    ox: V,
-    oy: V,
-    size: V,
-    pdf: V,
-}
-
-impl<V: Value> State<V> {
-    #[inline(always)]
-    fn new(x: V, y: V) -> Self {
-        let one = V::splat(1.0);
-        let zero = V::splat(0.0);
-        State {
-            x: to_unit(x),
-            y: to_unit(y),
-            ox: zero,
-            oy: zero,
-            size: one,
-            pdf: one,
-        }
-    }
-
-    /// The warped point: the leaf's origin plus the rescaled point times its side, kept below
-    /// the leaf's upper edge (module docs).
-    #[inline(always)]
-    fn finish(&self) -> (V, V) {
-        let wx = (self.ox + self.x * self.size).min_of((self.ox + self.size).prev_float());
-        let wy = (self.oy + self.y * self.size).min_of((self.oy + self.size).prev_float());
-        (wx, wy)
-    }
-}
-
 /// Maps NaN and negatives to 0 and values ≥ 1 to [`ONE_MINUS_EPS`].
 #[inline(always)]
 fn to_unit<V: Value>(v: V) -> V {
     V::select(v.ge(V::splat(0.0)), v, V::splat(0.0)).min_of(V::splat(ONE_MINUS_EPS))
 }
 
-/// One level of hierarchical warping (Clarberg et al. 2005), the kernel both widths share.
-///
-/// Readable form:
-/// ```text
-/// right = x >= px;          x = right ? (x - px) / (1 - px) : x / px
-/// py = right ? py1 : py0
-/// upper = y >= py;          y = upper ? (y - py) / (1 - py) : y / py
-/// pdf *= 4 · P(x-half) · P(y-half | x-half);   size /= 2;   origin += (right, upper) · size
-/// ```
-/// The divisor is never zero for the half actually taken: `x < px` implies `px > 0`, and
-/// `px ≤ x < 1` implies `1 − px > 0`.
-#[inline(always)]
-fn descend<V: Value>(s: &mut State<V>, px: V, py0: V, py1: V) -> (V::Mask, V::Mask) {
-    let (one, zero) = (V::splat(1.0), V::splat(0.0));
-    let right = s.x.ge(px);
-    let fx = V::select(right, one - px, px);
-    let x0 = V::select(right, px, zero);
-    s.x = ((s.x - x0) / fx).min_of(V::splat(ONE_MINUS_EPS));
-    let py = V::select(right, py1, py0);
-    let upper = s.y.ge(py);
-    let fy = V::select(upper, one - py, py);
-    let y0 = V::select(upper, py, zero);
-    s.y = ((s.y - y0) / fy).min_of(V::splat(ONE_MINUS_EPS));
-    s.size = s.size * V::splat(0.5);
-    s.ox = s.ox + V::select(right, s.size, zero);
-    s.oy = s.oy + V::select(upper, s.size, zero);
-    s.pdf = s.pdf * (fx * fy * V::splat(4.0));
-    (right, upper)
+/// The fields of a leaf the final step reads, per lane.
+#[derive(Clone, Copy, Debug)]
+struct LeafData<V> {
+    lo: [V; 2],
+    hi: [V; 2],
+    origin: [V; 2],
+    size: V,
+    pdf: V,
 }
 
+impl LeafData<f32> {
+    #[inline(always)]
+    fn of(n: &Node) -> Self {
+        LeafData {
+            lo: n.lo,
+            hi: n.hi,
+            origin: n.origin,
+            size: n.size,
+            pdf: n.pdf,
+        }
+    }
+}
+
+impl LeafData<f32x8> {
+    /// Gathers the leaves of eight lanes.
+    #[inline(always)]
+    fn gather(nodes: &[Node], idx: &[usize; 8]) -> Self {
+        let mut f = [[0f32; 8]; 8];
+        for (l, &i) in idx.iter().enumerate() {
+            let n = &nodes[i];
+            let v = [
+                n.lo[0],
+                n.lo[1],
+                n.hi[0],
+                n.hi[1],
+                n.origin[0],
+                n.origin[1],
+                n.size,
+                n.pdf,
+            ];
+            for (k, v) in v.into_iter().enumerate() {
+                f[k][l] = v;
+            }
+        }
+        let v = f.map(f32x8::new);
+        LeafData {
+            lo: [v[0], v[1]],
+            hi: [v[2], v[3]],
+            origin: [v[4], v[5]],
+            size: v[6],
+            pdf: v[7],
+        }
+    }
+
+    /// One leaf in every lane.
+    #[inline(always)]
+    fn splat(n: &Node) -> Self {
+        let s = |v: [f32; 2]| [f32x8::splat(v[0]), f32x8::splat(v[1])];
+        LeafData {
+            lo: s(n.lo),
+            hi: s(n.hi),
+            origin: s(n.origin),
+            size: f32x8::splat(n.size),
+            pdf: f32x8::splat(n.pdf),
+        }
+    }
+}
+
+/// The last step of the warp, shared by both widths: rescale `u` from the leaf's source
+/// rectangle to [0,1) and place it in the leaf's square.
+///
+/// Readable form: `t = (u − lo) / (hi − lo)`, `w = origin + t · size`, both clamped (module
+/// docs). `u ≥ lo` holds because the descent compared `u` against exactly these bounds.
 #[inline(always)]
-fn child_of(n: &Node, right: bool, upper: bool) -> usize {
+fn place<V: Value>(leaf: &LeafData<V>, u: [V; 2]) -> ([V; 2], V) {
+    let axis = |a: usize| {
+        let t = ((u[a] - leaf.lo[a]) / (leaf.hi[a] - leaf.lo[a])).min_of(V::splat(ONE_MINUS_EPS));
+        let top = (leaf.origin[a] + leaf.size).prev_float();
+        (leaf.origin[a] + t * leaf.size).min_of(top)
+    };
+    ([axis(0), axis(1)], leaf.pdf)
+}
+
+/// One level of the descent: the child of interior node `n` that `u` falls in.
+///
+/// This is Clarberg et al.'s step — x-half by the marginal, y-half by the conditional given
+/// the x-half — with the rescaling of `u` folded into the thresholds `n.t` at build time.
+#[inline(always)]
+fn child(n: &Node, x: f32, y: f32) -> usize {
+    let right = x >= n.t[0];
+    let upper = y >= n.t[1 + usize::from(right)];
     usize::from(n.child) + usize::from(right) + 2 * usize::from(upper)
+}
+
+/// Descends from node `i` to the leaf containing `(x, y)`.
+#[inline(always)]
+fn leaf_from(nodes: &[Node], mut i: usize, x: f32, y: f32) -> usize {
+    while nodes[i].child != 0 {
+        i = child(&nodes[i], x, y);
+    }
+    i
 }
 
 /// Warps `u` ∈ [0,1)² through the guide: the scalar reference.
@@ -218,77 +262,52 @@ fn child_of(n: &Node, right: bool, upper: bool) -> usize {
 pub fn sample(guide: &Guide<'_>, u: [f32; 2]) -> Warped {
     debug_assert!(in_square(u), "sample point {u:?} outside [0,1)^2");
     let nodes = guide.nodes();
-    let mut s = State::<f32>::new(u[0], u[1]);
-    let mut n = &nodes[0];
-    while n.child != 0 {
-        let (right, upper) = descend(&mut s, n.px, n.py[0], n.py[1]);
-        n = &nodes[child_of(n, right, upper)];
-    }
-    let (x, y) = s.finish();
-    Warped {
-        u: [x, y],
-        pdf: s.pdf,
-    }
+    let (x, y) = (to_unit(u[0]), to_unit(u[1]));
+    let leaf = &nodes[leaf_from(nodes, 0, x, y)];
+    let (w, pdf) = place(&LeafData::of(leaf), [x, y]);
+    Warped { u: w, pdf }
 }
 
-/// The guide's density on the square at `w` ∈ [0,1)²; equals the `pdf` that [`sample`]
-/// returns for the point it produces, bit for bit.
+/// The guide's density on the square at `w` ∈ [0,1)²: the density of the leaf whose square
+/// holds `w`. Equals the `pdf` that [`sample`] returns with the point it produces, bit for bit.
 #[inline]
 pub fn pdf(guide: &Guide<'_>, w: [f32; 2]) -> f32 {
-    debug_assert!(in_square(w), "point {w:?} outside [0,1)^2");
-    let nodes = guide.nodes();
-    let (wx, wy) = (to_unit(w[0]), to_unit(w[1]));
-    let (mut ox, mut oy, mut size, mut pdf) = (0f32, 0f32, 1f32, 1f32);
-    let mut n = &nodes[0];
-    while n.child != 0 {
-        size *= 0.5;
-        let right = wx >= ox + size;
-        let fx = if right { 1.0 - n.px } else { n.px };
-        let py = n.py[usize::from(right)];
-        let upper = wy >= oy + size;
-        let fy = if upper { 1.0 - py } else { py };
-        ox += if right { size } else { 0.0 };
-        oy += if upper { size } else { 0.0 };
-        pdf *= fx * fy * 4.0;
-        n = &nodes[child_of(n, right, upper)];
-    }
-    pdf
+    guide.nodes()[leaf_at(guide, w)].pdf
 }
 
-/// The inverse of [`sample`]: the `u` that warps to `w` (up to rounding, which grows with
-/// the depth of `w`'s leaf; the tests bound it).
-pub fn invert(guide: &Guide<'_>, w: [f32; 2]) -> [f32; 2] {
+/// The leaf whose square holds `w` (descending by the squares' midpoints).
+fn leaf_at(guide: &Guide<'_>, w: [f32; 2]) -> usize {
     debug_assert!(in_square(w), "point {w:?} outside [0,1)^2");
     let nodes = guide.nodes();
     let (wx, wy) = (to_unit(w[0]), to_unit(w[1]));
-    // u = a + b·t, with t the point in the current node's frame.
-    let (mut ax, mut ay, mut bx, mut by) = (0f32, 0f32, 1f32, 1f32);
-    let (mut ox, mut oy, mut size) = (0f32, 0f32, 1f32);
-    let mut n = &nodes[0];
-    while n.child != 0 {
-        size *= 0.5;
-        let right = wx >= ox + size;
-        if right {
-            ax += bx * n.px;
-            bx *= 1.0 - n.px;
-            ox += size;
-        } else {
-            bx *= n.px;
-        }
-        let py = n.py[usize::from(right)];
-        let upper = wy >= oy + size;
-        if upper {
-            ay += by * py;
-            by *= 1.0 - py;
-            oy += size;
-        } else {
-            by *= py;
-        }
-        n = &nodes[child_of(n, right, upper)];
+    let mut i = 0;
+    while let Some(c) = nodes[i].first_child() {
+        let n = &nodes[i];
+        let half = n.size * 0.5;
+        let right = wx >= n.origin[0] + half;
+        let upper = wy >= n.origin[1] + half;
+        i = c + usize::from(right) + 2 * usize::from(upper);
     }
-    let ux = ax + bx * ((wx - ox) / size);
-    let uy = ay + by * ((wy - oy) / size);
-    [to_unit(ux), to_unit(uy)]
+    i
+}
+
+/// The inverse of [`sample`]: the `u` that warps to `w`, up to rounding. The warped point is
+/// an f32 (spacing ≤ 2⁻²⁴) in a leaf of side 2^-d whose source rectangle has side
+/// `hi − lo`, so `u` is recovered to about 2^(d−24)·(hi − lo) per axis.
+pub fn invert(guide: &Guide<'_>, w: [f32; 2]) -> [f32; 2] {
+    let n = &guide.nodes()[leaf_at(guide, w)];
+    let axis = |a: usize| {
+        let t = (to_unit(w[a]) - n.origin[a]) / n.size;
+        let u = n.lo[a] + t * (n.hi[a] - n.lo[a]);
+        // Stay in the source rectangle, so `sample(invert(w))` lands in the same leaf.
+        let top = if n.hi[a] > n.lo[a] {
+            n.hi[a].prev_float()
+        } else {
+            n.lo[a]
+        };
+        to_unit(u.max(n.lo[a]).min(top))
+    };
+    [axis(0), axis(1)]
 }
 
 fn in_square(u: [f32; 2]) -> bool {
@@ -303,66 +322,55 @@ pub fn sample8(guide: &Guide<'_>, x: f32x8, y: f32x8) -> Warped8 {
         "packet outside [0,1)^2"
     );
     let nodes = guide.nodes();
-    let mut s = State::<f32x8>::new(x, y);
-    let mut n = &nodes[0];
-    // Uniform fast path: every lane in node `n`, its values splatted.
-    while n.child != 0 {
-        let (px, py0, py1) = (
-            f32x8::splat(n.px),
-            f32x8::splat(n.py[0]),
-            f32x8::splat(n.py[1]),
-        );
-        let (right, upper) = descend(&mut s, px, py0, py1);
-        let (r, u) = (right.to_bitmask(), upper.to_bitmask());
-        if (r == 0 || r == 0xff) && (u == 0 || u == 0xff) {
-            n = &nodes[child_of(n, r != 0, u != 0)];
-        } else {
-            let idx = core::array::from_fn(|l| child_of(n, r >> l & 1 != 0, u >> l & 1 != 0));
-            return per_lane(nodes, s, idx);
+    let (x, y) = (to_unit(x), to_unit(y));
+    let mut i = 0;
+    // Uniform fast path: all lanes in node `i`; one compare per axis for the whole packet.
+    while let Some(c) = nodes[i].first_child() {
+        let n = &nodes[i];
+        let r = x.simd_ge(f32x8::splat(n.t[0])).to_bitmask();
+        if r != 0 && r != 0xff {
+            return per_lane(nodes, i, x, y);
         }
+        let right = usize::from(r != 0);
+        let u = y.simd_ge(f32x8::splat(n.t[1 + right])).to_bitmask();
+        if u != 0 && u != 0xff {
+            return per_lane(nodes, i, x, y);
+        }
+        i = c + right + 2 * usize::from(u != 0);
     }
-    let (x, y) = s.finish();
-    Warped8 { x, y, pdf: s.pdf }
+    let ([wx, wy], pdf) = place(&LeafData::splat(&nodes[i]), [x, y]);
+    Warped8 { x: wx, y: wy, pdf }
 }
 
-/// The divergent part of [`sample8`]: each lane has its own node; lanes that reached a leaf
-/// keep their state (masked updates) while the others descend.
+/// The divergent part of [`sample8`]: from node `i`, where the lanes part, every lane has
+/// its own node index. Each round gathers the lanes' thresholds, compares 8-wide and steps
+/// the lanes that are not yet in a leaf, without branching on the lanes' paths; rounds run
+/// until every lane sits in a leaf. The leaves are then gathered and placed 8-wide.
 #[inline(never)]
-fn per_lane(nodes: &[Node], mut s: State<f32x8>, mut idx: [usize; 8]) -> Warped8 {
+fn per_lane(nodes: &[Node], i: usize, x: f32x8, y: f32x8) -> Warped8 {
+    let mut idx = [i; 8];
     loop {
-        let lane = |l: usize| &nodes[idx[l]];
-        let active = f32x8::new(core::array::from_fn(|l| {
-            if lane(l).child != 0 {
-                f32::from_bits(u32::MAX)
-            } else {
-                0.0
-            }
-        }));
-        if active.to_bitmask() == 0 {
+        let mut t = [[0f32; 8]; 3];
+        let mut child = [0usize; 8];
+        for (l, &k) in idx.iter().enumerate() {
+            let n = &nodes[k];
+            (t[0][l], t[1][l], t[2][l], child[l]) = (n.t[0], n.t[1], n.t[2], usize::from(n.child));
+        }
+        if child == [0; 8] {
             break;
         }
-        let px = f32x8::new(core::array::from_fn(|l| lane(l).px));
-        let py0 = f32x8::new(core::array::from_fn(|l| lane(l).py[0]));
-        let py1 = f32x8::new(core::array::from_fn(|l| lane(l).py[1]));
-        let before = s;
-        let (right, upper) = descend(&mut s, px, py0, py1);
-        s = State {
-            x: active.select(s.x, before.x),
-            y: active.select(s.y, before.y),
-            ox: active.select(s.ox, before.ox),
-            oy: active.select(s.oy, before.oy),
-            size: active.select(s.size, before.size),
-            pdf: active.select(s.pdf, before.pdf),
-        };
-        let (a, r, u) = (active.to_bitmask(), right.to_bitmask(), upper.to_bitmask());
-        for (l, i) in idx.iter_mut().enumerate() {
-            if a >> l & 1 != 0 {
-                *i = child_of(&nodes[*i], r >> l & 1 != 0, u >> l & 1 != 0);
+        let rmask = x.simd_ge(f32x8::new(t[0]));
+        let right = rmask.to_bitmask();
+        let ty = rmask.select(f32x8::new(t[2]), f32x8::new(t[1]));
+        let upper = y.simd_ge(ty).to_bitmask();
+        for l in 0..8 {
+            if child[l] != 0 {
+                idx[l] = child[l] + (right >> l & 1) as usize + 2 * (upper >> l & 1) as usize;
             }
         }
     }
-    let (x, y) = s.finish();
-    Warped8 { x, y, pdf: s.pdf }
+    let ([wx, wy], pdf) = place(&LeafData::gather(nodes, &idx), [x, y]);
+    Warped8 { x: wx, y: wy, pdf }
 }
 
 /// [`sample8`] for a packet of `lanes` ≤ 8 points (the tail of a texel's samples): lanes
@@ -401,6 +409,7 @@ mod tests {
     use crate::testing::Pcg32;
 
     fn learned(storage: &mut [Node]) -> Guide<'_> {
+        // A bright disk on a dim background, learned from uniform samples.
         let mut rng = Pcg32::new(11, 2);
         let mut r: [Record; 400] = core::array::from_fn(|_| {
             let u = [rng.next_f32(), rng.next_f32()];
