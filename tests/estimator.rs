@@ -153,7 +153,19 @@ fn graybill_deal_beats_the_plain_average_on_unequal_variances() {
     );
     assert!(rg < 0.6 * ra, "GD {rg} vs average {ra}");
     assert!(rm < 0.6 * ra, "Müller {rm} vs average {ra}");
-    assert!(rg < 1.1 * optimal, "GD {rg} far from the optimal {optimal}");
+    // the default floor (c = 0.25) caps the weight of the σ = 0.5 batch for means above 2,
+    // which costs ~25 %; with c = 0.1 GD is within 2 % of the optimal (printed above)
+    assert!(rg < 1.3 * optimal, "GD {rg} far from the optimal {optimal}");
+    let g01 = GraybillDeal { rel_std_floor: 0.1 };
+    let e01: Vec<f64> = texels
+        .iter()
+        .map(|(mu, b)| g01.combine(b).luminance().unwrap() - mu)
+        .collect();
+    assert!(
+        rmse(&e01) < 1.05 * optimal,
+        "GD(c = 0.1) {} vs optimal {optimal}",
+        rmse(&e01)
+    );
     // with symmetric noise the estimated weights cost no bias
     let bias = e_gd.iter().sum::<f64>() / trials as f64;
     assert!(
@@ -466,11 +478,11 @@ fn graybill_deal_with_rho_wins_when_guiding_lowers_variance() {
         e_muller < 0.7 * e_avg,
         "Müller {e_muller} vs average {e_avg}"
     );
-    // Only ~12 % better: in 13 % of texels the unguided batch caught no bright hit, looks
+    // Only ~19 % better: in 13 % of texels the unguided batch caught no bright hit, looks
     // low-variance and takes the weight with a mean far too low (GD's bias, per texel; ρ only
     // fixes the global mean).
     assert!(
-        e_gd_rho < 0.95 * e_avg,
+        e_gd_rho < 0.9 * e_avg,
         "GD·ρ {e_gd_rho} vs average {e_avg}"
     );
     assert!((corrected / truth - 1.0).abs() < 0.01);
