@@ -481,9 +481,6 @@ fn graybill_deal_with_rho_wins_when_guiding_lowers_variance() {
     // Only ~19 % better: in 13 % of texels the unguided batch caught no bright hit, looks
     // low-variance and takes the weight with a mean far too low (GD's bias, per texel; ρ only
     // fixes the global mean).
-    assert!(
-        e_gd_rho < 0.9 * e_avg,
-        "GD·ρ {e_gd_rho} vs average {e_avg}"
-    );
+    assert!(e_gd_rho < 0.9 * e_avg, "GD·ρ {e_gd_rho} vs average {e_avg}");
     assert!((corrected / truth - 1.0).abs() < 0.01);
 }
