@@ -1,2 +1,6 @@
 //! guidebake-suite: the root package that owns the workspace's integration tests (`tests/`)
-//! and criterion benches (`benches/`). It has no code of its own.
+//! and criterion benches (`benches/`), and the bodies of the fuzz targets ([`fuzzing`]), so
+//! that `cargo fuzz` (in `fuzz/`) and `cargo test` (which replays the checked-in corpus)
+//! run the same code.
+
+pub mod fuzzing;

@@ -8,17 +8,25 @@
 //! |---|---|
 //! | [`texels`] | the texel file: streaming writer, validating memory-mapped reader |
 //! | [`scene`] | glTF / OBJ scenes, lights, sky |
+//! | [`bake`] | the streaming bake: shards, resume, the bounded tile pipeline |
+//! | [`demo`] | the bundled default scene: a room lit through a door ajar |
 //! | [`bvh`] | obvhs build, flattened into the kernels' node layout; robust ray origins |
 //! | [`prepare`] | lightmap UV rasterization into texel tiles |
 //! | [`synth`] | procedural worlds of any size, streamed |
+//! | [`output`] | result file, journal of finished tiles, ρ, EXR pages |
 //! | [`preview`] | PNG figures and tone-mapped previews |
+//! | [`transport`] | light transport: next-event estimation of analytic lights |
 //! | [`cmd`] | the `guidebake` subcommands |
 #![deny(unsafe_op_in_unsafe_fn)]
 
+pub mod bake;
 pub mod bvh;
 pub mod cmd;
+pub mod demo;
+pub mod output;
 pub mod prepare;
 pub mod preview;
 pub mod scene;
 pub mod synth;
 pub mod texels;
+pub mod transport;

@@ -21,6 +21,10 @@ enum Command {
     Prepare(cmd::prepare::PrepareArgs),
     /// Write a procedural world of N texels and its scene, streaming.
     Synth(cmd::synth::SynthArgs),
+    /// Bake a lightmap from a texel file with ray guiding.
+    Bake(cmd::bake::BakeArgs),
+    /// Combine the shards of a `bake --shard I/N` into the final lightmap.
+    Merge(cmd::merge::MergeArgs),
     /// Print a texel file's header and counts; dump chosen texels as JSON.
     Inspect(cmd::inspect::InspectArgs),
 }
@@ -32,6 +36,8 @@ fn main() -> ExitCode {
         Command::Prepare(a) => cmd::prepare::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Bake(a) => cmd::bake::run(a),
+        Command::Merge(a) => cmd::merge::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,1 +1,735 @@
-//! `prepare`: to be written (see the module table in the crate docs).
+//! `prepare`: rasterize a scene's lightmap UV charts into texel tiles (DESIGN.md, "prepare").
+//!
+//! The paper (Silvennoinen & Sloan 2019, §2.1) bakes lightmap texels, each with a world
+//! position and normal, grouped into clusters; it assumes the texels exist. This module makes
+//! them from glTF `TEXCOORD_1`:
+//!
+//! 1. **Layout.** Every mesh gets a map `pixel = uv · scale + offset` onto an atlas page
+//!    ([`MeshRecord`]). *Shared* layout: all meshes already share one atlas (the converted
+//!    Bitterli scenes, made with xatlas) — page 0, `scale` = page size. *Per-mesh* layout:
+//!    every mesh has its own 0..1 UVs (the vinc3r Cornell box) — each mesh's UV bounding
+//!    square becomes a square cell sized for the requested texel density, cells are shelf
+//!    packed (largest first, 2-texel gutter) onto pages of at most 4096². `Auto` (default)
+//!    takes the shared layout unless texel centres of different meshes overlap in UV space.
+//! 2. **Centres.** A texel whose centre lies inside a triangle (edge functions, inclusive)
+//!    takes that triangle; where several do, the first in scene order wins.
+//! 3. **Conservative pass.** A texel still empty but overlapped by a triangle (separating
+//!    axis test of the texel square against the UV triangle) takes that triangle's point
+//!    *closest to the texel centre* and is flagged [`FLAG_PARTIAL`], so thin triangles and
+//!    chart borders keep texels. Deviation: the blog in DESIGN.md's seeds clips the triangle
+//!    to the texel and spreads samples over the clipped polygons; we store one point and the
+//!    footprint axes instead, so the bake can still spread ray origins over the texel.
+//! 4. **Records.** Position and normal are interpolated with the barycentrics of that point
+//!    (clamped to the triangle, so every position lies on its triangle); the normal is the
+//!    interpolated vertex normal, or the geometric normal where the source has none; the
+//!    footprint axes dP/du, dP/dv are the world-space change over one texel step, from the
+//!    inverse of the triangle's UV Jacobian.
+//! 5. **Tiles.** 32×32-texel tiles of each page in Morton (Z-order) order of their tile
+//!    coordinates: charts are spatially coherent in UV, and Z-order keeps neighbouring tiles
+//!    near each other in the file. Empty tiles are not stored.
+//!
+//! Resolution: `--texels-per-unit D` (texels along one world unit), `--size W×H` (shared:
+//! the page size; per-mesh: the single page the packing must fit), or, when neither is
+//! given, a budget of one 1024×1024 page — the resolution the converted scenes' atlases
+//! were made for (scenes/README.md).
+//!
+//! Memory: one page's ownership grid (4 bytes per texel) at a time, plus one tile.
+
+use std::path::{Path, PathBuf};
+
+use glam::{Vec2, Vec3};
+
+use crate::scene::{Scene, Triangle};
+use crate::texels::{
+    FLAG_PARTIAL, FLAG_VALID, MeshRecord, PageRecord, TILE_SIZE, TexelFileError, TexelRecord,
+    TexelWriter, TileRect,
+};
+
+/// Largest page edge `prepare` creates.
+pub const MAX_PAGE: u32 = 16384;
+/// Page edge used by the per-mesh packer when no `--size` is given.
+pub const PACK_PAGE: u32 = 4096;
+/// Default budget: one page of this edge.
+pub const DEFAULT_PAGE: u32 = 1024;
+const GUTTER: u32 = 2;
+const PARTIAL_BIT: u32 = 1 << 31;
+
+/// How big the lightmap is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Resolution {
+    /// One 1024×1024 page's worth of texels (see the module docs).
+    Default,
+    /// Texels per world unit along an edge.
+    TexelsPerUnit(f32),
+    /// Page size in texels.
+    Size(u32, u32),
+}
+
+/// Which atlas layout to use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Layout {
+    /// Shared unless meshes overlap in UV space.
+    Auto,
+    /// All meshes already share one atlas.
+    Shared,
+    /// Every mesh has its own UV square; pack them.
+    PerMesh,
+}
+
+/// Options of [`prepare`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrepareOptions {
+    /// Resolution.
+    pub resolution: Resolution,
+    /// Layout.
+    pub layout: Layout,
+}
+
+/// What [`prepare`] did.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PrepareReport {
+    /// Texels written.
+    pub texels: u64,
+    /// Of those, texels whose centre no triangle covers (conservative pass).
+    pub partial_texels: u64,
+    /// Tiles written.
+    pub tiles: u64,
+    /// Page sizes.
+    pub pages: Vec<(u32, u32)>,
+    /// `true` when the per-mesh packing was used.
+    pub per_mesh_layout: bool,
+    /// Texels per world unit (derived when a size was given).
+    pub texels_per_unit: f32,
+    /// Meshes without lightmap UVs (they get no texels).
+    pub meshes_without_lightmap_uvs: Vec<String>,
+    /// Triangles skipped because their UV triangle has zero area.
+    pub uv_degenerate_triangles: u64,
+}
+
+/// Why `prepare` failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PrepareError {
+    /// Writing the texel file failed.
+    #[error(transparent)]
+    Texels(#[from] TexelFileError),
+    /// No mesh has lightmap UVs.
+    #[error("{path}: no mesh has lightmap UVs (TEXCOORD_1); meshes without: {}", meshes.join(", "))]
+    NoLightmapUvs {
+        /// The scene file.
+        path: PathBuf,
+        /// Every mesh name.
+        meshes: Vec<String>,
+    },
+    /// The options cannot be met.
+    #[error("{path}: {message}")]
+    Resolution {
+        /// The scene file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// Nothing was rasterized.
+    #[error("{path}: no texel is covered at this resolution")]
+    NoTexels {
+        /// The scene file.
+        path: PathBuf,
+    },
+}
+
+/// Per-mesh UV statistics.
+#[derive(Clone, Copy, Debug)]
+struct MeshUv {
+    world_area: f64,
+    uv_area: f64,
+    lo: Vec2,
+    hi: Vec2,
+}
+
+fn uv_area(uv: &[Vec2; 3]) -> f32 {
+    0.5 * (uv[1] - uv[0]).perp_dot(uv[2] - uv[0])
+}
+
+fn mesh_uv_stats(scene: &Scene) -> Vec<Option<MeshUv>> {
+    let mut out: Vec<Option<MeshUv>> = vec![None; scene.meshes.len()];
+    for t in &scene.triangles {
+        let Some(uv) = t.lightmap_uv else { continue };
+        let s = out[t.mesh as usize].get_or_insert(MeshUv {
+            world_area: 0.0,
+            uv_area: 0.0,
+            lo: Vec2::splat(f32::INFINITY),
+            hi: Vec2::splat(f32::NEG_INFINITY),
+        });
+        s.world_area += f64::from(t.area());
+        s.uv_area += f64::from(uv_area(&uv).abs());
+        for v in uv {
+            s.lo = s.lo.min(v);
+            s.hi = s.hi.max(v);
+        }
+    }
+    out
+}
+
+/// Writes the texel file for `scene` to `out`.
+///
+/// # Errors
+/// [`PrepareError`] when no mesh has lightmap UVs, the resolution cannot be met, nothing is
+/// covered, or writing fails (then no file is left at `out`).
+pub fn prepare(
+    scene: &Scene,
+    out: &Path,
+    opts: PrepareOptions,
+) -> Result<PrepareReport, PrepareError> {
+    let stats = mesh_uv_stats(scene);
+    let missing: Vec<String> = scene
+        .meshes_without_lightmap_uvs()
+        .into_iter()
+        .map(str::to_owned)
+        .collect();
+    if stats.iter().all(Option::is_none) {
+        return Err(PrepareError::NoLightmapUvs {
+            path: scene.path.clone(),
+            meshes: scene.meshes.iter().map(|m| m.name.clone()).collect(),
+        });
+    }
+    let per_mesh = match opts.layout {
+        Layout::Shared => false,
+        Layout::PerMesh => true,
+        Layout::Auto => meshes_overlap(scene, &stats),
+    };
+    let (pages, meshes, tpu) = if per_mesh {
+        per_mesh_layout(scene, &stats, opts.resolution)?
+    } else {
+        shared_layout(scene, &stats, opts.resolution)?
+    };
+    let mut w = TexelWriter::create(out, &pages, &meshes, scene.triangles.len() as u32, tpu)?;
+    let mut report = PrepareReport {
+        texels: 0,
+        partial_texels: 0,
+        tiles: 0,
+        pages: pages.iter().map(|p| (p.width, p.height)).collect(),
+        per_mesh_layout: per_mesh,
+        texels_per_unit: tpu,
+        meshes_without_lightmap_uvs: missing,
+        uv_degenerate_triangles: 0,
+    };
+    for (page_index, page) in pages.iter().enumerate() {
+        let raster = PageRaster::new(scene, &meshes, page_index as u32, *page, &mut report);
+        raster.emit_tiles(scene, &meshes, &mut w, &mut report)?;
+    }
+    if report.texels == 0 {
+        return Err(PrepareError::NoTexels {
+            path: scene.path.clone(),
+        });
+    }
+    w.finish()?;
+    Ok(report)
+}
+
+fn shared_layout(
+    scene: &Scene,
+    stats: &[Option<MeshUv>],
+    res: Resolution,
+) -> Result<(Vec<PageRecord>, Vec<MeshRecord>, f32), PrepareError> {
+    let (wa, ua) = stats
+        .iter()
+        .flatten()
+        .fold((0.0, 0.0), |a, s| (a.0 + s.world_area, a.1 + s.uv_area));
+    let density = (wa / ua.max(1e-30)).sqrt(); // world units per UV unit
+    let (w, h) = match res {
+        Resolution::Size(w, h) => (w, h),
+        Resolution::Default => (DEFAULT_PAGE, DEFAULT_PAGE),
+        Resolution::TexelsPerUnit(d) => {
+            let side = (f64::from(d) * density).ceil();
+            check_side(scene, side)?;
+            (side as u32, side as u32)
+        }
+    };
+    check_side(scene, f64::from(w.max(h)))?;
+    let tpu = (f64::from(w).min(f64::from(h)) / density) as f32;
+    let page = PageRecord {
+        width: w,
+        height: h,
+    };
+    let meshes = scene
+        .meshes
+        .iter()
+        .zip(stats)
+        .map(|(m, s)| MeshRecord {
+            first_triangle: m.first_triangle,
+            triangle_count: m.triangle_count,
+            page: 0,
+            flags: u32::from(s.is_some()),
+            uv_scale: [w as f32, h as f32],
+            uv_offset: [0.0; 2],
+        })
+        .collect();
+    Ok((vec![page], meshes, tpu))
+}
+
+fn check_side(scene: &Scene, side: f64) -> Result<(), PrepareError> {
+    if !(1.0..=f64::from(MAX_PAGE)).contains(&side) {
+        return Err(PrepareError::Resolution {
+            path: scene.path.clone(),
+            message: format!(
+                "a page of {side} texels is outside 1..={MAX_PAGE}; choose a smaller --texels-per-unit or --size"
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Cell edge of each mesh at density `d`, `None` for meshes without UVs.
+fn cells(stats: &[Option<MeshUv>], d: f64, max: u32) -> Vec<Option<u32>> {
+    stats
+        .iter()
+        .map(|s| {
+            s.map(|s| {
+                let ext = f64::from((s.hi - s.lo).max_element().max(1e-12));
+                // The UV bounding square scaled to `side` texels holds uv_area·side²/ext² texels.
+                let side = d * (s.world_area / s.uv_area.max(1e-30)).sqrt() * ext;
+                (side.ceil() as u32).clamp(2, max - 2 * GUTTER)
+            })
+        })
+        .collect()
+}
+
+/// Shelf packing: returns per mesh (page, x, y) and the number of pages.
+/// A cell's place: (page, x, y).
+type Place = (u32, u32, u32);
+
+fn shelf_pack(cells: &[Option<u32>], page: (u32, u32)) -> (Vec<Option<Place>>, u32) {
+    let mut order: Vec<usize> = (0..cells.len()).filter(|&i| cells[i].is_some()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(cells[i]));
+    let mut out = vec![None; cells.len()];
+    let (mut p, mut x, mut y, mut shelf) = (0u32, 0u32, 0u32, 0u32);
+    for i in order {
+        let s = cells[i].unwrap_or(0) + 2 * GUTTER;
+        if x + s > page.0 {
+            x = 0;
+            y += shelf;
+            shelf = 0;
+        }
+        if y + s > page.1 {
+            p += 1;
+            x = 0;
+            y = 0;
+            shelf = 0;
+        }
+        out[i] = Some((p, x + GUTTER, y + GUTTER));
+        x += s;
+        shelf = shelf.max(s);
+    }
+    (out, p + 1)
+}
+
+fn per_mesh_layout(
+    scene: &Scene,
+    stats: &[Option<MeshUv>],
+    res: Resolution,
+) -> Result<(Vec<PageRecord>, Vec<MeshRecord>, f32), PrepareError> {
+    let sum_ratio: f64 = stats
+        .iter()
+        .flatten()
+        .map(|s| s.world_area / s.uv_area.max(1e-30))
+        .sum();
+    let (mut d, page, one_page) = match res {
+        Resolution::TexelsPerUnit(d) => (f64::from(d), (PACK_PAGE, PACK_PAGE), false),
+        Resolution::Default => (
+            f64::from(DEFAULT_PAGE) / sum_ratio.sqrt(),
+            (PACK_PAGE, PACK_PAGE),
+            false,
+        ),
+        Resolution::Size(w, h) => (f64::from(w.min(h)) / sum_ratio.sqrt(), (w, h), true),
+    };
+    check_side(scene, f64::from(page.0.max(page.1)))?;
+    if page.0.min(page.1) <= 2 * GUTTER + 2 {
+        return Err(PrepareError::Resolution {
+            path: scene.path.clone(),
+            message: format!("page {}x{} is too small to pack meshes", page.0, page.1),
+        });
+    }
+    let max = page.0.min(page.1);
+    let (places, cs, n) = loop {
+        let cs = cells(stats, d, max);
+        let (places, n) = shelf_pack(&cs, page);
+        if !one_page || n == 1 || d < 1e-9 {
+            break (places, cs, n);
+        }
+        d *= 0.95;
+    };
+    if n > 4096 {
+        return Err(PrepareError::Resolution {
+            path: scene.path.clone(),
+            message: format!("{n} pages needed; choose a smaller --texels-per-unit"),
+        });
+    }
+    let meshes = scene
+        .meshes
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let (page, scale, offset) = match (places[i], cs[i], stats[i]) {
+                (Some((p, x, y)), Some(c), Some(s)) => {
+                    let k = c as f32 / (s.hi - s.lo).max_element().max(1e-12);
+                    (p, [k, k], [x as f32 - s.lo.x * k, y as f32 - s.lo.y * k])
+                }
+                _ => (0, [0.0; 2], [0.0; 2]),
+            };
+            MeshRecord {
+                first_triangle: m.first_triangle,
+                triangle_count: m.triangle_count,
+                page,
+                flags: u32::from(stats[i].is_some()),
+                uv_scale: scale,
+                uv_offset: offset,
+            }
+        })
+        .collect();
+    let pages = vec![
+        PageRecord {
+            width: page.0,
+            height: page.1
+        };
+        n as usize
+    ];
+    Ok((pages, meshes, d as f32))
+}
+
+/// `true` when texel centres of a 512² test grid are covered by triangles of two meshes.
+fn meshes_overlap(scene: &Scene, stats: &[Option<MeshUv>]) -> bool {
+    const N: u32 = 512;
+    let outside = stats
+        .iter()
+        .flatten()
+        .any(|s| s.lo.min_element() < -1e-3 || s.hi.max_element() > 1.0 + 1e-3);
+    if outside {
+        return true;
+    }
+    let mut owner = vec![u32::MAX; (N * N) as usize];
+    let (mut covered, mut conflicts) = (0u64, 0u64);
+    for t in &scene.triangles {
+        let Some(uv) = t.lightmap_uv else { continue };
+        let q = uv.map(|v| v * N as f32);
+        for_each_centre(&q, (N, N), |x, y| {
+            let o = &mut owner[(y * N + x) as usize];
+            if *o == u32::MAX {
+                *o = t.mesh;
+                covered += 1;
+            } else if *o != t.mesh {
+                conflicts += 1;
+            }
+        });
+    }
+    conflicts * 100 > covered
+}
+
+/// Calls `f(x, y)` for every pixel whose centre lies inside (or on) the triangle `q`.
+fn for_each_centre(q: &[Vec2; 3], size: (u32, u32), mut f: impl FnMut(u32, u32)) {
+    let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
+    if area == 0.0 || !area.is_finite() {
+        return;
+    }
+    let (x0, x1, y0, y1) = pixel_range(q, size);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let c = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            if barycentric(q, c, area).iter().all(|&l| l >= 0.0) {
+                f(x, y);
+            }
+        }
+    }
+}
+
+/// Pixel index ranges `[x0, x1) × [y0, y1)` of the triangle's bounding box, clipped.
+fn pixel_range(q: &[Vec2; 3], size: (u32, u32)) -> (u32, u32, u32, u32) {
+    let lo = q[0].min(q[1]).min(q[2]);
+    let hi = q[0].max(q[1]).max(q[2]);
+    let clip = |v: f32, n: u32| v.clamp(0.0, n as f32) as u32;
+    (
+        clip(lo.x.floor(), size.0),
+        clip(hi.x.floor() + 1.0, size.0),
+        clip(lo.y.floor(), size.1),
+        clip(hi.y.floor() + 1.0, size.1),
+    )
+}
+
+/// Barycentrics of `c` in the 2D triangle `q` whose doubled signed area is `area`.
+fn barycentric(q: &[Vec2; 3], c: Vec2, area: f32) -> [f32; 3] {
+    let l0 = (q[1] - c).perp_dot(q[2] - c) / area;
+    let l1 = (q[2] - c).perp_dot(q[0] - c) / area;
+    [l0, l1, 1.0 - l0 - l1]
+}
+
+/// Separating-axis test: does the triangle overlap the open unit square at (x, y)?
+fn overlaps_square(q: &[Vec2; 3], x: u32, y: u32) -> bool {
+    let lo = Vec2::new(x as f32, y as f32);
+    let corners = [lo, lo + Vec2::X, lo + Vec2::ONE, lo + Vec2::Y];
+    let (tlo, thi) = (q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
+    if thi.x <= lo.x || thi.y <= lo.y || tlo.x >= lo.x + 1.0 || tlo.y >= lo.y + 1.0 {
+        return false;
+    }
+    for i in 0..3 {
+        let e = q[(i + 1) % 3] - q[i];
+        let n = e.perp();
+        let tri = [q[0].dot(n), q[1].dot(n), q[2].dot(n)];
+        let (tmin, tmax) = (
+            tri[0].min(tri[1]).min(tri[2]),
+            tri[0].max(tri[1]).max(tri[2]),
+        );
+        let sq = corners.map(|c| c.dot(n));
+        let (smin, smax) = (
+            sq[0].min(sq[1]).min(sq[2]).min(sq[3]),
+            sq[0].max(sq[1]).max(sq[2]).max(sq[3]),
+        );
+        if smax <= tmin || smin >= tmax {
+            return false;
+        }
+    }
+    true
+}
+
+/// Closest point of the 2D triangle `q` to `c`, as clamped barycentrics.
+fn closest_barycentric(q: &[Vec2; 3], c: Vec2, area: f32) -> [f32; 3] {
+    let b = barycentric(q, c, area);
+    if b.iter().all(|&l| l >= 0.0) {
+        return b;
+    }
+    let mut best = ([1.0, 0.0, 0.0], f32::INFINITY);
+    for i in 0..3 {
+        let (a, e) = (q[i], q[(i + 1) % 3] - q[i]);
+        let t = ((c - a).dot(e) / e.length_squared().max(1e-30)).clamp(0.0, 1.0);
+        let d = (a + e * t).distance_squared(c);
+        if d < best.1 {
+            let mut l = [0.0; 3];
+            l[i] = 1.0 - t;
+            l[(i + 1) % 3] = t;
+            best = (l, d);
+        }
+    }
+    best.0
+}
+
+/// A triangle's UVs in page pixel coordinates.
+fn pixel_uv(t: &Triangle, m: &MeshRecord) -> Option<[Vec2; 3]> {
+    let (s, o) = (Vec2::from(m.uv_scale), Vec2::from(m.uv_offset));
+    t.lightmap_uv.map(|uv| uv.map(|v| v * s + o))
+}
+
+/// Ownership grid of one page: `triangle + 1` (0 empty), high bit = partial.
+struct PageRaster {
+    page: u32,
+    size: PageRecord,
+    owner: Vec<u32>,
+}
+
+impl PageRaster {
+    fn new(
+        scene: &Scene,
+        meshes: &[MeshRecord],
+        page: u32,
+        size: PageRecord,
+        report: &mut PrepareReport,
+    ) -> Self {
+        let dims = (size.width, size.height);
+        let mut owner = vec![0u32; size.width as usize * size.height as usize];
+        let on_page = |t: &Triangle| meshes[t.mesh as usize].page == page;
+        for (i, t) in scene
+            .triangles
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| on_page(t))
+        {
+            let Some(q) = pixel_uv(t, &meshes[t.mesh as usize]) else {
+                continue;
+            };
+            let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
+            if area == 0.0 || !area.is_finite() {
+                report.uv_degenerate_triangles += 1;
+                continue;
+            }
+            for_each_centre(&q, dims, |x, y| {
+                let o = &mut owner[y as usize * size.width as usize + x as usize];
+                if *o == 0 {
+                    *o = i as u32 + 1;
+                }
+            });
+        }
+        for (i, t) in scene
+            .triangles
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| on_page(t))
+        {
+            let Some(q) = pixel_uv(t, &meshes[t.mesh as usize]) else {
+                continue;
+            };
+            let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
+            if area == 0.0 || !area.is_finite() {
+                continue;
+            }
+            let (x0, x1, y0, y1) = pixel_range(&q, dims);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let o = &mut owner[y as usize * size.width as usize + x as usize];
+                    if *o == 0 && overlaps_square(&q, x, y) {
+                        *o = (i as u32 + 1) | PARTIAL_BIT;
+                    }
+                }
+            }
+        }
+        Self { page, size, owner }
+    }
+
+    fn emit_tiles(
+        &self,
+        scene: &Scene,
+        meshes: &[MeshRecord],
+        w: &mut TexelWriter,
+        report: &mut PrepareReport,
+    ) -> Result<(), PrepareError> {
+        let (tw, th) = (
+            self.size.width.div_ceil(TILE_SIZE),
+            self.size.height.div_ceil(TILE_SIZE),
+        );
+        let mut order: Vec<(u64, u32, u32)> = (0..th)
+            .flat_map(|ty| (0..tw).map(move |tx| (morton(tx, ty), tx, ty)))
+            .collect();
+        order.sort_unstable();
+        let mut buf = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
+        for (_, tx, ty) in order {
+            let rect = TileRect {
+                page: self.page,
+                x: tx * TILE_SIZE,
+                y: ty * TILE_SIZE,
+                width: TILE_SIZE.min(self.size.width - tx * TILE_SIZE),
+                height: TILE_SIZE.min(self.size.height - ty * TILE_SIZE),
+            };
+            buf.clear();
+            for y in rect.y..rect.y + rect.height {
+                for x in rect.x..rect.x + rect.width {
+                    let o = self.owner[y as usize * self.size.width as usize + x as usize];
+                    if o == 0 {
+                        continue;
+                    }
+                    let tri = (o & !PARTIAL_BIT) - 1;
+                    let partial = o & PARTIAL_BIT != 0;
+                    buf.push(texel_record(scene, meshes, self.page, tri, x, y, partial));
+                    report.partial_texels += u64::from(partial);
+                }
+            }
+            if !buf.is_empty() {
+                w.push_tile(rect, &buf)?;
+                report.tiles += 1;
+                report.texels += buf.len() as u64;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Interleaves the bits of x and y (Z-order).
+fn morton(x: u32, y: u32) -> u64 {
+    fn spread(v: u32) -> u64 {
+        let mut v = u64::from(v);
+        v = (v | (v << 16)) & 0x0000_FFFF_0000_FFFF;
+        v = (v | (v << 8)) & 0x00FF_00FF_00FF_00FF;
+        v = (v | (v << 4)) & 0x0F0F_0F0F_0F0F_0F0F;
+        v = (v | (v << 2)) & 0x3333_3333_3333_3333;
+        (v | (v << 1)) & 0x5555_5555_5555_5555
+    }
+    spread(x) | (spread(y) << 1)
+}
+
+/// The record of texel (x, y) owned by triangle `tri`.
+fn texel_record(
+    scene: &Scene,
+    meshes: &[MeshRecord],
+    page: u32,
+    tri: u32,
+    x: u32,
+    y: u32,
+    partial: bool,
+) -> TexelRecord {
+    let t = &scene.triangles[tri as usize];
+    let q = pixel_uv(t, &meshes[t.mesh as usize]).unwrap_or([Vec2::ZERO; 3]);
+    let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
+    let c = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+    let l = clamp_barycentric(closest_barycentric(&q, c, area));
+    let p = t.positions;
+    let position = p[0] * l[0] + p[1] * l[1] + p[2] * l[2];
+    let geometric = t.geometric_normal();
+    let n =
+        (t.normals[0] * l[0] + t.normals[1] * l[1] + t.normals[2] * l[2]).normalize_or(geometric);
+    // dP/dq = [p1-p0, p2-p0] · [q1-q0, q2-q0]^-1
+    let (e1, e2) = (q[1] - q[0], q[2] - q[0]);
+    let (f1, f2) = (p[1] - p[0], p[2] - p[0]);
+    let inv = 1.0 / area;
+    let dpdu = (f1 * e2.y - f2 * e1.y) * inv;
+    let dpdv = (f2 * e1.x - f1 * e2.x) * inv;
+    let finite_or_zero = |v: Vec3| if v.is_finite() { v } else { Vec3::ZERO };
+    TexelRecord {
+        position: position.to_array(),
+        normal: n.to_array(),
+        dpdu: finite_or_zero(dpdu).to_array(),
+        dpdv: finite_or_zero(dpdv).to_array(),
+        page,
+        pixel: [x as u16, y as u16],
+        triangle: tri,
+        flags: FLAG_VALID | if partial { FLAG_PARTIAL } else { 0 },
+    }
+}
+
+/// Clamps barycentrics into the triangle (rounding can leave −1e-7) and renormalizes.
+fn clamp_barycentric(l: [f32; 3]) -> [f32; 3] {
+    let l = l.map(|v| v.max(0.0));
+    let s = l[0] + l[1] + l[2];
+    if s > 0.0 {
+        l.map(|v| v / s)
+    } else {
+        [1.0, 0.0, 0.0]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn square_overlap_and_closest_point() {
+        let q = [
+            Vec2::new(0.2, 0.2),
+            Vec2::new(5.0, 0.3),
+            Vec2::new(0.3, 0.4),
+        ];
+        assert!(overlaps_square(&q, 0, 0));
+        assert!(overlaps_square(&q, 3, 0));
+        let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
+        // Centre (3.5, 0.5) is outside the thin sliver; its closest point lies on it.
+        let l = closest_barycentric(&q, Vec2::new(3.5, 0.5), area);
+        assert!(l.iter().all(|&v| v >= 0.0) && (l.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        let p = q[0] * l[0] + q[1] * l[1] + q[2] * l[2];
+        assert!((p.x - 3.5).abs() < 0.1, "{p}");
+        // A far square does not overlap.
+        assert!(!overlaps_square(&q, 3, 2));
+        let tilted = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(4.0, 4.0),
+            Vec2::new(0.0, 4.0),
+        ];
+        assert!(!overlaps_square(&tilted, 3, 0), "below the diagonal");
+        assert!(
+            !overlaps_square(&tilted, 2, 1),
+            "only touching the diagonal"
+        );
+        assert!(overlaps_square(&tilted, 1, 2), "above the diagonal");
+    }
+
+    #[test]
+    fn morton_orders_quadrants() {
+        assert_eq!(morton(0, 0), 0);
+        assert_eq!(morton(1, 0), 1);
+        assert_eq!(morton(0, 1), 2);
+        assert_eq!(morton(1, 1), 3);
+        assert_eq!(morton(2, 0), 4);
+    }
+}

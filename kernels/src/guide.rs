@@ -1,1 +1,592 @@
-//! `guide`: to be written (see the module table in the crate docs).
+//! `guide`: the learned directional quadtree and its hierarchical smoothing filter
+//! (Silvennoinen & Sloan 2019, §2.2 "Learning" and §2.3 "Filtering").
+//!
+//! The guide lives on the **primary sample square** [0,1)², not on the hemisphere: the
+//! unguided baseline is the uniform density on the square (the cosine-weighted hemisphere map
+//! of [`crate::mapping`] turns it into cosθ/π), so a guide learned on the square learns the
+//! incident radiance alone and its directional density is p(ω) = p_square(u)·cosθ/π.
+//!
+//! # Building (§2.2)
+//! Records are gather samples `(u, flux)`. The flux of a sample taken with density `p` on the
+//! square is its luminance `L / p(u)`, so learning stays unbiased whichever guide (or the
+//! baseline, `p = 1`) produced the samples. [`build`] then:
+//! 1. rejects and counts records with non-finite or negative flux, or `u` outside [0,1)²
+//!    ([`BuildStats`]);
+//! 2. splits top-down, breadth first: a node splits into four quadrants while it holds at
+//!    least [`GuideParams::min_records`] records (4) and at least
+//!    [`GuideParams::min_flux_fraction`] (1%) of the total flux, up to
+//!    [`GuideParams::max_depth`];
+//! 3. gives every leaf `max(flux, ambient · total · area)`: the **ambient floor** is a floor
+//!    on the density relative to its mean, so no direction has zero probability (default
+//!    [`DEFAULT_AMBIENT`] = 0.1: no leaf below a tenth of the uniform density, which bounds
+//!    the variance cost in directions the learning missed);
+//! 4. normalizes (root mass 1) and sums masses bottom-up;
+//! 5. smooths (§2.3), top-down, every node visited once: each child's share of its parent is
+//!    interpolated toward the parent's average (a quarter) by α ([`DEFAULT_ALPHA`] = 0.25):
+//!    `m_child' = m_parent' · ((1 − α)·m_child / m_parent + α/4)`, with `m_parent'` the
+//!    already smoothed parent mass. Masses stay normalized.
+//! 6. stores per interior node what the warp needs: the marginal probability `px` of the
+//!    left half and the conditionals `py[h]` of the lower half given the x-half `h`
+//!    (Clarberg et al. 2005, see [`crate::warp`]).
+//!
+//! If no record survives, or the accepted flux sums to zero, the guide is the uniform density
+//! (a root leaf): there is nothing to learn from.
+//!
+//! # Storage and capacity
+//! The caller supplies the node array (`&mut [Node]`, at most [`MAX_NODES`] nodes are used,
+//! because child links are `u16`); nothing allocates. The records are partitioned in place
+//! (their order changes). Nodes are created breadth first, so **when the storage is full**
+//! every level that was split is complete and the nodes that would split further simply stay
+//! leaves: the guide is the best coarser tree that fits, still a valid normalized density.
+//! The number of refused splits is reported in [`BuildStats::capacity_refusals`].
+//!
+//! # Deviations from the paper
+//! The paper does not state its floor or depth cap; ours are parameters with the defaults
+//! above. The paper's smoothing is phrased on node values; ours keeps the masses summing to
+//! one exactly (up to rounding) so no renormalization pass is needed.
+
+/// Largest number of nodes a guide can use: child links are `u16`.
+pub const MAX_NODES: usize = u16::MAX as usize;
+/// Largest depth cap [`GuideParams::max_depth`] accepts: leaves of side 2⁻¹⁶ still hold 256
+/// distinct f32 values per axis near 1.
+pub const MAX_DEPTH: u32 = 16;
+/// Default ambient floor: no leaf gets less than 0.1× the uniform density before smoothing.
+pub const DEFAULT_AMBIENT: f32 = 0.1;
+/// Default smoothing strength α (paper §2.3).
+pub const DEFAULT_ALPHA: f32 = 0.25;
+
+/// One learning sample: a point of the primary sample square and its flux
+/// (luminance divided by the density on the square that generated it).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Record {
+    /// The sample's point in [0,1)².
+    pub u: [f32; 2],
+    /// `L / p_square(u)`, finite and ≥ 0 to be accepted.
+    pub flux: f32,
+}
+
+/// Parameters of [`build`]; [`Default`] gives the documented defaults.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GuideParams {
+    /// A node splits only if it holds at least this many records (default 4).
+    pub min_records: u32,
+    /// ... and at least this fraction of the total flux (default 0.01).
+    pub min_flux_fraction: f32,
+    /// Depth cap; the root has depth 0 (default 10, clamped to [`MAX_DEPTH`]).
+    pub max_depth: u32,
+    /// Ambient floor on every leaf's density relative to the mean (default [`DEFAULT_AMBIENT`]).
+    /// 0 lets leaves without flux get probability 0 (and the warp never goes there), which
+    /// biases an estimator if radiance arrives there after all; for tests and inspection.
+    pub ambient: f32,
+    /// Smoothing strength α ∈ [0, 1] (default [`DEFAULT_ALPHA`]); 0 disables smoothing,
+    /// 1 makes every node uniform over its children.
+    pub alpha: f32,
+}
+
+impl Default for GuideParams {
+    fn default() -> Self {
+        GuideParams {
+            min_records: 4,
+            min_flux_fraction: 0.01,
+            max_depth: 10,
+            ambient: DEFAULT_AMBIENT,
+            alpha: DEFAULT_ALPHA,
+        }
+    }
+}
+
+/// A node of the directional quadtree. Children of an interior node are four consecutive
+/// nodes, quadrants in the order (x low, y low), (x high, y low), (x low, y high),
+/// (x high, y high).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Node {
+    /// Marginal probability of the left half (x < ½ of the node).
+    pub(crate) px: f32,
+    /// Probability of the lower half given the left (`py[0]`) or right (`py[1]`) half.
+    pub(crate) py: [f32; 2],
+    /// Probability mass of the node (the root has 1).
+    pub(crate) mass: f32,
+    /// First record of the node during the build (records are partitioned in place).
+    first: u32,
+    /// Number of records of the node.
+    count: u32,
+    /// Index of the first child; 0 for a leaf (the root is never a child).
+    pub(crate) child: u16,
+    /// Depth (root 0).
+    depth: u16,
+}
+
+impl Node {
+    /// Whether the node is a leaf.
+    pub fn is_leaf(&self) -> bool {
+        self.child == 0
+    }
+    /// Index of the first of the four children (quadrant order in the type's doc), `None`
+    /// for a leaf.
+    pub fn first_child(&self) -> Option<usize> {
+        (self.child != 0).then_some(usize::from(self.child))
+    }
+    /// Probability mass of the node after floor, normalization and smoothing.
+    pub fn mass(&self) -> f32 {
+        self.mass
+    }
+    /// Marginal probability of the node's left half (interior nodes; 1 for a leaf).
+    pub fn px(&self) -> f32 {
+        self.px
+    }
+    /// Conditional probability of the lower half given x-half `h` (0 left, 1 right).
+    pub fn py(&self, h: usize) -> f32 {
+        self.py[h]
+    }
+    /// Depth of the node (root 0).
+    pub fn depth(&self) -> u32 {
+        u32::from(self.depth)
+    }
+    /// Number of accepted records that fell in the node.
+    pub fn records(&self) -> u32 {
+        self.count
+    }
+}
+
+/// What [`build`] did with its input.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BuildStats {
+    /// Records used for learning.
+    pub accepted: u32,
+    /// Records dropped for non-finite or negative flux.
+    pub rejected_flux: u32,
+    /// Records dropped for a point outside [0,1)² (or NaN).
+    pub rejected_point: u32,
+    /// Total accepted flux (before the floor).
+    pub total_flux: f64,
+    /// Nodes used.
+    pub nodes: u32,
+    /// Leaves.
+    pub leaves: u32,
+    /// Deepest leaf.
+    pub depth: u32,
+    /// Splits the rule asked for but the storage could not hold.
+    pub capacity_refusals: u32,
+    /// Splits stopped by the depth cap.
+    pub depth_refusals: u32,
+}
+
+/// A built guide: a view of the caller's node storage.
+#[derive(Clone, Copy, Debug)]
+pub struct Guide<'a> {
+    nodes: &'a [Node],
+}
+
+/// A leaf as a square of the primary sample space with its constant density.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Leaf {
+    /// Lower corner.
+    pub origin: [f32; 2],
+    /// Side length (a power of two).
+    pub size: f32,
+    /// Density on the square inside the leaf, as [`crate::warp::pdf`] returns it.
+    pub pdf: f32,
+}
+
+impl<'a> Guide<'a> {
+    /// The uniform guide (one root leaf) in `storage`.
+    ///
+    /// # Panics
+    /// If `storage` is empty.
+    pub fn uniform(storage: &'a mut [Node]) -> Guide<'a> {
+        assert!(
+            !storage.is_empty(),
+            "guide storage must hold at least one node"
+        );
+        storage[0] = root_leaf(0);
+        Guide {
+            nodes: &storage[..1],
+        }
+    }
+
+    /// The nodes in breadth-first order; index 0 is the root.
+    pub fn nodes(&self) -> &'a [Node] {
+        self.nodes
+    }
+
+    /// Whether the guide is the uniform density (a single leaf).
+    pub fn is_uniform(&self) -> bool {
+        self.nodes.len() == 1
+    }
+
+    /// Visits every leaf with its square and density (for inspection, tests and plots).
+    pub fn for_each_leaf(&self, mut f: impl FnMut(Leaf)) {
+        self.visit(0, [0.0, 0.0], 1.0, 1.0, &mut f);
+    }
+
+    fn visit(&self, i: usize, o: [f32; 2], size: f32, pdf: f32, f: &mut impl FnMut(Leaf)) {
+        let n = self.nodes[i];
+        let Some(c) = n.first_child() else {
+            f(Leaf {
+                origin: o,
+                size,
+                pdf,
+            });
+            return;
+        };
+        let h = size * 0.5;
+        for q in 0..4 {
+            let (hx, hy) = (q & 1, q >> 1);
+            let fx = if hx == 0 { n.px } else { 1.0 - n.px };
+            let fy = if hy == 0 { n.py[hx] } else { 1.0 - n.py[hx] };
+            let o2 = [o[0] + h * hx as f32, o[1] + h * hy as f32];
+            self.visit(c + q, o2, h, pdf * (fx * fy * 4.0), f);
+        }
+    }
+}
+
+fn root_leaf(count: u32) -> Node {
+    Node {
+        px: 1.0,
+        py: [1.0, 1.0],
+        mass: 1.0,
+        first: 0,
+        count,
+        child: 0,
+        depth: 0,
+    }
+}
+
+/// Builds the guide from `records` into `storage` (see the module docs for the rule).
+/// `records` is reordered in place; rejected records end up after the accepted ones.
+///
+/// # Panics
+/// If `storage` is empty. Parameters out of range are clamped (depth to [`MAX_DEPTH`], α and
+/// the flux fraction to [0, 1], a negative or NaN ambient floor to 0).
+pub fn build<'a>(
+    records: &mut [Record],
+    params: &GuideParams,
+    storage: &'a mut [Node],
+) -> (Guide<'a>, BuildStats) {
+    assert!(
+        !storage.is_empty(),
+        "guide storage must hold at least one node"
+    );
+    let capacity = storage.len().min(MAX_NODES);
+    let usable = records.len().min(u32::MAX as usize);
+    let records = &mut records[..usable];
+    let mut stats = BuildStats::default();
+    let accepted = partition_valid(records, &mut stats);
+    let records = &mut records[..accepted];
+    stats.accepted = accepted as u32;
+    stats.total_flux = records.iter().map(|r| f64::from(r.flux)).sum();
+    storage[0] = root_leaf(stats.accepted);
+    if !(stats.total_flux > 0.0 && stats.total_flux.is_finite()) {
+        stats.nodes = 1;
+        stats.leaves = 1;
+        return (
+            Guide {
+                nodes: &storage[..1],
+            },
+            stats,
+        );
+    }
+    subdivide(records, params, &mut storage[..capacity], &mut stats);
+    let nodes = &mut storage[..stats.nodes as usize];
+    let floor = f64::from(sanitize(params.ambient, 0.0, f32::MAX)) * stats.total_flux;
+    set_masses(nodes, floor);
+    smooth(nodes, f64::from(sanitize(params.alpha, 0.0, 1.0)));
+    (Guide { nodes }, stats)
+}
+
+fn sanitize(x: f32, lo: f32, hi: f32) -> f32 {
+    if x >= lo { x.min(hi) } else { lo }
+}
+
+/// Moves valid records to the front, counting the rejected ones; returns how many are valid.
+fn partition_valid(records: &mut [Record], stats: &mut BuildStats) -> usize {
+    let in_square = |v: f32| (0.0..1.0).contains(&v);
+    let mut kept = 0;
+    for i in 0..records.len() {
+        let r = records[i];
+        if !(r.flux.is_finite() && r.flux >= 0.0) {
+            stats.rejected_flux += 1;
+        } else if !(in_square(r.u[0]) && in_square(r.u[1])) {
+            stats.rejected_point += 1;
+        } else {
+            records.swap(kept, i);
+            kept += 1;
+        }
+    }
+    kept
+}
+
+/// Breadth-first subdivision. Each node's accepted flux is left in its `mass` field.
+fn subdivide(
+    records: &mut [Record],
+    params: &GuideParams,
+    nodes: &mut [Node],
+    stats: &mut BuildStats,
+) {
+    let max_depth = params.max_depth.min(MAX_DEPTH);
+    let min_flux = f64::from(sanitize(params.min_flux_fraction, 0.0, 1.0)) * stats.total_flux;
+    nodes[0].mass = stats.total_flux as f32;
+    let mut len = 1usize;
+    let mut next = 0usize;
+    // During the build `px` holds the node's origin x, `py[0]` its origin y and `py[1]` its
+    // side; `smooth` overwrites them with the warp's probabilities.
+    nodes[0].px = 0.0;
+    nodes[0].py = [0.0, 1.0];
+    while next < len {
+        let n = nodes[next];
+        let wants = n.count >= params.min_records && f64::from(n.mass) >= min_flux;
+        if wants && u32::from(n.depth) >= max_depth {
+            stats.depth_refusals += 1;
+        } else if wants && len + 4 > nodes.len() {
+            stats.capacity_refusals += 1;
+        } else if wants {
+            split(records, nodes, next, len);
+            len += 4;
+        }
+        next += 1;
+    }
+    stats.nodes = len as u32;
+    for n in &nodes[..len] {
+        stats.leaves += u32::from(n.is_leaf());
+        stats.depth = stats.depth.max(n.depth());
+    }
+}
+
+/// Splits node `i` into four children at `first`, partitioning its records by quadrant.
+/// During the build `px` holds the node's origin x, `py[0]` its origin y, `py[1]` its size.
+fn split(records: &mut [Record], nodes: &mut [Node], i: usize, first: usize) {
+    let n = nodes[i];
+    let (ox, oy, size) = (n.px, n.py[0], n.py[1]);
+    let h = size * 0.5;
+    let (mx, my) = (ox + h, oy + h);
+    let range = &mut records[n.first as usize..(n.first + n.count) as usize];
+    let nx = partition(range, |r| r.u[0] < mx);
+    let (left, right) = range.split_at_mut(nx);
+    let nly = partition(left, |r| r.u[1] < my);
+    let nry = partition(right, |r| r.u[1] < my);
+    let counts = [nly, nry, left.len() - nly, right.len() - nry];
+    let starts = [0, nx, nly, nx + nry];
+    for q in 0..4 {
+        let start = n.first as usize + starts[q];
+        let recs = &records[start..start + counts[q]];
+        let flux: f64 = recs.iter().map(|r| f64::from(r.flux)).sum();
+        let (hx, hy) = ((q & 1) as f32, (q >> 1) as f32);
+        nodes[first + q] = Node {
+            px: ox + h * hx,
+            py: [oy + h * hy, h],
+            mass: flux as f32,
+            first: start as u32,
+            count: counts[q] as u32,
+            child: 0,
+            depth: n.depth + 1,
+        };
+    }
+    nodes[i].child = first as u16;
+}
+
+/// Moves the records satisfying `pred` to the front; returns their number.
+fn partition(records: &mut [Record], pred: impl Fn(&Record) -> bool) -> usize {
+    let mut k = 0;
+    for i in 0..records.len() {
+        if pred(&records[i]) {
+            records.swap(k, i);
+            k += 1;
+        }
+    }
+    k
+}
+
+/// Floors the leaves, sums masses bottom-up and normalizes. Children always follow their
+/// parent in breadth-first order, so one reverse pass sums every node after its children.
+/// On entry a leaf's `mass` holds its accepted flux and `py[1]` its side. Masses are stored
+/// in f32 between passes (relative error ~1e-7, far below the sampling noise).
+fn set_masses(nodes: &mut [Node], floor: f64) {
+    for i in (0..nodes.len()).rev() {
+        let n = nodes[i];
+        let m = match n.first_child() {
+            None => {
+                let area = f64::from(n.py[1]) * f64::from(n.py[1]);
+                f64::from(n.mass).max(floor * area)
+            }
+            Some(c) => (c..c + 4).map(|k| f64::from(nodes[k].mass)).sum(),
+        };
+        nodes[i].mass = m as f32;
+    }
+    let total = f64::from(nodes[0].mass);
+    for n in nodes.iter_mut() {
+        n.mass = (f64::from(n.mass) / total) as f32;
+    }
+    nodes[0].mass = 1.0;
+}
+
+/// Hierarchical smoothing (§2.3) and the warp's per-node probabilities, top-down.
+fn smooth(nodes: &mut [Node], alpha: f64) {
+    for i in 0..nodes.len() {
+        let n = nodes[i];
+        let Some(c) = n.first_child() else {
+            nodes[i].px = 1.0;
+            nodes[i].py = [1.0, 1.0];
+            continue;
+        };
+        let mut raw: [f64; 4] = core::array::from_fn(|q| f64::from(nodes[c + q].mass));
+        let mut sum: f64 = raw.iter().sum();
+        if !(sum > 0.0) {
+            // Only with `ambient = 0`: a node without flux spreads its (zero) mass evenly.
+            (raw, sum) = ([0.25; 4], 1.0);
+        }
+        let parent = f64::from(n.mass);
+        let m: [f64; 4] =
+            core::array::from_fn(|q| parent * ((1.0 - alpha) * raw[q] / sum + alpha * 0.25));
+        for q in 0..4 {
+            nodes[c + q].mass = m[q] as f32;
+        }
+        // A ratio 0/0 (zero-mass parent, only with `ambient = 0`) becomes ½: the node is
+        // unreachable by sampling, and `pdf` there is 0 through its parent's factor.
+        let ratio = |a: f64, b: f64| if b > 0.0 { (a / b) as f32 } else { 0.5 };
+        nodes[i].px = ratio(m[0] + m[2], m[0] + m[1] + m[2] + m[3]);
+        nodes[i].py = [ratio(m[0], m[0] + m[2]), ratio(m[1], m[1] + m[3])];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rec(x: f32, y: f32, flux: f32) -> Record {
+        Record { u: [x, y], flux }
+    }
+
+    #[test]
+    fn no_records_gives_uniform_guide() {
+        let mut storage = [Node::default(); 8];
+        let (g, s) = build(&mut [], &GuideParams::default(), &mut storage);
+        assert!(g.is_uniform());
+        assert_eq!((s.nodes, s.leaves, s.accepted), (1, 1, 0));
+    }
+
+    #[test]
+    fn bad_records_are_rejected_and_counted() {
+        let mut r = [
+            rec(0.1, 0.1, f32::NAN),
+            rec(0.1, 0.1, -1.0),
+            rec(0.1, 0.1, f32::INFINITY),
+            rec(1.0, 0.1, 1.0),
+            rec(f32::NAN, 0.1, 1.0),
+            rec(0.2, 0.3, 2.0),
+        ];
+        let mut storage = [Node::default(); 8];
+        let (_, s) = build(&mut r, &GuideParams::default(), &mut storage);
+        assert_eq!((s.rejected_flux, s.rejected_point, s.accepted), (3, 2, 1));
+        assert_eq!(r[0], rec(0.2, 0.3, 2.0));
+        assert_eq!(s.total_flux, 2.0);
+    }
+
+    #[test]
+    fn split_rule_needs_four_records_and_one_percent_of_flux() {
+        // Four records in one quadrant with 99.9% of the flux: the root splits, that
+        // quadrant splits again, the dim quadrant (3 records < 4) does not.
+        let mut r = [
+            rec(0.1, 0.1, 1000.0),
+            rec(0.2, 0.1, 1000.0),
+            rec(0.1, 0.3, 1000.0),
+            rec(0.3, 0.3, 1000.0),
+            rec(0.9, 0.9, 1.0),
+            rec(0.8, 0.9, 1.0),
+            rec(0.9, 0.7, 1.0),
+        ];
+        let p = GuideParams {
+            alpha: 0.0,
+            ..GuideParams::default()
+        };
+        let mut storage = [Node::default(); 64];
+        let (g, s) = build(&mut r, &p, &mut storage);
+        let root = g.nodes()[0];
+        let c = root.first_child().unwrap();
+        assert!(!g.nodes()[c].is_leaf(), "bright quadrant splits");
+        assert!(g.nodes()[c + 3].is_leaf(), "3 records do not split");
+        assert!(g.nodes()[c + 1].is_leaf() && g.nodes()[c + 2].is_leaf());
+        assert_eq!(s.capacity_refusals, 0);
+        // Masses sum to one at every interior node.
+        for n in g.nodes() {
+            if let Some(c) = n.first_child() {
+                let sum: f32 = (c..c + 4).map(|k| g.nodes()[k].mass()).sum();
+                assert!(
+                    (sum - n.mass()).abs() <= 1e-6 * n.mass().max(1e-30),
+                    "{sum} vs {}",
+                    n.mass()
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn one_percent_rule_stops_dim_regions() {
+        // 8 records in one quadrant but with 0.5% of the flux: no split there.
+        let mut r = [rec(0.9, 0.9, 10_000.0); 12];
+        for (k, x) in r.iter_mut().take(8).enumerate() {
+            *x = rec(0.05 + 0.05 * k as f32, 0.1, 6.0);
+        }
+        let p = GuideParams {
+            max_depth: 1,
+            ..GuideParams::default()
+        };
+        let mut storage = [Node::default(); 64];
+        let (g, s) = build(&mut r, &p, &mut storage);
+        assert_eq!(s.nodes, 5);
+        assert!(
+            s.depth_refusals >= 1,
+            "the bright quadrant hit the depth cap"
+        );
+        assert!(g.nodes()[1].is_leaf());
+    }
+
+    #[test]
+    fn ambient_floor_bounds_every_leaf_density() {
+        let mut r: [Record; 64] = core::array::from_fn(|k| rec(0.001 * k as f32, 0.002, 1.0));
+        let p = GuideParams {
+            alpha: 0.0,
+            ..GuideParams::default()
+        };
+        let mut storage = [Node::default(); 256];
+        let (g, _) = build(&mut r, &p, &mut storage);
+        let mut min_pdf = f32::MAX;
+        g.for_each_leaf(|l| min_pdf = min_pdf.min(l.pdf));
+        // Floor: density ≥ ambient × mean before normalization; the normalization divides by
+        // (1 + floored area share) ≤ 1 + ambient.
+        assert!(
+            min_pdf >= DEFAULT_AMBIENT / (1.0 + DEFAULT_AMBIENT) * 0.999,
+            "{min_pdf}"
+        );
+    }
+
+    #[test]
+    fn smoothing_alpha_one_gives_uniform_density() {
+        let mut r: [Record; 64] =
+            core::array::from_fn(|k| rec(0.01 * k as f32, 0.5, 1.0 + k as f32));
+        let p = GuideParams {
+            alpha: 1.0,
+            ..GuideParams::default()
+        };
+        let mut storage = [Node::default(); 256];
+        let (g, s) = build(&mut r, &p, &mut storage);
+        assert!(s.nodes > 5);
+        g.for_each_leaf(|l| assert!((l.pdf - 1.0).abs() < 1e-5, "{l:?}"));
+    }
+
+    #[test]
+    fn full_capacity_keeps_complete_levels() {
+        let mut rng = crate::testing::Pcg32::new(3, 4);
+        let mut r: [Record; 512] =
+            core::array::from_fn(|_| rec(rng.next_f32(), rng.next_f32(), 1.0));
+        let mut storage = [Node::default(); 7]; // room for the root and one split only
+        let (g, s) = build(&mut r, &GuideParams::default(), &mut storage);
+        assert_eq!(s.nodes, 5);
+        assert_eq!(s.capacity_refusals, 4, "all four children wanted to split");
+        assert_eq!(g.nodes().len(), 5);
+        let mut total = 0.0;
+        g.for_each_leaf(|l| total += l.pdf * l.size * l.size);
+        assert!((total - 1.0).abs() < 1e-5);
+    }
+}

@@ -1,13 +1,125 @@
-//! `guidebake inspect`: to be written.
+//! `guidebake inspect FILE.texels [--texel ID ...] [--json]`: print a texel file's header
+//! and counts (after full validation), and dump chosen texels.
+
+use std::path::PathBuf;
+
+use crate::texels::{TexelFile, TexelRecord};
 
 /// Arguments of `guidebake inspect`.
 #[derive(Debug, clap::Args)]
-pub struct InspectArgs {}
+pub struct InspectArgs {
+    /// The texel file.
+    pub file: PathBuf,
+    /// Texel ids to dump (repeatable).
+    #[arg(long = "texel")]
+    pub texels: Vec<u64>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(serde::Serialize)]
+struct TexelJson {
+    id: u64,
+    position: [f32; 3],
+    normal: [f32; 3],
+    dpdu: [f32; 3],
+    dpdv: [f32; 3],
+    page: u32,
+    pixel: [u16; 2],
+    triangle: u32,
+    flags: u32,
+}
+
+impl TexelJson {
+    fn new(id: u64, t: &TexelRecord) -> Self {
+        Self {
+            id,
+            position: t.position,
+            normal: t.normal,
+            dpdu: t.dpdu,
+            dpdv: t.dpdv,
+            page: t.page,
+            pixel: t.pixel,
+            triangle: t.triangle,
+            flags: t.flags,
+        }
+    }
+}
 
 /// Runs `guidebake inspect`.
 ///
 /// # Errors
-/// Always, until the subcommand exists.
-pub fn run(_args: &InspectArgs) -> Result<(), super::CmdError> {
-    Err("guidebake inspect is not built yet".into())
+/// The file fails validation, or a requested texel id is out of range.
+pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
+    let f = TexelFile::open(&args.file)?;
+    let h = f.header();
+    let all = f.texels();
+    let mut dump = Vec::with_capacity(args.texels.len());
+    for &id in &args.texels {
+        let t = usize::try_from(id)
+            .ok()
+            .and_then(|i| all.get(i))
+            .ok_or_else(|| {
+                format!(
+                    "{}: texel {id} is out of range (the file has {} texels)",
+                    args.file.display(),
+                    all.len()
+                )
+            })?;
+        dump.push(TexelJson::new(id, t));
+    }
+    let partial = all
+        .iter()
+        .filter(|t| t.flags & crate::texels::FLAG_PARTIAL != 0)
+        .count();
+    if args.json {
+        let v = serde_json::json!({
+            "file": args.file,
+            "version": h.version,
+            "file_size": h.file_size,
+            "texel_count": h.texel_count,
+            "partial_texels": partial,
+            "tile_count": h.tile_count,
+            "tile_size": h.tile_size,
+            "pages": f.pages().iter().map(|p| [p.width, p.height]).collect::<Vec<_>>(),
+            "mesh_count": h.mesh_count,
+            "triangle_count": h.triangle_count,
+            "texels_per_unit": h.texels_per_unit,
+            "bounds": [h.bounds_min, h.bounds_max],
+            "texels": dump,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "{}: texel file version {}, {} bytes",
+        args.file.display(),
+        h.version,
+        h.file_size
+    );
+    println!("  texels: {} ({partial} partial)", h.texel_count);
+    println!(
+        "  tiles:  {} (up to {}x{})",
+        h.tile_count, h.tile_size, h.tile_size
+    );
+    let pages: Vec<String> = f
+        .pages()
+        .iter()
+        .map(|p| format!("{}x{}", p.width, p.height))
+        .collect();
+    println!("  pages:  {} [{}]", pages.len(), pages.join(", "));
+    println!(
+        "  meshes: {}, scene triangles: {}",
+        h.mesh_count, h.triangle_count
+    );
+    println!("  bounds: {:?} .. {:?}", h.bounds_min, h.bounds_max);
+    println!("  texels per unit: {}", h.texels_per_unit);
+    for t in &dump {
+        println!(
+            "  texel {}: position {:?} normal {:?} page {} pixel {:?} triangle {} flags {:#x}",
+            t.id, t.position, t.normal, t.page, t.pixel, t.triangle, t.flags
+        );
+    }
+    Ok(())
 }

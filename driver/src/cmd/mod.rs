@@ -1,7 +1,9 @@
 //! The `guidebake` subcommands, one module each. Every `run` returns a typed error that
 //! `main` prints with its context; no subcommand panics on user input.
 
+pub mod bake;
 pub mod inspect;
+pub mod merge;
 pub mod prepare;
 pub mod samples;
 pub mod synth;

@@ -1,0 +1,874 @@
+//! The guided final gather of one tile (paper §2.1–2.5): cluster its texels, run K learning
+//! iterations per cluster, combine each texel's iterations.
+//!
+//! For every cluster, iteration 0 gathers with the unguided cosine-weighted baseline; after
+//! each iteration the cluster's samples (point u on the primary sample square, flux
+//! `L / q(u)`) build the guide the next iteration samples from. A gather sample at a texel
+//! with normal n estimates its irradiance as `L · π / q(u)`: the square maps to the
+//! hemisphere with density `cosθ/π`, so a guide density `q` on the square gives
+//! `p(ω) = q(u) cosθ/π` and `L cosθ / p(ω) = L π / q(u)`. Next-event estimation of the
+//! analytic lights is added to each sample with its own stratified light sample.
+//!
+//! Direction modes ([`Guiding`]):
+//! - `off` and `coherent`: each texel's presorted Sobol packets (paper §2.4, Figure 3),
+//!   rotated per texel and iteration and reordered so the wrap keeps packets coherent; warped
+//!   8-wide (`coherent`), traced as packets sharing one origin.
+//! - `naive`: the same guide, sampled one point at a time from the Sobol points in index
+//!   order, warped by the scalar warp and traced as single rays.
+//!
+//! A cluster whose learning saw no energy, or whose learned guide is uniform, keeps the
+//! unguided baseline (no warping cost), and the skip is counted. Every random number derives
+//! from (seed, texel id, iteration, sample index), so a tile's bits never depend on the thread
+//! that baked it.
+
+use glam::Vec3;
+use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
+use guidebake_kernels::estimator::{GraybillDeal, TexelEstimate, Welford, plain_average};
+use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
+use guidebake_kernels::mapping::{
+    orthonormal_basis, sample_cosine_hemisphere, sample_cosine_hemisphere_x8,
+};
+use guidebake_kernels::packet::{LANES, NO_HIT, Ray, Ray8};
+use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
+use guidebake_kernels::sobol::{
+    rotate, rotate_x8, rotation, sobol_2d, sobol_2d_x8, to_unit, to_unit_x8,
+};
+use guidebake_kernels::traverse::{intersect1, intersect8, offset_origin};
+use guidebake_kernels::warp;
+use wide::{f32x8, u32x8};
+
+use super::pipeline::TileBaked;
+use super::settings::{BakeSettings, Combine, Guiding};
+use super::world::World;
+use crate::output::journal::TileRecord;
+use crate::output::result_file::{
+    FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_UNGUIDED, FLAG_VALID, TexelResult,
+};
+use crate::texels::{FLAG_PARTIAL, FLAG_VALID as TEXEL_VALID, TexelRecord};
+
+/// Guide nodes per cluster: enough for a 64-texel cluster's records at the default split rule.
+pub const GUIDE_CAPACITY: usize = 4096;
+/// Salts separating the random streams of one (texel, iteration).
+const LIGHT_SALT: u32 = 0x6c69_6768;
+const HIT_LIGHT_SALT: u32 = 0x6869_7421;
+const ORIGIN_SALT: u32 = 0x6f72_6967;
+
+/// What the workers counted, merged over the bake.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct GatherCounters {
+    /// Gather rays traced.
+    pub gather_rays: u64,
+    /// Shadow rays traced (at texels and at gather hits).
+    pub shadow_rays: u64,
+    /// Valid texels baked.
+    pub texels_baked: u64,
+    /// Invalid texels skipped without tracing.
+    pub texels_invalid_skipped: u64,
+    /// Texels whose every sample was non-finite (baked black, flagged).
+    pub texels_without_finite_samples: u64,
+    /// Non-finite samples rejected by the estimators.
+    pub samples_rejected: u64,
+    /// Clusters baked.
+    pub clusters: u64,
+    /// Guided iterations that fell back to the baseline because learning saw no energy.
+    pub iterations_unguided_no_energy: u64,
+    /// Guided iterations that fell back to the baseline because the guide was uniform.
+    pub iterations_unguided_uniform_guide: u64,
+    /// Guided iterations that sampled a learned guide.
+    pub iterations_guided: u64,
+}
+
+impl GatherCounters {
+    /// Adds another worker's counts.
+    pub fn merge(&mut self, o: &Self) {
+        self.gather_rays += o.gather_rays;
+        self.shadow_rays += o.shadow_rays;
+        self.texels_baked += o.texels_baked;
+        self.texels_invalid_skipped += o.texels_invalid_skipped;
+        self.texels_without_finite_samples += o.texels_without_finite_samples;
+        self.samples_rejected += o.samples_rejected;
+        self.clusters += o.clusters;
+        self.iterations_unguided_no_energy += o.iterations_unguided_no_energy;
+        self.iterations_unguided_uniform_guide += o.iterations_unguided_uniform_guide;
+        self.iterations_guided += o.iterations_guided;
+    }
+}
+
+/// One worker's tile baker: fixed buffers reused tile after tile.
+pub struct TileBaker<'w> {
+    world: &'w World,
+    settings: BakeSettings,
+    /// Presorted Sobol order for each iteration's sample count.
+    orders: Vec<Vec<u32>>,
+    rotated: Vec<u32>,
+    records: Vec<Record>,
+    nodes: Vec<Node>,
+    batches: Vec<Welford>,
+    valid: Vec<u32>,
+    positions: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+    permutation: Vec<u32>,
+    ranges: Vec<ClusterRange>,
+    unguided: Vec<bool>,
+    /// This worker's counts.
+    pub counters: GatherCounters,
+}
+
+/// A texel as the gather needs it.
+#[derive(Clone, Copy, Debug)]
+struct GatherTexel {
+    id: u64,
+    position: Vec3,
+    normal: Vec3,
+    tangent: Vec3,
+    bitangent: Vec3,
+    dpdu: Vec3,
+    dpdv: Vec3,
+    jitter: bool,
+}
+
+impl<'w> TileBaker<'w> {
+    /// A baker for `world` with `settings` (already validated).
+    pub fn new(world: &'w World, settings: BakeSettings) -> Self {
+        let orders = (0..settings.iterations)
+            .map(|k| presorted(settings.samples_in_iteration(k)))
+            .collect();
+        Self {
+            world,
+            settings,
+            orders,
+            rotated: Vec::new(),
+            records: Vec::new(),
+            nodes: vec![Node::default(); GUIDE_CAPACITY],
+            batches: Vec::new(),
+            valid: Vec::new(),
+            positions: Vec::new(),
+            normals: Vec::new(),
+            permutation: Vec::new(),
+            ranges: Vec::new(),
+            unguided: Vec::new(),
+            counters: GatherCounters::default(),
+        }
+    }
+
+    /// Bakes tile `tile` whose texels (`texels`, global ids from `first_texel`) are given;
+    /// writes one result per texel into `out` and returns the tile's journal data.
+    pub fn bake_tile(
+        &mut self,
+        tile: u32,
+        first_texel: u64,
+        texels: &[TexelRecord],
+        out: &mut Vec<TexelResult>,
+    ) -> TileBaked {
+        out.clear();
+        out.resize(texels.len(), TexelResult::default());
+        self.collect_valid(texels);
+        let clusters = self.cluster();
+        let k = self.settings.iterations as usize;
+        self.batches.clear();
+        self.batches.resize(self.valid.len() * k, Welford::new());
+        self.unguided.clear();
+        self.unguided.resize(self.valid.len(), true);
+        let rays_before = self.counters.gather_rays + self.counters.shadow_rays;
+        for c in 0..clusters {
+            let range = self.ranges[c];
+            let members: Vec<u32> =
+                self.permutation[range.start as usize..range.end as usize].to_vec();
+            self.bake_cluster(&members, texels, first_texel);
+        }
+        let record = self.finish_tile(tile, out);
+        let rays = self.counters.gather_rays + self.counters.shadow_rays - rays_before;
+        TileBaked {
+            first_texel,
+            record: TileRecord { rays, ..record },
+        }
+    }
+
+    fn collect_valid(&mut self, texels: &[TexelRecord]) {
+        self.valid.clear();
+        self.positions.clear();
+        self.normals.clear();
+        for (i, t) in texels.iter().enumerate() {
+            if t.flags & TEXEL_VALID != 0 {
+                self.valid.push(i as u32);
+                self.positions.push(t.position);
+                self.normals.push(t.normal);
+            } else {
+                self.counters.texels_invalid_skipped += 1;
+            }
+        }
+    }
+
+    /// Clusters the valid texels (paper §2.1); returns the number of clusters. The texel file
+    /// was validated on open (finite positions, unit normals), so clustering cannot fail on
+    /// its input; should it anyway, every texel becomes its own cluster.
+    fn cluster(&mut self) -> usize {
+        let n = self.valid.len();
+        self.permutation.resize(n, 0);
+        self.ranges.resize(n.max(1), ClusterRange::default());
+        match build_clusters(
+            &self.positions,
+            &self.normals,
+            &ClusterParams::default(),
+            &mut self.permutation,
+            &mut self.ranges,
+        ) {
+            Ok(count) => count,
+            Err(_) => {
+                for i in 0..n {
+                    self.permutation[i] = i as u32;
+                    self.ranges[i] = ClusterRange {
+                        start: i as u32,
+                        end: i as u32 + 1,
+                    };
+                }
+                n
+            }
+        }
+    }
+
+    /// K learning iterations over one cluster; `members` index `self.valid`.
+    fn bake_cluster(&mut self, members: &[u32], texels: &[TexelRecord], first_texel: u64) {
+        let Self {
+            world,
+            settings,
+            orders,
+            rotated,
+            records,
+            nodes,
+            batches,
+            valid,
+            unguided,
+            counters,
+            ..
+        } = self;
+        counters.clusters += 1;
+        let iterations = settings.iterations;
+        let mut guide: Option<Guide<'_>> = None;
+        for k in 0..iterations {
+            records.clear();
+            for &m in members {
+                let i = valid[m as usize];
+                let t = gather_texel(&texels[i as usize], first_texel + u64::from(i));
+                if guide.is_some() {
+                    unguided[m as usize] = false;
+                }
+                let batch = &mut batches[m as usize * iterations as usize + k as usize];
+                let ctx = IterationCtx {
+                    world,
+                    settings,
+                    k,
+                    guide: guide.as_ref(),
+                };
+                match settings.guiding {
+                    Guiding::Naive => ctx.gather_naive(&t, batch, records, counters),
+                    Guiding::Off | Guiding::Coherent => {
+                        ctx.gather_packets(
+                            &t,
+                            &orders[k as usize],
+                            rotated,
+                            batch,
+                            records,
+                            counters,
+                        );
+                    }
+                }
+            }
+            if settings.guiding != Guiding::Off && k + 1 < iterations {
+                guide = learn(records, nodes, counters);
+            }
+        }
+    }
+
+    /// Combines every valid texel's iterations and fills the tile's results and ρ sums.
+    fn finish_tile(&mut self, tile: u32, out: &mut [TexelResult]) -> TileRecord {
+        let k = self.settings.iterations as usize;
+        let gd = GraybillDeal::default();
+        let mut record = TileRecord {
+            tile,
+            ..Default::default()
+        };
+        for (m, &i) in self.valid.iter().enumerate() {
+            let batches = &self.batches[m * k..(m + 1) * k];
+            let average = plain_average(batches);
+            let combined = match self.settings.combine {
+                Combine::Average => average,
+                Combine::Texel => gd.combine(batches),
+            };
+            let mut flags = FLAG_BAKED | FLAG_VALID;
+            if self.unguided[m] && self.settings.guiding != Guiding::Off {
+                flags |= FLAG_UNGUIDED;
+            }
+            let (rgb, samples, rejected) = match combined {
+                TexelEstimate::Value(e) => (e.rgb.map(|c| c as f32), e.samples, e.rejected),
+                TexelEstimate::NoSamples { rejected } => {
+                    flags |= FLAG_NO_FINITE_SAMPLES;
+                    self.counters.texels_without_finite_samples += 1;
+                    ([0.0; 3], 0, rejected)
+                }
+            };
+            self.counters.samples_rejected += rejected;
+            self.counters.texels_baked += 1;
+            if let (Some(u), Some(w)) = (average.luminance(), combined.luminance()) {
+                record.unweighted_luminance += u;
+                record.weighted_luminance += w;
+                record.texels += 1;
+            }
+            out[i as usize] = TexelResult {
+                irradiance: rgb,
+                rel_std_error: relative_std_error(batches),
+                samples: samples.min(u64::from(u32::MAX)) as u32,
+                flags,
+                reserved: [0; 2],
+            };
+        }
+        record
+    }
+}
+
+/// Builds the next iteration's guide from this iteration's records; `None` when the cluster
+/// should stay unguided (no energy seen, or a uniform guide), which is counted.
+fn learn<'n>(
+    records: &mut [Record],
+    nodes: &'n mut [Node],
+    counters: &mut GatherCounters,
+) -> Option<Guide<'n>> {
+    let (learned, stats) = guide::build(records, &GuideParams::default(), nodes);
+    if stats.total_flux.is_nan() || stats.total_flux <= 0.0 {
+        counters.iterations_unguided_no_energy += 1;
+        None
+    } else if learned.is_uniform() {
+        counters.iterations_unguided_uniform_guide += 1;
+        None
+    } else {
+        counters.iterations_guided += 1;
+        Some(learned)
+    }
+}
+
+/// The relative standard error of a texel's pooled luminance mean (0 when unknown).
+fn relative_std_error(batches: &[Welford]) -> f32 {
+    let mut pooled = Welford::new();
+    batches.iter().for_each(|b| pooled.merge(b));
+    match (pooled.luminance_variance(), pooled.mean_luminance()) {
+        (Some(var), Some(mean)) if mean > 0.0 && pooled.count() > 1 => {
+            let e = (var / pooled.count() as f64).sqrt() / mean;
+            if e.is_finite() { e as f32 } else { 0.0 }
+        }
+        _ => 0.0,
+    }
+}
+
+fn gather_texel(t: &TexelRecord, id: u64) -> GatherTexel {
+    let normal = Vec3::from(t.normal);
+    let (tangent, bitangent) = orthonormal_basis(normal);
+    GatherTexel {
+        id,
+        position: Vec3::from(t.position),
+        normal,
+        tangent,
+        bitangent,
+        dpdu: Vec3::from(t.dpdu),
+        dpdv: Vec3::from(t.dpdv),
+        jitter: t.flags & FLAG_PARTIAL == 0,
+    }
+}
+
+/// What one iteration's gather needs, borrowed.
+struct IterationCtx<'a> {
+    world: &'a World,
+    settings: &'a BakeSettings,
+    k: u32,
+    guide: Option<&'a Guide<'a>>,
+}
+
+impl IterationCtx<'_> {
+    /// The origin of packet `packet`: a point of the texel's footprint (its centre for
+    /// partly covered texels, whose footprint may leave the surface), offset from it.
+    fn origin(&self, t: &GatherTexel, packet: u32) -> Vec3 {
+        let mut p = t.position;
+        if t.jitter {
+            let r = rotation(
+                self.settings.seed ^ ORIGIN_SALT,
+                t.id,
+                self.k << 20 | packet,
+            );
+            p += t.dpdu * (to_unit(r[0]) - 0.5) + t.dpdv * (to_unit(r[1]) - 0.5);
+        }
+        offset_origin(p, t.normal)
+    }
+
+    fn to_world(&self, t: &GatherTexel, d: Vec3) -> Vec3 {
+        (t.tangent * d.x + t.bitangent * d.y + t.normal * d.z).normalize_or(t.normal)
+    }
+
+    /// Presorted packets, optionally warped 8-wide, traced as packets.
+    fn gather_packets(
+        &self,
+        t: &GatherTexel,
+        order: &[u32],
+        rotated: &mut Vec<u32>,
+        batch: &mut Welford,
+        records: &mut Vec<Record>,
+        counters: &mut GatherCounters,
+    ) {
+        let rot = rotation(self.settings.seed, t.id, self.k);
+        let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
+        rotated.resize(order.len(), 0);
+        reorder_after_rotation_into(order, rot, rotated);
+        let bvh = self.world.bvh();
+        for (j, chunk) in rotated.chunks_exact(LANES).enumerate() {
+            let index = u32x8::new(chunk.try_into().expect("packets of 8"));
+            let [sx, sy] = rotate_x8(sobol_2d_x8(index), rot);
+            let (x, y) = (to_unit_x8(sx), to_unit_x8(sy));
+            let (wx, wy, q) = match self.guide {
+                Some(g) => {
+                    let w = warp::sample8(g, x, y);
+                    (w.x, w.y, w.pdf)
+                }
+                None => (x, y, f32x8::ONE),
+            };
+            let [dx, dy, dz] = sample_cosine_hemisphere_x8([wx, wy]);
+            let (dx, dy, dz, wx, wy, q) = (
+                dx.to_array(),
+                dy.to_array(),
+                dz.to_array(),
+                wx.to_array(),
+                wy.to_array(),
+                q.to_array(),
+            );
+            let dirs: [Vec3; LANES] =
+                core::array::from_fn(|i| self.to_world(t, Vec3::new(dx[i], dy[i], dz[i])));
+            let origin = self.origin(t, j as u32);
+            let packet = Ray8::from_origin(origin, &dirs, 0.0, f32::INFINITY);
+            let mut hits = guidebake_kernels::packet::Hit8::NONE;
+            intersect8(&bvh, &packet, &mut hits);
+            counters.gather_rays += LANES as u64;
+            let (ht, hprim) = (hits.t.to_array(), hits.prim.to_array());
+            let lu = rotate_x8(sobol_2d_x8(index), light_rot);
+            let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
+            let light_u: [[f32; 2]; LANES] = core::array::from_fn(|i| [lx[i], ly[i]]);
+            let mut direct = [Vec3::ZERO; LANES];
+            counters.shadow_rays +=
+                u64::from(
+                    self.world
+                        .direct_irradiance8(origin, t.normal, &light_u, &mut direct),
+                );
+            for lane in 0..LANES {
+                let hit = (hprim[lane] != NO_HIT).then(|| (hprim[lane], ht[lane]));
+                let l = self.incoming(t.id, chunk[lane], origin, dirs[lane], hit, counters);
+                self.record(
+                    l,
+                    [wx[lane], wy[lane]],
+                    q[lane],
+                    direct[lane],
+                    batch,
+                    records,
+                );
+            }
+        }
+    }
+
+    /// Unsorted points in index order, scalar warp, single rays: the naive comparator.
+    fn gather_naive(
+        &self,
+        t: &GatherTexel,
+        batch: &mut Welford,
+        records: &mut Vec<Record>,
+        counters: &mut GatherCounters,
+    ) {
+        let n = self.settings.samples_in_iteration(self.k);
+        let rot = rotation(self.settings.seed, t.id, self.k);
+        let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
+        let bvh = self.world.bvh();
+        for j in 0..n / LANES as u32 {
+            let origin = self.origin(t, j);
+            let mut light_u = [[0.0; 2]; LANES];
+            let mut samples = [(Vec3::ZERO, [0.0f32; 2], 1.0f32); LANES];
+            for lane in 0..LANES {
+                let index = j * LANES as u32 + lane as u32;
+                let p = rotate(sobol_2d(index), rot);
+                let u = [to_unit(p[0]), to_unit(p[1])];
+                let (w, q) = match self.guide {
+                    Some(g) => {
+                        let s = warp::sample(g, u);
+                        (s.u, s.pdf)
+                    }
+                    None => (u, 1.0),
+                };
+                let dir = self.to_world(t, sample_cosine_hemisphere(w));
+                let hit = intersect1(&bvh, &Ray::new(origin, dir, 0.0, f32::INFINITY))
+                    .map(|h| (h.prim, h.t));
+                counters.gather_rays += 1;
+                let l = self.incoming(t.id, index, origin, dir, hit, counters);
+                let lp = rotate(sobol_2d(index), light_rot);
+                light_u[lane] = [to_unit(lp[0]), to_unit(lp[1])];
+                samples[lane] = (l, w, q);
+            }
+            let mut direct = [Vec3::ZERO; LANES];
+            counters.shadow_rays +=
+                u64::from(
+                    self.world
+                        .direct_irradiance8(origin, t.normal, &light_u, &mut direct),
+                );
+            for lane in 0..LANES {
+                let (l, w, q) = samples[lane];
+                self.record(l, w, q, direct[lane], batch, records);
+            }
+        }
+    }
+
+    /// Radiance arriving along `dir` at `origin`: the sky on a miss, else what leaves the hit.
+    fn incoming(
+        &self,
+        texel: u64,
+        sample: u32,
+        origin: Vec3,
+        dir: Vec3,
+        hit: Option<(u32, f32)>,
+        counters: &mut GatherCounters,
+    ) -> Vec3 {
+        match hit {
+            None => self.world.sky(dir),
+            Some((prim, t)) => {
+                let r = rotation(
+                    self.settings.seed ^ HIT_LIGHT_SALT,
+                    texel,
+                    self.k << 20 | sample,
+                );
+                let (l, rays) = self.world.hit_radiance(
+                    prim,
+                    origin + dir * t,
+                    dir,
+                    [to_unit(r[0]), to_unit(r[1])],
+                );
+                counters.shadow_rays += u64::from(rays);
+                l
+            }
+        }
+    }
+
+    /// One sample into the texel's estimator (irradiance `L π / q` + direct light) and the
+    /// cluster's learning records (point and flux `lum(L) / q`).
+    fn record(
+        &self,
+        l: Vec3,
+        w: [f32; 2],
+        q: f32,
+        direct: Vec3,
+        batch: &mut Welford,
+        records: &mut Vec<Record>,
+    ) {
+        let e = l * (core::f32::consts::PI / q) + direct;
+        batch.push(e.to_array());
+        let flux = luminance(l) / q;
+        if flux.is_finite() {
+            records.push(Record { u: w, flux });
+        }
+    }
+}
+
+fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::PathBuf;
+
+    use glam::Vec2;
+
+    use super::*;
+    use crate::bvh::Preset;
+    use crate::scene::{Material, Mesh, Scene, Sky, Sun, Triangle};
+
+    /// A quad `origin + s·u + t·v` as two triangles facing `u × v`.
+    fn quad(origin: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {
+        let n = u.cross(v).normalize();
+        let tri = |a: Vec3, b: Vec3, c: Vec3| Triangle {
+            positions: [a, b, c],
+            normals: [n; 3],
+            lightmap_uv: Some([Vec2::ZERO; 3]),
+            mesh: 0,
+            material,
+        };
+        [
+            tri(origin, origin + u, origin + u + v),
+            tri(origin, origin + u + v, origin + v),
+        ]
+    }
+
+    /// The 2 m cube around the origin, every face facing inwards.
+    fn inward_cube(material: u32) -> Vec<Triangle> {
+        let (o, s) = (Vec3::splat(-1.0), 2.0);
+        let (x, y, z) = (Vec3::X * s, Vec3::Y * s, Vec3::Z * s);
+        [
+            (o, x, y),
+            (o + z, y, x),
+            (o, y, z),
+            (o + x, z, y),
+            (o, z, x),
+            (o + y, x, z),
+        ]
+        .into_iter()
+        .flat_map(|(origin, u, v)| quad(origin, u, v, material))
+        .collect()
+    }
+
+    fn scene(
+        triangles: Vec<Triangle>,
+        materials: Vec<Material>,
+        sky: Sky,
+        sun: Option<Sun>,
+    ) -> Scene {
+        Scene {
+            path: PathBuf::from("<test>"),
+            meshes: vec![Mesh {
+                name: "m".into(),
+                first_triangle: 0,
+                triangle_count: triangles.len() as u32,
+                has_lightmap_uvs: true,
+            }],
+            triangles,
+            materials,
+            lights: Vec::new(),
+            sun,
+            sky,
+            degenerate_triangles: 0,
+        }
+    }
+
+    fn grey(albedo: f32, emission: f32) -> Material {
+        Material {
+            name: "m".into(),
+            albedo: Vec3::splat(albedo),
+            emission: Vec3::splat(emission),
+        }
+    }
+
+    /// `n` texels on the plane z = `z` around the origin, normal +z, footprint 1 cm.
+    fn texels_on_plane(n: usize, z: f32) -> Vec<TexelRecord> {
+        (0..n)
+            .map(|i| TexelRecord {
+                position: [(i % 8) as f32 * 0.05 - 0.2, (i / 8) as f32 * 0.05 - 0.2, z],
+                normal: [0.0, 0.0, 1.0],
+                dpdu: [0.01, 0.0, 0.0],
+                dpdv: [0.0, 0.01, 0.0],
+                page: 0,
+                pixel: [(i % 8) as u16, (i / 8) as u16],
+                triangle: 0,
+                flags: TEXEL_VALID,
+            })
+            .collect()
+    }
+
+    /// Mean irradiance over the texels and its standard error (from the texels' spread).
+    fn bake_mean(
+        world: &World,
+        settings: BakeSettings,
+        texels: &[TexelRecord],
+    ) -> (Vec3, Vec3, GatherCounters) {
+        let mut baker = TileBaker::new(world, settings);
+        let mut out = Vec::new();
+        baker.bake_tile(0, 1000, texels, &mut out);
+        let values: Vec<Vec3> = out.iter().map(|r| Vec3::from(r.irradiance)).collect();
+        assert!(values.iter().all(|v| v.is_finite()));
+        assert!(out.iter().all(|r| r.flags & FLAG_BAKED != 0));
+        let n = values.len() as f32;
+        let mean = values.iter().copied().sum::<Vec3>() / n;
+        let var = values
+            .iter()
+            .map(|v| (*v - mean) * (*v - mean))
+            .sum::<Vec3>()
+            / (n - 1.0);
+        (mean, (var / n).powf(0.5), baker.counters)
+    }
+
+    fn assert_within_3_sigma(what: &str, (mean, se): (Vec3, Vec3), want: Vec3) {
+        let tol = se * 3.0 + want.abs() * 2e-4;
+        assert!(
+            (mean - want).abs().cmple(tol).all(),
+            "{what}: {mean:?} ± {se:?}, want {want:?}"
+        );
+    }
+
+    const MODES: [Guiding; 3] = [Guiding::Off, Guiding::Naive, Guiding::Coherent];
+
+    fn settings(guiding: Guiding) -> BakeSettings {
+        BakeSettings {
+            spp: 128,
+            iterations: 3,
+            guiding,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_plane_under_a_constant_sky_receives_pi_l() {
+        let sky = Vec3::new(0.5, 1.0, 2.0);
+        let ground = quad(
+            Vec3::new(-10.0, -10.0, 0.0),
+            Vec3::X * 20.0,
+            Vec3::Y * 20.0,
+            0,
+        );
+        let world = World::new(
+            &scene(
+                ground.to_vec(),
+                vec![grey(0.5, 0.0)],
+                Sky::Constant(sky),
+                None,
+            ),
+            Preset::DEFAULT,
+        )
+        .unwrap();
+        for mode in MODES {
+            let (mean, se, counters) = bake_mean(&world, settings(mode), &texels_on_plane(64, 0.0));
+            assert_within_3_sigma(&format!("{mode}"), (mean, se), sky * core::f32::consts::PI);
+            assert_eq!(counters.gather_rays, 64 * 128);
+            assert_eq!(counters.shadow_rays, 0, "no lights, no shadow rays");
+        }
+    }
+
+    #[test]
+    fn a_sun_adds_its_cosine_law_and_is_blocked_inside_a_closed_box() {
+        let sky = Vec3::splat(0.2);
+        let to_sun = Vec3::new(0.3, 0.1, 1.0).normalize();
+        let sun = Sun {
+            direction: to_sun,
+            angular_radius: 0.05,
+            irradiance: Vec3::new(3.0, 2.0, 1.0),
+        };
+        let ground = quad(
+            Vec3::new(-10.0, -10.0, 0.0),
+            Vec3::X * 20.0,
+            Vec3::Y * 20.0,
+            0,
+        );
+        let open = World::new(
+            &scene(
+                ground.to_vec(),
+                vec![grey(0.0, 0.0)],
+                Sky::Constant(sky),
+                Some(sun.clone()),
+            ),
+            Preset::DEFAULT,
+        )
+        .unwrap();
+        let want = sun.irradiance * to_sun.z + sky * core::f32::consts::PI;
+        for mode in MODES {
+            let (mean, se, _) = bake_mean(&open, settings(mode), &texels_on_plane(64, 0.0));
+            assert_within_3_sigma(&format!("{mode}"), (mean, se), want);
+        }
+        // Inside a closed black box: no sun, no sky, and learning sees no energy.
+        let closed = World::new(
+            &scene(
+                inward_cube(0),
+                vec![grey(0.0, 0.0)],
+                Sky::Constant(sky),
+                Some(sun),
+            ),
+            Preset::DEFAULT,
+        )
+        .unwrap();
+        for mode in MODES {
+            let (mean, _, counters) =
+                bake_mean(&closed, settings(mode), &texels_on_plane(16, -0.999));
+            assert_eq!(mean, Vec3::ZERO, "{mode}");
+            assert!(
+                counters.shadow_rays > 0,
+                "{mode}: the sun was tested and found blocked"
+            );
+            assert!(
+                counters.iterations_unguided_no_energy > 0 || mode == Guiding::Off,
+                "{mode}: {counters:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn inside_a_closed_emissive_box_every_texel_sees_pi_le() {
+        // A 2 m cube emitting Le inwards, albedo 0: E = π Le in the first pass.
+        let tris = inward_cube(0);
+        let le = 1.5;
+        let world = World::new(
+            &scene(
+                tris,
+                vec![grey(0.0, le)],
+                Sky::Constant(Vec3::splat(100.0)),
+                None,
+            ),
+            Preset::DEFAULT,
+        )
+        .unwrap();
+        for mode in MODES {
+            let (mean, se, _) = bake_mean(&world, settings(mode), &texels_on_plane(32, -0.999));
+            assert_within_3_sigma(
+                &format!("{mode}"),
+                (mean, se),
+                Vec3::splat(le * core::f32::consts::PI),
+            );
+        }
+    }
+
+    #[test]
+    fn invalid_texels_are_skipped_and_counted() {
+        let ground = quad(
+            Vec3::new(-10.0, -10.0, 0.0),
+            Vec3::X * 20.0,
+            Vec3::Y * 20.0,
+            0,
+        );
+        let world = World::new(
+            &scene(
+                ground.to_vec(),
+                vec![grey(0.5, 0.0)],
+                Sky::Constant(Vec3::ONE),
+                None,
+            ),
+            Preset::DEFAULT,
+        )
+        .unwrap();
+        let mut texels = texels_on_plane(16, 0.0);
+        texels[3].flags = 0;
+        let mut baker = TileBaker::new(&world, settings(Guiding::Coherent));
+        let mut out = Vec::new();
+        let baked = baker.bake_tile(5, 0, &texels, &mut out);
+        assert_eq!(out[3], TexelResult::default());
+        assert_eq!(baker.counters.texels_invalid_skipped, 1);
+        assert_eq!(baked.record.texels, 15);
+        assert_eq!(baked.record.tile, 5);
+    }
+
+    #[test]
+    fn a_tile_bakes_to_the_same_bits_twice() {
+        let ground = quad(
+            Vec3::new(-10.0, -10.0, 0.0),
+            Vec3::X * 20.0,
+            Vec3::Y * 20.0,
+            0,
+        );
+        let mut tris = ground.to_vec();
+        tris.extend(quad(
+            Vec3::new(-0.3, -0.3, 0.5),
+            Vec3::Y * 0.6,
+            Vec3::X * 0.6,
+            0,
+        ));
+        let world = World::new(
+            &scene(tris, vec![grey(0.5, 0.0)], Sky::Constant(Vec3::ONE), None),
+            Preset::DEFAULT,
+        )
+        .unwrap();
+        let texels = texels_on_plane(40, 0.0);
+        let run = || {
+            let mut out = Vec::new();
+            TileBaker::new(&world, settings(Guiding::Coherent)).bake_tile(0, 7, &texels, &mut out);
+            out
+        };
+        assert_eq!(
+            bytemuck::cast_slice::<_, u8>(&run()),
+            bytemuck::cast_slice::<_, u8>(&run())
+        );
+    }
+}

@@ -1,0 +1,13 @@
+//! The streaming bake (DESIGN.md, "The bake"; paper §2): tiles stream from the texel file
+//! through per-worker buffers to one writer, in memory that does not grow with the world.
+//!
+//! This module holds the machinery that does not depend on light transport: which tiles a
+//! run bakes ([`shard`]), and the bounded worker/writer [`pipeline`] that commits finished
+//! tiles to the [result file and journal](crate::output).
+
+pub mod gather;
+pub mod pipeline;
+pub mod run;
+pub mod settings;
+pub mod shard;
+pub mod world;

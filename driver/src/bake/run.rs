@@ -1,0 +1,506 @@
+//! A whole bake, from texel file to EXR pages: `guidebake bake`, `guidebake merge` and
+//! `guidebake demo` call [`bake`] and [`finish`].
+//!
+//! A run works in a *work directory* beside its output (`OUT.exr.bake/`, or
+//! `OUT.exr.shard-I-of-N/` for `--shard I/N`) holding the [result
+//! file](crate::output::result_file), the [journal](crate::output::journal) and a
+//! `manifest.json` naming the texel file, the settings and the shard. An unsharded run that
+//! finishes applies ρ and writes the pages ([`finish`]), then removes its work directory; a
+//! shard leaves its work directory for `guidebake merge`. An interrupted run leaves it for
+//! `--resume`. A work directory is never overwritten without `--resume`: nothing baked is
+//! lost by a repeated command.
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use super::gather::{GatherCounters, TileBaker};
+use super::pipeline::{self, PipelineConfig, PipelineError};
+use super::settings::{BakeSettings, SettingsError};
+use super::shard::{Shard, tiles_to_bake};
+use super::world::World;
+use crate::bvh::{BvhError, Preset};
+use crate::output::exr_pages::{PageImage, PageWriteError, page_path, temporary_name};
+use crate::output::fnv1a64;
+use crate::output::journal::{Journal, JournalError, RhoSums, TileRecord, dedup_tiles};
+use crate::output::result_file::{FLAG_BAKED, ResultFile, ResultFileError, TexelResult};
+use crate::scene::Scene;
+use crate::texels::{TexelFile, TexelFileError};
+
+/// Pixels of padding around every chart in the written pages.
+pub const DILATION_PIXELS: u32 = 2;
+
+/// What a bake run is asked to do.
+#[derive(Clone, Debug)]
+pub struct BakeJob {
+    /// The texel file.
+    pub texels: PathBuf,
+    /// The lightmap to write (`.exr`; more pages become `OUT.pageN.exr`).
+    pub out: PathBuf,
+    /// The bake's settings.
+    pub settings: BakeSettings,
+    /// Worker threads.
+    pub threads: usize,
+    /// Which tiles this run bakes.
+    pub shard: Shard,
+    /// Continue an interrupted run from its journal.
+    pub resume: bool,
+    /// Write auxiliary channels (sample count, relative standard error, validity).
+    pub aux: bool,
+}
+
+/// The work directory's manifest: what `--resume` and `merge` check before trusting it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// The texel file baked.
+    pub texels: PathBuf,
+    /// Identity of the bake (settings and texel file).
+    pub bake_id: u64,
+    /// Which shard this directory holds.
+    pub shard_index: u32,
+    /// How many shards.
+    pub shard_count: u32,
+    /// Whether ρ is applied when the pages are written.
+    pub bias_correction: bool,
+    /// Whether auxiliary channels are written.
+    pub aux: bool,
+    /// The settings, for people.
+    pub settings: String,
+}
+
+/// What a bake did: the stats JSON.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct BakeReport {
+    /// Tiles this run baked (not counting those a resume skipped).
+    pub tiles_baked: usize,
+    /// Tiles skipped because the journal had them (`--resume`).
+    pub tiles_resumed: usize,
+    /// Whether Ctrl-C cut the run short (the work directory is kept for `--resume`).
+    pub interrupted: bool,
+    /// What the gather counted: rays by kind, texels, clusters, skips.
+    pub counters: GatherCounters,
+    /// Seconds per phase.
+    pub seconds: PhaseSeconds,
+    /// ρ = L̂ / L̂_GD over the world (1 when not applied or not yet known).
+    pub rho: f64,
+    /// Gather and shadow rays per second of the gather phase.
+    pub rays_per_second: f64,
+    /// Analytic lights in the scene (0: no shadow rays at all).
+    pub lights: usize,
+    /// The pages written (empty for a shard).
+    pub pages: Vec<PathBuf>,
+    /// Pixels with non-finite results replaced by zero when writing (should be 0).
+    pub non_finite_pixels: u64,
+}
+
+/// Wall-clock seconds of each phase.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct PhaseSeconds {
+    /// Opening and validating the texel file.
+    pub open_texels: f64,
+    /// Building the BVH.
+    pub build_bvh: f64,
+    /// The gather (all tiles of this run).
+    pub gather: f64,
+    /// Applying ρ and writing the pages.
+    pub write_pages: f64,
+}
+
+/// Why a bake stopped; every variant names what it was working on.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    /// Bad settings.
+    #[error(transparent)]
+    Settings(#[from] SettingsError),
+    /// The texel file could not be opened or is invalid.
+    #[error(transparent)]
+    Texels(#[from] TexelFileError),
+    /// The BVH could not be built from the scene.
+    #[error("cannot build the BVH: {0}")]
+    Bvh(#[from] BvhError),
+    /// Result file trouble.
+    #[error(transparent)]
+    Results(#[from] ResultFileError),
+    /// Journal trouble.
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+    /// The pipeline failed.
+    #[error(transparent)]
+    Pipeline(#[from] PipelineError),
+    /// A page could not be written.
+    #[error(transparent)]
+    Page(#[from] PageWriteError),
+    /// A file or directory operation failed.
+    #[error("{path}: {what}")]
+    File {
+        /// The file or directory.
+        path: PathBuf,
+        /// What failed.
+        what: String,
+    },
+    /// A previous run's work exists and `--resume` was not given.
+    #[error(
+        "{dir}: a previous bake's work is here; pass --resume to continue it, or delete the directory to start over"
+    )]
+    WorkExists {
+        /// The work directory.
+        dir: PathBuf,
+    },
+    /// The scene and the texel file disagree.
+    #[error("{0}")]
+    Mismatch(String),
+}
+
+/// The work directory of `out` for `shard`.
+pub fn work_dir(out: &Path, shard: Shard) -> PathBuf {
+    let name = out
+        .file_name()
+        .map_or_else(|| "lightmap".into(), |s| s.to_string_lossy());
+    let suffix = if shard.count == 1 {
+        "bake".to_owned()
+    } else {
+        format!("shard-{}-of-{}", shard.index, shard.count)
+    };
+    out.with_file_name(format!("{name}.{suffix}"))
+}
+
+fn file_error(path: &Path, what: impl std::fmt::Display) -> BakeError {
+    BakeError::File {
+        path: path.to_owned(),
+        what: what.to_string(),
+    }
+}
+
+/// Identity of a texel file: a hash of its header (sizes, counts, bounds, offsets).
+fn texel_file_id(texels: &TexelFile) -> u64 {
+    fnv1a64(bytemuck::bytes_of(texels.header()))
+}
+
+/// Bakes `job` over `scene`. `cancel` (a Ctrl-C flag) stops it early with its work kept.
+///
+/// # Errors
+/// A [`BakeError`] naming the file or option at fault; work committed before the error stays
+/// in the work directory for `--resume`.
+pub fn bake(
+    job: &BakeJob,
+    scene: &Scene,
+    cancel: &AtomicBool,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<BakeReport, BakeError> {
+    job.settings.validate()?;
+    let mut report = BakeReport {
+        rho: 1.0,
+        ..Default::default()
+    };
+    let clock = Instant::now();
+    let texels = TexelFile::open(&job.texels)?;
+    report.seconds.open_texels = clock.elapsed().as_secs_f64();
+    check_scene_matches(&texels, scene)?;
+
+    let clock = Instant::now();
+    let world = World::new(scene, Preset::DEFAULT)?;
+    report.seconds.build_bvh = clock.elapsed().as_secs_f64();
+    report.lights = world.lights().len();
+
+    let tile_count = texels.tiles().len() as u32;
+    let bake_id = job.settings.bake_id(texel_file_id(&texels));
+    let dir = work_dir(&job.out, job.shard);
+    let manifest = Manifest {
+        texels: std::path::absolute(&job.texels).unwrap_or_else(|_| job.texels.clone()),
+        bake_id,
+        shard_index: job.shard.index,
+        shard_count: job.shard.count,
+        bias_correction: job.settings.bias_correction,
+        aux: job.aux,
+        settings: format!("{:?}", job.settings),
+    };
+    let (results, mut journal, done) = open_work(
+        &dir,
+        &manifest,
+        texels.header().texel_count,
+        tile_count,
+        job.resume,
+    )?;
+    let todo = tiles_to_bake(
+        tile_count,
+        job.shard,
+        &done.iter().map(|r| r.tile).collect::<HashSet<u32>>(),
+    );
+    report.tiles_resumed = done.len();
+
+    let counters = Mutex::new(GatherCounters::default());
+    let total: u64 = todo
+        .iter()
+        .map(|&t| u64::from(texels.tiles()[t as usize].texel_count))
+        .sum();
+    let mut texels_done = 0u64;
+    let clock = Instant::now();
+    let config = PipelineConfig {
+        threads: job.threads.max(1),
+        window: 4 * job.threads.max(1),
+        commit_every: 64,
+    };
+    let make_worker = || CountedBaker {
+        baker: TileBaker::new(&world, job.settings),
+        sink: &counters,
+    };
+    let bake_tile = |w: &mut CountedBaker<'_, '_>, tile: u32, out: &mut Vec<TexelResult>| {
+        let record = &texels.tiles()[tile as usize];
+        w.baker.bake_tile(
+            tile,
+            record.first_texel,
+            texels.tile_texels(tile as usize),
+            out,
+        )
+    };
+    let pipeline = pipeline::run(
+        config,
+        &todo,
+        &results,
+        &mut journal,
+        cancel,
+        make_worker,
+        bake_tile,
+        &mut |b| {
+            texels_done += u64::from(texels.tiles()[b.record.tile as usize].texel_count);
+            progress(texels_done, total);
+        },
+    )?;
+    report.seconds.gather = clock.elapsed().as_secs_f64();
+    report.counters = *counters.lock().expect("no worker panicked");
+    let rays = report.counters.gather_rays + report.counters.shadow_rays;
+    report.rays_per_second = rays as f64 / report.seconds.gather.max(1e-9);
+    report.tiles_baked = pipeline.tiles_committed;
+    report.interrupted = pipeline.interrupted;
+    drop((results, journal));
+    if !report.interrupted && job.shard.count == 1 {
+        let clock = Instant::now();
+        let written = finish(&texels, &[dir.clone()], &job.out)?;
+        report.seconds.write_pages = clock.elapsed().as_secs_f64();
+        report.rho = written.rho;
+        report.pages = written.pages;
+        report.non_finite_pixels = written.non_finite_pixels;
+        std::fs::remove_dir_all(&dir).map_err(|e| {
+            file_error(
+                &dir,
+                format!("cannot remove the finished work directory: {e}"),
+            )
+        })?;
+    }
+    Ok(report)
+}
+
+/// A worker's baker whose counters join the bake's when the worker ends.
+struct CountedBaker<'w, 's> {
+    baker: TileBaker<'w>,
+    sink: &'s Mutex<GatherCounters>,
+}
+
+impl Drop for CountedBaker<'_, '_> {
+    fn drop(&mut self) {
+        if let Ok(mut total) = self.sink.lock() {
+            total.merge(&self.baker.counters);
+        }
+    }
+}
+
+fn check_scene_matches(texels: &TexelFile, scene: &Scene) -> Result<(), BakeError> {
+    let expected = texels.header().triangle_count as usize;
+    if expected != scene.triangles.len() {
+        return Err(BakeError::Mismatch(format!(
+            "{}: the texel file was prepared from a scene of {expected} triangles, but {} has {}",
+            texels.path().display(),
+            scene.path.display(),
+            scene.triangles.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Creates the work directory, or reopens it with `resume` after checking its manifest.
+fn open_work(
+    dir: &Path,
+    manifest: &Manifest,
+    texel_count: u64,
+    tile_count: u32,
+    resume: bool,
+) -> Result<(ResultFile, Journal, Vec<TileRecord>), BakeError> {
+    let (results_path, journal_path, manifest_path) = work_files(dir);
+    if dir.exists() {
+        if !resume {
+            return Err(BakeError::WorkExists {
+                dir: dir.to_owned(),
+            });
+        }
+        let found = read_manifest(&manifest_path)?;
+        if found.bake_id != manifest.bake_id {
+            return Err(BakeError::Mismatch(format!(
+                "{}: --resume of a different bake (other settings or texel file); delete it to start over",
+                dir.display()
+            )));
+        }
+        let (results, _) =
+            ResultFile::open(&results_path, true, Some((texel_count, manifest.bake_id)))?;
+        let (journal, _, mut done) =
+            Journal::open(&journal_path, true, Some((tile_count, manifest.bake_id)))?;
+        dedup_tiles(&mut done);
+        return Ok((results, journal, done));
+    }
+    std::fs::create_dir_all(dir)
+        .map_err(|e| file_error(dir, format!("cannot create the work directory: {e}")))?;
+    let json = serde_json::to_string_pretty(manifest).expect("a manifest serializes");
+    let tmp = temporary_name(&manifest_path);
+    std::fs::write(&tmp, json)
+        .and_then(|()| std::fs::rename(&tmp, &manifest_path))
+        .map_err(|e| file_error(&manifest_path, format!("cannot write: {e}")))?;
+    let results = ResultFile::create(&results_path, texel_count, manifest.bake_id)?;
+    let journal = Journal::create(&journal_path, tile_count, manifest.bake_id)?;
+    Ok((results, journal, Vec::new()))
+}
+
+fn work_files(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+    (
+        dir.join("results.bin"),
+        dir.join("journal.bin"),
+        dir.join("manifest.json"),
+    )
+}
+
+/// Reads a work directory's manifest.
+///
+/// # Errors
+/// [`BakeError::File`] when it is missing or not a manifest.
+pub fn read_manifest(path: &Path) -> Result<Manifest, BakeError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| file_error(path, format!("cannot read the manifest: {e}")))?;
+    serde_json::from_str(&text)
+        .map_err(|e| file_error(path, format!("not a guidebake manifest: {e}")))
+}
+
+/// What [`finish`] wrote.
+#[derive(Clone, Debug, Default)]
+pub struct Written {
+    /// ρ applied (1 without bias correction).
+    pub rho: f64,
+    /// The page files.
+    pub pages: Vec<PathBuf>,
+    /// Non-finite pixels replaced by zero.
+    pub non_finite_pixels: u64,
+}
+
+/// The final streaming pass: reduces ρ over every tile of the work directories (one per
+/// shard; together they must cover every tile exactly once), then writes each page — results
+/// times ρ, dilated — as EXR. Used by an unsharded bake and by `guidebake merge`.
+///
+/// # Errors
+/// A [`BakeError`] naming the work directory or page: a shard missing, shards of different
+/// bakes, a tile not baked, a page that cannot be written.
+pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Written, BakeError> {
+    let shards = open_shards(texels, dirs)?;
+    let first = &shards[0].0;
+    let mut all: Vec<TileRecord> = shards.iter().flat_map(|s| s.2.iter().copied()).collect();
+    dedup_tiles(&mut all);
+    let tile_count = texels.tiles().len();
+    if all.len() != tile_count {
+        let done: HashSet<u32> = all.iter().map(|r| r.tile).collect();
+        let missing = (0..tile_count as u32)
+            .find(|t| !done.contains(t))
+            .unwrap_or(0);
+        return Err(BakeError::Mismatch(format!(
+            "{} of {tile_count} tiles are baked (tile {missing} is not): finish every shard, or --resume the interrupted one",
+            all.len()
+        )));
+    }
+    let rho = if first.bias_correction {
+        RhoSums::reduce(&all).rho()
+    } else {
+        1.0
+    };
+    let mut written = Written {
+        rho,
+        ..Default::default()
+    };
+    let page_count = texels.pages().len() as u32;
+    for (page, size) in texels.pages().iter().enumerate() {
+        let mut image = PageImage::new(size.width, size.height);
+        let aux = first
+            .aux
+            .then(|| ["samples", "rel_std_error", "validity"].map(|c| image.add_aux_channel(c)));
+        let mut buffer = Vec::new();
+        for (t, tile) in texels
+            .tiles()
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.page as usize == page)
+        {
+            let (_, results, _) = &shards[t % shards.len()];
+            buffer.resize(tile.texel_count as usize, TexelResult::default());
+            results.read(tile.first_texel, &mut buffer)?;
+            for (texel, r) in texels.tile_texels(t).iter().zip(&buffer) {
+                if r.flags & FLAG_BAKED == 0 {
+                    continue;
+                }
+                let [x, y] = texel.pixel.map(u32::from);
+                let rgb = r.irradiance.map(|c| (f64::from(c) * rho) as f32);
+                if !image.set(x, y, rgb) {
+                    written.non_finite_pixels += 1;
+                }
+                if let Some([samples, error, validity]) = aux {
+                    image.set_aux(samples, x, y, r.samples as f32);
+                    image.set_aux(error, x, y, r.rel_std_error);
+                    image.set_aux(validity, x, y, 1.0);
+                }
+            }
+        }
+        image.dilate(DILATION_PIXELS);
+        let path = page_path(out, page as u32, page_count);
+        image.write_exr(&path)?;
+        written.pages.push(path);
+    }
+    Ok(written)
+}
+
+/// Opens the work directories in shard order and checks they belong to one bake.
+fn open_shards(
+    texels: &TexelFile,
+    dirs: &[PathBuf],
+) -> Result<Vec<(Manifest, ResultFile, Vec<TileRecord>)>, BakeError> {
+    let mut shards = Vec::new();
+    for dir in dirs {
+        let (results_path, journal_path, manifest_path) = work_files(dir);
+        let manifest = read_manifest(&manifest_path)?;
+        let (results, _) = ResultFile::open(
+            &results_path,
+            false,
+            Some((texels.header().texel_count, manifest.bake_id)),
+        )?;
+        let (_, _, records) = Journal::open(
+            &journal_path,
+            false,
+            Some((texels.tiles().len() as u32, manifest.bake_id)),
+        )?;
+        shards.push((manifest, results, records));
+    }
+    let Some(first) = shards.first().map(|s| s.0.clone()) else {
+        return Err(BakeError::Mismatch("no work directories to finish".into()));
+    };
+    shards.sort_by_key(|s| s.0.shard_index);
+    let count = first.shard_count as usize;
+    let indices: Vec<u32> = shards.iter().map(|s| s.0.shard_index).collect();
+    if shards.len() != count || indices != (0..count as u32).collect::<Vec<_>>() {
+        return Err(BakeError::Mismatch(format!(
+            "shards {indices:?} given; a bake of {count} shards needs each of 0..{count} once"
+        )));
+    }
+    if let Some(other) = shards.iter().find(|s| s.0.bake_id != first.bake_id) {
+        return Err(BakeError::Mismatch(format!(
+            "shard {} belongs to another bake (other settings or texel file) than shard {}",
+            other.0.shard_index, first.shard_index
+        )));
+    }
+    Ok(shards)
+}

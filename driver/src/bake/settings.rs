@@ -1,0 +1,159 @@
+//! What a bake is asked to do: the options of `guidebake bake`, and the identity that lets
+//! `--resume` and `merge` refuse results of a different bake.
+
+use std::fmt;
+
+use crate::output::fnv1a64;
+
+/// How gather directions are chosen (DESIGN.md, comparators).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Guiding {
+    /// Unguided cosine-weighted gather from presorted packets: the baseline.
+    Off,
+    /// The learned guide, warped one sample at a time from unsorted points, single rays.
+    Naive,
+    /// Presorted packets, rotated per texel, warped 8-wide and traced as packets (paper §2.4).
+    Coherent,
+}
+
+/// How a texel's iterations are combined (paper §2.5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Combine {
+    /// Every sample counts the same.
+    Average,
+    /// Graybill–Deal per texel: iterations weighted by the inverse variance of their means.
+    Texel,
+}
+
+/// The bake's settings; everything that changes its bits is part of [`Self::bake_id`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BakeSettings {
+    /// Final-gather rays per texel, all learning iterations together.
+    pub spp: u32,
+    /// Learning iterations K (iteration 0 is unguided).
+    pub iterations: u32,
+    /// Direction choice.
+    pub guiding: Guiding,
+    /// Estimator combination.
+    pub combine: Combine,
+    /// Apply the world-wide bias correction ρ.
+    pub bias_correction: bool,
+    /// Seed of every random number.
+    pub seed: u32,
+}
+
+impl Default for BakeSettings {
+    fn default() -> Self {
+        Self {
+            spp: 256,
+            iterations: 4,
+            guiding: Guiding::Coherent,
+            combine: Combine::Texel,
+            bias_correction: true,
+            seed: 0,
+        }
+    }
+}
+
+/// Why settings were refused.
+#[derive(Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct SettingsError(String);
+
+impl BakeSettings {
+    /// Checks the settings a user can get wrong.
+    ///
+    /// # Errors
+    /// [`SettingsError`] saying which option is out of range and why.
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        if self.iterations == 0 || self.iterations > 16 {
+            return Err(SettingsError(format!(
+                "--iterations {}: between 1 and 16 learning iterations",
+                self.iterations
+            )));
+        }
+        let per_iteration = self.spp / self.iterations;
+        if !(8..=1 << 20).contains(&per_iteration) {
+            return Err(SettingsError(format!(
+                "--spp {} over {} iterations leaves {per_iteration} rays per iteration: \
+                 give at least 8 (one packet) and at most 2^20 per iteration",
+                self.spp, self.iterations
+            )));
+        }
+        Ok(())
+    }
+
+    /// Gather rays per texel in iteration `k`: the budget split evenly in whole packets of
+    /// 8, the remainder going to the last iteration (which learns from the best guide).
+    pub fn samples_in_iteration(&self, k: u32) -> u32 {
+        let packets = self.spp / 8;
+        let base = packets / self.iterations;
+        let extra = if k + 1 == self.iterations {
+            packets % self.iterations
+        } else {
+            0
+        };
+        (base + extra) * 8
+    }
+
+    /// Identity of a bake of `texel_file_id` with these settings.
+    pub fn bake_id(&self, texel_file_id: u64) -> u64 {
+        fnv1a64(format!("{self:?} {texel_file_id:016x}").as_bytes())
+    }
+}
+
+impl fmt::Display for Guiding {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Guiding::Off => "off",
+            Guiding::Naive => "naive",
+            Guiding::Coherent => "coherent",
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_budget_is_split_in_whole_packets() {
+        let s = BakeSettings {
+            spp: 200,
+            iterations: 3,
+            ..Default::default()
+        };
+        let per: Vec<u32> = (0..3).map(|k| s.samples_in_iteration(k)).collect();
+        assert_eq!(per, [64, 64, 72]);
+        assert!(per.iter().all(|n| n % 8 == 0));
+        assert!(s.validate().is_ok());
+    }
+
+    #[test]
+    fn bad_settings_say_which_option() {
+        let zero = BakeSettings {
+            spp: 0,
+            ..Default::default()
+        };
+        assert!(zero.validate().unwrap_err().to_string().contains("--spp 0"));
+        let none = BakeSettings {
+            iterations: 0,
+            ..Default::default()
+        };
+        assert!(
+            none.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("--iterations 0")
+        );
+    }
+
+    #[test]
+    fn bake_ids_differ_when_the_bits_would() {
+        let a = BakeSettings::default();
+        let b = BakeSettings { seed: 1, ..a };
+        assert_ne!(a.bake_id(7), b.bake_id(7));
+        assert_ne!(a.bake_id(7), a.bake_id(8));
+        assert_eq!(a.bake_id(7), a.bake_id(7));
+    }
+}

@@ -1,0 +1,171 @@
+//! `guidebake bake TEXELS --scene SCENE -o OUT.exr`: the streaming guided bake.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use crate::bake::run::{BakeJob, BakeReport, bake, work_dir};
+use crate::bake::settings::{BakeSettings, Combine, Guiding};
+use crate::bake::shard::Shard;
+use crate::scene::Scene;
+
+/// Arguments of `guidebake bake`.
+#[derive(Debug, clap::Args)]
+pub struct BakeArgs {
+    /// The texel file (from `guidebake prepare` or `guidebake synth`).
+    pub texels: PathBuf,
+    /// The scene the texel file was prepared from (.gltf, .glb, .obj or a .toml scene file).
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// The lightmap to write (OpenEXR; several pages become OUT.pageN.exr).
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Final-gather rays per texel, all learning iterations together.
+    #[arg(long, default_value_t = 256)]
+    pub spp: u32,
+    /// Learning iterations (iteration 0 is unguided).
+    #[arg(long, default_value_t = 4)]
+    pub iterations: u32,
+    /// How gather directions are chosen.
+    #[arg(long, value_enum, default_value_t = Guiding::Coherent)]
+    pub guiding: Guiding,
+    /// How a texel's iterations are combined.
+    #[arg(long, value_enum, default_value_t = Combine::Texel)]
+    pub combine: Combine,
+    /// The world-wide bias correction ρ (paper §2.5).
+    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    pub bias_correction: OnOff,
+    /// Worker threads (default: every core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Seed of every random number.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u32,
+    /// Write the bake's statistics as JSON here.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    /// Extra EXR channels: sample count, relative standard error, validity.
+    #[arg(long)]
+    pub aux: bool,
+    /// Continue an interrupted bake from its journal.
+    #[arg(long)]
+    pub resume: bool,
+    /// Bake only shard I of N (I/N, 0-based); combine with `guidebake merge`.
+    #[arg(long, default_value = "0/1")]
+    pub shard: Shard,
+}
+
+/// `on` or `off`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnOff {
+    /// Enabled.
+    On,
+    /// Disabled.
+    Off,
+}
+
+/// Runs `guidebake bake`.
+///
+/// # Errors
+/// Bad options, an invalid texel file or scene, I/O failures: each names the file or option.
+/// An interrupted bake is an error too (exit code 1) that says how to resume.
+pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
+    let settings = BakeSettings {
+        spp: args.spp,
+        iterations: args.iterations,
+        guiding: args.guiding,
+        combine: args.combine,
+        bias_correction: args.bias_correction == OnOff::On,
+        seed: args.seed,
+    };
+    settings.validate()?;
+    check_output(&args.out)?;
+    let scene = Scene::load(&args.scene)?;
+    let job = BakeJob {
+        texels: args.texels.clone(),
+        out: args.out.clone(),
+        settings,
+        threads: args
+            .threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        shard: args.shard,
+        resume: args.resume,
+        aux: args.aux,
+    };
+    let report = run_with_progress(&job, &scene)?;
+    if let Some(path) = &args.stats {
+        write_stats(path, &report)?;
+    }
+    if report.interrupted {
+        return Err(format!(
+            "interrupted after {} tiles; the work is kept in {}: run the same command with --resume to finish",
+            report.tiles_baked,
+            work_dir(&job.out, job.shard).display()
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// Runs a bake with Ctrl-C handling and, on a terminal, a progress bar.
+///
+/// # Errors
+/// What [`bake`] returns.
+pub fn run_with_progress(job: &BakeJob, scene: &Scene) -> Result<BakeReport, super::CmdError> {
+    let cancel = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&cancel);
+    // A second handler cannot be installed (demo bakes twice): the first one keeps working.
+    let _ = ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed));
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let bar = indicatif::ProgressBar::new(0);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:40} {pos}/{len} texels  {per_sec}  ETA {eta}",
+            )
+            .expect("a valid template"),
+        );
+        bar
+    });
+    let mut progress = |done: u64, total: u64| {
+        if let Some(bar) = &bar {
+            bar.set_length(total);
+            bar.set_position(done);
+        }
+    };
+    let report = bake(job, scene, &cancel, &mut progress)?;
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    Ok(report)
+}
+
+/// Refuses an output whose directory does not exist, before any work is done.
+fn check_output(out: &std::path::Path) -> Result<(), super::CmdError> {
+    let dir = out
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    if !dir.is_dir() {
+        return Err(format!(
+            "{}: the output directory {} does not exist",
+            out.display(),
+            dir.display()
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// Writes the stats JSON through a temporary name.
+///
+/// # Errors
+/// When the file cannot be written; names it.
+pub fn write_stats(path: &std::path::Path, report: &BakeReport) -> Result<(), super::CmdError> {
+    let json = serde_json::to_string_pretty(report)?;
+    let tmp = crate::output::exr_pages::temporary_name(path);
+    std::fs::write(&tmp, json)
+        .and_then(|()| std::fs::rename(&tmp, path))
+        .map_err(|e| format!("{}: cannot write the stats: {e}", path.display()))?;
+    Ok(())
+}

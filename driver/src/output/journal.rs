@@ -1,0 +1,407 @@
+//! The journal of finished tiles: what `--resume` trusts and where ρ's sums live.
+//!
+//! Layout (little-endian): a 64-byte [`JournalHeader`] naming the bake, then 48-byte
+//! [`TileRecord`]s appended in the order tiles were committed. Each record carries an FNV-1a
+//! checksum of its other fields. Opening a journal reads records up to the first one that is
+//! short or fails its checksum — the torn tail of a crash — and truncates the file there:
+//! those tiles are simply baked again, which gives the same bits because every random number
+//! derives from (seed, texel, iteration, sample).
+//!
+//! The contract with the [result file](super::result_file): a tile is appended to the
+//! journal only after its results were written and synced, so every journalled tile's
+//! results are on disk.
+
+use std::fs::{File, OpenOptions};
+use std::io;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+use bytemuck::{Pod, Zeroable};
+
+use super::fnv1a64;
+
+/// Magic bytes at the start of a journal.
+pub const JOURNAL_MAGIC: [u8; 8] = *b"GBJOURNL";
+/// The journal version this build writes and reads.
+pub const JOURNAL_VERSION: u32 = 1;
+const HEADER_BYTES: u64 = 64;
+const RECORD_BYTES: u64 = 48;
+
+/// The journal's header.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct JournalHeader {
+    /// [`JOURNAL_MAGIC`].
+    pub magic: [u8; 8],
+    /// [`JOURNAL_VERSION`].
+    pub version: u32,
+    /// Tiles in the whole world (not only this shard's).
+    pub tile_count: u32,
+    /// Identity of the bake, as in the result file.
+    pub bake_id: u64,
+    /// Reserved, zero.
+    pub reserved: [u64; 5],
+}
+
+const _: () = assert!(size_of::<JournalHeader>() as u64 == HEADER_BYTES);
+
+/// One finished tile and its contribution to the bias correction ρ (paper §2.5).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct TileRecord {
+    /// The tile's index in the texel file's tile table.
+    pub tile: u32,
+    /// Valid texels that contributed to the sums.
+    pub texels: u32,
+    /// Σ over the tile's texels of the unweighted mean luminance (L̂).
+    pub unweighted_luminance: f64,
+    /// Σ over the tile's texels of the combined (weighted) mean luminance (L̂_GD).
+    pub weighted_luminance: f64,
+    /// Rays traced for the tile, all kinds (for statistics).
+    pub rays: u64,
+    /// Reserved, zero.
+    pub reserved: u64,
+    /// FNV-1a of the 40 bytes above.
+    pub checksum: u64,
+}
+
+const _: () = assert!(size_of::<TileRecord>() as u64 == RECORD_BYTES);
+
+impl TileRecord {
+    /// The record with its checksum filled in.
+    pub fn sealed(mut self) -> Self {
+        self.checksum = self.computed_checksum();
+        self
+    }
+
+    fn computed_checksum(&self) -> u64 {
+        fnv1a64(&bytemuck::bytes_of(self)[..40])
+    }
+
+    fn is_intact(&self) -> bool {
+        self.checksum == self.computed_checksum()
+    }
+}
+
+/// The world-wide sums behind ρ = L̂ / L̂_GD, reduced in tile order so that the result is
+/// the same bits whatever order tiles finished in, on however many threads or shards.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RhoSums {
+    /// Σ L̂ over all valid texels.
+    pub unweighted: f64,
+    /// Σ L̂_GD over all valid texels.
+    pub weighted: f64,
+    /// Valid texels counted.
+    pub texels: u64,
+}
+
+impl RhoSums {
+    /// Sums `records` in ascending tile order (sorting a copy; duplicates must have been
+    /// removed by the caller, see [`dedup_tiles`]).
+    pub fn reduce(records: &[TileRecord]) -> Self {
+        let mut sorted = records.to_vec();
+        sorted.sort_unstable_by_key(|r| r.tile);
+        sorted.iter().fold(Self::default(), |s, r| Self {
+            unweighted: s.unweighted + r.unweighted_luminance,
+            weighted: s.weighted + r.weighted_luminance,
+            texels: s.texels + u64::from(r.texels),
+        })
+    }
+
+    /// ρ = L̂ / L̂_GD, or 1 when the weighted sum is zero or either sum is not finite (a
+    /// black world needs no correction, and ρ must never bring NaN into an output).
+    pub fn rho(&self) -> f64 {
+        let rho = self.unweighted / self.weighted;
+        if self.weighted > 0.0 && rho.is_finite() {
+            rho
+        } else {
+            1.0
+        }
+    }
+}
+
+/// Keeps the last record of each tile (a tile baked again after a torn write appears twice
+/// with equal contents), in ascending tile order.
+pub fn dedup_tiles(records: &mut Vec<TileRecord>) {
+    records.sort_by_key(|r| r.tile);
+    records.dedup_by_key(|r| r.tile);
+}
+
+/// What went wrong with a journal; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum JournalError {
+    /// The operating system refused an operation.
+    #[error("{path}: {what}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What was being done.
+        what: &'static str,
+        /// The OS error.
+        source: io::Error,
+    },
+    /// The file is not a journal of this version, or belongs to another bake.
+    #[error("{path}: {what}")]
+    Mismatch {
+        /// The file.
+        path: PathBuf,
+        /// What does not match.
+        what: String,
+    },
+}
+
+/// An open journal, appending.
+#[derive(Debug)]
+pub struct Journal {
+    file: File,
+    path: PathBuf,
+    len: u64,
+}
+
+impl Journal {
+    /// Creates (or truncates) a journal for bake `bake_id` over `tile_count` tiles, synced.
+    ///
+    /// # Errors
+    /// [`JournalError::Io`] when the file cannot be created or synced.
+    pub fn create(path: &Path, tile_count: u32, bake_id: u64) -> Result<Self, JournalError> {
+        let io = |what| move |source| io_error(path, what, source);
+        let file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(path)
+            .map_err(io("create"))?;
+        let header = JournalHeader {
+            magic: JOURNAL_MAGIC,
+            version: JOURNAL_VERSION,
+            tile_count,
+            bake_id,
+            reserved: [0; 5],
+        };
+        file.write_all_at(bytemuck::bytes_of(&header), 0)
+            .map_err(io("write header"))?;
+        file.sync_all().map_err(io("sync"))?;
+        Ok(Self {
+            file,
+            path: path.to_owned(),
+            len: HEADER_BYTES,
+        })
+    }
+
+    /// Opens an existing journal, returns its header and intact records (in file order), and
+    /// truncates a torn tail so later appends follow the last intact record. With `expect`
+    /// = `Some((tile_count, bake_id))` a journal of another bake is refused.
+    ///
+    /// # Errors
+    /// [`JournalError::Io`] when it cannot be read or truncated; [`JournalError::Mismatch`]
+    /// on a bad magic, version, tile count or bake identity.
+    pub fn open(
+        path: &Path,
+        writable: bool,
+        expect: Option<(u32, u64)>,
+    ) -> Result<(Self, JournalHeader, Vec<TileRecord>), JournalError> {
+        let io = |what| move |source| io_error(path, what, source);
+        let file = OpenOptions::new()
+            .read(true)
+            .write(writable)
+            .open(path)
+            .map_err(io("open"))?;
+        let len = file.metadata().map_err(io("stat"))?.len();
+        let mismatch = |what: String| JournalError::Mismatch {
+            path: path.to_owned(),
+            what,
+        };
+        if len < HEADER_BYTES {
+            return Err(mismatch(format!("{len} bytes is too short for a journal")));
+        }
+        let mut bytes = vec![0u8; len as usize];
+        file.read_exact_at(&mut bytes, 0).map_err(io("read"))?;
+        let header: JournalHeader = bytemuck::pod_read_unaligned(&bytes[..HEADER_BYTES as usize]);
+        if header.magic != JOURNAL_MAGIC {
+            return Err(mismatch(
+                "not a guidebake journal (bad magic at offset 0)".into(),
+            ));
+        }
+        if header.version != JOURNAL_VERSION {
+            return Err(mismatch(format!(
+                "journal version {} (this build reads {JOURNAL_VERSION})",
+                header.version
+            )));
+        }
+        if let Some((tiles, bake_id)) = expect
+            && (header.tile_count != tiles || header.bake_id != bake_id)
+        {
+            return Err(mismatch(format!(
+                "belongs to another bake (tiles {}, id {:016x}; this bake: tiles {tiles}, id {bake_id:016x})",
+                header.tile_count, header.bake_id
+            )));
+        }
+        let records = intact_records(&bytes[HEADER_BYTES as usize..], header.tile_count);
+        let intact_len = HEADER_BYTES + records.len() as u64 * RECORD_BYTES;
+        if writable && intact_len != len {
+            file.set_len(intact_len).map_err(io("truncate torn tail"))?;
+            file.sync_all().map_err(io("sync"))?;
+        }
+        Ok((
+            Self {
+                file,
+                path: path.to_owned(),
+                len: intact_len,
+            },
+            header,
+            records,
+        ))
+    }
+
+    /// Appends `records` (sealing their checksums) and syncs. Call only after the tiles'
+    /// results were written to the result file and synced.
+    ///
+    /// # Errors
+    /// [`JournalError::Io`] when the write or the sync fails.
+    pub fn append(&mut self, records: &[TileRecord]) -> Result<(), JournalError> {
+        let sealed: Vec<TileRecord> = records.iter().map(|r| r.sealed()).collect();
+        let bytes: &[u8] = bytemuck::cast_slice(&sealed);
+        self.file
+            .write_all_at(bytes, self.len)
+            .map_err(|e| io_error(&self.path, "append", e))?;
+        self.file
+            .sync_data()
+            .map_err(|e| io_error(&self.path, "sync", e))?;
+        self.len += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// The journal's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// Records up to the first short, torn or out-of-range one.
+fn intact_records(bytes: &[u8], tile_count: u32) -> Vec<TileRecord> {
+    bytes
+        .chunks_exact(RECORD_BYTES as usize)
+        .map(bytemuck::pod_read_unaligned::<TileRecord>)
+        .take_while(|r| r.is_intact() && r.tile < tile_count)
+        .collect()
+}
+
+fn io_error(path: &Path, what: &'static str, source: io::Error) -> JournalError {
+    JournalError::Io {
+        path: path.to_owned(),
+        what,
+        source,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(tile: u32) -> TileRecord {
+        TileRecord {
+            tile,
+            texels: 10,
+            unweighted_luminance: 1.5 * f64::from(tile),
+            weighted_luminance: 1.25 * f64::from(tile),
+            rays: 1000,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn appended_records_survive_reopening() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("j.bin");
+        let mut journal = Journal::create(&path, 8, 42).unwrap();
+        journal.append(&[record(3), record(1)]).unwrap();
+        journal.append(&[record(7)]).unwrap();
+        let (_, header, records) = Journal::open(&path, false, Some((8, 42))).unwrap();
+        assert_eq!(header.tile_count, 8);
+        let tiles: Vec<u32> = records.iter().map(|r| r.tile).collect();
+        assert_eq!(tiles, [3, 1, 7]);
+        assert_eq!(records[0], record(3).sealed());
+    }
+
+    #[test]
+    fn a_torn_tail_is_dropped_and_truncated() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("j.bin");
+        let mut journal = Journal::create(&path, 8, 42).unwrap();
+        journal.append(&[record(0), record(1), record(2)]).unwrap();
+        // Tear the last record: half of it, then a flipped byte in the one before.
+        let len = std::fs::metadata(&path).unwrap().len();
+        let file = OpenOptions::new().write(true).open(&path).unwrap();
+        file.set_len(len - 20).unwrap();
+        file.write_all_at(&[0xff], 64 + 48 + 9).unwrap();
+        let (mut reopened, _, records) = Journal::open(&path, true, Some((8, 42))).unwrap();
+        assert_eq!(records, [record(0).sealed()]);
+        assert_eq!(std::fs::metadata(&path).unwrap().len(), 64 + 48);
+        reopened.append(&[record(5)]).unwrap();
+        let (_, _, records) = Journal::open(&path, false, None).unwrap();
+        assert_eq!(records, [record(0).sealed(), record(5).sealed()]);
+    }
+
+    #[test]
+    fn refuses_another_bake_and_non_journals() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("j.bin");
+        Journal::create(&path, 8, 42).unwrap();
+        let err = Journal::open(&path, false, Some((8, 43)))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("another bake") && err.contains("j.bin"),
+            "{err}"
+        );
+        std::fs::write(&path, [0u8; 64]).unwrap();
+        let err = Journal::open(&path, false, None).unwrap_err().to_string();
+        assert!(err.contains("bad magic"), "{err}");
+    }
+
+    #[test]
+    fn rho_is_the_same_bits_in_any_finishing_order() {
+        let records: Vec<TileRecord> = (0..200u32)
+            .map(|t| TileRecord {
+                tile: t,
+                texels: 1,
+                unweighted_luminance: 1.0 / (f64::from(t) + 0.3),
+                weighted_luminance: 1e8 / (f64::from(t * t) + 0.7),
+                ..Default::default()
+            })
+            .collect();
+        let forward = RhoSums::reduce(&records);
+        let mut shuffled = records.clone();
+        shuffled.reverse();
+        shuffled.swap(3, 150);
+        let backward = RhoSums::reduce(&shuffled);
+        assert_eq!(forward.rho().to_bits(), backward.rho().to_bits());
+        assert_eq!(forward.texels, 200);
+    }
+
+    #[test]
+    fn rho_is_one_for_a_black_or_broken_world() {
+        assert_eq!(RhoSums::default().rho(), 1.0);
+        let nan = RhoSums {
+            unweighted: f64::NAN,
+            weighted: 1.0,
+            texels: 1,
+        };
+        assert_eq!(nan.rho(), 1.0);
+        let ok = RhoSums {
+            unweighted: 3.0,
+            weighted: 2.0,
+            texels: 1,
+        };
+        assert_eq!(ok.rho(), 1.5);
+    }
+
+    #[test]
+    fn dedup_keeps_one_record_per_tile() {
+        let mut records = vec![record(4), record(2), record(4), record(0)];
+        dedup_tiles(&mut records);
+        let tiles: Vec<u32> = records.iter().map(|r| r.tile).collect();
+        assert_eq!(tiles, [0, 2, 4]);
+    }
+}

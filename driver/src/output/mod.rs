@@ -1,0 +1,30 @@
+//! What a bake leaves on disk, and how it survives a crash (DESIGN.md, "Bounded memory,
+//! parallelism, determinism").
+//!
+//! A bake never holds the lightmap in memory. Workers hand finished tiles to one writer,
+//! which writes them **in place** into a preallocated [`result_file`] (one fixed-size record
+//! per texel, indexed by global texel id), syncs it, and only then appends the tiles to a
+//! synced [`journal`]. An interrupted bake therefore resumes from the journal with every
+//! journalled tile's results on disk, and a torn journal record is detected by its checksum
+//! and dropped (its tile is baked again, which gives the same bits).
+//!
+//! The world-wide bias correction ρ = L̂ / L̂_GD of the paper (§2.5) needs every tile's sums:
+//! the journal keeps them per tile and [`journal::RhoSums`] reduces them **in tile order**, so
+//! ρ is bit-identical whatever the thread count, the order tiles finished in, or the shard
+//! split. A final streaming pass ([`exr_pages`]) applies ρ and writes the EXR pages, each to
+//! a temporary name renamed into place, so an output that looks complete is complete.
+
+pub mod exr_pages;
+pub mod journal;
+pub mod result_file;
+
+/// A 64-bit FNV-1a hash: checksums of journal records and identities of bake settings.
+/// Not cryptographic; it detects torn writes and mismatched resumes.
+pub fn fnv1a64(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}

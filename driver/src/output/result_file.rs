@@ -1,0 +1,387 @@
+//! The result file: one [`TexelResult`] per texel, preallocated, written in place.
+//!
+//! Layout (little-endian): a 64-byte [`ResultHeader`], then `texel_count` records of 32 bytes
+//! at `64 + 32 · texel_id`. The file is created sparse at its full size, so a bake of 10^8
+//! texels does not write 3.2 GB of zeros first, and it is written with positioned writes
+//! (`pwrite`), never mapped: nothing of it stays in anonymous memory, and the kernel's page
+//! cache is free to drop what has been synced.
+//!
+//! The header carries the identity of the bake (a hash of its settings and of its texel file)
+//! so that `--resume` refuses to continue a different bake's results.
+
+use std::fs::{File, OpenOptions};
+use std::io;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+use bytemuck::{Pod, Zeroable};
+
+/// Magic bytes at the start of a result file.
+pub const RESULT_MAGIC: [u8; 8] = *b"GBRESULT";
+/// The result-file version this build writes and reads.
+pub const RESULT_VERSION: u32 = 1;
+/// Bytes before the first record.
+pub const RESULT_HEADER_BYTES: u64 = 64;
+
+/// The texel was baked (set by the writer; unset records were never baked).
+pub const FLAG_BAKED: u32 = 1;
+/// The texel is valid in the texel file (invalid texels are skipped, not traced).
+pub const FLAG_VALID: u32 = 1 << 1;
+/// No finite gather sample reached the texel's estimators: its irradiance is zero by rule.
+pub const FLAG_NO_FINITE_SAMPLES: u32 = 1 << 2;
+/// The texel's cluster was baked unguided because its guide was near uniform or empty.
+pub const FLAG_UNGUIDED: u32 = 1 << 3;
+
+/// One texel's bake result, before the global bias correction ρ is applied.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct TexelResult {
+    /// Irradiance, RGB, the per-texel combination of the iterations' estimates.
+    pub irradiance: [f32; 3],
+    /// Relative standard error of the luminance estimate (0 when unknown).
+    pub rel_std_error: f32,
+    /// Gather samples taken, all iterations together.
+    pub samples: u32,
+    /// `FLAG_*` bits.
+    pub flags: u32,
+    /// Reserved, zero.
+    pub reserved: [u32; 2],
+}
+
+const _: () = assert!(size_of::<TexelResult>() == 32);
+
+/// The result file's header.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct ResultHeader {
+    /// [`RESULT_MAGIC`].
+    pub magic: [u8; 8],
+    /// [`RESULT_VERSION`].
+    pub version: u32,
+    /// Bytes per record, 32.
+    pub record_bytes: u32,
+    /// Records in the file.
+    pub texel_count: u64,
+    /// Identity of the bake: hash of its settings and texel file.
+    pub bake_id: u64,
+    /// Reserved, zero.
+    pub reserved: [u64; 4],
+}
+
+const _: () = assert!(size_of::<ResultHeader>() as u64 == RESULT_HEADER_BYTES);
+
+/// What went wrong with a result file; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum ResultFileError {
+    /// The operating system refused an operation.
+    #[error("{path}: {what}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What was being done.
+        what: &'static str,
+        /// The OS error.
+        source: io::Error,
+    },
+    /// The file is not a result file of this version, or of another bake.
+    #[error("{path}: {what}")]
+    Mismatch {
+        /// The file.
+        path: PathBuf,
+        /// What does not match.
+        what: String,
+    },
+    /// A texel range past the end of the file.
+    #[error("{path}: texels {first}..{end} lie past the {count} texels of the file")]
+    OutOfRange {
+        /// The file.
+        path: PathBuf,
+        /// First texel asked for.
+        first: u64,
+        /// One past the last texel asked for.
+        end: u64,
+        /// Texels in the file.
+        count: u64,
+    },
+}
+
+/// A result file open for writing (a bake) or reading (the final pass, `merge`).
+#[derive(Debug)]
+pub struct ResultFile {
+    file: File,
+    path: PathBuf,
+    texel_count: u64,
+}
+
+impl ResultFile {
+    /// Creates (or truncates) the file at `path` for `texel_count` texels of bake `bake_id`,
+    /// preallocated sparse at its full size and synced.
+    ///
+    /// # Errors
+    /// [`ResultFileError::Io`] when the file cannot be created, sized or synced.
+    pub fn create(path: &Path, texel_count: u64, bake_id: u64) -> Result<Self, ResultFileError> {
+        let io = |what| move |source| io_error(path, what, source);
+        let file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(path)
+            .map_err(io("create"))?;
+        let header = ResultHeader {
+            magic: RESULT_MAGIC,
+            version: RESULT_VERSION,
+            record_bytes: size_of::<TexelResult>() as u32,
+            texel_count,
+            bake_id,
+            reserved: [0; 4],
+        };
+        let len = records_end(texel_count).ok_or_else(|| ResultFileError::Mismatch {
+            path: path.to_owned(),
+            what: format!("{texel_count} texels do not fit in a file"),
+        })?;
+        file.set_len(len).map_err(io("preallocate"))?;
+        file.write_all_at(bytemuck::bytes_of(&header), 0)
+            .map_err(io("write header"))?;
+        file.sync_all().map_err(io("sync"))?;
+        Ok(Self {
+            file,
+            path: path.to_owned(),
+            texel_count,
+        })
+    }
+
+    /// Opens an existing result file and checks that it belongs to bake `bake_id` with
+    /// `texel_count` texels (pass `None` to accept any bake, as `merge` does after checking
+    /// the shards agree among themselves).
+    ///
+    /// # Errors
+    /// [`ResultFileError::Io`] when it cannot be opened or read; [`ResultFileError::Mismatch`]
+    /// when the magic, version, record size, length or bake identity differ.
+    pub fn open(
+        path: &Path,
+        writable: bool,
+        expect: Option<(u64, u64)>,
+    ) -> Result<(Self, ResultHeader), ResultFileError> {
+        let io = |what| move |source| io_error(path, what, source);
+        let file = OpenOptions::new()
+            .read(true)
+            .write(writable)
+            .open(path)
+            .map_err(io("open"))?;
+        let mut bytes = [0u8; RESULT_HEADER_BYTES as usize];
+        let len = file.metadata().map_err(io("stat"))?.len();
+        let mismatch = |what: String| ResultFileError::Mismatch {
+            path: path.to_owned(),
+            what,
+        };
+        if len < RESULT_HEADER_BYTES {
+            return Err(mismatch(format!(
+                "{len} bytes is too short for a result file"
+            )));
+        }
+        file.read_exact_at(&mut bytes, 0)
+            .map_err(io("read header"))?;
+        let header: ResultHeader = bytemuck::pod_read_unaligned(&bytes);
+        if header.magic != RESULT_MAGIC {
+            return Err(mismatch(
+                "not a guidebake result file (bad magic at offset 0)".into(),
+            ));
+        }
+        if header.version != RESULT_VERSION {
+            return Err(mismatch(format!(
+                "result file version {} (this build reads {RESULT_VERSION})",
+                header.version
+            )));
+        }
+        if header.record_bytes as usize != size_of::<TexelResult>() {
+            return Err(mismatch(format!(
+                "record size {} (expected 32)",
+                header.record_bytes
+            )));
+        }
+        if records_end(header.texel_count) != Some(len) {
+            return Err(mismatch(format!(
+                "length {len} does not hold the {} texels its header declares",
+                header.texel_count
+            )));
+        }
+        if let Some((texels, bake_id)) = expect
+            && (header.texel_count != texels || header.bake_id != bake_id)
+        {
+            return Err(mismatch(format!(
+                "belongs to another bake (texels {}, id {:016x}; this bake: texels {texels}, id {bake_id:016x})",
+                header.texel_count, header.bake_id
+            )));
+        }
+        let texel_count = header.texel_count;
+        Ok((
+            Self {
+                file,
+                path: path.to_owned(),
+                texel_count,
+            },
+            header,
+        ))
+    }
+
+    /// Texels in the file.
+    pub fn texel_count(&self) -> u64 {
+        self.texel_count
+    }
+
+    /// The file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Writes `results` for the texels from `first_texel` on, in place.
+    ///
+    /// # Errors
+    /// [`ResultFileError::OutOfRange`] past the end; [`ResultFileError::Io`] on a failed write.
+    pub fn write(&self, first_texel: u64, results: &[TexelResult]) -> Result<(), ResultFileError> {
+        let offset = self.range_offset(first_texel, results.len())?;
+        self.file
+            .write_all_at(bytemuck::cast_slice(results), offset)
+            .map_err(|e| io_error(&self.path, "write results", e))
+    }
+
+    /// Reads the texels from `first_texel` on into `out`.
+    ///
+    /// # Errors
+    /// [`ResultFileError::OutOfRange`] past the end; [`ResultFileError::Io`] on a failed read.
+    pub fn read(&self, first_texel: u64, out: &mut [TexelResult]) -> Result<(), ResultFileError> {
+        let offset = self.range_offset(first_texel, out.len())?;
+        self.file
+            .read_exact_at(bytemuck::cast_slice_mut(out), offset)
+            .map_err(|e| io_error(&self.path, "read results", e))
+    }
+
+    /// Makes every write so far durable (`fdatasync`): call before journalling the tiles.
+    ///
+    /// # Errors
+    /// [`ResultFileError::Io`] when the sync fails.
+    pub fn sync(&self) -> Result<(), ResultFileError> {
+        self.file
+            .sync_data()
+            .map_err(|e| io_error(&self.path, "sync", e))
+    }
+
+    fn range_offset(&self, first: u64, count: usize) -> Result<u64, ResultFileError> {
+        let end = first.checked_add(count as u64);
+        match end {
+            Some(end) if end <= self.texel_count => Ok(RESULT_HEADER_BYTES + first * 32),
+            _ => Err(ResultFileError::OutOfRange {
+                path: self.path.clone(),
+                first,
+                end: end.unwrap_or(u64::MAX),
+                count: self.texel_count,
+            }),
+        }
+    }
+}
+
+fn records_end(texel_count: u64) -> Option<u64> {
+    texel_count
+        .checked_mul(32)?
+        .checked_add(RESULT_HEADER_BYTES)
+}
+
+fn io_error(path: &Path, what: &'static str, source: io::Error) -> ResultFileError {
+    ResultFileError::Io {
+        path: path.to_owned(),
+        what,
+        source,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn result(i: u32) -> TexelResult {
+        TexelResult {
+            irradiance: [i as f32, 0.5, -0.0],
+            rel_std_error: 0.01,
+            samples: i,
+            flags: FLAG_BAKED | FLAG_VALID,
+            reserved: [0; 2],
+        }
+    }
+
+    #[test]
+    fn writes_in_place_and_reads_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.bin");
+        let file = ResultFile::create(&path, 100, 7).unwrap();
+        let tile: Vec<_> = (0..10).map(result).collect();
+        file.write(40, &tile).unwrap();
+        file.sync().unwrap();
+        let (reopened, header) = ResultFile::open(&path, false, Some((100, 7))).unwrap();
+        assert_eq!(header.texel_count, 100);
+        let mut back = vec![TexelResult::default(); 12];
+        reopened.read(39, &mut back).unwrap();
+        assert_eq!(
+            back[0],
+            TexelResult::default(),
+            "unwritten texels read as zero"
+        );
+        assert_eq!(&back[1..11], &tile[..]);
+        assert_eq!(std::fs::metadata(&path).unwrap().len(), 64 + 100 * 32);
+    }
+
+    #[test]
+    fn refuses_ranges_past_the_end() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = ResultFile::create(&dir.path().join("r.bin"), 10, 1).unwrap();
+        let err = file.write(8, &[result(0); 3]).unwrap_err();
+        assert!(matches!(
+            err,
+            ResultFileError::OutOfRange {
+                first: 8,
+                end: 11,
+                count: 10,
+                ..
+            }
+        ));
+        assert!(file.write(u64::MAX, &[result(0)]).is_err());
+    }
+
+    #[test]
+    fn refuses_another_bake_a_bad_magic_and_a_short_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.bin");
+        ResultFile::create(&path, 10, 1).unwrap();
+        let err = ResultFile::open(&path, true, Some((10, 2)))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("another bake") && err.contains("r.bin"),
+            "{err}"
+        );
+
+        let file = OpenOptions::new().write(true).open(&path).unwrap();
+        file.write_all_at(b"NOTMAGIC", 0).unwrap();
+        let err = ResultFile::open(&path, false, None)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("bad magic"), "{err}");
+
+        ResultFile::create(&path, 10, 1).unwrap();
+        OpenOptions::new()
+            .write(true)
+            .open(&path)
+            .unwrap()
+            .set_len(64 + 9 * 32)
+            .unwrap();
+        let err = ResultFile::open(&path, false, None)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("does not hold"), "{err}");
+        std::fs::write(&path, b"short").unwrap();
+        let err = ResultFile::open(&path, false, None)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("too short"), "{err}");
+    }
+}

@@ -1,0 +1,192 @@
+//! `prepare` on every scene in `../shared/scenes`: covered-texel counts against the atlas
+//! sizes of scenes/README.md, and every texel on its triangle.
+
+use std::path::PathBuf;
+
+use glam::{Vec2, Vec3};
+use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
+use guidebake::scene::Scene;
+use guidebake::texels::{FLAG_PARTIAL, TexelFile};
+
+fn scenes_dir() -> Option<PathBuf> {
+    // `../shared/scenes` beside the workspace; worktrees under `/work/wt/NAME` find it one
+    // level further up; `GUIDEBAKE_SCENES` overrides both.
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let candidates = std::env::var_os("GUIDEBAKE_SCENES")
+        .map(PathBuf::from)
+        .into_iter()
+        .chain(
+            [
+                format!("{root}/../shared/scenes"),
+                format!("{root}/../../shared/scenes"),
+            ]
+            .map(PathBuf::from),
+        );
+    let found = candidates.into_iter().find(|p| p.is_dir());
+    if found.is_none() {
+        println!("skipping: ../shared/scenes is absent");
+    }
+    found
+}
+
+/// Total UV area and UV perimeter of the scene's triangles, in page pixels.
+fn pixel_area_and_perimeter(scene: &Scene, f: &TexelFile) -> (f64, f64) {
+    let (mut area, mut perim) = (0.0f64, 0.0f64);
+    for t in &scene.triangles {
+        let m = f.meshes()[t.mesh as usize];
+        let Some(uv) = t.lightmap_uv else { continue };
+        let q = uv.map(|v| v * Vec2::from(m.uv_scale) + Vec2::from(m.uv_offset));
+        area += f64::from(0.5 * (q[1] - q[0]).perp_dot(q[2] - q[0]).abs());
+        perim += f64::from(q[0].distance(q[1]) + q[1].distance(q[2]) + q[2].distance(q[0]));
+    }
+    (area, perim)
+}
+
+/// Asserts every texel lies on its triangle: within 1e-4 (relative to the scene size) of its
+/// plane, with barycentrics ≥ −1e-3.
+fn assert_on_triangles(scene: &Scene, f: &TexelFile) {
+    let (lo, hi) = scene.bounds();
+    let tol = 1e-5 * (hi - lo).max_element().max(1.0);
+    for (i, x) in f.texels().iter().enumerate() {
+        let t = &scene.triangles[x.triangle as usize];
+        let [a, b, c] = t.positions;
+        let p = Vec3::from(x.position);
+        let n = (b - a).cross(c - a);
+        let dist = (p - a).dot(n.normalize());
+        assert!(
+            dist.abs() <= tol,
+            "texel {i} is {dist} off its triangle's plane"
+        );
+        let area2 = n.length_squared();
+        let l1 = (p - a).cross(c - a).dot(n) / area2;
+        let l2 = (b - a).cross(p - a).dot(n) / area2;
+        let l0 = 1.0 - l1 - l2;
+        assert!(
+            l0 >= -1e-3 && l1 >= -1e-3 && l2 >= -1e-3,
+            "texel {i} barycentrics {l0} {l1} {l2}"
+        );
+        assert!((Vec3::from(x.normal).length() - 1.0).abs() < 1e-3);
+    }
+}
+
+/// Converted Bitterli scenes at their atlas sizes. Every texel centre inside a UV triangle is
+/// covered, so the centre-covered count C estimates the total UV area A in pixels; a centre
+/// count differs from the area only along chart borders, by at most half a pixel per unit of
+/// border length. The sum of all triangle perimeters P bounds the border length from above,
+/// so |C − A| ≤ P/2. The conservative pass adds only texels overlapping a border, so
+/// partial ≤ P + 4·triangles (each unit of border touches at most ~1 new texel, plus the
+/// corners).
+#[test]
+fn converted_scenes_have_expected_covered_texels() {
+    let Some(dir) = scenes_dir() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    for (name, w, h) in [
+        ("bitterli_cornell_box", 1073, 932),
+        ("bitterli_veach_bidir", 816, 1128),
+        ("bitterli_veach_ajar_no_teapots", 977, 976),
+    ] {
+        let scene = Scene::load(&dir.join(format!("converted/{name}.glb"))).unwrap();
+        let out = tmp.path().join(format!("{name}.texels"));
+        let opts = PrepareOptions {
+            resolution: Resolution::Size(w, h),
+            layout: Layout::Auto,
+        };
+        let report = prepare(&scene, &out, opts).unwrap();
+        assert!(
+            !report.per_mesh_layout,
+            "{name}: the shared xatlas atlas must be respected"
+        );
+        let f = TexelFile::open(&out).unwrap();
+        assert_eq!(f.header().texel_count, report.texels);
+        let partial = f
+            .texels()
+            .iter()
+            .filter(|t| t.flags & FLAG_PARTIAL != 0)
+            .count() as f64;
+        let centre = report.texels as f64 - partial;
+        let (area, perim) = pixel_area_and_perimeter(&scene, &f);
+        println!(
+            "{name}: {} texels, centre {centre}, partial {partial}, UV area {area:.0} px, perimeter {perim:.0} px, fill {:.3}",
+            report.texels,
+            area / f64::from(w * h)
+        );
+        assert!(
+            (centre - area).abs() <= perim / 2.0,
+            "{name}: centre-covered {centre} vs UV area {area}"
+        );
+        assert!(
+            partial <= perim + 4.0 * scene.triangles.len() as f64,
+            "{name}: {partial} partial texels"
+        );
+        // xatlas fills well over half of its atlas; a layout bug would not.
+        assert!(
+            centre > 0.5 * f64::from(w * h),
+            "{name}: only {centre} of {w}x{h} covered"
+        );
+        assert_on_triangles(&scene, &f);
+    }
+}
+
+/// The vinc3r Cornell box: every mesh has its own 0..1 UVs, so meshes must be packed
+/// without overlap; meshes without TEXCOORD_1 are reported by name.
+#[test]
+fn vinc3r_meshes_are_packed_and_missing_uvs_reported() {
+    let Some(dir) = scenes_dir() else { return };
+    let p =
+        dir.join("vinc3r_cornellbox/BJS-2.80-Eevee-gltf/assets/cornellBox-2.80-Eevee-gltf.gltf");
+    let scene = Scene::load(&p).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("v.texels");
+    let opts = PrepareOptions {
+        resolution: Resolution::Size(1024, 1024),
+        layout: Layout::Auto,
+    };
+    let report = prepare(&scene, &out, opts).unwrap();
+    assert!(report.per_mesh_layout);
+    assert_eq!(report.pages, [(1024, 1024)]);
+    assert!(
+        report
+            .meshes_without_lightmap_uvs
+            .iter()
+            .any(|m| m == "lamp.000")
+    );
+    let f = TexelFile::open(&out).unwrap();
+    // Meshes occupy disjoint pixel squares: each texel's mesh's cell contains its pixel.
+    let mut owner = vec![u32::MAX; 1024 * 1024];
+    for x in f.texels() {
+        let mesh = scene.triangles[x.triangle as usize].mesh;
+        let o = &mut owner[x.pixel[1] as usize * 1024 + x.pixel[0] as usize];
+        assert_eq!(*o, u32::MAX, "pixel {:?} written twice", x.pixel);
+        *o = mesh;
+    }
+    let (area, perim) = pixel_area_and_perimeter(&scene, &f);
+    let partial = f
+        .texels()
+        .iter()
+        .filter(|t| t.flags & FLAG_PARTIAL != 0)
+        .count() as f64;
+    let centre = report.texels as f64 - partial;
+    assert!(
+        (centre - area).abs() <= perim / 2.0,
+        "centre-covered {centre} vs UV area {area}"
+    );
+    assert_on_triangles(&scene, &f);
+}
+
+/// A texel density doubles the texel count about fourfold.
+#[test]
+fn texels_per_unit_scales_quadratically() {
+    let Some(dir) = scenes_dir() else { return };
+    let scene = Scene::load(&dir.join("converted/bitterli_cornell_box.glb")).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let count = |d: f32| {
+        let out = tmp.path().join(format!("c{d}.texels"));
+        let opts = PrepareOptions {
+            resolution: Resolution::TexelsPerUnit(d),
+            layout: Layout::Auto,
+        };
+        prepare(&scene, &out, opts).unwrap().texels as f64
+    };
+    let (a, b) = (count(20.0), count(40.0));
+    assert!((b / a - 4.0).abs() < 0.4, "{a} -> {b}");
+}

@@ -1,0 +1,65 @@
+//! `synth` writes a texel file whose texels lie on the triangles of the scene it writes,
+//! and that scene loads through `Scene::load` (the `.toml` with sun and sky).
+
+use glam::Vec3;
+use guidebake::scene::{Scene, Sky};
+use guidebake::synth::synth;
+use guidebake::texels::TexelFile;
+
+#[test]
+fn synth_texels_lie_on_the_written_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("city.texels");
+    let r = synth(300_000, &out).unwrap();
+    assert!(
+        (r.texels as f64 / 300_000.0 - 1.0).abs() < 0.02,
+        "{}",
+        r.texels
+    );
+    let f = TexelFile::open(&out).unwrap();
+    assert_eq!(f.header().texel_count, r.texels);
+    let scene = Scene::load(&r.scene).unwrap();
+    assert_eq!(scene.triangles.len() as u32, f.header().triangle_count);
+    assert!(scene.sun.is_some());
+    assert!(matches!(scene.sky, Sky::Constant(_)));
+    for (i, x) in f.texels().iter().enumerate() {
+        let t = &scene.triangles[x.triangle as usize];
+        let [a, b, c] = t.positions;
+        let p = Vec3::from(x.position);
+        let n = (b - a).cross(c - a);
+        let area2 = n.length_squared();
+        let l1 = (p - a).cross(c - a).dot(n) / area2;
+        let l2 = (b - a).cross(p - a).dot(n) / area2;
+        assert!(
+            (p - a).dot(n.normalize()).abs() < 1e-4,
+            "texel {i} off its plane"
+        );
+        assert!(
+            l1 >= -1e-4 && l2 >= -1e-4 && 1.0 - l1 - l2 >= -1e-4,
+            "texel {i}: {l1} {l2}"
+        );
+        assert!(
+            Vec3::from(x.normal).dot(n.normalize()) > 0.9999,
+            "texel {i} normal"
+        );
+        // The mesh record maps the triangle's lightmap UVs onto the texel's pixel.
+        let m = f.meshes()[t.mesh as usize];
+        assert_eq!(m.page, x.page);
+        let uv = t.lightmap_uv.unwrap();
+        let q = uv.map(|v| v * glam::Vec2::from(m.uv_scale) + glam::Vec2::from(m.uv_offset));
+        let px = q[0] * (1.0 - l1 - l2) + q[1] * l1 + q[2] * l2;
+        assert_eq!(
+            px.floor().as_uvec2().to_array(),
+            [u32::from(x.pixel[0]), u32::from(x.pixel[1])],
+            "texel {i}"
+        );
+    }
+}
+
+#[test]
+fn synth_rejects_impossible_counts_without_leaving_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = synth(10, &dir.path().join("x.texels")).unwrap_err();
+    assert!(e.to_string().contains("--texels 10"), "{e}");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
