@@ -14,7 +14,10 @@ pub struct Pcg32 {
 impl Pcg32 {
     /// A generator for `seed` on stream `stream`.
     pub fn new(seed: u64, stream: u64) -> Self {
-        let mut rng = Pcg32 { state: 0, inc: (stream << 1) | 1 };
+        let mut rng = Pcg32 {
+            state: 0,
+            inc: (stream << 1) | 1,
+        };
         rng.next_u32();
         rng.state = rng.state.wrapping_add(seed);
         rng.next_u32();
@@ -74,7 +77,11 @@ impl ChiSquare {
 /// # Panics
 /// If `observed` and `expected` differ in length.
 pub fn chi_square(observed: &[f64], expected: &[f64], min_expected: f64) -> ChiSquare {
-    assert_eq!(observed.len(), expected.len(), "histogram and pdf differ in size");
+    assert_eq!(
+        observed.len(),
+        expected.len(),
+        "histogram and pdf differ in size"
+    );
     let (mut statistic, mut cells, mut pooled_cells) = (0.0, 0u32, 0u32);
     let (mut pool_obs, mut pool_exp) = (0.0, 0.0);
     let mut impossible = false;
@@ -102,7 +109,12 @@ pub fn chi_square(observed: &[f64], expected: &[f64], min_expected: f64) -> ChiS
     } else {
         regularized_gamma_q(f64::from(dof) / 2.0, statistic / 2.0)
     };
-    ChiSquare { statistic, dof, p_value, pooled_cells }
+    ChiSquare {
+        statistic,
+        dof,
+        p_value,
+        pooled_cells,
+    }
 }
 
 /// Q(a, x) = Γ(a, x) / Γ(a), the upper regularized incomplete gamma function: a series for
