@@ -21,6 +21,8 @@ enum Command {
     Prepare(cmd::prepare::PrepareArgs),
     /// Write a procedural world of N texels and its scene, streaming.
     Synth(cmd::synth::SynthArgs),
+    /// The bundled default: bake a generated room lit through a door ajar, unguided and guided.
+    Demo(cmd::demo::DemoArgs),
     /// Bake a lightmap from a texel file with ray guiding.
     Bake(cmd::bake::BakeArgs),
     /// Combine the shards of a `bake --shard I/N` into the final lightmap.
@@ -36,6 +38,7 @@ fn main() -> ExitCode {
         Command::Prepare(a) => cmd::prepare::run(a),
         Command::Synth(a) => cmd::synth::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Demo(a) => cmd::demo::run(a),
         Command::Bake(a) => cmd::bake::run(a),
         Command::Merge(a) => cmd::merge::run(a),
     };

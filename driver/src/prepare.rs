@@ -179,6 +179,15 @@ pub fn prepare(
     out: &Path,
     opts: PrepareOptions,
 ) -> Result<PrepareReport, PrepareError> {
+    if scene.triangles.len() >= (PARTIAL_BIT - 1) as usize {
+        return Err(PrepareError::Resolution {
+            path: scene.path.clone(),
+            message: format!(
+                "{} triangles; prepare supports fewer than 2^31",
+                scene.triangles.len()
+            ),
+        });
+    }
     let stats = mesh_uv_stats(scene);
     let missing: Vec<String> = scene
         .meshes_without_lightmap_uvs()
@@ -385,10 +394,30 @@ fn per_mesh_layout(
             }
         })
         .collect();
+    // Without --size, a single page shrinks to what the packing used (32-texel multiples).
+    let used = if one_page || n > 1 {
+        page
+    } else {
+        let extent = |f: fn(&(u32, u32, u32), u32) -> u32| {
+            places
+                .iter()
+                .zip(&cs)
+                .filter_map(|(p, c)| Some(f(&(*p)?, (*c)?)))
+                .max()
+                .unwrap_or(1)
+        };
+        let w = extent(|p, c| p.1 + c + GUTTER)
+            .next_multiple_of(TILE_SIZE)
+            .min(page.0);
+        let h = extent(|p, c| p.2 + c + GUTTER)
+            .next_multiple_of(TILE_SIZE)
+            .min(page.1);
+        (w, h)
+    };
     let pages = vec![
         PageRecord {
-            width: page.0,
-            height: page.1
+            width: used.0,
+            height: used.1
         };
         n as usize
     ];

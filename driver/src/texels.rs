@@ -413,6 +413,14 @@ impl TexelWriter {
         if let Some(m) = meshes.iter().find(|m| m.page as usize >= pages.len()) {
             return Err(usage(format!("mesh on page {} of {}", m.page, pages.len())));
         }
+        if let Some(m) = meshes.iter().find(|m| {
+            u64::from(m.first_triangle) + u64::from(m.triangle_count) > u64::from(triangle_count)
+                || !m.uv_scale.iter().chain(&m.uv_offset).all(|v| v.is_finite())
+        }) {
+            return Err(usage(format!(
+                "mesh record {m:?} does not fit {triangle_count} triangles or is not finite"
+            )));
+        }
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())

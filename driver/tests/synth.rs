@@ -63,3 +63,43 @@ fn synth_rejects_impossible_counts_without_leaving_files() {
     assert!(e.to_string().contains("--texels 10"), "{e}");
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+/// `synth` then `inspect --json --texel`: the dump equals the file's records; an id out of
+/// range is an error naming the file.
+#[test]
+fn cli_synth_then_inspect_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("c.texels");
+    let bin = env!("CARGO_BIN_EXE_guidebake");
+    let run = |args: &[&str]| std::process::Command::new(bin).args(args).output().unwrap();
+    let o = run(&["synth", "--texels", "20000", "-o", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(&[
+        "inspect",
+        out.to_str().unwrap(),
+        "--json",
+        "--texel",
+        "0",
+        "--texel",
+        "1234",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let f = TexelFile::open(&out).unwrap();
+    assert_eq!(v["texel_count"], f.header().texel_count);
+    assert_eq!(v["tile_count"], f.header().tile_count);
+    for (k, id) in [0usize, 1234].into_iter().enumerate() {
+        let t = &f.texels()[id];
+        let pos: Vec<f32> = serde_json::from_value(v["texels"][k]["position"].clone()).unwrap();
+        let nrm: Vec<f32> = serde_json::from_value(v["texels"][k]["normal"].clone()).unwrap();
+        assert_eq!(pos, t.position);
+        assert_eq!(nrm, t.normal);
+    }
+    let o = run(&["inspect", out.to_str().unwrap(), "--texel", "99999999"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("c.texels: texel 99999999 is out of range"),
+        "{err}"
+    );
+}

@@ -467,7 +467,10 @@ mod tests {
         );
         for (name, hist) in [("scalar", &scalar), ("x8", &independent)] {
             let r = chi_square(hist, &expected, 5.0);
-            assert!(r.passes(0.01, 2), "{name}: {r:?}");
+            if !r.passes(0.01, 2) {
+                let path = dump_histogram(name, hist, &expected, NPHI);
+                panic!("{name}: {r:?}; histogram and expectation in {path}");
+            }
         }
         // The test can fail: a uniform-hemisphere sampler (z = u) must be rejected.
         let mut rng = Pcg32::new(2019, 3);
@@ -519,6 +522,32 @@ mod tests {
                 "u {u:?}: {area} vs {want}"
             );
         }
+    }
+
+    /// Writes observed and expected counts (rows: cos θ bins, columns: φ bins) under
+    /// `target/` so a person can look at a failing chi-square test.
+    fn dump_histogram(
+        name: &str,
+        observed: &[f64],
+        expected: &[f64],
+        columns: usize,
+    ) -> std::string::String {
+        use std::fmt::Write;
+        let mut text = std::string::String::from(
+            "# observed / expected per cell; rows = cos theta bins, columns = phi bins\n",
+        );
+        for (row_o, row_e) in observed.chunks(columns).zip(expected.chunks(columns)) {
+            for (o, e) in row_o.iter().zip(row_e) {
+                let _ = write!(text, "{o:.0}/{e:.1} ");
+            }
+            text.push('\n');
+        }
+        let path = std::format!(
+            "{}/../target/chi2_cosine_hemisphere_{name}.txt",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let _ = std::fs::write(&path, text);
+        path
     }
 
     fn check_basis(n: Vec3, t: Vec3, b: Vec3) {

@@ -24,7 +24,9 @@
 //!   four wrap quadrants, emitted in an order where consecutive quadrants are neighbours in
 //!   the rotated square.
 
-use crate::sobol::sobol_2d;
+use wide::{f32x8, u32x8};
+
+use crate::sobol::{rotate_x8, sobol_2d, sobol_2d_x8, to_unit_x8};
 
 /// Points per packet: the SIMD width of the warp and the traversal.
 pub const PACKET: usize = 8;
@@ -181,12 +183,43 @@ pub fn reorder_after_rotation_into(order: &[u32], r: [u32; 2], out: &mut [u32]) 
     }
 }
 
+/// One packet's points in the primary sample space: lane i is the Sobol point `packet[i]`
+/// rotated by `r`, as `f32` in [0, 1) — what the 8-wide warp and
+/// [`crate::mapping::sample_cosine_hemisphere_x8`] take.
+///
+/// `packet` holds 1 to 8 indices (a chunk of a presorted or reordered order); lanes past its
+/// end repeat its last index, so they carry valid samples that the caller masks off.
+///
+/// # Panics
+/// Debug builds assert 1 ≤ `packet.len()` ≤ 8. Release: an empty packet gives lanes of
+/// point 0, extra indices are ignored.
+#[inline]
+pub fn packet_u_x8(packet: &[u32], r: [u32; 2]) -> [f32x8; 2] {
+    debug_assert!(
+        (1..=PACKET).contains(&packet.len()),
+        "packet of {} indices",
+        packet.len()
+    );
+    let last = packet.len().min(PACKET).saturating_sub(1);
+    let lanes: [u32; PACKET] =
+        core::array::from_fn(|i| packet.get(i.min(last)).copied().unwrap_or(0));
+    let [x, y] = rotate_x8(sobol_2d_x8(u32x8::new(lanes)), r);
+    [to_unit_x8(x), to_unit_x8(y)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::sobol::rotate;
     use crate::testing::Pcg32;
     use std::vec::Vec;
+
+    /// Shadows the `alloc`-only [`super::presorted`] so these tests also run without `alloc`.
+    fn presorted(n: u32) -> Vec<u32> {
+        let mut out = std::vec![0; n as usize];
+        presort_into(n, &mut out);
+        out
+    }
 
     /// Reference: the explicit recursive quadtree whose leaves hold fewer than 8 points; its
     /// leaves as sets of indices, in Morton or Hilbert traversal order.
@@ -262,7 +295,8 @@ mod tests {
                 }
             }
         }
-        assert_eq!(presorted(100).len(), 100);
+        #[cfg(feature = "alloc")]
+        assert_eq!(super::presorted(100), presorted(100));
     }
 
     #[test]
@@ -270,6 +304,23 @@ mod tests {
         for n in [1, 7, 8, 9, 63, 64, 100, 256, 333, 1024] {
             check_matches_explicit_quadtree(n, CurveOrder::Hilbert);
             check_matches_explicit_quadtree(n, CurveOrder::Morton);
+        }
+    }
+
+    #[test]
+    fn packet_u_x8_matches_the_scalar_pipeline_for_every_lane_count() {
+        use crate::sobol::to_unit;
+        let order = presorted(203);
+        let r = crate::sobol::rotation(4, 99, 1);
+        for count in 1..=PACKET {
+            for packet in order.chunks(count) {
+                let [x, y] = packet_u_x8(packet, r);
+                for lane in 0..PACKET {
+                    let i = packet[lane.min(packet.len() - 1)];
+                    let u = rotate(sobol_2d(i), r).map(to_unit);
+                    assert_eq!([x.to_array()[lane], y.to_array()[lane]], u, "lane {lane}");
+                }
+            }
         }
     }
 

@@ -662,7 +662,9 @@ mod tests {
             .collect()
     }
 
-    /// Mean irradiance over the texels and its standard error (from the texels' spread).
+    /// Mean irradiance over the texels and its standard error (from the texels' spread),
+    /// after the bias correction ρ of the tile's sums, as the bake's final pass applies it:
+    /// Graybill–Deal alone is biased when a batch's variance correlates with its mean.
     fn bake_mean(
         world: &World,
         settings: BakeSettings,
@@ -670,8 +672,10 @@ mod tests {
     ) -> (Vec3, Vec3, GatherCounters) {
         let mut baker = TileBaker::new(world, settings);
         let mut out = Vec::new();
-        baker.bake_tile(0, 1000, texels, &mut out);
-        let values: Vec<Vec3> = out.iter().map(|r| Vec3::from(r.irradiance)).collect();
+        let baked = baker.bake_tile(0, 1000, texels, &mut out);
+        let sums = crate::output::journal::RhoSums::reduce(&[baked.record]);
+        let rho = sums.rho() as f32;
+        let values: Vec<Vec3> = out.iter().map(|r| Vec3::from(r.irradiance) * rho).collect();
         assert!(values.iter().all(|v| v.is_finite()));
         assert!(out.iter().all(|r| r.flags & FLAG_BAKED != 0));
         let n = values.len() as f32;

@@ -388,6 +388,8 @@ pub struct Written {
     pub rho: f64,
     /// The page files.
     pub pages: Vec<PathBuf>,
+    /// Their tone-mapped PNG previews.
+    pub previews: Vec<PathBuf>,
     /// Non-finite pixels replaced by zero.
     pub non_finite_pixels: u64,
 }
@@ -459,7 +461,12 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
         image.dilate(DILATION_PIXELS);
         let path = page_path(out, page as u32, page_count);
         image.write_exr(&path)?;
+        let preview = path.with_extension("png");
+        image
+            .write_preview(&preview)
+            .map_err(|e| file_error(&preview, e))?;
         written.pages.push(path);
+        written.previews.push(preview);
     }
     Ok(written)
 }

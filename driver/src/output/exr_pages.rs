@@ -199,6 +199,39 @@ impl PageImage {
     }
 }
 
+impl PageImage {
+    /// Writes a tone-mapped sRGB preview (Reinhard, exposure set so the mean covered pixel's
+    /// luminance maps to ½) as a PNG, through a temporary name.
+    ///
+    /// # Errors
+    /// [`PreviewError`](crate::preview::PreviewError) naming the file.
+    pub fn write_preview(&self, path: &Path) -> Result<(), crate::preview::PreviewError> {
+        let covered: Vec<&[f32; 3]> = self
+            .rgb
+            .iter()
+            .zip(&self.covered)
+            .filter(|(_, c)| **c)
+            .map(|(p, _)| p)
+            .collect();
+        let mean = covered
+            .iter()
+            .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
+            .sum::<f32>()
+            / covered.len().max(1) as f32;
+        let exposure = if mean > 0.0 && mean.is_finite() {
+            1.0 / mean
+        } else {
+            1.0
+        };
+        let bytes: Vec<u8> = self
+            .rgb
+            .iter()
+            .flat_map(|p| crate::preview::tonemap_reinhard(*p, exposure))
+            .collect();
+        crate::preview::write_png_rgb8(path, self.width as u32, self.height as u32, &bytes)
+    }
+}
+
 /// The file of page `page` of `page_count`: `OUT.exr` itself for a single page, otherwise
 /// `OUT.page{N}.exr` beside it.
 pub fn page_path(out: &Path, page: u32, page_count: u32) -> PathBuf {
@@ -300,6 +333,20 @@ mod tests {
         let err = PageImage::new(1, 1).write_exr(&path).unwrap_err();
         assert!(err.to_string().contains("lm.exr"), "{err}");
         assert!(!path.exists());
+    }
+
+    #[test]
+    fn previews_are_tone_mapped_pngs() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut page = PageImage::new(3, 2);
+        page.set(0, 0, [1e5, 1e5, 1e5]);
+        page.set(1, 0, [1e-4, 1e-4, 1e-4]);
+        let path = dir.path().join("lm.png");
+        page.write_preview(&path).unwrap();
+        let png = image::open(&path).unwrap().to_rgb8();
+        assert_eq!(png.dimensions(), (3, 2));
+        assert!(png.get_pixel(0, 0)[0] > png.get_pixel(1, 0)[0]);
+        assert_eq!(png.get_pixel(2, 1).0, [0, 0, 0]);
     }
 
     #[test]
