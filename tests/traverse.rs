@@ -97,12 +97,12 @@ fn random_packets(rng: &mut Pcg32, count: usize, scale: f32, offset: Vec3) -> Ve
                         unit_dir(rng),
                     )
                 };
-                let tmin = if rng.next_u32() % 4 == 0 {
+                let tmin = if rng.next_u32().is_multiple_of(4) {
                     rng.next_f32() * scale * 0.3
                 } else {
                     0.0
                 };
-                let tmax = if rng.next_u32() % 4 == 0 {
+                let tmax = if rng.next_u32().is_multiple_of(4) {
                     tmin + rng.next_f32() * scale
                 } else {
                     f32::INFINITY

@@ -1,11 +1,10 @@
 //! Scenes and ray sets shared by `tests/traverse.rs` and `benches/traverse.rs` (included with
-//! `#[path]`). The .glb loader stands in for `guidebake::scene::Scene::load`, which had not
-//! landed on main when this was written: replace it once it has.
+//! `#[path]`).
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use guidebake_kernels::packet::{LANES, Ray8};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::offset_origin;
@@ -23,45 +22,14 @@ pub fn converted_dir() -> Option<PathBuf> {
     .map(Path::to_path_buf)
 }
 
-/// World-space triangles of every mesh primitive in a glTF binary (node transforms applied).
+/// World-space triangles of a scene file, through the driver's loader
+/// ([`guidebake::scene::Scene::load`]; primitive id = index in [`Scene::triangle_positions`]).
+///
+/// [`Scene::triangle_positions`]: guidebake::scene::Scene::triangle_positions
 pub fn load_glb(path: &Path) -> Vec<[Vec3; 3]> {
-    let (doc, buffers, _) =
-        gltf::import(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut soup = Vec::new();
-    for scene in doc.scenes() {
-        for node in scene.nodes() {
-            walk(&node, Mat4::IDENTITY, &buffers, &mut soup);
-        }
-    }
-    soup
-}
-
-fn walk(
-    node: &gltf::Node,
-    parent: Mat4,
-    buffers: &[gltf::buffer::Data],
-    soup: &mut Vec<[Vec3; 3]>,
-) {
-    let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
-    if let Some(mesh) = node.mesh() {
-        for prim in mesh.primitives() {
-            let reader = prim.reader(|b| Some(&buffers[b.index()]));
-            let pos: Vec<Vec3> = reader
-                .read_positions()
-                .map(|p| p.map(|p| world.transform_point3(Vec3::from(p))).collect())
-                .unwrap_or_default();
-            let idx: Vec<u32> = match reader.read_indices() {
-                Some(i) => i.into_u32().collect(),
-                None => (0..pos.len() as u32).collect(),
-            };
-            for t in idx.chunks_exact(3) {
-                soup.push([pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]]);
-            }
-        }
-    }
-    for child in node.children() {
-        walk(&child, world, buffers, soup);
-    }
+    guidebake::scene::Scene::load(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .triangle_positions()
 }
 
 /// A procedural city: a `side × side` grid of boxes of random heights on a ground plane, each

@@ -55,8 +55,9 @@ impl Preset {
         Preset::VerySlowBuild,
     ];
 
-    /// The bake's choice, by measurement (docs/traverse.md, "Build presets"): the preset whose
-    /// build time plus trace time is smallest for a bake-sized ray budget.
+    /// The bake's choice. Measured in docs/traverse.md ("Build presets"): on a loaded machine
+    /// only `FastestBuild` traced clearly slower; the others were within noise, so this stays
+    /// obvhs's "about Embree's build time" preset until a quiet rerun says otherwise.
     pub const DEFAULT: Preset = Preset::MediumBuild;
 
     /// obvhs's parameters for this preset.

@@ -253,12 +253,9 @@ mod tests {
         for n in 0..=LANES {
             let rays: [Ray; LANES] = core::array::from_fn(|_| random_ray(&mut rng));
             let packet = Ray8::from_rays(&rays[..n]);
-            for lane in 0..LANES {
-                if lane < n {
-                    assert_eq!(packet.lane(lane), rays[lane]);
-                } else {
-                    assert_eq!(packet.lane(lane), Ray::INACTIVE);
-                }
+            for (lane, ray) in rays.iter().enumerate() {
+                let want = if lane < n { *ray } else { Ray::INACTIVE };
+                assert_eq!(packet.lane(lane), want);
             }
             assert_eq!(packet.active().to_bitmask(), (1u32 << n) - 1);
         }

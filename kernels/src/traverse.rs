@@ -935,14 +935,14 @@ mod tests {
     fn ray(rng: &mut Pcg32, org: Vec3) -> Ray {
         let special = [0.0, -0.0, 1.0, -1.0, 1e-20, 0.5];
         let mut c = || {
-            if rng.next_u32() % 3 == 0 {
+            if rng.next_u32().is_multiple_of(3) {
                 special[(rng.next_u32() % 6) as usize]
             } else {
                 rng.next_f32() * 2.0 - 1.0
             }
         };
         let d = Vec3::new(c(), c(), c());
-        let tmax = if rng.next_u32() % 3 == 0 {
+        let tmax = if rng.next_u32().is_multiple_of(3) {
             1.0 + 4.0 * rng.next_f32()
         } else {
             f32::INFINITY
