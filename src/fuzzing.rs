@@ -8,8 +8,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use guidebake::output::journal::Journal;
 use guidebake::output::result_file::{ResultFile, TexelResult};
 
+/// A fuzz target's body: arbitrary bytes in, a panic only on a broken invariant.
+pub type Body = fn(&[u8]);
+
 /// The names of the targets, as `fuzz/corpus/` folders and `fuzz/fuzz_targets/` files.
-pub const TARGETS: &[(&str, fn(&[u8]))] = &[("journal", journal), ("result_file", result_file)];
+pub const TARGETS: &[(&str, Body)] = &[("journal", journal), ("result_file", result_file)];
 
 /// A unique path in the temporary directory for one input, removed when dropped.
 struct ScratchFile(PathBuf);

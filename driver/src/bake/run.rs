@@ -279,7 +279,7 @@ pub fn bake(
     drop((results, journal));
     if !report.interrupted && job.shard.count == 1 {
         let clock = Instant::now();
-        let written = finish(&texels, &[dir.clone()], &job.out)?;
+        let written = finish(&texels, std::slice::from_ref(&dir), &job.out)?;
         report.seconds.write_pages = clock.elapsed().as_secs_f64();
         report.rho = written.rho;
         report.pages = written.pages;

@@ -50,10 +50,8 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     for (name, guiding) in [("baseline", Guiding::Off), ("guided", Guiding::Coherent)] {
         let out = args.out.join(format!("{name}.exr"));
-        for stale in [crate::bake::run::work_dir(&out, Shard::WHOLE)] {
-            // A demo is always baked afresh: an earlier, interrupted demo's work is not resumed.
-            let _ = std::fs::remove_dir_all(stale);
-        }
+        // A demo is always baked afresh: an earlier, interrupted demo's work is not resumed.
+        let _ = std::fs::remove_dir_all(crate::bake::run::work_dir(&out, Shard::WHOLE));
         let job = BakeJob {
             texels: texels.clone(),
             out: out.clone(),
