@@ -23,8 +23,9 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use crossbeam::channel;
 
-use crate::output::journal::{Journal, JournalError, TileRecord};
-use crate::output::result_file::{ResultFile, ResultFileError, TexelResult};
+use crate::output::OutputFileError;
+use crate::output::journal::{Journal, TileRecord};
+use crate::output::result_file::{ResultFile, TexelResult};
 
 /// What a worker produced for one tile.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -62,12 +63,9 @@ pub struct PipelineReport {
 /// Why the pipeline stopped early.
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
-    /// Writing or syncing results failed.
+    /// Writing, reading or syncing the result file or the journal failed.
     #[error(transparent)]
-    Results(#[from] ResultFileError),
-    /// Appending to the journal failed.
-    #[error(transparent)]
-    Journal(#[from] JournalError),
+    Output(#[from] OutputFileError),
     /// The worker pool could not be started.
     #[error("cannot start {threads} worker threads: {why}")]
     Threads {

@@ -24,10 +24,11 @@ use super::settings::{BakeSettings, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::world::World;
 use crate::bvh::{BvhError, Preset};
+use crate::output::OutputFileError;
 use crate::output::exr_pages::{PageImage, PageWriteError, page_path, temporary_name};
 use crate::output::fnv1a64;
-use crate::output::journal::{Journal, JournalError, RhoSums, TileRecord, dedup_tiles};
-use crate::output::result_file::{FLAG_BAKED, ResultFile, ResultFileError, TexelResult};
+use crate::output::journal::{Journal, RhoSums, TileRecord, dedup_tiles};
+use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
 use crate::scene::Scene;
 use crate::texels::{TexelFile, TexelFileError};
 
@@ -122,12 +123,9 @@ pub enum BakeError {
     /// The BVH could not be built from the scene.
     #[error("cannot build the BVH: {0}")]
     Bvh(#[from] BvhError),
-    /// Result file trouble.
+    /// Writing, reading or syncing the result file or the journal failed.
     #[error(transparent)]
-    Results(#[from] ResultFileError),
-    /// Journal trouble.
-    #[error(transparent)]
-    Journal(#[from] JournalError),
+    Output(#[from] OutputFileError),
     /// The pipeline failed.
     #[error(transparent)]
     Pipeline(#[from] PipelineError),

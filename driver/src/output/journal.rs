@@ -12,13 +12,12 @@
 //! results are on disk.
 
 use std::fs::{File, OpenOptions};
-use std::io;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use bytemuck::{Pod, Zeroable};
 
-use super::fnv1a64;
+use super::{OutputFileError, fnv1a64, io_error};
 
 /// Magic bytes at the start of a journal.
 pub const JOURNAL_MAGIC: [u8; 8] = *b"GBJOURNL";
@@ -127,29 +126,6 @@ pub fn dedup_tiles(records: &mut Vec<TileRecord>) {
     records.dedup_by_key(|r| r.tile);
 }
 
-/// What went wrong with a journal; every variant names the file.
-#[derive(Debug, thiserror::Error)]
-pub enum JournalError {
-    /// The operating system refused an operation.
-    #[error("{path}: {what}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What was being done.
-        what: &'static str,
-        /// The OS error.
-        source: io::Error,
-    },
-    /// The file is not a journal of this version, or belongs to another bake.
-    #[error("{path}: {what}")]
-    Mismatch {
-        /// The file.
-        path: PathBuf,
-        /// What does not match.
-        what: String,
-    },
-}
-
 /// An open journal, appending.
 #[derive(Debug)]
 pub struct Journal {
@@ -162,8 +138,8 @@ impl Journal {
     /// Creates (or truncates) a journal for bake `bake_id` over `tile_count` tiles, synced.
     ///
     /// # Errors
-    /// [`JournalError::Io`] when the file cannot be created or synced.
-    pub fn create(path: &Path, tile_count: u32, bake_id: u64) -> Result<Self, JournalError> {
+    /// [`OutputFileError::Io`] when the file cannot be created or synced.
+    pub fn create(path: &Path, tile_count: u32, bake_id: u64) -> Result<Self, OutputFileError> {
         let io = |what| move |source| io_error(path, what, source);
         let file = OpenOptions::new()
             .read(true)
@@ -194,13 +170,13 @@ impl Journal {
     /// = `Some((tile_count, bake_id))` a journal of another bake is refused.
     ///
     /// # Errors
-    /// [`JournalError::Io`] when it cannot be read or truncated; [`JournalError::Mismatch`]
+    /// [`OutputFileError::Io`] when it cannot be read or truncated; [`OutputFileError::Mismatch`]
     /// on a bad magic, version, tile count or bake identity.
     pub fn open(
         path: &Path,
         writable: bool,
         expect: Option<(u32, u64)>,
-    ) -> Result<(Self, JournalHeader, Vec<TileRecord>), JournalError> {
+    ) -> Result<(Self, JournalHeader, Vec<TileRecord>), OutputFileError> {
         let io = |what| move |source| io_error(path, what, source);
         let file = OpenOptions::new()
             .read(true)
@@ -208,7 +184,7 @@ impl Journal {
             .open(path)
             .map_err(io("open"))?;
         let len = file.metadata().map_err(io("stat"))?.len();
-        let mismatch = |what: String| JournalError::Mismatch {
+        let mismatch = |what: String| OutputFileError::Mismatch {
             path: path.to_owned(),
             what,
         };
@@ -258,8 +234,8 @@ impl Journal {
     /// results were written to the result file and synced.
     ///
     /// # Errors
-    /// [`JournalError::Io`] when the write or the sync fails.
-    pub fn append(&mut self, records: &[TileRecord]) -> Result<(), JournalError> {
+    /// [`OutputFileError::Io`] when the write or the sync fails.
+    pub fn append(&mut self, records: &[TileRecord]) -> Result<(), OutputFileError> {
         let sealed: Vec<TileRecord> = records.iter().map(|r| r.sealed()).collect();
         let bytes: &[u8] = bytemuck::cast_slice(&sealed);
         self.file
@@ -285,14 +261,6 @@ fn intact_records(bytes: &[u8], tile_count: u32) -> Vec<TileRecord> {
         .map(bytemuck::pod_read_unaligned::<TileRecord>)
         .take_while(|r| r.is_intact() && r.tile < tile_count)
         .collect()
-}
-
-fn io_error(path: &Path, what: &'static str, source: io::Error) -> JournalError {
-    JournalError::Io {
-        path: path.to_owned(),
-        what,
-        source,
-    }
 }
 
 #[cfg(test)]

@@ -14,6 +14,9 @@
 //! split. A final streaming pass ([`exr_pages`]) applies ρ and writes the EXR pages, each to
 //! a temporary name renamed into place, so an output that looks complete is complete.
 
+use std::io;
+use std::path::{Path, PathBuf};
+
 pub mod exr_pages;
 pub mod journal;
 pub mod result_file;
@@ -27,4 +30,48 @@ pub fn fnv1a64(bytes: &[u8]) -> u64 {
         h = h.wrapping_mul(0x0000_0100_0000_01b3);
     }
     h
+}
+
+/// What went wrong with a result file or a journal; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputFileError {
+    /// The operating system refused an operation.
+    #[error("{path}: {what}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What was being done.
+        what: &'static str,
+        /// The OS error.
+        source: io::Error,
+    },
+    /// The file is not of this kind or version, or belongs to another bake.
+    #[error("{path}: {what}")]
+    Mismatch {
+        /// The file.
+        path: PathBuf,
+        /// What does not match.
+        what: String,
+    },
+    /// A texel range past the end of a result file.
+    #[error("{path}: texels {first}..{end} lie past the {count} texels of the file")]
+    OutOfRange {
+        /// The file.
+        path: PathBuf,
+        /// First texel asked for.
+        first: u64,
+        /// One past the last texel asked for.
+        end: u64,
+        /// Texels in the file.
+        count: u64,
+    },
+}
+
+/// An [`OutputFileError::Io`] for `path`.
+fn io_error(path: &Path, what: &'static str, source: io::Error) -> OutputFileError {
+    OutputFileError::Io {
+        path: path.to_owned(),
+        what,
+        source,
+    }
 }

@@ -10,11 +10,12 @@
 //! so that `--resume` refuses to continue a different bake's results.
 
 use std::fs::{File, OpenOptions};
-use std::io;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use bytemuck::{Pod, Zeroable};
+
+use super::{OutputFileError, io_error};
 
 /// Magic bytes at the start of a result file.
 pub const RESULT_MAGIC: [u8; 8] = *b"GBRESULT";
@@ -70,41 +71,6 @@ pub struct ResultHeader {
 
 const _: () = assert!(size_of::<ResultHeader>() as u64 == RESULT_HEADER_BYTES);
 
-/// What went wrong with a result file; every variant names the file.
-#[derive(Debug, thiserror::Error)]
-pub enum ResultFileError {
-    /// The operating system refused an operation.
-    #[error("{path}: {what}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What was being done.
-        what: &'static str,
-        /// The OS error.
-        source: io::Error,
-    },
-    /// The file is not a result file of this version, or of another bake.
-    #[error("{path}: {what}")]
-    Mismatch {
-        /// The file.
-        path: PathBuf,
-        /// What does not match.
-        what: String,
-    },
-    /// A texel range past the end of the file.
-    #[error("{path}: texels {first}..{end} lie past the {count} texels of the file")]
-    OutOfRange {
-        /// The file.
-        path: PathBuf,
-        /// First texel asked for.
-        first: u64,
-        /// One past the last texel asked for.
-        end: u64,
-        /// Texels in the file.
-        count: u64,
-    },
-}
-
 /// A result file open for writing (a bake) or reading (the final pass, `merge`).
 #[derive(Debug)]
 pub struct ResultFile {
@@ -118,8 +84,8 @@ impl ResultFile {
     /// preallocated sparse at its full size and synced.
     ///
     /// # Errors
-    /// [`ResultFileError::Io`] when the file cannot be created, sized or synced.
-    pub fn create(path: &Path, texel_count: u64, bake_id: u64) -> Result<Self, ResultFileError> {
+    /// [`OutputFileError::Io`] when the file cannot be created, sized or synced.
+    pub fn create(path: &Path, texel_count: u64, bake_id: u64) -> Result<Self, OutputFileError> {
         let io = |what| move |source| io_error(path, what, source);
         let file = OpenOptions::new()
             .read(true)
@@ -136,7 +102,7 @@ impl ResultFile {
             bake_id,
             reserved: [0; 4],
         };
-        let len = records_end(texel_count).ok_or_else(|| ResultFileError::Mismatch {
+        let len = records_end(texel_count).ok_or_else(|| OutputFileError::Mismatch {
             path: path.to_owned(),
             what: format!("{texel_count} texels do not fit in a file"),
         })?;
@@ -156,13 +122,13 @@ impl ResultFile {
     /// the shards agree among themselves).
     ///
     /// # Errors
-    /// [`ResultFileError::Io`] when it cannot be opened or read; [`ResultFileError::Mismatch`]
+    /// [`OutputFileError::Io`] when it cannot be opened or read; [`OutputFileError::Mismatch`]
     /// when the magic, version, record size, length or bake identity differ.
     pub fn open(
         path: &Path,
         writable: bool,
         expect: Option<(u64, u64)>,
-    ) -> Result<(Self, ResultHeader), ResultFileError> {
+    ) -> Result<(Self, ResultHeader), OutputFileError> {
         let io = |what| move |source| io_error(path, what, source);
         let file = OpenOptions::new()
             .read(true)
@@ -171,7 +137,7 @@ impl ResultFile {
             .map_err(io("open"))?;
         let mut bytes = [0u8; RESULT_HEADER_BYTES as usize];
         let len = file.metadata().map_err(io("stat"))?.len();
-        let mismatch = |what: String| ResultFileError::Mismatch {
+        let mismatch = |what: String| OutputFileError::Mismatch {
             path: path.to_owned(),
             what,
         };
@@ -238,8 +204,8 @@ impl ResultFile {
     /// Writes `results` for the texels from `first_texel` on, in place.
     ///
     /// # Errors
-    /// [`ResultFileError::OutOfRange`] past the end; [`ResultFileError::Io`] on a failed write.
-    pub fn write(&self, first_texel: u64, results: &[TexelResult]) -> Result<(), ResultFileError> {
+    /// [`OutputFileError::OutOfRange`] past the end; [`OutputFileError::Io`] on a failed write.
+    pub fn write(&self, first_texel: u64, results: &[TexelResult]) -> Result<(), OutputFileError> {
         let offset = self.range_offset(first_texel, results.len())?;
         self.file
             .write_all_at(bytemuck::cast_slice(results), offset)
@@ -249,8 +215,8 @@ impl ResultFile {
     /// Reads the texels from `first_texel` on into `out`.
     ///
     /// # Errors
-    /// [`ResultFileError::OutOfRange`] past the end; [`ResultFileError::Io`] on a failed read.
-    pub fn read(&self, first_texel: u64, out: &mut [TexelResult]) -> Result<(), ResultFileError> {
+    /// [`OutputFileError::OutOfRange`] past the end; [`OutputFileError::Io`] on a failed read.
+    pub fn read(&self, first_texel: u64, out: &mut [TexelResult]) -> Result<(), OutputFileError> {
         let offset = self.range_offset(first_texel, out.len())?;
         self.file
             .read_exact_at(bytemuck::cast_slice_mut(out), offset)
@@ -260,18 +226,18 @@ impl ResultFile {
     /// Makes every write so far durable (`fdatasync`): call before journalling the tiles.
     ///
     /// # Errors
-    /// [`ResultFileError::Io`] when the sync fails.
-    pub fn sync(&self) -> Result<(), ResultFileError> {
+    /// [`OutputFileError::Io`] when the sync fails.
+    pub fn sync(&self) -> Result<(), OutputFileError> {
         self.file
             .sync_data()
             .map_err(|e| io_error(&self.path, "sync", e))
     }
 
-    fn range_offset(&self, first: u64, count: usize) -> Result<u64, ResultFileError> {
+    fn range_offset(&self, first: u64, count: usize) -> Result<u64, OutputFileError> {
         let end = first.checked_add(count as u64);
         match end {
             Some(end) if end <= self.texel_count => Ok(RESULT_HEADER_BYTES + first * 32),
-            _ => Err(ResultFileError::OutOfRange {
+            _ => Err(OutputFileError::OutOfRange {
                 path: self.path.clone(),
                 first,
                 end: end.unwrap_or(u64::MAX),
@@ -285,14 +251,6 @@ fn records_end(texel_count: u64) -> Option<u64> {
     texel_count
         .checked_mul(32)?
         .checked_add(RESULT_HEADER_BYTES)
-}
-
-fn io_error(path: &Path, what: &'static str, source: io::Error) -> ResultFileError {
-    ResultFileError::Io {
-        path: path.to_owned(),
-        what,
-        source,
-    }
 }
 
 #[cfg(test)]
@@ -337,7 +295,7 @@ mod tests {
         let err = file.write(8, &[result(0); 3]).unwrap_err();
         assert!(matches!(
             err,
-            ResultFileError::OutOfRange {
+            OutputFileError::OutOfRange {
                 first: 8,
                 end: 11,
                 count: 10,
