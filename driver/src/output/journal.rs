@@ -11,13 +11,13 @@
 //! journal only after its results were written and synced, so every journalled tile's
 //! results are on disk.
 
-use std::fs::{File, OpenOptions};
+use std::fs::File;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{OutputFileError, fnv1a64, io_error};
+use super::{OutputFileError, create_with_header, fnv1a64, io_error, open_with_header};
 
 /// Magic bytes at the start of a journal.
 pub const JOURNAL_MAGIC: [u8; 8] = *b"GBJOURNL";
@@ -140,14 +140,6 @@ impl Journal {
     /// # Errors
     /// [`OutputFileError::Io`] when the file cannot be created or synced.
     pub fn create(path: &Path, tile_count: u32, bake_id: u64) -> Result<Self, OutputFileError> {
-        let io = |what| move |source| io_error(path, what, source);
-        let file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(path)
-            .map_err(io("create"))?;
         let header = JournalHeader {
             magic: JOURNAL_MAGIC,
             version: JOURNAL_VERSION,
@@ -155,9 +147,7 @@ impl Journal {
             bake_id,
             reserved: [0; 5],
         };
-        file.write_all_at(bytemuck::bytes_of(&header), 0)
-            .map_err(io("write header"))?;
-        file.sync_all().map_err(io("sync"))?;
+        let file = create_with_header(path, &bytemuck::cast(header), HEADER_BYTES)?;
         Ok(Self {
             file,
             path: path.to_owned(),
@@ -178,33 +168,16 @@ impl Journal {
         expect: Option<(u32, u64)>,
     ) -> Result<(Self, JournalHeader, Vec<TileRecord>), OutputFileError> {
         let io = |what| move |source| io_error(path, what, source);
-        let file = OpenOptions::new()
-            .read(true)
-            .write(writable)
-            .open(path)
-            .map_err(io("open"))?;
-        let len = file.metadata().map_err(io("stat"))?.len();
         let mismatch = |what: String| OutputFileError::Mismatch {
             path: path.to_owned(),
             what,
         };
-        if len < HEADER_BYTES {
-            return Err(mismatch(format!("{len} bytes is too short for a journal")));
-        }
-        let mut bytes = vec![0u8; len as usize];
-        file.read_exact_at(&mut bytes, 0).map_err(io("read"))?;
-        let header: JournalHeader = bytemuck::pod_read_unaligned(&bytes[..HEADER_BYTES as usize]);
-        if header.magic != JOURNAL_MAGIC {
-            return Err(mismatch(
-                "not a guidebake journal (bad magic at offset 0)".into(),
-            ));
-        }
-        if header.version != JOURNAL_VERSION {
-            return Err(mismatch(format!(
-                "journal version {} (this build reads {JOURNAL_VERSION})",
-                header.version
-            )));
-        }
+        let (file, len, head) =
+            open_with_header(path, writable, "journal", JOURNAL_MAGIC, JOURNAL_VERSION)?;
+        let header: JournalHeader = bytemuck::cast(head);
+        let mut bytes = vec![0u8; (len - HEADER_BYTES) as usize];
+        file.read_exact_at(&mut bytes, HEADER_BYTES)
+            .map_err(io("read records"))?;
         if let Some((tiles, bake_id)) = expect
             && (header.tile_count != tiles || header.bake_id != bake_id)
         {
@@ -213,7 +186,7 @@ impl Journal {
                 header.tile_count, header.bake_id
             )));
         }
-        let records = intact_records(&bytes[HEADER_BYTES as usize..], header.tile_count);
+        let records = intact_records(&bytes, header.tile_count);
         let intact_len = HEADER_BYTES + records.len() as u64 * RECORD_BYTES;
         if writable && intact_len != len {
             file.set_len(intact_len).map_err(io("truncate torn tail"))?;
@@ -265,6 +238,8 @@ fn intact_records(bytes: &[u8], tile_count: u32) -> Vec<TileRecord> {
 
 #[cfg(test)]
 mod tests {
+    use std::fs::OpenOptions;
+
     use super::*;
 
     fn record(tile: u32) -> TileRecord {

@@ -14,7 +14,9 @@
 //! split. A final streaming pass ([`exr_pages`]) applies ρ and writes the EXR pages, each to
 //! a temporary name renamed into place, so an output that looks complete is complete.
 
+use std::fs::{File, OpenOptions};
 use std::io;
+use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 pub mod exr_pages;
@@ -74,4 +76,68 @@ fn io_error(path: &Path, what: &'static str, source: io::Error) -> OutputFileErr
         what,
         source,
     }
+}
+
+/// Bytes of the header every output file starts with: magic (8), version (4), the rest.
+const HEADER_BYTES: usize = 64;
+
+/// Creates (or truncates) `path`, sizes it to `len` bytes (sparse), writes `header` at offset
+/// 0 and syncs: the common start of a result file and a journal.
+fn create_with_header(
+    path: &Path,
+    header: &[u8; HEADER_BYTES],
+    len: u64,
+) -> Result<File, OutputFileError> {
+    let io = |what| move |source| io_error(path, what, source);
+    let file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(path)
+        .map_err(io("create"))?;
+    file.set_len(len).map_err(io("preallocate"))?;
+    file.write_all_at(header, 0).map_err(io("write header"))?;
+    file.sync_all().map_err(io("sync"))?;
+    Ok(file)
+}
+
+/// Opens `path` and returns it with its length and header, after checking the header's magic
+/// (first 8 bytes) and version (next 4, little-endian); `kind` names the file in messages.
+fn open_with_header(
+    path: &Path,
+    writable: bool,
+    kind: &str,
+    magic: [u8; 8],
+    version: u32,
+) -> Result<(File, u64, [u8; HEADER_BYTES]), OutputFileError> {
+    let io = |what| move |source| io_error(path, what, source);
+    let mismatch = |what: String| OutputFileError::Mismatch {
+        path: path.to_owned(),
+        what,
+    };
+    let file = OpenOptions::new()
+        .read(true)
+        .write(writable)
+        .open(path)
+        .map_err(io("open"))?;
+    let len = file.metadata().map_err(io("stat"))?.len();
+    if len < HEADER_BYTES as u64 {
+        return Err(mismatch(format!("{len} bytes is too short for a {kind}")));
+    }
+    let mut header = [0u8; HEADER_BYTES];
+    file.read_exact_at(&mut header, 0)
+        .map_err(io("read header"))?;
+    if header[..8] != magic {
+        return Err(mismatch(format!(
+            "not a guidebake {kind} (bad magic at offset 0)"
+        )));
+    }
+    let found = u32::from_le_bytes(header[8..12].try_into().expect("4 bytes"));
+    if found != version {
+        return Err(mismatch(format!(
+            "{kind} version {found} (this build reads {version})"
+        )));
+    }
+    Ok((file, len, header))
 }

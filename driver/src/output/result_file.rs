@@ -9,13 +9,13 @@
 //! The header carries the identity of the bake (a hash of its settings and of its texel file)
 //! so that `--resume` refuses to continue a different bake's results.
 
-use std::fs::{File, OpenOptions};
+use std::fs::File;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use bytemuck::{Pod, Zeroable};
 
-use super::{OutputFileError, io_error};
+use super::{OutputFileError, create_with_header, io_error, open_with_header};
 
 /// Magic bytes at the start of a result file.
 pub const RESULT_MAGIC: [u8; 8] = *b"GBRESULT";
@@ -86,14 +86,6 @@ impl ResultFile {
     /// # Errors
     /// [`OutputFileError::Io`] when the file cannot be created, sized or synced.
     pub fn create(path: &Path, texel_count: u64, bake_id: u64) -> Result<Self, OutputFileError> {
-        let io = |what| move |source| io_error(path, what, source);
-        let file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(path)
-            .map_err(io("create"))?;
         let header = ResultHeader {
             magic: RESULT_MAGIC,
             version: RESULT_VERSION,
@@ -106,10 +98,7 @@ impl ResultFile {
             path: path.to_owned(),
             what: format!("{texel_count} texels do not fit in a file"),
         })?;
-        file.set_len(len).map_err(io("preallocate"))?;
-        file.write_all_at(bytemuck::bytes_of(&header), 0)
-            .map_err(io("write header"))?;
-        file.sync_all().map_err(io("sync"))?;
+        let file = create_with_header(path, &bytemuck::cast(header), len)?;
         Ok(Self {
             file,
             path: path.to_owned(),
@@ -129,37 +118,13 @@ impl ResultFile {
         writable: bool,
         expect: Option<(u64, u64)>,
     ) -> Result<(Self, ResultHeader), OutputFileError> {
-        let io = |what| move |source| io_error(path, what, source);
-        let file = OpenOptions::new()
-            .read(true)
-            .write(writable)
-            .open(path)
-            .map_err(io("open"))?;
-        let mut bytes = [0u8; RESULT_HEADER_BYTES as usize];
-        let len = file.metadata().map_err(io("stat"))?.len();
+        let (file, len, bytes) =
+            open_with_header(path, writable, "result file", RESULT_MAGIC, RESULT_VERSION)?;
+        let header: ResultHeader = bytemuck::cast(bytes);
         let mismatch = |what: String| OutputFileError::Mismatch {
             path: path.to_owned(),
             what,
         };
-        if len < RESULT_HEADER_BYTES {
-            return Err(mismatch(format!(
-                "{len} bytes is too short for a result file"
-            )));
-        }
-        file.read_exact_at(&mut bytes, 0)
-            .map_err(io("read header"))?;
-        let header: ResultHeader = bytemuck::pod_read_unaligned(&bytes);
-        if header.magic != RESULT_MAGIC {
-            return Err(mismatch(
-                "not a guidebake result file (bad magic at offset 0)".into(),
-            ));
-        }
-        if header.version != RESULT_VERSION {
-            return Err(mismatch(format!(
-                "result file version {} (this build reads {RESULT_VERSION})",
-                header.version
-            )));
-        }
         if header.record_bytes as usize != size_of::<TexelResult>() {
             return Err(mismatch(format!(
                 "record size {} (expected 32)",
@@ -255,6 +220,8 @@ fn records_end(texel_count: u64) -> Option<u64> {
 
 #[cfg(test)]
 mod tests {
+    use std::fs::OpenOptions;
+
     use super::*;
 
     fn result(i: u32) -> TexelResult {
