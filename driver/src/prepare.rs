@@ -38,6 +38,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
+use guidebake_kernels::presort::CurveOrder;
 
 use crate::scene::{Scene, Triangle};
 use crate::texels::{
@@ -621,7 +622,7 @@ impl PageRaster {
             self.size.height.div_ceil(TILE_SIZE),
         );
         let mut order: Vec<(u64, u32, u32)> = (0..th)
-            .flat_map(|ty| (0..tw).map(move |tx| (morton(tx, ty), tx, ty)))
+            .flat_map(|ty| (0..tw).map(move |tx| (CurveOrder::Morton.key([tx, ty]), tx, ty)))
             .collect();
         order.sort_unstable();
         let mut buf = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
@@ -654,19 +655,6 @@ impl PageRaster {
         }
         Ok(())
     }
-}
-
-/// Interleaves the bits of x and y (Z-order).
-fn morton(x: u32, y: u32) -> u64 {
-    fn spread(v: u32) -> u64 {
-        let mut v = u64::from(v);
-        v = (v | (v << 16)) & 0x0000_FFFF_0000_FFFF;
-        v = (v | (v << 8)) & 0x00FF_00FF_00FF_00FF;
-        v = (v | (v << 4)) & 0x0F0F_0F0F_0F0F_0F0F;
-        v = (v | (v << 2)) & 0x3333_3333_3333_3333;
-        (v | (v << 1)) & 0x5555_5555_5555_5555
-    }
-    spread(x) | (spread(y) << 1)
 }
 
 /// The record of texel (x, y) owned by triangle `tri`.
@@ -754,7 +742,8 @@ mod tests {
     }
 
     #[test]
-    fn morton_orders_quadrants() {
+    fn tiles_follow_the_kernels_morton_order() {
+        let morton = |x, y| CurveOrder::Morton.key([x, y]);
         assert_eq!(morton(0, 0), 0);
         assert_eq!(morton(1, 0), 1);
         assert_eq!(morton(0, 1), 2);
