@@ -562,14 +562,11 @@ impl PageRaster {
     ) -> Self {
         let dims = (size.width, size.height);
         let mut owner = vec![0u32; size.width as usize * size.height as usize];
-        let on_page = |t: &Triangle| meshes[t.mesh as usize].page == page;
-        for (i, t) in scene
-            .triangles
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| on_page(t))
-        {
-            let Some(q) = pixel_uv(t, &meshes[t.mesh as usize]) else {
+        // The page's triangles in pixel space, once for both passes; UV-degenerate ones counted.
+        let mut on_page: Vec<(u32, [Vec2; 3])> = Vec::new();
+        for (i, t) in scene.triangles.iter().enumerate() {
+            let mesh = &meshes[t.mesh as usize];
+            let Some(q) = pixel_uv(t, mesh).filter(|_| mesh.page == page) else {
                 continue;
             };
             let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
@@ -577,32 +574,25 @@ impl PageRaster {
                 report.uv_degenerate_triangles += 1;
                 continue;
             }
+            on_page.push((i as u32 + 1, q));
+        }
+        // Pass 1: texel centres covered by a triangle (the first triangle wins).
+        for &(id, q) in &on_page {
             for_each_centre(&q, dims, |x, y| {
                 let o = &mut owner[y as usize * size.width as usize + x as usize];
                 if *o == 0 {
-                    *o = i as u32 + 1;
+                    *o = id;
                 }
             });
         }
-        for (i, t) in scene
-            .triangles
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| on_page(t))
-        {
-            let Some(q) = pixel_uv(t, &meshes[t.mesh as usize]) else {
-                continue;
-            };
-            let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
-            if area == 0.0 || !area.is_finite() {
-                continue;
-            }
+        // Pass 2: texels left empty that a triangle still overlaps, marked partial.
+        for &(id, q) in &on_page {
             let (x0, x1, y0, y1) = pixel_range(&q, dims);
             for y in y0..y1 {
                 for x in x0..x1 {
                     let o = &mut owner[y as usize * size.width as usize + x as usize];
                     if *o == 0 && overlaps_square(&q, x, y) {
-                        *o = (i as u32 + 1) | PARTIAL_BIT;
+                        *o = id | PARTIAL_BIT;
                     }
                 }
             }
