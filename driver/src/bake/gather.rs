@@ -649,6 +649,26 @@ mod tests {
         }
     }
 
+    /// A 20 m ground square at z = 0, facing +z.
+    fn ground() -> Vec<Triangle> {
+        quad(
+            Vec3::new(-10.0, -10.0, 0.0),
+            Vec3::X * 20.0,
+            Vec3::Y * 20.0,
+            0,
+        )
+        .to_vec()
+    }
+
+    /// The world of `triangles` in one material under a constant sky and an optional sun.
+    fn world(triangles: Vec<Triangle>, material: Material, sky: Vec3, sun: Option<Sun>) -> World {
+        World::new(
+            &scene(triangles, vec![material], Sky::Constant(sky), sun),
+            Preset::DEFAULT,
+        )
+        .unwrap()
+    }
+
     /// `n` texels on the plane z = `z` around the origin, normal +z, footprint 1 cm.
     fn texels_on_plane(n: usize, z: f32) -> Vec<TexelRecord> {
         (0..n)
@@ -713,22 +733,7 @@ mod tests {
     #[test]
     fn a_plane_under_a_constant_sky_receives_pi_l() {
         let sky = Vec3::new(0.5, 1.0, 2.0);
-        let ground = quad(
-            Vec3::new(-10.0, -10.0, 0.0),
-            Vec3::X * 20.0,
-            Vec3::Y * 20.0,
-            0,
-        );
-        let world = World::new(
-            &scene(
-                ground.to_vec(),
-                vec![grey(0.5, 0.0)],
-                Sky::Constant(sky),
-                None,
-            ),
-            Preset::DEFAULT,
-        )
-        .unwrap();
+        let world = world(ground(), grey(0.5, 0.0), sky, None);
         for mode in MODES {
             let (mean, se, counters) = bake_mean(&world, settings(mode), &texels_on_plane(64, 0.0));
             assert_within_3_sigma(&format!("{mode}"), (mean, se), sky * core::f32::consts::PI);
@@ -746,38 +751,14 @@ mod tests {
             angular_radius: 0.05,
             irradiance: Vec3::new(3.0, 2.0, 1.0),
         };
-        let ground = quad(
-            Vec3::new(-10.0, -10.0, 0.0),
-            Vec3::X * 20.0,
-            Vec3::Y * 20.0,
-            0,
-        );
-        let open = World::new(
-            &scene(
-                ground.to_vec(),
-                vec![grey(0.0, 0.0)],
-                Sky::Constant(sky),
-                Some(sun.clone()),
-            ),
-            Preset::DEFAULT,
-        )
-        .unwrap();
+        let open = world(ground(), grey(0.0, 0.0), sky, Some(sun.clone()));
         let want = sun.irradiance * to_sun.z + sky * core::f32::consts::PI;
         for mode in MODES {
             let (mean, se, _) = bake_mean(&open, settings(mode), &texels_on_plane(64, 0.0));
             assert_within_3_sigma(&format!("{mode}"), (mean, se), want);
         }
         // Inside a closed black box: no sun, no sky, and learning sees no energy.
-        let closed = World::new(
-            &scene(
-                inward_cube(0),
-                vec![grey(0.0, 0.0)],
-                Sky::Constant(sky),
-                Some(sun),
-            ),
-            Preset::DEFAULT,
-        )
-        .unwrap();
+        let closed = world(inward_cube(0), grey(0.0, 0.0), sky, Some(sun));
         for mode in MODES {
             let (mean, _, counters) =
                 bake_mean(&closed, settings(mode), &texels_on_plane(16, -0.999));
@@ -796,18 +777,8 @@ mod tests {
     #[test]
     fn inside_a_closed_emissive_box_every_texel_sees_pi_le() {
         // A 2 m cube emitting Le inwards, albedo 0: E = π Le in the first pass.
-        let tris = inward_cube(0);
         let le = 1.5;
-        let world = World::new(
-            &scene(
-                tris,
-                vec![grey(0.0, le)],
-                Sky::Constant(Vec3::splat(100.0)),
-                None,
-            ),
-            Preset::DEFAULT,
-        )
-        .unwrap();
+        let world = world(inward_cube(0), grey(0.0, le), Vec3::splat(100.0), None);
         for mode in MODES {
             let (mean, se, _) = bake_mean(&world, settings(mode), &texels_on_plane(32, -0.999));
             assert_within_3_sigma(
@@ -820,22 +791,7 @@ mod tests {
 
     #[test]
     fn invalid_texels_are_skipped_and_counted() {
-        let ground = quad(
-            Vec3::new(-10.0, -10.0, 0.0),
-            Vec3::X * 20.0,
-            Vec3::Y * 20.0,
-            0,
-        );
-        let world = World::new(
-            &scene(
-                ground.to_vec(),
-                vec![grey(0.5, 0.0)],
-                Sky::Constant(Vec3::ONE),
-                None,
-            ),
-            Preset::DEFAULT,
-        )
-        .unwrap();
+        let world = world(ground(), grey(0.5, 0.0), Vec3::ONE, None);
         let mut texels = texels_on_plane(16, 0.0);
         texels[3].flags = 0;
         let mut baker = TileBaker::new(&world, settings(Guiding::Coherent));
@@ -849,24 +805,14 @@ mod tests {
 
     #[test]
     fn a_tile_bakes_to_the_same_bits_twice() {
-        let ground = quad(
-            Vec3::new(-10.0, -10.0, 0.0),
-            Vec3::X * 20.0,
-            Vec3::Y * 20.0,
-            0,
-        );
-        let mut tris = ground.to_vec();
+        let mut tris = ground();
         tris.extend(quad(
             Vec3::new(-0.3, -0.3, 0.5),
             Vec3::Y * 0.6,
             Vec3::X * 0.6,
             0,
         ));
-        let world = World::new(
-            &scene(tris, vec![grey(0.5, 0.0)], Sky::Constant(Vec3::ONE), None),
-            Preset::DEFAULT,
-        )
-        .unwrap();
+        let world = world(tris, grey(0.5, 0.0), Vec3::ONE, None);
         let texels = texels_on_plane(40, 0.0);
         let run = || {
             let mut out = Vec::new();
