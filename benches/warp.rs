@@ -16,7 +16,7 @@ use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_mai
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
-use guidebake_kernels::testing::Pcg32;
+use guidebake_kernels::testing::{disk_and_sky, learning_records};
 use guidebake_kernels::warp::{self, Warped};
 use std::hint::black_box;
 use wide::f32x8;
@@ -25,27 +25,8 @@ use wide::f32x8;
 const SAMPLES: u32 = 1024;
 const TEXELS: u64 = 16;
 
-fn disk_and_sky(u: [f32; 2]) -> f32 {
-    let (dx, dy) = (u[0] - 0.7, u[1] - 0.23);
-    if dx * dx + dy * dy < 0.05 * 0.05 {
-        100.0
-    } else {
-        1.0
-    }
-}
-
 fn records(previous: Option<&Guide<'_>>, n: usize, seed: u64) -> Vec<Record> {
-    let mut rng = Pcg32::new(seed, 17);
-    (0..n)
-        .map(|_| {
-            let u = [rng.next_f32(), rng.next_f32()];
-            let s = previous.map_or(Warped { u, pdf: 1.0 }, |g| warp::sample(g, u));
-            Record {
-                u: s.u,
-                flux: disk_and_sky(s.u) / s.pdf,
-            }
-        })
-        .collect()
+    learning_records(previous, n, seed, disk_and_sky)
 }
 
 /// The learning records of the second iteration, drawn from the first guide.

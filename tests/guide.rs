@@ -7,7 +7,7 @@
 //! `target/chi2/<name>.txt` for a person to look at.
 
 use guidebake_kernels::guide::{self, BuildStats, Guide, GuideParams, MAX_DEPTH, Node, Record};
-use guidebake_kernels::testing::{Pcg32, chi_square};
+use guidebake_kernels::testing::{Pcg32, chi_square, disk_and_sky, learning_records};
 use guidebake_kernels::warp::{self, ONE_MINUS_EPS};
 use std::io::Write;
 use wide::f32x8;
@@ -19,35 +19,10 @@ const ALPHA: f64 = 0.01;
 const RES: usize = 31;
 const SAMPLES: usize = 200_000;
 
-/// The "known anisotropic radiance" on the square: a small bright disk and a dim sky.
-fn disk_and_sky(u: [f32; 2]) -> f32 {
-    let (dx, dy) = (u[0] - 0.7, u[1] - 0.23);
-    if dx * dx + dy * dy < 0.05 * 0.05 {
-        100.0
-    } else {
-        1.0
-    }
-}
-
-/// Learning records: `n` samples drawn from `previous` (uniform when `None`), flux L/p.
+/// Learning records of the disk-and-sky radiance: `n` samples drawn from `previous` (uniform
+/// when `None`), flux L/p.
 fn learn_records(previous: Option<&Guide<'_>>, n: usize, seed: u64) -> Vec<Record> {
-    let mut rng = Pcg32::new(seed, 17);
-    (0..n)
-        .map(|_| {
-            let u = [rng.next_f32(), rng.next_f32()];
-            let (w, p) = match previous {
-                Some(g) => {
-                    let s = warp::sample(g, u);
-                    (s.u, s.pdf)
-                }
-                None => (u, 1.0),
-            };
-            Record {
-                u: w,
-                flux: disk_and_sky(w) / p,
-            }
-        })
-        .collect()
+    learning_records(previous, n, seed, disk_and_sky)
 }
 
 fn build<'a>(

@@ -163,6 +163,41 @@ pub fn regularized_gamma_q(a: f64, x: f64) -> f64 {
     }
 }
 
+/// The "known anisotropic radiance" on the square of the guide tests and the warp bench: a
+/// small bright disk (radius 0.05 around (0.7, 0.23), radiance 100) over a dim sky (1).
+pub fn disk_and_sky(u: [f32; 2]) -> f32 {
+    let (dx, dy) = (u[0] - 0.7, u[1] - 0.23);
+    if dx * dx + dy * dy < 0.05 * 0.05 {
+        100.0
+    } else {
+        1.0
+    }
+}
+
+/// `n` learning records of `radiance`: points drawn uniformly (from PCG32 stream 17 of
+/// `seed`), warped through `previous` when given, each with flux `L / p`.
+#[cfg(feature = "alloc")]
+pub fn learning_records(
+    previous: Option<&crate::guide::Guide<'_>>,
+    n: usize,
+    seed: u64,
+    radiance: impl Fn([f32; 2]) -> f32,
+) -> alloc::vec::Vec<crate::guide::Record> {
+    let mut rng = Pcg32::new(seed, 17);
+    (0..n)
+        .map(|_| {
+            let u = [rng.next_f32(), rng.next_f32()];
+            let s = previous.map_or(crate::warp::Warped { u, pdf: 1.0 }, |g| {
+                crate::warp::sample(g, u)
+            });
+            crate::guide::Record {
+                u: s.u,
+                flux: radiance(s.u) / s.pdf,
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
