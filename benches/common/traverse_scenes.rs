@@ -9,17 +9,11 @@ use guidebake_kernels::packet::{LANES, Ray8};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::offset_origin;
 
-/// `../shared/scenes/converted` beside the workspace (or `../../shared` when the workspace is
-/// a git worktree one level further down), if present.
+/// `converted/` of the shared scenes ([`guidebake::scene::shared_scenes_dir`]), if present.
 pub fn converted_dir() -> Option<PathBuf> {
-    [
-        concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/scenes/converted"),
-        concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/scenes/converted"),
-    ]
-    .into_iter()
-    .map(Path::new)
-    .find(|dir| dir.is_dir())
-    .map(Path::to_path_buf)
+    guidebake::scene::shared_scenes_dir()
+        .map(|d| d.join("converted"))
+        .filter(|d| d.is_dir())
 }
 
 /// World-space triangles of a scene file, through the driver's loader

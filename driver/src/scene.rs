@@ -988,29 +988,36 @@ impl LightArgs {
     }
 }
 
+/// Where the tests and benches find the third-party scenes: `GUIDEBAKE_SCENES` if set, else
+/// `../shared/scenes` beside the workspace (or `../../shared/scenes`, for a workspace that is a
+/// git worktree one level further down). Prints a "skipping" line and returns `None` when
+/// none exists, so a test on a fresh clone without `../shared` skips with a message.
+#[doc(hidden)]
+pub fn shared_scenes_dir() -> Option<PathBuf> {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let candidates = std::env::var_os("GUIDEBAKE_SCENES")
+        .map(PathBuf::from)
+        .into_iter()
+        .chain(
+            [
+                format!("{root}/../shared/scenes"),
+                format!("{root}/../../shared/scenes"),
+            ]
+            .map(PathBuf::from),
+        );
+    let found = candidates.into_iter().find(|p| p.is_dir());
+    if found.is_none() {
+        println!("skipping: ../shared/scenes is absent (set GUIDEBAKE_SCENES to point at it)");
+    }
+    found
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn scenes_dir() -> Option<PathBuf> {
-        // `../shared/scenes` beside the workspace; worktrees under `/work/wt/NAME` find it one
-        // level further up; `GUIDEBAKE_SCENES` overrides both.
-        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
-        let candidates = std::env::var_os("GUIDEBAKE_SCENES")
-            .map(PathBuf::from)
-            .into_iter()
-            .chain(
-                [
-                    format!("{root}/../shared/scenes"),
-                    format!("{root}/../../shared/scenes"),
-                ]
-                .map(PathBuf::from),
-            );
-        let found = candidates.into_iter().find(|p| p.is_dir());
-        if found.is_none() {
-            println!("skipping: ../shared/scenes is absent");
-        }
-        found
+        shared_scenes_dir()
     }
 
     #[test]

@@ -9,24 +9,7 @@ use guidebake::scene::Scene;
 use guidebake::texels::{FLAG_PARTIAL, TexelFile};
 
 fn scenes_dir() -> Option<PathBuf> {
-    // `../shared/scenes` beside the workspace; worktrees under `/work/wt/NAME` find it one
-    // level further up; `GUIDEBAKE_SCENES` overrides both.
-    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
-    let candidates = std::env::var_os("GUIDEBAKE_SCENES")
-        .map(PathBuf::from)
-        .into_iter()
-        .chain(
-            [
-                format!("{root}/../shared/scenes"),
-                format!("{root}/../../shared/scenes"),
-            ]
-            .map(PathBuf::from),
-        );
-    let found = candidates.into_iter().find(|p| p.is_dir());
-    if found.is_none() {
-        println!("skipping: ../shared/scenes is absent");
-    }
-    found
+    guidebake::scene::shared_scenes_dir()
 }
 
 /// Total UV area and UV perimeter of the scene's triangles, in page pixels.
