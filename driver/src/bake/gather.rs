@@ -451,12 +451,7 @@ impl IterationCtx<'_> {
             let lu = rotate_x8(sobol_2d_x8(index), light_rot);
             let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
             let light_u: [[f32; 2]; LANES] = core::array::from_fn(|i| [lx[i], ly[i]]);
-            let mut direct = [Vec3::ZERO; LANES];
-            counters.shadow_rays +=
-                u64::from(
-                    self.world
-                        .direct_irradiance8(origin, t.normal, &light_u, &mut direct),
-                );
+            let direct = self.direct8(t, origin, &light_u, counters);
             for lane in 0..LANES {
                 let hit = (hprim[lane] != NO_HIT).then(|| (hprim[lane], ht[lane]));
                 let l = self.incoming(t.id, chunk[lane], origin, dirs[lane], hit, counters);
@@ -508,17 +503,29 @@ impl IterationCtx<'_> {
                 light_u[lane] = [to_unit(lp[0]), to_unit(lp[1])];
                 samples[lane] = (l, w, q);
             }
-            let mut direct = [Vec3::ZERO; LANES];
-            counters.shadow_rays +=
-                u64::from(
-                    self.world
-                        .direct_irradiance8(origin, t.normal, &light_u, &mut direct),
-                );
+            let direct = self.direct8(t, origin, &light_u, counters);
             for lane in 0..LANES {
                 let (l, w, q) = samples[lane];
                 self.record(l, w, q, direct[lane], batch, records);
             }
         }
+    }
+
+    /// Next-event estimation at the texel for one packet's eight samples (shared origin),
+    /// counting the shadow rays.
+    fn direct8(
+        &self,
+        t: &GatherTexel,
+        origin: Vec3,
+        light_u: &[[f32; 2]; LANES],
+        counters: &mut GatherCounters,
+    ) -> [Vec3; LANES] {
+        let mut direct = [Vec3::ZERO; LANES];
+        let rays = self
+            .world
+            .direct_irradiance8(origin, t.normal, light_u, &mut direct);
+        counters.shadow_rays += u64::from(rays);
+        direct
     }
 
     /// Radiance arriving along `dir` at `origin`: the sky on a miss, else what leaves the hit.
