@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
 use guidebake::bake::run::{BakeError, BakeJob, bake, finish, work_dir};
-use guidebake::bake::settings::{BakeSettings, Guiding};
+use guidebake::bake::settings::{BakeSettings, Guiding, Transport};
 use guidebake::bake::shard::Shard;
 use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle};
 use guidebake::texels::{
@@ -17,6 +17,9 @@ use guidebake::texels::{
 const SKY: f32 = 0.75;
 const SIDE: u32 = 24; // page side in texels: 9 tiles of 8×8
 const TILE: u32 = 8;
+const TILES: usize = 9;
+/// Series passes of the fixture's default bake.
+const PASSES: usize = 3;
 
 /// A 4 m square ground plane under a constant sky, mapped 1:1 onto one page.
 fn plane_scene() -> Scene {
@@ -124,6 +127,8 @@ impl Fixture {
                 spp: 64,
                 iterations: 2,
                 guiding: Guiding::Coherent,
+                transport: Transport::Series,
+                bounces: PASSES as u32,
                 ..Default::default()
             },
             threads,
@@ -156,9 +161,17 @@ fn a_plane_under_the_sky_bakes_to_pi_l_in_the_exr() {
     let f = Fixture::new();
     let job = f.job("lm.exr", 2, Shard::WHOLE);
     let report = f.run(&job, None).unwrap();
-    assert_eq!(report.tiles_baked, 9);
+    assert_eq!(
+        report.tiles_baked,
+        TILES * PASSES,
+        "every tile in every series pass"
+    );
+    assert_eq!(report.passes, PASSES as u32);
     assert!(!report.interrupted);
-    assert_eq!(report.counters.gather_rays, u64::from(SIDE * SIDE) * 64);
+    assert_eq!(
+        report.counters.gather_rays,
+        u64::from(SIDE * SIDE) * 64 * PASSES as u64
+    );
     assert!(
         !work_dir(&job.out, Shard::WHOLE).exists(),
         "a finished bake removes its work"
@@ -196,10 +209,15 @@ fn one_or_two_threads_write_the_same_bits() {
 #[test]
 fn three_shards_merged_equal_one_bake() {
     let f = Fixture::new();
-    f.run(&f.job("whole.exr", 2, Shard::WHOLE), None).unwrap();
+    let path = |mut job: BakeJob| {
+        job.settings.transport = Transport::Path;
+        job
+    };
+    f.run(&path(f.job("whole.exr", 2, Shard::WHOLE)), None)
+        .unwrap();
     let mut dirs = Vec::new();
     for index in [1, 2, 0] {
-        let job = f.job("sharded.exr", 1, Shard { index, count: 3 });
+        let job = path(f.job("sharded.exr", 1, Shard { index, count: 3 }));
         let report = f.run(&job, None).unwrap();
         assert_eq!(report.tiles_baked, 3);
         dirs.push(work_dir(&job.out, job.shard));
@@ -218,27 +236,48 @@ fn three_shards_merged_equal_one_bake() {
 }
 
 #[test]
+fn series_passes_cannot_be_sharded() {
+    let f = Fixture::new();
+    let err = f
+        .run(&f.job("s.exr", 1, Shard { index: 0, count: 2 }), None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("--shard 0/2") && err.contains("--transport path"),
+        "{err}"
+    );
+}
+
+#[test]
 fn an_interrupted_bake_resumes_to_the_same_bits_and_is_never_clobbered() {
     let f = Fixture::new();
     f.run(&f.job("whole.exr", 2, Shard::WHOLE), None).unwrap();
-    // One worker and a window of 4 tiles: cancelling after the first tile leaves most undone.
-    let mut job = f.job("resumed.exr", 1, Shard::WHOLE);
-    let cut = f.run(&job, Some(64)).unwrap();
-    assert!(cut.interrupted && cut.tiles_baked < 9, "{cut:?}");
-    assert!(
-        !job.out.exists(),
-        "an interrupted bake leaves no output that looks complete"
-    );
-    let again = f.run(&job, None).unwrap_err();
-    assert!(matches!(again, BakeError::WorkExists { .. }), "{again}");
-    job.resume = true;
-    let rest = f.run(&job, None).unwrap();
-    assert_eq!(rest.tiles_resumed, cut.tiles_baked);
-    assert_eq!(cut.tiles_baked + rest.tiles_baked, 9);
-    assert_eq!(
-        exr_bytes(&f.dir.path().join("whole.exr")),
-        exr_bytes(&job.out)
-    );
+    let pass_texels = u64::from(SIDE * SIDE);
+    // One worker and a window of 4 tiles: cancelling after the first tile of a pass leaves
+    // most of that pass undone. Cut in the first pass, then in the second.
+    for (name, cut_after) in [("first.exr", 64), ("second.exr", pass_texels + 64)] {
+        let mut job = f.job(name, 1, Shard::WHOLE);
+        let cut = f.run(&job, Some(cut_after)).unwrap();
+        assert!(
+            cut.interrupted && cut.tiles_baked < TILES * PASSES,
+            "{cut:?}"
+        );
+        assert!(
+            !job.out.exists(),
+            "an interrupted bake leaves no output that looks complete"
+        );
+        let again = f.run(&job, None).unwrap_err();
+        assert!(matches!(again, BakeError::WorkExists { .. }), "{again}");
+        job.resume = true;
+        let rest = f.run(&job, None).unwrap();
+        assert_eq!(rest.tiles_resumed, cut.tiles_baked, "{name}");
+        assert_eq!(cut.tiles_baked + rest.tiles_baked, TILES * PASSES, "{name}");
+        assert_eq!(
+            exr_bytes(&f.dir.path().join("whole.exr")),
+            exr_bytes(&job.out),
+            "{name}"
+        );
+    }
 }
 
 #[test]
