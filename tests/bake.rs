@@ -299,3 +299,194 @@ fn a_scene_that_does_not_match_the_texel_file_is_refused() {
         "{err}"
     );
 }
+
+/// Texels per face edge of the closed box; faces are charts in a 3×2 grid on one page.
+const FACE: u32 = 8;
+
+/// A closed 2 m cube, every face facing inwards, of albedo `albedo` emitting `le`, with one
+/// lightmap chart per face, and its texel file at `path`.
+fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
+    let (o, s) = (Vec3::splat(-1.0), 2.0);
+    let (x, y, z) = (Vec3::X * s, Vec3::Y * s, Vec3::Z * s);
+    // Each face: corner, edge u, edge v, with u × v pointing into the box.
+    let faces = [
+        (o, x, y),
+        (o + z, y, x),
+        (o, y, z),
+        (o + x, z, y),
+        (o, z, x),
+        (o + y, x, z),
+    ];
+    let (w, h) = (3 * FACE, 2 * FACE);
+    let chart = |i: usize| ((i % 3) as u32 * FACE, (i / 3) as u32 * FACE);
+    let mut triangles = Vec::new();
+    for (i, &(c, u, v)) in faces.iter().enumerate() {
+        let n = u.cross(v).normalize();
+        let (cx, cy) = chart(i);
+        let uv = |a: f32, b: f32| {
+            Vec2::new(
+                (cx as f32 + a * FACE as f32) / w as f32,
+                (cy as f32 + b * FACE as f32) / h as f32,
+            )
+        };
+        let tri = |p: [Vec3; 3], q: [Vec2; 3]| Triangle {
+            positions: p,
+            normals: [n; 3],
+            lightmap_uv: Some(q),
+            mesh: 0,
+            material: 0,
+        };
+        triangles.push(tri(
+            [c, c + u, c + u + v],
+            [uv(0.0, 0.0), uv(1.0, 0.0), uv(1.0, 1.0)],
+        ));
+        triangles.push(tri(
+            [c, c + u + v, c + v],
+            [uv(0.0, 0.0), uv(1.0, 1.0), uv(0.0, 1.0)],
+        ));
+    }
+    let page = PageRecord {
+        width: w,
+        height: h,
+    };
+    let mesh = MeshRecord {
+        first_triangle: 0,
+        triangle_count: triangles.len() as u32,
+        page: 0,
+        flags: 1,
+        uv_scale: [w as f32, h as f32],
+        uv_offset: [0.0; 2],
+    };
+    let mut writer = TexelWriter::create(path, &[page], &[mesh], 12, FACE as f32 / s).unwrap();
+    for (i, &(c, u, v)) in faces.iter().enumerate() {
+        let n = u.cross(v).normalize();
+        let (cx, cy) = chart(i);
+        let texels: Vec<TexelRecord> = (0..FACE * FACE)
+            .map(|j| {
+                let (fx, fy) = ((j % FACE) as f32 + 0.5, (j / FACE) as f32 + 0.5);
+                let p = c + u * (fx / FACE as f32) + v * (fy / FACE as f32);
+                TexelRecord {
+                    position: p.to_array(),
+                    normal: n.to_array(),
+                    dpdu: (u / FACE as f32).to_array(),
+                    dpdv: (v / FACE as f32).to_array(),
+                    page: 0,
+                    pixel: [(cx + j % FACE) as u16, (cy + j / FACE) as u16],
+                    triangle: 2 * i as u32 + u32::from(fy > fx),
+                    flags: FLAG_VALID,
+                }
+            })
+            .collect();
+        let rect = TileRect {
+            page: 0,
+            x: cx,
+            y: cy,
+            width: FACE,
+            height: FACE,
+        };
+        writer.push_tile(rect, &texels).unwrap();
+    }
+    writer.finish().unwrap();
+    Scene {
+        path: PathBuf::from("<box>"),
+        meshes: vec![Mesh {
+            name: "box".into(),
+            first_triangle: 0,
+            triangle_count: 12,
+            has_lightmap_uvs: true,
+        }],
+        triangles,
+        materials: vec![Material {
+            name: "glow".into(),
+            albedo: Vec3::splat(albedo),
+            emission: Vec3::splat(le),
+        }],
+        lights: Vec::new(),
+        sun: None,
+        sky: Sky::Constant(Vec3::splat(100.0)),
+        degenerate_triangles: 0,
+    }
+}
+
+/// Every texel's irradiance (R channel) of the single-page lightmap at `path`.
+fn red_channel(path: &Path) -> Vec<f64> {
+    let image = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
+    let red = image
+        .layer_data
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name == *"R")
+        .unwrap();
+    red.sample_data.values_as_f32().map(f64::from).collect()
+}
+
+#[test]
+fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transports() {
+    // Inside a closed box of albedo ρ emitting Le everywhere, B bounces give
+    // E_B = π Le (1 + ρ + … + ρ^(B−1)) = π Le (1 − ρ^B) / (1 − ρ) at every point.
+    let (albedo, le) = (0.5f32, 1.5f32);
+    let dir = tempfile::tempdir().unwrap();
+    let texels = dir.path().join("box.texels");
+    let scene = emissive_box(&texels, albedo, le);
+    let closed_form = |b: u32| {
+        std::f64::consts::PI * f64::from(le) * (1.0 - f64::from(albedo).powi(b as i32))
+            / (1.0 - f64::from(albedo))
+    };
+    for (transport, bounces, guiding) in [
+        (Transport::Series, 1, Guiding::Off),
+        (Transport::Series, 4, Guiding::Off),
+        (Transport::Series, 4, Guiding::Coherent),
+        (Transport::Path, 4, Guiding::Coherent),
+        (Transport::Path, 64, Guiding::Off),
+    ] {
+        let out = dir
+            .path()
+            .join(format!("{transport}-{bounces}-{guiding}.exr"));
+        let job = BakeJob {
+            texels: texels.clone(),
+            out: out.clone(),
+            settings: BakeSettings {
+                spp: 128,
+                iterations: 2,
+                transport,
+                bounces,
+                guiding,
+                ..Default::default()
+            },
+            threads: 2,
+            shard: Shard::WHOLE,
+            resume: false,
+            aux: false,
+        };
+        let report = bake(&job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+        let values = red_channel(&out);
+        assert_eq!(values.len(), (6 * FACE * FACE) as usize);
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        let want = closed_form(bounces);
+        let se = (var / n).sqrt();
+        let what = format!("{transport} B={bounces} {guiding}: {mean} ± {se}, want {want}");
+        if transport == Transport::Series && guiding == Guiding::Off {
+            // Constant radiance everywhere and cosine sampling: every sample is the same.
+            assert!(
+                values.iter().all(|v| (v - want).abs() < 1e-4 * want),
+                "{what}"
+            );
+        } else {
+            // A learned guide's density is not constant, nor are paths: noise, no bias.
+            assert!((mean - want).abs() < 3.0 * se + 1e-4 * want, "{what}");
+        }
+        match transport {
+            Transport::Series => {
+                assert_eq!(report.passes, bounces);
+                assert_eq!(report.counters.path_rays, 0);
+            }
+            Transport::Path => {
+                assert_eq!(report.passes, 1);
+                assert!(report.counters.path_rays > 0);
+            }
+        }
+    }
+}
