@@ -685,16 +685,19 @@ mod tests {
     }
 
     /// `n` texels on the plane z = `z` around the origin, normal +z, footprint 1 cm.
+    /// Each lies on the triangle of [`quad`]'s pair that holds it when the quad is the ground
+    /// or the cube's floor (the first triangle where y ≤ x).
     fn texels_on_plane(n: usize, z: f32) -> Vec<TexelRecord> {
         (0..n)
-            .map(|i| TexelRecord {
-                position: [(i % 8) as f32 * 0.05 - 0.2, (i / 8) as f32 * 0.05 - 0.2, z],
+            .map(|i| (i, (i % 8) as f32 * 0.05 - 0.2, (i / 8) as f32 * 0.05 - 0.2))
+            .map(|(i, x, y)| TexelRecord {
+                position: [x, y, z],
                 normal: [0.0, 0.0, 1.0],
                 dpdu: [0.01, 0.0, 0.0],
                 dpdv: [0.0, 0.01, 0.0],
                 page: 0,
                 pixel: [(i % 8) as u16, (i / 8) as u16],
-                triangle: 0,
+                triangle: u32::from(y > x),
                 flags: TEXEL_VALID,
             })
             .collect()
@@ -801,6 +804,90 @@ mod tests {
                 (mean, se),
                 Vec3::splat(le * core::f32::consts::PI),
             );
+        }
+    }
+
+    /// A black ground under a black sky lit by `lights` only.
+    fn lit_world(lights: Vec<crate::scene::Light>) -> World {
+        let mut scene = scene(ground(), vec![grey(0.0, 0.0)], Sky::None, None);
+        scene.lights = lights;
+        World::new(&scene, Preset::DEFAULT).unwrap()
+    }
+
+    #[test]
+    fn a_sphere_light_facing_a_point_gives_pi_l_r_over_d_squared() {
+        let (radius, d, l) = (0.25f32, 2.0f32, Vec3::new(40.0, 20.0, 10.0));
+        let world = lit_world(vec![crate::scene::Light::Sphere {
+            center: Vec3::new(0.0, 0.0, d),
+            radius,
+            radiance: l,
+        }]);
+        // Texels within 0.2 m of the axis: the closed form holds at the axis; off it, the
+        // cosine and distance change by at most 1 % here, so use the mean over the texels.
+        let texels = texels_on_plane(64, 0.0);
+        let want = texels
+            .iter()
+            .map(|t| {
+                let p = Vec3::from(t.position);
+                let to = Vec3::new(0.0, 0.0, d) - p;
+                let (dist, cos) = (to.length(), to.normalize().z);
+                // Exact for a sphere seen from a point: π L sin²θmax · cos of its centre
+                // direction (the cone lies wholly above the horizon).
+                l * core::f32::consts::PI * (radius / dist).powi(2) * cos
+            })
+            .sum::<Vec3>()
+            / texels.len() as f32;
+        let on_axis = l * core::f32::consts::PI * (radius / d).powi(2);
+        assert!((want - on_axis).abs().max_element() < 0.02 * on_axis.max_element());
+        for mode in MODES {
+            let (mean, se, counters) = bake_mean(&world, settings(mode), &texels);
+            assert_within_3_sigma(&format!("{mode}"), (mean, se), want);
+            assert!(counters.shadow_rays > 0);
+        }
+    }
+
+    #[test]
+    fn point_and_spot_lights_follow_the_cosine_and_inverse_square_laws() {
+        use crate::transport::lights::spot_falloff;
+        let intensity = Vec3::new(8.0, 4.0, 2.0);
+        let position = Vec3::new(1.5, -0.5, 2.0);
+        let axis = (Vec3::new(0.4, 0.0, 0.0) - position).normalize();
+        // A penumbra wide against the 1 cm texels, whose origins are jittered over them.
+        let (inner, outer) = (0.05f32, 0.3f32);
+        let point = crate::scene::Light::Point {
+            position,
+            intensity,
+        };
+        let spot = crate::scene::Light::Spot {
+            position,
+            direction: axis,
+            intensity,
+            inner_cone: inner,
+            outer_cone: outer,
+        };
+        let texels = texels_on_plane(64, 0.0);
+        for (light, is_spot) in [(point, false), (spot, true)] {
+            let world = lit_world(vec![light]);
+            let mut baker = TileBaker::new(&world, settings(Guiding::Coherent));
+            let mut out = Vec::new();
+            baker.bake_tile(0, 0, &texels, &mut out);
+            let mut dimmed = 0;
+            for (t, r) in texels.iter().zip(&out) {
+                let to = position - Vec3::from(t.position);
+                let mut want = intensity * to.normalize().z / to.length_squared();
+                if is_spot {
+                    want *= spot_falloff(-to.normalize().dot(axis), inner.cos(), outer.cos());
+                }
+                let full = intensity * to.normalize().z / to.length_squared();
+                dimmed += usize::from(want.x < 0.99 * full.x);
+                // A delta light: no noise beyond the origins jittered within the 1 cm texel.
+                let got = Vec3::from(r.irradiance);
+                assert!(
+                    (got - want).abs().max_element() < 0.01 * intensity.x / to.length_squared(),
+                    "spot {is_spot}: {got} vs {want}"
+                );
+            }
+            assert_eq!(dimmed > 0, is_spot, "{dimmed} texels in the spot's falloff");
         }
     }
 
