@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
 use guidebake::bake::run::{BakeError, BakeJob, bake, finish, work_dir};
-use guidebake::bake::settings::{BakeSettings, Guiding, Transport};
+use guidebake::bake::settings::{BakeSettings, Combine, Guiding, Transport};
 use guidebake::bake::shard::Shard;
 use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle};
 use guidebake::texels::{
@@ -489,4 +489,85 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
             }
         }
     }
+}
+
+#[test]
+fn global_weights_bake_the_closed_form_and_merge_shards_to_the_same_bits() {
+    let (albedo, le) = (0.5f32, 1.5f32);
+    let dir = tempfile::tempdir().unwrap();
+    let texels = dir.path().join("box.texels");
+    let scene = emissive_box(&texels, albedo, le);
+    let want = std::f64::consts::PI * f64::from(le) * (1.0 - 0.5f64.powi(3)) / 0.5;
+    let job = |out: &str, shard: Shard| BakeJob {
+        texels: texels.clone(),
+        out: dir.path().join(out),
+        settings: BakeSettings {
+            spp: 128,
+            iterations: 4,
+            combine: Combine::Global,
+            transport: Transport::Path,
+            bounces: 3,
+            ..Default::default()
+        },
+        threads: 2,
+        shard,
+        resume: false,
+        aux: true,
+    };
+    let whole = job("whole.exr", Shard::WHOLE);
+    let report = bake(&whole, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+    assert!(
+        (report.rho - 1.0).abs() < 0.05,
+        "global weights are unbiased: ρ = {}",
+        report.rho
+    );
+    let values = red_channel(&whole.out);
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let se = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    assert!((mean - want).abs() < 3.0 * se, "{mean} ± {se}, want {want}");
+    let mut dirs = Vec::new();
+    for index in [2, 0, 1] {
+        let shard = job("sharded.exr", Shard { index, count: 3 });
+        bake(&shard, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+        dirs.push(work_dir(&shard.out, shard.shard));
+    }
+    let merged = dir.path().join("sharded.exr");
+    finish(&TexelFile::open(&texels).unwrap(), &dirs, &merged).unwrap();
+    assert_eq!(exr_bytes(&whole.out), exr_bytes(&merged));
+}
+
+#[test]
+fn aux_channels_hold_samples_error_validity_position_and_normal() {
+    let f = Fixture::new();
+    let job = f.job("aux.exr", 2, Shard::WHOLE);
+    f.run(&job, None).unwrap();
+    let image = exr::prelude::read_first_flat_layer_from_file(&job.out).unwrap();
+    let channel = |name: &str| -> Vec<f32> {
+        image
+            .layer_data
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name == *name)
+            .unwrap_or_else(|| panic!("no channel {name}"))
+            .sample_data
+            .values_as_f32()
+            .collect()
+    };
+    for name in guidebake::bake::run::AUX_CHANNELS {
+        assert!(channel(name).iter().all(|v| v.is_finite()), "{name}");
+    }
+    assert!(channel("samples").iter().all(|&s| s == 64.0));
+    assert!(channel("validity").iter().all(|&v| v == 1.0));
+    assert!(channel("N.Z").iter().all(|&z| z == 1.0));
+    assert!(channel("P.Z").iter().all(|&z| z == 0.0));
+    // Pixel (x, y) of the 4 m plane lies at x·size − 2 + size/2.
+    let px = channel("P.X");
+    let size = 4.0 / SIDE as f32;
+    for x in 0..SIDE as usize {
+        assert!((px[x] - ((x as f32 + 0.5) * size - 2.0)).abs() < 1e-6);
+    }
+    let err = channel("rel_std_error");
+    assert!(err.iter().all(|&e| (0.0..1.0).contains(&e)));
 }

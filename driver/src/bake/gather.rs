@@ -37,7 +37,7 @@ use guidebake_kernels::traverse::{intersect1, intersect8, offset_origin};
 use guidebake_kernels::warp;
 use wide::{f32x8, u32x8};
 
-use super::pipeline::TileBaked;
+use super::pipeline::{TileBaked, TileBuffer};
 use super::settings::{BakeSettings, Combine, Guiding};
 use super::world::{SurfaceHit, World};
 use crate::output::journal::TileRecord;
@@ -165,16 +165,22 @@ impl<'w> TileBaker<'w> {
     }
 
     /// Bakes tile `tile` whose texels (`texels`, global ids from `first_texel`) are given;
-    /// writes one result per texel into `out` and returns the tile's journal data.
+    /// writes one result per texel into `out` (and, for `--combine global`, every texel's K
+    /// batches) and returns the tile's journal data.
     pub fn bake_tile(
         &mut self,
         tile: u32,
         first_texel: u64,
         texels: &[TexelRecord],
-        out: &mut Vec<TexelResult>,
+        out: &mut TileBuffer,
     ) -> TileBaked {
-        out.clear();
-        out.resize(texels.len(), TexelResult::default());
+        out.results.clear();
+        out.results.resize(texels.len(), TexelResult::default());
+        out.batches.clear();
+        if self.settings.combine == Combine::Global {
+            let k = self.settings.iterations as usize;
+            out.batches.resize(texels.len() * k, Welford::new());
+        }
         self.collect_valid(texels);
         let clusters = self.cluster();
         let k = self.settings.iterations as usize;
@@ -294,7 +300,7 @@ impl<'w> TileBaker<'w> {
     }
 
     /// Combines every valid texel's iterations and fills the tile's results and ρ sums.
-    fn finish_tile(&mut self, tile: u32, out: &mut [TexelResult]) -> TileRecord {
+    fn finish_tile(&mut self, tile: u32, out: &mut TileBuffer) -> TileRecord {
         let k = self.settings.iterations as usize;
         let gd = GraybillDeal::default();
         let mut record = TileRecord {
@@ -307,6 +313,12 @@ impl<'w> TileBaker<'w> {
             let combined = match self.settings.combine {
                 Combine::Average => average,
                 Combine::Texel => gd.combine(batches),
+                // Combined in the final pass, once every texel's variances give the weights;
+                // until then the plain average stands in.
+                Combine::Global => {
+                    out.batches[i as usize * k..(i as usize + 1) * k].copy_from_slice(batches);
+                    average
+                }
             };
             let mut flags = FLAG_BAKED | FLAG_VALID;
             if self.unguided[m] && self.settings.guiding != Guiding::Off {
@@ -327,7 +339,7 @@ impl<'w> TileBaker<'w> {
                 record.weighted_luminance += w;
                 record.texels += 1;
             }
-            out[i as usize] = TexelResult {
+            out.results[i as usize] = TexelResult {
                 irradiance: rgb,
                 gathered: self.gathered[m]
                     .mean_rgb()
@@ -712,8 +724,9 @@ mod tests {
         texels: &[TexelRecord],
     ) -> (Vec3, Vec3, GatherCounters) {
         let mut baker = TileBaker::new(world, settings);
-        let mut out = Vec::new();
+        let mut out = TileBuffer::default();
         let baked = baker.bake_tile(0, 1000, texels, &mut out);
+        let out = out.results;
         let sums = crate::output::journal::RhoSums::reduce(&[baked.record]);
         let rho = sums.rho() as f32;
         let values: Vec<Vec3> = out.iter().map(|r| Vec3::from(r.irradiance) * rho).collect();
@@ -869,8 +882,9 @@ mod tests {
         for (light, is_spot) in [(point, false), (spot, true)] {
             let world = lit_world(vec![light]);
             let mut baker = TileBaker::new(&world, settings(Guiding::Coherent));
-            let mut out = Vec::new();
+            let mut out = TileBuffer::default();
             baker.bake_tile(0, 0, &texels, &mut out);
+            let out = out.results;
             let mut dimmed = 0;
             for (t, r) in texels.iter().zip(&out) {
                 let to = position - Vec3::from(t.position);
@@ -897,8 +911,9 @@ mod tests {
         let mut texels = texels_on_plane(16, 0.0);
         texels[3].flags = 0;
         let mut baker = TileBaker::new(&world, settings(Guiding::Coherent));
-        let mut out = Vec::new();
+        let mut out = TileBuffer::default();
         let baked = baker.bake_tile(5, 0, &texels, &mut out);
+        let out = out.results;
         assert_eq!(out[3], TexelResult::default());
         assert_eq!(baker.counters.texels_invalid_skipped, 1);
         assert_eq!(baked.record.texels, 15);
@@ -917,9 +932,9 @@ mod tests {
         let world = world(tris, grey(0.5, 0.0), Vec3::ONE, None);
         let texels = texels_on_plane(40, 0.0);
         let run = || {
-            let mut out = Vec::new();
+            let mut out = TileBuffer::default();
             TileBaker::new(&world, settings(Guiding::Coherent)).bake_tile(0, 7, &texels, &mut out);
-            out
+            out.results
         };
         assert_eq!(
             bytemuck::cast_slice::<_, u8>(&run()),

@@ -23,6 +23,10 @@ pub enum Combine {
     Average,
     /// Graybill–Deal per texel: iterations weighted by the inverse variance of their means.
     Texel,
+    /// Müller et al.'s production scheme: one weight per iteration for the whole world, ∝ 1 /
+    /// the mean over all texels of that iteration's variance; unbiased, needs no ρ. The
+    /// iterations' batches are kept in a file and combined in the final pass.
+    Global,
 }
 
 /// How the radiance a gather ray brings back from its hit is computed (DESIGN.md, light
@@ -60,6 +64,9 @@ pub struct BakeSettings {
     pub bounces: u32,
 }
 
+/// Most learning iterations a bake may ask for.
+pub const MAX_ITERATIONS: usize = 16;
+
 /// Most bounces a bake may ask for.
 pub const MAX_BOUNCES: u32 = 64;
 
@@ -96,9 +103,9 @@ impl BakeSettings {
     /// # Errors
     /// [`SettingsError`] saying which option is out of range and why.
     pub fn validate(&self) -> Result<(), SettingsError> {
-        if self.iterations == 0 || self.iterations > 16 {
+        if self.iterations == 0 || self.iterations as usize > MAX_ITERATIONS {
             return Err(SettingsError(format!(
-                "--iterations {}: between 1 and 16 learning iterations",
+                "--iterations {}: between 1 and {MAX_ITERATIONS} learning iterations",
                 self.iterations
             )));
         }
@@ -161,6 +168,16 @@ impl fmt::Display for Guiding {
             Guiding::Off => "off",
             Guiding::Naive => "naive",
             Guiding::Coherent => "coherent",
+        })
+    }
+}
+
+impl fmt::Display for Combine {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Combine::Average => "average",
+            Combine::Texel => "texel",
+            Combine::Global => "global",
         })
     }
 }
