@@ -415,7 +415,10 @@ mod tests {
         let err = run(
             config,
             &tiles,
-            &read_only,
+            TileFiles {
+                results: &read_only,
+                batches: None,
+            },
             &mut journal,
             &cancel,
             Vec::new,

@@ -187,7 +187,7 @@ impl<T: PerTexel> RecordFile<T> {
             what,
         };
         let record_bytes = header.record_bytes as usize;
-        if record_bytes == 0 || record_bytes % size_of::<T>() != 0 {
+        if record_bytes == 0 || !record_bytes.is_multiple_of(size_of::<T>()) {
             return Err(mismatch(format!(
                 "record size {record_bytes} (expected a multiple of {})",
                 size_of::<T>()
