@@ -37,6 +37,7 @@ use guidebake_kernels::traverse::{intersect1, intersect8, offset_origin};
 use guidebake_kernels::warp;
 use wide::{f32x8, u32x8};
 
+use super::grid::{self as grid_guide, GridGuide};
 use super::pipeline::{TileBaked, TileBuffer};
 use super::settings::{BakeSettings, Combine, Guiding};
 use super::world::{SurfaceHit, World};
@@ -182,7 +183,11 @@ impl<'w> TileBaker<'w> {
             out.batches.resize(texels.len() * k, Welford::new());
         }
         self.collect_valid(texels);
-        let clusters = self.cluster();
+        let clusters = if self.settings.guiding == Guiding::Grid {
+            self.grid_squares(texels)
+        } else {
+            self.cluster()
+        };
         let k = self.settings.iterations as usize;
         self.batches.clear();
         self.batches.resize(self.valid.len() * k, Welford::new());
@@ -248,6 +253,36 @@ impl<'w> TileBaker<'w> {
         }
     }
 
+    /// The grid comparator's learning groups: the valid texels of each 8×8-texel square of
+    /// the atlas ([`grid_guide::SQUARE`]); returns the number of groups.
+    fn grid_squares(&mut self, texels: &[TexelRecord]) -> usize {
+        let key = |i: u32| {
+            let t = &texels[i as usize];
+            let s = grid_guide::SQUARE;
+            (t.page, t.pixel[1] / s, t.pixel[0] / s)
+        };
+        let n = self.valid.len();
+        self.permutation.clear();
+        self.permutation.extend(0..n as u32);
+        let valid = &self.valid;
+        self.permutation.sort_by_key(|&m| key(valid[m as usize]));
+        self.ranges.clear();
+        let mut start = 0;
+        for end in 1..=n {
+            let same = end < n
+                && key(valid[self.permutation[end] as usize])
+                    == key(valid[self.permutation[start] as usize]);
+            if !same {
+                self.ranges.push(ClusterRange {
+                    start: start as u32,
+                    end: end as u32,
+                });
+                start = end;
+            }
+        }
+        self.ranges.len()
+    }
+
     /// K learning iterations over one cluster; `members` index `self.valid`.
     fn bake_cluster(&mut self, members: &[u32], texels: &[TexelRecord], first_texel: u64) {
         let Self {
@@ -267,12 +302,18 @@ impl<'w> TileBaker<'w> {
         counters.clusters += 1;
         let iterations = settings.iterations;
         let mut guide: Option<Guide<'_>> = None;
+        let mut grid: Option<GridGuide> = None;
         for k in 0..iterations {
             records.clear();
             for &m in members {
                 let i = valid[m as usize];
                 let t = gather_texel(&texels[i as usize], first_texel + u64::from(i));
-                if guide.is_some() {
+                let learned = match (&guide, &grid) {
+                    (Some(g), _) => Some(Learned::Tree(g)),
+                    (None, Some(g)) => Some(Learned::Grid(g)),
+                    (None, None) => None,
+                };
+                if learned.is_some() {
                     unguided[m as usize] = false;
                 }
                 let mut sinks = Sinks {
@@ -284,17 +325,23 @@ impl<'w> TileBaker<'w> {
                     world,
                     settings,
                     k,
-                    guide: guide.as_ref(),
+                    guide: learned,
                 };
                 match settings.guiding {
                     Guiding::Naive => ctx.gather_naive(&t, &mut sinks, counters),
-                    Guiding::Off | Guiding::Coherent => {
+                    Guiding::Off | Guiding::Coherent | Guiding::Grid => {
                         ctx.gather_packets(&t, &orders[k as usize], rotated, &mut sinks, counters);
                     }
                 }
             }
-            if settings.guiding != Guiding::Off && k + 1 < iterations {
-                guide = learn(records, nodes, counters);
+            if k + 1 < iterations {
+                match settings.guiding {
+                    Guiding::Off => {}
+                    Guiding::Grid => grid = learn_grid(records, counters),
+                    Guiding::Naive | Guiding::Coherent => {
+                        guide = learn(records, nodes, counters);
+                    }
+                }
             }
         }
     }
@@ -374,6 +421,27 @@ fn learn<'n>(
     }
 }
 
+/// The grid comparator's next guide (`None`, counted, when learning saw no energy).
+fn learn_grid(records: &[Record], counters: &mut GatherCounters) -> Option<GridGuide> {
+    let grid = GridGuide::learn(records);
+    if grid.is_some() {
+        counters.iterations_guided += 1;
+    } else {
+        counters.iterations_unguided_no_energy += 1;
+    }
+    grid
+}
+
+/// The grid warp of eight points, one lane at a time (the comparator has no 8-wide warp).
+fn grid_sample8(g: &GridGuide, x: f32x8, y: f32x8) -> (f32x8, f32x8, f32x8) {
+    let (x, y) = (x.to_array(), y.to_array());
+    let (mut wx, mut wy, mut q) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+    for lane in 0..LANES {
+        ([wx[lane], wy[lane]], q[lane]) = g.sample([x[lane], y[lane]]);
+    }
+    (f32x8::from(wx), f32x8::from(wy), f32x8::from(q))
+}
+
 /// The relative standard error of a texel's pooled luminance mean (0 when unknown).
 fn relative_std_error(batches: &[Welford]) -> f32 {
     let mut pooled = Welford::new();
@@ -403,6 +471,13 @@ fn gather_texel(t: &TexelRecord, id: u64) -> GatherTexel {
     }
 }
 
+/// The guide an iteration samples: the paper's quadtree, or the grid comparator's bins.
+#[derive(Clone, Copy)]
+enum Learned<'a> {
+    Tree(&'a Guide<'a>),
+    Grid(&'a GridGuide),
+}
+
 /// Where one texel's samples go in one iteration.
 struct Sinks<'a> {
     /// The texel's estimator of this iteration (gathered + direct irradiance).
@@ -418,7 +493,7 @@ struct IterationCtx<'a> {
     world: &'a World,
     settings: &'a BakeSettings,
     k: u32,
-    guide: Option<&'a Guide<'a>>,
+    guide: Option<Learned<'a>>,
 }
 
 impl IterationCtx<'_> {
@@ -461,10 +536,11 @@ impl IterationCtx<'_> {
             let [sx, sy] = rotate_x8(sobol_2d_x8(index), rot);
             let (x, y) = (to_unit_x8(sx), to_unit_x8(sy));
             let (wx, wy, q) = match self.guide {
-                Some(g) => {
+                Some(Learned::Tree(g)) => {
                     let w = warp::sample8(g, x, y);
                     (w.x, w.y, w.pdf)
                 }
+                Some(Learned::Grid(g)) => grid_sample8(g, x, y),
                 None => (x, y, f32x8::ONE),
             };
             let [dx, dy, dz] = sample_cosine_hemisphere_x8([wx, wy]);
@@ -517,10 +593,11 @@ impl IterationCtx<'_> {
                 let p = rotate(sobol_2d(index), rot);
                 let u = [to_unit(p[0]), to_unit(p[1])];
                 let (w, q) = match self.guide {
-                    Some(g) => {
+                    Some(Learned::Tree(g)) => {
                         let s = warp::sample(g, u);
                         (s.u, s.pdf)
                     }
+                    Some(Learned::Grid(g)) => g.sample(u),
                     None => (u, 1.0),
                 };
                 let dir = self.to_world(t, sample_cosine_hemisphere(w));
@@ -750,7 +827,12 @@ mod tests {
         );
     }
 
-    const MODES: [Guiding; 3] = [Guiding::Off, Guiding::Naive, Guiding::Coherent];
+    const MODES: [Guiding; 4] = [
+        Guiding::Off,
+        Guiding::Naive,
+        Guiding::Coherent,
+        Guiding::Grid,
+    ];
 
     fn settings(guiding: Guiding) -> BakeSettings {
         BakeSettings {
@@ -902,6 +984,51 @@ mod tests {
                 );
             }
             assert_eq!(dimmed > 0, is_spot, "{dimmed} texels in the spot's falloff");
+        }
+    }
+
+    #[test]
+    fn the_grid_comparator_learns_per_8x8_square_of_texels() {
+        let world = world(ground(), grey(0.5, 0.0), Vec3::ONE, None);
+        // A 16×16-texel tile: four squares of 8×8.
+        let texels: Vec<TexelRecord> = (0..256)
+            .map(|i| {
+                let mut t = texels_on_plane(1, 0.0)[0];
+                t.pixel = [(i % 16) as u16, (i / 16) as u16];
+                t.position = [(i % 16) as f32 * 0.02, (i / 16) as f32 * 0.02, 0.0];
+                t.triangle = u32::from(t.position[1] > t.position[0]);
+                t
+            })
+            .collect();
+        let settings = BakeSettings {
+            spp: 64,
+            iterations: 3,
+            guiding: Guiding::Grid,
+            ..Default::default()
+        };
+        let mut baker = TileBaker::new(&world, settings);
+        baker.bake_tile(0, 0, &texels, &mut TileBuffer::default());
+        assert_eq!(baker.counters.clusters, 4, "{:?}", baker.counters);
+        assert_eq!(
+            baker.counters.iterations_guided,
+            4 * 2,
+            "every square learns after iterations 0 and 1"
+        );
+        let squares: Vec<Vec<(u16, u16)>> = baker.ranges[..4]
+            .iter()
+            .map(|r| {
+                baker.permutation[r.start as usize..r.end as usize]
+                    .iter()
+                    .map(|&m| {
+                        let p = texels[baker.valid[m as usize] as usize].pixel;
+                        (p[0] / 8, p[1] / 8)
+                    })
+                    .collect()
+            })
+            .collect();
+        for sq in &squares {
+            assert_eq!(sq.len(), 64);
+            assert!(sq.iter().all(|&s| s == sq[0]), "one square per group");
         }
     }
 

@@ -14,6 +14,9 @@ pub enum Guiding {
     Naive,
     /// Presorted packets, rotated per texel, warped 8-wide and traced as packets (paper §2.4).
     Coherent,
+    /// The comparator of the HWRTL baker and Unreal's first-bounce guiding: a 16×16-bin
+    /// density per 8×8-texel square, sampled per lane, traced as packets.
+    Grid,
 }
 
 /// How a texel's iterations are combined (paper §2.5).
@@ -168,6 +171,7 @@ impl fmt::Display for Guiding {
             Guiding::Off => "off",
             Guiding::Naive => "naive",
             Guiding::Coherent => "coherent",
+            Guiding::Grid => "grid",
         })
     }
 }
