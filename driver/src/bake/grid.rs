@@ -41,10 +41,11 @@ impl GridGuide {
         let mut flux = [0.0f64; BINS * BINS];
         for r in records {
             let [x, y] = r.u;
-            if !(r.flux.is_finite() && r.flux >= 0.0)
-                || !(0.0..1.0).contains(&x)
-                || !(0.0..1.0).contains(&y)
-            {
+            let usable = r.flux.is_finite()
+                && r.flux >= 0.0
+                && (0.0..1.0).contains(&x)
+                && (0.0..1.0).contains(&y);
+            if !usable {
                 continue;
             }
             flux[bin(y) * BINS + bin(x)] += f64::from(r.flux);
@@ -66,10 +67,10 @@ impl GridGuide {
             let row = &flux[r * BINS..(r + 1) * BINS];
             let in_row: f64 = row.iter().sum();
             let mut acc = 0.0f64;
-            for c in 0..BINS {
-                acc += row[c];
+            for (c, &f) in row.iter().enumerate() {
+                acc += f;
                 g.cols[r][c + 1] = (acc / in_row) as f32;
-                g.density[r * BINS + c] = (row[c] / total * (BINS * BINS) as f64) as f32;
+                g.density[r * BINS + c] = (f / total * (BINS * BINS) as f64) as f32;
             }
             g.cols[r][BINS] = 1.0;
             row_sum += in_row;
