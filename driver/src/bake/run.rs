@@ -193,7 +193,19 @@ fn texel_file_id(texels: &TexelFile) -> u64 {
     fnv1a64(bytemuck::bytes_of(texels.header()))
 }
 
-/// Bakes `job` over `scene`. `cancel` (a Ctrl-C flag) stops it early with its work kept.
+/// How far a bake is, as [`bake_with_progress`] reports it after every tile.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Progress {
+    /// Texels done, over every pass (a resumed run counts what its journals hold).
+    pub texels_done: u64,
+    /// Texels to do, over every pass.
+    pub texels_total: u64,
+    /// Rays this run has traced so far (all kinds).
+    pub rays: u64,
+}
+
+/// Bakes `job` over `scene`. `cancel` (a Ctrl-C flag) stops it early with its work kept;
+/// `progress(done, total)` counts texels over every pass.
 ///
 /// # Errors
 /// A [`BakeError`] naming the file or option at fault; work committed before the error stays
@@ -203,6 +215,21 @@ pub fn bake(
     scene: &Scene,
     cancel: &AtomicBool,
     progress: &mut dyn FnMut(u64, u64),
+) -> Result<BakeReport, BakeError> {
+    bake_with_progress(job, scene, cancel, &mut |p: Progress| {
+        progress(p.texels_done, p.texels_total);
+    })
+}
+
+/// [`bake`] with the rays traced in each report too (the progress bar's rays/s).
+///
+/// # Errors
+/// As [`bake`].
+pub fn bake_with_progress(
+    job: &BakeJob,
+    scene: &Scene,
+    cancel: &AtomicBool,
+    progress: &mut dyn FnMut(Progress),
 ) -> Result<BakeReport, BakeError> {
     job.settings.validate()?;
     if job.shard.count > 1 && job.settings.passes() > 1 {
@@ -245,8 +272,10 @@ pub fn bake(
     };
     open_work(&dir, &manifest, job.resume)?;
     let pass_texels = shard_texels(&texels, job.shard);
-    let total = pass_texels * u64::from(passes);
-    let mut texels_done = 0u64;
+    let mut now = Progress {
+        texels_total: pass_texels * u64::from(passes),
+        ..Default::default()
+    };
     let clock = Instant::now();
     for pass in 1..=passes {
         if pass > 1 {
@@ -261,9 +290,10 @@ pub fn bake(
             pass,
             bake_id,
             cancel,
-            &mut |n| {
-                texels_done += n;
-                progress(texels_done, total);
+            &mut |texels, rays| {
+                now.texels_done += texels;
+                now.rays += rays;
+                progress(now);
             },
         )?;
         report.tiles_baked += run.tiles_baked;
@@ -273,7 +303,7 @@ pub fn bake(
             report.interrupted = true;
             break;
         }
-        texels_done = pass_texels * u64::from(pass);
+        now.texels_done = pass_texels * u64::from(pass);
     }
     report.passes = passes;
     report.seconds.gather = clock.elapsed().as_secs_f64() - report.seconds.previous_pass_images;
@@ -323,7 +353,7 @@ fn bake_pass(
     pass: u32,
     bake_id: u64,
     cancel: &AtomicBool,
-    progress: &mut dyn FnMut(u64),
+    progress: &mut dyn FnMut(u64, u64),
 ) -> Result<PassRun, BakeError> {
     let tile_count = texels.tiles().len() as u32;
     let (results, mut journal, done) =
@@ -349,6 +379,7 @@ fn bake_pass(
         done.iter()
             .map(|r| u64::from(texels.tiles()[r.tile as usize].texel_count))
             .sum(),
+        0,
     );
     let counters = Mutex::new(GatherCounters::default());
     let config = PipelineConfig {
@@ -381,9 +412,8 @@ fn bake_pass(
         make_worker,
         bake_tile,
         &mut |b| {
-            progress(u64::from(
-                texels.tiles()[b.record.tile as usize].texel_count,
-            ))
+            let texel_count = texels.tiles()[b.record.tile as usize].texel_count;
+            progress(u64::from(texel_count), b.record.rays);
         },
     )?;
     let counters = *counters.lock().expect("no worker panicked");
