@@ -393,12 +393,14 @@ fn bake_pass(
     };
     let bake_tile = |w: &mut CountedBaker<'_, '_>, tile: u32, out: &mut TileBuffer| {
         let record = &texels.tiles()[tile as usize];
-        w.baker.bake_tile(
+        let baked = w.baker.bake_tile(
             tile,
             record.first_texel,
             texels.tile_texels(tile as usize),
             out,
-        )
+        );
+        texels.release_tile(tile as usize);
+        baked
     };
     let pipeline = pipeline::run(
         config,
