@@ -176,15 +176,7 @@ fn a_plane_under_the_sky_bakes_to_pi_l_in_the_exr() {
         !work_dir(&job.out, Shard::WHOLE).exists(),
         "a finished bake removes its work"
     );
-    let image = exr::prelude::read_first_flat_layer_from_file(&job.out).unwrap();
-    let red = image
-        .layer_data
-        .channel_data
-        .list
-        .iter()
-        .find(|c| c.name == *"R")
-        .unwrap();
-    let values: Vec<f32> = red.sample_data.values_as_f32().collect();
+    let values = channel(&job.out, "R");
     assert_eq!(values.len(), (SIDE * SIDE) as usize);
     let mean = values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len() as f64;
     let want = f64::from(SKY) * std::f64::consts::PI;
@@ -408,31 +400,39 @@ fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
     }
 }
 
-/// Every texel's irradiance (R channel) of the single-page lightmap at `path`.
-fn red_channel(path: &Path) -> Vec<f64> {
+/// Channel `name` of the single-page lightmap at `path`, row by row.
+fn channel(path: &Path, name: &str) -> Vec<f32> {
     let image = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
-    let red = image
+    image
         .layer_data
         .channel_data
         .list
         .iter()
-        .find(|c| c.name == *"R")
-        .unwrap();
-    red.sample_data.values_as_f32().map(f64::from).collect()
+        .find(|c| c.name == *name)
+        .unwrap_or_else(|| panic!("{}: no channel {name}", path.display()))
+        .sample_data
+        .values_as_f32()
+        .collect()
+}
+
+/// Every texel's irradiance (R channel) of the single-page lightmap at `path`.
+fn red_channel(path: &Path) -> Vec<f64> {
+    channel(path, "R").into_iter().map(f64::from).collect()
+}
+
+/// Irradiance inside a closed box of albedo ρ emitting Le everywhere after B bounces:
+/// E_B = π Le (1 + ρ + … + ρ^(B−1)) = π Le (1 − ρ^B) / (1 − ρ), at every point.
+fn closed_box_irradiance(le: f32, albedo: f32, bounces: u32) -> f64 {
+    let rho = f64::from(albedo);
+    std::f64::consts::PI * f64::from(le) * (1.0 - rho.powi(bounces as i32)) / (1.0 - rho)
 }
 
 #[test]
 fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transports() {
-    // Inside a closed box of albedo ρ emitting Le everywhere, B bounces give
-    // E_B = π Le (1 + ρ + … + ρ^(B−1)) = π Le (1 − ρ^B) / (1 − ρ) at every point.
     let (albedo, le) = (0.5f32, 1.5f32);
     let dir = tempfile::tempdir().unwrap();
     let texels = dir.path().join("box.texels");
     let scene = emissive_box(&texels, albedo, le);
-    let closed_form = |b: u32| {
-        std::f64::consts::PI * f64::from(le) * (1.0 - f64::from(albedo).powi(b as i32))
-            / (1.0 - f64::from(albedo))
-    };
     for (transport, bounces, guiding) in [
         (Transport::Series, 1, Guiding::Off),
         (Transport::Series, 4, Guiding::Off),
@@ -465,7 +465,7 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
         let n = values.len() as f64;
         let mean = values.iter().sum::<f64>() / n;
         let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
-        let want = closed_form(bounces);
+        let want = closed_box_irradiance(le, albedo, bounces);
         let se = (var / n).sqrt();
         let what = format!("{transport} B={bounces} {guiding}: {mean} ± {se}, want {want}");
         if transport == Transport::Series && guiding == Guiding::Off {
@@ -497,7 +497,7 @@ fn global_weights_bake_the_closed_form_and_merge_shards_to_the_same_bits() {
     let dir = tempfile::tempdir().unwrap();
     let texels = dir.path().join("box.texels");
     let scene = emissive_box(&texels, albedo, le);
-    let want = std::f64::consts::PI * f64::from(le) * (1.0 - 0.5f64.powi(3)) / 0.5;
+    let want = closed_box_irradiance(le, albedo, 3);
     let job = |out: &str, shard: Shard| BakeJob {
         texels: texels.clone(),
         out: dir.path().join(out),
@@ -542,19 +542,7 @@ fn aux_channels_hold_samples_error_validity_position_and_normal() {
     let f = Fixture::new();
     let job = f.job("aux.exr", 2, Shard::WHOLE);
     f.run(&job, None).unwrap();
-    let image = exr::prelude::read_first_flat_layer_from_file(&job.out).unwrap();
-    let channel = |name: &str| -> Vec<f32> {
-        image
-            .layer_data
-            .channel_data
-            .list
-            .iter()
-            .find(|c| c.name == *name)
-            .unwrap_or_else(|| panic!("no channel {name}"))
-            .sample_data
-            .values_as_f32()
-            .collect()
-    };
+    let channel = |name: &str| channel(&job.out, name);
     for name in guidebake::bake::run::AUX_CHANNELS {
         assert!(channel(name).iter().all(|v| v.is_finite()), "{name}");
     }
