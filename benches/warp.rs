@@ -9,7 +9,8 @@
 //! (benchmark ids `warp/<function>/<samples>`). The guide is a realistic learned one: a small
 //! bright disk and a dim sky, learned in two iterations from 256 uniform and 512 guided
 //! records.
-//! Group `guide` (records/s): `build` from those 512 records.
+//! Group `guide` (records/s): `build` from those 512 records, and the same build with
+//! storage for the tree only (`build_without_start_table`), which shows the start table's cost.
 //!
 //! Every function's output is checked against the scalar reference once before timing.
 //!
@@ -349,6 +350,19 @@ fn bench(c: &mut Criterion) {
             || learned.clone(),
             |r| {
                 let (g, s) = guide::build(r, &GuideParams::default(), &mut storage);
+                black_box((g.nodes().len(), s));
+            },
+            BatchSize::SmallInput,
+        )
+    });
+    // The same build with storage for the tree only: no start table, to show its cost.
+    let tree_only = stats.nodes as usize;
+    group.bench_function("build_without_start_table", |b| {
+        b.iter_batched_ref(
+            || learned.clone(),
+            |r| {
+                let (g, s) = guide::build(r, &GuideParams::default(), &mut storage[..tree_only]);
+                assert!(g.start_table().is_empty());
                 black_box((g.nodes().len(), s));
             },
             BatchSize::SmallInput,

@@ -281,7 +281,7 @@ pub struct BuildStats {
 }
 
 /// Cells per axis of the warp's start table (a power of two, so `u · START_GRID` is exact).
-pub const START_GRID: usize = 64;
+pub const START_GRID: usize = 32;
 /// Nodes of storage the start table occupies after the tree: `START_GRID²` u16 entries.
 pub const START_TABLE_NODES: usize =
     (START_GRID * START_GRID * 2).div_ceil(core::mem::size_of::<Node>());
@@ -448,9 +448,14 @@ fn cells_by_side(t: f32, [lo, hi]: [u32; 2]) -> ([u32; 2], [u32; 2]) {
 /// that straddle one of its thresholds, and recurses into the children with the rest.
 fn fill_cells(nodes: &[Node], i: usize, xs: [u32; 2], ys: [u32; 2], table: &mut [u16]) {
     let write = |table: &mut [u16], xs: [u32; 2], ys: [u32; 2]| {
+        if xs[0] >= xs[1] {
+            return;
+        }
         for cy in ys[0]..ys[1] {
             let row = cy as usize * START_GRID;
-            table[row + xs[0] as usize..row + xs[1] as usize].fill(i as u16);
+            for cell in &mut table[row + xs[0] as usize..row + xs[1] as usize] {
+                *cell = i as u16;
+            }
         }
     };
     let Some(c) = nodes[i].first_child() else {

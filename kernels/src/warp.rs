@@ -31,7 +31,7 @@
 //! rectangles are mass-balanced, so a 64-sample texel's packet spans 1/8 of the square and
 //! meets many of them), so what pays is to make the per-lane part cheap:
 //! - **start table**: each lane looks up the cell of `u` in the guide's
-//!   [`Guide::start_table`] — the deepest node that every point of that cell of a 64 × 64
+//!   [`Guide::start_table`] — the deepest node that every point of that cell of a 32 × 32
 //!   grid over the primary sample square passes through (exact: the thresholds are in
 //!   primary sample space) — and starts there, usually in its leaf or one level above;
 //! - **interleaved per-lane descent**: the eight lanes' descents run in lockstep rounds,
