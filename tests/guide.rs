@@ -310,10 +310,27 @@ fn zero_and_nan_flux_give_the_uniform_guide() {
 }
 
 /// Compares every lane of `sample8_lanes` with the scalar warp, bit for bit, and checks that
-/// lanes beyond `lanes` come back unchanged with pdf 0.
+/// lanes beyond `lanes` come back unchanged with pdf 0. Also compares `pdf8` with the scalar
+/// `pdf` at the input points and with the warp's pdf at the warped points.
 fn assert_packet_matches(g: &Guide<'_>, xs: [f32; 8], ys: [f32; 8], lanes: usize) {
     let w = warp::sample8_lanes(g, f32x8::new(xs), f32x8::new(ys), lanes);
     let (wx, wy, wp) = (w.x.to_array(), w.y.to_array(), w.pdf.to_array());
+    let d = warp::pdf8(g, f32x8::new(xs), f32x8::new(ys)).to_array();
+    let dw = warp::pdf8(g, w.x, w.y).to_array();
+    for l in 0..8 {
+        assert_eq!(
+            d[l].to_bits(),
+            warp::pdf(g, [xs[l], ys[l]]).to_bits(),
+            "pdf8 lane {l}"
+        );
+        if l < lanes {
+            assert_eq!(
+                dw[l].to_bits(),
+                wp[l].to_bits(),
+                "pdf8 at the warped point, lane {l}"
+            );
+        }
+    }
     for l in 0..8 {
         if l < lanes {
             let s = warp::sample(g, [xs[l], ys[l]]);

@@ -67,8 +67,10 @@
 //!
 //! # Deviation
 //! Clarberg et al. warp a wavelet-defined image; we warp a quadtree built by
-//! [`crate::guide::build`]. [`invert`] and [`pdf`] have no 8-wide versions: nothing on the
-//! hot path needs them yet.
+//! [`crate::guide::build`]. [`pdf8`] is the 8-wide [`pdf`] (interleaved per-lane descent
+//! by the squares' midpoints; the start table indexes primary sample space, not the warped
+//! square, so it does not apply). [`invert`] has no 8-wide version: nothing on the hot path
+//! needs it.
 
 use crate::guide::{Guide, Node, START_GRID};
 use core::ops::{Add, Div, Mul, Sub};
@@ -291,6 +293,36 @@ pub fn pdf(guide: &Guide<'_>, w: [f32; 2]) -> f32 {
     guide.nodes()[leaf_at(guide, w)].pdf
 }
 
+/// [`pdf`] for eight points: lane `i` equals `pdf(guide, [x[i], y[i]])` bit for bit (the
+/// same comparisons against the same midpoints). The eight descents run interleaved and
+/// branch-free, as in [`sample8`], until no lane moved.
+#[inline]
+pub fn pdf8(guide: &Guide<'_>, x: f32x8, y: f32x8) -> f32x8 {
+    debug_assert!(
+        (0..8).all(|i| in_square([x.to_array()[i], y.to_array()[i]])),
+        "packet outside [0,1)^2"
+    );
+    let nodes = guide.nodes();
+    let (xs, ys) = (to_unit(x).to_array(), to_unit(y).to_array());
+    let mut idx = [0usize; 8];
+    loop {
+        let mut moved = 0;
+        for l in 0..8 {
+            let n = &nodes[idx[l]];
+            let half = n.size * 0.5;
+            let right = xs[l] >= n.origin[0] + half;
+            let upper = ys[l] >= n.origin[1] + half;
+            let next = usize::from(n.child) + usize::from(right) + 2 * usize::from(upper);
+            moved |= n.child;
+            idx[l] = if n.child == 0 { idx[l] } else { next };
+        }
+        if moved == 0 {
+            break;
+        }
+    }
+    f32x8::new(idx.map(|i| nodes[i].pdf))
+}
+
 /// The leaf whose square holds `w` (descending by the squares' midpoints).
 fn leaf_at(guide: &Guide<'_>, w: [f32; 2]) -> usize {
     debug_assert!(in_square(w), "point {w:?} outside [0,1)^2");
@@ -504,6 +536,32 @@ mod tests {
                 assert_eq!(w.y.to_array()[l].to_bits(), s.u[1].to_bits());
                 assert_eq!(w.pdf.to_array()[l].to_bits(), s.pdf.to_bits());
             }
+        }
+    }
+
+    #[test]
+    fn pdf8_matches_scalar_pdf_bit_for_bit() {
+        let mut st = [Node::default(); 1024];
+        let g = learned(&mut st);
+        let mut rng = Pcg32::new(4, 12);
+        let edge = [0.0, ONE_MINUS_EPS, 0.5, f32::from_bits(0x3effffff)];
+        for p in 0..2000 {
+            let xs: [f32; 8] =
+                core::array::from_fn(|l| if p == 0 { edge[l % 4] } else { rng.next_f32() });
+            let ys: [f32; 8] = core::array::from_fn(|l| {
+                if p == 0 {
+                    edge[l / 2 % 4]
+                } else {
+                    rng.next_f32()
+                }
+            });
+            let d = pdf8(&g, f32x8::new(xs), f32x8::new(ys)).to_array();
+            for l in 0..8 {
+                assert_eq!(d[l].to_bits(), pdf(&g, [xs[l], ys[l]]).to_bits());
+            }
+            // At the warped points it returns the warp's own pdf.
+            let w = sample8(&g, f32x8::new(xs), f32x8::new(ys));
+            assert_eq!(pdf8(&g, w.x, w.y).to_array(), w.pdf.to_array());
         }
     }
 
