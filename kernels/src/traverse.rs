@@ -495,6 +495,70 @@ struct Pre8 {
     lanes: [Pre; LANES],
     /// Bit mask of traced lanes.
     traced: u8,
+    /// The packet's direction interval when its traced lanes share origin and octant.
+    interval: Option<Interval>,
+}
+
+/// A shared-origin packet in one octant as one "interval ray": per axis the range of the
+/// lanes' `1/d`, for a conservative whole-packet box test (the interval culling).
+#[derive(Clone, Copy, Debug)]
+struct Interval {
+    org: [f32; 3],
+    inv_lo: [f32; 3],
+    inv_hi: [f32; 3],
+    neg: [bool; 3],
+    tmin: f32,
+}
+
+impl Interval {
+    /// The interval of the traced lanes, if they share `lead`'s origin.
+    fn of(lanes: &[Pre; LANES], traced: u8, lead: &Pre, neg: [bool; 3]) -> Option<Self> {
+        let mut iv = Self {
+            org: lead.org,
+            inv_lo: [f32::INFINITY; 3],
+            inv_hi: [f32::NEG_INFINITY; 3],
+            neg,
+            tmin: f32::INFINITY,
+        };
+        for (i, p) in lanes.iter().enumerate() {
+            if traced >> i & 1 == 0 {
+                continue;
+            }
+            if p.org != lead.org {
+                return None;
+            }
+            for axis in 0..3 {
+                iv.inv_lo[axis] = iv.inv_lo[axis].min(p.inv[axis]);
+                iv.inv_hi[axis] = iv.inv_hi[axis].max(p.inv[axis]);
+            }
+            iv.tmin = iv.tmin.min(p.tmin * NEAR_DOWN);
+        }
+        Some(iv)
+    }
+
+    /// Whether no lane's interval can meet slot `slot`'s box: [`box1`] with every product
+    /// replaced by its lower (near) or upper (far) bound over the lanes' `1/d` (rounding is
+    /// monotone, so the bounds hold after rounding). A plane whose bound is NaN (`0 · ∞`)
+    /// constrains nothing, as in [`box1`].
+    #[inline(always)]
+    fn misses(&self, node: &Node, slot: usize) -> bool {
+        let mut near = self.tmin;
+        let mut far = f32::INFINITY;
+        for axis in 0..3 {
+            let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
+            let (pn, pf) = if self.neg[axis] { (hi, lo) } else { (lo, hi) };
+            let (dn, df) = (pn - self.org[axis], pf - self.org[axis]);
+            let (n0, n1) = (dn * self.inv_lo[axis], dn * self.inv_hi[axis]);
+            let (f0, f1) = (df * self.inv_lo[axis], df * self.inv_hi[axis]);
+            if !(n0.is_nan() || n1.is_nan()) {
+                near = near.max(n0.min(n1));
+            }
+            if !(f0.is_nan() || f1.is_nan()) {
+                far = far.min(f0.max(f1));
+            }
+        }
+        near > far * FAR_UP
+    }
 }
 
 fn mask_of(bits: u8) -> f32x8 {
@@ -547,9 +611,23 @@ impl Pre8 {
             uniform,
             tmin: col(&|p| p.tmin),
             tmin_down: col(&|p| p.tmin * NEAR_DOWN),
+            interval: octant.and_then(|neg| Interval::of(&lanes, traced, lead, neg)),
             lanes,
             traced,
         }
+    }
+
+    /// [`Pre8::box8`], after the packet's [`Interval`] test when `interval` is set and the
+    /// packet has one (a miss there is a miss for every lane).
+    #[inline(always)]
+    fn box8_culled(&self, node: &Node, slot: usize, tmax: f32x8, interval: bool) -> (f32x8, f32x8) {
+        if interval
+            && let Some(iv) = &self.interval
+            && iv.misses(node, slot)
+        {
+            return (f32x8::ZERO, f32x8::ZERO);
+        }
+        self.box8(node, slot, tmax)
     }
 
     /// Lanes whose interval meets slot `slot`'s box, and their entry distances: [`box1`] for
@@ -701,50 +779,209 @@ fn occludes8(pre: &Pre8, tri: &Tri, tmax: f32x8) -> u8 {
     bits
 }
 
-/// Depth-first walk of a packet. `visit` tests a leaf and returns the packet's new `tmax`
-/// (all lanes −∞ stops the walk).
+/// How the packet walk orders children and when it hands lanes to the scalar walk.
+///
+/// [`Traversal::DEFAULT`] is what [`intersect8`] and [`occluded8`] use; the other settings
+/// exist so that `benches/traverse.rs` can measure the ideas side by side
+/// (docs/traverse.md, "Ideas"). Every setting gives the same results, bit for bit: the
+/// closest hit under the tie rule does not depend on the visiting order, and the scalar
+/// walk performs the same arithmetic as the packet's lanes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Traversal {
+    /// Finish an inner subtree with the scalar walk, lane by lane, when at most this many
+    /// lanes still reach it (0: never).
+    pub fallback_lanes: u32,
+    /// Which of two hit children is visited first.
+    pub order: ChildOrder,
+    /// Before the 8-wide box test, test the box once against the packet's interval of
+    /// directions (shared origin, one octant); skip the 8-wide test when that misses.
+    pub interval: bool,
+}
+
+/// The order in which a packet visits two children that its lanes both hit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChildOrder {
+    /// The lanes hitting both boxes vote with their entry distances.
+    Vote,
+    /// The box centres are compared along the packet's direction sign vector (the classic
+    /// ordered traversal by octant); falls back to [`ChildOrder::Vote`] across octants.
+    Signs,
+    /// The first traced lane's entry distances decide.
+    Lead,
+}
+
+impl Traversal {
+    /// The measured choice (docs/traverse.md).
+    pub const DEFAULT: Self = Self {
+        fallback_lanes: 0,
+        order: ChildOrder::Vote,
+        interval: false,
+    };
+}
+
+impl Default for Traversal {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// What a packet walk does at a leaf (eight lanes) and in a subtree handed to the scalar walk
+/// (one lane).
+trait Visitor<'a> {
+    /// Tests a leaf for the packet; returns the packet's new `tmax` (−∞ in finished lanes).
+    fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8;
+    /// Walks the subtree `entry` for lane `lane` alone; returns the packet's new `tmax`.
+    fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8;
+}
+
+/// Closest-hit visitor.
+struct Closest<'p> {
+    pre: &'p Pre8,
+    best: Best8,
+}
+
+impl<'a> Visitor<'a> for Closest<'_> {
+    #[inline(always)]
+    fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8 {
+        for tri in leaf {
+            closest8(self.pre, tri, &mut self.best);
+        }
+        self.best.t
+    }
+
+    fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8 {
+        let pre = &self.pre.lanes[lane];
+        let mut hit = self.best.lane(lane);
+        walk1(bvh, pre, entry, |leaf| {
+            for tri in leaf {
+                closest1(pre, tri, &mut hit);
+            }
+            hit.t
+        });
+        set_lane(&mut self.best, lane, &hit);
+        self.best.t
+    }
+}
+
+/// Occlusion visitor: a blocked lane's `tmax` becomes −∞.
+struct Occlusion<'p> {
+    pre: &'p Pre8,
+    tmax: f32x8,
+    blocked: u8,
+}
+
+impl<'a> Visitor<'a> for Occlusion<'_> {
+    #[inline(always)]
+    fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8 {
+        for tri in leaf {
+            let bits = occludes8(self.pre, tri, self.tmax);
+            if bits != 0 {
+                self.blocked |= bits;
+                self.tmax = mask_of(bits).bitselect(f32x8::splat(f32::NEG_INFINITY), self.tmax);
+                if self.blocked == self.pre.traced {
+                    break;
+                }
+            }
+        }
+        self.tmax
+    }
+
+    fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8 {
+        let pre = &self.pre.lanes[lane];
+        let tmax = self.tmax.as_array()[lane];
+        let mut hit = false;
+        walk1(bvh, pre, entry, |leaf| {
+            hit = hit || leaf.iter().any(|tri| occludes1(pre, tri, tmax));
+            if hit { f32::NEG_INFINITY } else { tmax }
+        });
+        if hit {
+            self.blocked |= 1 << lane;
+            self.tmax.as_mut_array()[lane] = f32::NEG_INFINITY;
+        }
+        self.tmax
+    }
+}
+
+/// Depth-first walk of a packet: a shared stack of `(child, meta, lanes)` entries, `lanes`
+/// the bit mask of lanes whose interval met the entry's box when it was pushed.
 fn walk8<'a>(
     bvh: &BvhRef<'a>,
     pre: &Pre8,
     mut tmax: f32x8,
-    mut visit: impl FnMut(&'a [Tri]) -> f32x8,
+    how: &Traversal,
+    visitor: &mut impl Visitor<'a>,
 ) {
-    let mut stack = [(0u32, 0u32); STACK];
+    let mut stack = [(0u32, 0u32, 0u8); STACK];
+    stack[0].2 = pre.traced;
     let mut sp = 1;
+    let mut alive = pre.traced;
     while sp > 0 {
         sp -= 1;
-        let (child, meta) = stack[sp];
+        let (child, meta, lanes) = stack[sp];
         if meta != 0 {
-            tmax = visit(bvh.leaf(child, meta));
-            if !pre.tmin.simd_le(tmax).any() {
+            tmax = visitor.leaf8(bvh.leaf(child, meta));
+            alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
+            if alive == 0 {
+                return;
+            }
+            continue;
+        }
+        let live = lanes & alive;
+        if live == 0 {
+            continue;
+        }
+        if live.count_ones() <= how.fallback_lanes {
+            for lane in 0..LANES {
+                if live >> lane & 1 == 1 {
+                    tmax = visitor.walk1(bvh, lane, (child, meta));
+                }
+            }
+            alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
+            if alive == 0 {
                 return;
             }
             continue;
         }
         let node = &bvh.nodes[child as usize];
-        let entry = |slot: usize| (node.child[slot], node.meta[slot]);
-        let (m0, n0) = pre.box8(node, 0, tmax);
-        let (m1, n1) = pre.box8(node, 1, tmax);
-        let (b0, b1) = (m0.to_bitmask(), m1.to_bitmask());
+        let (m0, n0) = pre.box8_culled(node, 0, tmax, how.interval);
+        let (m1, n1) = pre.box8_culled(node, 1, tmax, how.interval);
+        let (b0, b1) = (m0.to_bitmask() as u8, m1.to_bitmask() as u8);
+        let entry = |slot: usize, bits: u8| (node.child[slot], node.meta[slot], bits);
         match (b0 != 0, b1 != 0) {
             (true, true) => {
-                // The lanes hitting both boxes vote for the nearer one.
-                let closer1 = (n1.simd_lt(n0) & m0 & m1).to_bitmask().count_ones();
-                let (near, far) = if 2 * closer1 > (b0 & b1).count_ones() {
-                    (1, 0)
-                } else {
-                    (0, 1)
+                let first1 = match (how.order, pre.octant) {
+                    (ChildOrder::Signs, Some(neg)) => {
+                        // Centre along the sign vector, doubled: lo + hi per axis.
+                        let along = |slot: usize| {
+                            (0..3).fold(0.0, |acc, axis| {
+                                let c = node.lo[axis][slot] + node.hi[axis][slot];
+                                if neg[axis] { acc - c } else { acc + c }
+                            })
+                        };
+                        along(1) < along(0)
+                    }
+                    (ChildOrder::Lead, _) if b0 & b1 != 0 => {
+                        let lead = (b0 & b1).trailing_zeros() as usize;
+                        n1.as_array()[lead] < n0.as_array()[lead]
+                    }
+                    _ => {
+                        // The lanes hitting both boxes vote for the nearer one.
+                        let closer1 = (n1.simd_lt(n0) & m0 & m1).to_bitmask().count_ones();
+                        2 * closer1 > (b0 & b1).count_ones()
+                    }
                 };
-                stack[sp] = entry(far);
-                stack[sp + 1] = entry(near);
+                let (near, far) = if first1 { (1, 0) } else { (0, 1) };
+                let bits = [b0, b1];
+                stack[sp] = entry(far, bits[far]);
+                stack[sp + 1] = entry(near, bits[near]);
                 sp += 2;
             }
             (true, false) => {
-                stack[sp] = entry(0);
+                stack[sp] = entry(0, b0);
                 sp += 1;
             }
             (false, true) => {
-                stack[sp] = entry(1);
+                stack[sp] = entry(1, b1);
                 sp += 1;
             }
             (false, false) => {}
@@ -758,6 +995,11 @@ fn walk8<'a>(
 /// miss leave their `hits` lane untouched. Returns the bit mask of lanes that hit. Each hit
 /// equals [`intersect1`]'s for that lane, bit for bit.
 pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
+    intersect8_with(bvh, rays, hits, &Traversal::DEFAULT)
+}
+
+/// [`intersect8`] with a chosen [`Traversal`] (same results, different speed).
+pub fn intersect8_with(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8, how: &Traversal) -> u8 {
     let pre = Pre8::new(rays);
     if pre.traced == 0 {
         return 0;
@@ -767,18 +1009,17 @@ pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
         rays.tmax.fast_min(f32x8::splat(f32::MAX)),
         f32x8::splat(f32::NEG_INFINITY),
     );
-    let mut best = Best8 {
-        t: tmax,
-        u: f32x8::ZERO,
-        v: f32x8::ZERO,
-        prim: u32x8::splat(NO_HIT),
+    let mut closest = Closest {
+        pre: &pre,
+        best: Best8 {
+            t: tmax,
+            u: f32x8::ZERO,
+            v: f32x8::ZERO,
+            prim: u32x8::splat(NO_HIT),
+        },
     };
-    walk8(bvh, &pre, tmax, |leaf| {
-        for tri in leaf {
-            closest8(&pre, tri, &mut best);
-        }
-        best.t
-    });
+    walk8(bvh, &pre, tmax, how, &mut closest);
+    let best = closest.best;
     let hit_mask = best.prim.simd_ne(u32x8::splat(NO_HIT));
     let f: f32x8 = bytemuck::cast(hit_mask);
     hits.t = f.bitselect(best.t, hits.t);
@@ -792,30 +1033,27 @@ pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
 /// drops out when blocked, the walk ends when all have). Returns the bit mask of blocked lanes;
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
 pub fn occluded8(bvh: &BvhRef<'_>, rays: &Ray8) -> u8 {
+    occluded8_with(bvh, rays, &Traversal::DEFAULT)
+}
+
+/// [`occluded8`] with a chosen [`Traversal`] (same results, different speed).
+pub fn occluded8_with(bvh: &BvhRef<'_>, rays: &Ray8, how: &Traversal) -> u8 {
     let pre = Pre8::new(rays);
     if pre.traced == 0 {
         return 0;
     }
     let traced = mask_of(pre.traced);
-    let mut tmax = traced.bitselect(
+    let tmax = traced.bitselect(
         rays.tmax.fast_min(f32x8::splat(f32::MAX)),
         f32x8::splat(f32::NEG_INFINITY),
     );
-    let mut blocked = 0u8;
-    walk8(bvh, &pre, tmax, |leaf| {
-        for tri in leaf {
-            let bits = occludes8(&pre, tri, tmax);
-            if bits != 0 {
-                blocked |= bits;
-                tmax = mask_of(bits).bitselect(f32x8::splat(f32::NEG_INFINITY), tmax);
-                if blocked == pre.traced {
-                    break;
-                }
-            }
-        }
-        tmax
-    });
-    blocked
+    let mut occlusion = Occlusion {
+        pre: &pre,
+        tmax,
+        blocked: 0,
+    };
+    walk8(bvh, &pre, tmax, how, &mut occlusion);
+    occlusion.blocked
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -950,6 +1188,23 @@ mod tests {
         Ray::new(org, d, 0.0, tmax)
     }
 
+    /// Every [`Traversal`] setting worth measuring: each must give the same bits.
+    fn variants() -> Vec<Traversal> {
+        let mut out = Vec::new();
+        for order in [ChildOrder::Vote, ChildOrder::Signs, ChildOrder::Lead] {
+            for fallback_lanes in [0, 1, 2, 8] {
+                for interval in [false, true] {
+                    out.push(Traversal {
+                        fallback_lanes,
+                        order,
+                        interval,
+                    });
+                }
+            }
+        }
+        out
+    }
+
     #[test]
     fn packet_equals_scalar_equals_brute_force_for_1_to_8_lanes() {
         let mut rng = Pcg32::new(41, 2);
@@ -973,6 +1228,18 @@ mod tests {
             let mut hits = Hit8::NONE;
             let mask = intersect8(&bvh, &packet, &mut hits);
             let blocked = occluded8(&bvh, &packet);
+            for how in variants() {
+                let mut other = Hit8::NONE;
+                let m = intersect8_with(&bvh, &packet, &mut other, &how);
+                let lanes =
+                    |h: &Hit8| -> [Option<Hit>; LANES] { core::array::from_fn(|i| h.lane(i)) };
+                assert_eq!(
+                    (m, lanes(&other)),
+                    (mask, lanes(&hits)),
+                    "{how:?}: {rays:?}"
+                );
+                assert_eq!(occluded8_with(&bvh, &packet, &how), blocked, "{how:?}");
+            }
             for lane in 0..LANES {
                 let r = packet.lane(lane);
                 let oracle = intersect_brute(&tris, &r);
