@@ -257,11 +257,6 @@ impl Pre {
             tmin: ray.tmin,
         }
     }
-
-    /// Permutation id `kz * 2 + swapped`, equal for lanes with the same shear axes.
-    fn perm_id(&self) -> u32 {
-        (self.k[2] * 2 + usize::from(self.k[0] != (self.k[2] + 1) % 3)) as u32
-    }
 }
 
 /// Entry distance of slot `slot` if the ray's `[tmin, tmax]` meets its box.
@@ -492,7 +487,8 @@ struct Pre8 {
     tmin: f32x8,
     /// `tmin · (1 − 2⁻¹⁸)` for the box test.
     tmin_down: f32x8,
-    lanes: [Pre; LANES],
+    /// The rays, for [`Pre8::lane`].
+    rays: Ray8,
     /// Bit mask of traced lanes.
     traced: u8,
     /// The packet's direction interval when its traced lanes share origin and octant.
@@ -511,29 +507,30 @@ struct Interval {
 }
 
 impl Interval {
-    /// The interval of the traced lanes, if they share `lead`'s origin.
-    fn of(lanes: &[Pre; LANES], traced: u8, lead: &Pre, neg: [bool; 3]) -> Option<Self> {
-        let mut iv = Self {
-            org: lead.org,
-            inv_lo: [f32::INFINITY; 3],
-            inv_hi: [f32::NEG_INFINITY; 3],
-            neg,
-            tmin: f32::INFINITY,
+    /// The interval of the traced lanes, if they share one origin.
+    fn of(
+        org: &[f32x8; 3],
+        inv: &[f32x8; 3],
+        tmin: f32x8,
+        traced: u8,
+        neg: [bool; 3],
+    ) -> Option<Self> {
+        let lead = traced.trailing_zeros().min(7) as usize;
+        let o = org.map(|v| v.as_array()[lead]);
+        let shared = (0..3)
+            .all(|a| org[a].simd_eq(f32x8::splat(o[a])).to_bitmask() as u8 & traced == traced);
+        let fold = |v: &f32x8, start: f32, f: fn(f32, f32) -> f32| {
+            (0..LANES)
+                .filter(|&i| traced >> i & 1 == 1)
+                .fold(start, |acc, i| f(acc, v.as_array()[i]))
         };
-        for (i, p) in lanes.iter().enumerate() {
-            if traced >> i & 1 == 0 {
-                continue;
-            }
-            if p.org != lead.org {
-                return None;
-            }
-            for axis in 0..3 {
-                iv.inv_lo[axis] = iv.inv_lo[axis].min(p.inv[axis]);
-                iv.inv_hi[axis] = iv.inv_hi[axis].max(p.inv[axis]);
-            }
-            iv.tmin = iv.tmin.min(p.tmin * NEAR_DOWN);
-        }
-        Some(iv)
+        shared.then(|| Self {
+            org: o,
+            inv_lo: [0, 1, 2].map(|a| fold(&inv[a], f32::INFINITY, f32::min)),
+            inv_hi: [0, 1, 2].map(|a| fold(&inv[a], f32::NEG_INFINITY, f32::max)),
+            neg,
+            tmin: fold(&tmin, f32::INFINITY, f32::min) * NEAR_DOWN,
+        })
     }
 
     /// Whether no lane's interval can meet slot `slot`'s box: [`box1`] with every product
@@ -572,49 +569,82 @@ fn mask_of(bits: u8) -> f32x8 {
 }
 
 impl Pre8 {
-    fn new(rays: &Ray8) -> Self {
-        let traced = (rays.traceable() & rays.tmin.simd_ge(f32x8::ZERO)).to_bitmask() as u8;
-        let stub = Pre::new(&Ray::new(Vec3::ZERO, Vec3::X, f32::INFINITY, 0.0));
-        let lanes: [Pre; LANES] = core::array::from_fn(|i| {
-            if traced >> i & 1 == 1 {
-                Pre::new(&rays.lane(i))
+    /// The packet's constants, computed 8-wide with the same IEEE operations as [`Pre::new`]
+    /// per lane (so every lane's values equal its scalar [`Pre`]'s bit for bit); untraced
+    /// lanes get the stub ray (origin 0, direction +x, `tmin = +∞`). `interval`: also derive
+    /// the packet's [`Interval`] (only [`Traversal::interval`] uses it).
+    fn new(rays: &Ray8, interval: bool) -> Self {
+        let (zero, one) = (f32x8::ZERO, f32x8::ONE);
+        let live = rays.traceable() & rays.tmin.simd_ge(zero);
+        let traced = live.to_bitmask() as u8;
+        let org = rays.org.map(|o| live.bitselect(o, zero));
+        let d = [
+            live.bitselect(rays.dir[0], one),
+            live.bitselect(rays.dir[1], zero),
+            live.bitselect(rays.dir[2], zero),
+        ];
+        let tmin = live.bitselect(rays.tmin, f32x8::splat(f32::INFINITY));
+        let inv = d.map(|x| one / x);
+        // Shear axes as in `Pre::new`: kz the largest |d| (ties to the lower axis), kx/ky the
+        // next two cyclically, swapped when d[kz] < 0.
+        let a = d.map(f32x8::abs);
+        let kz0 = a[0].simd_ge(a[1]) & a[0].simd_ge(a[2]);
+        let kz1 = !kz0 & a[1].simd_ge(a[2]);
+        let kz2 = !(kz0 | kz1);
+        let dkz = kz0.bitselect(d[0], kz1.bitselect(d[1], d[2]));
+        let sw = dkz.simd_lt(zero);
+        let sel = [
+            [(kz2 & !sw) | (kz1 & sw), (kz0 & !sw) | (kz2 & sw)],
+            [(kz1 & !sw) | (kz2 & sw), (kz2 & !sw) | (kz0 & sw)],
+            [kz0, kz1],
+        ];
+        let pick =
+            |v: &[f32x8; 3], i: usize| sel[i][0].bitselect(v[0], sel[i][1].bitselect(v[1], v[2]));
+        let (dx, dy, dz) = (pick(&d, 0), pick(&d, 1), pick(&d, 2));
+        let neg = inv.map(f32x8::is_sign_negative);
+        // Lanes agree when a mask is all-traced or none-traced.
+        let same = |m: f32x8| {
+            let bits = m.to_bitmask() as u8 & traced;
+            bits == 0 || bits == traced
+        };
+        let lead = traced.trailing_zeros().min(7);
+        let bit = |m: f32x8| m.to_bitmask() >> lead & 1 == 1;
+        let octant = neg.iter().all(|&m| same(m)).then(|| neg.map(bit));
+        let uniform = (same(kz0) && same(kz1) && same(sw)).then(|| {
+            let kz = if bit(kz0) {
+                0
+            } else if bit(kz1) {
+                1
             } else {
-                stub
-            }
+                2
+            };
+            let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
+            if bit(sw) { [ky, kx, kz] } else { [kx, ky, kz] }
         });
-        let col = |f: &dyn Fn(&Pre) -> f32| f32x8::new(core::array::from_fn(|i| f(&lanes[i])));
-        let first = lanes[traced.trailing_zeros().min(7) as usize].perm_id();
-        let same = (0..LANES).all(|i| traced >> i & 1 == 0 || lanes[i].perm_id() == first);
-        let uniform = same.then(|| lanes[traced.trailing_zeros().min(7) as usize].k);
-        let lead = &lanes[traced.trailing_zeros().min(7) as usize];
-        let signs = |p: &Pre| p.inv.map(f32::is_sign_negative);
-        let octant = (0..LANES)
-            .all(|i| traced >> i & 1 == 0 || signs(&lanes[i]) == signs(lead))
-            .then(|| signs(lead));
-        let is = |i: usize, j: usize| col(&|p| if p.k[i] == j { f32::from_bits(!0) } else { 0.0 });
+        let interval = match octant {
+            Some(neg) if interval => Interval::of(&org, &inv, tmin, traced, neg),
+            _ => None,
+        };
         Self {
-            org: [0, 1, 2].map(|a| col(&|p| p.org[a])),
-            inv: [0, 1, 2].map(|a| col(&|p| p.inv[a])),
-            porg: [0, 1, 2].map(|a| col(&|p| p.org[p.k[a]])),
-            s: [0, 1, 2].map(|a| col(&|p| p.s[a])),
-            sel: [0, 1, 2].map(|i| [is(i, 0), is(i, 1)]),
-            neg: [0, 1, 2].map(|a| {
-                col(&|p| {
-                    if p.inv[a].is_sign_negative() {
-                        f32::from_bits(!0)
-                    } else {
-                        0.0
-                    }
-                })
-            }),
+            porg: [pick(&org, 0), pick(&org, 1), pick(&org, 2)],
+            s: [dx / dz, dy / dz, one / dz],
+            org,
+            inv,
+            sel: [sel[0], sel[1], sel[2]],
+            neg,
             octant,
             uniform,
-            tmin: col(&|p| p.tmin),
-            tmin_down: col(&|p| p.tmin * NEAR_DOWN),
-            interval: octant.and_then(|neg| Interval::of(&lanes, traced, lead, neg)),
-            lanes,
+            tmin,
+            tmin_down: tmin * f32x8::splat(NEAR_DOWN),
+            rays: *rays,
             traced,
+            interval,
         }
+    }
+
+    /// Lane `i`'s scalar constants (for the rare per-lane paths); `i` must be traced.
+    fn lane(&self, i: usize) -> Pre {
+        Pre::new(&self.rays.lane(i))
     }
 
     /// [`Pre8::box8`], after the packet's [`Interval`] test when `interval` is set and the
@@ -695,7 +725,7 @@ impl Pre8 {
         let tt = u * (sz * a[2]) + v * (sz * b[2]) + w * (sz * c[2]);
         let ok = !(neg & pos) & det.simd_ne(zero) & !any_zero;
         Tri8 {
-            t: tt / det,
+            tt,
             v,
             w,
             det,
@@ -705,8 +735,9 @@ impl Pre8 {
     }
 }
 
+/// [`Pre8::tri8`]'s result; `t = tt / det` is divided only when some lane may hit.
 struct Tri8 {
-    t: f32x8,
+    tt: f32x8,
     v: f32x8,
     w: f32x8,
     det: f32x8,
@@ -736,11 +767,15 @@ impl Best8 {
 fn closest8(pre: &Pre8, tri: &Tri, best: &mut Best8) {
     let r = pre.tri8(tri);
     let live = pre.tmin.simd_le(best.t);
-    let cand = r.ok & r.t.simd_ge(pre.tmin) & r.t.simd_le(best.t);
-    let strict = cand & r.t.simd_lt(best.t);
+    if !((r.ok | r.any_zero) & live).any() {
+        return;
+    }
+    let t = r.tt / r.det;
+    let cand = r.ok & t.simd_ge(pre.tmin) & t.simd_le(best.t);
+    let strict = cand & t.simd_lt(best.t);
     if strict.any() {
         let m: u32x8 = bytemuck::cast(strict);
-        best.t = strict.bitselect(r.t, best.t);
+        best.t = strict.bitselect(t, best.t);
         best.u = strict.bitselect(r.v / r.det, best.u);
         best.v = strict.bitselect(r.w / r.det, best.v);
         best.prim = m.bitselect(u32x8::splat(tri.prim), best.prim);
@@ -751,7 +786,7 @@ fn closest8(pre: &Pre8, tri: &Tri, best: &mut Best8) {
         for i in 0..LANES {
             if rare >> i & 1 == 1 {
                 let mut hit = best.lane(i);
-                closest1(&pre.lanes[i], tri, &mut hit);
+                closest1(&pre.lane(i), tri, &mut hit);
                 set_lane(best, i, &hit);
             }
         }
@@ -768,11 +803,15 @@ fn set_lane(best: &mut Best8, i: usize, hit: &Hit) {
 /// Lanes `tri` blocks on `[tmin, tmax]`, as a bit mask.
 fn occludes8(pre: &Pre8, tri: &Tri, tmax: f32x8) -> u8 {
     let r = pre.tri8(tri);
-    let hit = r.ok & r.t.simd_ge(pre.tmin) & r.t.simd_le(tmax);
+    if !(r.ok | r.any_zero).any() {
+        return 0;
+    }
+    let t = r.tt / r.det;
+    let hit = r.ok & t.simd_ge(pre.tmin) & t.simd_le(tmax);
     let mut bits = hit.to_bitmask() as u8;
     let zero = (r.any_zero & pre.tmin.simd_le(tmax)).to_bitmask() as u8;
     for i in 0..LANES {
-        if zero >> i & 1 == 1 && occludes1(&pre.lanes[i], tri, tmax.as_array()[i]) {
+        if zero >> i & 1 == 1 && occludes1(&pre.lane(i), tri, tmax.as_array()[i]) {
             bits |= 1 << i;
         }
     }
@@ -850,7 +889,7 @@ impl<'a> Visitor<'a> for Closest<'_> {
     }
 
     fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8 {
-        let pre = &self.pre.lanes[lane];
+        let pre = &self.pre.lane(lane);
         let mut hit = self.best.lane(lane);
         walk1(bvh, pre, entry, |leaf| {
             for tri in leaf {
@@ -887,7 +926,7 @@ impl<'a> Visitor<'a> for Occlusion<'_> {
     }
 
     fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8 {
-        let pre = &self.pre.lanes[lane];
+        let pre = &self.pre.lane(lane);
         let tmax = self.tmax.as_array()[lane];
         let mut hit = false;
         walk1(bvh, pre, entry, |leaf| {
@@ -1000,7 +1039,7 @@ pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
 
 /// [`intersect8`] with a chosen [`Traversal`] (same results, different speed).
 pub fn intersect8_with(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8, how: &Traversal) -> u8 {
-    let pre = Pre8::new(rays);
+    let pre = Pre8::new(rays, how.interval);
     if pre.traced == 0 {
         return 0;
     }
@@ -1038,7 +1077,7 @@ pub fn occluded8(bvh: &BvhRef<'_>, rays: &Ray8) -> u8 {
 
 /// [`occluded8`] with a chosen [`Traversal`] (same results, different speed).
 pub fn occluded8_with(bvh: &BvhRef<'_>, rays: &Ray8, how: &Traversal) -> u8 {
-    let pre = Pre8::new(rays);
+    let pre = Pre8::new(rays, how.interval);
     if pre.traced == 0 {
         return 0;
     }
@@ -1274,7 +1313,7 @@ mod tests {
                     f32::INFINITY,
                 )
             });
-            let pre = Pre8::new(&Ray8::from_rays(&rays));
+            let pre = Pre8::new(&Ray8::from_rays(&rays), false);
             let r = pre.tri8(&t);
             for (i, ray) in rays.iter().enumerate() {
                 let want = tri1(&Pre::new(ray), &t);
@@ -1284,12 +1323,58 @@ mod tests {
                 }
                 assert_eq!(lane, want.is_some(), "{ray:?}");
                 if let Some((tt, _, _)) = want {
-                    assert_eq!(r.t.as_array()[i].to_bits(), tt.to_bits());
+                    assert_eq!((r.tt / r.det).as_array()[i].to_bits(), tt.to_bits());
                     hits += 1;
                 }
             }
         }
         assert!(hits > 4000, "the test must exercise hits ({hits})");
+    }
+
+    #[test]
+    fn packet_constants_equal_each_lanes_scalar_constants_bit_for_bit() {
+        let mut rng = Pcg32::new(77, 3);
+        let bits = |v: f32x8, i: usize| v.as_array()[i].to_bits();
+        for trial in 0..2000 {
+            let shared = v3(&mut rng, 4.0);
+            let rays: Vec<Ray> = (0..1 + trial % LANES)
+                .map(|_| {
+                    let org = if trial % 3 == 0 {
+                        v3(&mut rng, 4.0)
+                    } else {
+                        shared
+                    };
+                    ray(&mut rng, org)
+                })
+                .collect();
+            let packet = Ray8::from_rays(&rays);
+            let pre = Pre8::new(&packet, true);
+            let mut perms = Vec::new();
+            for (i, r) in rays.iter().enumerate() {
+                if !traceable(r) {
+                    assert_eq!(pre.traced >> i & 1, 0);
+                    continue;
+                }
+                assert_eq!(pre.traced >> i & 1, 1);
+                let p = Pre::new(r);
+                perms.push(p.k);
+                for a in 0..3 {
+                    assert_eq!(bits(pre.org[a], i), p.org[a].to_bits());
+                    assert_eq!(bits(pre.inv[a], i), p.inv[a].to_bits(), "{r:?}");
+                    assert_eq!(bits(pre.s[a], i), p.s[a].to_bits(), "{r:?}");
+                    assert_eq!(bits(pre.porg[a], i), p.org[p.k[a]].to_bits(), "{r:?}");
+                    for j in 0..2 {
+                        assert_eq!(bits(pre.sel[a][j], i) != 0, p.k[a] == j, "{r:?}");
+                    }
+                }
+                assert_eq!(bits(pre.tmin, i), p.tmin.to_bits());
+            }
+            let all_same = perms.windows(2).all(|w| w[0] == w[1]);
+            assert_eq!(pre.uniform.is_some(), all_same || perms.is_empty());
+            if let (Some(k), Some(first)) = (pre.uniform, perms.first()) {
+                assert_eq!(k, *first);
+            }
+        }
     }
 
     #[test]
