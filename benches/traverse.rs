@@ -567,26 +567,34 @@ fn duel(scene: &str, entries: &[(String, usize, Box<dyn Fn() -> u64 + '_>)], rou
     }
 }
 
-/// Build time vs gather trace time of every obvhs preset (printed, one run each; not a criterion
-/// measurement: a build is seconds long on the 1M scene).
+/// Build time vs gather trace time of every obvhs preset (printed; not a criterion
+/// measurement: a build is seconds long on the 1M scene). The traces run round-robin, one
+/// pass per preset per round, so every preset sees the same load; medians over the rounds.
 fn presets(s: &Scene, packets: &[Ray8]) {
-    for preset in Preset::ALL {
-        let bvh = Bvh::build(&s.soup, preset).expect("preset BVH");
-        let view = bvh.view();
-        let mut best = f64::INFINITY;
-        for _ in 0..5 {
+    let built: Vec<(Preset, Bvh)> = Preset::ALL
+        .iter()
+        .map(|&p| (p, Bvh::build(&s.soup, p).expect("preset BVH")))
+        .collect();
+    let rounds = 15;
+    let mut rates = vec![Vec::with_capacity(rounds); built.len()];
+    for round in 0..rounds {
+        for k in 0..built.len() {
+            let i = (round + k) % built.len();
+            let view = built[i].1.view();
             let start = Instant::now();
             black_box(packet8(&view, packets));
-            best = best.min(start.elapsed().as_secs_f64());
+            rates[i].push((packets.len() * LANES) as f64 / start.elapsed().as_secs_f64() / 1e6);
         }
-        let mrays = (packets.len() * LANES) as f64 / best / 1e6;
+    }
+    for ((preset, bvh), mut r) in built.iter().zip(rates) {
+        r.sort_by(f64::total_cmp);
         println!(
-            "preset {} {:>10}: build {:>8.1} ms, {} nodes, gather packet8 {:.2} Mrays/s",
+            "preset {} {:>10}: build {:>8.1} ms, {} nodes, gather packet8 {:.2} Mrays/s (median of {rounds})",
             s.name,
             preset.name(),
             bvh.build_time().as_secs_f64() * 1e3,
-            view.nodes().len(),
-            mrays
+            bvh.view().nodes().len(),
+            r[rounds / 2]
         );
     }
 }
