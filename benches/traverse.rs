@@ -450,7 +450,7 @@ fn bench(c: &mut Criterion) {
             .and_then(|v| v.parse::<usize>().ok())
         {
             let gather = &sets[0].1;
-            let mut entries: Vec<(String, usize, Box<dyn Fn() -> u64 + '_>)> = vec![
+            let mut entries: Vec<DuelEntry<'_>> = vec![
                 (
                     "packet8".into(),
                     gather.len(),
@@ -514,11 +514,14 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
+/// A duel contestant: name, packets per pass, one pass over its ray set (returns a checksum).
+type DuelEntry<'a> = (String, usize, Box<dyn Fn() -> u64 + 'a>);
+
 /// Round-robin timing of the gather tracers: each round runs every entry once over its ray
 /// set (the start rotating from round to round), so all entries see the same machine load
 /// within a few tens of milliseconds. Prints per entry the median Mrays/s and the median over
 /// rounds of its per-round ratio to `obvhs_cwbvh` and to the faster Embree `intersect8`.
-fn duel(scene: &str, entries: &[(String, usize, Box<dyn Fn() -> u64 + '_>)], rounds: usize) {
+fn duel(scene: &str, entries: &[DuelEntry<'_>], rounds: usize) {
     let n = entries.len();
     let mut rates = vec![Vec::with_capacity(rounds); n];
     for round in 0..rounds {
