@@ -15,7 +15,7 @@ shift || true
 if rustup run nightly rustc --version >/dev/null 2>&1; then tc=(+nightly); san=(); else tc=(); san=(-s none); fi
 # cargo-fuzz sets RUSTFLAGS, which hides .cargo/config.toml's: pass the AVX2 code path on.
 if grep -q avx2 /proc/cpuinfo 2>/dev/null; then
-    export RUSTFLAGS="${RUSTFLAGS:-} -C target-feature=+avx2,+fma"
+    export RUSTFLAGS="${RUSTFLAGS:+$RUSTFLAGS }-C target-feature=+avx2,+fma"
 fi
 if [ $# -gt 0 ]; then targets=("$@"); else mapfile -t targets < <(cargo "${tc[@]}" fuzz list); fi
 mkdir -p artifacts/corpus
@@ -25,7 +25,7 @@ for target in "${targets[@]}"; do
     status=ok
     cargo "${tc[@]}" fuzz run "${san[@]}" "$target" "artifacts/corpus/$target" "corpus/$target" -- \
         -max_total_time="$seconds" -print_final_stats=1 -rss_limit_mb=4096 >"$log" 2>&1 || status=CRASH
-    execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1)
-    secs=$(grep -o 'Done [0-9]* runs in [0-9]* second' "$log" | grep -o 'in [0-9]*' | grep -o '[0-9]*' | tail -1)
+    execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1 || true)
+    secs=$(grep -o 'Done [0-9]* runs in [0-9]* second' "$log" | grep -o 'in [0-9]*' | grep -o '[0-9]*' | tail -1 || true)
     echo "$target: ${execs:-?} executions in ${secs:-?} s, $status (log: fuzz/$log)"
 done
