@@ -1,14 +1,31 @@
 #!/usr/bin/env bash
-# Runs every fuzz target for SECONDS (default 60) each and prints executions and crashes.
+# Runs the fuzz targets for SECONDS (default 60) each and prints, per target, executions,
+# time and whether it crashed:   fuzz/run.sh [SECONDS] [TARGET...]
 # Needs `cargo install cargo-fuzz`. Uses nightly with AddressSanitizer when available,
-# otherwise stable without a sanitizer (-s none). New crashes land in fuzz/artifacts/;
-# once fixed, copy each into fuzz/corpus/TARGET/ so `cargo test` replays it.
+# otherwise stable without a sanitizer (-s none). cargo-fuzz builds in release with debug
+# assertions (so the kernels' debug_assert! preconditions and overflow checks are live).
+# New inputs go to fuzz/artifacts/corpus/TARGET (the checked-in seeds in fuzz/corpus/TARGET
+# are read, never written); crashes land in fuzz/artifacts/TARGET/. Once a crash is fixed,
+# copy its input into fuzz/corpus/TARGET/ so `cargo test --test fuzz_corpus` replays it.
+# Full logs: fuzz/artifacts/run-TARGET.log.
 set -euo pipefail
 cd "$(dirname "$0")"
 seconds=${1:-60}
+shift || true
 if rustup run nightly rustc --version >/dev/null 2>&1; then tc=(+nightly); san=(); else tc=(); san=(-s none); fi
-for target in $(cargo "${tc[@]}" fuzz list); do
-    echo "=== $target (${seconds}s)"
-    cargo "${tc[@]}" fuzz run "${san[@]}" "$target" "corpus/$target" -- \
-        -max_total_time="$seconds" -print_final_stats=1 2>&1 | grep -E 'stat::number_of_executed_units|crash|ERROR' || true
+# cargo-fuzz sets RUSTFLAGS, which hides .cargo/config.toml's: pass the AVX2 code path on.
+if grep -q avx2 /proc/cpuinfo 2>/dev/null; then
+    export RUSTFLAGS="${RUSTFLAGS:+$RUSTFLAGS }-C target-feature=+avx2,+fma"
+fi
+if [ $# -gt 0 ]; then targets=("$@"); else mapfile -t targets < <(cargo "${tc[@]}" fuzz list); fi
+mkdir -p artifacts/corpus
+for target in "${targets[@]}"; do
+    mkdir -p "artifacts/corpus/$target"
+    log="artifacts/run-$target.log"
+    status=ok
+    cargo "${tc[@]}" fuzz run "${san[@]}" "$target" "artifacts/corpus/$target" "corpus/$target" -- \
+        -max_total_time="$seconds" -print_final_stats=1 -rss_limit_mb=4096 >"$log" 2>&1 || status=CRASH
+    execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1 || true)
+    secs=$(grep -o 'Done [0-9]* runs in [0-9]* second' "$log" | grep -o 'in [0-9]*' | grep -o '[0-9]*' | tail -1 || true)
+    echo "$target: ${execs:-?} executions in ${secs:-?} s, $status (log: fuzz/$log)"
 done

@@ -1,19 +1,31 @@
 //! Replays the checked-in fuzz corpus (`fuzz/corpus/TARGET/*`) through the same bodies the
 //! cargo-fuzz targets run, so every input that once crashed a target stays a regression
 //! test on stable Rust. Run the fuzzers themselves with `fuzz/run.sh`.
+//!
+//! The structured seeds (guide, estimator, traverse, scene, texel_file) are written by
+//! `write_seed_corpus` below, so a person can see what each seed holds and rewrite them
+//! after a format change:
+//! `cargo test --test fuzz_corpus -- --ignored write_seed_corpus`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
+use guidebake::texels::{FLAG_VALID, PageRecord, TexelFile, TexelRecord, TexelWriter, TileRect};
+use guidebake_kernels::testing::Pcg32;
 use guidebake_suite::fuzzing::TARGETS;
+
+fn corpus_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus")
+}
 
 #[test]
 fn every_corpus_input_passes_its_target() {
-    let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
+    let corpus = corpus_dir();
     let mut replayed = 0;
     for (name, body) in TARGETS {
         let dir = corpus.join(name);
         let entries = std::fs::read_dir(&dir)
             .unwrap_or_else(|e| panic!("{}: every target keeps a seed corpus: {e}", dir.display()));
+        let mut seeds = 0;
         for entry in entries {
             let path = entry.expect("readable corpus directory").path();
             let bytes = std::fs::read(&path).expect("readable corpus file");
@@ -23,15 +35,442 @@ fn every_corpus_input_passes_its_target() {
                 "fuzz target {name} fails on {}",
                 path.display()
             );
-            replayed += 1;
+            seeds += 1;
         }
+        assert!(
+            seeds >= 3,
+            "{name}: a seed corpus of {seeds} inputs is too small"
+        );
+        replayed += seeds;
     }
-    assert!(
-        replayed >= TARGETS.len(),
-        "the corpus is not empty ({replayed} inputs)"
-    );
     println!(
         "replayed {replayed} fuzz corpus inputs over {} targets",
         TARGETS.len()
     );
+}
+
+/// The fuzz/Cargo.toml lists one `[[bin]]` per body here, and every wrapper calls its body:
+/// a target added to one place and forgotten in the other fails here, not in a fuzz run.
+#[test]
+fn every_body_has_a_cargo_fuzz_target() {
+    let fuzz = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz");
+    let manifest = std::fs::read_to_string(fuzz.join("Cargo.toml")).unwrap();
+    for (name, _) in TARGETS {
+        assert!(
+            manifest.contains(&format!("name = \"{name}\"")),
+            "fuzz/Cargo.toml lacks a [[bin]] for {name}"
+        );
+        let wrapper = std::fs::read_to_string(fuzz.join(format!("fuzz_targets/{name}.rs")))
+            .unwrap_or_else(|e| panic!("fuzz/fuzz_targets/{name}.rs: {e}"));
+        assert!(
+            wrapper.contains(&format!("fuzzing::{name}(data)")),
+            "{name}.rs"
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Seed writers: the byte layouts are documented on each body in src/fuzzing.rs.
+
+fn write(target: &str, name: &str, bytes: &[u8]) {
+    let dir = corpus_dir().join(target);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join(name), bytes).unwrap();
+}
+
+fn f32s(out: &mut Vec<u8>, values: &[f32]) {
+    out.extend(values.iter().flat_map(|v| v.to_le_bytes()));
+}
+
+/// The u32 that `sobol::to_unit` maps to `u` (u a multiple of 2^-24 in [0,1)).
+fn from_unit(u: f32) -> u32 {
+    ((u * 16_777_216.0) as u32) << 8
+}
+
+/// A guide input: parameters, raw-flux records, sample points.
+fn guide_seed(
+    params: [u8; 6],
+    capacity: u16,
+    records: &[([f32; 2], f32)],
+    points: &[[f32; 2]],
+) -> Vec<u8> {
+    let mut b = params[..5].to_vec();
+    let raw_points = params[0] & 2 != 0;
+    if params[0] & 1 != 0 {
+        b.extend(f32::NAN.to_le_bytes()); // raw α: must be clamped
+    } else {
+        b.push(params[5]);
+    }
+    b.extend(capacity.to_le_bytes());
+    b.extend((records.len() as u16).to_le_bytes());
+    for (u, flux) in records {
+        if raw_points {
+            f32s(&mut b, u);
+        } else {
+            b.extend(u.iter().flat_map(|&c| from_unit(c).to_le_bytes()));
+        }
+        f32s(&mut b, &[*flux]);
+    }
+    for p in points {
+        b.extend(p.iter().flat_map(|&c| from_unit(c).to_le_bytes()));
+    }
+    b
+}
+
+fn write_guide_seeds() {
+    let mut rng = Pcg32::new(8, 1);
+    let mut point = || [rng.next_f32(), rng.next_f32()];
+    let points: Vec<[f32; 2]> = (0..61).map(|_| point()).collect();
+    // flags 4: raw flux bits; defaults: ≥4 records, 1% of the flux, depth 10, α 0.25.
+    let defaults = [4, 4, 10, 10, 0, 64];
+    let disk: Vec<([f32; 2], f32)> = (0..256)
+        .map(|_| {
+            let u = point();
+            let d2 = (u[0] - 0.7).powi(2) + (u[1] - 0.2).powi(2);
+            (u, if d2 < 0.01 { 50.0 } else { 0.5 })
+        })
+        .collect();
+    write(
+        "guide",
+        "disk-and-sky",
+        &guide_seed(defaults, 4095, &disk, &points),
+    );
+    let mut firefly: Vec<([f32; 2], f32)> = (0..64).map(|_| (point(), 0.0)).collect();
+    firefly[17].1 = 1e5;
+    write(
+        "guide",
+        "single-firefly",
+        &guide_seed(defaults, 4095, &firefly, &points),
+    );
+    let dark: Vec<([f32; 2], f32)> = (0..64).map(|_| (point(), 0.0)).collect();
+    write(
+        "guide",
+        "all-zero-flux",
+        &guide_seed(defaults, 4095, &dark, &points),
+    );
+    // One point hit 200 times: the split rule runs to the depth cap (19, clamped to 16).
+    let spike: Vec<([f32; 2], f32)> = (0..200).map(|_| ([0.3, 0.9], 1.0)).collect();
+    write(
+        "guide",
+        "depth-cap",
+        &guide_seed([4, 1, 0, 19, 1, 255], 4095, &spike, &points),
+    );
+    // Full capacity: 5 nodes for 256 records that want many more.
+    write(
+        "guide",
+        "capacity-5",
+        &guide_seed([4, 1, 0, 12, 0, 0], 5, &disk, &points),
+    );
+    // flags 1|2|4: NaN α, raw points (1.0, −0, NaN rejected or kept), NaN/∞/negative flux.
+    let hostile = [
+        ([0.5, 0.5], f32::NAN),
+        ([1.0, 0.5], 1.0),
+        ([-0.0, 0.25], 2.0),
+        ([f32::NAN, 0.1], 1.0),
+        ([0.1, 0.1], f32::INFINITY),
+        ([0.2, 0.2], -3.0),
+        ([0.3, 0.3], f32::MAX),
+        ([0.31, 0.3], f32::MAX),
+        ([0.9, 0.9], 1e-45),
+        ([0.6, 0.6], 0.5),
+    ];
+    write(
+        "guide",
+        "hostile-records",
+        &guide_seed([7, 0, 0, 16, 3, 0], 33, &hostile, &points),
+    );
+}
+
+/// An estimator input: K, the floor selector, then samples `(batch, rgb)` as raw f32 bits.
+fn estimator_seed(k: u8, floor: u8, samples: &[(u8, [f32; 3])]) -> Vec<u8> {
+    let mut b = vec![k - 1, floor];
+    for (batch, rgb) in samples {
+        b.push(0x80 | batch);
+        f32s(&mut b, rgb);
+    }
+    b
+}
+
+fn write_estimator_seeds() {
+    let mut rng = Pcg32::new(8, 2);
+    let noisy: Vec<(u8, [f32; 3])> = (0..128)
+        .map(|i| {
+            let k = (i % 4) as u8;
+            let x = rng.next_f32() * 4.0 / f32::from(k + 1);
+            (k, [x, 0.8 * x, 0.5])
+        })
+        .collect();
+    write(
+        "estimator",
+        "four-iterations",
+        &estimator_seed(4, 0, &noisy),
+    );
+    let nan = f32::NAN;
+    let hostile = [
+        (0, [1.0, 2.0, 3.0]),
+        (0, [nan, 1.0, 1.0]),
+        (1, [f32::INFINITY, 0.0, 0.0]),
+        (1, [f32::MAX, f32::MAX, f32::MAX]),
+        (1, [f32::MAX, 0.0, f32::MAX]),
+        (2, [1e-40, 1e-45, 0.0]),
+        (2, [-f32::MAX, 1.0, 1.0]),
+        (2, [1e5, 1e-4, 1e5]),
+        (0, [f32::NEG_INFINITY, 0.0, 0.0]),
+    ];
+    write("estimator", "nan-inf-huge", &estimator_seed(3, 1, &hostile));
+    let all_nan: Vec<(u8, [f32; 3])> = (0..12).map(|i| (i % 3, [nan; 3])).collect();
+    write(
+        "estimator",
+        "no-finite-sample",
+        &estimator_seed(3, 0, &all_nan),
+    );
+    // A noise-free dark batch beside a lit one with a firefly: the floor's case.
+    let mut floor: Vec<(u8, [f32; 3])> = (0..32).map(|_| (0, [0.0; 3])).collect();
+    floor.extend((0..31).map(|_| (1, [0.5; 3])));
+    floor.push((1, [1e5; 3]));
+    floor.push((2, [0.25; 3])); // a one-sample batch
+    write(
+        "estimator",
+        "dark-lit-firefly",
+        &estimator_seed(3, 255, &floor),
+    );
+}
+
+/// A traverse input: header, grid triangles, grid rays (`sel` without bit 7) or raw rays.
+struct TraverseSeed {
+    bytes: Vec<u8>,
+}
+
+impl TraverseSeed {
+    fn new(preset: u8, scale_exp: i8, offset: u8, flags: u8, tris: &[[[i16; 3]; 3]]) -> Self {
+        let mut bytes = vec![
+            preset,
+            (scale_exp + 20) as u8,
+            offset,
+            flags,
+            tris.len() as u8,
+        ];
+        for c in tris.iter().flatten().flatten() {
+            bytes.extend(c.to_le_bytes());
+        }
+        Self { bytes }
+    }
+
+    /// `tmin` index 0..4 and `tmax` index 0..8 of the tables in `fuzzing::traverse`.
+    fn ray(&mut self, tmin: u8, tmax: u8, org: [i16; 3], dir: [i16; 3]) -> &mut Self {
+        self.bytes.push(tmin | tmax << 2);
+        for c in org.iter().chain(&dir) {
+            self.bytes.extend(c.to_le_bytes());
+        }
+        self
+    }
+
+    fn raw_ray(&mut self, tmin: u8, tmax: u8, org: [f32; 3], dir: [f32; 3]) -> &mut Self {
+        self.bytes.push(0x80 | tmin | tmax << 2);
+        f32s(&mut self.bytes, &org);
+        f32s(&mut self.bytes, &dir);
+        self
+    }
+}
+
+/// The cube [−s, s]³ as 12 triangles.
+fn cube(s: i16) -> Vec<[[i16; 3]; 3]> {
+    let mut tris = Vec::new();
+    for axis in 0..3 {
+        for side in [-s, s] {
+            let corner = |a: i16, b: i16| {
+                let mut p = [0i16; 3];
+                p[axis] = side;
+                p[(axis + 1) % 3] = a;
+                p[(axis + 2) % 3] = b;
+                p
+            };
+            tris.push([corner(-s, -s), corner(s, -s), corner(s, s)]);
+            tris.push([corner(-s, -s), corner(s, s), corner(-s, s)]);
+        }
+    }
+    tris
+}
+
+fn write_traverse_seeds() {
+    let mut rng = Pcg32::new(8, 3);
+    let mut dir = || std::array::from_fn(|_| (rng.next_u32() >> 16) as i16);
+    // Gather packets from the cube's centre (shared origins), corners and edges included.
+    let mut inside = TraverseSeed::new(3, -6, 0, 1, &cube(100));
+    for i in 0..20 {
+        inside.ray(0, 0, [0, 0, 0], dir());
+        inside.ray((i % 2) as u8, 2, [0, 0, 0], [1, 1, 1]);
+    }
+    inside
+        .ray(0, 0, [0, 0, 0], [1, 0, 0])
+        .ray(0, 0, [0, 0, 0], [1, 1, 0]);
+    write("traverse", "cube-gather-packets", &inside.bytes);
+    // The same cube 10^6 from the origin, rays skimming its faces and edges.
+    let mut far = TraverseSeed::new(4, 0, 3, 0, &cube(100));
+    for i in -3..=3i16 {
+        far.ray(0, 0, [-200, 100, i * 30], [1, 0, 0]);
+        far.ray(0, 1, [-200, 100, 100], [1, 0, i]);
+        far.ray(1, 6, [i, -300, i], [0, 1, 0]);
+    }
+    write("traverse", "far-offset-skimming", &far.bytes);
+    // Slivers, zero-area and coincident triangles (ties: the smaller id wins).
+    let tris = [
+        [[0, 0, 0], [1000, 0, 0], [0, 1, 0]],
+        [[0, 0, 0], [1000, 0, 0], [2000, 0, 0]],
+        [[0, 0, 0], [0, 0, 0], [0, 0, 0]],
+        [[-50, -50, 10], [50, -50, 10], [0, 50, 10]],
+        [[-50, -50, 10], [50, -50, 10], [0, 50, 10]],
+        [[50, -50, 10], [-50, -50, 10], [0, 50, 10]],
+    ];
+    let mut slivers = TraverseSeed::new(0, -10, 1, 0, &tris);
+    for x in [-1, 0, 1, 500, 999, 1000] {
+        slivers.ray(0, 0, [x, 0, -5], [0, 0, 1]);
+        slivers.ray(0, 0, [x, 0, 20], [0, 0, -1]);
+    }
+    slivers.ray(0, 0, [-100, 0, 10], [1, 0, 0]);
+    slivers.ray(0, 5, [0, 0, 9], [0, 0, 1]);
+    write("traverse", "slivers-and-ties", &slivers.bytes);
+    // Rays that must not be traced, and NaN boxes; tiny world at 2^-20.
+    let mut hostile = TraverseSeed::new(5, -20, 0, 0, &cube(3));
+    hostile.raw_ray(0, 0, [f32::NAN, 0.0, 0.0], [0.0, 0.0, 1.0]);
+    hostile.raw_ray(0, 0, [0.0, 0.0, 0.0], [f32::INFINITY, 0.0, 0.0]);
+    hostile.raw_ray(0, 0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]);
+    hostile.raw_ray(0, 0, [0.0, 0.0, 0.0], [1e-40, 0.0, 0.0]);
+    hostile.raw_ray(3, 4, [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+    hostile.raw_ray(2, 0, [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+    hostile.raw_ray(0, 7, [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+    hostile.raw_ray(0, 1, [-3e38, 0.0, 0.0], [1.0, 1e-30, 0.0]);
+    hostile.ray(0, 0, [0, 0, 0], [0, 0, 1]);
+    write("traverse", "untraceable-rays", &hostile.bytes);
+    write(
+        "traverse",
+        "empty-scene",
+        &TraverseSeed::new(2, 0, 0, 0, &[])
+            .ray(0, 0, [0, 0, 0], [0, 0, 1])
+            .bytes,
+    );
+}
+
+/// One triangle with lightmap UVs, its buffer inline as a data URI: a self-contained glTF.
+fn triangle_gltf() -> String {
+    let mut bin = Vec::new();
+    f32s(&mut bin, &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0]);
+    f32s(&mut bin, &[0.1, 0.1, 0.9, 0.1, 0.1, 0.9]);
+    bin.extend([0u32, 1, 2].iter().flat_map(|i| i.to_le_bytes()));
+    format!(
+        r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}],
+"nodes": [{{"name": "tri", "mesh": 0, "translation": [0, 1, 0]}}],
+"materials": [{{"pbrMetallicRoughness": {{"baseColorFactor": [0.5, 0.5, 0.5, 1]}}, "emissiveFactor": [1, 0.5, 0]}}],
+"meshes": [{{"name": "tri", "primitives": [{{"attributes": {{"POSITION": 0, "TEXCOORD_1": 1}}, "indices": 2, "material": 0}}]}}],
+"accessors": [
+ {{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0,0,-1], "max": [1,0,0]}},
+ {{"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"}},
+ {{"bufferView": 2, "componentType": 5125, "count": 3, "type": "SCALAR"}}],
+"bufferViews": [
+ {{"buffer": 0, "byteOffset": 0, "byteLength": 36}},
+ {{"buffer": 0, "byteOffset": 36, "byteLength": 24}},
+ {{"buffer": 0, "byteOffset": 60, "byteLength": 12}}],
+"buffers": [{{"byteLength": 72, "uri": "data:application/octet-stream;base64,{}"}}]}}"#,
+        base64(&bin)
+    )
+}
+
+fn base64(bytes: &[u8]) -> String {
+    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::new();
+    for c in bytes.chunks(3) {
+        let n = c
+            .iter()
+            .enumerate()
+            .fold(0u32, |n, (i, &b)| n | u32::from(b) << (16 - 8 * i));
+        for i in 0..4 {
+            s.push(if i <= c.len() {
+                A[(n >> (18 - 6 * i) & 63) as usize] as char
+            } else {
+                '='
+            });
+        }
+    }
+    s
+}
+
+fn write_scene_seeds() {
+    // The format byte: 0 .gltf, 1 .glb, 2 .obj, 3 .toml.
+    let with = |format: u8, body: &[u8]| [&[format][..], body].concat();
+    write(
+        "scene",
+        "triangle.gltf",
+        &with(0, triangle_gltf().as_bytes()),
+    );
+    let obj = "mtllib none.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+               vn 0 0 1\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\nf 1 1 2\n";
+    write("scene", "quad.obj", &with(2, obj.as_bytes()));
+    let toml = "geometry = \"missing.glb\"\n[sky]\nconstant = [0.5, 0.6, 0.8]\n\
+                [sun]\ndirection = [0.3, 1.0, 0.2]\nangular_radius_deg = 0.267\nirradiance = [4, 3.8, 3.5]\n";
+    write("scene", "scene.toml", &with(3, toml.as_bytes()));
+    // The real Cornell box (CC0, Bitterli; ../shared/scenes/converted), when present.
+    let cornell =
+        guidebake::scene::shared_scenes_dir().map(|d| d.join("converted/bitterli_cornell_box.glb"));
+    match cornell.and_then(|p| std::fs::read(p).ok()) {
+        Some(glb) => write("scene", "bitterli-cornell-box.glb", &with(1, &glb)),
+        None => println!("../shared/scenes absent: the Cornell box seed is kept as it is"),
+    }
+}
+
+/// The small valid texel file of driver/tests/bad_input.rs: one 8×8 page, two tiles.
+fn two_tile_texels(path: &Path) {
+    let page = PageRecord {
+        width: 8,
+        height: 8,
+    };
+    let mut w = TexelWriter::create(path, &[page], &[], 0, 1.0).unwrap();
+    let texel = |x: u16, y: u16| TexelRecord {
+        position: [f32::from(x), 0.0, f32::from(y)],
+        normal: [0.0, 1.0, 0.0],
+        dpdu: [1.0, 0.0, 0.0],
+        dpdv: [0.0, 0.0, 1.0],
+        page: 0,
+        pixel: [x, y],
+        triangle: u32::MAX,
+        flags: FLAG_VALID,
+    };
+    let rect = |y| TileRect {
+        page: 0,
+        x: 0,
+        y,
+        width: 8,
+        height: 4,
+    };
+    w.push_tile(rect(0), &(0..8).map(|x| texel(x, 0)).collect::<Vec<_>>())
+        .unwrap();
+    w.push_tile(rect(4), &(0..4).map(|x| texel(x, 5)).collect::<Vec<_>>())
+        .unwrap();
+    w.finish().unwrap();
+}
+
+fn write_texel_file_seeds() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = dir.path().join("small.texels");
+    two_tile_texels(&small);
+    let bytes = std::fs::read(&small).unwrap();
+    write("texel_file", "two-tiles", &bytes);
+    write(
+        "texel_file",
+        "two-tiles-truncated",
+        &bytes[..bytes.len() - 10],
+    );
+    let city = dir.path().join("city.texels");
+    guidebake::synth::synth(guidebake::synth::MIN_TEXELS, &city).unwrap();
+    TexelFile::open(&city).unwrap();
+    write("texel_file", "synth-min", &std::fs::read(&city).unwrap());
+}
+
+#[test]
+#[ignore = "rewrites fuzz/corpus: cargo test --test fuzz_corpus -- --ignored write_seed_corpus"]
+fn write_seed_corpus() {
+    write_guide_seeds();
+    write_estimator_seeds();
+    write_traverse_seeds();
+    write_scene_seeds();
+    write_texel_file_seeds();
 }

@@ -526,6 +526,44 @@ mod gltf_source {
         }
     }
 
+    /// The `gltf` crate's readers assert an accessor's layout (a VEC4 `TEXCOORD_1` panics,
+    /// found by issue 8's scene fuzz target): check what the glTF spec allows first.
+    fn check_accessors(
+        b: &SceneBuilder,
+        id: u32,
+        prim: &gltf::Primitive,
+    ) -> Result<(), SceneError> {
+        use gltf::Semantic;
+        use gltf::accessor::{DataType as T, Dimensions as D};
+        let fits = |a: &gltf::Accessor, dims: D, types: &[T]| {
+            a.dimensions() == dims && types.contains(&a.data_type())
+        };
+        let describe = |what: String, a: &gltf::Accessor| {
+            format!(
+                "{what} accessor {} is {:?} of {:?}, which the glTF spec does not allow",
+                a.index(),
+                a.dimensions(),
+                a.data_type()
+            )
+        };
+        for (semantic, a) in prim.attributes() {
+            let allowed = match semantic {
+                Semantic::Positions | Semantic::Normals => fits(&a, D::Vec3, &[T::F32]),
+                Semantic::TexCoords(_) => fits(&a, D::Vec2, &[T::F32, T::U8, T::U16]),
+                _ => true,
+            };
+            if !allowed {
+                return Err(b.bad_mesh(id, describe(format!("{semantic:?}"), &a)));
+            }
+        }
+        match prim.indices() {
+            Some(a) if !fits(&a, D::Scalar, &[T::U8, T::U16, T::U32]) => {
+                Err(b.bad_mesh(id, describe("indices".into(), &a)))
+            }
+            _ => Ok(()),
+        }
+    }
+
     fn read_light(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> Light {
         use gltf::khr_lights_punctual::Kind;
         let colour = Vec3::from(light.color()) * light.intensity();
@@ -578,6 +616,7 @@ mod gltf_source {
                     ),
                 ));
             }
+            check_accessors(b, id, &prim)?;
             let reader = prim.reader(|buf| buffers.get(buf.index()).map(|d| d.0.as_slice()));
             let Some(positions) = reader.read_positions() else {
                 return Err(b.bad_mesh(id, "primitive without POSITION".into()));

@@ -378,3 +378,209 @@ fn bad_scenes_are_clear_errors() {
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
+
+/// Runs the CLI; returns (exit code, stderr) and checks it did not panic.
+fn cli_fails(args: &[&str]) -> (i32, String) {
+    let (code, err) = cli(args);
+    let code = code.unwrap_or_else(|| panic!("{args:?} was killed by a signal: {err}"));
+    assert_ne!(code, 0, "{args:?} succeeded");
+    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    (code, err)
+}
+
+/// A prepared one-triangle scene in `dir`: (scene, texel file).
+fn prepared_triangle(dir: &Path) -> (PathBuf, PathBuf) {
+    let (json, bin) = triangle_gltf("tri", true, [0, 1, 2]);
+    let scene = write_gltf(dir, "tri", &json, Some(&bin));
+    let texels = dir.join("tri.texels");
+    let (code, err) = cli(&[
+        "prepare",
+        scene.to_str().unwrap(),
+        "-o",
+        texels.to_str().unwrap(),
+        "--size",
+        "32x32",
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    (scene, texels)
+}
+
+/// Nothing named like the output or its work directory exists in `dir`.
+fn assert_no_output(dir: &Path, stem: &str) {
+    let left: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(Result::ok)
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(stem))
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+/// Bad `guidebake bake` values: each a clear message naming the option or file, a non-zero
+/// exit, no panic, and neither a lightmap nor a work directory left behind.
+#[test]
+fn bad_bake_arguments_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (scene, texels) = prepared_triangle(d);
+    let out = d.join("lm.exr");
+    let (scene, texels, out_s) = (
+        scene.to_str().unwrap(),
+        texels.to_str().unwrap(),
+        out.to_str().unwrap(),
+    );
+    let bake = |extra: &[&'static str]| -> Vec<String> {
+        let mut args = vec!["bake", texels, "--scene", scene, "-o", out_s];
+        args.extend_from_slice(extra);
+        args.into_iter().map(String::from).collect()
+    };
+    let fails = |args: Vec<String>| {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        cli_fails(&args)
+    };
+
+    // Sample counts and iterations the bake cannot split into packets.
+    for (extra, expect) in [
+        (&["--spp", "0"][..], "--spp 0"),
+        (
+            &["--spp", "8", "--iterations", "2"],
+            "--spp 8 over 2 iterations",
+        ),
+        (&["--spp", "32", "--iterations", "0"], "--iterations 0"),
+        (&["--spp", "1024", "--iterations", "17"], "--iterations 17"),
+    ] {
+        let (_, err) = fails(bake(extra));
+        assert!(
+            err.contains(expect),
+            "{extra:?}: expected '{expect}' in: {err}"
+        );
+    }
+    // Shards that do not exist, and values clap refuses (exit 2, usage message).
+    for shard in ["3/2", "2/2", "0/0", "1", "a/b", "1/2/3"] {
+        let (_, err) = fails(bake(&["--spp", "32", "--shard", shard]));
+        assert!(err.contains("--shard"), "--shard {shard}: {err}");
+    }
+    for (extra, expect) in [
+        (&["--guiding", "sometimes"][..], "--guiding"),
+        (&["--spp", "many"], "--spp"),
+        (&["--spp", "32", "--seed", "-3"], "-3"),
+    ] {
+        let (_, err) = fails(bake(extra));
+        assert!(err.contains(expect), "{extra:?}: {err}");
+    }
+    assert_no_output(d, "lm.");
+
+    // A missing scene and a missing texel file are named.
+    let missing_scene = d.join("nowhere.gltf");
+    let (_, err) = cli_fails(&[
+        "bake",
+        texels,
+        "--scene",
+        missing_scene.to_str().unwrap(),
+        "-o",
+        out_s,
+        "--spp",
+        "32",
+    ]);
+    assert!(err.contains("nowhere.gltf"), "{err}");
+    let missing_texels = d.join("nothing.texels");
+    let (_, err) = cli_fails(&[
+        "bake",
+        missing_texels.to_str().unwrap(),
+        "--scene",
+        scene,
+        "-o",
+        out_s,
+        "--spp",
+        "32",
+    ]);
+    assert!(err.contains("nothing.texels"), "{err}");
+    assert_no_output(d, "lm.");
+}
+
+/// A texel file prepared from another scene is refused, naming both files.
+#[test]
+fn a_texel_file_of_another_scene_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (_, texels) = prepared_triangle(d);
+    // The same triangle twice (a second node): another scene.
+    let (json, bin) = triangle_gltf("two", true, [0, 1, 2]);
+    let json = json
+        .replace(r#""nodes": [0]"#, r#""nodes": [0, 1]"#)
+        .replace(
+            r#""nodes": [{"name": "tri", "mesh": 0}]"#,
+            r#""nodes": [{"name": "tri", "mesh": 0}, {"name": "copy", "mesh": 0, "translation": [0, 1, 0]}]"#,
+        );
+    let other = write_gltf(d, "two", &json, Some(&bin));
+    let out = d.join("lm.exr");
+    let (_, err) = cli_fails(&[
+        "bake",
+        texels.to_str().unwrap(),
+        "--scene",
+        other.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--spp",
+        "32",
+    ]);
+    assert!(
+        err.contains("tri.texels") && err.contains("two.gltf") && err.contains("1 triangles"),
+        "{err}"
+    );
+    assert_no_output(d, "lm.");
+}
+
+/// An output directory that does not exist, is a file, or cannot be written: a clear
+/// message naming it, before any work, and nothing left behind.
+#[test]
+fn an_unwritable_output_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (scene, texels) = prepared_triangle(d);
+    let bake_to = |out: &Path| {
+        cli_fails(&[
+            "bake",
+            texels.to_str().unwrap(),
+            "--scene",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--spp",
+            "32",
+        ])
+        .1
+    };
+    let err = bake_to(&d.join("no/such/dir/lm.exr"));
+    assert!(
+        err.contains("no/such/dir") && err.contains("does not exist"),
+        "{err}"
+    );
+    let file = d.join("plain-file");
+    std::fs::write(&file, b"not a directory").unwrap();
+    let err = bake_to(&file.join("lm.exr"));
+    assert!(err.contains("plain-file"), "{err}");
+
+    // A directory nobody may write: read-only permissions (as a normal user), or a
+    // read-only file system (/proc, which refuses even root).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let locked = d.join("locked");
+        std::fs::create_dir(&locked).unwrap();
+        std::fs::set_permissions(&locked, std::fs::Permissions::from_mode(0o555)).unwrap();
+        let writable = std::fs::write(locked.join("probe"), b"").is_ok();
+        let target = if writable {
+            PathBuf::from("/proc/guidebake-lm.exr") // root ignores permissions
+        } else {
+            locked.join("lm.exr")
+        };
+        let err = bake_to(&target);
+        let parent = target.parent().unwrap().to_str().unwrap();
+        assert!(err.contains(parent), "{err}");
+        assert!(!target.exists());
+        std::fs::set_permissions(&locked, std::fs::Permissions::from_mode(0o755)).unwrap();
+        assert_no_output(&locked, "lm.");
+    }
+    assert_no_output(d, "lm.");
+}

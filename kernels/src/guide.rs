@@ -646,9 +646,31 @@ fn smooth(nodes: &mut [Node], alpha: f64) {
 /// The threshold that gives `[lo, t)` the share `p` of `[lo, hi)`, rounded to f32 and kept
 /// inside the interval. Children inherit these exact f32 values as their bounds, so the
 /// source rectangles tile the square without gaps or overlaps.
+///
+/// A share strictly between 0 and 1 keeps both sides at least one f32 step wide while the
+/// interval has room: rounding must not give a child of positive mass an empty source
+/// rectangle (pdf 0: the warp would never go there, and the ambient floor would be lost).
+/// Found by the `guide` fuzz target (depth 12, α = 0: a leaf of mass ~10⁻⁹ near u = 0.44).
 fn split_at(lo: f32, hi: f32, p: f64) -> f32 {
     let t = f64::from(lo) + (f64::from(hi) - f64::from(lo)) * p;
-    (t as f32).clamp(lo, hi)
+    let t = (t as f32).clamp(lo, hi);
+    if p > 0.0 && p < 1.0 && lo < hi {
+        let (above_lo, below_hi) = (next_up(lo), next_down(hi));
+        if above_lo <= below_hi {
+            return t.clamp(above_lo, below_hi);
+        }
+    }
+    t
+}
+
+/// The next f32 above `x` (finite, ≥ 0).
+fn next_up(x: f32) -> f32 {
+    f32::from_bits(x.to_bits() + 1)
+}
+
+/// The next f32 below `x` (finite, > 0).
+fn next_down(x: f32) -> f32 {
+    f32::from_bits(x.to_bits() - 1)
 }
 
 #[cfg(test)]

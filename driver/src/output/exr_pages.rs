@@ -11,8 +11,8 @@
 use std::path::{Path, PathBuf};
 
 use exr::prelude::{
-    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
-    WritableImage,
+    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder,
+    SmallVec, WritableImage,
 };
 
 /// One atlas page of a lightmap.
@@ -189,7 +189,13 @@ impl PageImage {
         let layer = Layer::new(
             (self.width, self.height),
             LayerAttributes::named("lightmap"),
-            Encoding::SMALL_FAST_LOSSLESS,
+            // Blocks are compressed in parallel; an increasing line order makes the writer
+            // put them in the file in order, so the same lightmap is the same bytes whatever
+            // the threads' timing (with `Unspecified` the order follows completion).
+            Encoding {
+                line_order: LineOrder::Increasing,
+                ..Encoding::SMALL_FAST_LOSSLESS
+            },
             AnyChannels::sort(channels),
         );
         Image::from_layer(layer)
