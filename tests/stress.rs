@@ -17,6 +17,7 @@ use std::path::PathBuf;
 
 use glam::{Vec2, Vec3};
 use guidebake::bake::gather::TileBaker;
+use guidebake::bake::pipeline::TileBuffer;
 use guidebake::bake::settings::{BakeSettings, Combine, Guiding, MAX_BOUNCES, Transport};
 use guidebake::bake::world::World;
 use guidebake::bvh::Preset;
@@ -121,8 +122,9 @@ fn bake_with_rho(
     let mut records = Vec::new();
     let mut raw = Vec::new();
     for (i, texels) in tiles.iter().enumerate() {
-        let mut out = Vec::new();
-        let baked = baker.bake_tile(i as u32, 1000 * i as u64, texels, &mut out);
+        let mut buffer = TileBuffer::default();
+        let baked = baker.bake_tile(i as u32, 1000 * i as u64, texels, &mut buffer);
+        let out = buffer.results;
         assert!(
             out.iter()
                 .all(|r| r.flags & FLAG_BAKED != 0 && r.flags & FLAG_VALID != 0),
@@ -582,8 +584,9 @@ fn an_all_zero_gather_gives_exact_zeros() {
                 ..settings(mode, 64)
             };
             let mut baker = TileBaker::new(&world, s);
-            let mut out = Vec::new();
-            let baked = baker.bake_tile(0, 0, &texels, &mut out);
+            let mut buffer = TileBuffer::default();
+            let baked = baker.bake_tile(0, 0, &texels, &mut buffer);
+            let out = buffer.results;
             assert_eq!(RhoSums::reduce(&[baked.record]).rho(), 1.0, "{mode}");
             for r in &out {
                 assert_eq!(r.irradiance, [0.0; 3], "{mode}: {r:?}");
@@ -757,14 +760,13 @@ fn normals_nearly_tangent_to_the_surface() {
     tilted_normals(1.0, &[1.0, 1.5, PI / 2.0 - 1e-2]);
 }
 
-/// KNOWN FAILURE (reported in issue 8, docs/RELIABILITY.md): a texel normal 10⁻³ rad short
-/// of tangent. The gather offsets its origins along the *texel's* normal, so the origin
-/// rises only 10⁻³ × 1.5·10⁻⁵ m above its surface, below the intersection test's error:
-/// grazing rays slip through the ground or hit it spuriously. Measured (guided, 96 spp):
-/// 1.678 ± 0.014 instead of π(1 + cos θ)/2 = 1.572, 7 % bright.
+/// A texel normal 10⁻³ rad short of tangent. Found failing by this test (issue 8): the gather
+/// offset its origins along the *texel's* normal, so the origin rose only 10⁻³ × 1.5·10⁻⁵ m
+/// above its surface and grazing rays slipped through the ground (1.678 ± 0.014 instead of
+/// π(1 + cos θ)/2 = 1.572, 7 % bright). Origins are now offset along the triangle's own
+/// normal on the texel's side.
 #[test]
-#[ignore = "known failure: origins offset along the texel normal, not the surface's (see the doc comment)"]
-fn known_failure_normal_within_a_milliradian_of_tangent() {
+fn normal_within_a_milliradian_of_tangent() {
     tilted_normals(1.0, &[PI / 2.0 - 1e-3]);
 }
 
@@ -780,13 +782,12 @@ fn known_failure_grazing_rays_on_a_large_ground() {
     tilted_normals(1e3, &[0.5, 1.0, 1.5]);
 }
 
-/// KNOWN FAILURE (reported in issue 8, docs/RELIABILITY.md): `World::onto_triangle` moves a
-/// gather origin "a thousandth of the way towards the triangle's centroid"; on a 20 km
-/// ground quad that is 3–5 m, so texels under a 1 m emitting panel gather from beside it.
-/// Measured (unguided): the panel's π·L·F = 7.5·10⁴ comes out as 205 ± 142.
+/// Texels under a 1 m emitting panel on a 20 km ground quad. Found failing by this test
+/// (issue 8): `World::onto_triangle` moved every gather origin a thousandth of the way to
+/// its triangle's centroid, 3–5 m here, so the texels gathered from beside the panel (205 ±
+/// 142 instead of π·L·F = 7.5·10⁴). The nudge is now capped at a hundredth of the texel.
 #[test]
-#[ignore = "known failure: origins moved towards a huge triangle's centroid (see the doc comment)"]
-fn known_failure_origin_moved_on_a_huge_triangle() {
+fn origins_stay_on_their_texel_on_a_huge_triangle() {
     let panel = 1e5f32;
     let mut tris = pad(Vec3::ZERO, 1e4, 0).to_vec();
     tris.extend(quad(Vec3::new(-0.5, -0.5, 1.0), Vec3::Y, Vec3::X, 1));

@@ -510,7 +510,12 @@ impl IterationCtx<'_> {
             );
             p += t.dpdu * (to_unit(r[0]) - 0.5) + t.dpdv * (to_unit(r[1]) - 0.5);
         }
-        offset_origin(self.world.onto_triangle(t.triangle, p), t.normal)
+        // Off the triangle's own plane, on the texel's side: a shading normal near the
+        // tangent plane would lift the origin too little. The centroid nudge stays within a
+        // hundredth of the texel.
+        let footprint = t.dpdu.length() + t.dpdv.length();
+        let on = self.world.onto_triangle(t.triangle, p, 0.01 * footprint);
+        offset_origin(on, self.world.facing_normal(t.triangle, t.normal))
     }
 
     fn to_world(&self, t: &GatherTexel, d: Vec3) -> Vec3 {

@@ -461,6 +461,7 @@ fn previous_pass(
                 );
             }
         }
+        texels.release_tile(t);
     }
     let previous = image
         .finish(scene, texels.meshes())
@@ -687,6 +688,7 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
                     }
                 }
             }
+            texels.release_tile(t);
         }
         image.dilate(DILATION_PIXELS);
         let path = page_path(out, page as u32, page_count);

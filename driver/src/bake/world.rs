@@ -128,15 +128,33 @@ impl World {
     }
 
     /// The point of triangle `prim` closest to `p`, moved a thousandth of the way towards the
-    /// triangle's centroid: a ray origin on the triangle, never exactly on an edge it shares
-    /// with a neighbouring wall (where it could slip through the corner and see the sky).
-    /// `p` itself when `prim` is not a triangle of the scene.
-    pub fn onto_triangle(&self, prim: u32, p: Vec3) -> Vec3 {
+    /// triangle's centroid but never more than `max_shift`: a ray origin on the triangle, never
+    /// exactly on an edge it shares with a neighbouring wall (where it could slip through the
+    /// corner and see the sky), and never far from `p` on a huge triangle. `p` itself when
+    /// `prim` is not a triangle of the scene.
+    pub fn onto_triangle(&self, prim: u32, p: Vec3, max_shift: f32) -> Vec3 {
         let Some(&[a, b, c]) = self.corners.get(prim as usize) else {
             return p;
         };
         let q = closest_point_on_triangle(p, a, b, c);
-        q + ((a + b + c) / 3.0 - q) * 1e-3
+        let shift = ((a + b + c) / 3.0 - q) * 1e-3;
+        let length = shift.length();
+        if length > max_shift && length > 0.0 {
+            q + shift * (max_shift / length)
+        } else {
+            q + shift
+        }
+    }
+
+    /// The geometric normal of triangle `prim` on the side of `toward` (for offsetting ray
+    /// origins off the surface itself, not off a shading normal that may lie near its
+    /// plane); `toward` when `prim` is not a triangle of the scene.
+    pub fn facing_normal(&self, prim: u32, toward: Vec3) -> Vec3 {
+        match self.surfaces.get(prim as usize) {
+            Some(s) if s.normal.dot(toward) < 0.0 => -s.normal,
+            Some(s) => s.normal,
+            None => toward,
+        }
     }
 
     /// The BVH, for tracing.
