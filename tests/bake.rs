@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
 use guidebake::bake::run::{BakeError, BakeJob, bake, finish, work_dir};
-use guidebake::bake::settings::{BakeSettings, Guiding};
+use guidebake::bake::settings::{BakeSettings, Guiding, Transport};
 use guidebake::bake::shard::Shard;
 use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle};
 use guidebake::texels::{
@@ -17,6 +17,9 @@ use guidebake::texels::{
 const SKY: f32 = 0.75;
 const SIDE: u32 = 24; // page side in texels: 9 tiles of 8×8
 const TILE: u32 = 8;
+const TILES: usize = 9;
+/// Series passes of the fixture's default bake.
+const PASSES: usize = 3;
 
 /// A 4 m square ground plane under a constant sky, mapped 1:1 onto one page.
 fn plane_scene() -> Scene {
@@ -124,6 +127,8 @@ impl Fixture {
                 spp: 64,
                 iterations: 2,
                 guiding: Guiding::Coherent,
+                transport: Transport::Series,
+                bounces: PASSES as u32,
                 ..Default::default()
             },
             threads,
@@ -156,9 +161,17 @@ fn a_plane_under_the_sky_bakes_to_pi_l_in_the_exr() {
     let f = Fixture::new();
     let job = f.job("lm.exr", 2, Shard::WHOLE);
     let report = f.run(&job, None).unwrap();
-    assert_eq!(report.tiles_baked, 9);
+    assert_eq!(
+        report.tiles_baked,
+        TILES * PASSES,
+        "every tile in every series pass"
+    );
+    assert_eq!(report.passes, PASSES as u32);
     assert!(!report.interrupted);
-    assert_eq!(report.counters.gather_rays, u64::from(SIDE * SIDE) * 64);
+    assert_eq!(
+        report.counters.gather_rays,
+        u64::from(SIDE * SIDE) * 64 * PASSES as u64
+    );
     assert!(
         !work_dir(&job.out, Shard::WHOLE).exists(),
         "a finished bake removes its work"
@@ -196,10 +209,15 @@ fn one_or_two_threads_write_the_same_bits() {
 #[test]
 fn three_shards_merged_equal_one_bake() {
     let f = Fixture::new();
-    f.run(&f.job("whole.exr", 2, Shard::WHOLE), None).unwrap();
+    let path = |mut job: BakeJob| {
+        job.settings.transport = Transport::Path;
+        job
+    };
+    f.run(&path(f.job("whole.exr", 2, Shard::WHOLE)), None)
+        .unwrap();
     let mut dirs = Vec::new();
     for index in [1, 2, 0] {
-        let job = f.job("sharded.exr", 1, Shard { index, count: 3 });
+        let job = path(f.job("sharded.exr", 1, Shard { index, count: 3 }));
         let report = f.run(&job, None).unwrap();
         assert_eq!(report.tiles_baked, 3);
         dirs.push(work_dir(&job.out, job.shard));
@@ -218,27 +236,48 @@ fn three_shards_merged_equal_one_bake() {
 }
 
 #[test]
+fn series_passes_cannot_be_sharded() {
+    let f = Fixture::new();
+    let err = f
+        .run(&f.job("s.exr", 1, Shard { index: 0, count: 2 }), None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("--shard 0/2") && err.contains("--transport path"),
+        "{err}"
+    );
+}
+
+#[test]
 fn an_interrupted_bake_resumes_to_the_same_bits_and_is_never_clobbered() {
     let f = Fixture::new();
     f.run(&f.job("whole.exr", 2, Shard::WHOLE), None).unwrap();
-    // One worker and a window of 4 tiles: cancelling after the first tile leaves most undone.
-    let mut job = f.job("resumed.exr", 1, Shard::WHOLE);
-    let cut = f.run(&job, Some(64)).unwrap();
-    assert!(cut.interrupted && cut.tiles_baked < 9, "{cut:?}");
-    assert!(
-        !job.out.exists(),
-        "an interrupted bake leaves no output that looks complete"
-    );
-    let again = f.run(&job, None).unwrap_err();
-    assert!(matches!(again, BakeError::WorkExists { .. }), "{again}");
-    job.resume = true;
-    let rest = f.run(&job, None).unwrap();
-    assert_eq!(rest.tiles_resumed, cut.tiles_baked);
-    assert_eq!(cut.tiles_baked + rest.tiles_baked, 9);
-    assert_eq!(
-        exr_bytes(&f.dir.path().join("whole.exr")),
-        exr_bytes(&job.out)
-    );
+    let pass_texels = u64::from(SIDE * SIDE);
+    // One worker and a window of 4 tiles: cancelling after the first tile of a pass leaves
+    // most of that pass undone. Cut in the first pass, then in the second.
+    for (name, cut_after) in [("first.exr", 64), ("second.exr", pass_texels + 64)] {
+        let mut job = f.job(name, 1, Shard::WHOLE);
+        let cut = f.run(&job, Some(cut_after)).unwrap();
+        assert!(
+            cut.interrupted && cut.tiles_baked < TILES * PASSES,
+            "{cut:?}"
+        );
+        assert!(
+            !job.out.exists(),
+            "an interrupted bake leaves no output that looks complete"
+        );
+        let again = f.run(&job, None).unwrap_err();
+        assert!(matches!(again, BakeError::WorkExists { .. }), "{again}");
+        job.resume = true;
+        let rest = f.run(&job, None).unwrap();
+        assert_eq!(rest.tiles_resumed, cut.tiles_baked, "{name}");
+        assert_eq!(cut.tiles_baked + rest.tiles_baked, TILES * PASSES, "{name}");
+        assert_eq!(
+            exr_bytes(&f.dir.path().join("whole.exr")),
+            exr_bytes(&job.out),
+            "{name}"
+        );
+    }
 }
 
 #[test]
@@ -259,4 +298,195 @@ fn a_scene_that_does_not_match_the_texel_file_is_refused() {
         err.contains("2 triangles") && err.contains("has 1"),
         "{err}"
     );
+}
+
+/// Texels per face edge of the closed box; faces are charts in a 3×2 grid on one page.
+const FACE: u32 = 8;
+
+/// A closed 2 m cube, every face facing inwards, of albedo `albedo` emitting `le`, with one
+/// lightmap chart per face, and its texel file at `path`.
+fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
+    let (o, s) = (Vec3::splat(-1.0), 2.0);
+    let (x, y, z) = (Vec3::X * s, Vec3::Y * s, Vec3::Z * s);
+    // Each face: corner, edge u, edge v, with u × v pointing into the box.
+    let faces = [
+        (o, x, y),
+        (o + z, y, x),
+        (o, y, z),
+        (o + x, z, y),
+        (o, z, x),
+        (o + y, x, z),
+    ];
+    let (w, h) = (3 * FACE, 2 * FACE);
+    let chart = |i: usize| ((i % 3) as u32 * FACE, (i / 3) as u32 * FACE);
+    let mut triangles = Vec::new();
+    for (i, &(c, u, v)) in faces.iter().enumerate() {
+        let n = u.cross(v).normalize();
+        let (cx, cy) = chart(i);
+        let uv = |a: f32, b: f32| {
+            Vec2::new(
+                (cx as f32 + a * FACE as f32) / w as f32,
+                (cy as f32 + b * FACE as f32) / h as f32,
+            )
+        };
+        let tri = |p: [Vec3; 3], q: [Vec2; 3]| Triangle {
+            positions: p,
+            normals: [n; 3],
+            lightmap_uv: Some(q),
+            mesh: 0,
+            material: 0,
+        };
+        triangles.push(tri(
+            [c, c + u, c + u + v],
+            [uv(0.0, 0.0), uv(1.0, 0.0), uv(1.0, 1.0)],
+        ));
+        triangles.push(tri(
+            [c, c + u + v, c + v],
+            [uv(0.0, 0.0), uv(1.0, 1.0), uv(0.0, 1.0)],
+        ));
+    }
+    let page = PageRecord {
+        width: w,
+        height: h,
+    };
+    let mesh = MeshRecord {
+        first_triangle: 0,
+        triangle_count: triangles.len() as u32,
+        page: 0,
+        flags: 1,
+        uv_scale: [w as f32, h as f32],
+        uv_offset: [0.0; 2],
+    };
+    let mut writer = TexelWriter::create(path, &[page], &[mesh], 12, FACE as f32 / s).unwrap();
+    for (i, &(c, u, v)) in faces.iter().enumerate() {
+        let n = u.cross(v).normalize();
+        let (cx, cy) = chart(i);
+        let texels: Vec<TexelRecord> = (0..FACE * FACE)
+            .map(|j| {
+                let (fx, fy) = ((j % FACE) as f32 + 0.5, (j / FACE) as f32 + 0.5);
+                let p = c + u * (fx / FACE as f32) + v * (fy / FACE as f32);
+                TexelRecord {
+                    position: p.to_array(),
+                    normal: n.to_array(),
+                    dpdu: (u / FACE as f32).to_array(),
+                    dpdv: (v / FACE as f32).to_array(),
+                    page: 0,
+                    pixel: [(cx + j % FACE) as u16, (cy + j / FACE) as u16],
+                    triangle: 2 * i as u32 + u32::from(fy > fx),
+                    flags: FLAG_VALID,
+                }
+            })
+            .collect();
+        let rect = TileRect {
+            page: 0,
+            x: cx,
+            y: cy,
+            width: FACE,
+            height: FACE,
+        };
+        writer.push_tile(rect, &texels).unwrap();
+    }
+    writer.finish().unwrap();
+    Scene {
+        path: PathBuf::from("<box>"),
+        meshes: vec![Mesh {
+            name: "box".into(),
+            first_triangle: 0,
+            triangle_count: 12,
+            has_lightmap_uvs: true,
+        }],
+        triangles,
+        materials: vec![Material {
+            name: "glow".into(),
+            albedo: Vec3::splat(albedo),
+            emission: Vec3::splat(le),
+        }],
+        lights: Vec::new(),
+        sun: None,
+        sky: Sky::Constant(Vec3::splat(100.0)),
+        degenerate_triangles: 0,
+    }
+}
+
+/// Every texel's irradiance (R channel) of the single-page lightmap at `path`.
+fn red_channel(path: &Path) -> Vec<f64> {
+    let image = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
+    let red = image
+        .layer_data
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name == *"R")
+        .unwrap();
+    red.sample_data.values_as_f32().map(f64::from).collect()
+}
+
+#[test]
+fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transports() {
+    // Inside a closed box of albedo ρ emitting Le everywhere, B bounces give
+    // E_B = π Le (1 + ρ + … + ρ^(B−1)) = π Le (1 − ρ^B) / (1 − ρ) at every point.
+    let (albedo, le) = (0.5f32, 1.5f32);
+    let dir = tempfile::tempdir().unwrap();
+    let texels = dir.path().join("box.texels");
+    let scene = emissive_box(&texels, albedo, le);
+    let closed_form = |b: u32| {
+        std::f64::consts::PI * f64::from(le) * (1.0 - f64::from(albedo).powi(b as i32))
+            / (1.0 - f64::from(albedo))
+    };
+    for (transport, bounces, guiding) in [
+        (Transport::Series, 1, Guiding::Off),
+        (Transport::Series, 4, Guiding::Off),
+        (Transport::Series, 4, Guiding::Coherent),
+        (Transport::Path, 4, Guiding::Coherent),
+        (Transport::Path, 64, Guiding::Off),
+    ] {
+        let out = dir
+            .path()
+            .join(format!("{transport}-{bounces}-{guiding}.exr"));
+        let job = BakeJob {
+            texels: texels.clone(),
+            out: out.clone(),
+            settings: BakeSettings {
+                spp: 128,
+                iterations: 2,
+                transport,
+                bounces,
+                guiding,
+                ..Default::default()
+            },
+            threads: 2,
+            shard: Shard::WHOLE,
+            resume: false,
+            aux: false,
+        };
+        let report = bake(&job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+        let values = red_channel(&out);
+        assert_eq!(values.len(), (6 * FACE * FACE) as usize);
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        let want = closed_form(bounces);
+        let se = (var / n).sqrt();
+        let what = format!("{transport} B={bounces} {guiding}: {mean} ± {se}, want {want}");
+        if transport == Transport::Series && guiding == Guiding::Off {
+            // Constant radiance everywhere and cosine sampling: every sample is the same.
+            assert!(
+                values.iter().all(|v| (v - want).abs() < 1e-4 * want),
+                "{what}"
+            );
+        } else {
+            // A learned guide's density is not constant, nor are paths: noise, no bias.
+            assert!((mean - want).abs() < 3.0 * se + 1e-4 * want, "{what}");
+        }
+        match transport {
+            Transport::Series => {
+                assert_eq!(report.passes, bounces);
+                assert_eq!(report.counters.path_rays, 0);
+            }
+            Transport::Path => {
+                assert_eq!(report.passes, 1);
+                assert!(report.counters.path_rays > 0);
+            }
+        }
+    }
 }

@@ -39,18 +39,18 @@ use wide::{f32x8, u32x8};
 
 use super::pipeline::TileBaked;
 use super::settings::{BakeSettings, Combine, Guiding};
-use super::world::World;
+use super::world::{SurfaceHit, World};
 use crate::output::journal::TileRecord;
 use crate::output::result_file::{
     FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_UNGUIDED, FLAG_VALID, TexelResult,
 };
 use crate::texels::{FLAG_PARTIAL, FLAG_VALID as TEXEL_VALID, TexelRecord};
+use crate::transport::rng::SampleRng;
 
 /// Guide nodes per cluster: enough for a 64-texel cluster's records at the default split rule.
 pub const GUIDE_CAPACITY: usize = 4096;
 /// Salts separating the random streams of one (texel, iteration).
 const LIGHT_SALT: u32 = 0x6c69_6768;
-const HIT_LIGHT_SALT: u32 = 0x6869_7421;
 const ORIGIN_SALT: u32 = 0x6f72_6967;
 
 /// What the workers counted, merged over the bake.
@@ -60,6 +60,8 @@ pub struct GatherCounters {
     pub gather_rays: u64,
     /// Shadow rays traced (at texels and at gather hits).
     pub shadow_rays: u64,
+    /// Path continuation rays traced beyond the gather hits (`path` transport).
+    pub path_rays: u64,
     /// Valid texels baked.
     pub texels_baked: u64,
     /// Invalid texels skipped without tracing.
@@ -79,10 +81,16 @@ pub struct GatherCounters {
 }
 
 impl GatherCounters {
+    /// Rays of every kind.
+    pub fn rays(&self) -> u64 {
+        self.gather_rays + self.shadow_rays + self.path_rays
+    }
+
     /// Adds another worker's counts.
     pub fn merge(&mut self, o: &Self) {
         self.gather_rays += o.gather_rays;
         self.shadow_rays += o.shadow_rays;
+        self.path_rays += o.path_rays;
         self.texels_baked += o.texels_baked;
         self.texels_invalid_skipped += o.texels_invalid_skipped;
         self.texels_without_finite_samples += o.texels_without_finite_samples;
@@ -104,6 +112,9 @@ pub struct TileBaker<'w> {
     records: Vec<Record>,
     nodes: Vec<Node>,
     batches: Vec<Welford>,
+    /// Per valid texel: its gather-only samples `L π / q` (all iterations), the series
+    /// transport's indirect irradiance for the next pass.
+    gathered: Vec<Welford>,
     valid: Vec<u32>,
     positions: Vec<[f32; 3]>,
     normals: Vec<[f32; 3]>,
@@ -142,6 +153,7 @@ impl<'w> TileBaker<'w> {
             records: Vec::new(),
             nodes: vec![Node::default(); GUIDE_CAPACITY],
             batches: Vec::new(),
+            gathered: Vec::new(),
             valid: Vec::new(),
             positions: Vec::new(),
             normals: Vec::new(),
@@ -168,9 +180,11 @@ impl<'w> TileBaker<'w> {
         let k = self.settings.iterations as usize;
         self.batches.clear();
         self.batches.resize(self.valid.len() * k, Welford::new());
+        self.gathered.clear();
+        self.gathered.resize(self.valid.len(), Welford::new());
         self.unguided.clear();
         self.unguided.resize(self.valid.len(), true);
-        let rays_before = self.counters.gather_rays + self.counters.shadow_rays;
+        let rays_before = self.counters.rays();
         for c in 0..clusters {
             let range = self.ranges[c];
             let members: Vec<u32> =
@@ -178,7 +192,7 @@ impl<'w> TileBaker<'w> {
             self.bake_cluster(&members, texels, first_texel);
         }
         let record = self.finish_tile(tile, out);
-        let rays = self.counters.gather_rays + self.counters.shadow_rays - rays_before;
+        let rays = self.counters.rays() - rays_before;
         TileBaked {
             first_texel,
             record: TileRecord { rays, ..record },
@@ -238,6 +252,7 @@ impl<'w> TileBaker<'w> {
             records,
             nodes,
             batches,
+            gathered,
             valid,
             unguided,
             counters,
@@ -254,7 +269,11 @@ impl<'w> TileBaker<'w> {
                 if guide.is_some() {
                     unguided[m as usize] = false;
                 }
-                let batch = &mut batches[m as usize * iterations as usize + k as usize];
+                let mut sinks = Sinks {
+                    batch: &mut batches[m as usize * iterations as usize + k as usize],
+                    gathered: &mut gathered[m as usize],
+                    records,
+                };
                 let ctx = IterationCtx {
                     world,
                     settings,
@@ -262,16 +281,9 @@ impl<'w> TileBaker<'w> {
                     guide: guide.as_ref(),
                 };
                 match settings.guiding {
-                    Guiding::Naive => ctx.gather_naive(&t, batch, records, counters),
+                    Guiding::Naive => ctx.gather_naive(&t, &mut sinks, counters),
                     Guiding::Off | Guiding::Coherent => {
-                        ctx.gather_packets(
-                            &t,
-                            &orders[k as usize],
-                            rotated,
-                            batch,
-                            records,
-                            counters,
-                        );
+                        ctx.gather_packets(&t, &orders[k as usize], rotated, &mut sinks, counters);
                     }
                 }
             }
@@ -317,10 +329,13 @@ impl<'w> TileBaker<'w> {
             }
             out[i as usize] = TexelResult {
                 irradiance: rgb,
+                gathered: self.gathered[m]
+                    .mean_rgb()
+                    .map_or([0.0; 3], |c| c.map(|x| x as f32)),
                 rel_std_error: relative_std_error(batches),
                 samples: samples.min(u64::from(u32::MAX)) as u32,
                 flags,
-                reserved: [0; 2],
+                reserved: [0; 3],
             };
         }
         record
@@ -376,6 +391,16 @@ fn gather_texel(t: &TexelRecord, id: u64) -> GatherTexel {
     }
 }
 
+/// Where one texel's samples go in one iteration.
+struct Sinks<'a> {
+    /// The texel's estimator of this iteration (gathered + direct irradiance).
+    batch: &'a mut Welford,
+    /// The texel's gather-only samples over all iterations.
+    gathered: &'a mut Welford,
+    /// The cluster's learning records.
+    records: &'a mut Vec<Record>,
+}
+
 /// What one iteration's gather needs, borrowed.
 struct IterationCtx<'a> {
     world: &'a World,
@@ -411,8 +436,7 @@ impl IterationCtx<'_> {
         t: &GatherTexel,
         order: &[u32],
         rotated: &mut Vec<u32>,
-        batch: &mut Welford,
-        records: &mut Vec<Record>,
+        sinks: &mut Sinks<'_>,
         counters: &mut GatherCounters,
     ) {
         let rot = rotation(self.settings.seed, t.id, self.k);
@@ -448,33 +472,26 @@ impl IterationCtx<'_> {
             intersect8(&bvh, &packet, &mut hits);
             counters.gather_rays += LANES as u64;
             let (ht, hprim) = (hits.t.to_array(), hits.prim.to_array());
+            let (hu, hv) = (hits.u.to_array(), hits.v.to_array());
             let lu = rotate_x8(sobol_2d_x8(index), light_rot);
             let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
             let light_u: [[f32; 2]; LANES] = core::array::from_fn(|i| [lx[i], ly[i]]);
             let direct = self.direct8(t, origin, &light_u, counters);
             for lane in 0..LANES {
-                let hit = (hprim[lane] != NO_HIT).then(|| (hprim[lane], ht[lane]));
+                let hit = (hprim[lane] != NO_HIT).then(|| SurfaceHit {
+                    prim: hprim[lane],
+                    t: ht[lane],
+                    u: hu[lane],
+                    v: hv[lane],
+                });
                 let l = self.incoming(t.id, chunk[lane], origin, dirs[lane], hit, counters);
-                self.record(
-                    l,
-                    [wx[lane], wy[lane]],
-                    q[lane],
-                    direct[lane],
-                    batch,
-                    records,
-                );
+                self.record(l, [wx[lane], wy[lane]], q[lane], direct[lane], sinks);
             }
         }
     }
 
     /// Unsorted points in index order, scalar warp, single rays: the naive comparator.
-    fn gather_naive(
-        &self,
-        t: &GatherTexel,
-        batch: &mut Welford,
-        records: &mut Vec<Record>,
-        counters: &mut GatherCounters,
-    ) {
+    fn gather_naive(&self, t: &GatherTexel, sinks: &mut Sinks<'_>, counters: &mut GatherCounters) {
         let n = self.settings.samples_in_iteration(self.k);
         let rot = rotation(self.settings.seed, t.id, self.k);
         let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
@@ -495,8 +512,14 @@ impl IterationCtx<'_> {
                     None => (u, 1.0),
                 };
                 let dir = self.to_world(t, sample_cosine_hemisphere(w));
-                let hit = intersect1(&bvh, &Ray::new(origin, dir, 0.0, f32::INFINITY))
-                    .map(|h| (h.prim, h.t));
+                let hit = intersect1(&bvh, &Ray::new(origin, dir, 0.0, f32::INFINITY)).map(|h| {
+                    SurfaceHit {
+                        prim: h.prim,
+                        t: h.t,
+                        u: h.u,
+                        v: h.v,
+                    }
+                });
                 counters.gather_rays += 1;
                 let l = self.incoming(t.id, index, origin, dir, hit, counters);
                 let lp = rotate(sobol_2d(index), light_rot);
@@ -506,7 +529,7 @@ impl IterationCtx<'_> {
             let direct = self.direct8(t, origin, &light_u, counters);
             for lane in 0..LANES {
                 let (l, w, q) = samples[lane];
-                self.record(l, w, q, direct[lane], batch, records);
+                self.record(l, w, q, direct[lane], sinks);
             }
         }
     }
@@ -535,45 +558,30 @@ impl IterationCtx<'_> {
         sample: u32,
         origin: Vec3,
         dir: Vec3,
-        hit: Option<(u32, f32)>,
+        hit: Option<SurfaceHit>,
         counters: &mut GatherCounters,
     ) -> Vec3 {
         match hit {
             None => self.world.sky(dir),
-            Some((prim, t)) => {
-                let r = rotation(
-                    self.settings.seed ^ HIT_LIGHT_SALT,
-                    texel,
-                    self.k << 20 | sample,
-                );
-                let (l, rays) = self.world.hit_radiance(
-                    prim,
-                    origin + dir * t,
-                    dir,
-                    [to_unit(r[0]), to_unit(r[1])],
-                );
-                counters.shadow_rays += u64::from(rays);
-                l
+            Some(hit) => {
+                let mut rng = SampleRng::new(self.settings.seed, texel, self.k, sample);
+                let leaving = self.world.hit_radiance(origin, dir, hit, &mut rng);
+                counters.shadow_rays += u64::from(leaving.shadow_rays);
+                counters.path_rays += u64::from(leaving.path_rays);
+                leaving.radiance
             }
         }
     }
 
     /// One sample into the texel's estimator (irradiance `L π / q` + direct light) and the
     /// cluster's learning records (point and flux `lum(L) / q`).
-    fn record(
-        &self,
-        l: Vec3,
-        w: [f32; 2],
-        q: f32,
-        direct: Vec3,
-        batch: &mut Welford,
-        records: &mut Vec<Record>,
-    ) {
-        let e = l * (core::f32::consts::PI / q) + direct;
-        batch.push(e.to_array());
+    fn record(&self, l: Vec3, w: [f32; 2], q: f32, direct: Vec3, sinks: &mut Sinks<'_>) {
+        let gathered = l * (core::f32::consts::PI / q);
+        sinks.gathered.push(gathered.to_array());
+        sinks.batch.push((gathered + direct).to_array());
         let flux = luminance(l) / q;
         if flux.is_finite() {
-            records.push(Record { u: w, flux });
+            sinks.records.push(Record { u: w, flux });
         }
     }
 }

@@ -31,6 +31,7 @@ use crate::output::journal::{Journal, RhoSums, TileRecord, dedup_tiles};
 use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
 use crate::scene::Scene;
 use crate::texels::{TexelFile, TexelFileError};
+use crate::transport::series::{PreviousPass, PreviousPassWriter};
 
 /// Pixels of padding around every chart in the written pages.
 pub const DILATION_PIXELS: u32 = 2;
@@ -69,6 +70,8 @@ pub struct Manifest {
     pub bias_correction: bool,
     /// Whether auxiliary channels are written.
     pub aux: bool,
+    /// Passes over the world (series transport's bounces); the last one is the lightmap.
+    pub passes: u32,
     /// The settings, for people.
     pub settings: String,
 }
@@ -82,7 +85,9 @@ pub struct BakeReport {
     pub tiles_resumed: usize,
     /// Whether Ctrl-C cut the run short (the work directory is kept for `--resume`).
     pub interrupted: bool,
-    /// What the gather counted: rays by kind, texels, clusters, skips.
+    /// Passes over the world (series transport: one per bounce).
+    pub passes: u32,
+    /// What the gather counted over every pass: rays by kind, texels, clusters, skips.
     pub counters: GatherCounters,
     /// Seconds per phase.
     pub seconds: PhaseSeconds,
@@ -105,8 +110,10 @@ pub struct PhaseSeconds {
     pub open_texels: f64,
     /// Building the BVH.
     pub build_bvh: f64,
-    /// The gather (all tiles of this run).
+    /// The gather (all tiles and passes of this run).
     pub gather: f64,
+    /// Writing and dilating the previous passes' images for series transport.
+    pub previous_pass_images: f64,
     /// Applying ρ and writing the pages.
     pub write_pages: f64,
 }
@@ -190,6 +197,14 @@ pub fn bake(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<BakeReport, BakeError> {
     job.settings.validate()?;
+    if job.shard.count > 1 && job.settings.passes() > 1 {
+        return Err(BakeError::Settings(SettingsError::new(format!(
+            "--shard {}/{} with --transport series --bounces {}: each series pass needs the whole \
+             previous pass, so shards cannot bake them apart; bake unsharded, or shard a \
+             --transport path bake (or --bounces 1)",
+            job.shard.index, job.shard.count, job.settings.bounces
+        ))));
+    }
     let mut report = BakeReport {
         rho: 1.0,
         ..Default::default()
@@ -200,11 +215,12 @@ pub fn bake(
     check_scene_matches(&texels, scene)?;
 
     let clock = Instant::now();
-    let world = World::new(scene, Preset::DEFAULT)?;
+    let mut world = World::new(scene, Preset::DEFAULT)?;
+    world.set_transport(job.settings.transport, job.settings.bounces);
     report.seconds.build_bvh = clock.elapsed().as_secs_f64();
     report.lights = world.lights().len();
 
-    let tile_count = texels.tiles().len() as u32;
+    let passes = job.settings.passes();
     let bake_id = job.settings.bake_id(texel_file_id(&texels));
     let dir = work_dir(&job.out, job.shard);
     let manifest = Manifest {
@@ -214,36 +230,112 @@ pub fn bake(
         shard_count: job.shard.count,
         bias_correction: job.settings.bias_correction,
         aux: job.aux,
+        passes,
         settings: format!("{:?}", job.settings),
     };
-    let (results, mut journal, done) = open_work(
-        &dir,
-        &manifest,
-        texels.header().texel_count,
-        tile_count,
-        job.resume,
-    )?;
+    open_work(&dir, &manifest, job.resume)?;
+    let pass_texels = shard_texels(&texels, job.shard);
+    let total = pass_texels * u64::from(passes);
+    let mut texels_done = 0u64;
+    let clock = Instant::now();
+    for pass in 1..=passes {
+        if pass > 1 {
+            let previous = previous_pass(&texels, scene, &dir, pass - 1, bake_id, &mut report)?;
+            world.set_previous_pass(Some(previous));
+        }
+        let run = bake_pass(
+            job,
+            &texels,
+            &world,
+            &dir,
+            pass,
+            bake_id,
+            cancel,
+            &mut |n| {
+                texels_done += n;
+                progress(texels_done, total);
+            },
+        )?;
+        report.tiles_baked += run.tiles_baked;
+        report.tiles_resumed += run.tiles_resumed;
+        report.counters.merge(&run.counters);
+        if run.interrupted {
+            report.interrupted = true;
+            break;
+        }
+        texels_done = pass_texels * u64::from(pass);
+    }
+    report.passes = passes;
+    report.seconds.gather = clock.elapsed().as_secs_f64() - report.seconds.previous_pass_images;
+    report.rays_per_second = report.counters.rays() as f64 / report.seconds.gather.max(1e-9);
+    drop(world);
+    if !report.interrupted && job.shard.count == 1 {
+        let clock = Instant::now();
+        let written = finish(&texels, std::slice::from_ref(&dir), &job.out)?;
+        report.seconds.write_pages = clock.elapsed().as_secs_f64();
+        report.rho = written.rho;
+        report.pages = written.pages;
+        report.non_finite_pixels = written.non_finite_pixels;
+        std::fs::remove_dir_all(&dir).map_err(|e| {
+            file_error(
+                &dir,
+                format!("cannot remove the finished work directory: {e}"),
+            )
+        })?;
+    }
+    Ok(report)
+}
+
+/// Texels in the tiles of `shard`.
+fn shard_texels(texels: &TexelFile, shard: Shard) -> u64 {
+    tiles_to_bake(texels.tiles().len() as u32, shard, &HashSet::new())
+        .iter()
+        .map(|&t| u64::from(texels.tiles()[t as usize].texel_count))
+        .sum()
+}
+
+/// What one pass over the world did.
+#[derive(Default)]
+struct PassRun {
+    tiles_baked: usize,
+    tiles_resumed: usize,
+    interrupted: bool,
+    counters: GatherCounters,
+}
+
+/// Bakes pass `pass` of the job's tiles (those its journal lacks) into the pass's result file.
+#[allow(clippy::too_many_arguments)]
+fn bake_pass(
+    job: &BakeJob,
+    texels: &TexelFile,
+    world: &World,
+    dir: &Path,
+    pass: u32,
+    bake_id: u64,
+    cancel: &AtomicBool,
+    progress: &mut dyn FnMut(u64),
+) -> Result<PassRun, BakeError> {
+    let tile_count = texels.tiles().len() as u32;
+    let (results, mut journal, done) =
+        open_pass(dir, pass, bake_id, texels.header().texel_count, tile_count)?;
     let todo = tiles_to_bake(
         tile_count,
         job.shard,
         &done.iter().map(|r| r.tile).collect::<HashSet<u32>>(),
     );
-    report.tiles_resumed = done.len();
-
+    progress(
+        done.iter()
+            .map(|r| u64::from(texels.tiles()[r.tile as usize].texel_count))
+            .sum(),
+    );
     let counters = Mutex::new(GatherCounters::default());
-    let total: u64 = todo
-        .iter()
-        .map(|&t| u64::from(texels.tiles()[t as usize].texel_count))
-        .sum();
-    let mut texels_done = 0u64;
-    let clock = Instant::now();
     let config = PipelineConfig {
         threads: job.threads.max(1),
         window: 4 * job.threads.max(1),
         commit_every: 64,
     };
     let make_worker = || CountedBaker {
-        baker: TileBaker::new(&world, job.settings),
+        baker: TileBaker::new(world, job.settings),
         sink: &counters,
     };
     let bake_tile = |w: &mut CountedBaker<'_, '_>, tile: u32, out: &mut Vec<TexelResult>| {
@@ -264,32 +356,60 @@ pub fn bake(
         make_worker,
         bake_tile,
         &mut |b| {
-            texels_done += u64::from(texels.tiles()[b.record.tile as usize].texel_count);
-            progress(texels_done, total);
+            progress(u64::from(
+                texels.tiles()[b.record.tile as usize].texel_count,
+            ))
         },
     )?;
-    report.seconds.gather = clock.elapsed().as_secs_f64();
-    report.counters = *counters.lock().expect("no worker panicked");
-    let rays = report.counters.gather_rays + report.counters.shadow_rays;
-    report.rays_per_second = rays as f64 / report.seconds.gather.max(1e-9);
-    report.tiles_baked = pipeline.tiles_committed;
-    report.interrupted = pipeline.interrupted;
-    drop((results, journal));
-    if !report.interrupted && job.shard.count == 1 {
-        let clock = Instant::now();
-        let written = finish(&texels, std::slice::from_ref(&dir), &job.out)?;
-        report.seconds.write_pages = clock.elapsed().as_secs_f64();
-        report.rho = written.rho;
-        report.pages = written.pages;
-        report.non_finite_pixels = written.non_finite_pixels;
-        std::fs::remove_dir_all(&dir).map_err(|e| {
-            file_error(
-                &dir,
-                format!("cannot remove the finished work directory: {e}"),
-            )
-        })?;
+    let counters = *counters.lock().expect("no worker panicked");
+    Ok(PassRun {
+        tiles_baked: pipeline.tiles_committed,
+        tiles_resumed: done.len(),
+        interrupted: pipeline.interrupted,
+        counters,
+    })
+}
+
+/// Writes the image of pass `pass`'s gather-only irradiance and maps it for the next pass
+/// (series transport).
+fn previous_pass(
+    texels: &TexelFile,
+    scene: &Scene,
+    dir: &Path,
+    pass: u32,
+    bake_id: u64,
+    report: &mut BakeReport,
+) -> Result<PreviousPass, BakeError> {
+    let clock = Instant::now();
+    let (results_path, _) = pass_files(dir, pass);
+    let (results, _) = ResultFile::open(
+        &results_path,
+        false,
+        Some((texels.header().texel_count, bake_id)),
+    )?;
+    let image_path = dir.join(format!("indirect.{pass}.bin"));
+    let mut image = PreviousPassWriter::create(&image_path, texels.pages())
+        .map_err(|e| file_error(&e.path, e.what))?;
+    let mut buffer = Vec::new();
+    for (t, tile) in texels.tiles().iter().enumerate() {
+        buffer.resize(tile.texel_count as usize, TexelResult::default());
+        results.read(tile.first_texel, &mut buffer)?;
+        for (texel, r) in texels.tile_texels(t).iter().zip(&buffer) {
+            if r.flags & FLAG_BAKED != 0 {
+                image.set(
+                    texel.page,
+                    u32::from(texel.pixel[0]),
+                    u32::from(texel.pixel[1]),
+                    r.gathered,
+                );
+            }
+        }
     }
-    Ok(report)
+    let previous = image
+        .finish(scene, texels.meshes())
+        .map_err(|e| file_error(&e.path, e.what))?;
+    report.seconds.previous_pass_images += clock.elapsed().as_secs_f64();
+    Ok(previous)
 }
 
 /// A worker's baker whose counters join the bake's when the worker ends.
@@ -319,15 +439,10 @@ fn check_scene_matches(texels: &TexelFile, scene: &Scene) -> Result<(), BakeErro
     Ok(())
 }
 
-/// Creates the work directory, or reopens it with `resume` after checking its manifest.
-fn open_work(
-    dir: &Path,
-    manifest: &Manifest,
-    texel_count: u64,
-    tile_count: u32,
-    resume: bool,
-) -> Result<(ResultFile, Journal, Vec<TileRecord>), BakeError> {
-    let (results_path, journal_path, manifest_path) = work_files(dir);
+/// Creates the work directory and its manifest, or, with `resume`, checks that the one there
+/// belongs to this bake.
+fn open_work(dir: &Path, manifest: &Manifest, resume: bool) -> Result<(), BakeError> {
+    let manifest_path = dir.join("manifest.json");
     if dir.exists() {
         if !resume {
             return Err(BakeError::WorkExists {
@@ -341,12 +456,7 @@ fn open_work(
                 dir.display()
             )));
         }
-        let (results, _) =
-            ResultFile::open(&results_path, true, Some((texel_count, manifest.bake_id)))?;
-        let (journal, _, mut done) =
-            Journal::open(&journal_path, true, Some((tile_count, manifest.bake_id)))?;
-        dedup_tiles(&mut done);
-        return Ok((results, journal, done));
+        return Ok(());
     }
     std::fs::create_dir_all(dir)
         .map_err(|e| file_error(dir, format!("cannot create the work directory: {e}")))?;
@@ -354,17 +464,36 @@ fn open_work(
     let tmp = temporary_name(&manifest_path);
     std::fs::write(&tmp, json)
         .and_then(|()| std::fs::rename(&tmp, &manifest_path))
-        .map_err(|e| file_error(&manifest_path, format!("cannot write: {e}")))?;
-    let results = ResultFile::create(&results_path, texel_count, manifest.bake_id)?;
-    let journal = Journal::create(&journal_path, tile_count, manifest.bake_id)?;
+        .map_err(|e| file_error(&manifest_path, format!("cannot write: {e}")))
+}
+
+/// Opens pass `pass`'s result file and journal in `dir` (with the tiles its journal holds),
+/// creating them when this pass has not started.
+fn open_pass(
+    dir: &Path,
+    pass: u32,
+    bake_id: u64,
+    texel_count: u64,
+    tile_count: u32,
+) -> Result<(ResultFile, Journal, Vec<TileRecord>), BakeError> {
+    let (results_path, journal_path) = pass_files(dir, pass);
+    if results_path.exists() && journal_path.exists() {
+        let (results, _) = ResultFile::open(&results_path, true, Some((texel_count, bake_id)))?;
+        let (journal, _, mut done) =
+            Journal::open(&journal_path, true, Some((tile_count, bake_id)))?;
+        dedup_tiles(&mut done);
+        return Ok((results, journal, done));
+    }
+    let results = ResultFile::create(&results_path, texel_count, bake_id)?;
+    let journal = Journal::create(&journal_path, tile_count, bake_id)?;
     Ok((results, journal, Vec::new()))
 }
 
-fn work_files(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+/// The result file and journal of pass `pass` (1-based) in a work directory.
+fn pass_files(dir: &Path, pass: u32) -> (PathBuf, PathBuf) {
     (
-        dir.join("results.bin"),
-        dir.join("journal.bin"),
-        dir.join("manifest.json"),
+        dir.join(format!("results.{pass}.bin")),
+        dir.join(format!("journal.{pass}.bin")),
     )
 }
 
@@ -476,8 +605,8 @@ fn open_shards(
 ) -> Result<Vec<(Manifest, ResultFile, Vec<TileRecord>)>, BakeError> {
     let mut shards = Vec::new();
     for dir in dirs {
-        let (results_path, journal_path, manifest_path) = work_files(dir);
-        let manifest = read_manifest(&manifest_path)?;
+        let manifest = read_manifest(&dir.join("manifest.json"))?;
+        let (results_path, journal_path) = pass_files(dir, manifest.passes);
         let (results, _) = ResultFile::open(
             &results_path,
             false,

@@ -25,6 +25,19 @@ pub enum Combine {
     Texel,
 }
 
+/// How the radiance a gather ray brings back from its hit is computed (DESIGN.md, light
+/// transport).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Transport {
+    /// The paper's production setting: pass b gathers, at each hit, emission + albedo/π ×
+    /// (direct light connected explicitly + the indirect irradiance of pass b−1 looked up in
+    /// the previous pass's lightmap). `--bounces B` passes stream the world B times.
+    Series,
+    /// Unidirectional path tracing from the gather hit, next-event estimation at every
+    /// vertex and Russian roulette: the unbiased reference, one pass.
+    Path,
+}
+
 /// The bake's settings; everything that changes its bits is part of [`Self::bake_id`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BakeSettings {
@@ -40,7 +53,15 @@ pub struct BakeSettings {
     pub bias_correction: bool,
     /// Seed of every random number.
     pub seed: u32,
+    /// Light transport at the gather hits.
+    pub transport: Transport,
+    /// Bounces of light after the gather hit: 1 = emission and direct light at the hit
+    /// only; `series` runs this many passes, `path` paths of at most this many vertices.
+    pub bounces: u32,
 }
+
+/// Most bounces a bake may ask for.
+pub const MAX_BOUNCES: u32 = 64;
 
 impl Default for BakeSettings {
     fn default() -> Self {
@@ -51,6 +72,8 @@ impl Default for BakeSettings {
             combine: Combine::Texel,
             bias_correction: true,
             seed: 0,
+            transport: Transport::Series,
+            bounces: 3,
         }
     }
 }
@@ -59,6 +82,13 @@ impl Default for BakeSettings {
 #[derive(Debug, PartialEq, Eq, thiserror::Error)]
 #[error("{0}")]
 pub struct SettingsError(String);
+
+impl SettingsError {
+    /// An error with this message (which names the option at fault).
+    pub fn new(message: String) -> Self {
+        Self(message)
+    }
+}
 
 impl BakeSettings {
     /// Checks the settings a user can get wrong.
@@ -80,7 +110,21 @@ impl BakeSettings {
                 self.spp, self.iterations
             )));
         }
+        if !(1..=MAX_BOUNCES).contains(&self.bounces) {
+            return Err(SettingsError(format!(
+                "--bounces {}: between 1 and {MAX_BOUNCES}",
+                self.bounces
+            )));
+        }
         Ok(())
+    }
+
+    /// Passes over the world: `bounces` for series transport, one for path tracing.
+    pub fn passes(&self) -> u32 {
+        match self.transport {
+            Transport::Series => self.bounces,
+            Transport::Path => 1,
+        }
     }
 
     /// Gather rays per texel in iteration `k`: the budget split evenly in whole packets of
@@ -99,6 +143,15 @@ impl BakeSettings {
     /// Identity of a bake of `texel_file_id` with these settings.
     pub fn bake_id(&self, texel_file_id: u64) -> u64 {
         fnv1a64(format!("{self:?} {texel_file_id:016x}").as_bytes())
+    }
+}
+
+impl fmt::Display for Transport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Transport::Series => "series",
+            Transport::Path => "path",
+        })
     }
 }
 
@@ -145,6 +198,17 @@ mod tests {
                 .unwrap_err()
                 .to_string()
                 .contains("--iterations 0")
+        );
+        let bounces = BakeSettings {
+            bounces: 0,
+            ..Default::default()
+        };
+        assert!(
+            bounces
+                .validate()
+                .unwrap_err()
+                .to_string()
+                .contains("--bounces 0")
         );
     }
 

@@ -1,20 +1,28 @@
 //! Everything a gather ray can meet, shared read-only by every worker: the BVH in the
 //! kernels' layout, per-triangle shading data, the analytic lights and the sky.
 //!
-//! The radiance a gather ray brings back from a hit follows the paper's production setting
-//! (series transport, first pass): the hit's emission (front faces only) plus its albedo/π
-//! times the direct irradiance there, connected explicitly with shadow rays. A ray that
-//! leaves the scene sees the sky. Light kinds the scene lacks cost nothing: no light, no
-//! shadow rays; a black sky, no lookups.
+//! The radiance a gather ray brings back from a hit ([`World::hit_radiance`]) is the hit's
+//! emission (front faces only) plus its albedo/π times the direct irradiance there, connected
+//! explicitly with shadow rays, plus indirect light by the bake's transport: in `series`
+//! passes after the first, albedo/π × the previous pass's indirect irradiance at the hit
+//! ([`PreviousPass`]); in `path` mode albedo × the radiance arriving along a cosine-sampled
+//! direction, recursively, up to `bounces` vertices, with Russian roulette from the third.
+//! A ray that leaves the scene sees the sky. Light kinds the scene lacks cost nothing: no
+//! light, no shadow rays; a black sky, no lookups; a black surface, no continuation.
 
 use glam::Vec3;
+use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere};
 use guidebake_kernels::packet::{LANES, Ray, Ray8};
-use guidebake_kernels::traverse::{BvhRef, occluded1, occluded8, offset_origin};
+use guidebake_kernels::traverse::{BvhRef, intersect1, occluded1, occluded8, offset_origin};
 use wide::f32x8;
+
+use super::settings::Transport;
 
 use crate::bvh::{Bvh, BvhError, Preset};
 use crate::scene::{self, Scene, Sky};
 use crate::transport::lights::Light;
+use crate::transport::rng::SampleRng;
+use crate::transport::series::PreviousPass;
 use crate::transport::sky::{sky_is_black, sky_radiance};
 
 /// Shading data of one triangle, indexed by BVH primitive id.
@@ -37,7 +45,38 @@ pub struct World {
     lights: Vec<Light>,
     sky: Sky,
     sky_black: bool,
+    transport: Transport,
+    bounces: u32,
+    previous: Option<PreviousPass>,
 }
+
+/// Where a gather ray hit: the primitive, the ray parameter and the barycentric weights of
+/// the triangle's second and third vertices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceHit {
+    /// BVH primitive id (scene triangle index).
+    pub prim: u32,
+    /// Ray parameter.
+    pub t: f32,
+    /// Barycentric weight of the second vertex.
+    pub u: f32,
+    /// Barycentric weight of the third vertex.
+    pub v: f32,
+}
+
+/// What [`World::hit_radiance`] brings back and what it cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Leaving {
+    /// Radiance leaving the hit towards the gather ray's origin.
+    pub radiance: Vec3,
+    /// Shadow rays traced (next-event estimation at the path's vertices).
+    pub shadow_rays: u32,
+    /// Path continuation rays traced (`path` transport).
+    pub path_rays: u32,
+}
+
+/// Path vertices from which Russian roulette may end a path (the first two always continue).
+const ROULETTE_FROM: u32 = 3;
 
 /// Shadow rays stop this fraction short of a light at a finite distance, so the light's own
 /// geometry (a sphere light's surface) does not occlude it.
@@ -70,7 +109,22 @@ impl World {
             lights: lights_of(scene),
             sky_black: sky_is_black(&scene.sky),
             sky: scene.sky.clone(),
+            transport: Transport::Series,
+            bounces: 1,
+            previous: None,
         })
+    }
+
+    /// Sets the transport at gather hits: `path` with at most `bounces` vertices, or
+    /// `series` (whose indirect light comes from [`Self::set_previous_pass`]).
+    pub fn set_transport(&mut self, transport: Transport, bounces: u32) {
+        self.transport = transport;
+        self.bounces = bounces.max(1);
+    }
+
+    /// The previous series pass, looked up at gather hits (`None` in the first pass).
+    pub fn set_previous_pass(&mut self, previous: Option<PreviousPass>) {
+        self.previous = previous;
     }
 
     /// The point of triangle `prim` closest to `p`, moved a thousandth of the way towards the
@@ -109,24 +163,75 @@ impl World {
         }
     }
 
-    /// Radiance leaving the hit of a ray along `dir` on primitive `prim` at point `p`, back
-    /// towards the ray's origin: emission (front face) + albedo/π × direct irradiance.
-    /// `u` drives the light samples. Returns the radiance and the shadow rays traced.
-    pub fn hit_radiance(&self, prim: u32, p: Vec3, dir: Vec3, u: [f32; 2]) -> (Vec3, u32) {
-        let Some(s) = self.surfaces.get(prim as usize) else {
-            return (Vec3::ZERO, 0);
-        };
-        let front = s.normal.dot(dir) < 0.0;
-        let emission = if front { s.emission } else { Vec3::ZERO };
-        if self.lights.is_empty() || s.albedo == Vec3::ZERO {
-            return (emission, 0);
+    /// Radiance leaving `hit` of the gather ray from `origin` along `dir`, back towards
+    /// `origin`, by the world's transport (module docs). `rng` is the sample's own stream.
+    pub fn hit_radiance(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        hit: SurfaceHit,
+        rng: &mut SampleRng,
+    ) -> Leaving {
+        let mut out = Leaving::default();
+        let (mut origin, mut dir, mut hit) = (origin, dir, hit);
+        let mut throughput = Vec3::ONE;
+        for vertex in 1.. {
+            let Some(s) = self.surfaces.get(hit.prim as usize) else {
+                break;
+            };
+            let front = s.normal.dot(dir) < 0.0;
+            if front {
+                out.radiance += throughput * s.emission;
+            }
+            if s.albedo == Vec3::ZERO {
+                break;
+            }
+            let facing = if front { s.normal } else { -s.normal };
+            let p = offset_origin(origin + dir * hit.t, facing);
+            let reflect = throughput * s.albedo;
+            let mut irradiance = Vec3::ZERO;
+            if !self.lights.is_empty() {
+                let (direct, rays) = self.direct_irradiance(p, facing, rng.pair());
+                irradiance += direct;
+                out.shadow_rays += rays;
+            }
+            if let (Transport::Series, Some(previous)) = (self.transport, &self.previous) {
+                irradiance += previous.irradiance(hit.prim, hit.u, hit.v);
+            }
+            out.radiance += reflect * core::f32::consts::FRAC_1_PI * irradiance;
+            if self.transport != Transport::Path || vertex >= self.bounces {
+                break;
+            }
+            // Continue: cosine-weighted direction, so the estimate's weight is the albedo.
+            throughput = reflect;
+            if vertex + 1 >= ROULETTE_FROM {
+                let survive = throughput.max_element().clamp(0.05, 0.95);
+                if rng.unit() >= survive {
+                    break;
+                }
+                throughput /= survive;
+            }
+            let (tangent, bitangent) = orthonormal_basis(facing);
+            let d = sample_cosine_hemisphere(rng.pair());
+            let next = (tangent * d.x + bitangent * d.y + facing * d.z).normalize_or(facing);
+            out.path_rays += 1;
+            match intersect1(&self.bvh(), &Ray::new(p, next, 0.0, f32::INFINITY)) {
+                None => {
+                    out.radiance += throughput * self.sky(next);
+                    break;
+                }
+                Some(h) => {
+                    (origin, dir) = (p, next);
+                    hit = SurfaceHit {
+                        prim: h.prim,
+                        t: h.t,
+                        u: h.u,
+                        v: h.v,
+                    };
+                }
+            }
         }
-        let facing = if front { s.normal } else { -s.normal };
-        let (direct, rays) = self.direct_irradiance(offset_origin(p, facing), facing, u);
-        (
-            emission + s.albedo * core::f32::consts::FRAC_1_PI * direct,
-            rays,
-        )
+        out
     }
 
     /// Direct irradiance at `p` (already offset from its surface) with normal `n`: one sample

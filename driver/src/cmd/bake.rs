@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::bake::run::{BakeJob, BakeReport, bake, work_dir};
-use crate::bake::settings::{BakeSettings, Combine, Guiding};
+use crate::bake::settings::{BakeSettings, Combine, Guiding, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
 
@@ -33,6 +33,14 @@ pub struct BakeArgs {
     /// How a texel's iterations are combined.
     #[arg(long, value_enum, default_value_t = Combine::Texel)]
     pub combine: Combine,
+    /// Light transport at gather hits: `series` (passes through the previous pass's
+    /// lightmap, the paper's production setting) or `path` (unbiased path tracing).
+    #[arg(long, value_enum, default_value_t = Transport::Series)]
+    pub transport: Transport,
+    /// Bounces of light after the gather hit (series: passes over the world; path: most
+    /// vertices of a path, Russian roulette from the third).
+    #[arg(long, default_value_t = BakeSettings::default().bounces)]
+    pub bounces: u32,
     /// The world-wide bias correction ρ (paper §2.5).
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub bias_correction: OnOff,
@@ -78,6 +86,8 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         combine: args.combine,
         bias_correction: args.bias_correction == OnOff::On,
         seed: args.seed,
+        transport: args.transport,
+        bounces: args.bounces,
     };
     settings.validate()?;
     check_output(&args.out)?;

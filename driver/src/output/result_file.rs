@@ -1,8 +1,8 @@
 //! The result file: one [`TexelResult`] per texel, preallocated, written in place.
 //!
-//! Layout (little-endian): a 64-byte [`ResultHeader`], then `texel_count` records of 32 bytes
-//! at `64 + 32 · texel_id`. The file is created sparse at its full size, so a bake of 10^8
-//! texels does not write 3.2 GB of zeros first, and it is written with positioned writes
+//! Layout (little-endian): a 64-byte [`ResultHeader`], then `texel_count` records of 48 bytes
+//! at `64 + 48 · texel_id`. The file is created sparse at its full size, so a bake of 10^8
+//! texels does not write 4.8 GB of zeros first, and it is written with positioned writes
 //! (`pwrite`), never mapped: nothing of it stays in anonymous memory, and the kernel's page
 //! cache is free to drop what has been synced.
 //!
@@ -20,7 +20,7 @@ use super::{OutputFileError, create_with_header, io_error, open_with_header};
 /// Magic bytes at the start of a result file.
 pub const RESULT_MAGIC: [u8; 8] = *b"GBRESULT";
 /// The result-file version this build writes and reads.
-pub const RESULT_VERSION: u32 = 1;
+pub const RESULT_VERSION: u32 = 2;
 /// Bytes before the first record.
 pub const RESULT_HEADER_BYTES: u64 = 64;
 
@@ -39,6 +39,9 @@ pub const FLAG_UNGUIDED: u32 = 1 << 3;
 pub struct TexelResult {
     /// Irradiance, RGB, the per-texel combination of the iterations' estimates.
     pub irradiance: [f32; 3],
+    /// The final gather's share of it (without the texel's next-event estimate), the plain
+    /// average over all iterations: the indirect irradiance a next series pass looks up.
+    pub gathered: [f32; 3],
     /// Relative standard error of the luminance estimate (0 when unknown).
     pub rel_std_error: f32,
     /// Gather samples taken, all iterations together.
@@ -46,10 +49,13 @@ pub struct TexelResult {
     /// `FLAG_*` bits.
     pub flags: u32,
     /// Reserved, zero.
-    pub reserved: [u32; 2],
+    pub reserved: [u32; 3],
 }
 
-const _: () = assert!(size_of::<TexelResult>() == 32);
+/// Bytes of one [`TexelResult`] in the file.
+pub const RECORD_BYTES: u64 = 48;
+
+const _: () = assert!(size_of::<TexelResult>() as u64 == RECORD_BYTES);
 
 /// The result file's header.
 #[repr(C)]
@@ -59,7 +65,7 @@ pub struct ResultHeader {
     pub magic: [u8; 8],
     /// [`RESULT_VERSION`].
     pub version: u32,
-    /// Bytes per record, 32.
+    /// Bytes per record, 48.
     pub record_bytes: u32,
     /// Records in the file.
     pub texel_count: u64,
@@ -127,8 +133,9 @@ impl ResultFile {
         };
         if header.record_bytes as usize != size_of::<TexelResult>() {
             return Err(mismatch(format!(
-                "record size {} (expected 32)",
-                header.record_bytes
+                "record size {} (expected {})",
+                header.record_bytes,
+                size_of::<TexelResult>()
             )));
         }
         if records_end(header.texel_count) != Some(len) {
@@ -201,7 +208,7 @@ impl ResultFile {
     fn range_offset(&self, first: u64, count: usize) -> Result<u64, OutputFileError> {
         let end = first.checked_add(count as u64);
         match end {
-            Some(end) if end <= self.texel_count => Ok(RESULT_HEADER_BYTES + first * 32),
+            Some(end) if end <= self.texel_count => Ok(RESULT_HEADER_BYTES + first * RECORD_BYTES),
             _ => Err(OutputFileError::OutOfRange {
                 path: self.path.clone(),
                 first,
@@ -214,7 +221,7 @@ impl ResultFile {
 
 fn records_end(texel_count: u64) -> Option<u64> {
     texel_count
-        .checked_mul(32)?
+        .checked_mul(RECORD_BYTES)?
         .checked_add(RESULT_HEADER_BYTES)
 }
 
@@ -230,7 +237,8 @@ mod tests {
             rel_std_error: 0.01,
             samples: i,
             flags: FLAG_BAKED | FLAG_VALID,
-            reserved: [0; 2],
+            gathered: [0.25, 0.0, 1.0],
+            reserved: [0; 3],
         }
     }
 
@@ -252,7 +260,10 @@ mod tests {
             "unwritten texels read as zero"
         );
         assert_eq!(&back[1..11], &tile[..]);
-        assert_eq!(std::fs::metadata(&path).unwrap().len(), 64 + 100 * 32);
+        assert_eq!(
+            std::fs::metadata(&path).unwrap().len(),
+            64 + 100 * RECORD_BYTES
+        );
     }
 
     #[test]
@@ -297,7 +308,7 @@ mod tests {
             .write(true)
             .open(&path)
             .unwrap()
-            .set_len(64 + 9 * 32)
+            .set_len(64 + 9 * RECORD_BYTES)
             .unwrap();
         let err = ResultFile::open(&path, false, None)
             .unwrap_err()
