@@ -62,10 +62,12 @@ fn bake_tile(c: &mut Criterion) {
         .collect();
     pairs.dedup();
     for (guiding, combine) in pairs {
-        let mut settings = BakeSettings::default();
-        settings.spp = SPP;
-        settings.guiding = guiding;
-        settings.combine = combine;
+        let settings = BakeSettings {
+            spp: SPP,
+            guiding,
+            combine,
+            ..Default::default()
+        };
         let mut baker = TileBaker::new(&world, settings);
         let mut out: Vec<TexelResult> = Vec::new();
         baker.bake_tile(tile as u32, first, records, &mut out);

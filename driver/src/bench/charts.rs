@@ -115,17 +115,32 @@ fn err<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
 }
 
-/// The decade-aligned range around positive `values`.
-fn log_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+/// The range of log10 of the positive `values`, with a margin. The error charts plot log10 of
+/// their values on linear axes labelled with 10^v: plotters' own log axes label only whole
+/// decades, and a ladder of run times often spans less than one.
+fn log10_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     let (lo, hi) = values
         .filter(|v| *v > 0.0 && v.is_finite())
-        .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+        .map(f64::log10)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
             (lo.min(v), hi.max(v))
         });
-    if hi <= 0.0 {
-        return 0.1..1.0;
+    if !(lo.is_finite() && hi.is_finite()) {
+        return -1.0..0.0;
     }
-    (lo / 1.3)..(hi * 1.3)
+    let margin = ((hi - lo) * 0.06).max(0.05);
+    (lo - margin)..(hi + margin)
+}
+
+/// A label for the value 10^`v` with three significant digits.
+fn power_label(v: f64) -> String {
+    let x = 10f64.powf(v);
+    if (0.01..1000.0).contains(&x) {
+        let digits = (2 - x.log10().floor() as i32).max(0) as usize;
+        format!("{x:.digits$}")
+    } else {
+        format!("{x:.2e}")
+    }
 }
 
 impl Chart for ErrorChart<'_> {
@@ -135,27 +150,27 @@ impl Chart for ErrorChart<'_> {
             Metric::RelMse => p.rel_mse,
         };
         let points = || self.curves.iter().flat_map(|c| c.points.iter());
-        let x = log_range(points().map(|p| p.wall_s));
-        let y = log_range(points().map(value));
+        let x = log10_range(points().map(|p| p.wall_s));
+        let y = log10_range(points().map(value));
         root.fill(&WHITE).map_err(err)?;
         let mut chart = ChartBuilder::on(root)
             .caption(&self.title, ("sans-serif", 22))
             .margin(14)
             .x_label_area_size(44)
             .y_label_area_size(76)
-            .build_cartesian_2d(x.log_scale(), y.log_scale())
+            .build_cartesian_2d(x, y)
             .map_err(err)?;
         chart
             .configure_mesh()
-            .x_desc("wall time of the bake (s)")
+            .x_desc("wall time of the bake (s, log scale)")
             .y_desc(match self.metric {
-                Metric::Rmse => "RMSE against the reference",
-                Metric::RelMse => "relative MSE against the reference",
+                Metric::Rmse => "RMSE against the reference (log scale)",
+                Metric::RelMse => "relative MSE against the reference (log scale)",
             })
             .x_labels(12)
             .y_labels(12)
-            .y_label_formatter(&|v| format!("{v:.1e}"))
-            .x_label_formatter(&|v| format!("{v:.2}"))
+            .y_label_formatter(&|v| power_label(*v))
+            .x_label_formatter(&|v| power_label(*v))
             .label_style(("sans-serif", 14))
             .draw()
             .map_err(err)?;
@@ -168,6 +183,7 @@ impl Chart for ErrorChart<'_> {
                 .iter()
                 .map(|p| (p.wall_s, value(p)))
                 .filter(|(a, b)| *a > 0.0 && *b > 0.0 && a.is_finite() && b.is_finite())
+                .map(|(a, b)| (a.log10(), b.log10()))
                 .collect();
             chart
                 .draw_series(LineSeries::new(pts.clone(), style))
@@ -311,5 +327,21 @@ impl Chart for OverheadChart<'_> {
             .draw()
             .map_err(err)?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_axes_cover_the_values_and_label_them_readably() {
+        let r = log10_range([0.5, 2.0, 8.0].into_iter());
+        assert!(r.start < 0.5f64.log10() && r.end > 8.0f64.log10());
+        assert_eq!(log10_range([0.0, f64::NAN].into_iter()), -1.0..0.0);
+        assert_eq!(power_label(0.0), "1.00");
+        assert_eq!(power_label(2.0), "100");
+        assert_eq!(power_label(-1.0), "0.100");
+        assert_eq!(power_label(-4.0), "1.00e-4");
     }
 }

@@ -194,6 +194,8 @@ pub struct Ladder {
     pub seeds: Vec<u32>,
     /// Learning iterations of every bake.
     pub iterations: u32,
+    /// Bounces of every bake (the bake's default transport).
+    pub bounces: u32,
 }
 
 /// Runs the ladder, interleaving the methods at each (seed, spp) so that a change of load on
@@ -211,7 +213,7 @@ pub fn run_ladder(
     for &seed in &ladder.seeds {
         for &spp in &ladder.spp {
             for &method in &ladder.methods {
-                let settings = method.settings(spp, ladder.iterations, seed);
+                let settings = method.settings(spp, ladder.iterations, ladder.bounces, seed);
                 let baked = bench.bake_scratch(settings)?;
                 let error = compare(&baked.values, reference)?;
                 let record = RunRecord::new(method, &settings, &baked, error);
@@ -260,6 +262,7 @@ pub fn run_overhead(
     bench: &Bench<'_>,
     spp: u32,
     iterations: u32,
+    bounces: u32,
     repeats: u32,
 ) -> Result<Vec<OverheadRecord>, BenchError> {
     let modes = Guiding::value_variants();
@@ -272,7 +275,7 @@ pub fn run_overhead(
                 combine: Combine::Texel,
                 rho: true,
             };
-            let settings = method.settings(spp, iterations, 1);
+            let settings = method.settings(spp, iterations, bounces, 1);
             let baked = bench.bake_scratch(settings)?;
             let c = &baked.report.counters;
             let record = OverheadRecord {

@@ -73,17 +73,20 @@ impl Method {
         )
     }
 
-    /// The bake settings of this method; everything else (transport, bounces, …) keeps the
-    /// bake's defaults, so settings added to the bake need no change here.
-    pub fn settings(&self, spp: u32, iterations: u32, seed: u32) -> BakeSettings {
-        let mut s = BakeSettings::default();
-        s.spp = spp;
-        s.iterations = iterations;
-        s.guiding = self.guiding;
-        s.combine = self.combine;
-        s.bias_correction = self.rho;
-        s.seed = seed;
-        s
+    /// The bake settings of this method with `bounces` of the bake's default transport;
+    /// everything else keeps the bake's defaults, so settings added to the bake need no change
+    /// here.
+    pub fn settings(&self, spp: u32, iterations: u32, bounces: u32, seed: u32) -> BakeSettings {
+        BakeSettings {
+            spp,
+            iterations,
+            bounces,
+            guiding: self.guiding,
+            combine: self.combine,
+            bias_correction: self.rho,
+            seed,
+            ..Default::default()
+        }
     }
 }
 
@@ -105,10 +108,10 @@ mod tests {
     #[test]
     fn settings_carry_the_method() {
         let m = Method::guided_gd_rho();
-        let s = m.settings(128, 4, 7);
+        let s = m.settings(128, 4, 2, 7);
         assert_eq!(
-            (s.spp, s.iterations, s.seed, s.guiding, s.combine),
-            (128, 4, 7, Guiding::Coherent, Combine::Texel)
+            (s.spp, s.iterations, s.bounces, s.seed, s.guiding, s.combine),
+            (128, 4, 2, 7, Guiding::Coherent, Combine::Texel)
         );
         assert!(s.bias_correction);
         assert!(s.validate().is_ok());

@@ -108,6 +108,8 @@ pub struct BenchConfig {
     pub seeds: Vec<u32>,
     /// Learning iterations of every bake.
     pub iterations: u32,
+    /// Bounces of every bake, the reference's too.
+    pub bounces: u32,
     /// Rays per texel of the reference.
     pub reference_spp: u32,
     /// Rays per texel of the overhead runs.
@@ -138,7 +140,7 @@ impl BenchConfig {
         let counts = spp.iter().chain([&self.reference_spp, &self.overhead_spp]);
         for &n in counts {
             Method::baseline()
-                .settings(n, self.iterations, 1)
+                .settings(n, self.iterations, self.bounces, 1)
                 .validate()
                 .map_err(|e| BenchError::Config(e.to_string()))?;
         }
@@ -219,7 +221,7 @@ fn measure_and_write(
     let reference = reference::reference(
         bench,
         &config.cache,
-        reference::reference_settings(config.reference_spp, config.iterations),
+        reference::reference_settings(config.reference_spp, config.iterations, config.bounces),
     )?;
     let mut spp = config.spp.clone();
     spp.sort_unstable();
@@ -229,12 +231,14 @@ fn measure_and_write(
         spp,
         seeds: config.seeds.clone(),
         iterations: config.iterations,
+        bounces: config.bounces,
     };
     let runs = harness::run_ladder(bench, &ladder, &reference.values)?;
     let overhead_runs = harness::run_overhead(
         bench,
         config.overhead_spp,
         config.iterations,
+        config.bounces,
         config.repeats,
     )?;
 
@@ -386,57 +390,33 @@ fn write_outputs(
     let path = out.join("table.md");
     files.push(path.clone());
     report::write_markdown(&path, summary)?;
-    let charts: [(
-        &str,
-        Box<dyn Fn(&Path) -> Result<Vec<PathBuf>, charts::ChartError>>,
-    ); 3] = [
-        (
-            "rmse_vs_time",
-            Box::new(|stem: &Path| {
-                charts::write_chart(
-                    &charts::ErrorChart {
-                        title: format!("{}: RMSE against wall time", config.name),
-                        curves: &summary.curves,
-                        metric: charts::Metric::Rmse,
-                    },
-                    stem,
-                )
-            }),
-        ),
-        (
-            "relmse_vs_time",
-            Box::new(|stem: &Path| {
-                charts::write_chart(
-                    &charts::ErrorChart {
-                        title: format!("{}: relative MSE against wall time", config.name),
-                        curves: &summary.curves,
-                        metric: charts::Metric::RelMse,
-                    },
-                    stem,
-                )
-            }),
-        ),
-        (
-            "overhead",
-            Box::new(|stem: &Path| {
-                charts::write_chart(
-                    &charts::OverheadChart {
-                        title: format!(
-                            "{}: time over guiding off at {} spp (paper Figure 5)",
-                            config.name, summary.overhead.spp
-                        ),
-                        overhead: &summary.overhead.modes,
-                        target: COHERENT_OVERHEAD_TARGET,
-                    },
-                    stem,
-                )
-            }),
-        ),
-    ];
-    for (name, draw) in charts {
-        let stem = out.join(name);
-        files.extend([stem.with_extension("png"), stem.with_extension("svg")]);
-        draw(&stem)?;
+    let mut chart =
+        |name: &str, chart: &dyn Fn(&Path) -> Result<Vec<PathBuf>, charts::ChartError>| {
+            let stem = out.join(name);
+            files.extend([stem.with_extension("png"), stem.with_extension("svg")]);
+            chart(&stem).map(|_| ())
+        };
+    for (name, metric, what) in [
+        ("rmse_vs_time", charts::Metric::Rmse, "RMSE"),
+        ("relmse_vs_time", charts::Metric::RelMse, "relative MSE"),
+    ] {
+        let error_chart = charts::ErrorChart {
+            title: format!("{}: {what} against wall time", config.name),
+            curves: &summary.curves,
+            metric,
+        };
+        chart(name, &|stem| charts::write_chart(&error_chart, stem))?;
     }
+    let overhead_chart = charts::OverheadChart {
+        title: format!(
+            "{}: time over guiding off at {} spp (paper Figure 5)",
+            config.name, summary.overhead.spp
+        ),
+        overhead: &summary.overhead.modes,
+        target: COHERENT_OVERHEAD_TARGET,
+    };
+    chart("overhead", &|stem| {
+        charts::write_chart(&overhead_chart, stem)
+    })?;
     Ok(())
 }

@@ -3,9 +3,11 @@
 //! None of the benchmark scenes has a closed-form lightmap, so the reference is a bake with
 //! many more samples than any measured run, made with the unbiased baseline estimator
 //! (cosine-weighted gather, plain average, no ρ), so that no guiding or combination under test
-//! is measured against itself. It uses the bake's default transport: until the `path`
-//! transport lands this is the same series transport the measured runs use, so the errors are
-//! those of the estimators, not of the transport.
+//! is measured against itself, and with the `path` transport (unidirectional path tracing from
+//! every gather hit, paths of at most as many bounces as the measured runs): an unbiased
+//! estimate of the same light transport. The measured runs use the bake's default `series`
+//! transport, so their errors include its bias (the previous pass's lightmap looked up at
+//! each hit) as well as the estimators' noise and bias.
 //!
 //! A reference costs minutes, so it is cached on disk: `ref-KEY.exr` (its pages) and
 //! `ref-KEY.json`, where KEY hashes the scene (its loaded triangles, materials and lights), the
@@ -22,7 +24,7 @@ use super::BenchError;
 use super::harness::Bench;
 use super::method::Method;
 use super::readback::read_lightmap;
-use crate::bake::settings::BakeSettings;
+use crate::bake::settings::{BakeSettings, Transport};
 use crate::output::exr_pages::temporary_name;
 use crate::output::fnv1a64;
 use crate::scene::Scene;
@@ -60,9 +62,11 @@ pub struct ReferenceInfo {
     pub cached: bool,
 }
 
-/// The reference's settings: the unbiased baseline at `spp`.
-pub fn reference_settings(spp: u32, iterations: u32) -> BakeSettings {
-    Method::baseline().settings(spp, iterations, REFERENCE_SEED)
+/// The reference's settings: the unbiased baseline at `spp` with the `path` transport.
+pub fn reference_settings(spp: u32, iterations: u32, bounces: u32) -> BakeSettings {
+    let mut s = Method::baseline().settings(spp, iterations, bounces, REFERENCE_SEED);
+    s.transport = Transport::Path;
+    s
 }
 
 /// A hash of what the scene is, for the cache key (not of its path).
@@ -91,23 +95,23 @@ pub fn reference(
     settings: BakeSettings,
 ) -> Result<Reference, BenchError> {
     let key = format!(
-        "guidebake bench reference v1; scene {:016x}; texels {:016x}; settings {settings:?}",
+        "guidebake bench reference v2; scene {:016x}; texels {:016x}; settings {settings:?}",
         scene_id(bench.scene),
         texel_file_id(bench.texels)
     );
     let stem = format!("ref-{:016x}", fnv1a64(key.as_bytes()));
     let out = cache.join(format!("{stem}.exr"));
     let json = cache.join(format!("{stem}.json"));
-    if let Some(mut info) = read_info(&json).filter(|i| i.key == key) {
-        if let Ok(values) = read_lightmap(bench.texels, &out) {
-            info.cached = true;
-            eprintln!(
-                "reference: cached {} ({} spp)",
-                info.path.display(),
-                info.spp
-            );
-            return Ok(Reference { info, values });
-        }
+    if let Some(mut info) = read_info(&json).filter(|i| i.key == key)
+        && let Ok(values) = read_lightmap(bench.texels, &out)
+    {
+        info.cached = true;
+        eprintln!(
+            "reference: cached {} ({} spp)",
+            info.path.display(),
+            info.spp
+        );
+        return Ok(Reference { info, values });
     }
     std::fs::create_dir_all(cache).map_err(|e| BenchError::file(cache, e))?;
     eprintln!(

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use crate::bake::settings::BakeSettings;
 use crate::bench::method::Method;
 use crate::bench::{BenchConfig, run};
 use crate::demo::{DEMO_TEXELS_PER_METRE, ajar_room};
@@ -20,11 +21,11 @@ pub struct BenchArgs {
     /// output directory at --size / --texels-per-unit.
     #[arg(long)]
     pub texels: Option<PathBuf>,
-    /// Page size when preparing, e.g. 128x128 (default for a scene file: 128x128, a reduced
-    /// atlas so a full run takes minutes on two cores).
+    /// Page size when preparing, e.g. 64x64 (default for a scene file: 64x64, a reduced atlas
+    /// so a full run takes minutes on two cores).
     #[arg(long, value_parser = super::prepare::parse_size, conflicts_with = "texels_per_unit")]
     pub size: Option<(u32, u32)>,
-    /// Texels per world unit when preparing (default for the demo room: 8, --quick 6).
+    /// Texels per world unit when preparing (default for the demo room: 8, --quick 4).
     #[arg(long)]
     pub texels_per_unit: Option<f32>,
     /// Output directory: runs.csv, overhead.csv, summary.json, table.md and the charts.
@@ -33,11 +34,11 @@ pub struct BenchArgs {
     /// Directory of cached reference lightmaps (reused while scene, texels and settings match).
     #[arg(long, default_value = "out/bench-cache")]
     pub cache: PathBuf,
-    /// A small run for CI (under a minute on two cores): the ladder 32,64,128, one seed, a
-    /// 1024-spp reference, 3 overhead repeats at 64 spp.
+    /// A small run for CI (under a minute on two cores): the demo room at 4 texels/m, one
+    /// bounce, the ladder 32,64, one seed, a 512-spp reference, 3 overhead repeats at 32 spp.
     #[arg(long)]
     pub quick: bool,
-    /// Rays per texel of the ladder, comma-separated (default 32,64,128,256,512).
+    /// Rays per texel of the ladder, comma-separated (default 32,64,128,256).
     #[arg(long, value_delimiter = ',')]
     pub spp: Option<Vec<u32>>,
     /// Seeds per (method, spp) (default 2).
@@ -46,7 +47,10 @@ pub struct BenchArgs {
     /// Learning iterations of every bake.
     #[arg(long, default_value_t = 4)]
     pub iterations: u32,
-    /// Rays per texel of the reference (default 8192).
+    /// Bounces of every bake and of the reference (default: the bake's; --quick 1).
+    #[arg(long)]
+    pub bounces: Option<u32>,
+    /// Rays per texel of the reference (default 4096).
     #[arg(long)]
     pub ref_spp: Option<u32>,
     /// Rays per texel of the overhead runs (default 256).
@@ -86,15 +90,16 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
         methods: Method::all(),
         spp: args.spp.clone().unwrap_or_else(|| {
             if quick {
-                vec![32, 64, 128]
+                vec![32, 64]
             } else {
-                vec![32, 64, 128, 256, 512]
+                vec![32, 64, 128, 256]
             }
         }),
         seeds: (1..=seeds).collect(),
         iterations: args.iterations,
-        reference_spp: pick(args.ref_spp, 8192, 1024),
-        overhead_spp: pick(args.overhead_spp, 256, 64),
+        bounces: pick(args.bounces, BakeSettings::default().bounces, 1),
+        reference_spp: pick(args.ref_spp, 4096, 512),
+        overhead_spp: pick(args.overhead_spp, 256, 32),
         repeats: pick(args.repeats, 5, 3),
     };
     if let Some(d) = args.texels_per_unit
@@ -112,13 +117,13 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
             let resolution = match (args.size, args.texels_per_unit) {
                 (_, Some(d)) => Resolution::TexelsPerUnit(d),
                 (Some((w, h)), None) => Resolution::Size(w, h),
-                (None, None) => Resolution::Size(128, 128),
+                (None, None) => Resolution::Size(64, 64),
             };
             (scene, stem, resolution, Layout::Auto)
         }
         None => {
             let density = args.texels_per_unit.unwrap_or(if quick {
-                DEMO_TEXELS_PER_METRE / 4.0
+                DEMO_TEXELS_PER_METRE / 6.0
             } else {
                 DEMO_TEXELS_PER_METRE / 3.0
             });
