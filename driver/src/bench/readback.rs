@@ -81,3 +81,47 @@ pub fn read_lightmap(
         })
         .collect())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::demo::ajar_room;
+    use crate::output::exr_pages::PageImage;
+    use crate::prepare::{Layout, PrepareOptions, Resolution, prepare};
+
+    #[test]
+    fn every_valid_texel_reads_back_what_was_written_at_its_pixel() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("room.texels");
+        let options = PrepareOptions {
+            resolution: Resolution::TexelsPerUnit(4.0),
+            layout: Layout::Shared,
+        };
+        prepare(&ajar_room(), &path, options).unwrap();
+        let texels = TexelFile::open(&path).unwrap();
+        assert_eq!(texels.pages().len(), 1);
+        let page = texels.pages()[0];
+        let mut image = PageImage::new(page.width, page.height);
+        let value = |id: usize| [id as f32, 0.5, -(id as f32)];
+        for (id, t) in texels.texels().iter().enumerate() {
+            image.set(u32::from(t.pixel[0]), u32::from(t.pixel[1]), value(id));
+        }
+        image.dilate(2);
+        let out = dir.path().join("lightmap.exr");
+        image.write_exr(&out).unwrap();
+        let back = read_lightmap(&texels, &out).unwrap();
+        assert_eq!(back.len(), texels.texels().len());
+        let mut valid = 0;
+        for (id, (t, v)) in texels.texels().iter().zip(&back).enumerate() {
+            if t.flags & FLAG_VALID == 0 {
+                assert!(v.is_none());
+            } else {
+                assert_eq!(*v, Some(value(id)), "texel {id}");
+                valid += 1;
+            }
+        }
+        assert!(valid > 100);
+        let missing = read_lightmap(&texels, &dir.path().join("absent.exr")).unwrap_err();
+        assert!(missing.to_string().contains("absent.exr"));
+    }
+}
