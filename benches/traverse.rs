@@ -7,7 +7,13 @@
 //!
 //! `cargo bench --bench traverse -- --warm-up-time 1 --measurement-time 5`
 //! `cargo bench --bench traverse --features embree -- --warm-up-time 1 --measurement-time 5`
-//! Set `TRAVERSE_PRESETS=1` to also time every obvhs build preset (build time vs trace time).
+//! Set `TRAVERSE_PRESETS=1` to also time every obvhs build preset (build time vs trace time),
+//! `TRAVERSE_SCENES=ajar` (or `city1m`) to run one scene, `TRAVERSE_DUEL=N` to also time the
+//! gather tracers round-robin for N rounds (ratios per round: robust on a loaded machine).
+//!
+//! Besides the default traversal, the issue's ideas are measured as `*_packet8_<idea>` (and
+//! `shadow_occluded8_<idea>`), and a `gather_resorted` set (each texel's rotated points fully
+//! re-sorted) feeds Embree's `rtcIntersect16` two of our packets at a time.
 
 #[path = "common/traverse_scenes.rs"]
 mod scenes;
@@ -20,7 +26,8 @@ use glam::{Vec3, Vec3A};
 use guidebake::bvh::{Bvh, Preset};
 use guidebake_kernels::packet::{Hit8, LANES, Ray8};
 use guidebake_kernels::traverse::{
-    BvhRef, intersect_brute, intersect1, intersect8, occluded1, occluded8,
+    BvhRef, ChildOrder, Traversal, intersect_brute, intersect1, intersect8, intersect8_with,
+    occluded1, occluded8, occluded8_with,
 };
 use obvhs::cwbvh::{CwBvh, builder::build_cwbvh_from_tris};
 use obvhs::ray::{Ray as ORay, RayHit};
@@ -67,9 +74,14 @@ fn scene(name: &'static str, soup: Vec<[Vec3; 3]>, light: Vec3) -> Scene {
     }
 }
 
+/// Whether scene `name` is selected by `TRAVERSE_SCENES` (comma-separated; unset: all).
+fn wanted(name: &str) -> bool {
+    std::env::var("TRAVERSE_SCENES").map_or(true, |v| v.split(',').any(|s| s == name))
+}
+
 fn scenes() -> Vec<Scene> {
     let mut out = Vec::new();
-    match scenes::converted_dir() {
+    match scenes::converted_dir().filter(|_| wanted("ajar")) {
         Some(dir) => {
             let soup = scenes::load_glb(&dir.join("bitterli_veach_ajar_no_teapots.glb"));
             let (lo, hi) = bounds(&soup);
@@ -79,10 +91,15 @@ fn scenes() -> Vec<Scene> {
                 (lo + hi) * 0.5 + Vec3::new(0.0, 0.3 * (hi.y - lo.y), 0.0),
             ));
         }
-        None => println!("skipping the ajar room: ../shared/scenes/converted not found"),
+        None if wanted("ajar") => {
+            println!("skipping the ajar room: ../shared/scenes/converted not found")
+        }
+        None => {}
     }
-    let city = scenes::city(106, 3, 4);
-    out.push(scene("city1m", city, Vec3::new(53.0, 12.0, 53.0)));
+    if wanted("city1m") {
+        let city = scenes::city(106, 3, 4);
+        out.push(scene("city1m", city, Vec3::new(53.0, 12.0, 53.0)));
+    }
     out
 }
 
@@ -98,10 +115,32 @@ fn bounds(soup: &[[Vec3; 3]]) -> (Vec3, Vec3) {
 // Tracers. Each returns a checksum (hits, or the sum of prim ids) so the work is not elided.
 
 fn packet8(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+    packet8_with(view, packets, &Traversal::DEFAULT)
+}
+
+/// The issue's traversal ideas, each measured against the default (docs/traverse.md).
+const IDEAS: [(&str, Traversal); 6] = [
+    ("packet8_fallback1", idea(1, ChildOrder::Vote, false)),
+    ("packet8_fallback2", idea(2, ChildOrder::Vote, false)),
+    ("packet8_fallback3", idea(3, ChildOrder::Vote, false)),
+    ("packet8_order_signs", idea(0, ChildOrder::Signs, false)),
+    ("packet8_order_lead", idea(0, ChildOrder::Lead, false)),
+    ("packet8_interval", idea(0, ChildOrder::Vote, true)),
+];
+
+const fn idea(fallback_lanes: u32, order: ChildOrder, interval: bool) -> Traversal {
+    Traversal {
+        fallback_lanes,
+        order,
+        interval,
+    }
+}
+
+fn packet8_with(view: &BvhRef<'_>, packets: &[Ray8], how: &Traversal) -> u64 {
     let mut sum = 0u64;
     for p in packets {
         let mut hits = Hit8::NONE;
-        intersect8(view, p, &mut hits);
+        intersect8_with(view, p, &mut hits, how);
         sum += hits
             .prim
             .to_array()
@@ -123,10 +162,10 @@ fn scalar(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
     sum
 }
 
-fn occl8(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+fn occl8(view: &BvhRef<'_>, packets: &[Ray8], how: &Traversal) -> u64 {
     packets
         .iter()
-        .map(|p| u64::from(occluded8(view, p).count_ones()))
+        .map(|p| u64::from(occluded8_with(view, p, how).count_ones()))
         .sum()
 }
 
@@ -290,8 +329,14 @@ fn bench(c: &mut Criterion) {
                     &em.occluded8_all(packets, true),
                 );
                 group.bench_function(id("occluded8"), |b| {
-                    b.iter(|| occl8(&view, black_box(packets)))
+                    b.iter(|| occl8(&view, black_box(packets), &Traversal::DEFAULT))
                 });
+                for (name, how) in &IDEAS[..3] {
+                    let name = name.replace("packet8", "occluded8");
+                    group.bench_function(id(&name), |b| {
+                        b.iter(|| occl8(&view, black_box(packets), how))
+                    });
+                }
                 group.bench_function(id("scalar"), |b| {
                     b.iter(|| occl1(&view, black_box(packets)))
                 });
@@ -344,6 +389,11 @@ fn bench(c: &mut Criterion) {
             group.bench_function(id("packet8"), |b| {
                 b.iter(|| packet8(&view, black_box(packets)))
             });
+            for (name, how) in &IDEAS {
+                group.bench_function(id(name), |b| {
+                    b.iter(|| packet8_with(&view, black_box(packets), how))
+                });
+            }
             group.bench_function(id("scalar"), |b| {
                 b.iter(|| scalar(&view, black_box(packets)))
             });
@@ -361,6 +411,102 @@ fn bench(c: &mut Criterion) {
                 });
             }
         }
+        // The comparator's best case: each texel's rotated points fully re-sorted, so 16
+        // consecutive rays (two of our packets) are as coherent as 8 were.
+        let resorted = scenes::gather_packets_ordered(
+            &s.soup,
+            TEXELS,
+            PER_TEXEL,
+            1,
+            scenes::GatherOrder::Resorted,
+        );
+        let rays = (resorted.len() * LANES) as u64;
+        group.throughput(Throughput::Elements(rays));
+        let id = |what: &str| format!("{}/gather_resorted_{what}", s.name);
+        let reference = prims_of(&view, &resorted);
+        check_ours(&s, &view, &resorted, &reference);
+        group.bench_function(id("packet8"), |b| {
+            b.iter(|| packet8(&view, black_box(&resorted)))
+        });
+        #[cfg(feature = "embree")]
+        {
+            check_prims(
+                &id("embree_intersect16"),
+                &reference,
+                &em.intersect16_prims(&resorted, true),
+            );
+            for coherent in [true, false] {
+                let tag = if coherent { "coherent" } else { "incoherent" };
+                group.bench_function(id(&format!("embree_intersect16_{tag}")), |b| {
+                    b.iter(|| em.intersect16_sum(black_box(&resorted), coherent))
+                });
+                group.bench_function(id(&format!("embree_intersect8_{tag}")), |b| {
+                    b.iter(|| em.intersect8_sum(black_box(&resorted), coherent))
+                });
+            }
+        }
+        if let Some(rounds) = std::env::var("TRAVERSE_DUEL")
+            .ok()
+            .and_then(|v| v.parse::<usize>().ok())
+        {
+            let gather = &sets[0].1;
+            let mut entries: Vec<DuelEntry<'_>> = vec![
+                (
+                    "packet8".into(),
+                    gather.len(),
+                    Box::new(|| packet8(&view, gather)),
+                ),
+                (
+                    "scalar".into(),
+                    gather.len(),
+                    Box::new(|| scalar(&view, gather)),
+                ),
+                (
+                    "obvhs_cwbvh".into(),
+                    gather.len(),
+                    Box::new(|| obvhs_closest(&s, gather)),
+                ),
+            ];
+            for (name, how) in &IDEAS {
+                entries.push((
+                    (*name).into(),
+                    gather.len(),
+                    Box::new(move || packet8_with(&view, gather, how)),
+                ));
+            }
+            entries.push((
+                "resorted_packet8".into(),
+                resorted.len(),
+                Box::new(|| packet8(&view, &resorted)),
+            ));
+            #[cfg(feature = "embree")]
+            for coherent in [true, false] {
+                let tag = if coherent { "coherent" } else { "incoherent" };
+                let em = &em;
+                entries.push((
+                    format!("embree_intersect8_{tag}"),
+                    gather.len(),
+                    Box::new(move || em.intersect8_sum(gather, coherent)),
+                ));
+                entries.push((
+                    format!("embree_intersect1_{tag}"),
+                    gather.len(),
+                    Box::new(move || em.intersect1_sum(gather, coherent)),
+                ));
+                let resorted = &resorted;
+                entries.push((
+                    format!("resorted_embree_intersect16_{tag}"),
+                    resorted.len(),
+                    Box::new(move || em.intersect16_sum(resorted, coherent)),
+                ));
+                entries.push((
+                    format!("resorted_embree_intersect8_{tag}"),
+                    resorted.len(),
+                    Box::new(move || em.intersect8_sum(resorted, coherent)),
+                ));
+            }
+            duel(s.name, &entries, rounds);
+        }
         if std::env::var_os("TRAVERSE_PRESETS").is_some() {
             presets(&s, &sets[0].1);
         }
@@ -368,26 +514,90 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-/// Build time vs gather trace time of every obvhs preset (printed, one run each; not a criterion
-/// measurement: a build is seconds long on the 1M scene).
+/// A duel contestant: name, packets per pass, one pass over its ray set (returns a checksum).
+type DuelEntry<'a> = (String, usize, Box<dyn Fn() -> u64 + 'a>);
+
+/// Round-robin timing of the gather tracers: each round runs every entry once over its ray
+/// set (the start rotating from round to round), so all entries see the same machine load
+/// within a few tens of milliseconds. Prints per entry the median Mrays/s and the median over
+/// rounds of its per-round ratio to `obvhs_cwbvh` and to the faster Embree `intersect8`.
+fn duel(scene: &str, entries: &[DuelEntry<'_>], rounds: usize) {
+    let n = entries.len();
+    let mut rates = vec![Vec::with_capacity(rounds); n];
+    for round in 0..rounds {
+        for k in 0..n {
+            let (_, packets, run) = &entries[(round + k) % n];
+            let start = Instant::now();
+            black_box(run());
+            let secs = start.elapsed().as_secs_f64();
+            rates[(round + k) % n].push((packets * LANES) as f64 / secs / 1e6);
+        }
+    }
+    let index = |name: &str| entries.iter().position(|e| e.0 == name);
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let obvhs = index("obvhs_cwbvh").expect("obvhs entry");
+    let embree8: Vec<usize> = ["embree_intersect8_coherent", "embree_intersect8_incoherent"]
+        .iter()
+        .filter_map(|e| index(e))
+        .collect();
+    println!(
+        "duel {scene} gather: {rounds} rounds; median Mrays/s, median per-round ratio to obvhs \
+         CwBvh and to Embree's faster intersect8 (per round)"
+    );
+    for (k, (name, _, _)) in entries.iter().enumerate() {
+        let ratio_to = |other: &[usize]| {
+            if other.is_empty() {
+                return f64::NAN;
+            }
+            median(
+                (0..rounds)
+                    .map(|r| {
+                        let best = other.iter().map(|&o| rates[o][r]).fold(0.0, f64::max);
+                        rates[k][r] / best
+                    })
+                    .collect(),
+            )
+        };
+        println!(
+            "duel {scene} {name:<36} {:>7.2} Mrays/s  x{:.2} obvhs  x{:.2} embree8",
+            median(rates[k].clone()),
+            ratio_to(&[obvhs]),
+            ratio_to(&embree8)
+        );
+    }
+}
+
+/// Build time vs gather trace time of every obvhs preset (printed; not a criterion
+/// measurement: a build is seconds long on the 1M scene). The traces run round-robin, one
+/// pass per preset per round, so every preset sees the same load; medians over the rounds.
 fn presets(s: &Scene, packets: &[Ray8]) {
-    for preset in Preset::ALL {
-        let bvh = Bvh::build(&s.soup, preset).expect("preset BVH");
-        let view = bvh.view();
-        let mut best = f64::INFINITY;
-        for _ in 0..5 {
+    let built: Vec<(Preset, Bvh)> = Preset::ALL
+        .iter()
+        .map(|&p| (p, Bvh::build(&s.soup, p).expect("preset BVH")))
+        .collect();
+    let rounds = 15;
+    let mut rates = vec![Vec::with_capacity(rounds); built.len()];
+    for round in 0..rounds {
+        for k in 0..built.len() {
+            let i = (round + k) % built.len();
+            let view = built[i].1.view();
             let start = Instant::now();
             black_box(packet8(&view, packets));
-            best = best.min(start.elapsed().as_secs_f64());
+            rates[i].push((packets.len() * LANES) as f64 / start.elapsed().as_secs_f64() / 1e6);
         }
-        let mrays = (packets.len() * LANES) as f64 / best / 1e6;
+    }
+    for ((preset, bvh), mut r) in built.iter().zip(rates) {
+        r.sort_by(f64::total_cmp);
         println!(
-            "preset {} {:>10}: build {:>8.1} ms, {} nodes, gather packet8 {:.2} Mrays/s",
+            "preset {} {:>10}: build {:>8.1} ms, {} nodes, gather packet8 {:.2} Mrays/s (median of {rounds})",
             s.name,
             preset.name(),
             bvh.build_time().as_secs_f64() * 1e3,
-            view.nodes().len(),
-            mrays
+            bvh.view().nodes().len(),
+            r[rounds / 2]
         );
     }
 }
@@ -417,6 +627,9 @@ mod embree_rt {
 
     #[repr(C, align(32))]
     struct Valid([i32; 8]);
+
+    #[repr(C, align(64))]
+    struct Valid16([i32; 16]);
 
     pub struct EmbreeScene {
         device: RTCDevice,
@@ -509,6 +722,64 @@ mod embree_rt {
                     rh.hit.primID[i]
                 }
             })
+        }
+
+        /// Two of our packets as one `RTCRayHit16` (64-byte aligned valid mask).
+        fn intersect16(&self, p: &[Ray8], coherent: bool) -> [u32; 16] {
+            let lanes = |f: &dyn Fn(&Ray8) -> wide::f32x8| -> [f32; 16] {
+                let (a, b) = (f(&p[0]).to_array(), f(&p[1]).to_array());
+                std::array::from_fn(|i| if i < 8 { a[i] } else { b[i - 8] })
+            };
+            let active = [p[0].active().to_bitmask(), p[1].active().to_bitmask()];
+            let valid = Valid16(std::array::from_fn(|i| {
+                if active[i / 8] >> (i % 8) & 1 == 1 {
+                    -1
+                } else {
+                    0
+                }
+            }));
+            // SAFETY: RTCRayHit16 is plain old data (floats and integers); all-zero is valid.
+            let mut rh: RTCRayHit16 = unsafe { std::mem::zeroed() };
+            rh.ray.org_x = lanes(&|r| r.org[0]);
+            rh.ray.org_y = lanes(&|r| r.org[1]);
+            rh.ray.org_z = lanes(&|r| r.org[2]);
+            rh.ray.dir_x = lanes(&|r| r.dir[0]);
+            rh.ray.dir_y = lanes(&|r| r.dir[1]);
+            rh.ray.dir_z = lanes(&|r| r.dir[2]);
+            rh.ray.tnear = lanes(&|r| r.tmin);
+            rh.ray.tfar = lanes(&|r| r.tmax);
+            rh.ray.mask = [u32::MAX; 16];
+            rh.hit.geomID = [u32::MAX; 16];
+            rh.hit.primID = [u32::MAX; 16];
+            let mut ctx = context(coherent);
+            // SAFETY: `valid` (64-byte aligned) and `rh` live across the call.
+            unsafe { rtcIntersect16(valid.0.as_ptr(), self.scene, &mut ctx, &mut rh) };
+            std::array::from_fn(|i| {
+                if rh.hit.geomID[i] == u32::MAX {
+                    u32::MAX
+                } else {
+                    rh.hit.primID[i]
+                }
+            })
+        }
+
+        pub fn intersect16_prims(&self, packets: &[Ray8], coherent: bool) -> Vec<u32> {
+            packets
+                .chunks_exact(2)
+                .flat_map(|p| self.intersect16(p, coherent))
+                .collect()
+        }
+
+        pub fn intersect16_sum(&self, packets: &[Ray8], coherent: bool) -> u64 {
+            packets
+                .chunks_exact(2)
+                .map(|p| {
+                    self.intersect16(p, coherent)
+                        .iter()
+                        .map(|&x| u64::from(x))
+                        .sum::<u64>()
+                })
+                .sum()
         }
 
         fn intersect1(&self, p: &Ray8, lane: usize, coherent: bool) -> u32 {

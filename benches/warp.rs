@@ -4,15 +4,23 @@
 //! Sobol points in two orders — `unsorted` (Sobol index order after the texel's rotation:
 //! consecutive points far apart) and `presorted` (the presorted order repaired for the
 //! rotation's wrap, `presort::reorder_after_rotation_into`: consecutive 8-point packets are
-//! coherent, paper §2.4). The guide is a realistic learned one: a small bright disk and a dim
-//! sky, learned in two iterations from 256 uniform and 512 guided records.
-//! Group `guide` (records/s): `build` from those 512 records.
+//! coherent, paper §2.4) — the packets `driver/src/bake/gather.rs` (`gather_packets`) feeds
+//! `warp::sample8`. Both at the bake's default 64 samples per texel and iteration and at 1024
+//! (benchmark ids `warp/<function>/<samples>`). The guide is a realistic learned one: a small
+//! bright disk and a dim sky, learned in two iterations from 256 uniform and 512 guided
+//! records.
+//! Group `guide` (records/s): `build` from those 512 records, and the same build with
+//! storage for the tree only (`build_without_start_table`), which shows the start table's cost.
 //!
 //! Every function's output is checked against the scalar reference once before timing.
 //!
+//! Before the criterion groups the bench prints how coherent the packets are and times the
+//! four warps round-robin (medians; the ratios to trust on a shared machine).
+//!
 //! Run: `cargo bench --bench warp -- --warm-up-time 1 --measurement-time 3`
+//! (`cargo bench --bench warp -- none` prints the round-robin medians only).
 
-use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
+use criterion::{BatchSize, BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
@@ -21,9 +29,11 @@ use guidebake_kernels::warp::{self, Warped};
 use std::hint::black_box;
 use wide::f32x8;
 
-/// Gather samples per texel and texels per timed iteration.
-const SAMPLES: u32 = 1024;
-const TEXELS: u64 = 16;
+/// Points per timed iteration: texels × gather samples per texel.
+const POINTS: u32 = 16_384;
+/// Gather samples per texel and iteration: the bake's default (256 spp over 4 iterations)
+/// and a high count, where presorted packets are more coherent.
+const SAMPLE_COUNTS: [u32; 2] = [64, 1024];
 
 fn records(previous: Option<&Guide<'_>>, n: usize, seed: u64) -> Vec<Record> {
     learning_records(previous, n, seed, disk_and_sky)
@@ -43,18 +53,20 @@ struct Points {
     presorted: Vec<[f32; 2]>,
 }
 
-fn points() -> Points {
-    let order = presorted(SAMPLES);
-    let mut repaired = vec![0u32; SAMPLES as usize];
+/// `samples` points per texel for `POINTS / samples` texels, each rotated as the bake
+/// rotates iteration 1 of a texel (`gather_packets`: `rotation(seed, texel, k)`).
+fn points(samples: u32) -> Points {
+    let order = presorted(samples);
+    let mut repaired = vec![0u32; samples as usize];
     let (mut unsorted, mut sorted) = (Vec::new(), Vec::new());
-    for texel in 0..TEXELS {
+    for texel in 0..u64::from(POINTS / samples) {
         let r = rotation(7, texel, 1);
         let unit = |i: u32| {
             let p = rotate(sobol_2d(i), r);
             [to_unit(p[0]), to_unit(p[1])]
         };
         reorder_after_rotation_into(&order, r, &mut repaired);
-        unsorted.extend((0..SAMPLES).map(unit));
+        unsorted.extend((0..samples).map(unit));
         sorted.extend(repaired.iter().map(|&i| unit(i)));
     }
     Points {
@@ -122,108 +134,141 @@ fn check(g: &Guide<'_>, points: &[[f32; 2]]) {
     }
 }
 
-/// Share of packets that walk the whole tree on the uniform fast path.
-fn uniform_share(g: &Guide<'_>, points: &[[f32; 2]]) -> f64 {
-    let leaf = |u: [f32; 2]| {
-        let s = warp::sample(g, u);
-        let mut id = None;
-        let mut k = 0;
-        g.for_each_leaf(|l| {
-            let inside = |a: f32, o: f32| (o..o + l.size).contains(&a);
-            if inside(s.u[0], l.origin[0]) && inside(s.u[1], l.origin[1]) {
-                id = Some(k);
-            }
-            k += 1;
-        });
-        id
-    };
-    let packets = points.chunks_exact(8);
-    let n = packets.len();
-    let same = packets
-        .filter(|c| c.iter().all(|&u| leaf(u) == leaf(c[0])))
-        .count();
-    same as f64 / n as f64
+/// How coherent the packets are on the guide, averaged over packets.
+struct PacketPaths {
+    /// Share of packets whose eight lanes end in one leaf (the whole uniform fast path).
+    one_leaf: f64,
+    /// Depth of the deepest node all eight lanes share.
+    parting_depth: f64,
+    /// Depth of the lanes' leaves.
+    leaf_depth: f64,
 }
 
-/// The four warp variants timed round-robin, 31 rounds, medians printed: on a shared,
+/// The path of `u` through the guide's nodes (root first), by the thresholds the warp uses.
+fn path(g: &Guide<'_>, u: [f32; 2]) -> Vec<usize> {
+    let nodes = g.nodes();
+    let mut i = 0;
+    let mut p = vec![0];
+    while let Some(c) = nodes[i].first_child() {
+        let t = nodes[i].thresholds();
+        let right = u[0] >= t[0];
+        let upper = u[1] >= t[1 + usize::from(right)];
+        i = c + usize::from(right) + 2 * usize::from(upper);
+        p.push(i);
+    }
+    p
+}
+
+fn packet_paths(g: &Guide<'_>, points: &[[f32; 2]]) -> PacketPaths {
+    let (mut one, mut part, mut leaf, mut n) = (0usize, 0usize, 0usize, 0usize);
+    for c in points.chunks_exact(8) {
+        let paths: Vec<Vec<usize>> = c.iter().map(|&u| path(g, u)).collect();
+        let shared = (0..)
+            .take_while(|&d| {
+                paths
+                    .iter()
+                    .all(|p| p.get(d).is_some_and(|&k| k == paths[0][d]))
+            })
+            .count();
+        one += usize::from(paths.iter().all(|p| p == &paths[0]));
+        part += shared - 1;
+        leaf += paths.iter().map(|p| p.len() - 1).sum::<usize>();
+        n += 1;
+    }
+    PacketPaths {
+        one_leaf: one as f64 / n as f64,
+        parting_depth: part as f64 / n as f64,
+        leaf_depth: leaf as f64 / (8 * n) as f64,
+    }
+}
+
+/// Rounds of the round-robin timing.
+const ROUNDS: usize = 101;
+
+/// A timed variant: its name and a run over all points.
+type Variant<'a> = (&'static str, Box<dyn FnMut() + 'a>);
+
+/// The warp variants timed round-robin, [`ROUNDS`] rounds, medians printed: on a shared,
 /// noisy machine the ratios of one interleaved run are steadier than criterion's sequential
 /// groups (each of which can land in a different load phase).
-fn interleaved(g: &Guide<'_>, pts: &Points) {
+fn interleaved(g: &Guide<'_>, pts: &Points, samples: u32) {
     let (su, sp) = (soa(&pts.unsorted), soa(&pts.presorted));
-    let mut out = vec![
-        Warped {
-            u: [0.0; 2],
-            pdf: 0.0
-        };
-        pts.unsorted.len()
+    let n = pts.unsorted.len();
+    let scalar_run = |p: &'static str, points: &Vec<[f32; 2]>| -> Variant<'_> {
+        let points = points.clone();
+        let mut out = vec![
+            Warped {
+                u: [0.0; 2],
+                pdf: 0.0
+            };
+            n
+        ];
+        (
+            p,
+            Box::new(move || {
+                scalar(g, black_box(&points), &mut out);
+                black_box(&out);
+            }),
+        )
+    };
+    let x8_run = |p: &'static str, packets: &Vec<(f32x8, f32x8)>| -> Variant<'_> {
+        let packets = packets.clone();
+        let zero = f32x8::splat(0.0);
+        let mut out8 = vec![
+            warp::Warped8 {
+                x: zero,
+                y: zero,
+                pdf: zero
+            };
+            n / 8
+        ];
+        (
+            p,
+            Box::new(move || {
+                x8(g, black_box(&packets), &mut out8);
+                black_box(&out8);
+            }),
+        )
+    };
+    let mut variants = [
+        scalar_run("scalar_unsorted", &pts.unsorted),
+        scalar_run("scalar_presorted", &pts.presorted),
+        x8_run("x8_unsorted", &su),
+        x8_run("x8_presorted", &sp),
     ];
-    let zero = f32x8::splat(0.0);
-    let mut out8 = vec![
-        warp::Warped8 {
-            x: zero,
-            y: zero,
-            pdf: zero
-        };
-        su.len()
-    ];
-    let mut times: [Vec<f64>; 4] = Default::default();
-    for round in 0..31 {
+    let v = variants.len();
+    let mut times = vec![Vec::new(); v];
+    for round in 0..ROUNDS {
         // Rotate which variant goes first, so none always meets the same phase of the round.
-        for k in (0..4).map(|j| (j + round) % 4) {
+        for k in (0..v).map(|j| (j + round) % v) {
             let t = std::time::Instant::now();
             for _ in 0..4 {
-                match k {
-                    0 => scalar(g, black_box(&pts.unsorted), &mut out),
-                    1 => scalar(g, black_box(&pts.presorted), &mut out),
-                    2 => x8(g, black_box(&su), &mut out8),
-                    _ => x8(g, black_box(&sp), &mut out8),
-                }
+                (variants[k].1)();
             }
             times[k].push(t.elapsed().as_secs_f64() / 4.0);
         }
-        black_box((&out, &out8));
     }
-    let names = [
-        "scalar_unsorted",
-        "scalar_presorted",
-        "x8_unsorted",
-        "x8_presorted",
-    ];
-    let n = pts.unsorted.len() as f64;
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
     let m: Vec<f64> = times.iter_mut().map(median).collect();
-    for (name, t) in names.iter().zip(&m) {
+    for ((name, _), t) in variants.iter().zip(&m) {
         eprintln!(
-            "interleaved median warp/{name}: {:.1} Msamples/s ({:.2}x scalar_unsorted)",
-            n / t / 1e6,
+            "interleaved median warp/{name}/{samples}: {:.1} Msamples/s ({:.2}x scalar_unsorted)",
+            n as f64 / t / 1e6,
             m[0] / t
         );
     }
 }
 
-fn bench(c: &mut Criterion) {
-    let learned = second_iteration_records();
-    let mut storage = vec![Node::default(); 4096];
-    let mut recs = learned.clone();
-    let (g, stats) = guide::build(&mut recs, &GuideParams::default(), &mut storage);
-    let pts = points();
-    check(&g, &pts.unsorted);
-    check(&g, &pts.presorted);
-    eprintln!(
-        "guide: {} nodes, {} leaves, depth {}; packets in one leaf: presorted {:.0}%, unsorted {:.0}%",
-        stats.nodes,
-        stats.leaves,
-        stats.depth,
-        100.0 * uniform_share(&g, &pts.presorted[..4096]),
-        100.0 * uniform_share(&g, &pts.unsorted[..4096]),
-    );
-
-    interleaved(&g, &pts);
-
-    let mut group = c.benchmark_group("warp");
+/// Criterion timing of the four warps on `samples` points per texel.
+fn timed(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    g: &Guide<'_>,
+    pts: &Points,
+    samples: u32,
+) {
     group.throughput(Throughput::Elements(pts.unsorted.len() as u64));
     let mut out = vec![
         Warped {
@@ -236,9 +281,9 @@ fn bench(c: &mut Criterion) {
         ("scalar_unsorted", &pts.unsorted),
         ("scalar_presorted", &pts.presorted),
     ] {
-        group.bench_function(name, |b| {
+        group.bench_function(BenchmarkId::new(name, samples), |b| {
             b.iter(|| {
-                scalar(&g, black_box(p), &mut out);
+                scalar(g, black_box(p), &mut out);
                 black_box(&out);
             })
         });
@@ -256,12 +301,45 @@ fn bench(c: &mut Criterion) {
         ("x8_unsorted", soa(&pts.unsorted)),
         ("x8_presorted", soa(&pts.presorted)),
     ] {
-        group.bench_function(name, |b| {
+        group.bench_function(BenchmarkId::new(name, samples), |b| {
             b.iter(|| {
-                x8(&g, black_box(&p), &mut out8);
+                x8(g, black_box(&p), &mut out8);
                 black_box(&out8);
             })
         });
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let learned = second_iteration_records();
+    let mut storage = vec![Node::default(); 4096];
+    let mut recs = learned.clone();
+    let (g, stats) = guide::build(&mut recs, &GuideParams::default(), &mut storage);
+    eprintln!(
+        "guide: {} nodes, {} leaves, depth {}",
+        stats.nodes, stats.leaves, stats.depth
+    );
+    let mut group = c.benchmark_group("warp");
+    for samples in SAMPLE_COUNTS {
+        let pts = points(samples);
+        check(&g, &pts.unsorted);
+        check(&g, &pts.presorted);
+        let (ps, us) = (
+            packet_paths(&g, &pts.presorted),
+            packet_paths(&g, &pts.unsorted),
+        );
+        eprintln!(
+            "{samples} samples per texel: packets in one leaf: presorted {:.0}%, unsorted {:.0}%; \
+             presorted packets part at depth {:.2} of a mean leaf depth {:.2} (unsorted {:.2} of {:.2})",
+            100.0 * ps.one_leaf,
+            100.0 * us.one_leaf,
+            ps.parting_depth,
+            ps.leaf_depth,
+            us.parting_depth,
+            us.leaf_depth,
+        );
+        interleaved(&g, &pts, samples);
+        timed(&mut group, &g, &pts, samples);
     }
     group.finish();
 
@@ -272,6 +350,19 @@ fn bench(c: &mut Criterion) {
             || learned.clone(),
             |r| {
                 let (g, s) = guide::build(r, &GuideParams::default(), &mut storage);
+                black_box((g.nodes().len(), s));
+            },
+            BatchSize::SmallInput,
+        )
+    });
+    // The same build with storage for the tree only: no start table, to show its cost.
+    let tree_only = stats.nodes as usize;
+    group.bench_function("build_without_start_table", |b| {
+        b.iter_batched_ref(
+            || learned.clone(),
+            |r| {
+                let (g, s) = guide::build(r, &GuideParams::default(), &mut storage[..tree_only]);
+                assert!(g.start_table().is_empty());
                 black_box((g.nodes().len(), s));
             },
             BatchSize::SmallInput,

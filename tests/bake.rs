@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
 use guidebake::bake::run::{BakeError, BakeJob, bake, finish, work_dir};
-use guidebake::bake::settings::{BakeSettings, Guiding, Transport};
+use guidebake::bake::settings::{BakeSettings, Combine, Guiding, Transport};
 use guidebake::bake::shard::Shard;
 use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle};
 use guidebake::texels::{
@@ -176,15 +176,7 @@ fn a_plane_under_the_sky_bakes_to_pi_l_in_the_exr() {
         !work_dir(&job.out, Shard::WHOLE).exists(),
         "a finished bake removes its work"
     );
-    let image = exr::prelude::read_first_flat_layer_from_file(&job.out).unwrap();
-    let red = image
-        .layer_data
-        .channel_data
-        .list
-        .iter()
-        .find(|c| c.name == *"R")
-        .unwrap();
-    let values: Vec<f32> = red.sample_data.values_as_f32().collect();
+    let values = channel(&job.out, "R");
     assert_eq!(values.len(), (SIDE * SIDE) as usize);
     let mean = values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len() as f64;
     let want = f64::from(SKY) * std::f64::consts::PI;
@@ -408,31 +400,39 @@ fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
     }
 }
 
-/// Every texel's irradiance (R channel) of the single-page lightmap at `path`.
-fn red_channel(path: &Path) -> Vec<f64> {
+/// Channel `name` of the single-page lightmap at `path`, row by row.
+fn channel(path: &Path, name: &str) -> Vec<f32> {
     let image = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
-    let red = image
+    image
         .layer_data
         .channel_data
         .list
         .iter()
-        .find(|c| c.name == *"R")
-        .unwrap();
-    red.sample_data.values_as_f32().map(f64::from).collect()
+        .find(|c| c.name == *name)
+        .unwrap_or_else(|| panic!("{}: no channel {name}", path.display()))
+        .sample_data
+        .values_as_f32()
+        .collect()
+}
+
+/// Every texel's irradiance (R channel) of the single-page lightmap at `path`.
+fn red_channel(path: &Path) -> Vec<f64> {
+    channel(path, "R").into_iter().map(f64::from).collect()
+}
+
+/// Irradiance inside a closed box of albedo ρ emitting Le everywhere after B bounces:
+/// E_B = π Le (1 + ρ + … + ρ^(B−1)) = π Le (1 − ρ^B) / (1 − ρ), at every point.
+fn closed_box_irradiance(le: f32, albedo: f32, bounces: u32) -> f64 {
+    let rho = f64::from(albedo);
+    std::f64::consts::PI * f64::from(le) * (1.0 - rho.powi(bounces as i32)) / (1.0 - rho)
 }
 
 #[test]
 fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transports() {
-    // Inside a closed box of albedo ρ emitting Le everywhere, B bounces give
-    // E_B = π Le (1 + ρ + … + ρ^(B−1)) = π Le (1 − ρ^B) / (1 − ρ) at every point.
     let (albedo, le) = (0.5f32, 1.5f32);
     let dir = tempfile::tempdir().unwrap();
     let texels = dir.path().join("box.texels");
     let scene = emissive_box(&texels, albedo, le);
-    let closed_form = |b: u32| {
-        std::f64::consts::PI * f64::from(le) * (1.0 - f64::from(albedo).powi(b as i32))
-            / (1.0 - f64::from(albedo))
-    };
     for (transport, bounces, guiding) in [
         (Transport::Series, 1, Guiding::Off),
         (Transport::Series, 4, Guiding::Off),
@@ -465,7 +465,7 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
         let n = values.len() as f64;
         let mean = values.iter().sum::<f64>() / n;
         let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
-        let want = closed_form(bounces);
+        let want = closed_box_irradiance(le, albedo, bounces);
         let se = (var / n).sqrt();
         let what = format!("{transport} B={bounces} {guiding}: {mean} ± {se}, want {want}");
         if transport == Transport::Series && guiding == Guiding::Off {
@@ -489,4 +489,73 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
             }
         }
     }
+}
+
+#[test]
+fn global_weights_bake_the_closed_form_and_merge_shards_to_the_same_bits() {
+    let (albedo, le) = (0.5f32, 1.5f32);
+    let dir = tempfile::tempdir().unwrap();
+    let texels = dir.path().join("box.texels");
+    let scene = emissive_box(&texels, albedo, le);
+    let want = closed_box_irradiance(le, albedo, 3);
+    let job = |out: &str, shard: Shard| BakeJob {
+        texels: texels.clone(),
+        out: dir.path().join(out),
+        settings: BakeSettings {
+            spp: 128,
+            iterations: 4,
+            combine: Combine::Global,
+            transport: Transport::Path,
+            bounces: 3,
+            ..Default::default()
+        },
+        threads: 2,
+        shard,
+        resume: false,
+        aux: true,
+    };
+    let whole = job("whole.exr", Shard::WHOLE);
+    let report = bake(&whole, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+    assert!(
+        (report.rho - 1.0).abs() < 0.05,
+        "global weights are unbiased: ρ = {}",
+        report.rho
+    );
+    let values = red_channel(&whole.out);
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let se = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    assert!((mean - want).abs() < 3.0 * se, "{mean} ± {se}, want {want}");
+    let mut dirs = Vec::new();
+    for index in [2, 0, 1] {
+        let shard = job("sharded.exr", Shard { index, count: 3 });
+        bake(&shard, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+        dirs.push(work_dir(&shard.out, shard.shard));
+    }
+    let merged = dir.path().join("sharded.exr");
+    finish(&TexelFile::open(&texels).unwrap(), &dirs, &merged).unwrap();
+    assert_eq!(exr_bytes(&whole.out), exr_bytes(&merged));
+}
+
+#[test]
+fn aux_channels_hold_samples_error_validity_position_and_normal() {
+    let f = Fixture::new();
+    let job = f.job("aux.exr", 2, Shard::WHOLE);
+    f.run(&job, None).unwrap();
+    let channel = |name: &str| channel(&job.out, name);
+    for name in guidebake::bake::run::AUX_CHANNELS {
+        assert!(channel(name).iter().all(|v| v.is_finite()), "{name}");
+    }
+    assert!(channel("samples").iter().all(|&s| s == 64.0));
+    assert!(channel("validity").iter().all(|&v| v == 1.0));
+    assert!(channel("N.Z").iter().all(|&z| z == 1.0));
+    assert!(channel("P.Z").iter().all(|&z| z == 0.0));
+    // Pixel (x, y) of the 4 m plane lies at x·size − 2 + size/2.
+    let px = channel("P.X");
+    let size = 4.0 / SIDE as f32;
+    for x in 0..SIDE as usize {
+        assert!((px[x] - ((x as f32 + 0.5) * size - 2.0)).abs() < 1e-6);
+    }
+    let err = channel("rel_std_error");
+    assert!(err.iter().all(|&e| (0.0..1.0).contains(&e)));
 }

@@ -6,7 +6,9 @@
 //! On a chi-square failure the histogram and its expectation are written to
 //! `target/chi2/<name>.txt` for a person to look at.
 
-use guidebake_kernels::guide::{self, BuildStats, Guide, GuideParams, MAX_DEPTH, Node, Record};
+use guidebake_kernels::guide::{
+    self, BuildStats, Guide, GuideParams, MAX_DEPTH, Node, Record, START_GRID,
+};
 use guidebake_kernels::testing::{Pcg32, chi_square, disk_and_sky, learning_records};
 use guidebake_kernels::warp::{self, ONE_MINUS_EPS};
 use std::io::Write;
@@ -308,10 +310,27 @@ fn zero_and_nan_flux_give_the_uniform_guide() {
 }
 
 /// Compares every lane of `sample8_lanes` with the scalar warp, bit for bit, and checks that
-/// lanes beyond `lanes` come back unchanged with pdf 0.
+/// lanes beyond `lanes` come back unchanged with pdf 0. Also compares `pdf8` with the scalar
+/// `pdf` at the input points and with the warp's pdf at the warped points.
 fn assert_packet_matches(g: &Guide<'_>, xs: [f32; 8], ys: [f32; 8], lanes: usize) {
     let w = warp::sample8_lanes(g, f32x8::new(xs), f32x8::new(ys), lanes);
     let (wx, wy, wp) = (w.x.to_array(), w.y.to_array(), w.pdf.to_array());
+    let d = warp::pdf8(g, f32x8::new(xs), f32x8::new(ys)).to_array();
+    let dw = warp::pdf8(g, w.x, w.y).to_array();
+    for l in 0..8 {
+        assert_eq!(
+            d[l].to_bits(),
+            warp::pdf(g, [xs[l], ys[l]]).to_bits(),
+            "pdf8 lane {l}"
+        );
+        if l < lanes {
+            assert_eq!(
+                dw[l].to_bits(),
+                wp[l].to_bits(),
+                "pdf8 at the warped point, lane {l}"
+            );
+        }
+    }
     for l in 0..8 {
         if l < lanes {
             let s = warp::sample(g, [xs[l], ys[l]]);
@@ -404,7 +423,27 @@ fn sample8_matches_scalar_on_every_guide_and_packet_kind() {
         1e-30,
         0.999,
     ];
+    // Both paths of `sample8`: the start table (learned, deep) and the root descent with
+    // the uniform fast path (no room for the table; uniform guides).
+    assert!(!learned_g.start_table().is_empty() && !deep_g.start_table().is_empty());
+    assert!(full_g.start_table().is_empty() && zero_g.start_table().is_empty());
+    let below = |v: f32| f32::from_bits(v.to_bits() - 1);
     for g in [&learned_g, &full_g, &deep_g, &zero_g, &nan_g] {
+        // Points on and just below the start table's cell edges, where a wrong table shows.
+        for _ in 0..300 {
+            let cell = |rng: &mut Pcg32| (rng.next_u32() as usize % START_GRID) as f32;
+            let edge = |c: f32, up: bool| {
+                if up {
+                    below((c + 1.0) / START_GRID as f32)
+                } else {
+                    c / START_GRID as f32
+                }
+            };
+            let (cx, cy) = (cell(&mut rng), cell(&mut rng));
+            let xs: [f32; 8] = std::array::from_fn(|l| edge(cx, l & 1 != 0));
+            let ys: [f32; 8] = std::array::from_fn(|l| edge(cy, l & 2 != 0));
+            assert_packet_matches(g, xs, ys, 8);
+        }
         let coherent = coherent_packets(500, &mut rng);
         for (k, (xs, ys)) in coherent.iter().enumerate() {
             assert_packet_matches(g, *xs, *ys, 8);

@@ -11,9 +11,26 @@ use guidebake::bvh::{Bvh, Preset};
 use guidebake_kernels::packet::{Hit, Hit8, LANES, Ray, Ray8};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::{
-    BvhRef, intersect_brute, intersect1, intersect8, occluded_brute, occluded1, occluded8,
-    offset_origin,
+    BvhRef, ChildOrder, Traversal, intersect_brute, intersect1, intersect8, intersect8_with,
+    occluded_brute, occluded1, occluded8, occluded8_with, offset_origin,
 };
+
+/// The traversal settings `benches/traverse.rs` measures, besides the default.
+fn variants() -> Vec<Traversal> {
+    let mut out = Vec::new();
+    for order in [ChildOrder::Vote, ChildOrder::Signs, ChildOrder::Lead] {
+        for fallback_lanes in [0, 2, 8] {
+            for interval in [false, true] {
+                out.push(Traversal {
+                    fallback_lanes,
+                    order,
+                    interval,
+                });
+            }
+        }
+    }
+    out
+}
 
 /// Compares every lane of every packet with the scalar traversal and the oracle.
 fn check_packets(bvh: &BvhRef<'_>, packets: &[Ray8], what: &str) -> usize {
@@ -22,6 +39,24 @@ fn check_packets(bvh: &BvhRef<'_>, packets: &[Ray8], what: &str) -> usize {
         let mut hits = Hit8::NONE;
         let mask = intersect8(bvh, packet, &mut hits);
         let blocked = occluded8(bvh, packet);
+        // Every traversal setting the bench measures gives the same bits.
+        for how in variants() {
+            let mut other = Hit8::NONE;
+            let m = intersect8_with(bvh, packet, &mut other, &how);
+            for lane in 0..LANES {
+                assert_eq!(
+                    other.lane(lane),
+                    hits.lane(lane),
+                    "{what}: {how:?} packet {p}"
+                );
+            }
+            assert_eq!(m, mask, "{what}: {how:?} mask, packet {p}");
+            assert_eq!(
+                occluded8_with(bvh, packet, &how),
+                blocked,
+                "{what}: {how:?} occluded"
+            );
+        }
         for lane in 0..LANES {
             let ray = packet.lane(lane);
             let oracle = intersect_brute(bvh.tris(), &ray);

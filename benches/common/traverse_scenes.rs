@@ -5,9 +5,19 @@
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
+use guidebake_kernels::mapping::{
+    orthonormal_basis, sample_cosine_hemisphere, sample_cosine_hemisphere_x8,
+};
 use guidebake_kernels::packet::{LANES, Ray8};
+use guidebake_kernels::presort::{
+    CurveOrder, presorted, quadtree_sort_by, reorder_after_rotation_into,
+};
+use guidebake_kernels::sobol::{
+    rotate, rotate_x8, rotation, sobol_2d, sobol_2d_x8, to_unit, to_unit_x8,
+};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::offset_origin;
+use wide::u32x8;
 
 /// `converted/` of the shared scenes ([`guidebake::scene::shared_scenes_dir`]), if present.
 pub fn converted_dir() -> Option<PathBuf> {
@@ -127,79 +137,63 @@ pub fn surface_points(soup: &[[Vec3; 3]], count: usize, seed: u64) -> Vec<Surfac
         .collect()
 }
 
-/// A branch-free orthonormal basis around unit `n` (Duff et al. 2017).
-pub fn basis(n: Vec3) -> (Vec3, Vec3) {
-    let sign = 1.0f32.copysign(n.z);
-    let a = -1.0 / (sign + n.z);
-    let b = n.x * n.y * a;
-    (
-        Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
-        Vec3::new(b, sign + n.y * n.y * a, -n.y),
-    )
-}
-
-/// Cosine-weighted direction around `n` from `u` in [0,1)² (concentric map, then lift).
-// To be replaced by `guidebake_kernels::mapping::sample_cosine_hemisphere` once it lands.
+/// Cosine-weighted direction around unit `n` from `u` in [0,1)²: the kernels' map
+/// ([`sample_cosine_hemisphere`]) in the kernels' frame ([`orthonormal_basis`]), as the bake's
+/// `to_world` does.
 pub fn cosine_dir(n: Vec3, u: [f32; 2]) -> Vec3 {
-    let (a, b) = (2.0 * u[0] - 1.0, 2.0 * u[1] - 1.0);
-    let (r, phi) = if a == 0.0 && b == 0.0 {
-        (0.0, 0.0)
-    } else if a.abs() > b.abs() {
-        (a, std::f32::consts::FRAC_PI_4 * (b / a))
-    } else {
-        (
-            b,
-            std::f32::consts::FRAC_PI_2 - std::f32::consts::FRAC_PI_4 * (a / b),
-        )
-    };
-    let (x, y) = (r * phi.cos(), r * phi.sin());
-    let z = (1.0 - x * x - y * y).max(0.0).sqrt();
-    let (t, bt) = basis(n);
-    (t * x + bt * y + n * z).normalize()
+    to_world(n, sample_cosine_hemisphere(u))
 }
 
-/// Points of a 2D quadtree order over [0,1)² whose leaves hold fewer than 8 points: each
-/// consecutive 8 is a coherent group (paper §2.4, Figure 3). `points` are sorted in place.
-// To be replaced by `guidebake_kernels::presort::presorted` once it lands.
-pub fn presort(points: &mut [[f32; 2]]) {
-    fn key(p: [f32; 2]) -> u64 {
-        let q = |x: f32| ((x * 65536.0) as u32).min(65535);
-        let (x, y) = (q(p[0]), q(p[1]));
-        let mut k = 0u64;
-        for bit in (0..16).rev() {
-            k = k << 2 | u64::from(x >> bit & 1) << 1 | u64::from(y >> bit & 1);
-        }
-        k
-    }
-    points.sort_by_key(|&p| key(p));
+fn to_world(n: Vec3, d: Vec3) -> Vec3 {
+    let (t, b) = orthonormal_basis(n);
+    (t * d.x + b * d.y + n * d.z).normalize_or(n)
 }
 
-/// Gather packets: for each texel, `per_texel` cosine directions from a stratified-random
-/// point set (fixed per bench, like the presorted Sobol set) rotated per texel
-/// (Cranley–Patterson) and ordered after rotation so each 8 are coherent; origin offset
-/// robustly from the surface.
-pub fn gather_packets(soup: &[[Vec3; 3]], texels: usize, per_texel: usize, seed: u64) -> Vec<Ray8> {
+/// How a texel's 256 Sobol points are grouped into packets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GatherOrder {
+    /// What the bake does: the presorted order (once per sample count), rotated per texel and
+    /// wrap-reordered in O(N) ([`reorder_after_rotation_into`]).
+    Presorted,
+    /// The comparator's best case: the rotated points fully re-sorted per texel by the
+    /// Hilbert quadtree order ([`quadtree_sort_by`]); consecutive 8s or 16s are packets.
+    Resorted,
+}
+
+/// Salt of the per-packet origin jitter (any constant; the bake has its own).
+const ORIGIN_SALT: u32 = 0x0416_1d00;
+
+/// Gather packets, built exactly as `driver/src/bake/gather.rs` `gather_packets` feeds the
+/// tracer: per texel (a surface point, gathering from the side facing the scene's centre),
+/// the first `per_texel` Sobol points in presorted order, Cranley–Patterson rotated per texel
+/// ([`rotation`], [`rotate_x8`]), wrap-reordered ([`reorder_after_rotation_into`]), mapped by
+/// [`sample_cosine_hemisphere_x8`] into the texel's frame; each packet's shared origin is
+/// jittered over the texel's footprint (`extent / 512`, kept on the triangle, like the bake's
+/// `onto_triangle`) and offset with [`offset_origin`]. `order` = [`GatherOrder::Resorted`]
+/// re-sorts the rotated points instead (the Embree `rtcIntersect16` comparator).
+pub fn gather_packets_ordered(
+    soup: &[[Vec3; 3]],
+    texels: usize,
+    per_texel: usize,
+    seed: u64,
+    order: GatherOrder,
+) -> Vec<Ray8> {
     assert_eq!(per_texel % LANES, 0);
-    let mut rng = Pcg32::new(seed, 17);
-    let side = (per_texel as f64).sqrt().ceil() as usize;
-    let rows = per_texel.div_ceil(side);
-    let base: Vec<[f32; 2]> = (0..per_texel)
-        .map(|i| {
-            let (cx, cy) = (i % side, i / side);
-            let x = (cx as f32 + rng.next_f32()) / side as f32;
-            let y = (cy as f32 + rng.next_f32()) / rows as f32;
-            [x.min(1.0 - f32::EPSILON), y.min(1.0 - f32::EPSILON)]
-        })
-        .collect();
-    let centre = soup
+    let presorted_order = presorted(per_texel as u32);
+    let mut rotated = vec![0u32; per_texel];
+    let (lo, hi) = soup
         .iter()
         .flatten()
         .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
             (lo.min(p), hi.max(p))
         });
-    let centre = (centre.0 + centre.1) * 0.5;
+    let (centre, footprint) = ((lo + hi) * 0.5, (hi - lo).max_element() / 512.0);
+    let seed32 = seed as u32;
     let mut packets = Vec::with_capacity(texels * per_texel / LANES);
-    for s in surface_points(soup, texels, seed ^ 0x5eed) {
+    for (id, s) in surface_points(soup, texels, seed ^ 0x5eed)
+        .into_iter()
+        .enumerate()
+    {
         // Two-sided surfaces: gather from the side facing the scene's centre (the inside of a
         // room), as a lightmap texel would.
         let n = if s.n.dot(centre - s.p) >= 0.0 {
@@ -207,24 +201,55 @@ pub fn gather_packets(soup: &[[Vec3; 3]], texels: usize, per_texel: usize, seed:
         } else {
             -s.n
         };
-        let org = offset_origin(s.p, n);
-        let (du, dv) = (rng.next_f32(), rng.next_f32());
-        let mut pts: Vec<[f32; 2]> = base
-            .iter()
-            .map(|p| [wrap(p[0] + du), wrap(p[1] + dv)])
-            .collect();
-        presort(&mut pts);
-        for group in pts.chunks_exact(LANES) {
-            let dirs: [Vec3; LANES] = std::array::from_fn(|i| cosine_dir(n, group[i]));
+        let (t, b) = orthonormal_basis(n);
+        let rot = rotation(seed32, id as u64, 0);
+        match order {
+            GatherOrder::Presorted => {
+                reorder_after_rotation_into(&presorted_order, rot, &mut rotated)
+            }
+            GatherOrder::Resorted => {
+                rotated.copy_from_slice(&presorted_order);
+                quadtree_sort_by(&mut rotated, CurveOrder::Hilbert, |i| {
+                    rotate(sobol_2d(i), rot)
+                });
+            }
+        }
+        let tri = soup[s.prim as usize];
+        for (j, chunk) in rotated.chunks_exact(LANES).enumerate() {
+            let index = u32x8::new(chunk.try_into().expect("packets of 8"));
+            let [sx, sy] = rotate_x8(sobol_2d_x8(index), rot);
+            let [dx, dy, dz] = sample_cosine_hemisphere_x8([to_unit_x8(sx), to_unit_x8(sy)]);
+            let (dx, dy, dz) = (dx.to_array(), dy.to_array(), dz.to_array());
+            let dirs: [Vec3; LANES] =
+                std::array::from_fn(|i| to_world(n, Vec3::new(dx[i], dy[i], dz[i])));
+            let r = rotation(seed32 ^ ORIGIN_SALT, id as u64, j as u32);
+            let jitter =
+                t * (footprint * (to_unit(r[0]) - 0.5)) + b * (footprint * (to_unit(r[1]) - 0.5));
+            let p = onto_triangle(tri, s.p + jitter).unwrap_or(s.p);
+            let org = offset_origin(p, n);
             packets.push(Ray8::from_origin(org, &dirs, 0.0, f32::INFINITY));
         }
     }
     packets
 }
 
-fn wrap(x: f32) -> f32 {
-    let y = x - x.floor();
-    if y >= 1.0 { 0.0 } else { y }
+/// [`gather_packets_ordered`] in the bake's order ([`GatherOrder::Presorted`]).
+pub fn gather_packets(soup: &[[Vec3; 3]], texels: usize, per_texel: usize, seed: u64) -> Vec<Ray8> {
+    gather_packets_ordered(soup, texels, per_texel, seed, GatherOrder::Presorted)
+}
+
+/// `p` projected onto `tri`'s plane if that lands inside the triangle (a jittered origin that
+/// would leave its triangle falls back to the texel's point).
+fn onto_triangle(tri: [Vec3; 3], p: Vec3) -> Option<Vec3> {
+    let (e1, e2) = (tri[1] - tri[0], tri[2] - tri[0]);
+    let n = e1.cross(e2);
+    let q = p - n * ((p - tri[0]).dot(n) / n.length_squared());
+    let w = q - tri[0];
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (w1, w2) = (w.dot(e1), w.dot(e2));
+    let den = d11 * d22 - d12 * d12;
+    let (a, b) = ((d22 * w1 - d12 * w2) / den, (d11 * w2 - d12 * w1) / den);
+    (a >= 0.0 && b >= 0.0 && a + b <= 1.0).then(|| tri[0] + e1 * a + e2 * b)
 }
 
 /// Shadow packets: from surface points towards random points on a small area light at

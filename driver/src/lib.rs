@@ -12,10 +12,11 @@
 //! | [`demo`] | the bundled default scene: a room lit through a door ajar |
 //! | [`bvh`] | obvhs build, flattened into the kernels' node layout; robust ray origins |
 //! | [`prepare`] | lightmap UV rasterization into texel tiles |
+//! | [`facing`] | which side of a two-sided surface its texels describe |
 //! | [`synth`] | procedural worlds of any size, streamed |
 //! | [`output`] | result file, journal of finished tiles, ρ, EXR pages |
 //! | [`preview`] | PNG figures and tone-mapped previews |
-//! | [`transport`] | light transport: next-event estimation of analytic lights |
+//! | [`transport`] | light transport: next-event estimation, series lookups, path sampling |
 //! | [`bench`] | the run-time-against-error harness and the Figure-5 overhead |
 //! | [`cmd`] | the `guidebake` subcommands |
 #![deny(unsafe_op_in_unsafe_fn)]
@@ -25,6 +26,7 @@ pub mod bench;
 pub mod bvh;
 pub mod cmd;
 pub mod demo;
+pub mod facing;
 pub mod output;
 pub mod prepare;
 pub mod preview;

@@ -21,7 +21,8 @@
 //!    footprint axes instead, so the bake can still spread ray origins over the texel.
 //! 4. **Records.** Position and normal are interpolated with the barycentrics of that point
 //!    (clamped to the triangle, so every position lies on its triangle); the normal is the
-//!    interpolated vertex normal, or the geometric normal where the source has none; the
+//!    interpolated vertex normal, or the geometric normal where the source has none, turned
+//!    to the side of the two-sided surface that sees the scene ([`crate::facing`]); the
 //!    footprint axes dP/du, dP/dv are the world-space change over one texel step, from the
 //!    inverse of the triangle's UV Jacobian.
 //! 5. **Tiles.** 32×32-texel tiles of each page in Morton (Z-order) order of their tile
@@ -40,6 +41,7 @@ use std::path::{Path, PathBuf};
 use glam::{Vec2, Vec3};
 use guidebake_kernels::presort::CurveOrder;
 
+use crate::facing::facing_sides;
 use crate::scene::{Scene, Triangle};
 use crate::texels::{
     FLAG_PARTIAL, FLAG_VALID, MeshRecord, PageRecord, TILE_SIZE, TexelFileError, TexelRecord,
@@ -105,6 +107,9 @@ pub struct PrepareReport {
     pub meshes_without_lightmap_uvs: Vec<String>,
     /// Triangles skipped because their UV triangle has zero area.
     pub uv_degenerate_triangles: u64,
+    /// Triangles whose texels face against their winding: the side that sees the scene
+    /// ([`crate::facing`]).
+    pub flipped_triangles: u64,
 }
 
 /// Why `prepare` failed.
@@ -211,6 +216,10 @@ pub fn prepare(
     } else {
         shared_layout(scene, &stats, opts.resolution)?
     };
+    let flip = facing_sides(scene).map_err(|e| PrepareError::Resolution {
+        path: scene.path.clone(),
+        message: format!("cannot trace the scene to orient its surfaces: {e}"),
+    })?;
     let mut w = TexelWriter::create(out, &pages, &meshes, scene.triangles.len() as u32, tpu)?;
     let mut report = PrepareReport {
         texels: 0,
@@ -221,10 +230,11 @@ pub fn prepare(
         texels_per_unit: tpu,
         meshes_without_lightmap_uvs: missing,
         uv_degenerate_triangles: 0,
+        flipped_triangles: flip.iter().filter(|&&f| f).count() as u64,
     };
     for (page_index, page) in pages.iter().enumerate() {
         let raster = PageRaster::new(scene, &meshes, page_index as u32, *page, &mut report);
-        raster.emit_tiles(scene, &meshes, &mut w, &mut report)?;
+        raster.emit_tiles(scene, &meshes, &flip, &mut w, &mut report)?;
     }
     if report.texels == 0 {
         return Err(PrepareError::NoTexels {
@@ -604,6 +614,7 @@ impl PageRaster {
         &self,
         scene: &Scene,
         meshes: &[MeshRecord],
+        flip: &[bool],
         w: &mut TexelWriter,
         report: &mut PrepareReport,
     ) -> Result<(), PrepareError> {
@@ -633,7 +644,11 @@ impl PageRaster {
                     }
                     let tri = (o & !PARTIAL_BIT) - 1;
                     let partial = o & PARTIAL_BIT != 0;
-                    buf.push(texel_record(scene, meshes, self.page, tri, x, y, partial));
+                    let mut record = texel_record(scene, meshes, self.page, tri, x, y, partial);
+                    if flip[tri as usize] {
+                        record.normal = record.normal.map(|c| -c);
+                    }
+                    buf.push(record);
                     report.partial_texels += u64::from(partial);
                 }
             }

@@ -150,6 +150,15 @@ pub enum Light {
         /// Angle (radians) outside which the intensity is zero.
         outer_cone: f32,
     },
+    /// A sphere of uniform radiance (scene files only: glTF has no area lights of this kind).
+    Sphere {
+        /// Centre.
+        center: Vec3,
+        /// Radius, > 0.
+        radius: f32,
+        /// Radiance of its surface, RGB.
+        radiance: Vec3,
+    },
 }
 
 /// The sun: a directional light with a finite angular radius.
@@ -760,6 +769,10 @@ mod obj_source {
 /// direction = [0.3, 1.0, 0.2]    # towards the sun, need not be unit
 /// angular_radius_deg = 0.267
 /// irradiance = [4.0, 3.8, 3.5]
+/// [[sphere_light]]               # any number of sphere lights
+/// center = [0.0, 2.0, 0.0]
+/// radius = 0.1
+/// radiance = [50.0, 50.0, 50.0]
 /// ```
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -770,6 +783,52 @@ pub struct SceneFile {
     pub sky: Option<SkySpec>,
     /// Sun, if any.
     pub sun: Option<SunSpec>,
+    /// Sphere lights.
+    #[serde(default)]
+    pub sphere_light: Vec<SphereSpec>,
+}
+
+/// `[[sphere_light]]` of a [`SceneFile`].
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SphereSpec {
+    /// Centre.
+    pub center: [f32; 3],
+    /// Radius, > 0.
+    pub radius: f32,
+    /// Radiance, linear RGB.
+    pub radiance: [f32; 3],
+}
+
+impl SphereSpec {
+    /// Validates and converts.
+    ///
+    /// # Errors
+    /// A message when the centre is not finite, the radius not positive and finite, or the
+    /// radiance negative or not finite.
+    pub fn to_light(&self) -> Result<Light, String> {
+        let center = Vec3::from(self.center);
+        let radiance = Vec3::from(self.radiance);
+        if !center.is_finite() {
+            return Err(format!("sphere_light center {center} must be finite"));
+        }
+        if !(self.radius > 0.0 && self.radius.is_finite()) {
+            return Err(format!(
+                "sphere_light radius {} must be positive and finite",
+                self.radius
+            ));
+        }
+        if !radiance.is_finite() || radiance.min_element() < 0.0 {
+            return Err(format!(
+                "sphere_light radiance {radiance} must be finite and non-negative"
+            ));
+        }
+        Ok(Light::Sphere {
+            center,
+            radius: self.radius,
+            radiance,
+        })
+    }
 }
 
 /// `[sky]` of a [`SceneFile`]: exactly one of the two fields.
@@ -852,6 +911,9 @@ impl SceneFile {
         let mut scene = Scene::load(&geometry)?;
         if let Some(sun) = &file.sun {
             scene.sun = Some(sun.to_sun().map_err(bad)?);
+        }
+        for sphere in &file.sphere_light {
+            scene.lights.push(sphere.to_light().map_err(bad)?);
         }
         scene.sky = match &file.sky {
             None => Sky::None,

@@ -746,7 +746,13 @@ impl TexelFile {
         // mapped (writers write a temporary file and rename it). Every byte read below is
         // bounds-checked against `map.len()` before it is cast.
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(io("map"))?;
-        let header = validate(path, &map)?;
+        // Validation reads every texel once; each tile's pages are released behind it, so
+        // opening a file larger than memory does not fill the resident set.
+        let header = validate(path, &map, &mut |start, count| {
+            release_texels(&map, start, count);
+        })?;
+        // Bakes stream the tiles in file order. Advisory only: failure changes nothing.
+        let _ = map.advise(memmap2::Advice::Sequential);
         Ok(Self {
             path: path.to_owned(),
             header,
@@ -797,6 +803,18 @@ impl TexelFile {
         self.section(self.header.texels_offset, self.header.texel_count)
     }
 
+    /// Lets the kernel drop the pages holding tile `tile`'s texels from this process's memory
+    /// (`madvise(MADV_DONTNEED)`): a bake calls it when the tile is done, so a streaming bake's
+    /// resident set does not grow with the texel file. The data stays valid: a later read
+    /// faults the pages back in from the file. Pages shared with a neighbouring tile are
+    /// dropped too and reread when needed. Failures are ignored (the advice is optional).
+    pub fn release_tile(&self, tile: usize) {
+        if let Some(t) = self.tiles().get(tile) {
+            let start = self.header.texels_offset + t.first_texel * size_of::<TexelRecord>() as u64;
+            release_texels(&self.map, start, u64::from(t.texel_count));
+        }
+    }
+
     /// The texels of one tile.
     ///
     /// # Panics
@@ -809,8 +827,33 @@ impl TexelFile {
     }
 }
 
-/// Header and section checks, then every record.
-fn validate(path: &Path, map: &[u8]) -> Result<Header, TexelFileError> {
+/// Drops the pages of `count` texel records at byte `start` of `map` from memory (advice;
+/// failures and ranges past the map are ignored).
+fn release_texels(map: &memmap2::Mmap, start: u64, count: u64) {
+    let len = count * size_of::<TexelRecord>() as u64;
+    if start.saturating_add(len) > map.len() as u64 {
+        return;
+    }
+    // SAFETY: the range lies within the map. MADV_DONTNEED on this read-only, file-backed
+    // mapping only discards cached pages; the module invariant (the file is never modified
+    // while mapped) makes every later read see the same bytes, so slices handed out earlier
+    // stay valid and unchanged.
+    let _ = unsafe {
+        map.unchecked_advise_range(
+            memmap2::UncheckedAdvice::DontNeed,
+            start as usize,
+            len as usize,
+        )
+    };
+}
+
+/// Header and section checks, then every record; `release(byte offset, texels)` is called
+/// behind each validated tile.
+fn validate(
+    path: &Path,
+    map: &[u8],
+    release: &mut dyn FnMut(u64, u64),
+) -> Result<Header, TexelFileError> {
     let file_len = map.len() as u64;
     let hsize = size_of::<Header>() as u64;
     if file_len < hsize {
@@ -955,7 +998,7 @@ fn validate(path: &Path, map: &[u8]) -> Result<Header, TexelFileError> {
         "texel",
         header.texels_offset,
     )?;
-    validate_records(path, &header, pages, meshes, tiles, texels)?;
+    validate_records(path, &header, pages, meshes, tiles, texels, release)?;
     Ok(header)
 }
 
@@ -979,6 +1022,7 @@ fn validate_records(
     meshes: &[MeshRecord],
     tiles: &[TileRecord],
     texels: &[TexelRecord],
+    release: &mut dyn FnMut(u64, u64),
 ) -> Result<(), TexelFileError> {
     for (i, p) in pages.iter().enumerate() {
         if !(1..=65536).contains(&p.width) || !(1..=65536).contains(&p.height) {
@@ -1061,6 +1105,7 @@ fn validate_records(
                 message: format!("triangle {} of {}", x.triangle, h.triangle_count),
             });
         }
+        release(h.texels_offset + 64 * next, end - next);
         next = end;
     }
     if next != h.texel_count {

@@ -58,6 +58,37 @@ fn scene_file_adds_sun_and_constant_sky() {
 }
 
 #[test]
+fn scene_file_adds_sphere_lights_and_rejects_bad_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    obj_triangle(d);
+    let light = |radius: &str| {
+        format!(
+            "geometry = \"t.obj\"\n[[sphere_light]]\ncenter = [0, 1, 0]\nradius = {radius}\nradiance = [5, 4, 3]\n[[sphere_light]]\ncenter = [1, 1, 0]\nradius = 0.5\nradiance = [1, 1, 1]\n"
+        )
+    };
+    std::fs::write(d.join("s.toml"), light("0.25")).unwrap();
+    let s = Scene::load(&d.join("s.toml")).unwrap();
+    assert_eq!(s.lights.len(), 2);
+    assert_eq!(
+        s.lights[0],
+        guidebake::scene::Light::Sphere {
+            center: Vec3::Y,
+            radius: 0.25,
+            radiance: Vec3::new(5.0, 4.0, 3.0),
+        }
+    );
+    for bad in ["0", "-1", "nan"] {
+        std::fs::write(d.join("s.toml"), light(bad)).unwrap();
+        let err = Scene::load(&d.join("s.toml")).unwrap_err().to_string();
+        assert!(
+            err.contains("s.toml") && err.contains("sphere_light radius"),
+            "{bad}: {err}"
+        );
+    }
+}
+
+#[test]
 fn scene_file_loads_an_equirect_exr_and_rejects_bad_ones() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

@@ -43,6 +43,13 @@
 //! leaves: the guide is the best coarser tree that fits, still a valid normalized density.
 //! The number of refused splits is reported in [`BuildStats::capacity_refusals`].
 //!
+//! After the tree, if [`START_TABLE_NODES`] nodes of the storage are still free, `build`
+//! writes the warp's **start table** there ([`Guide::start_table`]: for each cell of a
+//! [`START_GRID`]² grid over the primary sample square, the deepest node the whole cell
+//! passes through). It is what lets the 8-wide warp skip the top of the tree; without room
+//! for it the guide is the same density and the warp gives the same results, more slowly.
+//! Filling it visits every node and writes every cell once.
+//!
 //! # Embedding: guide + warp + estimator in a baker with its own ray tracer
 //! One texel (in a real baker: every texel of a cluster shares the guide), three learning
 //! iterations: iteration 0 gathers with the uniform guide (the cosine baseline), each later
@@ -273,10 +280,18 @@ pub struct BuildStats {
     pub depth_refusals: u32,
 }
 
+/// Cells per axis of the warp's start table (a power of two, so `u · START_GRID` is exact).
+pub const START_GRID: usize = 32;
+/// Nodes of storage the start table occupies after the tree: `START_GRID²` u16 entries.
+pub const START_TABLE_NODES: usize =
+    (START_GRID * START_GRID * 2).div_ceil(core::mem::size_of::<Node>());
+
 /// A built guide: a view of the caller's node storage.
 #[derive(Clone, Copy, Debug)]
 pub struct Guide<'a> {
     nodes: &'a [Node],
+    /// The start table ([`Guide::start_table`]), empty when the storage had no room for it.
+    start: &'a [u16],
 }
 
 /// A leaf as a square of the primary sample space with its constant density.
@@ -303,12 +318,24 @@ impl<'a> Guide<'a> {
         storage[0] = root_leaf(0);
         Guide {
             nodes: &storage[..1],
+            start: &[],
         }
     }
 
     /// The nodes in breadth-first order; index 0 is the root.
     pub fn nodes(&self) -> &'a [Node] {
         self.nodes
+    }
+
+    /// The warp's **start table**: for each cell `(cx, cy)` of a `START_GRID × START_GRID`
+    /// grid over the primary sample square, at index `cx + START_GRID · cy`, the deepest node
+    /// that every point of the cell `[cx, cx+1)/G × [cy, cy+1)/G` passes through on its way
+    /// down (the thresholds are in primary sample space, so this is exact). The 8-wide warp
+    /// starts each lane there instead of at the root. Empty for the uniform guide and when
+    /// the storage has fewer than [`START_TABLE_NODES`] nodes left after the tree; the warp
+    /// then starts at the root (same results, slower).
+    pub fn start_table(&self) -> &'a [u16] {
+        self.start
     }
 
     /// Whether the guide is the uniform density (a single leaf).
@@ -351,6 +378,9 @@ fn root_leaf(count: u32) -> Node {
 /// # Panics
 /// If `storage` is empty. Parameters out of range are clamped (depth to [`MAX_DEPTH`], α and
 /// the flux fraction to [0, 1], a negative or NaN ambient floor to 0).
+///
+/// The warp's start table ([`Guide::start_table`]) is written into the
+/// [`START_TABLE_NODES`] nodes of `storage` that follow the tree, when they are free.
 pub fn build<'a>(
     records: &mut [Record],
     params: &GuideParams,
@@ -375,16 +405,78 @@ pub fn build<'a>(
         return (
             Guide {
                 nodes: &storage[..1],
+                start: &[],
             },
             stats,
         );
     }
     subdivide(records, params, &mut storage[..capacity], &mut stats);
-    let nodes = &mut storage[..stats.nodes as usize];
+    let (nodes, rest) = storage.split_at_mut(stats.nodes as usize);
     let floor = f64::from(sanitize(params.ambient, 0.0, f32::MAX)) * stats.total_flux;
     set_masses(nodes, floor);
     smooth(nodes, f64::from(sanitize(params.alpha, 0.0, 1.0)));
-    (Guide { nodes }, stats)
+    let start: &mut [u16] = match rest.get_mut(..START_TABLE_NODES) {
+        Some(room) if nodes.len() > 1 => {
+            let table = &mut bytemuck::cast_slice_mut(room)[..START_GRID * START_GRID];
+            fill_start_table(nodes, table);
+            table
+        }
+        _ => &mut [],
+    };
+    (Guide { nodes, start }, stats)
+}
+
+/// Fills the start table (see [`Guide::start_table`]) top-down, writing every cell once.
+fn fill_start_table(nodes: &[Node], table: &mut [u16]) {
+    let g = START_GRID as u32;
+    fill_cells(nodes, 0, [0, g], [0, g], table);
+}
+
+/// The cells of `[lo, hi)` (in cell units along one axis) whose points all lie below the
+/// threshold `t`, and those whose points all lie at or above it. A cell `c` holds the f32
+/// values `v` with `⌊v·G⌋ = c`, i.e. `c/G ≤ v < (c+1)/G` exactly (G is a power of two), so
+/// it lies below `t` iff `c + 1 ≤ t·G` and at or above iff `c ≥ t·G`. A cell in neither
+/// range straddles `t`.
+fn cells_by_side(t: f32, [lo, hi]: [u32; 2]) -> ([u32; 2], [u32; 2]) {
+    let tg = t * START_GRID as f32; // exact, in [0, G]
+    let floor = tg as u32;
+    let ceil = floor + u32::from((floor as f32) < tg);
+    ([lo, floor.clamp(lo, hi)], [ceil.clamp(lo, hi), hi])
+}
+
+/// Writes node `i` into the cells of `[xs) × [ys)` (all of whose points reach node `i`)
+/// that straddle one of its thresholds, and recurses into the children with the rest.
+fn fill_cells(nodes: &[Node], i: usize, xs: [u32; 2], ys: [u32; 2], table: &mut [u16]) {
+    let write = |table: &mut [u16], xs: [u32; 2], ys: [u32; 2]| {
+        if xs[0] >= xs[1] {
+            return;
+        }
+        for cy in ys[0]..ys[1] {
+            let row = cy as usize * START_GRID;
+            for cell in &mut table[row + xs[0] as usize..row + xs[1] as usize] {
+                *cell = i as u16;
+            }
+        }
+    };
+    let Some(c) = nodes[i].first_child() else {
+        write(table, xs, ys);
+        return;
+    };
+    let t = nodes[i].t;
+    let (left, right) = cells_by_side(t[0], xs);
+    write(table, [left[1], right[0]], ys); // the column straddling the x threshold, if any
+    for (half, x) in [left, right].into_iter().enumerate() {
+        if x[0] >= x[1] {
+            continue;
+        }
+        let (below, above) = cells_by_side(t[1 + half], ys);
+        write(table, x, [below[1], above[0]]);
+        for (q, y) in [(0, below), (2, above)] {
+            if y[0] < y[1] {
+                fill_cells(nodes, c + half + q, x, y, table);
+            }
+        }
+    }
 }
 
 fn sanitize(x: f32, lo: f32, hi: f32) -> f32 {
@@ -682,6 +774,136 @@ mod tests {
         let (g, s) = build(&mut r, &p, &mut storage);
         assert!(s.nodes > 5);
         g.for_each_leaf(|l| assert!((l.pdf - 1.0).abs() < 1e-5, "{l:?}"));
+    }
+
+    /// The start table's oracle: each cell descends from the root while the whole cell
+    /// `[cx, cx+1)/G × [cy, cy+1)/G` lies on one side of the node's thresholds.
+    fn start_node_of_cell(nodes: &[Node], cx: usize, cy: usize) -> usize {
+        let g = START_GRID as f32;
+        let side = |t: f32, lo: f32, hi: f32| {
+            if t <= lo {
+                Some(1)
+            } else if hi <= t {
+                Some(0)
+            } else {
+                None
+            }
+        };
+        let (x, y) = (cx as f32, cy as f32);
+        let mut i = 0;
+        while let Some(c) = nodes[i].first_child() {
+            let t = nodes[i].t;
+            let Some(right) = side(t[0], x / g, (x + 1.0) / g) else {
+                break;
+            };
+            let Some(upper) = side(t[1 + right], y / g, (y + 1.0) / g) else {
+                break;
+            };
+            i = c + right + 2 * upper;
+        }
+        i
+    }
+
+    /// Whether the root-to-leaf path of `u` (by the warp's thresholds) passes node `k`.
+    fn path_passes(nodes: &[Node], u: [f32; 2], k: usize) -> bool {
+        let mut i = 0;
+        loop {
+            if i == k {
+                return true;
+            }
+            let Some(c) = nodes[i].first_child() else {
+                return false;
+            };
+            let t = nodes[i].t;
+            let right = u[0] >= t[0];
+            let upper = u[1] >= t[1 + usize::from(right)];
+            i = c + usize::from(right) + 2 * usize::from(upper);
+        }
+    }
+
+    #[test]
+    fn start_table_is_the_deepest_node_each_cell_shares() {
+        let mut rng = crate::testing::Pcg32::new(21, 5);
+        // Disk and sky everywhere plus a tight cluster: shallow and very deep regions.
+        let mut r: [Record; 900] = core::array::from_fn(|k| {
+            if k < 700 {
+                let u = [rng.next_f32(), rng.next_f32()];
+                rec(u[0], u[1], crate::testing::disk_and_sky(u))
+            } else {
+                rec(
+                    0.3 + 1e-4 * rng.next_f32(),
+                    0.6 + 1e-4 * rng.next_f32(),
+                    5.0,
+                )
+            }
+        });
+        let p = GuideParams {
+            max_depth: MAX_DEPTH,
+            ..GuideParams::default()
+        };
+        let mut storage = [Node::default(); 2048];
+        let (g, s) = build(&mut r, &p, &mut storage);
+        assert!(s.depth >= 12 && s.nodes > 100, "{s:?}");
+        let (nodes, table) = (g.nodes(), g.start_table());
+        assert_eq!(table.len(), START_GRID * START_GRID);
+        let below = |v: f32| f32::from_bits(v.to_bits() - 1);
+        let gf = START_GRID as f32;
+        let mut deeper_than_root = 0;
+        for (k, &start) in table.iter().enumerate() {
+            let (cx, cy) = (k % START_GRID, k / START_GRID);
+            assert_eq!(
+                usize::from(start),
+                start_node_of_cell(nodes, cx, cy),
+                "cell {cx},{cy}"
+            );
+            deeper_than_root += usize::from(start != 0);
+            // The cell's corners and random interior points all pass the start node.
+            let (x0, y0) = (cx as f32 / gf, cy as f32 / gf);
+            let (x1, y1) = (below((cx + 1) as f32 / gf), below((cy + 1) as f32 / gf));
+            let mut pts = [[x0, y0], [x1, y0], [x0, y1], [x1, y1], [0.0; 2], [0.0; 2]];
+            for q in &mut pts[4..] {
+                *q = [x0 + rng.next_f32() / gf, y0 + rng.next_f32() / gf];
+            }
+            for u in pts {
+                let u = [u[0].clamp(x0, x1), u[1].clamp(y0, y1)];
+                assert!(
+                    path_passes(nodes, u, usize::from(start)),
+                    "cell {cx},{cy} point {u:?}"
+                );
+            }
+        }
+        assert!(
+            deeper_than_root > START_GRID * START_GRID / 2,
+            "{deeper_than_root}"
+        );
+    }
+
+    #[test]
+    fn start_table_needs_room_after_the_tree() {
+        let mut rng = crate::testing::Pcg32::new(3, 8);
+        let recs: [Record; 256] =
+            core::array::from_fn(|_| rec(rng.next_f32(), rng.next_f32(), 1.0));
+        let mut storage = [Node::default(); 1024];
+        let n = {
+            let (g, s) = build(&mut recs.clone(), &GuideParams::default(), &mut storage);
+            assert_eq!(g.start_table().len(), START_GRID * START_GRID);
+            s.nodes as usize
+        };
+        // Room for the tree but not for the table: the same tree, no table.
+        let (g, s) = build(
+            &mut recs.clone(),
+            &GuideParams::default(),
+            &mut storage[..n + START_TABLE_NODES - 1],
+        );
+        assert_eq!((s.nodes as usize, s.capacity_refusals), (n, 0));
+        assert!(g.start_table().is_empty());
+        let (g, _) = build(
+            &mut recs.clone(),
+            &GuideParams::default(),
+            &mut storage[..n + START_TABLE_NODES],
+        );
+        assert_eq!(g.start_table().len(), START_GRID * START_GRID);
+        assert!(Guide::uniform(&mut storage).start_table().is_empty());
     }
 
     #[test]

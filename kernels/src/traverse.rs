@@ -257,11 +257,6 @@ impl Pre {
             tmin: ray.tmin,
         }
     }
-
-    /// Permutation id `kz * 2 + swapped`, equal for lanes with the same shear axes.
-    fn perm_id(&self) -> u32 {
-        (self.k[2] * 2 + usize::from(self.k[0] != (self.k[2] + 1) % 3)) as u32
-    }
 }
 
 /// Entry distance of slot `slot` if the ray's `[tmin, tmax]` meets its box.
@@ -492,9 +487,75 @@ struct Pre8 {
     tmin: f32x8,
     /// `tmin · (1 − 2⁻¹⁸)` for the box test.
     tmin_down: f32x8,
-    lanes: [Pre; LANES],
+    /// The rays, for [`Pre8::lane`].
+    rays: Ray8,
     /// Bit mask of traced lanes.
     traced: u8,
+    /// The packet's direction interval when its traced lanes share origin and octant.
+    interval: Option<Interval>,
+}
+
+/// A shared-origin packet in one octant as one "interval ray": per axis the range of the
+/// lanes' `1/d`, for a conservative whole-packet box test (the interval culling).
+#[derive(Clone, Copy, Debug)]
+struct Interval {
+    org: [f32; 3],
+    inv_lo: [f32; 3],
+    inv_hi: [f32; 3],
+    neg: [bool; 3],
+    tmin: f32,
+}
+
+impl Interval {
+    /// The interval of the traced lanes, if they share one origin.
+    fn of(
+        org: &[f32x8; 3],
+        inv: &[f32x8; 3],
+        tmin: f32x8,
+        traced: u8,
+        neg: [bool; 3],
+    ) -> Option<Self> {
+        let lead = traced.trailing_zeros().min(7) as usize;
+        let o = org.map(|v| v.as_array()[lead]);
+        let shared = (0..3)
+            .all(|a| org[a].simd_eq(f32x8::splat(o[a])).to_bitmask() as u8 & traced == traced);
+        let fold = |v: &f32x8, start: f32, f: fn(f32, f32) -> f32| {
+            (0..LANES)
+                .filter(|&i| traced >> i & 1 == 1)
+                .fold(start, |acc, i| f(acc, v.as_array()[i]))
+        };
+        shared.then(|| Self {
+            org: o,
+            inv_lo: [0, 1, 2].map(|a| fold(&inv[a], f32::INFINITY, f32::min)),
+            inv_hi: [0, 1, 2].map(|a| fold(&inv[a], f32::NEG_INFINITY, f32::max)),
+            neg,
+            tmin: fold(&tmin, f32::INFINITY, f32::min) * NEAR_DOWN,
+        })
+    }
+
+    /// Whether no lane's interval can meet slot `slot`'s box: [`box1`] with every product
+    /// replaced by its lower (near) or upper (far) bound over the lanes' `1/d` (rounding is
+    /// monotone, so the bounds hold after rounding). A plane whose bound is NaN (`0 · ∞`)
+    /// constrains nothing, as in [`box1`].
+    #[inline(always)]
+    fn misses(&self, node: &Node, slot: usize) -> bool {
+        let mut near = self.tmin;
+        let mut far = f32::INFINITY;
+        for axis in 0..3 {
+            let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
+            let (pn, pf) = if self.neg[axis] { (hi, lo) } else { (lo, hi) };
+            let (dn, df) = (pn - self.org[axis], pf - self.org[axis]);
+            let (n0, n1) = (dn * self.inv_lo[axis], dn * self.inv_hi[axis]);
+            let (f0, f1) = (df * self.inv_lo[axis], df * self.inv_hi[axis]);
+            if !(n0.is_nan() || n1.is_nan()) {
+                near = near.max(n0.min(n1));
+            }
+            if !(f0.is_nan() || f1.is_nan()) {
+                far = far.min(f0.max(f1));
+            }
+        }
+        near > far * FAR_UP
+    }
 }
 
 fn mask_of(bits: u8) -> f32x8 {
@@ -508,48 +569,95 @@ fn mask_of(bits: u8) -> f32x8 {
 }
 
 impl Pre8 {
-    fn new(rays: &Ray8) -> Self {
-        let traced = (rays.traceable() & rays.tmin.simd_ge(f32x8::ZERO)).to_bitmask() as u8;
-        let stub = Pre::new(&Ray::new(Vec3::ZERO, Vec3::X, f32::INFINITY, 0.0));
-        let lanes: [Pre; LANES] = core::array::from_fn(|i| {
-            if traced >> i & 1 == 1 {
-                Pre::new(&rays.lane(i))
+    /// The packet's constants, computed 8-wide with the same IEEE operations as [`Pre::new`]
+    /// per lane (so every lane's values equal its scalar [`Pre`]'s bit for bit); untraced
+    /// lanes get the stub ray (origin 0, direction +x, `tmin = +∞`). `interval`: also derive
+    /// the packet's [`Interval`] (only [`Traversal::interval`] uses it).
+    fn new(rays: &Ray8, interval: bool) -> Self {
+        let (zero, one) = (f32x8::ZERO, f32x8::ONE);
+        let live = rays.traceable() & rays.tmin.simd_ge(zero);
+        let traced = live.to_bitmask() as u8;
+        let org = rays.org.map(|o| live.bitselect(o, zero));
+        let d = [
+            live.bitselect(rays.dir[0], one),
+            live.bitselect(rays.dir[1], zero),
+            live.bitselect(rays.dir[2], zero),
+        ];
+        let tmin = live.bitselect(rays.tmin, f32x8::splat(f32::INFINITY));
+        let inv = d.map(|x| one / x);
+        // Shear axes as in `Pre::new`: kz the largest |d| (ties to the lower axis), kx/ky the
+        // next two cyclically, swapped when d[kz] < 0.
+        let a = d.map(f32x8::abs);
+        let kz0 = a[0].simd_ge(a[1]) & a[0].simd_ge(a[2]);
+        let kz1 = !kz0 & a[1].simd_ge(a[2]);
+        let kz2 = !(kz0 | kz1);
+        let dkz = kz0.bitselect(d[0], kz1.bitselect(d[1], d[2]));
+        let sw = dkz.simd_lt(zero);
+        let sel = [
+            [(kz2 & !sw) | (kz1 & sw), (kz0 & !sw) | (kz2 & sw)],
+            [(kz1 & !sw) | (kz2 & sw), (kz2 & !sw) | (kz0 & sw)],
+            [kz0, kz1],
+        ];
+        let pick =
+            |v: &[f32x8; 3], i: usize| sel[i][0].bitselect(v[0], sel[i][1].bitselect(v[1], v[2]));
+        let (dx, dy, dz) = (pick(&d, 0), pick(&d, 1), pick(&d, 2));
+        let neg = inv.map(f32x8::is_sign_negative);
+        // Lanes agree when a mask is all-traced or none-traced.
+        let same = |m: f32x8| {
+            let bits = m.to_bitmask() as u8 & traced;
+            bits == 0 || bits == traced
+        };
+        let lead = traced.trailing_zeros().min(7);
+        let bit = |m: f32x8| m.to_bitmask() >> lead & 1 == 1;
+        let octant = neg.iter().all(|&m| same(m)).then(|| neg.map(bit));
+        let uniform = (same(kz0) && same(kz1) && same(sw)).then(|| {
+            let kz = if bit(kz0) {
+                0
+            } else if bit(kz1) {
+                1
             } else {
-                stub
-            }
+                2
+            };
+            let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
+            if bit(sw) { [ky, kx, kz] } else { [kx, ky, kz] }
         });
-        let col = |f: &dyn Fn(&Pre) -> f32| f32x8::new(core::array::from_fn(|i| f(&lanes[i])));
-        let first = lanes[traced.trailing_zeros().min(7) as usize].perm_id();
-        let same = (0..LANES).all(|i| traced >> i & 1 == 0 || lanes[i].perm_id() == first);
-        let uniform = same.then(|| lanes[traced.trailing_zeros().min(7) as usize].k);
-        let lead = &lanes[traced.trailing_zeros().min(7) as usize];
-        let signs = |p: &Pre| p.inv.map(f32::is_sign_negative);
-        let octant = (0..LANES)
-            .all(|i| traced >> i & 1 == 0 || signs(&lanes[i]) == signs(lead))
-            .then(|| signs(lead));
-        let is = |i: usize, j: usize| col(&|p| if p.k[i] == j { f32::from_bits(!0) } else { 0.0 });
+        let interval = match octant {
+            Some(neg) if interval => Interval::of(&org, &inv, tmin, traced, neg),
+            _ => None,
+        };
         Self {
-            org: [0, 1, 2].map(|a| col(&|p| p.org[a])),
-            inv: [0, 1, 2].map(|a| col(&|p| p.inv[a])),
-            porg: [0, 1, 2].map(|a| col(&|p| p.org[p.k[a]])),
-            s: [0, 1, 2].map(|a| col(&|p| p.s[a])),
-            sel: [0, 1, 2].map(|i| [is(i, 0), is(i, 1)]),
-            neg: [0, 1, 2].map(|a| {
-                col(&|p| {
-                    if p.inv[a].is_sign_negative() {
-                        f32::from_bits(!0)
-                    } else {
-                        0.0
-                    }
-                })
-            }),
+            porg: [pick(&org, 0), pick(&org, 1), pick(&org, 2)],
+            s: [dx / dz, dy / dz, one / dz],
+            org,
+            inv,
+            sel: [sel[0], sel[1], sel[2]],
+            neg,
             octant,
             uniform,
-            tmin: col(&|p| p.tmin),
-            tmin_down: col(&|p| p.tmin * NEAR_DOWN),
-            lanes,
+            tmin,
+            tmin_down: tmin * f32x8::splat(NEAR_DOWN),
+            rays: *rays,
             traced,
+            interval,
         }
+    }
+
+    /// Lane `i`'s scalar constants (for the rare per-lane paths); `i` must be traced.
+    fn lane(&self, i: usize) -> Pre {
+        Pre::new(&self.rays.lane(i))
+    }
+
+    /// [`Pre8::box8`], after the packet's [`Interval`] test when `interval` is set and the
+    /// packet has one (a miss there is a miss for every lane).
+    #[inline(always)]
+    fn box8_culled(&self, node: &Node, slot: usize, tmax: f32x8, interval: bool) -> (f32x8, f32x8) {
+        if interval
+            && let Some(iv) = &self.interval
+            && iv.misses(node, slot)
+        {
+            return (f32x8::ZERO, f32x8::ZERO);
+        }
+        self.box8(node, slot, tmax)
     }
 
     /// Lanes whose interval meets slot `slot`'s box, and their entry distances: [`box1`] for
@@ -617,7 +725,7 @@ impl Pre8 {
         let tt = u * (sz * a[2]) + v * (sz * b[2]) + w * (sz * c[2]);
         let ok = !(neg & pos) & det.simd_ne(zero) & !any_zero;
         Tri8 {
-            t: tt / det,
+            tt,
             v,
             w,
             det,
@@ -627,8 +735,9 @@ impl Pre8 {
     }
 }
 
+/// [`Pre8::tri8`]'s result; `t = tt / det` is divided only when some lane may hit.
 struct Tri8 {
-    t: f32x8,
+    tt: f32x8,
     v: f32x8,
     w: f32x8,
     det: f32x8,
@@ -655,14 +764,19 @@ impl Best8 {
     }
 }
 
+#[inline(always)]
 fn closest8(pre: &Pre8, tri: &Tri, best: &mut Best8) {
     let r = pre.tri8(tri);
     let live = pre.tmin.simd_le(best.t);
-    let cand = r.ok & r.t.simd_ge(pre.tmin) & r.t.simd_le(best.t);
-    let strict = cand & r.t.simd_lt(best.t);
+    if !((r.ok | r.any_zero) & live).any() {
+        return;
+    }
+    let t = r.tt / r.det;
+    let cand = r.ok & t.simd_ge(pre.tmin) & t.simd_le(best.t);
+    let strict = cand & t.simd_lt(best.t);
     if strict.any() {
         let m: u32x8 = bytemuck::cast(strict);
-        best.t = strict.bitselect(r.t, best.t);
+        best.t = strict.bitselect(t, best.t);
         best.u = strict.bitselect(r.v / r.det, best.u);
         best.v = strict.bitselect(r.w / r.det, best.v);
         best.prim = m.bitselect(u32x8::splat(tri.prim), best.prim);
@@ -670,12 +784,19 @@ fn closest8(pre: &Pre8, tri: &Tri, best: &mut Best8) {
     // Rare lanes: exact ties on t (tie rule) and zero edge functions (f64 fallback).
     let rare = ((cand & !strict) | (r.any_zero & live)).to_bitmask();
     if rare != 0 {
-        for i in 0..LANES {
-            if rare >> i & 1 == 1 {
-                let mut hit = best.lane(i);
-                closest1(&pre.lanes[i], tri, &mut hit);
-                set_lane(best, i, &hit);
-            }
+        closest8_rare(pre, tri, best, rare as u8);
+    }
+}
+
+/// The scalar path of [`closest8`]'s rare lanes (kept out of the inlined hot loop).
+#[cold]
+#[inline(never)]
+fn closest8_rare(pre: &Pre8, tri: &Tri, best: &mut Best8, rare: u8) {
+    for i in 0..LANES {
+        if rare >> i & 1 == 1 {
+            let mut hit = best.lane(i);
+            closest1(&pre.lane(i), tri, &mut hit);
+            set_lane(best, i, &hit);
         }
     }
 }
@@ -688,63 +809,242 @@ fn set_lane(best: &mut Best8, i: usize, hit: &Hit) {
 }
 
 /// Lanes `tri` blocks on `[tmin, tmax]`, as a bit mask.
+#[inline(always)]
 fn occludes8(pre: &Pre8, tri: &Tri, tmax: f32x8) -> u8 {
     let r = pre.tri8(tri);
-    let hit = r.ok & r.t.simd_ge(pre.tmin) & r.t.simd_le(tmax);
+    if !(r.ok | r.any_zero).any() {
+        return 0;
+    }
+    let t = r.tt / r.det;
+    let hit = r.ok & t.simd_ge(pre.tmin) & t.simd_le(tmax);
     let mut bits = hit.to_bitmask() as u8;
     let zero = (r.any_zero & pre.tmin.simd_le(tmax)).to_bitmask() as u8;
-    for i in 0..LANES {
-        if zero >> i & 1 == 1 && occludes1(&pre.lanes[i], tri, tmax.as_array()[i]) {
-            bits |= 1 << i;
-        }
+    if zero != 0 {
+        bits |= occludes8_rare(pre, tri, tmax, zero);
     }
     bits
 }
 
-/// Depth-first walk of a packet. `visit` tests a leaf and returns the packet's new `tmax`
-/// (all lanes −∞ stops the walk).
+/// The scalar `f64` fallback of [`occludes8`]'s lanes with a zero edge function.
+#[cold]
+#[inline(never)]
+fn occludes8_rare(pre: &Pre8, tri: &Tri, tmax: f32x8, zero: u8) -> u8 {
+    (0..LANES).fold(0, |bits, i| {
+        let blocked = zero >> i & 1 == 1 && occludes1(&pre.lane(i), tri, tmax.as_array()[i]);
+        bits | u8::from(blocked) << i
+    })
+}
+
+/// How the packet walk orders children and when it hands lanes to the scalar walk.
+///
+/// [`Traversal::DEFAULT`] is what [`intersect8`] and [`occluded8`] use; the other settings
+/// exist so that `benches/traverse.rs` can measure the ideas side by side
+/// (docs/traverse.md, "Ideas"). Every setting gives the same results, bit for bit: the
+/// closest hit under the tie rule does not depend on the visiting order, and the scalar
+/// walk performs the same arithmetic as the packet's lanes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Traversal {
+    /// Finish an inner subtree with the scalar walk, lane by lane, when at most this many
+    /// lanes still reach it (0: never).
+    pub fallback_lanes: u32,
+    /// Which of two hit children is visited first.
+    pub order: ChildOrder,
+    /// Before the 8-wide box test, test the box once against the packet's interval of
+    /// directions (shared origin, one octant); skip the 8-wide test when that misses.
+    pub interval: bool,
+}
+
+/// The order in which a packet visits two children that its lanes both hit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChildOrder {
+    /// The lanes hitting both boxes vote with their entry distances.
+    Vote,
+    /// The box centres are compared along the packet's direction sign vector (the classic
+    /// ordered traversal by octant); falls back to [`ChildOrder::Vote`] across octants.
+    Signs,
+    /// The first traced lane's entry distances decide.
+    Lead,
+}
+
+impl Traversal {
+    /// The measured choice (docs/traverse.md).
+    pub const DEFAULT: Self = Self {
+        fallback_lanes: 0,
+        order: ChildOrder::Vote,
+        interval: false,
+    };
+}
+
+impl Default for Traversal {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// What a packet walk does at a leaf (eight lanes) and in a subtree handed to the scalar walk
+/// (one lane).
+trait Visitor<'a> {
+    /// Tests a leaf for the packet; returns the packet's new `tmax` (−∞ in finished lanes).
+    fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8;
+    /// Walks the subtree `entry` for lane `lane` alone; returns the packet's new `tmax`.
+    fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8;
+}
+
+/// Closest-hit visitor.
+struct Closest<'p> {
+    pre: &'p Pre8,
+    best: Best8,
+}
+
+impl<'a> Visitor<'a> for Closest<'_> {
+    #[inline(always)]
+    fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8 {
+        for tri in leaf {
+            closest8(self.pre, tri, &mut self.best);
+        }
+        self.best.t
+    }
+
+    fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8 {
+        let pre = &self.pre.lane(lane);
+        let mut hit = self.best.lane(lane);
+        walk1(bvh, pre, entry, |leaf| {
+            for tri in leaf {
+                closest1(pre, tri, &mut hit);
+            }
+            hit.t
+        });
+        set_lane(&mut self.best, lane, &hit);
+        self.best.t
+    }
+}
+
+/// Occlusion visitor: a blocked lane's `tmax` becomes −∞.
+struct Occlusion<'p> {
+    pre: &'p Pre8,
+    tmax: f32x8,
+    blocked: u8,
+}
+
+impl<'a> Visitor<'a> for Occlusion<'_> {
+    #[inline(always)]
+    fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8 {
+        for tri in leaf {
+            let bits = occludes8(self.pre, tri, self.tmax);
+            if bits != 0 {
+                self.blocked |= bits;
+                self.tmax = mask_of(bits).bitselect(f32x8::splat(f32::NEG_INFINITY), self.tmax);
+                if self.blocked == self.pre.traced {
+                    break;
+                }
+            }
+        }
+        self.tmax
+    }
+
+    fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8 {
+        let pre = &self.pre.lane(lane);
+        let tmax = self.tmax.as_array()[lane];
+        let mut hit = false;
+        walk1(bvh, pre, entry, |leaf| {
+            hit = hit || leaf.iter().any(|tri| occludes1(pre, tri, tmax));
+            if hit { f32::NEG_INFINITY } else { tmax }
+        });
+        if hit {
+            self.blocked |= 1 << lane;
+            self.tmax.as_mut_array()[lane] = f32::NEG_INFINITY;
+        }
+        self.tmax
+    }
+}
+
+/// Depth-first walk of a packet: a shared stack of `(child, meta)` entries with `lanes`,
+/// the bit mask of lanes whose interval met the entry's box when it was pushed.
 fn walk8<'a>(
     bvh: &BvhRef<'a>,
     pre: &Pre8,
     mut tmax: f32x8,
-    mut visit: impl FnMut(&'a [Tri]) -> f32x8,
+    how: &Traversal,
+    visitor: &mut impl Visitor<'a>,
 ) {
-    let mut stack = [(0u32, 0u32); STACK];
+    // Entries as `child | meta << 32` and lane masks in two plain arrays: zeroing them is a
+    // short memset (a tuple array with padding cost ~10% of the walk in stores).
+    let mut stack = [0u64; STACK];
+    let mut lanes_of = [0u8; STACK];
+    lanes_of[0] = pre.traced;
     let mut sp = 1;
+    let mut alive = pre.traced;
     while sp > 0 {
         sp -= 1;
-        let (child, meta) = stack[sp];
+        let (child, meta, lanes) = (stack[sp] as u32, (stack[sp] >> 32) as u32, lanes_of[sp]);
         if meta != 0 {
-            tmax = visit(bvh.leaf(child, meta));
-            if !pre.tmin.simd_le(tmax).any() {
+            tmax = visitor.leaf8(bvh.leaf(child, meta));
+            alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
+            if alive == 0 {
+                return;
+            }
+            continue;
+        }
+        let live = lanes & alive;
+        if live == 0 {
+            continue;
+        }
+        if live.count_ones() <= how.fallback_lanes {
+            for lane in 0..LANES {
+                if live >> lane & 1 == 1 {
+                    tmax = visitor.walk1(bvh, lane, (child, meta));
+                }
+            }
+            alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
+            if alive == 0 {
                 return;
             }
             continue;
         }
         let node = &bvh.nodes[child as usize];
-        let entry = |slot: usize| (node.child[slot], node.meta[slot]);
-        let (m0, n0) = pre.box8(node, 0, tmax);
-        let (m1, n1) = pre.box8(node, 1, tmax);
-        let (b0, b1) = (m0.to_bitmask(), m1.to_bitmask());
+        let (m0, n0) = pre.box8_culled(node, 0, tmax, how.interval);
+        let (m1, n1) = pre.box8_culled(node, 1, tmax, how.interval);
+        let (b0, b1) = (m0.to_bitmask() as u8, m1.to_bitmask() as u8);
+        let entry = |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
         match (b0 != 0, b1 != 0) {
             (true, true) => {
-                // The lanes hitting both boxes vote for the nearer one.
-                let closer1 = (n1.simd_lt(n0) & m0 & m1).to_bitmask().count_ones();
-                let (near, far) = if 2 * closer1 > (b0 & b1).count_ones() {
-                    (1, 0)
-                } else {
-                    (0, 1)
+                let first1 = match (how.order, pre.octant) {
+                    (ChildOrder::Signs, Some(neg)) => {
+                        // Centre along the sign vector, doubled: lo + hi per axis.
+                        let along = |slot: usize| {
+                            (0..3).fold(0.0, |acc, axis| {
+                                let c = node.lo[axis][slot] + node.hi[axis][slot];
+                                if neg[axis] { acc - c } else { acc + c }
+                            })
+                        };
+                        along(1) < along(0)
+                    }
+                    (ChildOrder::Lead, _) if b0 & b1 != 0 => {
+                        let lead = (b0 & b1).trailing_zeros() as usize;
+                        n1.as_array()[lead] < n0.as_array()[lead]
+                    }
+                    _ => {
+                        // The lanes hitting both boxes vote for the nearer one.
+                        let closer1 = (n1.simd_lt(n0) & m0 & m1).to_bitmask().count_ones();
+                        2 * closer1 > (b0 & b1).count_ones()
+                    }
                 };
+                let (near, far) = if first1 { (1, 0) } else { (0, 1) };
+                let bits = [b0, b1];
                 stack[sp] = entry(far);
+                lanes_of[sp] = bits[far];
                 stack[sp + 1] = entry(near);
+                lanes_of[sp + 1] = bits[near];
                 sp += 2;
             }
             (true, false) => {
                 stack[sp] = entry(0);
+                lanes_of[sp] = b0;
                 sp += 1;
             }
             (false, true) => {
                 stack[sp] = entry(1);
+                lanes_of[sp] = b1;
                 sp += 1;
             }
             (false, false) => {}
@@ -758,7 +1058,12 @@ fn walk8<'a>(
 /// miss leave their `hits` lane untouched. Returns the bit mask of lanes that hit. Each hit
 /// equals [`intersect1`]'s for that lane, bit for bit.
 pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
-    let pre = Pre8::new(rays);
+    intersect8_with(bvh, rays, hits, &Traversal::DEFAULT)
+}
+
+/// [`intersect8`] with a chosen [`Traversal`] (same results, different speed).
+pub fn intersect8_with(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8, how: &Traversal) -> u8 {
+    let pre = Pre8::new(rays, how.interval);
     if pre.traced == 0 {
         return 0;
     }
@@ -767,18 +1072,17 @@ pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
         rays.tmax.fast_min(f32x8::splat(f32::MAX)),
         f32x8::splat(f32::NEG_INFINITY),
     );
-    let mut best = Best8 {
-        t: tmax,
-        u: f32x8::ZERO,
-        v: f32x8::ZERO,
-        prim: u32x8::splat(NO_HIT),
+    let mut closest = Closest {
+        pre: &pre,
+        best: Best8 {
+            t: tmax,
+            u: f32x8::ZERO,
+            v: f32x8::ZERO,
+            prim: u32x8::splat(NO_HIT),
+        },
     };
-    walk8(bvh, &pre, tmax, |leaf| {
-        for tri in leaf {
-            closest8(&pre, tri, &mut best);
-        }
-        best.t
-    });
+    walk8(bvh, &pre, tmax, how, &mut closest);
+    let best = closest.best;
     let hit_mask = best.prim.simd_ne(u32x8::splat(NO_HIT));
     let f: f32x8 = bytemuck::cast(hit_mask);
     hits.t = f.bitselect(best.t, hits.t);
@@ -792,30 +1096,27 @@ pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
 /// drops out when blocked, the walk ends when all have). Returns the bit mask of blocked lanes;
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
 pub fn occluded8(bvh: &BvhRef<'_>, rays: &Ray8) -> u8 {
-    let pre = Pre8::new(rays);
+    occluded8_with(bvh, rays, &Traversal::DEFAULT)
+}
+
+/// [`occluded8`] with a chosen [`Traversal`] (same results, different speed).
+pub fn occluded8_with(bvh: &BvhRef<'_>, rays: &Ray8, how: &Traversal) -> u8 {
+    let pre = Pre8::new(rays, how.interval);
     if pre.traced == 0 {
         return 0;
     }
     let traced = mask_of(pre.traced);
-    let mut tmax = traced.bitselect(
+    let tmax = traced.bitselect(
         rays.tmax.fast_min(f32x8::splat(f32::MAX)),
         f32x8::splat(f32::NEG_INFINITY),
     );
-    let mut blocked = 0u8;
-    walk8(bvh, &pre, tmax, |leaf| {
-        for tri in leaf {
-            let bits = occludes8(&pre, tri, tmax);
-            if bits != 0 {
-                blocked |= bits;
-                tmax = mask_of(bits).bitselect(f32x8::splat(f32::NEG_INFINITY), tmax);
-                if blocked == pre.traced {
-                    break;
-                }
-            }
-        }
-        tmax
-    });
-    blocked
+    let mut occlusion = Occlusion {
+        pre: &pre,
+        tmax,
+        blocked: 0,
+    };
+    walk8(bvh, &pre, tmax, how, &mut occlusion);
+    occlusion.blocked
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -950,6 +1251,23 @@ mod tests {
         Ray::new(org, d, 0.0, tmax)
     }
 
+    /// Every [`Traversal`] setting worth measuring: each must give the same bits.
+    fn variants() -> Vec<Traversal> {
+        let mut out = Vec::new();
+        for order in [ChildOrder::Vote, ChildOrder::Signs, ChildOrder::Lead] {
+            for fallback_lanes in [0, 1, 2, 8] {
+                for interval in [false, true] {
+                    out.push(Traversal {
+                        fallback_lanes,
+                        order,
+                        interval,
+                    });
+                }
+            }
+        }
+        out
+    }
+
     #[test]
     fn packet_equals_scalar_equals_brute_force_for_1_to_8_lanes() {
         let mut rng = Pcg32::new(41, 2);
@@ -973,6 +1291,18 @@ mod tests {
             let mut hits = Hit8::NONE;
             let mask = intersect8(&bvh, &packet, &mut hits);
             let blocked = occluded8(&bvh, &packet);
+            for how in variants() {
+                let mut other = Hit8::NONE;
+                let m = intersect8_with(&bvh, &packet, &mut other, &how);
+                let lanes =
+                    |h: &Hit8| -> [Option<Hit>; LANES] { core::array::from_fn(|i| h.lane(i)) };
+                assert_eq!(
+                    (m, lanes(&other)),
+                    (mask, lanes(&hits)),
+                    "{how:?}: {rays:?}"
+                );
+                assert_eq!(occluded8_with(&bvh, &packet, &how), blocked, "{how:?}");
+            }
             for lane in 0..LANES {
                 let r = packet.lane(lane);
                 let oracle = intersect_brute(&tris, &r);
@@ -1007,7 +1337,7 @@ mod tests {
                     f32::INFINITY,
                 )
             });
-            let pre = Pre8::new(&Ray8::from_rays(&rays));
+            let pre = Pre8::new(&Ray8::from_rays(&rays), false);
             let r = pre.tri8(&t);
             for (i, ray) in rays.iter().enumerate() {
                 let want = tri1(&Pre::new(ray), &t);
@@ -1017,12 +1347,58 @@ mod tests {
                 }
                 assert_eq!(lane, want.is_some(), "{ray:?}");
                 if let Some((tt, _, _)) = want {
-                    assert_eq!(r.t.as_array()[i].to_bits(), tt.to_bits());
+                    assert_eq!((r.tt / r.det).as_array()[i].to_bits(), tt.to_bits());
                     hits += 1;
                 }
             }
         }
         assert!(hits > 4000, "the test must exercise hits ({hits})");
+    }
+
+    #[test]
+    fn packet_constants_equal_each_lanes_scalar_constants_bit_for_bit() {
+        let mut rng = Pcg32::new(77, 3);
+        let bits = |v: f32x8, i: usize| v.as_array()[i].to_bits();
+        for trial in 0..2000 {
+            let shared = v3(&mut rng, 4.0);
+            let rays: Vec<Ray> = (0..1 + trial % LANES)
+                .map(|_| {
+                    let org = if trial % 3 == 0 {
+                        v3(&mut rng, 4.0)
+                    } else {
+                        shared
+                    };
+                    ray(&mut rng, org)
+                })
+                .collect();
+            let packet = Ray8::from_rays(&rays);
+            let pre = Pre8::new(&packet, true);
+            let mut perms = Vec::new();
+            for (i, r) in rays.iter().enumerate() {
+                if !traceable(r) {
+                    assert_eq!(pre.traced >> i & 1, 0);
+                    continue;
+                }
+                assert_eq!(pre.traced >> i & 1, 1);
+                let p = Pre::new(r);
+                perms.push(p.k);
+                for a in 0..3 {
+                    assert_eq!(bits(pre.org[a], i), p.org[a].to_bits());
+                    assert_eq!(bits(pre.inv[a], i), p.inv[a].to_bits(), "{r:?}");
+                    assert_eq!(bits(pre.s[a], i), p.s[a].to_bits(), "{r:?}");
+                    assert_eq!(bits(pre.porg[a], i), p.org[p.k[a]].to_bits(), "{r:?}");
+                    for j in 0..2 {
+                        assert_eq!(bits(pre.sel[a][j], i) != 0, p.k[a] == j, "{r:?}");
+                    }
+                }
+                assert_eq!(bits(pre.tmin, i), p.tmin.to_bits());
+            }
+            let all_same = perms.windows(2).all(|w| w[0] == w[1]);
+            assert_eq!(pre.uniform.is_some(), all_same || perms.is_empty());
+            if let (Some(k), Some(first)) = (pre.uniform, perms.first()) {
+                assert_eq!(k, *first);
+            }
+        }
     }
 
     #[test]

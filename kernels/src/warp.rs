@@ -23,11 +23,27 @@
 //! rounded.
 //!
 //! The triple: [`sample`] (u → warped point and its pdf), [`pdf`] (point → density on the
-//! square) and [`invert`] (warped point → u). [`sample8`] is the 8-wide packet version on
-//! `wide::f32x8`: a presorted packet (paper §2.4, Figure 3) mostly walks one path, so it runs
-//! a **uniform fast path** — one 8-wide compare per axis against the node's splatted
-//! thresholds — while all lanes sit in the same node, and from the first node where the
-//! lanes part descends **per lane**; the leaves are then gathered and placed 8-wide.
+//! square) and [`invert`] (warped point → u). [`sample`] is the readable scalar reference:
+//! it descends from the root.
+//!
+//! [`sample8`] is the 8-wide packet version on `wide::f32x8`. Presorted packets (paper §2.4,
+//! Figure 3) share only the top of their paths on a realistic guide (the leaves' source
+//! rectangles are mass-balanced, so a 64-sample texel's packet spans 1/8 of the square and
+//! meets many of them), so what pays is to make the per-lane part cheap:
+//! - **start table**: each lane looks up the cell of `u` in the guide's
+//!   [`Guide::start_table`] — the deepest node that every point of that cell of a 32 × 32
+//!   grid over the primary sample square passes through (exact: the thresholds are in
+//!   primary sample space) — and starts there, usually in its leaf or one level above;
+//! - **interleaved per-lane descent**: the eight lanes' descents run in lockstep rounds,
+//!   branch-free (a lane in its leaf stays there), so their load → compare → load chains
+//!   overlap where the scalar warp waits on one;
+//! - the leaves are gathered and the points placed 8-wide.
+//!
+//! Without a start table (the uniform guide, or a tree that filled its storage) it runs a
+//! **uniform fast path** — one 8-wide compare per axis against the node's splatted
+//! thresholds — while all lanes sit in the same node, and the per-lane descent from the
+//! node where they part. Measurements of these and of the alternatives that did not pay
+//! are in `docs/guide.md`.
 //!
 //! # One kernel, two widths
 //! The arithmetic — the final placement (`place`) and the input clamp — is written once
@@ -51,10 +67,12 @@
 //!
 //! # Deviation
 //! Clarberg et al. warp a wavelet-defined image; we warp a quadtree built by
-//! [`crate::guide::build`]. [`invert`] and [`pdf`] have no 8-wide versions: nothing on the
-//! hot path needs them yet.
+//! [`crate::guide::build`]. [`pdf8`] is the 8-wide [`pdf`] (interleaved per-lane descent
+//! by the squares' midpoints; the start table indexes primary sample space, not the warped
+//! square, so it does not apply). [`invert`] has no 8-wide version: nothing on the hot path
+//! needs it.
 
-use crate::guide::{Guide, Node};
+use crate::guide::{Guide, Node, START_GRID};
 use core::ops::{Add, Div, Mul, Sub};
 use wide::{f32x8, i32x8};
 
@@ -275,6 +293,36 @@ pub fn pdf(guide: &Guide<'_>, w: [f32; 2]) -> f32 {
     guide.nodes()[leaf_at(guide, w)].pdf
 }
 
+/// [`pdf`] for eight points: lane `i` equals `pdf(guide, [x[i], y[i]])` bit for bit (the
+/// same comparisons against the same midpoints). The eight descents run interleaved and
+/// branch-free, as in [`sample8`], until no lane moved.
+#[inline]
+pub fn pdf8(guide: &Guide<'_>, x: f32x8, y: f32x8) -> f32x8 {
+    debug_assert!(
+        (0..8).all(|i| in_square([x.to_array()[i], y.to_array()[i]])),
+        "packet outside [0,1)^2"
+    );
+    let nodes = guide.nodes();
+    let (xs, ys) = (to_unit(x).to_array(), to_unit(y).to_array());
+    let mut idx = [0usize; 8];
+    loop {
+        let mut moved = 0;
+        for l in 0..8 {
+            let n = &nodes[idx[l]];
+            let half = n.size * 0.5;
+            let right = xs[l] >= n.origin[0] + half;
+            let upper = ys[l] >= n.origin[1] + half;
+            let next = usize::from(n.child) + usize::from(right) + 2 * usize::from(upper);
+            moved |= n.child;
+            idx[l] = if n.child == 0 { idx[l] } else { next };
+        }
+        if moved == 0 {
+            break;
+        }
+    }
+    f32x8::new(idx.map(|i| nodes[i].pdf))
+}
+
 /// The leaf whose square holds `w` (descending by the squares' midpoints).
 fn leaf_at(guide: &Guide<'_>, w: [f32; 2]) -> usize {
     debug_assert!(in_square(w), "point {w:?} outside [0,1)^2");
@@ -323,18 +371,35 @@ pub fn sample8(guide: &Guide<'_>, x: f32x8, y: f32x8) -> Warped8 {
     );
     let nodes = guide.nodes();
     let (x, y) = (to_unit(x), to_unit(y));
+    let table = guide.start_table();
+    if table.is_empty() {
+        return from_root(nodes, x, y);
+    }
+    // Each lane starts at the deepest node its start-table cell shares (⌊u·G⌋ is exact:
+    // G is a power of two and u ∈ [0, 1−ε]).
+    let g = f32x8::splat(START_GRID as f32);
+    let cell = (x * g).trunc_int() + (y * g).trunc_int() * i32x8::splat(START_GRID as i32);
+    let cell = cell.to_array();
+    let idx = core::array::from_fn(|l| usize::from(table[cell[l] as usize]));
+    descend_lanes(nodes, idx, x, y)
+}
+
+/// [`sample8`] without a start table (the uniform guide, or a tree that filled its storage):
+/// the uniform fast path — one 8-wide compare per axis against the node's splatted
+/// thresholds — while all lanes sit in the same node, per-lane descent from where they part.
+#[inline(never)]
+fn from_root(nodes: &[Node], x: f32x8, y: f32x8) -> Warped8 {
     let mut i = 0;
-    // Uniform fast path: all lanes in node `i`; one compare per axis for the whole packet.
     while let Some(c) = nodes[i].first_child() {
         let n = &nodes[i];
         let r = x.simd_ge(f32x8::splat(n.t[0])).to_bitmask();
         if r != 0 && r != 0xff {
-            return per_lane(nodes, i, x, y);
+            return descend_lanes(nodes, [i; 8], x, y);
         }
         let right = usize::from(r != 0);
         let u = y.simd_ge(f32x8::splat(n.t[1 + right])).to_bitmask();
         if u != 0 && u != 0xff {
-            return per_lane(nodes, i, x, y);
+            return descend_lanes(nodes, [i; 8], x, y);
         }
         i = c + right + 2 * usize::from(u != 0);
     }
@@ -342,31 +407,26 @@ pub fn sample8(guide: &Guide<'_>, x: f32x8, y: f32x8) -> Warped8 {
     Warped8 { x: wx, y: wy, pdf }
 }
 
-/// The divergent part of [`sample8`]: from node `i`, where the lanes part, every lane has
-/// its own node index. Each round gathers the lanes' thresholds, compares 8-wide and steps
-/// the lanes that are not yet in a leaf, without branching on the lanes' paths; rounds run
-/// until every lane sits in a leaf. The leaves are then gathered and placed 8-wide.
-#[inline(never)]
-fn per_lane(nodes: &[Node], i: usize, x: f32x8, y: f32x8) -> Warped8 {
-    let mut idx = [i; 8];
+/// The per-lane descent of [`sample8`]: lane `l` starts at node `idx[l]` (which its point
+/// reaches) and descends on its own; the eight descents are interleaved so that their
+/// load → compare → load chains overlap, and a lane already in its leaf stays there (a
+/// select, not a branch). Rounds run until no lane moved. The leaves are then gathered and
+/// placed 8-wide.
+#[inline(always)]
+fn descend_lanes(nodes: &[Node], mut idx: [usize; 8], x: f32x8, y: f32x8) -> Warped8 {
+    let (xs, ys) = (x.to_array(), y.to_array());
     loop {
-        let mut t = [[0f32; 8]; 3];
-        let mut child = [0usize; 8];
-        for (l, &k) in idx.iter().enumerate() {
-            let n = &nodes[k];
-            (t[0][l], t[1][l], t[2][l], child[l]) = (n.t[0], n.t[1], n.t[2], usize::from(n.child));
-        }
-        if child == [0; 8] {
-            break;
-        }
-        let rmask = x.simd_ge(f32x8::new(t[0]));
-        let right = rmask.to_bitmask();
-        let ty = rmask.select(f32x8::new(t[2]), f32x8::new(t[1]));
-        let upper = y.simd_ge(ty).to_bitmask();
+        let mut moved = 0;
         for l in 0..8 {
-            if child[l] != 0 {
-                idx[l] = child[l] + (right >> l & 1) as usize + 2 * (upper >> l & 1) as usize;
-            }
+            let n = &nodes[idx[l]];
+            let right = xs[l] >= n.t[0];
+            let upper = ys[l] >= n.t[1 + usize::from(right)];
+            let next = usize::from(n.child) + usize::from(right) + 2 * usize::from(upper);
+            moved |= n.child;
+            idx[l] = if n.child == 0 { idx[l] } else { next };
+        }
+        if moved == 0 {
+            break;
         }
     }
     let ([wx, wy], pdf) = place(&LeafData::gather(nodes, &idx), [x, y]);
@@ -476,6 +536,32 @@ mod tests {
                 assert_eq!(w.y.to_array()[l].to_bits(), s.u[1].to_bits());
                 assert_eq!(w.pdf.to_array()[l].to_bits(), s.pdf.to_bits());
             }
+        }
+    }
+
+    #[test]
+    fn pdf8_matches_scalar_pdf_bit_for_bit() {
+        let mut st = [Node::default(); 1024];
+        let g = learned(&mut st);
+        let mut rng = Pcg32::new(4, 12);
+        let edge = [0.0, ONE_MINUS_EPS, 0.5, f32::from_bits(0x3effffff)];
+        for p in 0..2000 {
+            let xs: [f32; 8] =
+                core::array::from_fn(|l| if p == 0 { edge[l % 4] } else { rng.next_f32() });
+            let ys: [f32; 8] = core::array::from_fn(|l| {
+                if p == 0 {
+                    edge[l / 2 % 4]
+                } else {
+                    rng.next_f32()
+                }
+            });
+            let d = pdf8(&g, f32x8::new(xs), f32x8::new(ys)).to_array();
+            for l in 0..8 {
+                assert_eq!(d[l].to_bits(), pdf(&g, [xs[l], ys[l]]).to_bits());
+            }
+            // At the warped points it returns the warp's own pdf.
+            let w = sample8(&g, f32x8::new(xs), f32x8::new(ys));
+            assert_eq!(pdf8(&g, w.x, w.y).to_array(), w.pdf.to_array());
         }
     }
 

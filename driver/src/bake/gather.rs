@@ -37,7 +37,8 @@ use guidebake_kernels::traverse::{intersect1, intersect8, offset_origin};
 use guidebake_kernels::warp;
 use wide::{f32x8, u32x8};
 
-use super::pipeline::TileBaked;
+use super::grid::{self as grid_guide, GridGuide};
+use super::pipeline::{TileBaked, TileBuffer};
 use super::settings::{BakeSettings, Combine, Guiding};
 use super::world::{SurfaceHit, World};
 use crate::output::journal::TileRecord;
@@ -165,18 +166,28 @@ impl<'w> TileBaker<'w> {
     }
 
     /// Bakes tile `tile` whose texels (`texels`, global ids from `first_texel`) are given;
-    /// writes one result per texel into `out` and returns the tile's journal data.
+    /// writes one result per texel into `out` (and, for `--combine global`, every texel's K
+    /// batches) and returns the tile's journal data.
     pub fn bake_tile(
         &mut self,
         tile: u32,
         first_texel: u64,
         texels: &[TexelRecord],
-        out: &mut Vec<TexelResult>,
+        out: &mut TileBuffer,
     ) -> TileBaked {
-        out.clear();
-        out.resize(texels.len(), TexelResult::default());
+        out.results.clear();
+        out.results.resize(texels.len(), TexelResult::default());
+        out.batches.clear();
+        if self.settings.combine == Combine::Global {
+            let k = self.settings.iterations as usize;
+            out.batches.resize(texels.len() * k, Welford::new());
+        }
         self.collect_valid(texels);
-        let clusters = self.cluster();
+        let clusters = if self.settings.guiding == Guiding::Grid {
+            self.grid_squares(texels)
+        } else {
+            self.cluster()
+        };
         let k = self.settings.iterations as usize;
         self.batches.clear();
         self.batches.resize(self.valid.len() * k, Welford::new());
@@ -242,6 +253,36 @@ impl<'w> TileBaker<'w> {
         }
     }
 
+    /// The grid comparator's learning groups: the valid texels of each 8×8-texel square of
+    /// the atlas ([`grid_guide::SQUARE`]); returns the number of groups.
+    fn grid_squares(&mut self, texels: &[TexelRecord]) -> usize {
+        let key = |i: u32| {
+            let t = &texels[i as usize];
+            let s = grid_guide::SQUARE;
+            (t.page, t.pixel[1] / s, t.pixel[0] / s)
+        };
+        let n = self.valid.len();
+        self.permutation.clear();
+        self.permutation.extend(0..n as u32);
+        let valid = &self.valid;
+        self.permutation.sort_by_key(|&m| key(valid[m as usize]));
+        self.ranges.clear();
+        let mut start = 0;
+        for end in 1..=n {
+            let same = end < n
+                && key(valid[self.permutation[end] as usize])
+                    == key(valid[self.permutation[start] as usize]);
+            if !same {
+                self.ranges.push(ClusterRange {
+                    start: start as u32,
+                    end: end as u32,
+                });
+                start = end;
+            }
+        }
+        self.ranges.len()
+    }
+
     /// K learning iterations over one cluster; `members` index `self.valid`.
     fn bake_cluster(&mut self, members: &[u32], texels: &[TexelRecord], first_texel: u64) {
         let Self {
@@ -261,12 +302,18 @@ impl<'w> TileBaker<'w> {
         counters.clusters += 1;
         let iterations = settings.iterations;
         let mut guide: Option<Guide<'_>> = None;
+        let mut grid: Option<GridGuide> = None;
         for k in 0..iterations {
             records.clear();
             for &m in members {
                 let i = valid[m as usize];
                 let t = gather_texel(&texels[i as usize], first_texel + u64::from(i));
-                if guide.is_some() {
+                let learned = match (&guide, &grid) {
+                    (Some(g), _) => Some(Learned::Tree(g)),
+                    (None, Some(g)) => Some(Learned::Grid(g)),
+                    (None, None) => None,
+                };
+                if learned.is_some() {
                     unguided[m as usize] = false;
                 }
                 let mut sinks = Sinks {
@@ -278,23 +325,29 @@ impl<'w> TileBaker<'w> {
                     world,
                     settings,
                     k,
-                    guide: guide.as_ref(),
+                    guide: learned,
                 };
                 match settings.guiding {
                     Guiding::Naive => ctx.gather_naive(&t, &mut sinks, counters),
-                    Guiding::Off | Guiding::Coherent => {
+                    Guiding::Off | Guiding::Coherent | Guiding::Grid => {
                         ctx.gather_packets(&t, &orders[k as usize], rotated, &mut sinks, counters);
                     }
                 }
             }
-            if settings.guiding != Guiding::Off && k + 1 < iterations {
-                guide = learn(records, nodes, counters);
+            if k + 1 < iterations {
+                match settings.guiding {
+                    Guiding::Off => {}
+                    Guiding::Grid => grid = learn_grid(records, counters),
+                    Guiding::Naive | Guiding::Coherent => {
+                        guide = learn(records, nodes, counters);
+                    }
+                }
             }
         }
     }
 
     /// Combines every valid texel's iterations and fills the tile's results and ρ sums.
-    fn finish_tile(&mut self, tile: u32, out: &mut [TexelResult]) -> TileRecord {
+    fn finish_tile(&mut self, tile: u32, out: &mut TileBuffer) -> TileRecord {
         let k = self.settings.iterations as usize;
         let gd = GraybillDeal::default();
         let mut record = TileRecord {
@@ -307,6 +360,12 @@ impl<'w> TileBaker<'w> {
             let combined = match self.settings.combine {
                 Combine::Average => average,
                 Combine::Texel => gd.combine(batches),
+                // Combined in the final pass, once every texel's variances give the weights;
+                // until then the plain average stands in.
+                Combine::Global => {
+                    out.batches[i as usize * k..(i as usize + 1) * k].copy_from_slice(batches);
+                    average
+                }
             };
             let mut flags = FLAG_BAKED | FLAG_VALID;
             if self.unguided[m] && self.settings.guiding != Guiding::Off {
@@ -327,7 +386,7 @@ impl<'w> TileBaker<'w> {
                 record.weighted_luminance += w;
                 record.texels += 1;
             }
-            out[i as usize] = TexelResult {
+            out.results[i as usize] = TexelResult {
                 irradiance: rgb,
                 gathered: self.gathered[m]
                     .mean_rgb()
@@ -362,6 +421,27 @@ fn learn<'n>(
     }
 }
 
+/// The grid comparator's next guide (`None`, counted, when learning saw no energy).
+fn learn_grid(records: &[Record], counters: &mut GatherCounters) -> Option<GridGuide> {
+    let grid = GridGuide::learn(records);
+    if grid.is_some() {
+        counters.iterations_guided += 1;
+    } else {
+        counters.iterations_unguided_no_energy += 1;
+    }
+    grid
+}
+
+/// The grid warp of eight points, one lane at a time (the comparator has no 8-wide warp).
+fn grid_sample8(g: &GridGuide, x: f32x8, y: f32x8) -> (f32x8, f32x8, f32x8) {
+    let (x, y) = (x.to_array(), y.to_array());
+    let (mut wx, mut wy, mut q) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+    for lane in 0..LANES {
+        ([wx[lane], wy[lane]], q[lane]) = g.sample([x[lane], y[lane]]);
+    }
+    (f32x8::from(wx), f32x8::from(wy), f32x8::from(q))
+}
+
 /// The relative standard error of a texel's pooled luminance mean (0 when unknown).
 fn relative_std_error(batches: &[Welford]) -> f32 {
     let mut pooled = Welford::new();
@@ -391,6 +471,13 @@ fn gather_texel(t: &TexelRecord, id: u64) -> GatherTexel {
     }
 }
 
+/// The guide an iteration samples: the paper's quadtree, or the grid comparator's bins.
+#[derive(Clone, Copy)]
+enum Learned<'a> {
+    Tree(&'a Guide<'a>),
+    Grid(&'a GridGuide),
+}
+
 /// Where one texel's samples go in one iteration.
 struct Sinks<'a> {
     /// The texel's estimator of this iteration (gathered + direct irradiance).
@@ -406,7 +493,7 @@ struct IterationCtx<'a> {
     world: &'a World,
     settings: &'a BakeSettings,
     k: u32,
-    guide: Option<&'a Guide<'a>>,
+    guide: Option<Learned<'a>>,
 }
 
 impl IterationCtx<'_> {
@@ -449,10 +536,11 @@ impl IterationCtx<'_> {
             let [sx, sy] = rotate_x8(sobol_2d_x8(index), rot);
             let (x, y) = (to_unit_x8(sx), to_unit_x8(sy));
             let (wx, wy, q) = match self.guide {
-                Some(g) => {
+                Some(Learned::Tree(g)) => {
                     let w = warp::sample8(g, x, y);
                     (w.x, w.y, w.pdf)
                 }
+                Some(Learned::Grid(g)) => grid_sample8(g, x, y),
                 None => (x, y, f32x8::ONE),
             };
             let [dx, dy, dz] = sample_cosine_hemisphere_x8([wx, wy]);
@@ -505,10 +593,11 @@ impl IterationCtx<'_> {
                 let p = rotate(sobol_2d(index), rot);
                 let u = [to_unit(p[0]), to_unit(p[1])];
                 let (w, q) = match self.guide {
-                    Some(g) => {
+                    Some(Learned::Tree(g)) => {
                         let s = warp::sample(g, u);
                         (s.u, s.pdf)
                     }
+                    Some(Learned::Grid(g)) => g.sample(u),
                     None => (u, 1.0),
                 };
                 let dir = self.to_world(t, sample_cosine_hemisphere(w));
@@ -685,16 +774,19 @@ mod tests {
     }
 
     /// `n` texels on the plane z = `z` around the origin, normal +z, footprint 1 cm.
+    /// Each lies on the triangle of [`quad`]'s pair that holds it when the quad is the ground
+    /// or the cube's floor (the first triangle where y ≤ x).
     fn texels_on_plane(n: usize, z: f32) -> Vec<TexelRecord> {
         (0..n)
-            .map(|i| TexelRecord {
-                position: [(i % 8) as f32 * 0.05 - 0.2, (i / 8) as f32 * 0.05 - 0.2, z],
+            .map(|i| (i, (i % 8) as f32 * 0.05 - 0.2, (i / 8) as f32 * 0.05 - 0.2))
+            .map(|(i, x, y)| TexelRecord {
+                position: [x, y, z],
                 normal: [0.0, 0.0, 1.0],
                 dpdu: [0.01, 0.0, 0.0],
                 dpdv: [0.0, 0.01, 0.0],
                 page: 0,
                 pixel: [(i % 8) as u16, (i / 8) as u16],
-                triangle: 0,
+                triangle: u32::from(y > x),
                 flags: TEXEL_VALID,
             })
             .collect()
@@ -709,8 +801,9 @@ mod tests {
         texels: &[TexelRecord],
     ) -> (Vec3, Vec3, GatherCounters) {
         let mut baker = TileBaker::new(world, settings);
-        let mut out = Vec::new();
+        let mut out = TileBuffer::default();
         let baked = baker.bake_tile(0, 1000, texels, &mut out);
+        let out = out.results;
         let sums = crate::output::journal::RhoSums::reduce(&[baked.record]);
         let rho = sums.rho() as f32;
         let values: Vec<Vec3> = out.iter().map(|r| Vec3::from(r.irradiance) * rho).collect();
@@ -734,7 +827,12 @@ mod tests {
         );
     }
 
-    const MODES: [Guiding; 3] = [Guiding::Off, Guiding::Naive, Guiding::Coherent];
+    const MODES: [Guiding; 4] = [
+        Guiding::Off,
+        Guiding::Naive,
+        Guiding::Coherent,
+        Guiding::Grid,
+    ];
 
     fn settings(guiding: Guiding) -> BakeSettings {
         BakeSettings {
@@ -804,14 +902,145 @@ mod tests {
         }
     }
 
+    /// A black ground under a black sky lit by `lights` only.
+    fn lit_world(lights: Vec<crate::scene::Light>) -> World {
+        let mut scene = scene(ground(), vec![grey(0.0, 0.0)], Sky::None, None);
+        scene.lights = lights;
+        World::new(&scene, Preset::DEFAULT).unwrap()
+    }
+
+    #[test]
+    fn a_sphere_light_facing_a_point_gives_pi_l_r_over_d_squared() {
+        let (radius, d, l) = (0.25f32, 2.0f32, Vec3::new(40.0, 20.0, 10.0));
+        let world = lit_world(vec![crate::scene::Light::Sphere {
+            center: Vec3::new(0.0, 0.0, d),
+            radius,
+            radiance: l,
+        }]);
+        // Texels within 0.2 m of the axis: the closed form holds at the axis; off it, the
+        // cosine and distance change by at most 1 % here, so use the mean over the texels.
+        let texels = texels_on_plane(64, 0.0);
+        let want = texels
+            .iter()
+            .map(|t| {
+                let p = Vec3::from(t.position);
+                let to = Vec3::new(0.0, 0.0, d) - p;
+                let (dist, cos) = (to.length(), to.normalize().z);
+                // Exact for a sphere seen from a point: π L sin²θmax · cos of its centre
+                // direction (the cone lies wholly above the horizon).
+                l * core::f32::consts::PI * (radius / dist).powi(2) * cos
+            })
+            .sum::<Vec3>()
+            / texels.len() as f32;
+        let on_axis = l * core::f32::consts::PI * (radius / d).powi(2);
+        assert!((want - on_axis).abs().max_element() < 0.02 * on_axis.max_element());
+        for mode in MODES {
+            let (mean, se, counters) = bake_mean(&world, settings(mode), &texels);
+            assert_within_3_sigma(&format!("{mode}"), (mean, se), want);
+            assert!(counters.shadow_rays > 0);
+        }
+    }
+
+    #[test]
+    fn point_and_spot_lights_follow_the_cosine_and_inverse_square_laws() {
+        use crate::transport::lights::spot_falloff;
+        let intensity = Vec3::new(8.0, 4.0, 2.0);
+        let position = Vec3::new(1.5, -0.5, 2.0);
+        let axis = (Vec3::new(0.4, 0.0, 0.0) - position).normalize();
+        // A penumbra wide against the 1 cm texels, whose origins are jittered over them.
+        let (inner, outer) = (0.05f32, 0.3f32);
+        let point = crate::scene::Light::Point {
+            position,
+            intensity,
+        };
+        let spot = crate::scene::Light::Spot {
+            position,
+            direction: axis,
+            intensity,
+            inner_cone: inner,
+            outer_cone: outer,
+        };
+        let texels = texels_on_plane(64, 0.0);
+        for (light, is_spot) in [(point, false), (spot, true)] {
+            let world = lit_world(vec![light]);
+            let mut baker = TileBaker::new(&world, settings(Guiding::Coherent));
+            let mut out = TileBuffer::default();
+            baker.bake_tile(0, 0, &texels, &mut out);
+            let out = out.results;
+            let mut dimmed = 0;
+            for (t, r) in texels.iter().zip(&out) {
+                let to = position - Vec3::from(t.position);
+                let mut want = intensity * to.normalize().z / to.length_squared();
+                if is_spot {
+                    want *= spot_falloff(-to.normalize().dot(axis), inner.cos(), outer.cos());
+                }
+                let full = intensity * to.normalize().z / to.length_squared();
+                dimmed += usize::from(want.x < 0.99 * full.x);
+                // A delta light: no noise beyond the origins jittered within the 1 cm texel.
+                let got = Vec3::from(r.irradiance);
+                assert!(
+                    (got - want).abs().max_element() < 0.01 * intensity.x / to.length_squared(),
+                    "spot {is_spot}: {got} vs {want}"
+                );
+            }
+            assert_eq!(dimmed > 0, is_spot, "{dimmed} texels in the spot's falloff");
+        }
+    }
+
+    #[test]
+    fn the_grid_comparator_learns_per_8x8_square_of_texels() {
+        let world = world(ground(), grey(0.5, 0.0), Vec3::ONE, None);
+        // A 16×16-texel tile: four squares of 8×8.
+        let texels: Vec<TexelRecord> = (0..256)
+            .map(|i| {
+                let mut t = texels_on_plane(1, 0.0)[0];
+                t.pixel = [(i % 16) as u16, (i / 16) as u16];
+                t.position = [(i % 16) as f32 * 0.02, (i / 16) as f32 * 0.02, 0.0];
+                t.triangle = u32::from(t.position[1] > t.position[0]);
+                t
+            })
+            .collect();
+        let settings = BakeSettings {
+            spp: 64,
+            iterations: 3,
+            guiding: Guiding::Grid,
+            ..Default::default()
+        };
+        let mut baker = TileBaker::new(&world, settings);
+        baker.bake_tile(0, 0, &texels, &mut TileBuffer::default());
+        assert_eq!(baker.counters.clusters, 4, "{:?}", baker.counters);
+        assert_eq!(
+            baker.counters.iterations_guided,
+            4 * 2,
+            "every square learns after iterations 0 and 1"
+        );
+        let squares: Vec<Vec<(u16, u16)>> = baker.ranges[..4]
+            .iter()
+            .map(|r| {
+                baker.permutation[r.start as usize..r.end as usize]
+                    .iter()
+                    .map(|&m| {
+                        let p = texels[baker.valid[m as usize] as usize].pixel;
+                        (p[0] / 8, p[1] / 8)
+                    })
+                    .collect()
+            })
+            .collect();
+        for sq in &squares {
+            assert_eq!(sq.len(), 64);
+            assert!(sq.iter().all(|&s| s == sq[0]), "one square per group");
+        }
+    }
+
     #[test]
     fn invalid_texels_are_skipped_and_counted() {
         let world = world(ground(), grey(0.5, 0.0), Vec3::ONE, None);
         let mut texels = texels_on_plane(16, 0.0);
         texels[3].flags = 0;
         let mut baker = TileBaker::new(&world, settings(Guiding::Coherent));
-        let mut out = Vec::new();
+        let mut out = TileBuffer::default();
         let baked = baker.bake_tile(5, 0, &texels, &mut out);
+        let out = out.results;
         assert_eq!(out[3], TexelResult::default());
         assert_eq!(baker.counters.texels_invalid_skipped, 1);
         assert_eq!(baked.record.texels, 15);
@@ -830,9 +1059,9 @@ mod tests {
         let world = world(tris, grey(0.5, 0.0), Vec3::ONE, None);
         let texels = texels_on_plane(40, 0.0);
         let run = || {
-            let mut out = Vec::new();
+            let mut out = TileBuffer::default();
             TileBaker::new(&world, settings(Guiding::Coherent)).bake_tile(0, 7, &texels, &mut out);
-            out
+            out.results
         };
         assert_eq!(
             bytemuck::cast_slice::<_, u8>(&run()),

@@ -6,6 +6,7 @@
 //! tiles to the [result file and journal](crate::output).
 
 pub mod gather;
+pub mod grid;
 pub mod pipeline;
 pub mod run;
 pub mod settings;

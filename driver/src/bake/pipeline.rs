@@ -25,7 +25,33 @@ use crossbeam::channel;
 
 use crate::output::OutputFileError;
 use crate::output::journal::{Journal, TileRecord};
-use crate::output::result_file::{ResultFile, TexelResult};
+use crate::output::result_file::{BatchFile, ResultFile, TexelResult};
+use guidebake_kernels::estimator::Welford;
+
+/// One tile's output, in a buffer of the pool.
+#[derive(Debug, Default)]
+pub struct TileBuffer {
+    /// One result per texel of the tile.
+    pub results: Vec<TexelResult>,
+    /// Every texel's per-iteration batches (K per texel), when a batch file is written.
+    pub batches: Vec<Welford>,
+}
+
+impl TileBuffer {
+    fn clear(&mut self) {
+        self.results.clear();
+        self.batches.clear();
+    }
+}
+
+/// Where finished tiles go: the result file and, for `--combine global`, the batch file.
+#[derive(Clone, Copy, Debug)]
+pub struct TileFiles<'a> {
+    /// The results.
+    pub results: &'a ResultFile,
+    /// The per-iteration batches, if kept.
+    pub batches: Option<&'a BatchFile>,
+}
 
 /// What a worker produced for one tile.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -89,7 +115,7 @@ pub enum PipelineError {
 pub fn run<W, M, B>(
     config: PipelineConfig,
     tiles: &[u32],
-    results: &ResultFile,
+    files: TileFiles<'_>,
     journal: &mut Journal,
     cancel: &AtomicBool,
     make_worker: M,
@@ -98,7 +124,7 @@ pub fn run<W, M, B>(
 ) -> Result<PipelineReport, PipelineError>
 where
     M: Fn() -> W + Sync,
-    B: Fn(&mut W, u32, &mut Vec<TexelResult>) -> TileBaked + Sync,
+    B: Fn(&mut W, u32, &mut TileBuffer) -> TileBaked + Sync,
 {
     let threads = config.threads.max(1);
     let window = config.window.max(1);
@@ -111,20 +137,20 @@ where
             why: e.to_string(),
         })?;
 
-    let (free_tx, free_rx) = channel::bounded::<Vec<TexelResult>>(window);
+    let (free_tx, free_rx) = channel::bounded::<TileBuffer>(window);
     for _ in 0..window {
         free_tx
-            .send(Vec::new())
+            .send(TileBuffer::default())
             .expect("the pool holds exactly `window` buffers");
     }
-    let (done_tx, done_rx) = channel::bounded::<(TileBaked, Vec<TexelResult>)>(window);
+    let (done_tx, done_rx) = channel::bounded::<(TileBaked, TileBuffer)>(window);
     let next = AtomicUsize::new(0);
     let in_flight = AtomicUsize::new(0);
     let max_in_flight = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
 
-    let worker = |free_rx: &channel::Receiver<Vec<TexelResult>>,
-                  done_tx: &channel::Sender<(TileBaked, Vec<TexelResult>)>| {
+    let worker = |free_rx: &channel::Receiver<TileBuffer>,
+                  done_tx: &channel::Sender<(TileBaked, TileBuffer)>| {
         let mut state = make_worker();
         loop {
             if cancel.load(Ordering::Relaxed) || stop.load(Ordering::Relaxed) {
@@ -157,7 +183,7 @@ where
             });
         });
         let writer = Writer {
-            results,
+            files,
             journal,
             commit_every: config.commit_every.max(1),
         };
@@ -174,7 +200,7 @@ where
 
 /// The writer's side: write each tile in place, hand its buffer back, commit in batches.
 struct Writer<'a> {
-    results: &'a ResultFile,
+    files: TileFiles<'a>,
     journal: &'a mut Journal,
     commit_every: usize,
 }
@@ -182,15 +208,15 @@ struct Writer<'a> {
 impl Writer<'_> {
     fn drain(
         mut self,
-        done_rx: channel::Receiver<(TileBaked, Vec<TexelResult>)>,
-        free_tx: channel::Sender<Vec<TexelResult>>,
+        done_rx: channel::Receiver<(TileBaked, TileBuffer)>,
+        free_tx: channel::Sender<TileBuffer>,
         in_flight: &AtomicUsize,
         progress: &mut dyn FnMut(&TileBaked),
     ) -> Result<PipelineReport, PipelineError> {
         let mut report = PipelineReport::default();
         let mut pending: Vec<TileRecord> = Vec::with_capacity(self.commit_every);
         for (baked, buffer) in done_rx.iter() {
-            let written = self.results.write(baked.first_texel, &buffer);
+            let written = self.write(baked.first_texel, &buffer);
             in_flight.fetch_sub(1, Ordering::Relaxed);
             let _ = free_tx.send(buffer);
             written?;
@@ -204,6 +230,14 @@ impl Writer<'_> {
         Ok(report)
     }
 
+    fn write(&self, first_texel: u64, buffer: &TileBuffer) -> Result<(), OutputFileError> {
+        self.files.results.write(first_texel, &buffer.results)?;
+        if let Some(batches) = self.files.batches {
+            batches.write(first_texel, &buffer.batches)?;
+        }
+        Ok(())
+    }
+
     /// Results first, journal second: a journalled tile's results are always on disk.
     fn commit(
         &mut self,
@@ -213,7 +247,10 @@ impl Writer<'_> {
         if pending.is_empty() {
             return Ok(());
         }
-        self.results.sync()?;
+        self.files.results.sync()?;
+        if let Some(batches) = self.files.batches {
+            batches.sync()?;
+        }
         self.journal.append(pending)?;
         report.tiles_committed += pending.len();
         report.commits += 1;
@@ -235,14 +272,14 @@ mod tests {
 
     /// A stand-in for the real tile bake: deterministic per texel, with a per-worker
     /// scratch buffer to show state is per thread.
-    fn fake_bake(scratch: &mut Vec<f32>, tile: u32, out: &mut Vec<TexelResult>) -> TileBaked {
+    fn fake_bake(scratch: &mut Vec<f32>, tile: u32, out: &mut TileBuffer) -> TileBaked {
         let first = u64::from(tile) * TILE_TEXELS;
         scratch.clear();
         let (mut unweighted, mut weighted) = (0.0, 0.0);
         for t in first..first + TILE_TEXELS {
             let x = ((t * 2_654_435_761) % 1000) as f32 / 97.0;
             scratch.push(x);
-            out.push(TexelResult {
+            out.results.push(TexelResult {
                 irradiance: [x, x * 0.5, 1.0 / (1.0 + x)],
                 samples: 64,
                 ..Default::default()
@@ -296,7 +333,10 @@ mod tests {
             run(
                 config,
                 &tiles,
-                &results,
+                TileFiles {
+                    results: &results,
+                    batches: None,
+                },
                 &mut journal,
                 &cancel,
                 Vec::new,
@@ -375,7 +415,10 @@ mod tests {
         let err = run(
             config,
             &tiles,
-            &read_only,
+            TileFiles {
+                results: &read_only,
+                batches: None,
+            },
             &mut journal,
             &cancel,
             Vec::new,

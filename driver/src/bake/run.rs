@@ -19,8 +19,8 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use super::gather::{GatherCounters, TileBaker};
-use super::pipeline::{self, PipelineConfig, PipelineError};
-use super::settings::{BakeSettings, SettingsError};
+use super::pipeline::{self, PipelineConfig, PipelineError, TileBuffer, TileFiles};
+use super::settings::{BakeSettings, Combine, MAX_ITERATIONS, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::world::World;
 use crate::bvh::{BvhError, Preset};
@@ -28,10 +28,13 @@ use crate::output::OutputFileError;
 use crate::output::exr_pages::{PageImage, PageWriteError, page_path, temporary_name};
 use crate::output::fnv1a64;
 use crate::output::journal::{Journal, RhoSums, TileRecord, dedup_tiles};
-use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
+use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
 use crate::scene::Scene;
 use crate::texels::{TexelFile, TexelFileError};
 use crate::transport::series::{PreviousPass, PreviousPassWriter};
+use guidebake_kernels::estimator::{
+    IterationVariance, RhoAccumulator, TexelEstimate, Welford, combine_weighted, plain_average,
+};
 
 /// Pixels of padding around every chart in the written pages.
 pub const DILATION_PIXELS: u32 = 2;
@@ -72,6 +75,11 @@ pub struct Manifest {
     pub aux: bool,
     /// Passes over the world (series transport's bounces); the last one is the lightmap.
     pub passes: u32,
+    /// Whether the final pass combines the kept batches with global weights
+    /// (`--combine global`).
+    pub combine_global: bool,
+    /// Learning iterations (batches per texel in the batch file).
+    pub iterations: u32,
     /// The settings, for people.
     pub settings: String,
 }
@@ -185,7 +193,19 @@ fn texel_file_id(texels: &TexelFile) -> u64 {
     fnv1a64(bytemuck::bytes_of(texels.header()))
 }
 
-/// Bakes `job` over `scene`. `cancel` (a Ctrl-C flag) stops it early with its work kept.
+/// How far a bake is, as [`bake_with_progress`] reports it after every tile.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Progress {
+    /// Texels done, over every pass (a resumed run counts what its journals hold).
+    pub texels_done: u64,
+    /// Texels to do, over every pass.
+    pub texels_total: u64,
+    /// Rays this run has traced so far (all kinds).
+    pub rays: u64,
+}
+
+/// Bakes `job` over `scene`. `cancel` (a Ctrl-C flag) stops it early with its work kept;
+/// `progress(done, total)` counts texels over every pass.
 ///
 /// # Errors
 /// A [`BakeError`] naming the file or option at fault; work committed before the error stays
@@ -195,6 +215,21 @@ pub fn bake(
     scene: &Scene,
     cancel: &AtomicBool,
     progress: &mut dyn FnMut(u64, u64),
+) -> Result<BakeReport, BakeError> {
+    bake_with_progress(job, scene, cancel, &mut |p: Progress| {
+        progress(p.texels_done, p.texels_total);
+    })
+}
+
+/// [`bake`] with the rays traced in each report too (the progress bar's rays/s).
+///
+/// # Errors
+/// As [`bake`].
+pub fn bake_with_progress(
+    job: &BakeJob,
+    scene: &Scene,
+    cancel: &AtomicBool,
+    progress: &mut dyn FnMut(Progress),
 ) -> Result<BakeReport, BakeError> {
     job.settings.validate()?;
     if job.shard.count > 1 && job.settings.passes() > 1 {
@@ -231,12 +266,16 @@ pub fn bake(
         bias_correction: job.settings.bias_correction,
         aux: job.aux,
         passes,
+        combine_global: job.settings.combine == Combine::Global,
+        iterations: job.settings.iterations,
         settings: format!("{:?}", job.settings),
     };
     open_work(&dir, &manifest, job.resume)?;
     let pass_texels = shard_texels(&texels, job.shard);
-    let total = pass_texels * u64::from(passes);
-    let mut texels_done = 0u64;
+    let mut now = Progress {
+        texels_total: pass_texels * u64::from(passes),
+        ..Default::default()
+    };
     let clock = Instant::now();
     for pass in 1..=passes {
         if pass > 1 {
@@ -251,9 +290,10 @@ pub fn bake(
             pass,
             bake_id,
             cancel,
-            &mut |n| {
-                texels_done += n;
-                progress(texels_done, total);
+            &mut |texels, rays| {
+                now.texels_done += texels;
+                now.rays += rays;
+                progress(now);
             },
         )?;
         report.tiles_baked += run.tiles_baked;
@@ -263,7 +303,7 @@ pub fn bake(
             report.interrupted = true;
             break;
         }
-        texels_done = pass_texels * u64::from(pass);
+        now.texels_done = pass_texels * u64::from(pass);
     }
     report.passes = passes;
     report.seconds.gather = clock.elapsed().as_secs_f64() - report.seconds.previous_pass_images;
@@ -313,11 +353,23 @@ fn bake_pass(
     pass: u32,
     bake_id: u64,
     cancel: &AtomicBool,
-    progress: &mut dyn FnMut(u64),
+    progress: &mut dyn FnMut(u64, u64),
 ) -> Result<PassRun, BakeError> {
     let tile_count = texels.tiles().len() as u32;
     let (results, mut journal, done) =
         open_pass(dir, pass, bake_id, texels.header().texel_count, tile_count)?;
+    // Global weights combine the last pass's batches once the whole world is baked.
+    let batches = (job.settings.combine == Combine::Global && pass == job.settings.passes())
+        .then(|| {
+            open_batches(
+                dir,
+                bake_id,
+                texels.header().texel_count,
+                job.settings.iterations,
+                !done.is_empty(),
+            )
+        })
+        .transpose()?;
     let todo = tiles_to_bake(
         tile_count,
         job.shard,
@@ -327,6 +379,7 @@ fn bake_pass(
         done.iter()
             .map(|r| u64::from(texels.tiles()[r.tile as usize].texel_count))
             .sum(),
+        0,
     );
     let counters = Mutex::new(GatherCounters::default());
     let config = PipelineConfig {
@@ -338,27 +391,31 @@ fn bake_pass(
         baker: TileBaker::new(world, job.settings),
         sink: &counters,
     };
-    let bake_tile = |w: &mut CountedBaker<'_, '_>, tile: u32, out: &mut Vec<TexelResult>| {
+    let bake_tile = |w: &mut CountedBaker<'_, '_>, tile: u32, out: &mut TileBuffer| {
         let record = &texels.tiles()[tile as usize];
-        w.baker.bake_tile(
+        let baked = w.baker.bake_tile(
             tile,
             record.first_texel,
             texels.tile_texels(tile as usize),
             out,
-        )
+        );
+        texels.release_tile(tile as usize);
+        baked
     };
     let pipeline = pipeline::run(
         config,
         &todo,
-        &results,
+        TileFiles {
+            results: &results,
+            batches: batches.as_ref(),
+        },
         &mut journal,
         cancel,
         make_worker,
         bake_tile,
         &mut |b| {
-            progress(u64::from(
-                texels.tiles()[b.record.tile as usize].texel_count,
-            ))
+            let texel_count = texels.tiles()[b.record.tile as usize].texel_count;
+            progress(u64::from(texel_count), b.record.rays);
         },
     )?;
     let counters = *counters.lock().expect("no worker panicked");
@@ -489,6 +546,28 @@ fn open_pass(
     Ok((results, journal, Vec::new()))
 }
 
+/// Opens the batch file of `--combine global` (`resume`: the one a resumed pass wrote
+/// into), or creates it.
+fn open_batches(
+    dir: &Path,
+    bake_id: u64,
+    texel_count: u64,
+    iterations: u32,
+    resume: bool,
+) -> Result<BatchFile, BakeError> {
+    let path = dir.join("batches.bin");
+    if resume && path.exists() {
+        let (file, _) = BatchFile::open(&path, true, Some((texel_count, bake_id)))?;
+        return Ok(file);
+    }
+    Ok(BatchFile::create_with(
+        &path,
+        texel_count,
+        iterations,
+        bake_id,
+    )?)
+}
+
 /// The result file and journal of pass `pass` (1-based) in a work directory.
 fn pass_files(dir: &Path, pass: u32) -> (PathBuf, PathBuf) {
     (
@@ -530,8 +609,11 @@ pub struct Written {
 /// bakes, a tile not baked, a page that cannot be written.
 pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Written, BakeError> {
     let shards = open_shards(texels, dirs)?;
-    let first = &shards[0].0;
-    let mut all: Vec<TileRecord> = shards.iter().flat_map(|s| s.2.iter().copied()).collect();
+    let first = &shards[0].manifest;
+    let mut all: Vec<TileRecord> = shards
+        .iter()
+        .flat_map(|s| s.records.iter().copied())
+        .collect();
     dedup_tiles(&mut all);
     let tile_count = texels.tiles().len();
     if all.len() != tile_count {
@@ -544,21 +626,28 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
             all.len()
         )));
     }
-    let rho = if first.bias_correction {
-        RhoSums::reduce(&all).rho()
-    } else {
-        1.0
+    let batches = open_batch_files(texels, &shards)?;
+    let global = batches
+        .as_deref()
+        .map(|files| global_weights(texels, &shards, files))
+        .transpose()?;
+    let rho = match (first.bias_correction, &global) {
+        (false, _) => 1.0,
+        (true, None) => RhoSums::reduce(&all).rho(),
+        (true, Some(g)) => g.rho,
     };
     let mut written = Written {
         rho,
         ..Default::default()
     };
+    let k = first.iterations as usize;
+    let mut texel_batches = Vec::new();
     let page_count = texels.pages().len() as u32;
     for (page, size) in texels.pages().iter().enumerate() {
         let mut image = PageImage::new(size.width, size.height);
         let aux = first
             .aux
-            .then(|| ["samples", "rel_std_error", "validity"].map(|c| image.add_aux_channel(c)));
+            .then(|| AUX_CHANNELS.map(|c| image.add_aux_channel(c)));
         let mut buffer = Vec::new();
         for (t, tile) in texels
             .tiles()
@@ -566,22 +655,36 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
             .enumerate()
             .filter(|(_, t)| t.page as usize == page)
         {
-            let (_, results, _) = &shards[t % shards.len()];
+            let results = &shards[t % shards.len()].results;
             buffer.resize(tile.texel_count as usize, TexelResult::default());
             results.read(tile.first_texel, &mut buffer)?;
-            for (texel, r) in texels.tile_texels(t).iter().zip(&buffer) {
+            if let (Some(files), Some(_)) = (&batches, &global) {
+                texel_batches.resize(buffer.len() * k, Welford::new());
+                files[t % files.len()].read(tile.first_texel, &mut texel_batches)?;
+            }
+            for (i, (texel, r)) in texels.tile_texels(t).iter().zip(&buffer).enumerate() {
                 if r.flags & FLAG_BAKED == 0 {
                     continue;
                 }
                 let [x, y] = texel.pixel.map(u32::from);
-                let rgb = r.irradiance.map(|c| (f64::from(c) * rho) as f32);
+                let irradiance = match &global {
+                    Some(g) => g.combine(&texel_batches[i * k..(i + 1) * k]),
+                    None => r.irradiance.map(f64::from),
+                };
+                let rgb = irradiance.map(|c| (c * rho) as f32);
                 if !image.set(x, y, rgb) {
                     written.non_finite_pixels += 1;
                 }
-                if let Some([samples, error, validity]) = aux {
+                if let Some([samples, error, validity, px, py, pz, nx, ny, nz]) = aux {
                     image.set_aux(samples, x, y, r.samples as f32);
                     image.set_aux(error, x, y, r.rel_std_error);
                     image.set_aux(validity, x, y, 1.0);
+                    for (c, v) in [px, py, pz].into_iter().zip(texel.position) {
+                        image.set_aux(c, x, y, v);
+                    }
+                    for (c, v) in [nx, ny, nz].into_iter().zip(texel.normal) {
+                        image.set_aux(c, x, y, v);
+                    }
                 }
             }
         }
@@ -598,11 +701,112 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
     Ok(written)
 }
 
-/// Opens the work directories in shard order and checks they belong to one bake.
-fn open_shards(
+/// The auxiliary EXR channels of `--aux`: gather samples, relative standard error of the
+/// luminance, validity (1 where a texel was baked), world position and normal.
+pub const AUX_CHANNELS: [&str; 9] = [
+    "samples",
+    "rel_std_error",
+    "validity",
+    "P.X",
+    "P.Y",
+    "P.Z",
+    "N.X",
+    "N.Y",
+    "N.Z",
+];
+
+/// The shards' batch files when the bake combines with global weights (in shard order).
+fn open_batch_files(
     texels: &TexelFile,
-    dirs: &[PathBuf],
-) -> Result<Vec<(Manifest, ResultFile, Vec<TileRecord>)>, BakeError> {
+    shards: &[ShardWork],
+) -> Result<Option<Vec<BatchFile>>, BakeError> {
+    if !shards[0].manifest.combine_global {
+        return Ok(None);
+    }
+    let mut files = Vec::new();
+    for shard in shards {
+        let (file, _) = BatchFile::open(
+            &shard.dir.join("batches.bin"),
+            false,
+            Some((texels.header().texel_count, shard.manifest.bake_id)),
+        )?;
+        files.push(file);
+    }
+    Ok(Some(files))
+}
+
+/// Müller's global per-iteration weights, from every baked texel's batches, and the ρ they
+/// give (which is ~1: the weights do not depend on a texel's own samples).
+struct GlobalWeights {
+    weights: [f64; MAX_ITERATIONS],
+    rho: f64,
+}
+
+impl GlobalWeights {
+    /// A texel's irradiance combined with the global weights (zero when it has no samples).
+    fn combine(&self, batches: &[Welford]) -> [f64; 3] {
+        match combine_weighted(batches, &self.weights) {
+            TexelEstimate::Value(e) => e.rgb,
+            TexelEstimate::NoSamples { .. } => [0.0; 3],
+        }
+    }
+}
+
+/// Streams every shard's batches twice: the per-iteration variances give the weights, then the
+/// weighted and unweighted luminance sums give ρ. Exact sums: any shard split, same bits.
+fn global_weights(
+    texels: &TexelFile,
+    shards: &[ShardWork],
+    files: &[BatchFile],
+) -> Result<GlobalWeights, BakeError> {
+    let k = shards[0].manifest.iterations as usize;
+    let mut variance = IterationVariance::<MAX_ITERATIONS>::new();
+    let mut g = GlobalWeights {
+        weights: [0.0; MAX_ITERATIONS],
+        rho: 1.0,
+    };
+    let mut rho = RhoAccumulator::default();
+    for second in [false, true] {
+        let (mut results, mut batches) = (Vec::new(), Vec::new());
+        for (t, tile) in texels.tiles().iter().enumerate() {
+            results.resize(tile.texel_count as usize, TexelResult::default());
+            batches.resize(tile.texel_count as usize * k, Welford::new());
+            shards[t % shards.len()]
+                .results
+                .read(tile.first_texel, &mut results)?;
+            files[t % files.len()].read(tile.first_texel, &mut batches)?;
+            for (i, r) in results.iter().enumerate() {
+                let texel = &batches[i * k..(i + 1) * k];
+                if r.flags & FLAG_BAKED == 0 {
+                    continue;
+                }
+                if second {
+                    rho.add_texel(&plain_average(texel), &combine_weighted(texel, &g.weights));
+                } else {
+                    variance.add_texel(texel);
+                }
+            }
+        }
+        if !second {
+            g.weights = variance.weights();
+        }
+    }
+    g.rho = rho.rho();
+    Ok(g)
+}
+
+/// One shard's finished work, opened for the final pass.
+struct ShardWork {
+    manifest: Manifest,
+    dir: PathBuf,
+    /// The last pass's results.
+    results: ResultFile,
+    /// The last pass's journal records.
+    records: Vec<TileRecord>,
+}
+
+/// Opens the work directories in shard order and checks they belong to one bake.
+fn open_shards(texels: &TexelFile, dirs: &[PathBuf]) -> Result<Vec<ShardWork>, BakeError> {
     let mut shards = Vec::new();
     for dir in dirs {
         let manifest = read_manifest(&dir.join("manifest.json"))?;
@@ -617,23 +821,28 @@ fn open_shards(
             false,
             Some((texels.tiles().len() as u32, manifest.bake_id)),
         )?;
-        shards.push((manifest, results, records));
+        shards.push(ShardWork {
+            manifest,
+            dir: dir.clone(),
+            results,
+            records,
+        });
     }
-    let Some(first) = shards.first().map(|s| s.0.clone()) else {
+    let Some(first) = shards.first().map(|s| s.manifest.clone()) else {
         return Err(BakeError::Mismatch("no work directories to finish".into()));
     };
-    shards.sort_by_key(|s| s.0.shard_index);
+    shards.sort_by_key(|s| s.manifest.shard_index);
     let count = first.shard_count as usize;
-    let indices: Vec<u32> = shards.iter().map(|s| s.0.shard_index).collect();
+    let indices: Vec<u32> = shards.iter().map(|s| s.manifest.shard_index).collect();
     if shards.len() != count || indices != (0..count as u32).collect::<Vec<_>>() {
         return Err(BakeError::Mismatch(format!(
             "shards {indices:?} given; a bake of {count} shards needs each of 0..{count} once"
         )));
     }
-    if let Some(other) = shards.iter().find(|s| s.0.bake_id != first.bake_id) {
+    if let Some(other) = shards.iter().find(|s| s.manifest.bake_id != first.bake_id) {
         return Err(BakeError::Mismatch(format!(
             "shard {} belongs to another bake (other settings or texel file) than shard {}",
-            other.0.shard_index, first.shard_index
+            other.manifest.shard_index, first.shard_index
         )));
     }
     Ok(shards)

@@ -14,6 +14,9 @@ pub enum Guiding {
     Naive,
     /// Presorted packets, rotated per texel, warped 8-wide and traced as packets (paper §2.4).
     Coherent,
+    /// The comparator of the HWRTL baker and Unreal's first-bounce guiding: a 16×16-bin
+    /// density per 8×8-texel square, sampled per lane, traced as packets.
+    Grid,
 }
 
 /// How a texel's iterations are combined (paper §2.5).
@@ -23,6 +26,10 @@ pub enum Combine {
     Average,
     /// Graybill–Deal per texel: iterations weighted by the inverse variance of their means.
     Texel,
+    /// Müller et al.'s production scheme: one weight per iteration for the whole world, ∝ 1 /
+    /// the mean over all texels of that iteration's variance; unbiased, needs no ρ. The
+    /// iterations' batches are kept in a file and combined in the final pass.
+    Global,
 }
 
 /// How the radiance a gather ray brings back from its hit is computed (DESIGN.md, light
@@ -60,6 +67,9 @@ pub struct BakeSettings {
     pub bounces: u32,
 }
 
+/// Most learning iterations a bake may ask for.
+pub const MAX_ITERATIONS: usize = 16;
+
 /// Most bounces a bake may ask for.
 pub const MAX_BOUNCES: u32 = 64;
 
@@ -96,9 +106,9 @@ impl BakeSettings {
     /// # Errors
     /// [`SettingsError`] saying which option is out of range and why.
     pub fn validate(&self) -> Result<(), SettingsError> {
-        if self.iterations == 0 || self.iterations > 16 {
+        if self.iterations == 0 || self.iterations as usize > MAX_ITERATIONS {
             return Err(SettingsError(format!(
-                "--iterations {}: between 1 and 16 learning iterations",
+                "--iterations {}: between 1 and {MAX_ITERATIONS} learning iterations",
                 self.iterations
             )));
         }
@@ -161,6 +171,17 @@ impl fmt::Display for Guiding {
             Guiding::Off => "off",
             Guiding::Naive => "naive",
             Guiding::Coherent => "coherent",
+            Guiding::Grid => "grid",
+        })
+    }
+}
+
+impl fmt::Display for Combine {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Combine::Average => "average",
+            Combine::Texel => "texel",
+            Combine::Global => "global",
         })
     }
 }

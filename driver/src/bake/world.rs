@@ -381,6 +381,15 @@ pub fn lights_of(scene: &Scene) -> Vec<Light> {
                 cos_inner: inner_cone.cos(),
                 cos_outer: outer_cone.cos(),
             },
+            scene::Light::Sphere {
+                center,
+                radius,
+                radiance,
+            } => Light::Sphere {
+                center,
+                radius,
+                radiance,
+            },
         })
         .collect();
     if let Some(sun) = &scene.sun {

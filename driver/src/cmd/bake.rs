@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::bake::run::{BakeJob, BakeReport, bake, work_dir};
+use crate::bake::run::{BakeJob, BakeReport, Progress, bake_with_progress, work_dir};
 use crate::bake::settings::{BakeSettings, Combine, Guiding, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
@@ -131,19 +131,22 @@ pub fn run_with_progress(job: &BakeJob, scene: &Scene) -> Result<BakeReport, sup
         let bar = indicatif::ProgressBar::new(0);
         bar.set_style(
             indicatif::ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} texels  {per_sec}  ETA {eta}",
+                "{bar:40} {pos}/{len} texels  {per_sec}  {msg}  ETA {eta}",
             )
             .expect("a valid template"),
         );
         bar
     });
-    let mut progress = |done: u64, total: u64| {
+    let start = std::time::Instant::now();
+    let mut progress = |p: Progress| {
         if let Some(bar) = &bar {
-            bar.set_length(total);
-            bar.set_position(done);
+            bar.set_length(p.texels_total);
+            bar.set_position(p.texels_done);
+            let seconds = start.elapsed().as_secs_f64().max(1e-3);
+            bar.set_message(format!("{:.1} Mrays/s", p.rays as f64 / seconds / 1e6));
         }
     };
-    let report = bake(job, scene, &cancel, &mut progress)?;
+    let report = bake_with_progress(job, scene, &cancel, &mut progress)?;
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }

@@ -8,12 +8,18 @@
 //!
 //! The header carries the identity of the bake (a hash of its settings and of its texel file)
 //! so that `--resume` refuses to continue a different bake's results.
+//!
+//! The same layout, with its own magic, holds the *batch file* of `--combine global`
+//! ([`BatchFile`]): every texel's K per-iteration [`Welford`] batches, combined in the final
+//! pass once the global per-iteration weights are known.
 
 use std::fs::File;
+use std::marker::PhantomData;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use bytemuck::{Pod, Zeroable};
+use guidebake_kernels::estimator::Welford;
 
 use super::{OutputFileError, create_with_header, io_error, open_with_header};
 
@@ -77,38 +83,88 @@ pub struct ResultHeader {
 
 const _: () = assert!(size_of::<ResultHeader>() as u64 == RESULT_HEADER_BYTES);
 
-/// A result file open for writing (a bake) or reading (the final pass, `merge`).
+/// A record kept per texel in a file of its own kind: the bake's [`TexelResult`]s, or the
+/// iterations' [`Welford`] batches that `--combine global` combines at the end.
+pub trait PerTexel: Pod {
+    /// The file's magic.
+    const MAGIC: [u8; 8];
+    /// The file's format version.
+    const VERSION: u32;
+    /// The file's kind, in messages.
+    const KIND: &'static str;
+}
+
+impl PerTexel for TexelResult {
+    const MAGIC: [u8; 8] = RESULT_MAGIC;
+    const VERSION: u32 = RESULT_VERSION;
+    const KIND: &'static str = "result file";
+}
+
+impl PerTexel for Welford {
+    const MAGIC: [u8; 8] = *b"GBBATCH\0";
+    const VERSION: u32 = 1;
+    const KIND: &'static str = "batch file";
+}
+
+/// A file of `T` records, `per_texel` of them for each texel, open for writing (a bake) or
+/// reading (the final pass, `merge`).
 #[derive(Debug)]
-pub struct ResultFile {
+pub struct RecordFile<T> {
     file: File,
     path: PathBuf,
     texel_count: u64,
+    per_texel: u64,
+    record: PhantomData<T>,
 }
 
-impl ResultFile {
+/// The bake's result file: one [`TexelResult`] per texel.
+pub type ResultFile = RecordFile<TexelResult>;
+
+/// The iterations' batches of every texel (`--combine global`): K [`Welford`]s per texel.
+pub type BatchFile = RecordFile<Welford>;
+
+impl<T: PerTexel> RecordFile<T> {
     /// Creates (or truncates) the file at `path` for `texel_count` texels of bake `bake_id`,
-    /// preallocated sparse at its full size and synced.
+    /// one record each, preallocated sparse at its full size and synced.
     ///
     /// # Errors
     /// [`OutputFileError::Io`] when the file cannot be created, sized or synced.
     pub fn create(path: &Path, texel_count: u64, bake_id: u64) -> Result<Self, OutputFileError> {
+        Self::create_with(path, texel_count, 1, bake_id)
+    }
+
+    /// [`Self::create`] with `per_texel` records for each texel.
+    ///
+    /// # Errors
+    /// [`OutputFileError::Io`] when the file cannot be created, sized or synced.
+    pub fn create_with(
+        path: &Path,
+        texel_count: u64,
+        per_texel: u32,
+        bake_id: u64,
+    ) -> Result<Self, OutputFileError> {
+        let too_big = || OutputFileError::Mismatch {
+            path: path.to_owned(),
+            what: format!("{texel_count} texels of {per_texel} records do not fit in a file"),
+        };
+        let record_bytes =
+            u32::try_from(size_of::<T>() * per_texel.max(1) as usize).map_err(|_| too_big())?;
         let header = ResultHeader {
-            magic: RESULT_MAGIC,
-            version: RESULT_VERSION,
-            record_bytes: size_of::<TexelResult>() as u32,
+            magic: T::MAGIC,
+            version: T::VERSION,
+            record_bytes,
             texel_count,
             bake_id,
             reserved: [0; 4],
         };
-        let len = records_end(texel_count).ok_or_else(|| OutputFileError::Mismatch {
-            path: path.to_owned(),
-            what: format!("{texel_count} texels do not fit in a file"),
-        })?;
+        let len = records_end(texel_count, u64::from(record_bytes)).ok_or_else(too_big)?;
         let file = create_with_header(path, &bytemuck::cast(header), len)?;
         Ok(Self {
             file,
             path: path.to_owned(),
             texel_count,
+            per_texel: u64::from(per_texel.max(1)),
+            record: PhantomData,
         })
     }
 
@@ -124,21 +180,20 @@ impl ResultFile {
         writable: bool,
         expect: Option<(u64, u64)>,
     ) -> Result<(Self, ResultHeader), OutputFileError> {
-        let (file, len, bytes) =
-            open_with_header(path, writable, "result file", RESULT_MAGIC, RESULT_VERSION)?;
+        let (file, len, bytes) = open_with_header(path, writable, T::KIND, T::MAGIC, T::VERSION)?;
         let header: ResultHeader = bytemuck::cast(bytes);
         let mismatch = |what: String| OutputFileError::Mismatch {
             path: path.to_owned(),
             what,
         };
-        if header.record_bytes as usize != size_of::<TexelResult>() {
+        let record_bytes = header.record_bytes as usize;
+        if record_bytes == 0 || !record_bytes.is_multiple_of(size_of::<T>()) {
             return Err(mismatch(format!(
-                "record size {} (expected {})",
-                header.record_bytes,
-                size_of::<TexelResult>()
+                "record size {record_bytes} (expected a multiple of {})",
+                size_of::<T>()
             )));
         }
-        if records_end(header.texel_count) != Some(len) {
+        if records_end(header.texel_count, record_bytes as u64) != Some(len) {
             return Err(mismatch(format!(
                 "length {len} does not hold the {} texels its header declares",
                 header.texel_count
@@ -158,6 +213,8 @@ impl ResultFile {
                 file,
                 path: path.to_owned(),
                 texel_count,
+                per_texel: (record_bytes / size_of::<T>()) as u64,
+                record: PhantomData,
             },
             header,
         ))
@@ -168,27 +225,32 @@ impl ResultFile {
         self.texel_count
     }
 
+    /// Records per texel.
+    pub fn per_texel(&self) -> u64 {
+        self.per_texel
+    }
+
     /// The file's path.
     pub fn path(&self) -> &Path {
         &self.path
     }
 
-    /// Writes `results` for the texels from `first_texel` on, in place.
+    /// Writes `results` (whole texels' records) for the texels from `first_texel` on, in place.
     ///
     /// # Errors
     /// [`OutputFileError::OutOfRange`] past the end; [`OutputFileError::Io`] on a failed write.
-    pub fn write(&self, first_texel: u64, results: &[TexelResult]) -> Result<(), OutputFileError> {
+    pub fn write(&self, first_texel: u64, results: &[T]) -> Result<(), OutputFileError> {
         let offset = self.range_offset(first_texel, results.len())?;
         self.file
             .write_all_at(bytemuck::cast_slice(results), offset)
             .map_err(|e| io_error(&self.path, "write results", e))
     }
 
-    /// Reads the texels from `first_texel` on into `out`.
+    /// Reads the records of the texels from `first_texel` on into `out` (whole texels).
     ///
     /// # Errors
     /// [`OutputFileError::OutOfRange`] past the end; [`OutputFileError::Io`] on a failed read.
-    pub fn read(&self, first_texel: u64, out: &mut [TexelResult]) -> Result<(), OutputFileError> {
+    pub fn read(&self, first_texel: u64, out: &mut [T]) -> Result<(), OutputFileError> {
         let offset = self.range_offset(first_texel, out.len())?;
         self.file
             .read_exact_at(bytemuck::cast_slice_mut(out), offset)
@@ -205,10 +267,13 @@ impl ResultFile {
             .map_err(|e| io_error(&self.path, "sync", e))
     }
 
-    fn range_offset(&self, first: u64, count: usize) -> Result<u64, OutputFileError> {
-        let end = first.checked_add(count as u64);
+    /// Where the records of `records` / `per_texel` texels from `first` on start.
+    fn range_offset(&self, first: u64, records: usize) -> Result<u64, OutputFileError> {
+        debug_assert!((records as u64).is_multiple_of(self.per_texel));
+        let end = first.checked_add(records as u64 / self.per_texel);
+        let stride = self.per_texel * size_of::<T>() as u64;
         match end {
-            Some(end) if end <= self.texel_count => Ok(RESULT_HEADER_BYTES + first * RECORD_BYTES),
+            Some(end) if end <= self.texel_count => Ok(RESULT_HEADER_BYTES + first * stride),
             _ => Err(OutputFileError::OutOfRange {
                 path: self.path.clone(),
                 first,
@@ -219,9 +284,9 @@ impl ResultFile {
     }
 }
 
-fn records_end(texel_count: u64) -> Option<u64> {
+fn records_end(texel_count: u64, record_bytes: u64) -> Option<u64> {
     texel_count
-        .checked_mul(RECORD_BYTES)?
+        .checked_mul(record_bytes)?
         .checked_add(RESULT_HEADER_BYTES)
 }
 

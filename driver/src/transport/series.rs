@@ -382,7 +382,7 @@ mod tests {
     fn lookups_interpolate_and_the_file_matches_memory() {
         let (scene, meshes, pages) = scene();
         let image: Vec<Option<Vec3>> = (0..16).map(|i| Some(Vec3::splat((i % 4) as f32))).collect();
-        let mem = PreviousPass::from_pixels(&scene, &meshes, &pages, &[image.clone()]);
+        let mem = PreviousPass::from_pixels(&scene, &meshes, &pages, std::slice::from_ref(&image));
         // Halfway between pixel centres 1 and 2 of a row: the mean of 1 and 2.
         let e = mem.bilinear(0, Vec2::new(2.0, 1.5));
         assert!((e.x - 1.5).abs() < 1e-6, "{e}");
