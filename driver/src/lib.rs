@@ -17,10 +17,12 @@
 //! | [`output`] | result file, journal of finished tiles, ρ, EXR pages |
 //! | [`preview`] | PNG figures and tone-mapped previews |
 //! | [`transport`] | light transport: next-event estimation, series lookups, path sampling |
+//! | [`bench`] | the run-time-against-error harness and the Figure-5 overhead |
 //! | [`cmd`] | the `guidebake` subcommands |
 #![deny(unsafe_op_in_unsafe_fn)]
 
 pub mod bake;
+pub mod bench;
 pub mod bvh;
 pub mod cmd;
 pub mod demo;

@@ -27,6 +27,8 @@ enum Command {
     Bake(cmd::bake::BakeArgs),
     /// Combine the shards of a `bake --shard I/N` into the final lightmap.
     Merge(cmd::merge::MergeArgs),
+    /// Run time against error of every method, and the guiding overhead (paper Figure 5).
+    Bench(cmd::bench::BenchArgs),
     /// Print a texel file's header and counts; dump chosen texels as JSON.
     Inspect(cmd::inspect::InspectArgs),
 }
@@ -41,6 +43,7 @@ fn main() -> ExitCode {
         Command::Demo(a) => cmd::demo::run(a),
         Command::Bake(a) => cmd::bake::run(a),
         Command::Merge(a) => cmd::merge::run(a),
+        Command::Bench(a) => cmd::bench::run_bench(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

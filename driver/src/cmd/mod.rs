@@ -2,6 +2,7 @@
 //! `main` prints with its context; no subcommand panics on user input.
 
 pub mod bake;
+pub mod bench;
 pub mod demo;
 pub mod inspect;
 pub mod merge;
