@@ -14,12 +14,13 @@ use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use guidebake::bake::gather::TileBaker;
+use guidebake::bake::pipeline::TileBuffer;
 use guidebake::bake::settings::BakeSettings;
 use guidebake::bake::world::World;
 use guidebake::bench::method::{Method, value_name};
 use guidebake::bvh::Preset;
 use guidebake::demo::{DEMO_TEXELS_PER_METRE, ajar_room};
-use guidebake::output::result_file::{FLAG_BAKED, TexelResult};
+use guidebake::output::result_file::FLAG_BAKED;
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
 use guidebake::texels::{FLAG_VALID, TexelFile};
 
@@ -69,9 +70,9 @@ fn bake_tile(c: &mut Criterion) {
             ..Default::default()
         };
         let mut baker = TileBaker::new(&world, settings);
-        let mut out: Vec<TexelResult> = Vec::new();
+        let mut out = TileBuffer::default();
         baker.bake_tile(tile as u32, first, records, &mut out);
-        for (r, t) in out.iter().zip(records) {
+        for (r, t) in out.results.iter().zip(records) {
             if t.flags & FLAG_VALID != 0 {
                 assert!(r.flags & FLAG_BAKED != 0, "a valid texel is baked");
                 assert!(

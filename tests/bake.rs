@@ -553,8 +553,8 @@ fn aux_channels_hold_samples_error_validity_position_and_normal() {
     // Pixel (x, y) of the 4 m plane lies at x·size − 2 + size/2.
     let px = channel("P.X");
     let size = 4.0 / SIDE as f32;
-    for x in 0..SIDE as usize {
-        assert!((px[x] - ((x as f32 + 0.5) * size - 2.0)).abs() < 1e-6);
+    for (x, p) in px.iter().take(SIDE as usize).enumerate() {
+        assert!((p - ((x as f32 + 0.5) * size - 2.0)).abs() < 1e-6);
     }
     let err = channel("rel_std_error");
     assert!(err.iter().all(|&e| (0.0..1.0).contains(&e)));
