@@ -751,8 +751,6 @@ impl TexelFile {
         let header = validate(path, &map, &mut |start, count| {
             release_texels(&map, start, count);
         })?;
-        // Bakes stream the tiles in file order. Advisory only: failure changes nothing.
-        let _ = map.advise(memmap2::Advice::Sequential);
         Ok(Self {
             path: path.to_owned(),
             header,
@@ -827,11 +825,19 @@ impl TexelFile {
     }
 }
 
+/// Bytes the kernel may map around a page fault (Linux's default `fault_around_bytes`).
+const FAULT_AROUND: u64 = 64 * 1024;
+
 /// Drops the pages of `count` texel records at byte `start` of `map` from memory (advice;
-/// failures and ranges past the map are ignored).
+/// failures are ignored). The range is widened by [`FAULT_AROUND`] on each side (clamped to
+/// the map): the kernel maps pages around each fault, so a tile's neighbours' pages may be
+/// mapped too, and those of tiles another shard bakes would otherwise stay behind. Pages
+/// released while still in use are simply faulted in again.
 fn release_texels(map: &memmap2::Mmap, start: u64, count: u64) {
-    let len = count * size_of::<TexelRecord>() as u64;
-    if start.saturating_add(len) > map.len() as u64 {
+    let end = start.saturating_add(count * size_of::<TexelRecord>() as u64);
+    let from = start.saturating_sub(FAULT_AROUND);
+    let to = end.saturating_add(FAULT_AROUND).min(map.len() as u64);
+    if from >= to {
         return;
     }
     // SAFETY: the range lies within the map. MADV_DONTNEED on this read-only, file-backed
@@ -841,8 +847,8 @@ fn release_texels(map: &memmap2::Mmap, start: u64, count: u64) {
     let _ = unsafe {
         map.unchecked_advise_range(
             memmap2::UncheckedAdvice::DontNeed,
-            start as usize,
-            len as usize,
+            from as usize,
+            (to - from) as usize,
         )
     };
 }
