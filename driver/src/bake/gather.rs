@@ -21,6 +21,8 @@
 //! from (seed, texel id, iteration, sample index), so a tile's bits never depend on the thread
 //! that baked it.
 
+use std::time::Instant;
+
 use glam::Vec3;
 use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
 use guidebake_kernels::estimator::{GraybillDeal, TexelEstimate, Welford, plain_average};
@@ -79,6 +81,11 @@ pub struct GatherCounters {
     pub iterations_unguided_uniform_guide: u64,
     /// Guided iterations that sampled a learned guide.
     pub iterations_guided: u64,
+    /// Nanoseconds spent building guides (summed over workers: CPU time, not wall time).
+    pub guide_build_ns: u64,
+    /// Nanoseconds spent warping samples through guides (summed over workers), measured per
+    /// packet of eight.
+    pub warp_ns: u64,
 }
 
 impl GatherCounters {
@@ -100,6 +107,8 @@ impl GatherCounters {
         self.iterations_unguided_no_energy += o.iterations_unguided_no_energy;
         self.iterations_unguided_uniform_guide += o.iterations_unguided_uniform_guide;
         self.iterations_guided += o.iterations_guided;
+        self.guide_build_ns += o.guide_build_ns;
+        self.warp_ns += o.warp_ns;
     }
 }
 
@@ -335,6 +344,7 @@ impl<'w> TileBaker<'w> {
                 }
             }
             if k + 1 < iterations {
+                let clock = Instant::now();
                 match settings.guiding {
                     Guiding::Off => {}
                     Guiding::Grid => grid = learn_grid(records, counters),
@@ -342,6 +352,7 @@ impl<'w> TileBaker<'w> {
                         guide = learn(records, nodes, counters);
                     }
                 }
+                counters.guide_build_ns += clock.elapsed().as_nanos() as u64;
             }
         }
     }
@@ -540,6 +551,7 @@ impl IterationCtx<'_> {
             let index = u32x8::new(chunk.try_into().expect("packets of 8"));
             let [sx, sy] = rotate_x8(sobol_2d_x8(index), rot);
             let (x, y) = (to_unit_x8(sx), to_unit_x8(sy));
+            let clock = self.guide.map(|_| Instant::now());
             let (wx, wy, q) = match self.guide {
                 Some(Learned::Tree(g)) => {
                     let w = warp::sample8(g, x, y);
@@ -548,6 +560,9 @@ impl IterationCtx<'_> {
                 Some(Learned::Grid(g)) => grid_sample8(g, x, y),
                 None => (x, y, f32x8::ONE),
             };
+            if let Some(clock) = clock {
+                counters.warp_ns += clock.elapsed().as_nanos() as u64;
+            }
             let [dx, dy, dz] = sample_cosine_hemisphere_x8([wx, wy]);
             let (dx, dy, dz, wx, wy, q) = (
                 dx.to_array(),
@@ -593,18 +608,25 @@ impl IterationCtx<'_> {
             let origin = self.origin(t, j);
             let mut light_u = [[0.0; 2]; LANES];
             let mut samples = [(Vec3::ZERO, [0.0f32; 2], 1.0f32); LANES];
-            for lane in 0..LANES {
-                let index = j * LANES as u32 + lane as u32;
-                let p = rotate(sobol_2d(index), rot);
+            // The packet's eight scalar warps first, timed together (the stats' warp time).
+            let clock = self.guide.map(|_| Instant::now());
+            let warped: [([f32; 2], f32); LANES] = core::array::from_fn(|lane| {
+                let p = rotate(sobol_2d(j * LANES as u32 + lane as u32), rot);
                 let u = [to_unit(p[0]), to_unit(p[1])];
-                let (w, q) = match self.guide {
+                match self.guide {
                     Some(Learned::Tree(g)) => {
                         let s = warp::sample(g, u);
                         (s.u, s.pdf)
                     }
                     Some(Learned::Grid(g)) => g.sample(u),
                     None => (u, 1.0),
-                };
+                }
+            });
+            if let Some(clock) = clock {
+                counters.warp_ns += clock.elapsed().as_nanos() as u64;
+            }
+            for (lane, &(w, q)) in warped.iter().enumerate() {
+                let index = j * LANES as u32 + lane as u32;
                 let dir = self.to_world(t, sample_cosine_hemisphere(w));
                 let hit = intersect1(&bvh, &Ray::new(origin, dir, 0.0, f32::INFINITY)).map(|h| {
                     SurfaceHit {

@@ -516,13 +516,17 @@ fn open_work(dir: &Path, manifest: &Manifest, resume: bool) -> Result<(), BakeEr
         }
         return Ok(());
     }
-    std::fs::create_dir_all(dir)
+    // The directory appears with its manifest or not at all: it is made under a temporary
+    // name and renamed, so a crash in between leaves nothing that --resume would refuse.
+    let staging = temporary_name(dir);
+    let _ = std::fs::remove_dir_all(&staging);
+    std::fs::create_dir_all(&staging)
         .map_err(|e| file_error(dir, format!("cannot create the work directory: {e}")))?;
     let json = serde_json::to_string_pretty(manifest).expect("a manifest serializes");
-    let tmp = temporary_name(&manifest_path);
-    std::fs::write(&tmp, json)
-        .and_then(|()| std::fs::rename(&tmp, &manifest_path))
-        .map_err(|e| file_error(&manifest_path, format!("cannot write: {e}")))
+    std::fs::write(staging.join("manifest.json"), json)
+        .map_err(|e| file_error(&manifest_path, format!("cannot write: {e}")))?;
+    std::fs::rename(&staging, dir)
+        .map_err(|e| file_error(dir, format!("cannot create the work directory: {e}")))
 }
 
 /// Opens pass `pass`'s result file and journal in `dir` (with the tiles its journal holds),
