@@ -13,7 +13,6 @@
 //! `cargo test --release --test stress -- --ignored --nocapture`.
 
 use std::f32::consts::PI;
-use std::path::PathBuf;
 
 use glam::{Vec2, Vec3};
 use guidebake::bake::gather::TileBaker;
@@ -23,7 +22,7 @@ use guidebake::bake::world::World;
 use guidebake::bvh::Preset;
 use guidebake::output::journal::RhoSums;
 use guidebake::output::result_file::{FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_VALID};
-use guidebake::scene::{Material, Mesh, Scene, Sky, Sun, Triangle};
+use guidebake::scene::{Material, Scene, Sky, Sun, Triangle};
 use guidebake::texels::{FLAG_VALID as TEXEL_VALID, TexelRecord};
 
 const MODES: [Guiding; 3] = [Guiding::Off, Guiding::Naive, Guiding::Coherent];
@@ -75,19 +74,9 @@ fn material(albedo: f32, emission: f32) -> Material {
 
 fn scene(triangles: Vec<Triangle>, materials: Vec<Material>, sky: Vec3, sun: Option<Sun>) -> Scene {
     Scene {
-        path: PathBuf::from("<stress>"),
-        meshes: vec![Mesh {
-            name: "stress".into(),
-            first_triangle: 0,
-            triangle_count: triangles.len() as u32,
-            has_lightmap_uvs: true,
-        }],
-        triangles,
-        materials,
-        lights: Vec::new(),
         sun,
         sky: Sky::Constant(sky),
-        degenerate_triangles: 0,
+        ..Scene::of_triangles("stress", triangles, materials)
     }
 }
 

@@ -67,12 +67,10 @@ fn escaping(bvh: &BvhRef<'_>, c: &[Vec3; 3], n: Vec3) -> u32 {
 
 #[cfg(test)]
 mod tests {
-    use std::path::PathBuf;
-
     use glam::Vec2;
 
     use super::*;
-    use crate::scene::{Material, Mesh, Sky, Triangle};
+    use crate::scene::{Material, Sky, Triangle};
 
     /// The 2 m cube's faces, wound to face out of the box, plus a 40 m ground beside it facing
     /// up; all with lightmap UVs.
@@ -100,23 +98,16 @@ mod tests {
             .flat_map(|&(c, u, v)| [tri([c, c + u, c + u + v]), tri([c, c + u + v, c + v])])
             .collect();
         Scene {
-            path: PathBuf::from("<facing>"),
-            meshes: vec![Mesh {
-                name: "m".into(),
-                first_triangle: 0,
-                triangle_count: triangles.len() as u32,
-                has_lightmap_uvs: true,
-            }],
-            triangles,
-            materials: vec![Material {
-                name: "m".into(),
-                albedo: Vec3::splat(0.5),
-                emission: Vec3::ZERO,
-            }],
-            lights: Vec::new(),
-            sun: None,
             sky: Sky::Constant(Vec3::ONE),
-            degenerate_triangles: 0,
+            ..Scene::of_triangles(
+                "facing",
+                triangles,
+                vec![Material {
+                    name: "m".into(),
+                    albedo: Vec3::splat(0.5),
+                    emission: Vec3::ZERO,
+                }],
+            )
         }
     }
 

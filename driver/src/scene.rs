@@ -258,6 +258,27 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// A scene made in code: `triangles` as one mesh named `name` (with lightmap UVs where
+    /// the triangles have them), `materials`, no lights, no sun, a black sky. Callers set
+    /// the other fields.
+    pub fn of_triangles(name: &str, triangles: Vec<Triangle>, materials: Vec<Material>) -> Scene {
+        Scene {
+            path: PathBuf::from(format!("<{name}>")),
+            meshes: vec![Mesh {
+                name: name.into(),
+                first_triangle: 0,
+                triangle_count: triangles.len() as u32,
+                has_lightmap_uvs: triangles.iter().all(|t| t.lightmap_uv.is_some()),
+            }],
+            triangles,
+            materials,
+            lights: Vec::new(),
+            sun: None,
+            sky: Sky::None,
+            degenerate_triangles: 0,
+        }
+    }
+
     /// Loads a scene from `.gltf`, `.glb`, `.obj` or a `.toml` scene file.
     ///
     /// # Errors

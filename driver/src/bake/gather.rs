@@ -708,13 +708,11 @@ fn luminance(c: Vec3) -> f32 {
 
 #[cfg(test)]
 mod tests {
-    use std::path::PathBuf;
-
     use glam::Vec2;
 
     use super::*;
     use crate::bvh::Preset;
-    use crate::scene::{Material, Mesh, Scene, Sky, Sun, Triangle};
+    use crate::scene::{Material, Scene, Sky, Sun, Triangle};
 
     /// A quad `origin + s·u + t·v` as two triangles facing `u × v`.
     fn quad(origin: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {
@@ -756,19 +754,9 @@ mod tests {
         sun: Option<Sun>,
     ) -> Scene {
         Scene {
-            path: PathBuf::from("<test>"),
-            meshes: vec![Mesh {
-                name: "m".into(),
-                first_triangle: 0,
-                triangle_count: triangles.len() as u32,
-                has_lightmap_uvs: true,
-            }],
-            triangles,
-            materials,
-            lights: Vec::new(),
-            sun,
             sky,
-            degenerate_triangles: 0,
+            sun,
+            ..Scene::of_triangles("test", triangles, materials)
         }
     }
 
