@@ -9,7 +9,7 @@ use glam::{Vec2, Vec3};
 use guidebake::bake::run::{BakeError, BakeJob, bake, finish, work_dir};
 use guidebake::bake::settings::{BakeSettings, Combine, Guiding, Transport};
 use guidebake::bake::shard::Shard;
-use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle};
+use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle, inward_box_faces};
 use guidebake::texels::{
     FLAG_VALID, MeshRecord, PageRecord, TexelFile, TexelRecord, TexelWriter, TileRect,
 };
@@ -298,17 +298,8 @@ const FACE: u32 = 8;
 /// A closed 2 m cube, every face facing inwards, of albedo `albedo` emitting `le`, with one
 /// lightmap chart per face, and its texel file at `path`.
 fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
-    let (o, s) = (Vec3::splat(-1.0), 2.0);
-    let (x, y, z) = (Vec3::X * s, Vec3::Y * s, Vec3::Z * s);
-    // Each face: corner, edge u, edge v, with u × v pointing into the box.
-    let faces = [
-        (o, x, y),
-        (o + z, y, x),
-        (o, y, z),
-        (o + x, z, y),
-        (o, z, x),
-        (o + y, x, z),
-    ];
+    let s = 2.0;
+    let faces = inward_box_faces(Vec3::splat(-1.0), s);
     let (w, h) = (3 * FACE, 2 * FACE);
     let chart = |i: usize| ((i % 3) as u32 * FACE, (i / 3) as u32 * FACE);
     let mut triangles = Vec::new();

@@ -22,7 +22,7 @@ use guidebake::bake::world::World;
 use guidebake::bvh::Preset;
 use guidebake::output::journal::RhoSums;
 use guidebake::output::result_file::{FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_VALID};
-use guidebake::scene::{Material, Scene, Sky, Sun, Triangle};
+use guidebake::scene::{Material, Scene, Sky, Sun, Triangle, inward_box_faces};
 use guidebake::texels::{FLAG_VALID as TEXEL_VALID, TexelRecord};
 
 const MODES: [Guiding; 3] = [Guiding::Off, Guiding::Naive, Guiding::Coherent];
@@ -480,19 +480,10 @@ fn zero_albedo_reflects_nothing() {
 
 /// The 2 m cube around the origin, every face facing inwards, in `material`.
 fn inward_cube(material: u32) -> Vec<Triangle> {
-    let (o, s) = (Vec3::splat(-1.0), 2.0);
-    let (x, y, z) = (Vec3::X * s, Vec3::Y * s, Vec3::Z * s);
-    [
-        (o, x, y),
-        (o + z, y, x),
-        (o, y, z),
-        (o + x, z, y),
-        (o, z, x),
-        (o + y, x, z),
-    ]
-    .into_iter()
-    .flat_map(|(origin, u, v)| quad(origin, u, v, material))
-    .collect()
+    inward_box_faces(Vec3::splat(-1.0), 2.0)
+        .into_iter()
+        .flat_map(|(origin, u, v)| quad(origin, u, v, material))
+        .collect()
 }
 
 /// Inside a closed box of albedo 0.999 emitting Le, light bounces ~1000 times before it is

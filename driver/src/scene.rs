@@ -257,6 +257,20 @@ pub struct Scene {
     pub degenerate_triangles: usize,
 }
 
+/// The six faces of the axis-aligned box from `corner` with edge `size`, each as (corner,
+/// edge u, edge v) with u × v pointing into the box: the closed rooms of tests and examples.
+pub fn inward_box_faces(corner: Vec3, size: f32) -> [(Vec3, Vec3, Vec3); 6] {
+    let (o, x, y, z) = (corner, Vec3::X * size, Vec3::Y * size, Vec3::Z * size);
+    [
+        (o, x, y),
+        (o + z, y, x),
+        (o, y, z),
+        (o + x, z, y),
+        (o, z, x),
+        (o + y, x, z),
+    ]
+}
+
 impl Scene {
     /// A scene made in code: `triangles` as one mesh named `name` (with lightmap UVs where
     /// the triangles have them), `materials`, no lights, no sun, a black sky. Callers set

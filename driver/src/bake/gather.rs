@@ -712,7 +712,7 @@ mod tests {
 
     use super::*;
     use crate::bvh::Preset;
-    use crate::scene::{Material, Scene, Sky, Sun, Triangle};
+    use crate::scene::{Material, Scene, Sky, Sun, Triangle, inward_box_faces};
 
     /// A quad `origin + s·u + t·v` as two triangles facing `u × v`.
     fn quad(origin: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {
@@ -732,19 +732,10 @@ mod tests {
 
     /// The 2 m cube around the origin, every face facing inwards.
     fn inward_cube(material: u32) -> Vec<Triangle> {
-        let (o, s) = (Vec3::splat(-1.0), 2.0);
-        let (x, y, z) = (Vec3::X * s, Vec3::Y * s, Vec3::Z * s);
-        [
-            (o, x, y),
-            (o + z, y, x),
-            (o, y, z),
-            (o + x, z, y),
-            (o, z, x),
-            (o + y, x, z),
-        ]
-        .into_iter()
-        .flat_map(|(origin, u, v)| quad(origin, u, v, material))
-        .collect()
+        inward_box_faces(Vec3::splat(-1.0), 2.0)
+            .into_iter()
+            .flat_map(|(origin, u, v)| quad(origin, u, v, material))
+            .collect()
     }
 
     fn scene(
