@@ -480,7 +480,7 @@ mod gltf_source {
     use super::*;
 
     pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
-        let (doc, buffers, images) = gltf::import(path).map_err(|source| SceneError::Gltf {
+        let (doc, buffers, images) = import(path).map_err(|source| SceneError::Gltf {
             path: path.to_owned(),
             source,
         })?;
@@ -513,6 +513,55 @@ mod gltf_source {
             }
         }
         Ok(b.finish(materials, lights))
+    }
+
+    /// `gltf::import` with one check of ours before the crate's validation: gltf-json 1.4.1
+    /// indexes the accessor a primitive's `POSITION` names without checking it exists
+    /// (`mesh.rs`, `primitive_validate_hook`), so a file naming a missing accessor panicked
+    /// inside the importer (found by the `scene` fuzz target).
+    fn import(
+        path: &Path,
+    ) -> gltf::Result<(
+        gltf::Document,
+        Vec<gltf::buffer::Data>,
+        Vec<gltf::image::Data>,
+    )> {
+        let bytes = std::fs::read(path).map_err(gltf::Error::Io)?;
+        let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes)?;
+        let json = document.into_json();
+        check_position_accessors(&json)?;
+        let doc = gltf::Document::from_json(json)?;
+        let base = path.parent().unwrap_or_else(|| Path::new("./"));
+        let buffers = gltf::import_buffers(&doc, Some(base), blob)?;
+        let images = gltf::import_images(&doc, Some(base), &buffers)?;
+        Ok((doc, buffers, images))
+    }
+
+    /// Every primitive's `POSITION` names an accessor that exists.
+    fn check_position_accessors(json: &gltf::json::Root) -> gltf::Result<()> {
+        use gltf::json::validation::Error;
+        use gltf::json::{Path as JsonPath, mesh::Semantic, validation::Checked};
+        let mut errors = Vec::new();
+        for (m, mesh) in json.meshes.iter().enumerate() {
+            for (p, prim) in mesh.primitives.iter().enumerate() {
+                let position = prim.attributes.get(&Checked::Valid(Semantic::Positions));
+                if position.is_some_and(|a| a.value() >= json.accessors.len()) {
+                    let at = JsonPath::new()
+                        .field("meshes")
+                        .index(m)
+                        .field("primitives")
+                        .index(p)
+                        .field("attributes")
+                        .key("POSITION");
+                    errors.push((at, Error::IndexOutOfBounds));
+                }
+            }
+        }
+        if errors.is_empty() {
+            Ok(())
+        } else {
+            Err(gltf::Error::Validation(errors))
+        }
     }
 
     fn read_materials(doc: &gltf::Document, images: &[gltf::image::Data]) -> Vec<Material> {

@@ -412,8 +412,7 @@ pub fn build<'a>(
     }
     subdivide(records, params, &mut storage[..capacity], &mut stats);
     let (nodes, rest) = storage.split_at_mut(stats.nodes as usize);
-    let floor = f64::from(sanitize(params.ambient, 0.0, f32::MAX)) * stats.total_flux;
-    set_masses(nodes, floor);
+    set_masses(nodes, f64::from(sanitize(params.ambient, 0.0, f32::MAX)));
     smooth(nodes, f64::from(sanitize(params.alpha, 0.0, 1.0)));
     let start: &mut [u16] = match rest.get_mut(..START_TABLE_NODES) {
         Some(room) if nodes.len() > 1 => {
@@ -501,7 +500,10 @@ fn partition_valid(records: &mut [Record], stats: &mut BuildStats) -> usize {
     kept
 }
 
-/// Breadth-first subdivision. Each node's accepted flux is left in its `mass` field.
+/// Breadth-first subdivision. Each node's share of the accepted flux is left in its `mass`
+/// field: a fraction of the total, not the flux itself, because a sum of f32 fluxes can
+/// exceed `f32::MAX` (the `guide` fuzz target found leaves whose flux rounded to zero
+/// beside an infinite sibling, and so pdf 0).
 fn subdivide(
     records: &mut [Record],
     params: &GuideParams,
@@ -509,19 +511,19 @@ fn subdivide(
     stats: &mut BuildStats,
 ) {
     let max_depth = params.max_depth.min(MAX_DEPTH);
-    let min_flux = f64::from(sanitize(params.min_flux_fraction, 0.0, 1.0)) * stats.total_flux;
-    nodes[0].mass = stats.total_flux as f32;
+    let min_share = f64::from(sanitize(params.min_flux_fraction, 0.0, 1.0));
+    nodes[0].mass = 1.0;
     let mut len = 1usize;
     let mut next = 0usize;
     while next < len {
         let n = nodes[next];
-        let wants = n.count >= params.min_records && f64::from(n.mass) >= min_flux;
+        let wants = n.count >= params.min_records && f64::from(n.mass) >= min_share;
         if wants && u32::from(n.depth) >= max_depth {
             stats.depth_refusals += 1;
         } else if wants && len + 4 > nodes.len() {
             stats.capacity_refusals += 1;
         } else if wants {
-            split(records, nodes, next, len);
+            split(records, nodes, next, len, stats.total_flux);
             len += 4;
         }
         next += 1;
@@ -533,8 +535,9 @@ fn subdivide(
     }
 }
 
-/// Splits node `i` into four children at `first`, partitioning its records by quadrant.
-fn split(records: &mut [Record], nodes: &mut [Node], i: usize, first: usize) {
+/// Splits node `i` into four children at `first`, partitioning its records by quadrant;
+/// each child's `mass` is its share of `total_flux`.
+fn split(records: &mut [Record], nodes: &mut [Node], i: usize, first: usize, total_flux: f64) {
     let n = nodes[i];
     let ([ox, oy], size) = (n.origin, n.size);
     let h = size * 0.5;
@@ -554,7 +557,7 @@ fn split(records: &mut [Record], nodes: &mut [Node], i: usize, first: usize) {
         nodes[first + q] = Node {
             origin: [ox + h * hx, oy + h * hy],
             size: h,
-            mass: flux as f32,
+            mass: (flux / total_flux) as f32,
             first: start as u32,
             count: counts[q] as u32,
             child: 0,
@@ -577,9 +580,10 @@ fn partition(records: &mut [Record], pred: impl Fn(&Record) -> bool) -> usize {
     k
 }
 
-/// Floors the leaves, sums masses bottom-up and normalizes. Children always follow their
-/// parent in breadth-first order, so one reverse pass sums every node after its children.
-/// On entry a leaf's `mass` holds its accepted flux. Masses are stored
+/// Floors the leaves at `floor` times their area, sums masses bottom-up and normalizes.
+/// Children always follow their parent in breadth-first order, so one reverse pass sums
+/// every node after its children. On entry a leaf's `mass` holds its share of the accepted
+/// flux (so the floor is the ambient fraction itself). Masses are stored
 /// in f32 between passes (relative error ~1e-7, far below the sampling noise).
 fn set_masses(nodes: &mut [Node], floor: f64) {
     for i in (0..nodes.len()).rev() {
@@ -763,6 +767,33 @@ mod tests {
             "the bright quadrant hit the depth cap"
         );
         assert!(g.nodes()[1].is_leaf());
+    }
+
+    #[test]
+    fn flux_summing_past_f32_max_keeps_every_leaf_floored() {
+        // Eight records of 2^127 in one corner sum past f32::MAX; a node's flux stored as
+        // f32 became ∞ and its dim siblings' mass 0/∞ = 0 (found by the `guide` fuzz target).
+        let mut r: [Record; 12] = core::array::from_fn(|k| {
+            if k < 8 {
+                rec(0.01 * k as f32, 0.01, f32::MAX / 2.0)
+            } else {
+                rec(0.9, 0.1 + 0.2 * k as f32 / 12.0, 1.0)
+            }
+        });
+        let p = GuideParams {
+            alpha: 0.0,
+            ..GuideParams::default()
+        };
+        let mut storage = [Node::default(); 64];
+        let (g, s) = build(&mut r, &p, &mut storage);
+        assert!(s.total_flux > f64::from(f32::MAX));
+        assert!(s.nodes > 1);
+        let mut mass = 0.0f64;
+        g.for_each_leaf(|l| {
+            assert!(l.pdf.is_finite() && l.pdf > 0.0, "{l:?}");
+            mass += f64::from(l.pdf) * f64::from(l.size) * f64::from(l.size);
+        });
+        assert!((mass - 1.0).abs() < 1e-4, "{mass}");
     }
 
     #[test]
