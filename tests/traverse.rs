@@ -12,7 +12,7 @@ use guidebake_kernels::packet::{Hit, Hit8, LANES, Ray, Ray8};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::{
     BvhRef, ChildOrder, Traversal, intersect_brute, intersect1, intersect8, intersect8_with,
-    occluded_brute, occluded1, occluded8, occluded8_with, offset_origin,
+    occluded_brute, occluded1, occluded8, occluded8_with, offset_origin, triangle_extent,
 };
 
 /// The traversal settings `benches/traverse.rs` measures, besides the default.
@@ -446,10 +446,11 @@ fn offset_origins_avoid_self_intersection_at_1e6() {
         let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
         let view = bvh.view();
         let (mut self_hits, mut raw_self_hits) = (0, 0);
-        for s in scenes::surface_points(&soup, 4000, 8) {
+        for s in scenes::surface_points(&soup, 20000, 8) {
             let n = if rng.next_u32() & 1 == 0 { s.n } else { -s.n };
             let d = scenes::cosine_dir(n, [rng.next_f32(), rng.next_f32()]);
-            let safe = Ray::new(offset_origin(s.p, n), d, 0.0, f32::INFINITY);
+            let origin = offset_origin(s.p, n, triangle_extent(s.p, &soup[s.prim as usize]));
+            let safe = Ray::new(origin, d, 0.0, f32::INFINITY);
             self_hits += usize::from(intersect1(&view, &safe).is_some_and(|h| h.prim == s.prim));
             let raw = Ray::new(s.p, d, 0.0, f32::INFINITY);
             raw_self_hits += usize::from(intersect1(&view, &raw).is_some_and(|h| h.prim == s.prim));

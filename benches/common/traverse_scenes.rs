@@ -16,7 +16,7 @@ use guidebake_kernels::sobol::{
     rotate, rotate_x8, rotation, sobol_2d, sobol_2d_x8, to_unit, to_unit_x8,
 };
 use guidebake_kernels::testing::Pcg32;
-use guidebake_kernels::traverse::offset_origin;
+use guidebake_kernels::traverse::{offset_origin, triangle_extent};
 use wide::u32x8;
 
 /// `converted/` of the shared scenes ([`guidebake::scene::shared_scenes_dir`]), if present.
@@ -226,7 +226,7 @@ pub fn gather_packets_ordered(
             let jitter =
                 t * (footprint * (to_unit(r[0]) - 0.5)) + b * (footprint * (to_unit(r[1]) - 0.5));
             let p = onto_triangle(tri, s.p + jitter).unwrap_or(s.p);
-            let org = offset_origin(p, n);
+            let org = offset_origin(p, n, triangle_extent(p, &tri));
             packets.push(Ray8::from_origin(org, &dirs, 0.0, f32::INFINITY));
         }
     }
@@ -275,7 +275,7 @@ pub fn shadow_packets(
                     ) * radius;
                 let to = target - s.p;
                 let n = if s.n.dot(to) >= 0.0 { s.n } else { -s.n };
-                let org = offset_origin(s.p, n);
+                let org = offset_origin(s.p, n, triangle_extent(s.p, &soup[s.prim as usize]));
                 let dir = target - org;
                 packet.set_lane(
                     lane,
@@ -304,7 +304,7 @@ pub fn incoherent_packets(soup: &[[Vec3; 3]], count: usize, seed: u64) -> Vec<Ra
                     ],
                 );
                 let ray = guidebake_kernels::packet::Ray::new(
-                    offset_origin(s.p, n),
+                    offset_origin(s.p, n, triangle_extent(s.p, &soup[s.prim as usize])),
                     dir,
                     0.0,
                     f32::INFINITY,

@@ -13,7 +13,7 @@
 use glam::Vec3;
 use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere};
 use guidebake_kernels::packet::Ray;
-use guidebake_kernels::traverse::{BvhRef, intersect1, offset_origin};
+use guidebake_kernels::traverse::{BvhRef, intersect1, offset_origin, triangle_extent};
 
 use crate::bvh::{Bvh, BvhError, Preset};
 use crate::scene::Scene;
@@ -53,7 +53,7 @@ fn escaping(bvh: &BvhRef<'_>, c: &[Vec3; 3], n: Vec3) -> u32 {
     let mut misses = 0;
     for [b1, b2] in POINTS {
         let p = c[0] * (1.0 - b1 - b2) + c[1] * b1 + c[2] * b2;
-        let origin = offset_origin(p, n);
+        let origin = offset_origin(p, n, triangle_extent(p, c));
         for i in 0..8 {
             let u = [((i % 4) as f32 + 0.5) / 4.0, ((i / 4) as f32 + 0.5) / 2.0];
             let d = sample_cosine_hemisphere(u);

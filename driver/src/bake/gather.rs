@@ -35,7 +35,7 @@ use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{
     rotate, rotate_x8, rotation, sobol_2d, sobol_2d_x8, to_unit, to_unit_x8,
 };
-use guidebake_kernels::traverse::{intersect1, intersect8, offset_origin};
+use guidebake_kernels::traverse::{intersect1, intersect8};
 use guidebake_kernels::warp;
 use wide::{f32x8, u32x8};
 
@@ -526,7 +526,8 @@ impl IterationCtx<'_> {
         // hundredth of the texel.
         let footprint = t.dpdu.length() + t.dpdv.length();
         let on = self.world.onto_triangle(t.triangle, p, 0.01 * footprint);
-        offset_origin(on, self.world.facing_normal(t.triangle, t.normal))
+        let n = self.world.facing_normal(t.triangle, t.normal);
+        self.world.leave_surface(t.triangle, on, n, 0.0)
     }
 
     fn to_world(&self, t: &GatherTexel, d: Vec3) -> Vec3 {

@@ -13,7 +13,9 @@
 use glam::Vec3;
 use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere};
 use guidebake_kernels::packet::{LANES, Ray, Ray8};
-use guidebake_kernels::traverse::{BvhRef, intersect1, occluded1, occluded8, offset_origin};
+use guidebake_kernels::traverse::{
+    BvhRef, intersect1, occluded1, occluded8, offset_origin, triangle_extent,
+};
 use wide::f32x8;
 
 use super::settings::Transport;
@@ -146,6 +148,18 @@ impl World {
         }
     }
 
+    /// `p`, a point on triangle `prim`, offset off the surface towards `n` for a ray to leave
+    /// from ([`offset_origin`]): by a few ulps of its coordinates and of the triangle's size
+    /// seen from it, plus `travelled`, the length of the ray that computed `p` (0 for a point
+    /// interpolated on the triangle), whose rounding grows with it.
+    pub fn leave_surface(&self, prim: u32, p: Vec3, n: Vec3, travelled: f32) -> Vec3 {
+        let extent = self
+            .corners
+            .get(prim as usize)
+            .map_or(0.0, |c| triangle_extent(p, c));
+        offset_origin(p, n, extent + travelled.max(0.0))
+    }
+
     /// The geometric normal of triangle `prim` on the side of `toward` (for offsetting ray
     /// origins off the surface itself, not off a shading normal that may lie near its
     /// plane); `toward` when `prim` is not a triangle of the scene.
@@ -205,7 +219,7 @@ impl World {
                 break;
             }
             let facing = if front { s.normal } else { -s.normal };
-            let p = offset_origin(origin + dir * hit.t, facing);
+            let p = self.leave_surface(hit.prim, origin + dir * hit.t, facing, hit.t);
             let reflect = throughput * s.albedo;
             let mut irradiance = Vec3::ZERO;
             if !self.lights.is_empty() {
