@@ -14,11 +14,11 @@ use clap::ValueEnum;
 use serde::Serialize;
 
 use super::BenchError;
-use super::method::{Method, value_name};
+use super::method::{Method, serialize_value_name, value_name};
 use super::metrics::{ErrorStats, compare};
 use super::readback::read_lightmap;
 use crate::bake::run::{BakeJob, BakeReport, bake, work_dir};
-use crate::bake::settings::{BakeSettings, Combine, Guiding};
+use crate::bake::settings::{BakeSettings, Combine, Guiding, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
 use crate::texels::TexelFile;
@@ -194,7 +194,10 @@ pub struct Ladder {
     pub seeds: Vec<u32>,
     /// Learning iterations of every bake.
     pub iterations: u32,
-    /// Bounces of every bake (the bake's default transport).
+    /// Light transport of every bake.
+    #[serde(serialize_with = "serialize_value_name")]
+    pub transport: Transport,
+    /// Bounces of every bake.
     pub bounces: u32,
 }
 
@@ -213,7 +216,13 @@ pub fn run_ladder(
     for &seed in &ladder.seeds {
         for &spp in &ladder.spp {
             for &method in &ladder.methods {
-                let settings = method.settings(spp, ladder.iterations, ladder.bounces, seed);
+                let settings = method.settings(
+                    spp,
+                    ladder.iterations,
+                    ladder.transport,
+                    ladder.bounces,
+                    seed,
+                );
                 let baked = bench.bake_scratch(settings)?;
                 let error = compare(&baked.values, reference)?;
                 let record = RunRecord::new(method, &settings, &baked, error);
@@ -262,7 +271,7 @@ pub fn run_overhead(
     bench: &Bench<'_>,
     spp: u32,
     iterations: u32,
-    bounces: u32,
+    (transport, bounces): (Transport, u32),
     repeats: u32,
 ) -> Result<Vec<OverheadRecord>, BenchError> {
     let modes = Guiding::value_variants();
@@ -275,7 +284,7 @@ pub fn run_overhead(
                 combine: Combine::Texel,
                 rho: true,
             };
-            let settings = method.settings(spp, iterations, bounces, 1);
+            let settings = method.settings(spp, iterations, transport, bounces, 1);
             let baked = bench.bake_scratch(settings)?;
             let c = &baked.report.counters;
             let record = OverheadRecord {

@@ -7,7 +7,7 @@
 
 use clap::ValueEnum;
 
-use crate::bake::settings::{BakeSettings, Combine, Guiding};
+use crate::bake::settings::{BakeSettings, Combine, Guiding, Transport};
 
 /// One way of baking: what the bake's `--guiding`, `--combine` and `--bias-correction` say.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -24,6 +24,17 @@ pub struct Method {
 pub fn value_name<T: ValueEnum>(v: &T) -> String {
     v.to_possible_value()
         .map_or_else(|| "?".to_owned(), |p| p.get_name().to_owned())
+}
+
+/// Serializes a clap value by its command-line name (for `#[serde(serialize_with)]`).
+///
+/// # Errors
+/// The serializer's.
+pub fn serialize_value_name<T: ValueEnum, S: serde::Serializer>(
+    v: &T,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    s.serialize_str(&value_name(v))
 }
 
 impl Method {
@@ -73,13 +84,20 @@ impl Method {
         )
     }
 
-    /// The bake settings of this method with `bounces` of the bake's default transport;
-    /// everything else keeps the bake's defaults, so settings added to the bake need no change
-    /// here.
-    pub fn settings(&self, spp: u32, iterations: u32, bounces: u32, seed: u32) -> BakeSettings {
+    /// The bake settings of this method with `transport` at `bounces`; everything else keeps
+    /// the bake's defaults, so settings added to the bake need no change here.
+    pub fn settings(
+        &self,
+        spp: u32,
+        iterations: u32,
+        transport: Transport,
+        bounces: u32,
+        seed: u32,
+    ) -> BakeSettings {
         BakeSettings {
             spp,
             iterations,
+            transport,
             bounces,
             guiding: self.guiding,
             combine: self.combine,
@@ -108,11 +126,12 @@ mod tests {
     #[test]
     fn settings_carry_the_method() {
         let m = Method::guided_gd_rho();
-        let s = m.settings(128, 4, 2, 7);
+        let s = m.settings(128, 4, Transport::Path, 2, 7);
         assert_eq!(
             (s.spp, s.iterations, s.bounces, s.seed, s.guiding, s.combine),
             (128, 4, 2, 7, Guiding::Coherent, Combine::Texel)
         );
+        assert_eq!(s.transport, Transport::Path);
         assert!(s.bias_correction);
         assert!(s.validate().is_ok());
         assert_eq!(m.label(), "coherent/texel/rho");

@@ -34,6 +34,7 @@ use method::Method;
 use report::{EqualTimeSummary, Machine, OverheadSummary, Summary, Target};
 
 use crate::bake::run::BakeError;
+use crate::bake::settings::Transport;
 use crate::scene::Scene;
 use crate::texels::{FLAG_VALID, TexelFile, TexelFileError};
 
@@ -108,6 +109,8 @@ pub struct BenchConfig {
     pub seeds: Vec<u32>,
     /// Learning iterations of every bake.
     pub iterations: u32,
+    /// Light transport of every measured bake (the reference is always `path`).
+    pub transport: Transport,
     /// Bounces of every bake, the reference's too.
     pub bounces: u32,
     /// Rays per texel of the reference.
@@ -140,7 +143,7 @@ impl BenchConfig {
         let counts = spp.iter().chain([&self.reference_spp, &self.overhead_spp]);
         for &n in counts {
             Method::baseline()
-                .settings(n, self.iterations, self.bounces, 1)
+                .settings(n, self.iterations, self.transport, self.bounces, 1)
                 .validate()
                 .map_err(|e| BenchError::Config(e.to_string()))?;
         }
@@ -231,6 +234,7 @@ fn measure_and_write(
         spp,
         seeds: config.seeds.clone(),
         iterations: config.iterations,
+        transport: config.transport,
         bounces: config.bounces,
     };
     let runs = harness::run_ladder(bench, &ladder, &reference.values)?;
@@ -238,7 +242,7 @@ fn measure_and_write(
         bench,
         config.overhead_spp,
         config.iterations,
-        config.bounces,
+        (config.transport, config.bounces),
         config.repeats,
     )?;
 

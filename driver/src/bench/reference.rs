@@ -64,9 +64,7 @@ pub struct ReferenceInfo {
 
 /// The reference's settings: the unbiased baseline at `spp` with the `path` transport.
 pub fn reference_settings(spp: u32, iterations: u32, bounces: u32) -> BakeSettings {
-    let mut s = Method::baseline().settings(spp, iterations, bounces, REFERENCE_SEED);
-    s.transport = Transport::Path;
-    s
+    Method::baseline().settings(spp, iterations, Transport::Path, bounces, REFERENCE_SEED)
 }
 
 /// A hash of what the scene is, for the cache key (not of its path).

@@ -9,6 +9,7 @@ use serde::Serialize;
 use super::BenchError;
 use super::analysis::{Curve, EqualTime, EquivalentSamples, Interpolated, Overhead};
 use super::harness::{Ladder, OverheadRecord, RunRecord};
+use super::method::value_name;
 use super::reference::ReferenceInfo;
 use crate::output::exr_pages::temporary_name;
 
@@ -280,7 +281,7 @@ pub fn markdown(s: &Summary) -> String {
     let _ = writeln!(
         md,
         "### {}\n\n{} valid texels on {} page(s) {}; {} threads; {} ({} cores), {}.\n\
-         Ladder: spp {:?}, seeds {:?}, {} learning iterations. Reference: {} spp, {} ({:.1} s to bake{}).\n",
+         Ladder: spp {:?}, seeds {:?}, {} learning iterations, `{}` transport with {} bounces. Reference: {} spp, {} ({:.1} s to bake{}).\n",
         s.scene,
         s.texels,
         s.pages.len(),
@@ -292,6 +293,8 @@ pub fn markdown(s: &Summary) -> String {
         s.ladder.spp,
         s.ladder.seeds,
         s.ladder.iterations,
+        value_name(&s.ladder.transport),
+        s.ladder.bounces,
         s.reference.spp,
         s.reference.settings,
         s.reference.bake_seconds,

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::bake::settings::BakeSettings;
+use crate::bake::settings::{BakeSettings, Transport};
 use crate::bench::method::Method;
 use crate::bench::{BenchConfig, run};
 use crate::demo::{DEMO_TEXELS_PER_METRE, ajar_room};
@@ -47,6 +47,12 @@ pub struct BenchArgs {
     /// Learning iterations of every bake.
     #[arg(long, default_value_t = 4)]
     pub iterations: u32,
+    /// Light transport of every measured bake (the reference is always a `path` bake):
+    /// `path` measures the estimators against a reference of the same transport, so the
+    /// errors fall to zero as samples grow; `series` adds its own bias against `path` (the
+    /// bake's default transport; docs/bake.md).
+    #[arg(long, value_enum, default_value_t = Transport::Series)]
+    pub transport: Transport,
     /// Bounces of every bake and of the reference (default: the bake's; --quick 1).
     #[arg(long)]
     pub bounces: Option<u32>,
@@ -97,6 +103,7 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
         }),
         seeds: (1..=seeds).collect(),
         iterations: args.iterations,
+        transport: args.transport,
         bounces: pick(args.bounces, BakeSettings::default().bounces, 1),
         reference_spp: pick(args.ref_spp, 4096, 512),
         overhead_spp: pick(args.overhead_spp, 256, 32),
