@@ -994,6 +994,77 @@ mod tests {
         }
     }
 
+    /// What guiding is for (paper §2.2): 64 coincident texels on a black floor under a small
+    /// emissive panel (0.4 m square, 1 m up, form factor ≈ 0.05, not a light the bake
+    /// connects to), so a cosine sample finds the panel about once in twenty and the
+    /// texels' spread is the estimator's noise. Guided sampling learns the panel from the
+    /// first iteration and must cut the per-texel variance at equal samples; with the plain
+    /// average (unbiased) every mode agrees on the mean. Measured (128 spp in three
+    /// iterations of 40, 40 and 48, the first unguided): variance 12.9 unguided, 7.7 naive,
+    /// 7.2 coherent, 5.0 grid. The guided iterations alone do better — the default guide
+    /// learned from 2 560 cosine records of this panel cuts a random sample's variance 6.7×
+    /// — but the first iteration is a third of the budget and the unguided Sobol points are
+    /// already stratified.
+    #[test]
+    fn guiding_cuts_the_variance_under_a_small_emitter() {
+        let mut tris = quad(
+            Vec3::new(-10.0, -10.0, 0.0),
+            Vec3::X * 20.0,
+            Vec3::Y * 20.0,
+            0,
+        )
+        .to_vec();
+        tris.extend(quad(
+            Vec3::new(-0.2, -0.2, 1.0),
+            Vec3::Y * 0.4,
+            Vec3::X * 0.4,
+            1,
+        ));
+        let world = World::new(
+            &scene(
+                tris,
+                vec![grey(0.0, 0.0), grey(0.0, 100.0)],
+                Sky::Constant(Vec3::ZERO),
+                None,
+            ),
+            Preset::DEFAULT,
+        )
+        .unwrap();
+        let texels: Vec<TexelRecord> = texels_on_plane(64, 0.0)
+            .into_iter()
+            .map(|t| TexelRecord {
+                position: [0.0; 3],
+                triangle: 0,
+                ..t
+            })
+            .collect();
+        let spread = |guiding| {
+            let settings = BakeSettings {
+                combine: Combine::Average,
+                bias_correction: false,
+                ..settings(guiding)
+            };
+            let (mean, se, counters) = bake_mean(&world, settings, &texels);
+            (mean.x, se.x * 8.0, counters)
+        };
+        let (off_mean, off_sd, _) = spread(Guiding::Off);
+        for mode in [Guiding::Naive, Guiding::Coherent, Guiding::Grid] {
+            let (mean, sd, counters) = spread(mode);
+            assert!(counters.iterations_guided > 0, "{mode}: never guided");
+            let tol = 3.0 * (off_sd * off_sd + sd * sd).sqrt() / 8.0;
+            assert!(
+                (mean - off_mean).abs() <= tol,
+                "{mode}: {mean} vs {off_mean} ± {tol}"
+            );
+            assert!(
+                sd * sd < 0.7 * off_sd * off_sd,
+                "{mode}: per-texel variance {} not below 0.7 × unguided {}",
+                sd * sd,
+                off_sd * off_sd
+            );
+        }
+    }
+
     #[test]
     fn the_grid_comparator_learns_per_8x8_square_of_texels() {
         let world = world(ground(), grey(0.5, 0.0), Vec3::ONE, None);
