@@ -187,12 +187,13 @@ impl Default for GuideParams {
 /// Two spaces meet here: the node's *square* (`origin`, `size`) is where the warp puts
 /// points, its *source rectangle* `[lo, hi)` is the part of the primary sample space the warp
 /// maps onto that square.
-#[repr(C)]
+///
+/// Layout: 64 bytes, 64-byte aligned (one cache line per node). The eight fields the warp's
+/// final step reads (`lo`, `hi`, `origin`, `size`, `pdf`) come first, 32 contiguous bytes;
+/// `link` and `leaf_kids` exist for the 8-wide warp's branch-free descent.
+#[repr(C, align(64))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Node {
-    /// Interior: the warp goes right if `u.x >= t[0]`, then up if `u.y >= t[1 + right]`
-    /// (thresholds in primary sample space). Leaf: unused (0).
-    pub(crate) t: [f32; 3],
     /// Lower corner of the source rectangle.
     pub(crate) lo: [f32; 2],
     /// Upper corner of the source rectangle (exclusive).
@@ -203,6 +204,9 @@ pub struct Node {
     pub(crate) size: f32,
     /// Density on the square inside the node: source area over square area.
     pub(crate) pdf: f32,
+    /// Interior: the warp goes right if `u.x >= t[0]`, then up if `u.y >= t[1 + right]`
+    /// (thresholds in primary sample space). Leaf: unused (0).
+    pub(crate) t: [f32; 3],
     /// Probability mass of the node after floor, normalization and smoothing (root 1).
     pub(crate) mass: f32,
     /// First record of the node during the build (records are partitioned in place).
@@ -211,8 +215,15 @@ pub struct Node {
     count: u32,
     /// Index of the first child; 0 for a leaf (the root is never a child).
     pub(crate) child: u16,
-    /// Depth (root 0).
-    depth: u16,
+    /// Depth (root 0; at most [`MAX_DEPTH`]).
+    depth: u8,
+    /// Bit `q` set if child `q` is a leaf (all four bits for a leaf): the 8-wide warp's
+    /// step learns whether a lane arrived in a leaf without reading the child.
+    pub(crate) leaf_kids: u8,
+    /// The 8-wide warp's link: `child` for an interior node; for a leaf its own index
+    /// minus 3 (wrapping), so that the branch-free step `link + right + 2·upper` keeps a
+    /// lane in its leaf (a leaf's thresholds are 0, so `right` and `upper` are 1).
+    pub(crate) link: u32,
 }
 
 impl Node {
@@ -368,6 +379,8 @@ fn root_leaf(count: u32) -> Node {
         count,
         child: 0,
         depth: 0,
+        leaf_kids: 0b1111,
+        link: 0u32.wrapping_sub(3),
     }
 }
 
@@ -415,6 +428,7 @@ pub fn build<'a>(
     let floor = f64::from(sanitize(params.ambient, 0.0, f32::MAX)) * stats.total_flux;
     set_masses(nodes, floor);
     smooth(nodes, f64::from(sanitize(params.alpha, 0.0, 1.0)));
+    set_links(nodes);
     let start: &mut [u16] = match rest.get_mut(..START_TABLE_NODES) {
         Some(room) if nodes.len() > 1 => {
             let table = &mut bytemuck::cast_slice_mut(room)[..START_GRID * START_GRID];
@@ -424,6 +438,24 @@ pub fn build<'a>(
         _ => &mut [],
     };
     (Guide { nodes, start }, stats)
+}
+
+/// Sets every node's `link` and `leaf_kids` (the 8-wide warp's branch-free step).
+fn set_links(nodes: &mut [Node]) {
+    for i in 0..nodes.len() {
+        let (link, leaf_kids) = match nodes[i].first_child() {
+            Some(c) => {
+                let kids = (0..4).fold(0, |m, q| m | u8::from(nodes[c + q].is_leaf()) << q);
+                (c as u32, kids)
+            }
+            None => {
+                debug_assert_eq!(nodes[i].t, [0.0; 3], "a leaf's thresholds are 0");
+                ((i as u32).wrapping_sub(3), 0b1111)
+            }
+        };
+        nodes[i].link = link;
+        nodes[i].leaf_kids = leaf_kids;
+    }
 }
 
 /// Fills the start table (see [`Guide::start_table`]) top-down, writing every cell once.
@@ -898,6 +930,40 @@ mod tests {
             deeper_than_root > START_GRID * START_GRID / 2,
             "{deeper_than_root}"
         );
+    }
+
+    #[test]
+    fn warp_links_step_to_the_child_or_stay_in_the_leaf() {
+        let mut rng = crate::testing::Pcg32::new(9, 4);
+        let mut r: [Record; 600] = core::array::from_fn(|_| {
+            let u = [rng.next_f32(), rng.next_f32()];
+            rec(u[0], u[1], crate::testing::disk_and_sky(u))
+        });
+        let mut storage = [Node::default(); 1024];
+        let (g, s) = build(&mut r, &GuideParams::default(), &mut storage);
+        assert!(s.nodes > 20);
+        let nodes = g.nodes();
+        for (i, n) in nodes.iter().enumerate() {
+            for q in 0..4u32 {
+                let next = n.link.wrapping_add(q) as usize;
+                match n.first_child() {
+                    Some(c) => {
+                        assert_eq!(next, c + q as usize, "node {i}");
+                        assert_eq!(n.leaf_kids >> q & 1, u8::from(nodes[next].is_leaf()));
+                    }
+                    // A leaf's thresholds are 0, so every point takes quadrant 3.
+                    None => {
+                        assert_eq!(n.t, [0.0; 3], "leaf {i}");
+                        assert_eq!(n.leaf_kids, 0b1111, "leaf {i}");
+                        assert_eq!(q == 3, next == i, "leaf {i}");
+                    }
+                }
+            }
+        }
+        let mut one = [Node::default(); 1];
+        let root = Guide::uniform(&mut one).nodes()[0];
+        assert_eq!((root.link.wrapping_add(3), root.leaf_kids), (0, 0b1111));
+        assert_eq!(core::mem::align_of::<Node>(), 64);
     }
 
     #[test]
