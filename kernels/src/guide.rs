@@ -227,6 +227,11 @@ pub struct Node {
 }
 
 impl Node {
+    /// `lo, hi, origin, size, pdf`: the node's first 32 bytes, what the warp's last step reads.
+    #[inline(always)]
+    pub(crate) fn leaf_row(&self) -> [f32; 8] {
+        *bytemuck::from_bytes(&bytemuck::bytes_of(self)[..32])
+    }
     /// Whether the node is a leaf.
     pub fn is_leaf(&self) -> bool {
         self.child == 0
@@ -963,6 +968,10 @@ mod tests {
         let mut one = [Node::default(); 1];
         let root = Guide::uniform(&mut one).nodes()[0];
         assert_eq!((root.link.wrapping_add(3), root.leaf_kids), (0, 0b1111));
+        // The warp reads a leaf's eight placement fields as the node's first 32 bytes.
+        let n = &nodes[nodes.len() - 1];
+        let row = [n.lo, n.hi, n.origin, [n.size, n.pdf]].concat();
+        assert_eq!(n.leaf_row().as_slice(), row.as_slice());
         assert_eq!(core::mem::align_of::<Node>(), 64);
     }
 
