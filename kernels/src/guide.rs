@@ -190,7 +190,7 @@ impl Default for GuideParams {
 ///
 /// Layout: 64 bytes, 64-byte aligned (one cache line per node). The eight fields the warp's
 /// final step reads (`lo`, `hi`, `origin`, `size`, `pdf`) come first, 32 contiguous bytes;
-/// `link` and `leaf_kids` exist for the 8-wide warp's branch-free descent.
+/// `link` and `inner_kids` exist for the 8-wide warp's branch-free descent.
 #[repr(C, align(64))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Node {
@@ -217,9 +217,9 @@ pub struct Node {
     pub(crate) child: u16,
     /// Depth (root 0; at most [`MAX_DEPTH`]).
     depth: u8,
-    /// Bit `q` set if child `q` is a leaf (all four bits for a leaf): the 8-wide warp's
-    /// step learns whether a lane arrived in a leaf without reading the child.
-    pub(crate) leaf_kids: u8,
+    /// Bit `q` set if child `q` is interior (none for a leaf): the 8-wide warp's step
+    /// learns whether a lane arrived in a leaf without reading the child.
+    pub(crate) inner_kids: u8,
     /// The 8-wide warp's link: `child` for an interior node; for a leaf its own index
     /// minus 3 (wrapping), so that the branch-free step `link + right + 2·upper` keeps a
     /// lane in its leaf (a leaf's thresholds are 0, so `right` and `upper` are 1).
@@ -384,7 +384,7 @@ fn root_leaf(count: u32) -> Node {
         count,
         child: 0,
         depth: 0,
-        leaf_kids: 0b1111,
+        inner_kids: 0,
         link: 0u32.wrapping_sub(3),
     }
 }
@@ -445,21 +445,21 @@ pub fn build<'a>(
     (Guide { nodes, start }, stats)
 }
 
-/// Sets every node's `link` and `leaf_kids` (the 8-wide warp's branch-free step).
+/// Sets every node's `link` and `inner_kids` (the 8-wide warp's branch-free step).
 fn set_links(nodes: &mut [Node]) {
     for i in 0..nodes.len() {
-        let (link, leaf_kids) = match nodes[i].first_child() {
+        let (link, inner_kids) = match nodes[i].first_child() {
             Some(c) => {
-                let kids = (0..4).fold(0, |m, q| m | u8::from(nodes[c + q].is_leaf()) << q);
+                let kids = (0..4).fold(0, |m, q| m | u8::from(!nodes[c + q].is_leaf()) << q);
                 (c as u32, kids)
             }
             None => {
                 debug_assert_eq!(nodes[i].t, [0.0; 3], "a leaf's thresholds are 0");
-                ((i as u32).wrapping_sub(3), 0b1111)
+                ((i as u32).wrapping_sub(3), 0)
             }
         };
         nodes[i].link = link;
-        nodes[i].leaf_kids = leaf_kids;
+        nodes[i].inner_kids = inner_kids;
     }
 }
 
@@ -954,12 +954,12 @@ mod tests {
                 match n.first_child() {
                     Some(c) => {
                         assert_eq!(next, c + q as usize, "node {i}");
-                        assert_eq!(n.leaf_kids >> q & 1, u8::from(nodes[next].is_leaf()));
+                        assert_eq!(n.inner_kids >> q & 1, u8::from(!nodes[next].is_leaf()));
                     }
                     // A leaf's thresholds are 0, so every point takes quadrant 3.
                     None => {
                         assert_eq!(n.t, [0.0; 3], "leaf {i}");
-                        assert_eq!(n.leaf_kids, 0b1111, "leaf {i}");
+                        assert_eq!(n.inner_kids, 0, "leaf {i}");
                         assert_eq!(q == 3, next == i, "leaf {i}");
                     }
                 }
@@ -967,7 +967,7 @@ mod tests {
         }
         let mut one = [Node::default(); 1];
         let root = Guide::uniform(&mut one).nodes()[0];
-        assert_eq!((root.link.wrapping_add(3), root.leaf_kids), (0, 0b1111));
+        assert_eq!((root.link.wrapping_add(3), root.inner_kids), (0, 0));
         // The warp reads a leaf's eight placement fields as the node's first 32 bytes.
         let n = &nodes[nodes.len() - 1];
         let row = [n.lo, n.hi, n.origin, [n.size, n.pdf]].concat();

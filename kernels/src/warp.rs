@@ -38,7 +38,7 @@
 //!   descend in lockstep rounds, branch-free, so their load → compare → load chains overlap
 //!   where the scalar warp waits on one. The step `link + right + 2·upper` is the child
 //!   for an interior node and the node itself for a leaf (the node's `link`), and the
-//!   node's `leaf_kids` bits say whether the lane just reached a leaf, so a half stops in
+//!   node's `inner_kids` bits say whether the lane just reached a leaf, so a half stops in
 //!   the round its deepest lane arrives. A half waits only for the deepest of its four
 //!   lanes: on a learned guide the lanes of a packet need 0–5 more levels from their
 //!   table entries (about 1 on average), and rounds cost as much as the deepest lane;
@@ -398,7 +398,7 @@ fn from_root(nodes: &[Node], x: f32x8, y: f32x8) -> Warped8 {
     Warped8 { x: wx, y: wy, pdf }
 }
 
-/// Quadrant `q`'s bit in a node's `leaf_kids`.
+/// Quadrant `q`'s bit in a node's `inner_kids`.
 const QUADRANT_BIT: [u8; 4] = [1, 2, 4, 8];
 
 /// The per-lane descent of [`sample8`]: lane `l` starts at node `idx[l]` (which its point
@@ -408,7 +408,7 @@ const QUADRANT_BIT: [u8; 4] = [1, 2, 4, 8];
 /// for the deepest of four, not of eight, which saves a fifth of the steps on a learned
 /// guide). The step is branch-free and the same for every lane: `link + right + 2·upper`
 /// is the child for an interior node and the node itself for a leaf (its `link` is its
-/// index − 3, its thresholds 0), and the node's `leaf_kids` says whether the lane just
+/// index − 3, its thresholds 0), and the node's `inner_kids` says whether the lane just
 /// arrived in a leaf, so the rounds stop in the round that brings the last lane to its leaf
 /// (at least one round) instead of one round later. The leaves are then gathered (one
 /// 32-byte row per lane, transposed) and placed 8-wide.
@@ -423,7 +423,7 @@ fn descend_lanes(nodes: &[Node], mut idx: [usize; 8], x: f32x8, y: f32x8) -> War
                 let right = xs[l] >= n.t[0];
                 let upper = ys[l] >= n.t[1 + usize::from(right)];
                 let q = usize::from(right) + 2 * usize::from(upper);
-                live |= !n.leaf_kids & QUADRANT_BIT[q];
+                live |= n.inner_kids & QUADRANT_BIT[q];
                 idx[l] = n.link.wrapping_add(q as u32) as usize;
             }
             if live == 0 {
