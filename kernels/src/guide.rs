@@ -298,9 +298,10 @@ pub struct BuildStats {
 
 /// Cells per axis of the warp's start table (a power of two, so `u · START_GRID` is exact).
 pub const START_GRID: usize = 32;
-/// Nodes of storage the start table occupies after the tree: `START_GRID²` u16 entries.
+/// Nodes of storage the start table occupies after the tree: `START_GRID²` u16 start
+/// nodes and `START_GRID²` × 4 u16 shortcuts (10 KB).
 pub const START_TABLE_NODES: usize =
-    (START_GRID * START_GRID * 2).div_ceil(core::mem::size_of::<Node>());
+    (START_GRID * START_GRID * 2 * 5).div_ceil(core::mem::size_of::<Node>());
 
 /// A built guide: a view of the caller's node storage.
 #[derive(Clone, Copy, Debug)]
@@ -308,6 +309,9 @@ pub struct Guide<'a> {
     nodes: &'a [Node],
     /// The start table ([`Guide::start_table`]), empty when the storage had no room for it.
     start: &'a [u16],
+    /// Per start-table cell, per quadrant of its start node: the deepest node that every
+    /// point of the cell in that quadrant passes through (empty with `start`).
+    shortcuts: &'a [[u16; 4]],
 }
 
 /// A leaf as a square of the primary sample space with its constant density.
@@ -335,6 +339,7 @@ impl<'a> Guide<'a> {
         Guide {
             nodes: &storage[..1],
             start: &[],
+            shortcuts: &[],
         }
     }
 
@@ -352,6 +357,14 @@ impl<'a> Guide<'a> {
     /// then starts at the root (same results, slower).
     pub fn start_table(&self) -> &'a [u16] {
         self.start
+    }
+
+    /// For each start-table cell and each quadrant `q` (`right + 2·upper`) of the cell's
+    /// start node: the deepest node that every point of the cell taking quadrant `q` there
+    /// passes through, the 8-wide warp's second node (the start node itself, all four, when
+    /// it is a leaf). Empty with the start table.
+    pub(crate) fn shortcuts(&self) -> &'a [[u16; 4]] {
+        self.shortcuts
     }
 
     /// Whether the guide is the uniform density (a single leaf).
@@ -424,6 +437,7 @@ pub fn build<'a>(
             Guide {
                 nodes: &storage[..1],
                 start: &[],
+                shortcuts: &[],
             },
             stats,
         );
@@ -434,15 +448,27 @@ pub fn build<'a>(
     set_masses(nodes, floor);
     smooth(nodes, f64::from(sanitize(params.alpha, 0.0, 1.0)));
     set_links(nodes);
-    let start: &mut [u16] = match rest.get_mut(..START_TABLE_NODES) {
+    let (start, shortcuts): (&mut [u16], &mut [[u16; 4]]) = match rest.get_mut(..START_TABLE_NODES)
+    {
         Some(room) if nodes.len() > 1 => {
-            let table = &mut bytemuck::cast_slice_mut(room)[..START_GRID * START_GRID];
+            let cells = START_GRID * START_GRID;
+            let words: &mut [u16] = bytemuck::cast_slice_mut(room);
+            let (table, rest) = words.split_at_mut(cells);
+            let shortcuts = bytemuck::cast_slice_mut(&mut rest[..4 * cells]);
             fill_start_table(nodes, table);
-            table
+            fill_shortcuts(nodes, table, shortcuts);
+            (table, shortcuts)
         }
-        _ => &mut [],
+        _ => (&mut [], &mut []),
     };
-    (Guide { nodes, start }, stats)
+    (
+        Guide {
+            nodes,
+            start,
+            shortcuts,
+        },
+        stats,
+    )
 }
 
 /// Sets every node's `link` and `inner_kids` (the 8-wide warp's branch-free step).
@@ -514,6 +540,70 @@ fn fill_cells(nodes: &[Node], i: usize, xs: [u32; 2], ys: [u32; 2], table: &mut 
             }
         }
     }
+}
+
+/// Fills [`Guide::shortcuts`]: for each cell whose start node is interior, the four parts
+/// of the cell by the start node's thresholds, each followed down its child as far as all
+/// of its points go the same way.
+fn fill_shortcuts(nodes: &[Node], table: &[u16], shortcuts: &mut [[u16; 4]]) {
+    let g = START_GRID as f32;
+    for (k, (&n, s)) in table.iter().zip(shortcuts).enumerate() {
+        let n = usize::from(n);
+        let Some(c) = nodes[n].first_child() else {
+            *s = [n as u16; 4];
+            continue;
+        };
+        // The cell's points: [cx, cx+1)/G × [cy, cy+1)/G, exact (G a power of two).
+        let (cx, cy) = ((k % START_GRID) as f32, (k / START_GRID) as f32);
+        let (xs, ys) = ([cx / g, (cx + 1.0) / g], [cy / g, (cy + 1.0) / g]);
+        let t = nodes[n].t;
+        for (q, s) in s.iter_mut().enumerate() {
+            let (right, upper) = (q & 1, q >> 1);
+            let part_x = side(xs, t[0], right);
+            let part_y = side(ys, t[1 + right], upper);
+            *s = deepest_passed(nodes, c + q, part_x, part_y) as u16;
+        }
+    }
+}
+
+/// The part of the f32 interval `[a, b)` below the threshold `t` (`upper` 0) or at or
+/// above it (`upper` 1); empty when `a ≥ b`.
+fn side([a, b]: [f32; 2], t: f32, upper: usize) -> [f32; 2] {
+    if upper == 1 {
+        [a.max(t), b]
+    } else {
+        [a, b.min(t)]
+    }
+}
+
+/// The deepest node below node `i` (or `i`) that every point of `[xs) × [ys)` passes
+/// through, given that they all reach `i` (`i` for an empty rectangle). The points of
+/// `[a, b)` all lie below `t` iff `b ≤ t` and all at or above it iff `a ≥ t`; otherwise `t`
+/// itself is one of them and `a` another, on the other side, so the test is exact.
+fn deepest_passed(nodes: &[Node], mut i: usize, xs: [f32; 2], ys: [f32; 2]) -> usize {
+    if xs[0] >= xs[1] || ys[0] >= ys[1] {
+        return i;
+    }
+    let side_of = |[a, b]: [f32; 2], t: f32| {
+        if b <= t {
+            Some(0)
+        } else if a >= t {
+            Some(1)
+        } else {
+            None
+        }
+    };
+    while let Some(c) = nodes[i].first_child() {
+        let t = nodes[i].t;
+        let Some(right) = side_of(xs, t[0]) else {
+            break;
+        };
+        let Some(upper) = side_of(ys, t[1 + right]) else {
+            break;
+        };
+        i = c + right + 2 * upper;
+    }
+    i
 }
 
 fn sanitize(x: f32, lo: f32, hi: f32) -> f32 {
@@ -934,6 +1024,73 @@ mod tests {
         assert!(
             deeper_than_root > START_GRID * START_GRID / 2,
             "{deeper_than_root}"
+        );
+    }
+
+    #[test]
+    fn shortcuts_are_passed_by_every_point_of_their_cell_part() {
+        let mut rng = crate::testing::Pcg32::new(23, 7);
+        // As above: shallow regions and a very deep cluster.
+        let mut r: [Record; 900] = core::array::from_fn(|k| {
+            if k < 700 {
+                let u = [rng.next_f32(), rng.next_f32()];
+                rec(u[0], u[1], crate::testing::disk_and_sky(u))
+            } else {
+                rec(
+                    0.3 + 1e-4 * rng.next_f32(),
+                    0.6 + 1e-4 * rng.next_f32(),
+                    5.0,
+                )
+            }
+        });
+        let p = GuideParams {
+            max_depth: MAX_DEPTH,
+            ..GuideParams::default()
+        };
+        let mut storage = [Node::default(); 2048];
+        let (g, _) = build(&mut r, &p, &mut storage);
+        let (nodes, table, short) = (g.nodes(), g.start_table(), g.shortcuts());
+        assert_eq!(short.len(), table.len());
+        let below = |v: f32| f32::from_bits(v.to_bits() - 1);
+        let gf = START_GRID as f32;
+        let (mut deeper, mut interior) = (0, 0);
+        for (k, (&start, s)) in table.iter().zip(short).enumerate() {
+            let (n, s) = (usize::from(start), s.map(usize::from));
+            let Some(c) = nodes[n].first_child() else {
+                assert_eq!(s, [n; 4], "cell {k}");
+                continue;
+            };
+            interior += 1;
+            let (cx, cy) = (k % START_GRID, k / START_GRID);
+            let (x0, y0) = (cx as f32 / gf, cy as f32 / gf);
+            let (x1, y1) = (below((cx + 1) as f32 / gf), below((cy + 1) as f32 / gf));
+            // Corners, random points, and the start node's thresholds and the floats just
+            // below them, where they fall inside the cell.
+            let t = nodes[n].t;
+            let mut xs = alloc::vec![x0, x1, t[0], below(t[0])];
+            let mut ys = alloc::vec![y0, y1, t[1], below(t[1]), t[2], below(t[2])];
+            for _ in 0..4 {
+                xs.push(x0 + rng.next_f32() / gf);
+                ys.push(y0 + rng.next_f32() / gf);
+            }
+            for &x in &xs {
+                for &y in &ys {
+                    if !(x0..=x1).contains(&x) || !(y0..=y1).contains(&y) {
+                        continue;
+                    }
+                    let right = x >= t[0];
+                    let upper = y >= t[1 + usize::from(right)];
+                    let q = usize::from(right) + 2 * usize::from(upper);
+                    assert!(path_passes(nodes, [x, y], s[q]), "cell {k} point {x},{y}");
+                    assert!(path_passes(nodes, [x, y], c + q));
+                }
+            }
+            deeper += s.iter().enumerate().filter(|&(q, &s)| s != c + q).count();
+        }
+        // The shortcuts skip levels in many cells (else they would be worthless).
+        assert!(
+            interior > 100 && deeper > interior / 2,
+            "{interior} {deeper}"
         );
     }
 

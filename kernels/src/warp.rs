@@ -371,7 +371,16 @@ pub fn sample8(guide: &Guide<'_>, x: f32x8, y: f32x8) -> Warped8 {
     let g = f32x8::splat(START_GRID as f32);
     let cell = (x * g).trunc_int() + (y * g).trunc_int() * i32x8::splat(START_GRID as i32);
     let cell = cell.to_array();
-    let idx = core::array::from_fn(|l| usize::from(table[cell[l] as usize]));
+    let shortcuts = guide.shortcuts();
+    let (xs, ys) = (x.to_array(), y.to_array());
+    // One step from the start node, then on to the cell's shortcut for that quadrant.
+    let idx = core::array::from_fn(|l| {
+        let c = cell[l] as usize;
+        let n = &nodes[usize::from(table[c])];
+        let right = xs[l] >= n.t[0];
+        let upper = ys[l] >= n.t[1 + usize::from(right)];
+        usize::from(shortcuts[c][usize::from(right) + 2 * usize::from(upper)])
+    });
     descend_lanes(nodes, idx, x, y)
 }
 
@@ -416,6 +425,9 @@ const QUADRANT_BIT: [u8; 4] = [1, 2, 4, 8];
 fn descend_lanes(nodes: &[Node], mut idx: [usize; 8], x: f32x8, y: f32x8) -> Warped8 {
     let (xs, ys) = (x.to_array(), y.to_array());
     for half in [0..4, 4..8] {
+        if half.clone().fold(0, |m, l| m | nodes[idx[l]].child) == 0 {
+            continue;
+        }
         loop {
             let mut live = 0;
             for l in half.clone() {
