@@ -46,9 +46,12 @@
 //! After the tree, if [`START_TABLE_NODES`] nodes of the storage are still free, `build`
 //! writes the warp's **start table** there ([`Guide::start_table`]: for each cell of a
 //! [`START_GRID`]² grid over the primary sample square, the deepest node the whole cell
-//! passes through). It is what lets the 8-wide warp skip the top of the tree; without room
-//! for it the guide is the same density and the warp gives the same results, more slowly.
-//! Filling it visits every node and writes every cell once.
+//! passes through) and, per cell, four **shortcuts**: for each quadrant of the cell's start
+//! node, the deepest node that every point of the cell going that way passes through. They
+//! are what lets the 8-wide warp skip the top of the tree; without room for them the guide
+//! is the same density and the warp gives the same results, more slowly. Filling the start
+//! table visits every node and writes every cell once; each shortcut is one short descent
+//! of the cell's part (exact f32 interval tests against the thresholds).
 //!
 //! # Embedding: guide + warp + estimator in a baker with its own ray tracer
 //! One texel (in a real baker: every texel of a cluster shares the guide), three learning
