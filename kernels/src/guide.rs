@@ -46,9 +46,12 @@
 //! After the tree, if [`START_TABLE_NODES`] nodes of the storage are still free, `build`
 //! writes the warp's **start table** there ([`Guide::start_table`]: for each cell of a
 //! [`START_GRID`]² grid over the primary sample square, the deepest node the whole cell
-//! passes through). It is what lets the 8-wide warp skip the top of the tree; without room
-//! for it the guide is the same density and the warp gives the same results, more slowly.
-//! Filling it visits every node and writes every cell once.
+//! passes through) and, per cell, four **shortcuts**: for each quadrant of the cell's start
+//! node, the deepest node that every point of the cell going that way passes through. They
+//! are what lets the 8-wide warp skip the top of the tree; without room for them the guide
+//! is the same density and the warp gives the same results, more slowly. Filling the start
+//! table visits every node and writes every cell once; each shortcut is one short descent
+//! of the cell's part (exact f32 interval tests against the thresholds).
 //!
 //! # Embedding: guide + warp + estimator in a baker with its own ray tracer
 //! One texel (in a real baker: every texel of a cluster shares the guide), three learning
@@ -187,12 +190,13 @@ impl Default for GuideParams {
 /// Two spaces meet here: the node's *square* (`origin`, `size`) is where the warp puts
 /// points, its *source rectangle* `[lo, hi)` is the part of the primary sample space the warp
 /// maps onto that square.
-#[repr(C)]
+///
+/// Layout: 64 bytes, 64-byte aligned (one cache line per node). The eight fields the warp's
+/// final step reads (`lo`, `hi`, `origin`, `size`, `pdf`) come first, 32 contiguous bytes;
+/// `link` and `inner_kids` exist for the 8-wide warp's branch-free descent.
+#[repr(C, align(64))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Node {
-    /// Interior: the warp goes right if `u.x >= t[0]`, then up if `u.y >= t[1 + right]`
-    /// (thresholds in primary sample space). Leaf: unused (0).
-    pub(crate) t: [f32; 3],
     /// Lower corner of the source rectangle.
     pub(crate) lo: [f32; 2],
     /// Upper corner of the source rectangle (exclusive).
@@ -203,6 +207,9 @@ pub struct Node {
     pub(crate) size: f32,
     /// Density on the square inside the node: source area over square area.
     pub(crate) pdf: f32,
+    /// Interior: the warp goes right if `u.x >= t[0]`, then up if `u.y >= t[1 + right]`
+    /// (thresholds in primary sample space). Leaf: unused (0).
+    pub(crate) t: [f32; 3],
     /// Probability mass of the node after floor, normalization and smoothing (root 1).
     pub(crate) mass: f32,
     /// First record of the node during the build (records are partitioned in place).
@@ -211,11 +218,23 @@ pub struct Node {
     count: u32,
     /// Index of the first child; 0 for a leaf (the root is never a child).
     pub(crate) child: u16,
-    /// Depth (root 0).
-    depth: u16,
+    /// Depth (root 0; at most [`MAX_DEPTH`]).
+    depth: u8,
+    /// Bit `q` set if child `q` is interior (none for a leaf): the 8-wide warp's step
+    /// learns whether a lane arrived in a leaf without reading the child.
+    pub(crate) inner_kids: u8,
+    /// The 8-wide warp's link: `child` for an interior node; for a leaf its own index
+    /// minus 3 (wrapping), so that the branch-free step `link + right + 2·upper` keeps a
+    /// lane in its leaf (a leaf's thresholds are 0, so `right` and `upper` are 1).
+    pub(crate) link: u32,
 }
 
 impl Node {
+    /// `lo, hi, origin, size, pdf`: the node's first 32 bytes, what the warp's last step reads.
+    #[inline(always)]
+    pub(crate) fn leaf_row(&self) -> [f32; 8] {
+        *bytemuck::from_bytes(&bytemuck::bytes_of(self)[..32])
+    }
     /// Whether the node is a leaf.
     pub fn is_leaf(&self) -> bool {
         self.child == 0
@@ -282,9 +301,10 @@ pub struct BuildStats {
 
 /// Cells per axis of the warp's start table (a power of two, so `u · START_GRID` is exact).
 pub const START_GRID: usize = 32;
-/// Nodes of storage the start table occupies after the tree: `START_GRID²` u16 entries.
+/// Nodes of storage the start table occupies after the tree: `START_GRID²` u16 start
+/// nodes and `START_GRID²` × 4 u16 shortcuts (10 KB).
 pub const START_TABLE_NODES: usize =
-    (START_GRID * START_GRID * 2).div_ceil(core::mem::size_of::<Node>());
+    (START_GRID * START_GRID * 2 * 5).div_ceil(core::mem::size_of::<Node>());
 
 /// A built guide: a view of the caller's node storage.
 #[derive(Clone, Copy, Debug)]
@@ -292,6 +312,9 @@ pub struct Guide<'a> {
     nodes: &'a [Node],
     /// The start table ([`Guide::start_table`]), empty when the storage had no room for it.
     start: &'a [u16],
+    /// Per start-table cell, per quadrant of its start node: the deepest node that every
+    /// point of the cell in that quadrant passes through (empty with `start`).
+    shortcuts: &'a [[u16; 4]],
 }
 
 /// A leaf as a square of the primary sample space with its constant density.
@@ -319,6 +342,7 @@ impl<'a> Guide<'a> {
         Guide {
             nodes: &storage[..1],
             start: &[],
+            shortcuts: &[],
         }
     }
 
@@ -336,6 +360,14 @@ impl<'a> Guide<'a> {
     /// then starts at the root (same results, slower).
     pub fn start_table(&self) -> &'a [u16] {
         self.start
+    }
+
+    /// For each start-table cell and each quadrant `q` (`right + 2·upper`) of the cell's
+    /// start node: the deepest node that every point of the cell taking quadrant `q` there
+    /// passes through, the 8-wide warp's second node (the start node itself, all four, when
+    /// it is a leaf). Empty with the start table.
+    pub(crate) fn shortcuts(&self) -> &'a [[u16; 4]] {
+        self.shortcuts
     }
 
     /// Whether the guide is the uniform density (a single leaf).
@@ -368,6 +400,8 @@ fn root_leaf(count: u32) -> Node {
         count,
         child: 0,
         depth: 0,
+        inner_kids: 0,
+        link: 0u32.wrapping_sub(3),
     }
 }
 
@@ -406,6 +440,7 @@ pub fn build<'a>(
             Guide {
                 nodes: &storage[..1],
                 start: &[],
+                shortcuts: &[],
             },
             stats,
         );
@@ -414,15 +449,46 @@ pub fn build<'a>(
     let (nodes, rest) = storage.split_at_mut(stats.nodes as usize);
     set_masses(nodes, f64::from(sanitize(params.ambient, 0.0, f32::MAX)));
     smooth(nodes, f64::from(sanitize(params.alpha, 0.0, 1.0)));
-    let start: &mut [u16] = match rest.get_mut(..START_TABLE_NODES) {
+    set_links(nodes);
+    let (start, shortcuts): (&mut [u16], &mut [[u16; 4]]) = match rest.get_mut(..START_TABLE_NODES)
+    {
         Some(room) if nodes.len() > 1 => {
-            let table = &mut bytemuck::cast_slice_mut(room)[..START_GRID * START_GRID];
+            let cells = START_GRID * START_GRID;
+            let words: &mut [u16] = bytemuck::cast_slice_mut(room);
+            let (table, rest) = words.split_at_mut(cells);
+            let shortcuts = bytemuck::cast_slice_mut(&mut rest[..4 * cells]);
             fill_start_table(nodes, table);
-            table
+            fill_shortcuts(nodes, table, shortcuts);
+            (table, shortcuts)
         }
-        _ => &mut [],
+        _ => (&mut [], &mut []),
     };
-    (Guide { nodes, start }, stats)
+    (
+        Guide {
+            nodes,
+            start,
+            shortcuts,
+        },
+        stats,
+    )
+}
+
+/// Sets every node's `link` and `inner_kids` (the 8-wide warp's branch-free step).
+fn set_links(nodes: &mut [Node]) {
+    for i in 0..nodes.len() {
+        let (link, inner_kids) = match nodes[i].first_child() {
+            Some(c) => {
+                let kids = (0..4).fold(0, |m, q| m | u8::from(!nodes[c + q].is_leaf()) << q);
+                (c as u32, kids)
+            }
+            None => {
+                debug_assert_eq!(nodes[i].t, [0.0; 3], "a leaf's thresholds are 0");
+                ((i as u32).wrapping_sub(3), 0)
+            }
+        };
+        nodes[i].link = link;
+        nodes[i].inner_kids = inner_kids;
+    }
 }
 
 /// Fills the start table (see [`Guide::start_table`]) top-down, writing every cell once.
@@ -476,6 +542,70 @@ fn fill_cells(nodes: &[Node], i: usize, xs: [u32; 2], ys: [u32; 2], table: &mut 
             }
         }
     }
+}
+
+/// Fills [`Guide::shortcuts`]: for each cell whose start node is interior, the four parts
+/// of the cell by the start node's thresholds, each followed down its child as far as all
+/// of its points go the same way.
+fn fill_shortcuts(nodes: &[Node], table: &[u16], shortcuts: &mut [[u16; 4]]) {
+    let g = START_GRID as f32;
+    for (k, (&n, s)) in table.iter().zip(shortcuts).enumerate() {
+        let n = usize::from(n);
+        let Some(c) = nodes[n].first_child() else {
+            *s = [n as u16; 4];
+            continue;
+        };
+        // The cell's points: [cx, cx+1)/G × [cy, cy+1)/G, exact (G a power of two).
+        let (cx, cy) = ((k % START_GRID) as f32, (k / START_GRID) as f32);
+        let (xs, ys) = ([cx / g, (cx + 1.0) / g], [cy / g, (cy + 1.0) / g]);
+        let t = nodes[n].t;
+        for (q, s) in s.iter_mut().enumerate() {
+            let (right, upper) = (q & 1, q >> 1);
+            let part_x = side(xs, t[0], right);
+            let part_y = side(ys, t[1 + right], upper);
+            *s = deepest_passed(nodes, c + q, part_x, part_y) as u16;
+        }
+    }
+}
+
+/// The part of the f32 interval `[a, b)` below the threshold `t` (`upper` 0) or at or
+/// above it (`upper` 1); empty when `a ≥ b`.
+fn side([a, b]: [f32; 2], t: f32, upper: usize) -> [f32; 2] {
+    if upper == 1 {
+        [a.max(t), b]
+    } else {
+        [a, b.min(t)]
+    }
+}
+
+/// The deepest node below node `i` (or `i`) that every point of `[xs) × [ys)` passes
+/// through, given that they all reach `i` (`i` for an empty rectangle). The points of
+/// `[a, b)` all lie below `t` iff `b ≤ t` and all at or above it iff `a ≥ t`; otherwise `t`
+/// itself is one of them and `a` another, on the other side, so the test is exact.
+fn deepest_passed(nodes: &[Node], mut i: usize, xs: [f32; 2], ys: [f32; 2]) -> usize {
+    if xs[0] >= xs[1] || ys[0] >= ys[1] {
+        return i;
+    }
+    let side_of = |[a, b]: [f32; 2], t: f32| {
+        if b <= t {
+            Some(0)
+        } else if a >= t {
+            Some(1)
+        } else {
+            None
+        }
+    };
+    while let Some(c) = nodes[i].first_child() {
+        let t = nodes[i].t;
+        let Some(right) = side_of(xs, t[0]) else {
+            break;
+        };
+        let Some(upper) = side_of(ys, t[1 + right]) else {
+            break;
+        };
+        i = c + right + 2 * upper;
+    }
+    i
 }
 
 fn sanitize(x: f32, lo: f32, hi: f32) -> f32 {
@@ -929,6 +1059,111 @@ mod tests {
             deeper_than_root > START_GRID * START_GRID / 2,
             "{deeper_than_root}"
         );
+    }
+
+    #[test]
+    fn shortcuts_are_passed_by_every_point_of_their_cell_part() {
+        let mut rng = crate::testing::Pcg32::new(23, 7);
+        // As above: shallow regions and a very deep cluster.
+        let mut r: [Record; 900] = core::array::from_fn(|k| {
+            if k < 700 {
+                let u = [rng.next_f32(), rng.next_f32()];
+                rec(u[0], u[1], crate::testing::disk_and_sky(u))
+            } else {
+                rec(
+                    0.3 + 1e-4 * rng.next_f32(),
+                    0.6 + 1e-4 * rng.next_f32(),
+                    5.0,
+                )
+            }
+        });
+        let p = GuideParams {
+            max_depth: MAX_DEPTH,
+            ..GuideParams::default()
+        };
+        let mut storage = [Node::default(); 2048];
+        let (g, _) = build(&mut r, &p, &mut storage);
+        let (nodes, table, short) = (g.nodes(), g.start_table(), g.shortcuts());
+        assert_eq!(short.len(), table.len());
+        let below = |v: f32| f32::from_bits(v.to_bits() - 1);
+        let gf = START_GRID as f32;
+        let (mut deeper, mut interior) = (0, 0);
+        for (k, (&start, s)) in table.iter().zip(short).enumerate() {
+            let (n, s) = (usize::from(start), s.map(usize::from));
+            let Some(c) = nodes[n].first_child() else {
+                assert_eq!(s, [n; 4], "cell {k}");
+                continue;
+            };
+            interior += 1;
+            let (cx, cy) = (k % START_GRID, k / START_GRID);
+            let (x0, y0) = (cx as f32 / gf, cy as f32 / gf);
+            let (x1, y1) = (below((cx + 1) as f32 / gf), below((cy + 1) as f32 / gf));
+            // Corners, random points, and the start node's thresholds and the floats just
+            // below them, where they fall inside the cell.
+            let t = nodes[n].t;
+            let mut xs = alloc::vec![x0, x1, t[0], below(t[0])];
+            let mut ys = alloc::vec![y0, y1, t[1], below(t[1]), t[2], below(t[2])];
+            for _ in 0..4 {
+                xs.push(x0 + rng.next_f32() / gf);
+                ys.push(y0 + rng.next_f32() / gf);
+            }
+            for &x in &xs {
+                for &y in &ys {
+                    if !(x0..=x1).contains(&x) || !(y0..=y1).contains(&y) {
+                        continue;
+                    }
+                    let right = x >= t[0];
+                    let upper = y >= t[1 + usize::from(right)];
+                    let q = usize::from(right) + 2 * usize::from(upper);
+                    assert!(path_passes(nodes, [x, y], s[q]), "cell {k} point {x},{y}");
+                    assert!(path_passes(nodes, [x, y], c + q));
+                }
+            }
+            deeper += s.iter().enumerate().filter(|&(q, &s)| s != c + q).count();
+        }
+        // The shortcuts skip levels in many cells (else they would be worthless).
+        assert!(
+            interior > 100 && deeper > interior / 2,
+            "{interior} {deeper}"
+        );
+    }
+
+    #[test]
+    fn warp_links_step_to_the_child_or_stay_in_the_leaf() {
+        let mut rng = crate::testing::Pcg32::new(9, 4);
+        let mut r: [Record; 600] = core::array::from_fn(|_| {
+            let u = [rng.next_f32(), rng.next_f32()];
+            rec(u[0], u[1], crate::testing::disk_and_sky(u))
+        });
+        let mut storage = [Node::default(); 1024];
+        let (g, s) = build(&mut r, &GuideParams::default(), &mut storage);
+        assert!(s.nodes > 20);
+        let nodes = g.nodes();
+        for (i, n) in nodes.iter().enumerate() {
+            for q in 0..4u32 {
+                let next = n.link.wrapping_add(q) as usize;
+                match n.first_child() {
+                    Some(c) => {
+                        assert_eq!(next, c + q as usize, "node {i}");
+                        assert_eq!(n.inner_kids >> q & 1, u8::from(!nodes[next].is_leaf()));
+                    }
+                    // A leaf's thresholds are 0, so every point takes quadrant 3.
+                    None => {
+                        assert_eq!(n.t, [0.0; 3], "leaf {i}");
+                        assert_eq!(n.inner_kids, 0, "leaf {i}");
+                        assert_eq!(q == 3, next == i, "leaf {i}");
+                    }
+                }
+            }
+        }
+        let mut one = [Node::default(); 1];
+        let root = Guide::uniform(&mut one).nodes()[0];
+        assert_eq!((root.link.wrapping_add(3), root.inner_kids), (0, 0));
+        // The warp reads a leaf's eight placement fields as the node's first 32 bytes.
+        let n = &nodes[nodes.len() - 1];
+        let row = [n.lo, n.hi, n.origin, [n.size, n.pdf]].concat();
+        assert_eq!(n.leaf_row().as_slice(), row.as_slice());
+        assert_eq!(core::mem::align_of::<Node>(), 64);
     }
 
     #[test]
