@@ -109,8 +109,10 @@ pub struct BenchConfig {
     pub seeds: Vec<u32>,
     /// Learning iterations of every bake.
     pub iterations: u32,
-    /// Light transport of every measured bake (the reference is always `path`).
+    /// Light transport of the ladder's bakes (the reference is always `path`).
     pub transport: Transport,
+    /// Light transport of the overhead runs.
+    pub overhead_transport: Transport,
     /// Bounces of every bake, the reference's too.
     pub bounces: u32,
     /// Rays per texel of the reference.
@@ -242,7 +244,7 @@ fn measure_and_write(
         bench,
         config.overhead_spp,
         config.iterations,
-        (config.transport, config.bounces),
+        (config.overhead_transport, config.bounces),
         config.repeats,
     )?;
 
@@ -317,6 +319,7 @@ fn measure_and_write(
         overhead: OverheadSummary {
             spp: config.overhead_spp,
             repeats: config.repeats,
+            transport: config.overhead_transport,
             modes: overhead,
         },
         targets,

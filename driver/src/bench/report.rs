@@ -9,8 +9,9 @@ use serde::Serialize;
 use super::BenchError;
 use super::analysis::{Curve, EqualTime, EquivalentSamples, Interpolated, Overhead};
 use super::harness::{Ladder, OverheadRecord, RunRecord};
-use super::method::value_name;
+use super::method::{serialize_value_name, value_name};
 use super::reference::ReferenceInfo;
+use crate::bake::settings::Transport;
 use crate::output::exr_pages::temporary_name;
 
 /// The machine the numbers were measured on.
@@ -102,6 +103,9 @@ pub struct OverheadSummary {
     pub spp: u32,
     /// Repeats of each mode.
     pub repeats: u32,
+    /// Light transport of every run.
+    #[serde(serialize_with = "serialize_value_name")]
+    pub transport: Transport,
     /// Per mode, `off` first.
     pub modes: Vec<Overhead>,
 }
@@ -345,9 +349,11 @@ pub fn markdown(s: &Summary) -> String {
     );
     let _ = writeln!(
         md,
-        "Figure-5 overhead, {} spp, {} interleaved repeats (medians; Graybill–Deal + ρ):\n\n\
+        "Figure-5 overhead, {} spp, `{}` transport, {} interleaved repeats (medians; Graybill–Deal + ρ):\n\n\
          | guiding | gather (s) | wall (s) | gather / off | wall / off | paired gather / off | guided |\n|---|---:|---:|---:|---:|---:|---:|",
-        s.overhead.spp, s.overhead.repeats
+        s.overhead.spp,
+        value_name(&s.overhead.transport),
+        s.overhead.repeats
     );
     for o in &s.overhead.modes {
         let _ = writeln!(

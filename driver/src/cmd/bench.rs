@@ -47,12 +47,17 @@ pub struct BenchArgs {
     /// Learning iterations of every bake.
     #[arg(long, default_value_t = 4)]
     pub iterations: u32,
-    /// Light transport of every measured bake (the reference is always a `path` bake):
+    /// Light transport of the ladder's bakes (the reference is always a `path` bake):
     /// `path` measures the estimators against a reference of the same transport, so the
     /// errors fall to zero as samples grow; `series` adds its own bias against `path` (the
     /// bake's default transport; docs/bake.md).
     #[arg(long, value_enum, default_value_t = Transport::Series)]
     pub transport: Transport,
+    /// Light transport of the Figure-5 overhead runs. `series` (the bake's default) makes
+    /// the final gather most of the bake's cost, as in the paper's figure; under `path` each
+    /// gather ray carries a whole path and guiding's cost is diluted.
+    #[arg(long, value_enum, default_value_t = Transport::Series)]
+    pub overhead_transport: Transport,
     /// Bounces of every bake and of the reference (default: the bake's; --quick 1).
     #[arg(long)]
     pub bounces: Option<u32>,
@@ -104,6 +109,7 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
         seeds: (1..=seeds).collect(),
         iterations: args.iterations,
         transport: args.transport,
+        overhead_transport: args.overhead_transport,
         bounces: pick(args.bounces, BakeSettings::default().bounces, 1),
         reference_spp: pick(args.ref_spp, 4096, 512),
         overhead_spp: pick(args.overhead_spp, 256, 32),
