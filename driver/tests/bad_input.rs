@@ -464,6 +464,7 @@ fn bad_bake_arguments_are_clear_errors() {
         (&["--guiding", "sometimes"][..], "--guiding"),
         (&["--spp", "many"], "--spp"),
         (&["--spp", "32", "--seed", "-3"], "-3"),
+        (&["--spp", "32", "--threads", "0"], "--threads"),
     ] {
         let (_, err) = fails(bake(extra));
         assert!(err.contains(expect), "{extra:?}: {err}");

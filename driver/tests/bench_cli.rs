@@ -198,6 +198,16 @@ fn quick_bench_writes_well_formed_outputs() {
     );
     assert_eq!(summary["targets"].as_array().unwrap().len(), 3);
     assert_eq!(summary["reference"]["cached"], false);
+    // The defaults: series bakes against a path reference, series overhead runs.
+    assert_eq!(summary["ladder"]["transport"], "series");
+    assert_eq!(summary["overhead"]["transport"], "series");
+    assert!(
+        summary["reference"]["settings"]
+            .as_str()
+            .is_some_and(|s| s.contains("transport: Path")),
+        "{}",
+        summary["reference"]["settings"]
+    );
     assert!(summary["texels"].as_u64().unwrap() > 100);
 
     let table = std::fs::read_to_string(out.join("table.md")).unwrap();

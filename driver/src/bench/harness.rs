@@ -263,7 +263,8 @@ pub struct OverheadRecord {
 
 /// The Figure-5 measurement: every `--guiding` mode at `spp` with the bake's default
 /// combination (Graybill–Deal per texel and ρ), `repeats` times, interleaved, the order
-/// rotated every repeat so that no mode always runs first.
+/// rotated every repeat so that no mode always runs first; every bake with `transport` at
+/// `bounces`.
 ///
 /// # Errors
 /// [`BenchError`] from a bake.
@@ -271,7 +272,8 @@ pub fn run_overhead(
     bench: &Bench<'_>,
     spp: u32,
     iterations: u32,
-    (transport, bounces): (Transport, u32),
+    transport: Transport,
+    bounces: u32,
     repeats: u32,
 ) -> Result<Vec<OverheadRecord>, BenchError> {
     let modes = Guiding::value_variants();

@@ -109,8 +109,10 @@ pub struct BenchConfig {
     pub seeds: Vec<u32>,
     /// Learning iterations of every bake.
     pub iterations: u32,
-    /// Light transport of the ladder's bakes (the reference is always `path`).
+    /// Light transport of the ladder's bakes.
     pub transport: Transport,
+    /// Light transport of the reference.
+    pub reference_transport: Transport,
     /// Light transport of the overhead runs.
     pub overhead_transport: Transport,
     /// Bounces of every bake, the reference's too.
@@ -226,7 +228,12 @@ fn measure_and_write(
     let reference = reference::reference(
         bench,
         &config.cache,
-        reference::reference_settings(config.reference_spp, config.iterations, config.bounces),
+        reference::reference_settings(
+            config.reference_spp,
+            config.iterations,
+            config.reference_transport,
+            config.bounces,
+        ),
     )?;
     let mut spp = config.spp.clone();
     spp.sort_unstable();
@@ -244,7 +251,8 @@ fn measure_and_write(
         bench,
         config.overhead_spp,
         config.iterations,
-        (config.overhead_transport, config.bounces),
+        config.overhead_transport,
+        config.bounces,
         config.repeats,
     )?;
 

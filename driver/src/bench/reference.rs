@@ -3,11 +3,13 @@
 //! None of the benchmark scenes has a closed-form lightmap, so the reference is a bake with
 //! many more samples than any measured run, made with the unbiased baseline estimator
 //! (cosine-weighted gather, plain average, no ρ), so that no guiding or combination under test
-//! is measured against itself, and with the `path` transport (unidirectional path tracing from
-//! every gather hit, paths of at most as many bounces as the measured runs): an unbiased
-//! estimate of the same light transport. The measured runs use the bake's default `series`
-//! transport, so their errors include its bias (the previous pass's lightmap looked up at
-//! each hit) as well as the estimators' noise and bias.
+//! is measured against itself, and by default with the `path` transport (unidirectional path
+//! tracing from every gather hit, paths of at most as many bounces as the measured runs): an
+//! unbiased estimate of the same light transport. Runs with the bake's default `series`
+//! transport then include its bias (the previous pass's lightmap looked up at each hit) as
+//! well as the estimators' noise and bias; `--reference-transport series` measures them
+//! against a series reference instead, which isolates the estimators (the bake's own
+//! setting, where the paper's guiding learns from smooth lightmap lookups, not from paths).
 //!
 //! A reference costs minutes, so it is cached on disk: `ref-KEY.exr` (its pages) and
 //! `ref-KEY.json`, where KEY hashes the scene (its loaded triangles, materials and lights), the
@@ -62,9 +64,14 @@ pub struct ReferenceInfo {
     pub cached: bool,
 }
 
-/// The reference's settings: the unbiased baseline at `spp` with the `path` transport.
-pub fn reference_settings(spp: u32, iterations: u32, bounces: u32) -> BakeSettings {
-    Method::baseline().settings(spp, iterations, Transport::Path, bounces, REFERENCE_SEED)
+/// The reference's settings: the unbiased baseline at `spp` with `transport`.
+pub fn reference_settings(
+    spp: u32,
+    iterations: u32,
+    transport: Transport,
+    bounces: u32,
+) -> BakeSettings {
+    Method::baseline().settings(spp, iterations, transport, bounces, REFERENCE_SEED)
 }
 
 /// A hash of what the scene is, for the cache key (not of its path).

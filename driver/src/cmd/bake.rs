@@ -45,7 +45,7 @@ pub struct BakeArgs {
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub bias_correction: OnOff,
     /// Worker threads (default: every core).
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
     /// Seed of every random number.
     #[arg(long, default_value_t = 0)]

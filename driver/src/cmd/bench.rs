@@ -47,12 +47,15 @@ pub struct BenchArgs {
     /// Learning iterations of every bake.
     #[arg(long, default_value_t = 4)]
     pub iterations: u32,
-    /// Light transport of the ladder's bakes (the reference is always a `path` bake):
-    /// `path` measures the estimators against a reference of the same transport, so the
-    /// errors fall to zero as samples grow; `series` adds its own bias against `path` (the
-    /// bake's default transport; docs/bake.md).
+    /// Light transport of the ladder's bakes. Against a reference of the same transport the
+    /// errors fall to zero as samples grow; `series` (the bake's default) against a `path`
+    /// reference adds series' own bias (docs/bake.md).
     #[arg(long, value_enum, default_value_t = Transport::Series)]
     pub transport: Transport,
+    /// Light transport of the reference: `path` (the truth of the bounce-limited transport)
+    /// or `series` (to measure the estimators of series bakes without series' bias).
+    #[arg(long, value_enum, default_value_t = Transport::Path)]
+    pub reference_transport: Transport,
     /// Light transport of the Figure-5 overhead runs. `series` (the bake's default) makes
     /// the final gather most of the bake's cost, as in the paper's figure; under `path` each
     /// gather ray carries a whole path and guiding's cost is diluted.
@@ -71,7 +74,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub repeats: Option<u32>,
     /// Worker threads of every bake (default: every core).
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
     /// Name of the scene in the outputs (default: the file's stem, or `demo-ajar`).
     #[arg(long)]
@@ -110,6 +113,7 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
         iterations: args.iterations,
         transport: args.transport,
         overhead_transport: args.overhead_transport,
+        reference_transport: args.reference_transport,
         bounces: pick(args.bounces, BakeSettings::default().bounces, 1),
         reference_spp: pick(args.ref_spp, 4096, 512),
         overhead_spp: pick(args.overhead_spp, 256, 32),

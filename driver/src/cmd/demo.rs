@@ -21,7 +21,7 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 256)]
     pub spp: u32,
     /// Worker threads (default: every core).
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
 }
 
