@@ -1004,11 +1004,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn start_table_is_the_deepest_node_each_cell_shares() {
-        let mut rng = crate::testing::Pcg32::new(21, 5);
-        // Disk and sky everywhere plus a tight cluster: shallow and very deep regions.
-        let mut r: [Record; 900] = core::array::from_fn(|k| {
+    /// Disk and sky everywhere plus a tight cluster: shallow and very deep regions.
+    fn shallow_and_deep_records(rng: &mut crate::testing::Pcg32) -> [Record; 900] {
+        core::array::from_fn(|k| {
             if k < 700 {
                 let u = [rng.next_f32(), rng.next_f32()];
                 rec(u[0], u[1], crate::testing::disk_and_sky(u))
@@ -1019,7 +1017,13 @@ mod tests {
                     5.0,
                 )
             }
-        });
+        })
+    }
+
+    #[test]
+    fn start_table_is_the_deepest_node_each_cell_shares() {
+        let mut rng = crate::testing::Pcg32::new(21, 5);
+        let mut r = shallow_and_deep_records(&mut rng);
         let p = GuideParams {
             max_depth: MAX_DEPTH,
             ..GuideParams::default()
@@ -1064,19 +1068,7 @@ mod tests {
     #[test]
     fn shortcuts_are_passed_by_every_point_of_their_cell_part() {
         let mut rng = crate::testing::Pcg32::new(23, 7);
-        // As above: shallow regions and a very deep cluster.
-        let mut r: [Record; 900] = core::array::from_fn(|k| {
-            if k < 700 {
-                let u = [rng.next_f32(), rng.next_f32()];
-                rec(u[0], u[1], crate::testing::disk_and_sky(u))
-            } else {
-                rec(
-                    0.3 + 1e-4 * rng.next_f32(),
-                    0.6 + 1e-4 * rng.next_f32(),
-                    5.0,
-                )
-            }
-        });
+        let mut r = shallow_and_deep_records(&mut rng);
         let p = GuideParams {
             max_depth: MAX_DEPTH,
             ..GuideParams::default()
