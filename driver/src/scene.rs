@@ -527,6 +527,7 @@ mod gltf_source {
         Vec<gltf::image::Data>,
     )> {
         let bytes = std::fs::read(path).map_err(gltf::Error::Io)?;
+        check_glb_length(&bytes)?;
         let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes)?;
         let json = document.into_json();
         check_position_accessors(&json)?;
@@ -535,6 +536,26 @@ mod gltf_source {
         let buffers = gltf::import_buffers(&doc, Some(base), blob)?;
         let images = gltf::import_images(&doc, Some(base), &buffers)?;
         Ok((doc, buffers, images))
+    }
+
+    /// A GLB header's total length covers at least the header: gltf 1.4.1 subtracts the
+    /// header's 12 bytes from it unchecked (`binary.rs`), which panics on overflow in a debug
+    /// build and wraps to a 4 GiB read in a release one (found by the `scene` fuzz target).
+    fn check_glb_length(bytes: &[u8]) -> gltf::Result<()> {
+        const HEADER: usize = 12;
+        match bytes.get(8..HEADER) {
+            Some(length) if bytes.starts_with(b"glTF") => {
+                let length = u32::from_le_bytes(length.try_into().expect("4 bytes"));
+                if (length as usize) < HEADER {
+                    return Err(gltf::Error::Binary(gltf::binary::Error::Length {
+                        length,
+                        length_read: bytes.len(),
+                    }));
+                }
+                Ok(())
+            }
+            _ => Ok(()),
+        }
     }
 
     /// Every primitive's `POSITION` names an accessor that exists.

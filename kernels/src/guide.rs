@@ -377,7 +377,8 @@ impl<'a> Guide<'a> {
 
     /// Visits every leaf with its square and density (for inspection, tests and plots).
     pub fn for_each_leaf(&self, mut f: impl FnMut(Leaf)) {
-        for n in self.nodes.iter().filter(|n| n.is_leaf()) {
+        // Side 0: a node cut off the tree by `collapse`.
+        for n in self.nodes.iter().filter(|n| n.is_leaf() && n.size > 0.0) {
             f(Leaf {
                 origin: n.origin,
                 size: n.size,
@@ -765,16 +766,59 @@ fn smooth(nodes: &mut [Node], alpha: f64) {
             split_at(n.lo[1], n.hi[1], py[0]),
             split_at(n.lo[1], n.hi[1], py[1]),
         ];
+        let lo = |q: usize| [[n.lo[0], tx][q & 1], [n.lo[1], ty[q & 1]][q >> 1]];
+        let hi = |q: usize| [[tx, n.hi[0]][q & 1], [ty[q & 1], n.hi[1]][q >> 1]];
+        let empty = |q: usize| (0..2).any(|a| lo(q)[a] >= hi(q)[a]);
+        if (0..4).any(|q| m[q] > 0.0 && empty(q)) {
+            collapse(nodes, i);
+            continue;
+        }
         nodes[i].t = [tx, ty[0], ty[1]];
         nodes[i].pdf = (parent / (f64::from(n.size) * f64::from(n.size))) as f32;
         for (q, &mass) in m.iter().enumerate() {
-            let (hx, hy) = (q & 1, q >> 1);
             let k = &mut nodes[c + q];
             k.mass = mass as f32;
-            k.lo = [[n.lo[0], tx][hx], [n.lo[1], ty[hx]][hy]];
-            k.hi = [[tx, n.hi[0]][hx], [ty[hx], n.hi[1]][hy]];
+            k.lo = lo(q);
+            k.hi = hi(q);
         }
     }
+}
+
+/// Makes interior node `i` a leaf when its source rectangle is too narrow in f32 to give
+/// every child of positive mass a non-empty part (a deep, lopsided tree: found by the
+/// `guide` fuzz target at depth 12, α = 0, where one f32 step near u = 0.003 had to hold two
+/// children). The leaf keeps the node's mass and source rectangle, so its density is still
+/// exactly that of the map as rounded; its former descendants stay in the storage but are
+/// cut off (side 0, never reached from the root, skipped by [`Guide::for_each_leaf`]).
+fn collapse(nodes: &mut [Node], i: usize) {
+    if let Some(c) = nodes[i].first_child() {
+        for q in 0..4 {
+            cut_off(nodes, c + q);
+        }
+    }
+    let n = &mut nodes[i];
+    n.child = 0;
+    n.t = [0.0; 3];
+    let area = |a: usize| f64::from(n.hi[a]) - f64::from(n.lo[a]);
+    n.pdf = (area(0) * area(1) / (f64::from(n.size) * f64::from(n.size))) as f32;
+}
+
+/// Cuts node `k` and its subtree off the tree (see [`collapse`]); the recursion is at most
+/// [`MAX_DEPTH`] deep.
+fn cut_off(nodes: &mut [Node], k: usize) {
+    if let Some(c) = nodes[k].first_child() {
+        for q in 0..4 {
+            cut_off(nodes, c + q);
+        }
+    }
+    nodes[k] = Node {
+        child: 0,
+        size: 0.0,
+        mass: 0.0,
+        pdf: 0.0,
+        t: [0.0; 3],
+        ..nodes[k]
+    };
 }
 
 /// The threshold that gives `[lo, t)` the share `p` of `[lo, hi)`, rounded to f32 and kept

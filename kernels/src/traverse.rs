@@ -62,6 +62,18 @@ const STACK: usize = MAX_DEPTH + 2;
 const SLACK: f32 = 1.0 / (1u32 << 18) as f32;
 const FAR_UP: f32 = 1.0 + SLACK;
 const NEAR_DOWN: f32 = 1.0 - SLACK;
+/// Absolute slack added to the widened far bound: a relative one is nothing at `far = ±0`,
+/// where a box entered at a subnormal distance (an origin of 10⁻⁴³ against a box face at 0)
+/// was culled although its triangle's test rounds the hit to `t = 0` (found by the
+/// `traverse` fuzz target: a closest hit at `t = −0` hid another at `t = +0` with a smaller
+/// primitive id, which the tie rule prefers).
+const FAR_FLOOR: f32 = f32::MIN_POSITIVE;
+
+/// The far end of the conservative slab interval: `far · (1 + 2⁻¹⁸) + 2⁻¹²⁶`.
+#[inline(always)]
+fn widened(far: f32) -> f32 {
+    far * FAR_UP + FAR_FLOOR
+}
 
 /// One BVH node: the boxes of its two children, one 64-byte cache line.
 ///
@@ -280,7 +292,7 @@ fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
         near = if tn > near { tn } else { near };
         far = if tf < far { tf } else { far };
     }
-    (near <= far * FAR_UP).then_some(near)
+    (near <= widened(far)).then_some(near)
 }
 
 /// Edge functions in `f64`, Woop et al. 2013's fallback when one is exactly zero.
@@ -554,7 +566,7 @@ impl Interval {
                 far = far.min(f0.max(f1));
             }
         }
-        near > far * FAR_UP
+        near > widened(far)
     }
 }
 
@@ -686,7 +698,10 @@ impl Pre8 {
             near = tn.fast_max(near);
             far = tf.fast_min(far);
         }
-        (near.simd_le(far * f32x8::splat(FAR_UP)), near)
+        (
+            near.simd_le(far.mul_add(f32x8::splat(FAR_UP), f32x8::splat(FAR_FLOOR))),
+            near,
+        )
     }
 
     /// Vertex `v` relative to the origin in each lane's permuted axes.
