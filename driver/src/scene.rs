@@ -515,10 +515,11 @@ mod gltf_source {
         Ok(b.finish(materials, lights))
     }
 
-    /// `gltf::import` with one check of ours before the crate's validation: gltf-json 1.4.1
-    /// indexes the accessor a primitive's `POSITION` names without checking it exists
-    /// (`mesh.rs`, `primitive_validate_hook`), so a file naming a missing accessor panicked
-    /// inside the importer (found by the `scene` fuzz target).
+    /// `gltf::import` with two checks of ours where the crate panics instead of erring
+    /// (both found by the `scene` fuzz target): the GLB header's length
+    /// ([`check_glb_length`]), and, before the crate's validation, that every `POSITION`
+    /// names an existing accessor (gltf-json 1.4.1 indexes it unchecked in `mesh.rs`,
+    /// `primitive_validate_hook`; [`check_position_accessors`]).
     fn import(
         path: &Path,
     ) -> gltf::Result<(
