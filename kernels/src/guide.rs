@@ -741,9 +741,7 @@ fn smooth(nodes: &mut [Node], alpha: f64) {
     for i in 0..nodes.len() {
         let n = nodes[i];
         let Some(c) = n.first_child() else {
-            let area = |lo: f32, hi: f32| f64::from(hi) - f64::from(lo);
-            let size = f64::from(n.size);
-            nodes[i].pdf = (area(n.lo[0], n.hi[0]) * area(n.lo[1], n.hi[1]) / (size * size)) as f32;
+            nodes[i].pdf = leaf_pdf(&n);
             continue;
         };
         let mut raw: [f64; 4] = core::array::from_fn(|q| f64::from(nodes[c + q].mass));
@@ -799,8 +797,14 @@ fn collapse(nodes: &mut [Node], i: usize) {
     let n = &mut nodes[i];
     n.child = 0;
     n.t = [0.0; 3];
-    let area = |a: usize| f64::from(n.hi[a]) - f64::from(n.lo[a]);
-    n.pdf = (area(0) * area(1) / (f64::from(n.size) * f64::from(n.size))) as f32;
+    n.pdf = leaf_pdf(n);
+}
+
+/// A leaf's density on the square: the area of its source rectangle over its square's.
+fn leaf_pdf(n: &Node) -> f32 {
+    let side = |a: usize| f64::from(n.hi[a]) - f64::from(n.lo[a]);
+    let size = f64::from(n.size);
+    (side(0) * side(1) / (size * size)) as f32
 }
 
 /// Cuts node `k` and its subtree off the tree (see [`collapse`]); the recursion is at most
