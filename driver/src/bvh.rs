@@ -161,7 +161,7 @@ impl Bvh {
     /// again (linear in the node count): take it once, not per ray.
     pub fn view(&self) -> BvhRef<'_> {
         // `build` validated this exact layout and nothing mutates it since.
-        BvhRef::new(&self.nodes, &self.tris).expect("layout validated by Bvh::build")
+        BvhRef::new_trusted(&self.nodes, &self.tris)
     }
 
     /// Nodes, root first.
