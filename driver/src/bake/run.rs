@@ -316,12 +316,7 @@ pub fn bake_with_progress(
         report.rho = written.rho;
         report.pages = written.pages;
         report.non_finite_pixels = written.non_finite_pixels;
-        std::fs::remove_dir_all(&dir).map_err(|e| {
-            file_error(
-                &dir,
-                format!("cannot remove the finished work directory: {e}"),
-            )
-        })?;
+        retire_work(&dir)?;
     }
     Ok(report)
 }
@@ -527,6 +522,22 @@ fn open_work(dir: &Path, manifest: &Manifest, resume: bool) -> Result<(), BakeEr
         .map_err(|e| file_error(&manifest_path, format!("cannot write: {e}")))?;
     std::fs::rename(&staging, dir)
         .map_err(|e| file_error(dir, format!("cannot create the work directory: {e}")))
+}
+
+/// Removes a finished bake's work directory. It is renamed out of the way first, so a crash
+/// during the removal leaves no half-deleted work directory (one without its manifest) for
+/// `--resume` to refuse; at worst a hidden temporary directory beside it.
+fn retire_work(dir: &Path) -> Result<(), BakeError> {
+    let retired = temporary_name(dir);
+    let _ = std::fs::remove_dir_all(&retired);
+    std::fs::rename(dir, &retired)
+        .and_then(|()| std::fs::remove_dir_all(&retired))
+        .map_err(|e| {
+            file_error(
+                dir,
+                format!("cannot remove the finished work directory: {e}"),
+            )
+        })
 }
 
 /// Opens pass `pass`'s result file and journal in `dir` (with the tiles its journal holds),
