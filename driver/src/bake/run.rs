@@ -103,8 +103,11 @@ pub struct BakeReport {
     pub rho: f64,
     /// Gather and shadow rays per second of the gather phase.
     pub rays_per_second: f64,
-    /// Analytic lights in the scene (0: no shadow rays at all).
+    /// Analytic lights in the scene.
     pub lights: usize,
+    /// Emissive triangles sampled by next-event estimation (0: no emitter table, no shadow
+    /// rays to emitters; with `lights` also 0, no shadow rays at all).
+    pub emitters: usize,
     /// The pages written (empty for a shard).
     pub pages: Vec<PathBuf>,
     /// Pixels with non-finite results replaced by zero when writing (should be 0).
@@ -252,8 +255,10 @@ pub fn bake_with_progress(
     let clock = Instant::now();
     let mut world = World::new(scene, Preset::DEFAULT)?;
     world.set_transport(job.settings.transport, job.settings.bounces);
+    world.set_emitters(job.settings.emitters, job.settings.emitter_selection);
     report.seconds.build_bvh = clock.elapsed().as_secs_f64();
     report.lights = world.lights().len();
+    report.emitters = world.emitters().map_or(0, |e| e.len());
 
     let passes = job.settings.passes();
     let bake_id = job.settings.bake_id(texel_file_id(&texels));
