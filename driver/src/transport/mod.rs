@@ -13,6 +13,8 @@
 //! ([`crate::bake::world::World::hit_radiance`]). Random numbers beyond the gather's Sobol
 //! point come from [`rng`].
 
+pub mod alias;
+pub mod light_tree;
 pub mod lights;
 pub mod rng;
 pub mod series;
