@@ -455,11 +455,13 @@ fn choice(left: &Node, right: &Node, p: Vec3, n: Vec3) -> Option<[f64; 2]> {
     (sum > 0.0).then(|| [l / sum, r / sum])
 }
 
-/// cos and sin of max(0, a − b) from those of a and b (angles in [0, π]).
-fn minus_clamped(cos_a: f32, sin_a: f32, cos_b: f32, sin_b: f32) -> (f32, f32) {
+/// cos and sin of max(0, a − b) from those of a and b (angles in [0, π]); sin a is only
+/// evaluated when a > b.
+fn minus_clamped(cos_a: f32, sin_a: impl FnOnce() -> f32, cos_b: f32, sin_b: f32) -> (f32, f32) {
     if cos_a >= cos_b {
         (1.0, 0.0)
     } else {
+        let sin_a = sin_a();
         (cos_a * cos_b + sin_a * sin_b, sin_a * cos_b - cos_a * sin_b)
     }
 }
@@ -487,8 +489,8 @@ fn importance(node: &Node, p: Vec3, n: Vec3) -> f32 {
     let cos_b = sin_of(sin_b);
     // Emitter side: the smallest angle between a normal and a direction towards p.
     let cos_w = node.axis.dot(to_p).clamp(-1.0, 1.0);
-    let (cos_x, sin_x) = minus_clamped(cos_w, sin_of(cos_w), node.cos_o, node.sin_o);
-    let (cos_e, _) = minus_clamped(cos_x, sin_x, cos_b, sin_b);
+    let (cos_x, sin_x) = minus_clamped(cos_w, || sin_of(cos_w), node.cos_o, node.sin_o);
+    let (cos_e, _) = minus_clamped(cos_x, || sin_x, cos_b, sin_b);
     if cos_e <= -COS_SLACK {
         return 0.0;
     }
@@ -496,7 +498,7 @@ fn importance(node: &Node, p: Vec3, n: Vec3) -> f32 {
     let mut cos_r = 1.0;
     if n != Vec3::ZERO {
         let cos_i = (-n.dot(to_p)).clamp(-1.0, 1.0);
-        cos_r = minus_clamped(cos_i, sin_of(cos_i), cos_b, sin_b).0;
+        cos_r = minus_clamped(cos_i, || sin_of(cos_i), cos_b, sin_b).0;
         if cos_r <= -COS_SLACK {
             return 0.0;
         }
