@@ -760,6 +760,12 @@ mod tests {
                 "emitter {i} faces its wall"
             );
         }
+        // Deterministic: the same options write the same geometry.
+        let again = synth_with(100_000, &dir.path().join("again.texels"), &options).unwrap();
+        assert_eq!(
+            std::fs::read(&r.geometry).unwrap(),
+            std::fs::read(&again.geometry).unwrap()
+        );
         // The day city is unchanged by the option's existence.
         let day = synth(100_000, &dir.path().join("day.texels")).unwrap();
         assert_eq!(day.emissive_triangles, 0);

@@ -55,8 +55,20 @@
 //!   not finite, are not in the tree (pmf 0, never picked). A zero or non-finite normal (a
 //!   degenerate triangle) makes the emitter's cone the whole sphere.
 //! - **Precision of u**: each level consumes about log2(1 / p_child) bits of the f32 `u`
-//!   (24 bits), as in pbrt; the deeper choices of a pick of a very unlikely emitter are
-//!   coarse.
+//!   (24 bits), as in pbrt: the u values that lead to emitter i fill an interval of length
+//!   pmf_i, which 2^24 grid points resolve to ±2^-24, so an emitter with pmf 10^-6 is
+//!   picked with a frequency up to ±6% off its pmf (the alias table has the same limit).
+//!
+//! Measured (2-core EPYC shared with three other builds, 2026-11-24, `benches/lights.rs`,
+//! synthetic night city, release): the tree builds 10^4 emissive triangles in 23 ms and
+//! 10^6 in 2.3 s (the alias table: 0.09 ms, 11 ms); one pick plus the pmf of the picked
+//! emitter takes 1.5 µs at 10^4 and 3.2 µs at 10^6 (alias: 5 ns, 7 ns), averaged over
+//! city texels of which 29% see no window (their picks fail at the root); mean leaf depth
+//! 13.7 at 10^4. At shading points that some window can light, 68% of the tree's picks
+//! land on an emitter that can light the point and the other 32% fail in dead ends
+//! (alias: 29–31% useful); every successful pick was useful. Without the half-space tests
+//! the tree picked usefully 45% of the time and random triangles lost 0.50 of the mass in
+//! dead ends instead of 0.16.
 
 use std::f32::consts::{FRAC_PI_2, PI};
 
@@ -358,8 +370,11 @@ impl LightTree {
     /// Picks an emitter for the shading point `p` with unit receiver normal `n` (or
     /// `Vec3::ZERO` for a point in free space) with one uniform `u` in [0, 1): the emitter's
     /// index in the slice given to [`LightTree::build`] and the probability of that pick,
-    /// equal to [`LightTree::pmf`]. `None` when no emitter can light p (every importance
-    /// on the way is 0), or p is not finite. A non-finite `n` counts as `Vec3::ZERO`.
+    /// equal to [`LightTree::pmf`]. `None` when the descent ends where both children are
+    /// dark (always when no emitter can light p; see the module doc), or p is not finite.
+    /// A non-unit `n` is normalized, a non-finite one counts as `Vec3::ZERO`. For a
+    /// two-sided surface pass the normal of the side being shaded: the receiver is
+    /// one-sided.
     #[must_use]
     pub fn pick(&self, p: Vec3, n: Vec3, u: f32) -> Option<(u32, f32)> {
         if !p.is_finite() {
@@ -918,6 +933,13 @@ mod tests {
         }
         // Below the lit cluster's plane nothing can light a point facing down.
         assert_eq!(tree.pick(Vec3::new(0.0, -30.0, 0.0), -Vec3::Y, 0.3), None);
+    }
+
+    #[test]
+    fn samplers_are_shareable_between_threads() {
+        fn shareable<T: Send + Sync>() {}
+        shareable::<LightTree>();
+        shareable::<crate::transport::alias::AliasTable>();
     }
 
     #[test]
