@@ -10,8 +10,9 @@
 //!
 //! - **Bounds of a node**: its AABB as a bounding sphere (centre, radius) and as
 //!   half-extents, the total power φ (area × luminance of the emission), and a normal cone
-//!   (axis, θ_o) with its chord (the largest |m − axis| over member normals m); 60-byte
-//!   nodes. Emitters are one-sided Lambertian triangles, so θ_e = π/2 for every node.
+//!   (axis, θ_o) with its chord (the largest |m − axis| over member normals m), and for
+//!   inner nodes whose emitters face two to four exactly equal ways, an index into a side
+//!   table of their planes; 64-byte nodes. Emitters are one-sided Lambertian triangles, so θ_e = π/2 for every node.
 //!   Leaves hold one emitter each.
 //! - **Importance** at a point p with receiver normal n, θ_b the half-angle the sphere
 //!   subtends from p, θ_w the angle between the cone axis and the direction centre → p,
@@ -27,7 +28,10 @@
 //!   for every x in the box, a the cone axis — or the whole box is below p's horizon
 //!   (`(x − p)·n ≤ 0`). For a flat group of parallel emitters, such as one wall's windows,
 //!   these are exact where the sphere's cones are loose, and they also hold for p inside
-//!   the sphere; in the synthetic night city they cut the failed picks (below) markedly.
+//!   the sphere. A node whose emitters face two to four exactly equal ways (a building's
+//!   corner, a whole building of windows) also keeps, per way, the plane offset
+//!   min x·m over those emitters' boxes: it is dark when p·m ≤ that offset for every way —
+//!   which is what a texel on a building's own wall or roof is, for the building's windows.
 //! - **Conservative**: I is 0 only when no point of any emitter of the node can send light
 //!   into p's hemisphere, so a zero probability never hides light (that would bias the
 //!   bake). To keep this true in f32 the sphere is inflated by a relative 1e-6 of its size
@@ -72,12 +76,16 @@
 
 use std::f32::consts::{FRAC_PI_2, PI};
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use guidebake_kernels::estimator::luminance;
 use guidebake_kernels::warp::ONE_MINUS_EPS;
 
 /// How far below 0 a bound's cos θ' or cos θ'_i may round before the node counts as dark.
 pub const COS_SLACK: f32 = 1e-5;
+
+/// Chord of a node's normals above which it keeps [`Planes`] (parallel emitters have a
+/// chord of ~1e-7 and need none; two walls at right angles have 0.77).
+const WIDE_CHORD: f32 = 1e-3;
 
 /// Buckets per axis of the SAOH build (pbrt-v4 uses 12).
 const BUCKETS: usize = 12;
@@ -280,7 +288,17 @@ struct Node {
     /// Inner node: index of the right child (the left one follows the node). Leaf:
     /// [`LEAF`] | emitter index.
     link: u32,
+    /// Index of the node's [`Planes`] in [`LightTree::planes`], or [`NO_PLANES`].
+    planes: u32,
 }
+
+/// The planes of a node whose emitters face up to four exactly equal ways: per way the
+/// unit normal m (xyz) and the smallest x·m over those emitters' boxes (w). p is behind
+/// all of them when p·m ≤ w for every way. Unused ways repeat the first.
+type Planes = [Vec4; 4];
+
+/// [`Node::planes`] of a node without [`Planes`].
+const NO_PLANES: u32 = u32::MAX;
 
 impl Node {
     fn is_leaf(&self) -> bool {
@@ -291,8 +309,11 @@ impl Node {
     /// behind every emitter plane the box and cone allow, or the whole box is below p's
     /// horizon. Tighter than the sphere for flat groups such as one wall's windows, and
     /// valid inside the sphere too.
-    fn behind_all(&self, p: Vec3, n: Vec3, d: Vec3, dist: f32) -> bool {
+    fn behind_all(&self, p: Vec3, n: Vec3, d: Vec3, dist: f32, planes: Option<&Planes>) -> bool {
         let tol = 4e-6 * (p.abs().max_element() + self.center.abs().max_element() + self.radius);
+        if planes.is_some_and(|g| g.iter().all(|q| p.dot(q.truncate()) - q.w <= -tol)) {
+            return true;
+        }
         // max over box points x and cone normals m of (p − x)·m, bounded through the axis a:
         // (p − x)·a + |p − x| |m − a|.
         let front =
@@ -311,6 +332,8 @@ pub struct LightTree {
     /// Per input emitter: the left (0) / right (1) choices from the root, bit d for depth
     /// d, and a sentinel bit above the last; 0 for an emitter not in the tree.
     trails: Vec<u64>,
+    /// The planes of inner nodes whose emitters face two to four ways.
+    planes: Vec<Planes>,
 }
 
 impl LightTree {
@@ -345,6 +368,7 @@ impl LightTree {
         let mut tree = LightTree {
             nodes: Vec::with_capacity(2 * prims.len() - 1),
             trails: vec![0; emitters.len()],
+            planes: Vec::new(),
         };
         tree.build_node(&mut prims, 0, 0);
         Some(tree)
@@ -353,7 +377,14 @@ impl LightTree {
     /// Appends the subtree over `prims` (depth `depth`, trail bits so far `trail`).
     fn build_node(&mut self, prims: &mut [Prim], depth: u32, trail: u64) {
         let here = self.nodes.len();
-        let node = node_bounds(prims);
+        let mut node = node_bounds(prims);
+        if node.chord > WIDE_CHORD
+            && prims.len() > 1
+            && let Some(planes) = planes_of(prims)
+        {
+            node.planes = self.planes.len() as u32;
+            self.planes.push(planes);
+        }
         self.nodes.push(node);
         if let [one] = prims {
             self.nodes[here].link = LEAF | one.index;
@@ -385,7 +416,7 @@ impl LightTree {
         let mut prob = 1.0f64;
         let mut at = 0usize;
         if self.nodes[0].is_leaf() {
-            return (importance(&self.nodes[0], p, n) > 0.0)
+            return (importance(&self.nodes[0], &self.planes, p, n) > 0.0)
                 .then_some((self.nodes[0].link & !LEAF, 1.0));
         }
         loop {
@@ -394,7 +425,7 @@ impl LightTree {
                 return Some((node.link & !LEAF, finish(prob)));
             }
             let (left, right) = (at + 1, node.link as usize);
-            let [pl, pr] = choice(&self.nodes[left], &self.nodes[right], p, n)?;
+            let [pl, pr] = choice(&self.nodes[left], &self.nodes[right], &self.planes, p, n)?;
             let one_below = f64::from(ONE_MINUS_EPS);
             if u < pl {
                 (u, prob, at) = ((u / pl).min(one_below), prob * pl, left);
@@ -415,7 +446,7 @@ impl LightTree {
         let n = receiver(n);
         let depth = 63 - trail.leading_zeros();
         if depth == 0 {
-            return if importance(&self.nodes[0], p, n) > 0.0 {
+            return if importance(&self.nodes[0], &self.planes, p, n) > 0.0 {
                 1.0
             } else {
                 0.0
@@ -425,7 +456,8 @@ impl LightTree {
         for d in 0..depth {
             let node = &self.nodes[at];
             let (left, right) = (at + 1, node.link as usize);
-            let Some([pl, pr]) = choice(&self.nodes[left], &self.nodes[right], p, n) else {
+            let Some([pl, pr]) = choice(&self.nodes[left], &self.nodes[right], &self.planes, p, n)
+            else {
                 return 0.0;
             };
             (prob, at) = if trail >> d & 1 == 0 {
@@ -461,10 +493,10 @@ fn finish(prob: f64) -> f32 {
 }
 
 /// The probabilities of taking the left and the right child; `None` when both are dark.
-fn choice(left: &Node, right: &Node, p: Vec3, n: Vec3) -> Option<[f64; 2]> {
+fn choice(left: &Node, right: &Node, planes: &[Planes], p: Vec3, n: Vec3) -> Option<[f64; 2]> {
     let (l, r) = (
-        f64::from(importance(left, p, n)),
-        f64::from(importance(right, p, n)),
+        f64::from(importance(left, planes, p, n)),
+        f64::from(importance(right, planes, p, n)),
     );
     let sum = l + r;
     (sum > 0.0).then(|| [l / sum, r / sum])
@@ -487,11 +519,11 @@ fn sin_of(cos: f32) -> f32 {
 
 /// The node's importance at `p` with receiver normal `n` (module doc): an upper bound,
 /// up to a constant, of the irradiance its emitters can deliver; 0 only when none can.
-fn importance(node: &Node, p: Vec3, n: Vec3) -> f32 {
+fn importance(node: &Node, planes: &[Planes], p: Vec3, n: Vec3) -> f32 {
     let d = p - node.center;
     let d2 = d.length_squared();
     let dist = d2.sqrt();
-    if node.behind_all(p, n, d, dist) {
+    if node.behind_all(p, n, d, dist, planes.get(node.planes as usize)) {
         return 0.0;
     }
     let r2 = node.radius * node.radius;
@@ -571,7 +603,31 @@ fn node_bounds(prims: &[Prim]) -> Node {
         chord: (chord * (1.0 + 1e-6) + 1e-7).min(2.0),
         power: (agg.power as f32).min(f32::MAX),
         link: 0,
+        planes: NO_PLANES,
     }
+}
+
+/// The [`Planes`] of emitters that face at most four exactly equal ways; `None` otherwise
+/// (or when a normal is not a direction).
+fn planes_of(prims: &[Prim]) -> Option<Planes> {
+    let mut ways = [Vec4::ZERO; 4];
+    let mut count = 0;
+    for p in prims {
+        let m = p.normal.try_normalize()?;
+        let offset = p.centroid().dot(m) - support(0.5 * (p.hi - p.lo), m);
+        match ways[..count].iter_mut().find(|w| w.truncate() == m) {
+            Some(w) => w.w = w.w.min(offset),
+            None if count < 4 => {
+                ways[count] = m.extend(offset);
+                count += 1;
+            }
+            None => return None,
+        }
+    }
+    for k in count..ways.len() {
+        ways[k] = ways[0];
+    }
+    Some(ways)
 }
 
 /// Splits `prims` in two non-empty halves (reordering it); returns the size of the left.
@@ -703,7 +759,7 @@ mod tests {
                 return 0.0;
             }
             let right = node.link as usize;
-            match choice(&tree.nodes[at + 1], &tree.nodes[right], p, n) {
+            match choice(&tree.nodes[at + 1], &tree.nodes[right], &tree.planes, p, n) {
                 None => 1.0,
                 Some([pl, pr]) => {
                     let l = if pl > 0.0 {
@@ -721,7 +777,7 @@ mod tests {
             }
         }
         if tree.nodes[0].is_leaf() {
-            return if importance(&tree.nodes[0], p, n) > 0.0 {
+            return if importance(&tree.nodes[0], &tree.planes, p, n) > 0.0 {
                 0.0
             } else {
                 1.0
@@ -967,6 +1023,50 @@ mod tests {
             let positive = (0..400).filter(|&i| tree.pmf(front, n, i) > 0.0).count();
             let lit = emitters.iter().filter(|e| can_light(e, front, n)).count();
             assert!(positive >= lit && lit > 0, "{n}: {positive} < {lit}");
+        }
+    }
+
+    #[test]
+    fn a_building_does_not_light_itself() {
+        // Windows 2 cm out on the four walls of the box [0, 6] × [0, 20] × [0, 6].
+        let mut emitters = vec![];
+        for k in 0..6 {
+            for f in 0..6 {
+                let (s, y) = (0.5 + k as f32, 1.0 + 3.0 * f as f32);
+                let quads = [
+                    (Vec3::new(6.02, y, s), Vec3::Y, Vec3::Z, Vec3::X),
+                    (Vec3::new(-0.02, y, s), Vec3::Z, Vec3::Y, -Vec3::X),
+                    (Vec3::new(s, y, 6.02), Vec3::X, Vec3::Y, Vec3::Z),
+                    (Vec3::new(s, y, -0.02), Vec3::Y, Vec3::X, -Vec3::Z),
+                ];
+                for (a, u, v, out) in quads {
+                    let tri = [a, a + u * 0.5, a + v * 0.5];
+                    emitters.push(EmitterBounds::from_triangle(tri, Vec3::splat(3.0)));
+                    assert_eq!(emitters.last().unwrap().normal, out);
+                }
+            }
+        }
+        let tree = LightTree::build(&emitters).unwrap();
+        assert!(!tree.planes.is_empty());
+        let count = emitters.len() as u32;
+        for (p, n) in [
+            (Vec3::new(6.0, 7.3, 2.2), Vec3::X),
+            (Vec3::new(0.0, 12.0, 5.0), -Vec3::X),
+            (Vec3::new(3.0, 4.0, 6.0), Vec3::Z),
+            (Vec3::new(2.0, 20.0, 3.0), Vec3::Y),
+            (Vec3::new(3.0, 10.0, 3.0), Vec3::ZERO),
+        ] {
+            assert_eq!(tree.pick(p, n, 0.3), None, "{p}");
+            assert!((0..count).all(|i| tree.pmf(p, n, i) == 0.0), "{p}");
+        }
+        // In front of the +x wall, its windows count and the others do not.
+        let (p, n) = (Vec3::new(9.0, 7.0, 3.0), -Vec3::X);
+        for (i, e) in emitters.iter().enumerate() {
+            assert_eq!(
+                tree.pmf(p, n, i as u32) > 0.0,
+                can_light(e, p, n),
+                "window {i}"
+            );
         }
     }
 
