@@ -12,7 +12,9 @@
 //!   half-extents, the total power φ (area × luminance of the emission), and a normal cone
 //!   (axis, θ_o) with its chord (the largest |m − axis| over member normals m), and for
 //!   inner nodes whose emitters face two to four exactly equal ways, an index into a side
-//!   table of their planes; 64-byte nodes. Emitters are one-sided Lambertian triangles, so θ_e = π/2 for every node.
+//!   table of their planes; 64-byte nodes. Memory: 2N − 1 nodes, 8 bytes of trail per
+//!   input emitter, 64 bytes per planes entry (797 for the 10^4 windows of the night city;
+//!   0.63 N for random triangles, mostly nodes of two to four triangles). Emitters are one-sided Lambertian triangles, so θ_e = π/2 for every node.
 //!   Leaves hold one emitter each.
 //! - **Importance** at a point p with receiver normal n, θ_b the half-angle the sphere
 //!   subtends from p, θ_w the angle between the cone axis and the direction centre → p,
@@ -1168,13 +1170,17 @@ mod tests {
             .max()
             .unwrap();
         println!(
-            "light tree: 10^6 emitters built in {:.2} s, {} nodes of {} bytes, depth {depth}",
+            "light tree: 10^6 emitters built in {:.2} s, {} nodes of {} bytes, {} planes of {} \
+             bytes, depth {depth}",
             built.as_secs_f64(),
             tree.nodes.len(),
-            size_of::<Node>()
+            size_of::<Node>(),
+            tree.planes.len(),
+            size_of::<Planes>()
         );
         assert!(size_of::<Node>() <= 64);
         assert_eq!(tree.nodes.len(), 2 * emitters.len() - 1);
+        assert!(tree.planes.len() < emitters.len());
         assert!(depth <= MAX_DEPTH);
         let (p, n) = (Vec3::new(3.0, 0.5, -2.0), Vec3::Y);
         // The share of failed picks matches the dead ends' mass (4σ of a binomial).
