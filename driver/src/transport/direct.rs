@@ -345,12 +345,14 @@ mod tests {
             ),
         ];
         let n = 40_000;
-        for (what, p, normal) in cases {
+        let selections = [EmitterSelection::Power, EmitterSelection::Tree];
+        for ((what, p, normal), sel) in cases.into_iter().flat_map(|c| selections.map(|s| (c, s))) {
+            let what = format!("{what} ({sel})");
             let want = lambert(p, normal, &quad, l);
             assert!(want > 0.05, "{what}: {want}");
-            let nee_alone = lamp(quad, l, EmitterSampling::Nee, EmitterSelection::Power);
-            let hits_alone = lamp(quad, l, EmitterSampling::Hits, EmitterSelection::Power);
-            let mis = lamp(quad, l, EmitterSampling::Mis, EmitterSelection::Power);
+            let nee_alone = lamp(quad, l, EmitterSampling::Nee, sel);
+            let hits_alone = lamp(quad, l, EmitterSampling::Hits, sel);
+            let mis = lamp(quad, l, EmitterSampling::Mis, sel);
             let mut rng = Pcg32::new(7, 1);
             let nee = estimate(n, |i| sample(&nee_alone, p, normal, &mut rng, i).0);
             let hits = estimate(n, |i| sample(&hits_alone, p, normal, &mut rng, i).1);

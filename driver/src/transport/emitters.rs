@@ -11,13 +11,16 @@
 //! direction to `y` is `P(e | p, n) · |y − p|² / (A · cos θ_e)`.
 //!
 //! Selection ([`EmitterSelection`]): in proportion to power (area × luminance of the
-//! emission) from a cumulative table searched by bisection (O(log N), independent of the
-//! receiver), or by the light tree ([`super::light_tree`]), which prefers the emitters that
-//! matter at the receiver.
+//! emission) by Vose's alias table ([`super::alias`], O(1), the same at every receiver), or
+//! by the light tree ([`super::light_tree`], O(log N)), which prefers the emitters that
+//! matter at the receiver and picks none where none can light it.
 //!
 //! A world without emitters builds none of this and traces no shadow rays for them.
 
 use glam::{DVec3, Vec3};
+
+use super::alias::AliasTable;
+use super::light_tree::{EmitterBounds, LightTree};
 
 /// How next-event estimation picks an emitter.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
@@ -61,39 +64,7 @@ const NOT_AN_EMITTER: u32 = u32::MAX;
 #[derive(Debug)]
 enum Picker {
     Power(AliasTable),
-}
-
-/// Stand-in until the alias table lands: the cumulative power, searched by bisection.
-#[derive(Debug)]
-struct AliasTable {
-    cdf: Vec<f64>,
-}
-
-impl AliasTable {
-    fn new(weights: &[f32]) -> Option<Self> {
-        let mut cdf = Vec::with_capacity(weights.len());
-        let mut sum = 0.0f64;
-        for &w in weights {
-            sum += f64::from(w.max(0.0));
-            cdf.push(sum);
-        }
-        (sum > 0.0).then(|| Self {
-            cdf: cdf.into_iter().map(|c| c / sum).collect(),
-        })
-    }
-
-    fn pick(&self, u: f32) -> (u32, f32) {
-        let i = self
-            .cdf
-            .partition_point(|&c| c <= f64::from(u))
-            .min(self.cdf.len() - 1);
-        (i as u32, self.pmf(i as u32))
-    }
-
-    fn pmf(&self, i: u32) -> f32 {
-        let i = i as usize;
-        (self.cdf[i] - if i == 0 { 0.0 } else { self.cdf[i - 1] }) as f32
-    }
+    Tree(LightTree),
 }
 
 /// The emissive triangles of a world and how to sample them.
@@ -161,8 +132,8 @@ impl Emitters {
                 Picker::Power(AliasTable::new(&powers)?)
             }
             EmitterSelection::Tree => {
-                let powers: Vec<f32> = emitters.iter().map(Emitter::power).collect();
-                Picker::Power(AliasTable::new(&powers)?)
+                let bounds: Vec<EmitterBounds> = emitters.iter().map(Emitter::bounds).collect();
+                Picker::Tree(LightTree::build(&bounds)?)
             }
         };
         Some(Self {
@@ -189,6 +160,7 @@ impl Emitters {
     pub fn sample(&self, p: Vec3, n: Vec3, pick: f32, u: [f32; 2]) -> Option<EmitterSample> {
         let (index, pmf) = match &self.picker {
             Picker::Power(table) => table.pick(pick),
+            Picker::Tree(tree) => tree.pick(p, n, pick)?,
         };
         let e = &self.emitters[index as usize];
         let (point, density) = e.sample_point(p, u)?;
@@ -211,7 +183,7 @@ impl Emitters {
     /// The solid-angle density with which [`Self::sample`] at receiver `(p, n)` picks the
     /// direction `direction` that meets triangle `prim` at distance `t`: 0 when `prim` is not
     /// an emitter or is seen from behind.
-    pub fn pdf(&self, p: Vec3, _n: Vec3, prim: u32, direction: Vec3, t: f32) -> f32 {
+    pub fn pdf(&self, p: Vec3, n: Vec3, prim: u32, direction: Vec3, t: f32) -> f32 {
         let Some(&index) = self.of_prim.get(prim as usize) else {
             return 0.0;
         };
@@ -223,6 +195,7 @@ impl Emitters {
         }
         let pmf = match &self.picker {
             Picker::Power(table) => table.pmf(index),
+            Picker::Tree(tree) => tree.pmf(p, n, index),
         };
         let pdf = pmf * e.density(p, direction, t);
         if pdf.is_finite() { pdf } else { f32::MAX }
@@ -238,6 +211,14 @@ const SPHERICAL_SOLID_ANGLES: core::ops::RangeInclusive<f64> = 3e-4..=6.22;
 impl Emitter {
     fn power(&self) -> f32 {
         self.area * luminance(self.radiance)
+    }
+
+    fn bounds(&self) -> EmitterBounds {
+        EmitterBounds {
+            corners: self.corners(),
+            normal: self.normal,
+            power: self.power(),
+        }
     }
 
     fn corners(&self) -> [Vec3; 3] {

@@ -17,8 +17,10 @@
 //! from (paper §2.2), is documented in [`path`]. Random numbers beyond the gather's Sobol
 //! point come from [`rng`].
 
+pub mod alias;
 pub mod direct;
 pub mod emitters;
+pub mod light_tree;
 pub mod lights;
 pub mod path;
 pub mod rng;
