@@ -28,7 +28,7 @@ pub struct GuidebakeClusterParams {
 
 /// One cluster: the texels `permutation[start .. end]`.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeClusterRange {
     /// First index into the permutation.
     pub start: u32,

@@ -52,7 +52,7 @@ const _: () = {
 
 /// A batch's statistics ([`guidebake_welford_stats`]).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeWelfordStats {
     /// Finite samples accepted.
     pub count: u64,
@@ -66,7 +66,7 @@ pub struct GuidebakeWelfordStats {
 
 /// A texel's combined estimate.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeEstimate {
     /// 1 if the texel has an estimate; 0 if no batch had a finite sample (the other fields
     /// are then 0 but `rejected`).

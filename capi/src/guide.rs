@@ -29,7 +29,7 @@ use wide::f32x8;
 /// divided by the density on the square that drew the sample (`pdf` from the warp; 1 for
 /// the cosine baseline).
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeRecord {
     /// The sample's point in [0,1)².
     pub u: [f32; 2],
@@ -123,7 +123,7 @@ pub struct GuidebakeGuideStats {
 /// A built guide: an opaque, caller-owned 64-byte value borrowing the node storage it was
 /// built in. Copy it freely (every copy borrows the same storage); no destructor.
 #[repr(C)]
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeGuide {
     /// Private; zero-initialise if you must initialise it.
     pub opaque: [u64; 8],

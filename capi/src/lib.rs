@@ -16,8 +16,9 @@
 //!
 //! # The rules (also in `kernels/README.md`, "Embedding")
 //! - **Errors.** Every function that takes a pointer returns a [`GuidebakeStatus`]; on failure
-//!   [`guidebake_last_error`] gives a message naming the function and the argument. Nothing
-//!   is written to the outputs of a call that fails its checks.
+//!   [`guidebake_last_error`] gives a message naming the function and the argument. A call
+//!   that fails its argument checks writes nothing; one that fails for lack of room
+//!   ([`GuidebakeStatus::Capacity`] from clustering) may have written its outputs partly.
 //! - **Pointers.** Every pointer is checked for null and for its type's alignment; a null
 //!   pointer is accepted where the length is 0 and where a parameter is documented as
 //!   optional. Lengths are element counts; input and output buffers of one call must not

@@ -80,7 +80,7 @@ const _: () = {
 /// Eight rays, structure of arrays: lane i is `org[·][i] + t · dir[·][i]`, t ∈
 /// `[tmin[i], tmax[i]]`. No alignment beyond `float`'s is required.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeRay8 {
     /// Origins: x, y, z rows of eight lanes.
     pub org: [[f32; 8]; 3],
@@ -94,7 +94,7 @@ pub struct GuidebakeRay8 {
 
 /// Eight hits, structure of arrays.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeHit8 {
     /// Distances.
     pub t: [f32; 8],
@@ -108,7 +108,7 @@ pub struct GuidebakeHit8 {
 
 /// One ray.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeRay {
     /// Origin.
     pub org: [f32; 3],
@@ -122,7 +122,7 @@ pub struct GuidebakeRay {
 
 /// One hit.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeHit {
     /// Distance.
     pub t: f32,
@@ -137,7 +137,7 @@ pub struct GuidebakeHit {
 /// A validated BVH: an opaque, caller-owned 64-byte value borrowing the node and triangle
 /// arrays it was made from. Copy it freely; no destructor.
 #[repr(C)]
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GuidebakeBvh {
     /// Private; zero-initialise if you must initialise it.
     pub opaque: [u64; 8],
