@@ -18,8 +18,8 @@
 //! be added at the end without breaking callers compiled against an older header.
 
 use crate::{
-    Fail, GuidebakeStatus, check_one, disjoint, fail, guard, read_array, read_versioned,
-    sampling::check_points8, slice_mut, write_array,
+    Fail, GuidebakeStatus, check_one, disjoint, fail, guard, load8, read_array, read_versioned,
+    sampling::check_points8, slice_mut, store8, write_array,
 };
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::warp;
@@ -361,18 +361,20 @@ pub unsafe extern "C" fn guidebake_guide_sample8(
     guard("guidebake_guide_sample8", || {
         // SAFETY: the caller's contract; every pointer is checked before use.
         let g = unsafe { load(guide) }?;
-        // SAFETY: as above.
-        let (px, py) = unsafe { (read_array::<f32, 8>(x, "x")?, read_array::<f32, 8>(y, "y")?) };
-        check_points8(&px, &py)?;
+        check_one(x, "x")?;
+        check_one(y, "y")?;
         check_one(out_x, "out_x")?;
         check_one(out_y, "out_y")?;
         check_one(out_pdf, "out_pdf")?;
-        let w = warp::sample8(g, f32x8::new(px), f32x8::new(py));
-        // SAFETY: checked; writable is the caller's contract.
+        // SAFETY: checked; 8 readable floats each is the caller's contract.
+        let (vx, vy) = unsafe { (load8(x), load8(y)) };
+        check_points8(vx, vy)?;
+        let w = warp::sample8(g, vx, vy);
+        // SAFETY: checked; writable is the caller's contract. The inputs were read first.
         unsafe {
-            write_array(out_x, w.x.to_array());
-            write_array(out_y, w.y.to_array());
-            write_array(out_pdf, w.pdf.to_array());
+            store8(out_x, w.x);
+            store8(out_y, w.y);
+            store8(out_pdf, w.pdf);
         }
         Ok(())
     })
@@ -396,7 +398,7 @@ pub unsafe extern "C" fn guidebake_guide_sample(
         let g = unsafe { load(guide) }?;
         // SAFETY: as above.
         let u = unsafe { read_array::<f32, 2>(u, "u") }?;
-        check_points8(&[u[0]; 8], &[u[1]; 8])?;
+        check_points8(f32x8::splat(u[0]), f32x8::splat(u[1]))?;
         check_one(out, "out")?;
         check_one(out_pdf, "out_pdf")?;
         let w = warp::sample(g, u);
@@ -424,13 +426,14 @@ pub unsafe extern "C" fn guidebake_guide_pdf8(
     guard("guidebake_guide_pdf8", || {
         // SAFETY: the caller's contract; every pointer is checked before use.
         let g = unsafe { load(guide) }?;
-        // SAFETY: as above.
-        let (px, py) = unsafe { (read_array::<f32, 8>(x, "x")?, read_array::<f32, 8>(y, "y")?) };
-        check_points8(&px, &py)?;
+        check_one(x, "x")?;
+        check_one(y, "y")?;
         check_one(out_pdf, "out_pdf")?;
-        let pdf = warp::pdf8(g, f32x8::new(px), f32x8::new(py));
+        // SAFETY: checked; 8 readable floats each is the caller's contract.
+        let (vx, vy) = unsafe { (load8(x), load8(y)) };
+        check_points8(vx, vy)?;
         // SAFETY: checked.
-        unsafe { write_array(out_pdf, pdf.to_array()) };
+        unsafe { store8(out_pdf, warp::pdf8(g, vx, vy)) };
         Ok(())
     })
 }
@@ -450,7 +453,7 @@ pub unsafe extern "C" fn guidebake_guide_pdf(
         let g = unsafe { load(guide) }?;
         // SAFETY: as above.
         let w = unsafe { read_array::<f32, 2>(w, "w") }?;
-        check_points8(&[w[0]; 8], &[w[1]; 8])?;
+        check_points8(f32x8::splat(w[0]), f32x8::splat(w[1]))?;
         check_one(out_pdf, "out_pdf")?;
         // SAFETY: checked.
         unsafe { out_pdf.write(warp::pdf(g, w)) };

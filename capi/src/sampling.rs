@@ -8,7 +8,8 @@
 //! points in [0,1)² ([`guidebake_packet_points8`]) that the guide's warp takes.
 
 use crate::{
-    GuidebakeStatus, check_one, disjoint, fail, guard, read_array, slice, slice_mut, write_array,
+    GuidebakeStatus, check_one, disjoint, fail, guard, load8, read_array, slice, slice_mut, store8,
+    write_array,
 };
 use glam::Vec3;
 use guidebake_kernels::{mapping, presort, sobol};
@@ -166,18 +167,20 @@ pub unsafe extern "C" fn guidebake_sample_cosine_hemisphere8(
     out_z: *mut f32,
 ) -> GuidebakeStatus {
     guard("guidebake_sample_cosine_hemisphere8", || {
-        // SAFETY: checked before reading; readable is the caller's contract.
-        let u = unsafe { [read_array::<f32, 8>(x, "x")?, read_array::<f32, 8>(y, "y")?] };
-        check_points8(&u[0], &u[1])?;
+        check_one(x, "x")?;
+        check_one(y, "y")?;
         check_one(out_x, "out_x")?;
         check_one(out_y, "out_y")?;
         check_one(out_z, "out_z")?;
-        let [dx, dy, dz] = mapping::sample_cosine_hemisphere_x8(u.map(f32x8::new));
-        // SAFETY: checked; writable is the caller's contract.
+        // SAFETY: checked; 8 readable floats each is the caller's contract.
+        let u = unsafe { [load8(x), load8(y)] };
+        check_points8(u[0], u[1])?;
+        let [dx, dy, dz] = mapping::sample_cosine_hemisphere_x8(u);
+        // SAFETY: checked; writable is the caller's contract. The inputs were read first.
         unsafe {
-            write_array(out_x, dx.to_array());
-            write_array(out_y, dy.to_array());
-            write_array(out_z, dz.to_array());
+            store8(out_x, dx);
+            store8(out_y, dy);
+            store8(out_z, dz);
         }
         Ok(())
     })
@@ -195,7 +198,7 @@ pub unsafe extern "C" fn guidebake_sample_cosine_hemisphere(
     guard("guidebake_sample_cosine_hemisphere", || {
         // SAFETY: checked before reading.
         let u = unsafe { read_array::<f32, 2>(u, "u") }?;
-        check_points8(&[u[0]; 8], &[u[1]; 8])?;
+        check_points8(f32x8::splat(u[0]), f32x8::splat(u[1]))?;
         check_one(out, "out")?;
         // SAFETY: checked; writable is the caller's contract.
         unsafe { write_array(out, mapping::sample_cosine_hemisphere(u).to_array()) };
@@ -244,18 +247,18 @@ pub unsafe extern "C" fn guidebake_orthonormal_basis(
 
 /// Fails unless every lane lies in [0,1)² (the warps' and maps' domain).
 #[inline(always)]
-pub(crate) fn check_points8(x: &[f32; 8], y: &[f32; 8]) -> Result<(), crate::Fail> {
-    let (vx, vy) = (f32x8::new(*x), f32x8::new(*y));
+pub(crate) fn check_points8(x: f32x8, y: f32x8) -> Result<(), crate::Fail> {
     let (zero, one) = (f32x8::splat(0.0), f32x8::splat(1.0));
-    let inside = vx.simd_ge(zero) & vx.simd_lt(one) & vy.simd_ge(zero) & vy.simd_lt(one);
+    let inside = x.simd_ge(zero) & x.simd_lt(one) & y.simd_ge(zero) & y.simd_lt(one);
     if inside.to_bitmask() == 0xff {
         return Ok(());
     }
-    Err(outside(x, y))
+    Err(outside(x.to_array(), y.to_array()))
 }
 
 #[cold]
-fn outside(x: &[f32; 8], y: &[f32; 8]) -> crate::Fail {
+#[inline(never)]
+fn outside(x: [f32; 8], y: [f32; 8]) -> crate::Fail {
     let lane = (0..8)
         .find(|&i| !((0.0..1.0).contains(&x[i]) && (0.0..1.0).contains(&y[i])))
         .unwrap_or(0);

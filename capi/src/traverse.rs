@@ -21,12 +21,15 @@
 //! Results are exact: every tree over the same triangles gives the same hits bit for bit
 //! (the smallest primitive id wins ties).
 
-use crate::{Fail, GuidebakeStatus, bvh_build, check_one, disjoint, fail, guard, slice, slice_mut};
+use crate::{
+    Fail, GuidebakeStatus, bvh_build, check_one, disjoint, fail, guard, load8, slice, slice_mut,
+    store8,
+};
 use core::mem::offset_of;
 use glam::Vec3;
 use guidebake_kernels::packet::{Hit, Hit8, NO_HIT, Ray, Ray8};
 use guidebake_kernels::traverse::{self, BvhRef, LEAF, LayoutError, Node, Tri};
-use wide::{f32x8, u32x8};
+use wide::u32x8;
 
 /// `meta` bit of a leaf child; the low bits count its triangles.
 pub const GUIDEBAKE_BVH_LEAF: u32 = 0x8000_0000;
@@ -347,17 +350,24 @@ fn bad_handle() -> Fail {
     )
 }
 
+/// The packet, loaded row by row straight into vector registers.
+///
 /// # Safety
 /// `rays` was checked with `check_one`.
 #[inline(always)]
 unsafe fn ray8(rays: *const GuidebakeRay8) -> Ray8 {
-    // SAFETY: the caller checked the pointer; the struct is plain floats.
-    let r = unsafe { rays.read() };
-    Ray8 {
-        org: r.org.map(f32x8::new),
-        dir: r.dir.map(f32x8::new),
-        tmin: f32x8::new(r.tmin),
-        tmax: f32x8::new(r.tmax),
+    let row = |p: *const [f32; 8]| {
+        // SAFETY: a row of the checked packet.
+        unsafe { load8(p.cast()) }
+    };
+    // SAFETY: field projections of the checked pointer (no reference is formed).
+    unsafe {
+        Ray8 {
+            org: [0, 1, 2].map(|a| row(&raw const (*rays).org[a])),
+            dir: [0, 1, 2].map(|a| row(&raw const (*rays).dir[a])),
+            tmin: row(&raw const (*rays).tmin),
+            tmax: row(&raw const (*rays).tmax),
+        }
     }
 }
 
@@ -383,23 +393,28 @@ pub unsafe extern "C" fn guidebake_intersect8(
         if !out_mask.is_null() {
             check_one(out_mask, "out_mask")?;
         }
-        // SAFETY: checked.
-        let (rays, old) = unsafe { (ray8(rays), hits.read()) };
-        let mut h = Hit8 {
-            t: f32x8::new(old.t),
-            u: f32x8::new(old.u),
-            v: f32x8::new(old.v),
-            prim: u32x8::new(old.prim),
+        // SAFETY: checked; rows loaded straight into registers (see `load8`).
+        let (rays, mut h) = unsafe {
+            let ht = &raw mut (*hits).t;
+            let (hu, hv) = (&raw mut (*hits).u, &raw mut (*hits).v);
+            let hp = &raw mut (*hits).prim;
+            let h = Hit8 {
+                t: load8(ht.cast()),
+                u: load8(hu.cast()),
+                v: load8(hv.cast()),
+                prim: hp.cast::<u32x8>().read_unaligned(),
+            };
+            (ray8(rays), h)
         };
         let mask = traverse::intersect8(bvh, &rays, &mut h);
-        // SAFETY: checked; the packet was read by value, so `hits` may alias `rays`.
+        // SAFETY: checked; the packet was read before, so `hits` may alias `rays`.
         unsafe {
-            hits.write(GuidebakeHit8 {
-                t: h.t.to_array(),
-                u: h.u.to_array(),
-                v: h.v.to_array(),
-                prim: h.prim.to_array(),
-            });
+            store8((&raw mut (*hits).t).cast(), h.t);
+            store8((&raw mut (*hits).u).cast(), h.u);
+            store8((&raw mut (*hits).v).cast(), h.v);
+            (&raw mut (*hits).prim)
+                .cast::<u32x8>()
+                .write_unaligned(h.prim);
             if !out_mask.is_null() {
                 out_mask.write(mask);
             }
