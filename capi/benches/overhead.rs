@@ -5,7 +5,11 @@
 //! from the optimiser (`black_box`), as a C program calls into the static or shared library,
 //! so no cross-crate inlining flatters it. Results are checked equal before timing.
 //!
-//! Run: `cargo bench -p guidebake-kernels-capi --bench overhead -- --warm-up-time 1 --measurement-time 4`
+//! The machine is shared and its load drifts over a run, so each pair is measured in
+//! `ROUNDS` alternating rounds (`sample8/rust/1`, `sample8/abi/1`, `sample8/rust/2`, …);
+//! compare the pairs round by round (docs/capi.md has the figures and the script).
+//!
+//! Run: `cargo bench -p guidebake-kernels-capi --bench overhead -- --warm-up-time 0.5 --measurement-time 2`
 
 use std::hint::black_box;
 
@@ -29,6 +33,9 @@ use wide::{f32x8, u32x8};
 
 /// Packets per timed iteration.
 const PACKETS: usize = 256;
+
+/// Alternating rounds of each pair.
+const ROUNDS: usize = 3;
 
 type Sample8 = unsafe extern "C" fn(
     *const GuidebakeGuide,
@@ -119,12 +126,14 @@ fn sample8(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("abi_overhead");
     group.throughput(Throughput::Elements((8 * PACKETS) as u64));
-    group.bench_function("sample8/rust", |b| {
-        b.iter(|| rust_pass(black_box(&mut out)))
-    });
-    group.bench_function("sample8/abi", |b| {
-        b.iter(|| abi_pass(black_box(&mut out_abi)))
-    });
+    for round in 1..=ROUNDS {
+        group.bench_function(format!("sample8/rust/{round}"), |b| {
+            b.iter(|| rust_pass(black_box(&mut out)))
+        });
+        group.bench_function(format!("sample8/abi/{round}"), |b| {
+            b.iter(|| abi_pass(black_box(&mut out_abi)))
+        });
+    }
     group.finish();
 }
 
@@ -248,12 +257,14 @@ fn intersect8(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("abi_overhead");
     group.throughput(Throughput::Elements((8 * PACKETS) as u64));
-    group.bench_function("intersect8/rust", |b| {
-        b.iter(|| rust_pass(black_box(&mut hits)))
-    });
-    group.bench_function("intersect8/abi", |b| {
-        b.iter(|| abi_pass(black_box(&mut hits_abi)))
-    });
+    for round in 1..=ROUNDS {
+        group.bench_function(format!("intersect8/rust/{round}"), |b| {
+            b.iter(|| rust_pass(black_box(&mut hits)))
+        });
+        group.bench_function(format!("intersect8/abi/{round}"), |b| {
+            b.iter(|| abi_pass(black_box(&mut hits_abi)))
+        });
+    }
     group.finish();
 }
 
