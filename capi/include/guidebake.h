@@ -229,7 +229,7 @@ typedef struct GuidebakeGuideParams {
    */
   float ambient;
   /**
-   * Smoothing strength α ∈ [0,1] of §2.3 (default 0.25; 0 disables smoothing).
+   * Smoothing strength α in 0..=1 of §2.3 (default 0.25; 0 disables smoothing).
    */
   float alpha;
 } GuidebakeGuideParams;

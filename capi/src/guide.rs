@@ -60,7 +60,7 @@ pub struct GuidebakeGuideParams {
     pub max_depth: u32,
     /// Ambient floor: no leaf's density below this fraction of the mean (default 0.1).
     pub ambient: f32,
-    /// Smoothing strength α ∈ [0,1] of §2.3 (default 0.25; 0 disables smoothing).
+    /// Smoothing strength α in 0..=1 of §2.3 (default 0.25; 0 disables smoothing).
     pub alpha: f32,
 }
 

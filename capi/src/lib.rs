@@ -25,8 +25,8 @@
 //!   overlap (checked where both are buffers).
 //! - **No panic crosses the ABI**: each call runs under `catch_unwind`; a panic (a broken
 //!   invariant, never expected) becomes [`GuidebakeStatus::Panic`].
-//! - **No allocation** in any function except [`guidebake_presort`]'s sort; hot calls
-//!   (`sample8`, `pdf8`, `intersect8`, `occluded8`, Welford pushes) allocate nothing.
+//! - **No allocation** anywhere; the hot calls (`sample8`, `pdf8`, `intersect8`,
+//!   `occluded8`, Welford pushes) touch only their arguments.
 //! - **Versioned parameter structs.** Structs named `…Params` start with `size`; set it with
 //!   the `…_default()` constructor (or to `sizeof`), then change fields. A library newer than
 //!   the header reads the fields the caller's `size` covers and defaults the rest.
