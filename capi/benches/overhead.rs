@@ -7,7 +7,7 @@
 //!
 //! The machine is shared and its load drifts over a run, so each pair is measured in
 //! `ROUNDS` alternating rounds (`sample8/rust/1`, `sample8/abi/1`, `sample8/rust/2`, …);
-//! compare the pairs round by round (docs/capi.md has the figures and the script).
+//! compare the pairs round by round (figures: kernels/README.md, "Overhead").
 //!
 //! Run: `cargo bench -p guidebake-kernels-capi --bench overhead -- --warm-up-time 0.5 --measurement-time 2`
 

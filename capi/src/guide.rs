@@ -298,6 +298,7 @@ pub unsafe extern "C" fn guidebake_guide_build(
         } else {
             check_one(stats, "stats")?;
             disjoint(storage, storage_bytes, stats, 1, "`storage` and `stats`")?;
+            disjoint(records, record_count, stats, 1, "`records` and `stats`")?;
             // SAFETY: checked; readable is the caller's contract.
             let size = unsafe { stats.cast::<u32>().read() } as usize;
             if !(4..=size_of::<GuidebakeGuideStats>()).contains(&size) {

@@ -104,21 +104,24 @@ struct Truncating<'a> {
 
 impl Write for Truncating<'_> {
     fn write_str(&mut self, s: &str) -> fmt::Result {
-        for &b in s.as_bytes() {
-            if self.len + 1 >= self.buf.len() {
+        for c in s.chars() {
+            // Interior NULs would cut the C string short.
+            let c = if c == '\0' { '?' } else { c };
+            // Whole characters only, so the buffer stays UTF-8; one byte is kept for the NUL.
+            if self.len + c.len_utf8() >= self.buf.len() {
                 break;
             }
-            // Interior NULs would cut the C string short.
-            self.buf[self.len] = if b == 0 { b'?' } else { b };
-            self.len += 1;
+            c.encode_utf8(&mut self.buf[self.len..]);
+            self.len += c.len_utf8();
         }
         Ok(())
     }
 }
 
-/// Writes `"{function}: {message}"` as the thread's last error, truncated, NUL-terminated.
-fn set_last_error(function: &str, message: fmt::Arguments<'_>) {
-    LAST_ERROR.with(|cell| {
+/// Replaces the thread's last error with `message`, truncated and NUL-terminated. Does
+/// nothing while the thread is being torn down (its buffer is gone), never panics.
+fn write_last_error(message: fmt::Arguments<'_>) {
+    let _ = LAST_ERROR.try_with(|cell| {
         let Ok(mut buf) = cell.try_borrow_mut() else {
             return;
         };
@@ -126,26 +129,16 @@ fn set_last_error(function: &str, message: fmt::Arguments<'_>) {
             buf: &mut buf[..],
             len: 0,
         };
-        let _ = write!(w, "{function}: {message}");
+        let _ = w.write_fmt(message);
         let end = w.len;
         buf[end] = 0;
     });
 }
 
 /// Records `message` for [`guidebake_last_error`] and returns the failure to propagate.
+/// `guard` then prefixes the function's name.
 pub(crate) fn fail(status: GuidebakeStatus, message: fmt::Arguments<'_>) -> Fail {
-    // The function name is prefixed by `guard`, which rewrites the buffer.
-    LAST_ERROR.with(|cell| {
-        if let Ok(mut buf) = cell.try_borrow_mut() {
-            let mut w = Truncating {
-                buf: &mut buf[..],
-                len: 0,
-            };
-            let _ = w.write_fmt(message);
-            let end = w.len;
-            buf[end] = 0;
-        }
-    });
+    write_last_error(message);
     Fail(status)
 }
 
@@ -163,36 +156,58 @@ pub(crate) fn guard(
             status
         }
         Err(payload) => {
-            let text = payload
-                .downcast_ref::<&str>()
-                .copied()
-                .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
-                .unwrap_or("(no message)");
-            set_last_error(function, format_args!("panic caught: {text}"));
+            panicked(function, payload.as_ref());
+            // A payload whose destructor panics would unwind from here: leak it instead.
+            core::mem::forget(payload);
             GuidebakeStatus::Panic
         }
     }
 }
 
 #[cold]
+#[inline(never)]
+fn panicked(function: &str, payload: &(dyn core::any::Any + Send)) {
+    let text = payload
+        .downcast_ref::<&str>()
+        .copied()
+        .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
+        .unwrap_or("(no message)");
+    write_last_error(format_args!("{function}: panic caught: {text}"));
+}
+
+#[cold]
+#[inline(never)]
 fn prefix_last_error(function: &str) {
     let mut copy = [0u8; ERROR_BYTES];
-    let len = LAST_ERROR.with(|cell| {
-        let buf = cell.borrow();
-        let len = buf.iter().position(|&b| b == 0).unwrap_or(0);
-        copy[..len].copy_from_slice(&buf[..len]);
-        len
-    });
-    let message = core::str::from_utf8(&copy[..len]).unwrap_or("(message not UTF-8)");
-    set_last_error(function, format_args!("{message}"));
+    let len = LAST_ERROR
+        .try_with(|cell| {
+            let Ok(buf) = cell.try_borrow() else {
+                return 0;
+            };
+            let len = buf.iter().position(|&b| b == 0).unwrap_or(0);
+            copy[..len].copy_from_slice(&buf[..len]);
+            len
+        })
+        .unwrap_or(0);
+    let message = match core::str::from_utf8(&copy[..len]) {
+        Ok(m) => m,
+        // Cannot happen (`Truncating` writes whole characters); keep the valid prefix anyway.
+        Err(e) => core::str::from_utf8(&copy[..e.valid_up_to()]).unwrap_or(""),
+    };
+    write_last_error(format_args!("{function}: {message}"));
 }
+
+/// An empty C string for threads whose error buffer is gone.
+static EMPTY: [u8; 1] = [0];
 
 /// The message of the most recent failed call on this thread (an empty string if none
 /// failed yet). The pointer stays valid for the thread's lifetime; the text changes at the
 /// next failure on this thread. Successful calls leave it as it is.
 #[unsafe(no_mangle)]
 pub extern "C" fn guidebake_last_error() -> *const c_char {
-    LAST_ERROR.with(|cell| cell.as_ptr().cast::<c_char>())
+    LAST_ERROR
+        .try_with(|cell| cell.as_ptr().cast::<c_char>().cast_const())
+        .unwrap_or(EMPTY.as_ptr().cast())
 }
 
 /// [`GUIDEBAKE_ABI_VERSION`] of the library actually linked (compare with the header's).
