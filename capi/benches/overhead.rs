@@ -3,7 +3,9 @@
 //! traversal). Each pair reads its inputs from and writes its outputs to the same plain
 //! arrays, as a C caller's would be; the ABI side calls through a function pointer hidden
 //! from the optimiser (`black_box`), as a C program calls into the static or shared library,
-//! so no cross-crate inlining flatters it. Results are checked equal before timing.
+//! so no cross-crate inlining flatters it. `sample_packets/abi` is the batched call
+//! (`guidebake_guide_sample_packets`, all packets in one call). Results are checked equal
+//! before timing.
 //!
 //! The machine is shared and its load drifts over a run, so each pair is measured in
 //! `ROUNDS` alternating rounds (`sample8/rust/1`, `sample8/abi/1`, `sample8/rust/2`, …);
@@ -17,7 +19,8 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use glam::Vec3;
 use guidebake_capi::GuidebakeStatus;
 use guidebake_capi::guide::{
-    GuidebakeGuide, GuidebakeRecord, guidebake_guide_build, guidebake_guide_sample8,
+    GuidebakeGuide, GuidebakeRecord, guidebake_guide_build, guidebake_guide_sample_packets,
+    guidebake_guide_sample8,
 };
 use guidebake_capi::traverse::{
     GUIDEBAKE_NO_HIT, GuidebakeBvh, GuidebakeBvhNode, GuidebakeHit8, GuidebakeRay8,
@@ -41,6 +44,15 @@ type Sample8 = unsafe extern "C" fn(
     *const GuidebakeGuide,
     *const f32,
     *const f32,
+    *mut f32,
+    *mut f32,
+    *mut f32,
+) -> GuidebakeStatus;
+type SamplePackets = unsafe extern "C" fn(
+    *const GuidebakeGuide,
+    *const f32,
+    *const f32,
+    usize,
     *mut f32,
     *mut f32,
     *mut f32,
@@ -120,9 +132,34 @@ fn sample8(c: &mut Criterion) {
             debug_assert_eq!(s, GuidebakeStatus::Ok);
         }
     };
+    // The batched call: all packets in one call, planar arrays.
+    let batched: SamplePackets = black_box(guidebake_guide_sample_packets);
+    let mut planar = vec![[[0.0f32; 8]; PACKETS]; 3];
+    let batch_pass = |planar: &mut [[[f32; 8]; PACKETS]]| {
+        let [ox, oy, op] = planar else { unreachable!() };
+        // SAFETY: 8·PACKETS floats in every array and a live handle.
+        let s = unsafe {
+            batched(
+                &handle,
+                xs.as_ptr().cast(),
+                ys.as_ptr().cast(),
+                PACKETS,
+                ox.as_mut_ptr().cast(),
+                oy.as_mut_ptr().cast(),
+                op.as_mut_ptr().cast(),
+            )
+        };
+        debug_assert_eq!(s, GuidebakeStatus::Ok);
+    };
     rust_pass(&mut out);
     abi_pass(&mut out_abi);
+    batch_pass(&mut planar);
     assert_eq!(out, out_abi, "the ABI warps as the kernels do");
+    assert!(
+        out.iter()
+            .enumerate()
+            .all(|(p, o)| (0..3).all(|k| o[k] == planar[k][p]))
+    );
 
     let mut group = c.benchmark_group("abi_overhead");
     group.throughput(Throughput::Elements((8 * PACKETS) as u64));
@@ -132,6 +169,9 @@ fn sample8(c: &mut Criterion) {
         });
         group.bench_function(format!("sample8/abi/{round}"), |b| {
             b.iter(|| abi_pass(black_box(&mut out_abi)))
+        });
+        group.bench_function(format!("sample_packets/abi/{round}"), |b| {
+            b.iter(|| batch_pass(black_box(&mut planar)))
         });
     }
     group.finish();

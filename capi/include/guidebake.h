@@ -712,6 +712,24 @@ GuidebakeStatus guidebake_guide_sample8(const struct GuidebakeGuide *guide,
                                         float *out_pdf);
 
 /**
+ * [`guidebake_guide_sample8`] for `packets` packets at once: packet p is lanes
+ * `8·p .. 8·p + 8` of each array. The per-call checks are paid once, so a baker warping a
+ * texel's whole sample set pays next to nothing for the ABI. Every point is checked before
+ * anything is written. Each output may be its input (in place) or disjoint from every input.
+ *
+ * # Safety
+ * `guide` points to a handle; `x`, `y` to `8·packets` readable floats each; `out_x`,
+ * `out_y`, `out_pdf` to `8·packets` writable floats each.
+ */
+GuidebakeStatus guidebake_guide_sample_packets(const struct GuidebakeGuide *guide,
+                                               const float *x,
+                                               const float *y,
+                                               size_t packets,
+                                               float *out_x,
+                                               float *out_y,
+                                               float *out_pdf);
+
+/**
  * Warps one point `u[2]` ∈ [0,1)²: the warped point to `out[2]`, its density to `out_pdf`.
  * The scalar reference of [`guidebake_guide_sample8`].
  *

@@ -19,7 +19,7 @@
 
 use crate::{
     Fail, GuidebakeStatus, check_one, disjoint, fail, guard, load8, read_array, read_versioned,
-    sampling::check_points8, slice_mut, store8, write_array,
+    sampling::check_points8, slice, slice_mut, store8, write_array,
 };
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::warp;
@@ -379,6 +379,77 @@ pub unsafe extern "C" fn guidebake_guide_sample8(
         }
         Ok(())
     })
+}
+
+/// [`guidebake_guide_sample8`] for `packets` packets at once: packet p is lanes
+/// `8·p .. 8·p + 8` of each array. The per-call checks are paid once, so a baker warping a
+/// texel's whole sample set pays next to nothing for the ABI. Every point is checked before
+/// anything is written. Each output may be its input (in place) or disjoint from every input.
+///
+/// # Safety
+/// `guide` points to a handle; `x`, `y` to `8·packets` readable floats each; `out_x`,
+/// `out_y`, `out_pdf` to `8·packets` writable floats each.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn guidebake_guide_sample_packets(
+    guide: *const GuidebakeGuide,
+    x: *const f32,
+    y: *const f32,
+    packets: usize,
+    out_x: *mut f32,
+    out_y: *mut f32,
+    out_pdf: *mut f32,
+) -> GuidebakeStatus {
+    guard("guidebake_guide_sample_packets", || {
+        // SAFETY: the caller's contract; every pointer is checked before use.
+        let g = unsafe { load(guide) }?;
+        let Some(n) = packets.checked_mul(8) else {
+            return Err(fail(
+                GuidebakeStatus::BadLength,
+                format_args!("`packets` = {packets} is larger than any buffer"),
+            ));
+        };
+        // Lengths, nulls and alignment of all five arrays (views are not kept: the outputs
+        // may be the inputs).
+        // SAFETY: only checked, not dereferenced here.
+        unsafe {
+            slice(x, n, "x")?;
+            slice(y, n, "y")?;
+            slice(out_x.cast_const(), n, "out_x")?;
+            slice(out_y.cast_const(), n, "out_y")?;
+            slice(out_pdf.cast_const(), n, "out_pdf")?;
+        }
+        for (out, name) in [(out_x, "out_x"), (out_y, "out_y"), (out_pdf, "out_pdf")] {
+            for (input, input_name) in [(x, "x"), (y, "y")] {
+                if out.cast_const() != input {
+                    disjoint(input, n, out, n, "an input and an output")
+                        .map_err(|_| overlap(input_name, name))?;
+                }
+            }
+        }
+        for p in 0..packets {
+            // SAFETY: in bounds of the checked arrays.
+            let (vx, vy) = unsafe { (load8(x.add(8 * p)), load8(y.add(8 * p))) };
+            check_points8(vx, vy)?;
+        }
+        for p in 0..packets {
+            // SAFETY: as above; a packet is read before it is written, so in place is fine.
+            unsafe {
+                let w = warp::sample8(g, load8(x.add(8 * p)), load8(y.add(8 * p)));
+                store8(out_x.add(8 * p), w.x);
+                store8(out_y.add(8 * p), w.y);
+                store8(out_pdf.add(8 * p), w.pdf);
+            }
+        }
+        Ok(())
+    })
+}
+
+#[cold]
+fn overlap(input: &str, output: &str) -> Fail {
+    fail(
+        GuidebakeStatus::Overlap,
+        format_args!("`{input}` and `{output}` overlap without being the same array"),
+    )
 }
 
 /// Warps one point `u[2]` ∈ [0,1)²: the warped point to `out[2]`, its density to `out_pdf`.

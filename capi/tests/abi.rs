@@ -230,7 +230,8 @@ struct Line([u8; 64]);
 fn guide_calls_stay_in_their_buffers() {
     let mut rng = Pcg32::new(20, 2);
     let node = guidebake_guide_node_size();
-    let (mut build, mut sample) = (Tally::default(), Tally::default());
+    let (mut build, mut sample, mut packets_tally) =
+        (Tally::default(), Tally::default(), Tally::default());
     for case in 0..1500 {
         let n = len(&mut rng, 600);
         let mut records = Guarded::new(n, |_| GuidebakeRecord {
@@ -324,6 +325,42 @@ fn guide_calls_stay_in_their_buffers() {
                     "case {case}"
                 );
             }
+        }
+        // Many packets at once: arbitrary counts, in place or not.
+        let packets = len(&mut rng, 6);
+        let mut x = Guarded::new(8 * packets, |_| coord(&mut rng));
+        let mut y = Guarded::new(8 * packets, |_| coord(&mut rng));
+        let mut o: [Guarded<f32>; 3] =
+            core::array::from_fn(|_| Guarded::new(8 * packets, |_| -2.0));
+        let claimed = if one_in(&mut rng, 4) {
+            len(&mut rng, 6)
+        } else {
+            packets
+        }
+        .min(packets);
+        let (px, py) = (pick(&mut rng, &mut x), pick(&mut rng, &mut y));
+        let in_place = one_in(&mut rng, 3);
+        let op = if in_place {
+            [px, py, pick(&mut rng, &mut o[2])]
+        } else {
+            [
+                pick(&mut rng, &mut o[0]),
+                pick(&mut rng, &mut o[1]),
+                pick(&mut rng, &mut o[2]),
+            ]
+        };
+        // SAFETY: null or valid for `claimed` ≤ `packets` packets.
+        let s = packets_tally.add(unsafe {
+            guidebake_guide_sample_packets(g, px, py, claimed, op[0], op[1], op[2])
+        });
+        for b in o.iter().chain([&x, &y]) {
+            b.check("sample_packets");
+        }
+        if s != S::Ok {
+            assert!(
+                o[2].body().iter().all(|&v| v == -2.0),
+                "case {case}: wrote on failure"
+            );
         }
     }
 }

@@ -115,6 +115,74 @@ fn guide_build_sample8_and_pdf8_match_the_kernels() {
 }
 
 #[test]
+fn sample_packets_equals_sample8_per_packet_and_works_in_place() {
+    let mut rng = Pcg32::new(6, 20);
+    let recs = records(&mut rng, 1500);
+    let mut storage = vec![Node::default(); 1024];
+    let (g, _) = guide::build(&mut recs.clone(), &GuideParams::default(), &mut storage);
+    let mut c_storage = vec![Node::default(); 1024];
+    let mut c_recs: Vec<GuidebakeRecord> = recs
+        .iter()
+        .map(|r| GuidebakeRecord {
+            u: r.u,
+            flux: r.flux,
+        })
+        .collect();
+    let mut h = GuidebakeGuide { opaque: [0; 8] };
+    // SAFETY: valid buffers; the storage outlives the handle.
+    let s = unsafe {
+        guidebake_guide_build(
+            c_recs.as_mut_ptr(),
+            c_recs.len(),
+            std::ptr::null(),
+            c_storage.as_mut_ptr().cast(),
+            1024 * 64,
+            &mut h,
+            std::ptr::null_mut(),
+        )
+    };
+    assert_eq!(s, S::Ok);
+    let packets = 37;
+    let mut x: Vec<f32> = (0..8 * packets).map(|_| rng.next_f32()).collect();
+    let mut y: Vec<f32> = (0..8 * packets).map(|_| rng.next_f32()).collect();
+    let mut pdf = vec![0.0f32; 8 * packets];
+    let want: Vec<_> = (0..packets)
+        .map(|p| {
+            warp::sample8(
+                &g,
+                f32x8::new(x[8 * p..][..8].try_into().unwrap()),
+                f32x8::new(y[8 * p..][..8].try_into().unwrap()),
+            )
+        })
+        .collect();
+    // A point outside [0,1)² in the last packet: refused, nothing written.
+    let last = x[8 * packets - 1];
+    x[8 * packets - 1] = 1.0;
+    let (xp, yp) = (x.as_mut_ptr(), y.as_mut_ptr());
+    // SAFETY: in place, every array 8·packets floats.
+    let s =
+        unsafe { guidebake_guide_sample_packets(&h, xp, yp, packets, xp, yp, pdf.as_mut_ptr()) };
+    assert_eq!(s, S::InvalidArgument);
+    assert!(pdf.iter().all(|&p| p == 0.0));
+    x[8 * packets - 1] = last;
+    // SAFETY: as above.
+    let s =
+        unsafe { guidebake_guide_sample_packets(&h, xp, yp, packets, xp, yp, pdf.as_mut_ptr()) };
+    assert_eq!(s, S::Ok, "{}", last_error());
+    for (p, w) in want.iter().enumerate() {
+        assert_eq!(x[8 * p..][..8], w.x.to_array());
+        assert_eq!(y[8 * p..][..8], w.y.to_array());
+        assert_eq!(pdf[8 * p..][..8], w.pdf.to_array());
+    }
+    // Partial overlap is refused.
+    // SAFETY: every range lies inside the arrays.
+    let s = unsafe {
+        guidebake_guide_sample_packets(&h, xp, yp, packets - 1, xp.add(8), yp, pdf.as_mut_ptr())
+    };
+    assert_eq!(s, S::Overlap);
+}
+
+#[test]
 fn versioned_params_read_only_what_the_caller_knows() {
     let mut rng = Pcg32::new(2, 20);
     let recs = records(&mut rng, 3000);
