@@ -7,14 +7,19 @@
 //! (`guidebake_guide_sample_packets`, all packets in one call). Results are checked equal
 //! before timing.
 //!
-//! The machine is shared and its load drifts over a run, so each pair is measured in
-//! `ROUNDS` alternating rounds (`sample8/rust/1`, `sample8/abi/1`, `sample8/rust/2`, …);
-//! compare the pairs round by round (figures: kernels/README.md, "Overhead").
+//! The machine is shared (load 5 to 14 on its 2 cores while this was written), so the bench
+//! measures the **CPU time of its own thread** (`CLOCK_THREAD_CPUTIME_ID`) rather than wall
+//! time: time spent descheduled is not counted (cache and core sharing still are). Each pair
+//! is measured in `ROUNDS` alternating rounds (`sample8/rust/1`, `sample8/abi/1`,
+//! `sample8/rust/2`, …); compare the pairs round by round (figures: kernels/README.md,
+//! "Overhead").
 //!
 //! Run: `cargo bench -p guidebake-kernels-capi --bench overhead -- --warm-up-time 0.5 --measurement-time 2`
 
 use std::hint::black_box;
+use std::time::Duration;
 
+use criterion::measurement::{Measurement, ValueFormatter, WallTime};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use glam::Vec3;
 use guidebake_capi::GuidebakeStatus;
@@ -64,7 +69,56 @@ type Intersect8 = unsafe extern "C" fn(
     *mut u8,
 ) -> GuidebakeStatus;
 
-fn sample8(c: &mut Criterion) {
+/// CPU time of the calling thread, as criterion's measurement.
+struct ThreadTime;
+
+#[repr(C)]
+struct Timespec {
+    sec: i64,
+    nsec: i64,
+}
+
+unsafe extern "C" {
+    fn clock_gettime(clock: i32, out: *mut Timespec) -> i32;
+}
+
+/// Linux's `CLOCK_THREAD_CPUTIME_ID`.
+const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
+
+fn thread_cpu_time() -> Duration {
+    let mut t = Timespec { sec: 0, nsec: 0 };
+    // SAFETY: a valid out-pointer; the clock id is Linux's.
+    let r = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut t) };
+    assert_eq!(r, 0, "clock_gettime(CLOCK_THREAD_CPUTIME_ID) failed");
+    Duration::new(t.sec as u64, t.nsec as u32)
+}
+
+impl Measurement for ThreadTime {
+    type Intermediate = Duration;
+    type Value = Duration;
+    fn start(&self) -> Duration {
+        thread_cpu_time()
+    }
+    fn end(&self, start: Duration) -> Duration {
+        thread_cpu_time().saturating_sub(start)
+    }
+    fn add(&self, a: &Duration, b: &Duration) -> Duration {
+        *a + *b
+    }
+    fn zero(&self) -> Duration {
+        Duration::ZERO
+    }
+    fn to_f64(&self, d: &Duration) -> f64 {
+        d.as_nanos() as f64
+    }
+    fn formatter(&self) -> &dyn ValueFormatter {
+        // Values are durations in nanoseconds, as wall time's are: reuse its formatter.
+        static WALL: WallTime = WallTime;
+        WALL.formatter()
+    }
+}
+
+fn sample8(c: &mut Criterion<ThreadTime>) {
     let mut rng = Pcg32::new(20, 8);
     let records: Vec<Record> = (0..4096)
         .map(|_| {
@@ -177,7 +231,7 @@ fn sample8(c: &mut Criterion) {
     group.finish();
 }
 
-fn intersect8(c: &mut Criterion) {
+fn intersect8(c: &mut Criterion<ThreadTime>) {
     // A closed-ish scene: 2000 small triangles scattered in a 10-unit box, packets of eight
     // coherent cosine directions from points inside it (the gather's shape).
     let mut rng = Pcg32::new(20, 9);
@@ -308,5 +362,9 @@ fn intersect8(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, sample8, intersect8);
+criterion_group! {
+    name = benches;
+    config = Criterion::default().with_measurement(ThreadTime);
+    targets = sample8, intersect8
+}
 criterion_main!(benches);
