@@ -408,6 +408,68 @@ mod tests {
         assert!(mean > 0.0, "from above, the front is seen");
     }
 
+    /// Many emitters of mixed power and orientation, some facing away, some behind the
+    /// receiver: the irradiance by next-event estimation is the same whichever selection
+    /// picks them (both unbiased), and MIS with hits agrees with it.
+    #[test]
+    fn power_and_tree_selection_agree_on_many_emitters() {
+        let mut rng = Pcg32::new(42, 7);
+        let mut tris = Vec::new();
+        let mut materials = Vec::new();
+        for i in 0..60 {
+            let c = Vec3::new(
+                rng.next_f32() * 6.0 - 3.0,
+                rng.next_f32() * 6.0 - 3.0,
+                rng.next_f32() * 3.0 - 0.5,
+            );
+            let e1 = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5;
+            let e2 = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5;
+            let n = e1.cross(e2).normalize();
+            tris.push(Triangle {
+                positions: [c, c + e1, c + e2],
+                normals: [n; 3],
+                lightmap_uv: Some([Vec2::ZERO; 3]),
+                mesh: 0,
+                material: i,
+            });
+            materials.push(Material {
+                name: format!("e{i}"),
+                albedo: Vec3::ZERO,
+                emission: Vec3::splat(10f32.powf(rng.next_f32() * 3.0 - 1.0)),
+            });
+        }
+        let scene = Scene::of_triangles("many", tris, materials);
+        let (p, normal) = (
+            Vec3::new(0.2, -0.1, 0.0),
+            Vec3::new(0.1, 0.2, 1.0).normalize(),
+        );
+        let n = 200_000;
+        let mut results = Vec::new();
+        for (sampling, sel) in [
+            (EmitterSampling::Nee, EmitterSelection::Power),
+            (EmitterSampling::Nee, EmitterSelection::Tree),
+            (EmitterSampling::Mis, EmitterSelection::Tree),
+        ] {
+            let mut world = World::new(&scene, Preset::DEFAULT).unwrap();
+            world.set_emitters(sampling, sel);
+            let mut rng = Pcg32::new(9, 9);
+            let est = estimate(n, |i| {
+                let (a, b) = sample(&world, p, normal, &mut rng, i);
+                a + b
+            });
+            results.push((format!("{sampling}/{sel}"), est));
+        }
+        let (_, (m0, s0)) = results[0].clone();
+        assert!(m0 > 0.0);
+        for (what, (m, s)) in &results[1..] {
+            let tol = 3.0 * (s * s + s0 * s0).sqrt();
+            assert!(
+                (m - m0).abs() <= tol,
+                "{what}: {m} ± {s} vs nee/power {m0} ± {s0}"
+            );
+        }
+    }
+
     #[test]
     fn the_power_heuristic_weighs_in_zero_to_one() {
         assert_eq!(power_heuristic(f32::INFINITY, 3.0), 1.0);
