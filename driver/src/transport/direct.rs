@@ -470,6 +470,66 @@ mod tests {
         }
     }
 
+    /// A lamp and its receiver moved 10⁶ sideways (coordinates with ulps of 6 cm) and a lamp
+    /// of radiance 10⁵ next to one of 10⁻⁴: every sample finite, the emitter never shadows
+    /// itself (every sample that reaches it counts), and the mean within the geometry's
+    /// rounding of Lambert's value.
+    #[test]
+    fn far_off_and_extreme_emitters_stay_finite() {
+        let far = Vec3::new(1e6, -1e6, 0.0);
+        let quad = [
+            Vec3::new(-2.0, -2.0, 2.0),
+            Vec3::new(-2.0, 2.0, 2.0),
+            Vec3::new(2.0, 2.0, 2.0),
+            Vec3::new(2.0, -2.0, 2.0),
+        ];
+        for (offset, l, tolerance) in [(Vec3::ZERO, 1e5, 0.01), (far, 1e-4, 0.06)] {
+            let world = lamp(
+                quad.map(|v| v + offset),
+                l,
+                EmitterSampling::Nee,
+                EmitterSelection::Tree,
+            );
+            let p = offset + Vec3::new(0.3, 0.0, 0.0);
+            let want = lambert(p, Vec3::Z, &quad.map(|v| v + offset), l);
+            let mut rng = Pcg32::new(4, 4);
+            let (mut reached, n) = (0, 20_000);
+            let (mean, _) = estimate(n, |i| {
+                let e = sample(&world, p, Vec3::Z, &mut rng, i).0;
+                reached += usize::from(e > 0.0);
+                e
+            });
+            assert_eq!(
+                reached, n,
+                "{offset}: an emitter facing the point is always reached"
+            );
+            assert!(
+                (mean - want).abs() <= tolerance * want,
+                "{offset}: {mean} vs Lambert {want}"
+            );
+        }
+    }
+
+    /// Skip what the scene doesn't need: a black lamp is no emitter, so no table, no tree,
+    /// no shadow ray.
+    #[test]
+    fn a_world_without_emitters_samples_none() {
+        let quad = [Vec3::ZERO, Vec3::X, Vec3::X + Vec3::Y, Vec3::Y];
+        for sel in [EmitterSelection::Power, EmitterSelection::Tree] {
+            let dark = lamp(quad, 0.0, EmitterSampling::Mis, sel);
+            assert!(dark.emitters().is_none() && !dark.has_direct_light());
+            assert_eq!(dark.emitter_sampling(), EmitterSampling::Hits);
+            let at = Receiver {
+                point: Vec3::new(0.5, 0.5, -1.0),
+                normal: Vec3::Z,
+                other: None,
+            };
+            assert_eq!(dark.direct_irradiance(&at, [0.5; 2], 0.5), (Vec3::ZERO, 0));
+            let lit = lamp(quad, 1.0, EmitterSampling::Mis, sel);
+            assert_eq!(lit.emitters().map(|e| e.len()), Some(2));
+        }
+    }
+
     #[test]
     fn the_power_heuristic_weighs_in_zero_to_one() {
         assert_eq!(power_heuristic(f32::INFINITY, 3.0), 1.0);
