@@ -242,15 +242,18 @@ pub fn invert_cosine_hemisphere_x8(w: [f32x8; 3]) -> [f32x8; 2] {
     ]
 }
 
-/// A right-handed orthonormal basis (t, b) with t × b = n, for a unit normal `n`, without a
-/// branch on the sign of n.z (Duff et al. 2017, listing 3).
+/// A right-handed orthonormal basis (t, b) with t × b = n, for a unit normal `n` (Duff et
+/// al. 2017, listing 3). The sign is that of n.z with −0 counted as +0, so the two zeros of
+/// a wall facing sideways get the same frame. The frame still turns by 180° about n where
+/// n.z crosses 0: a texel's frame that must agree with its neighbours' comes from
+/// [`carried_frame`].
 ///
 /// # Panics
 /// Debug builds assert n is finite. Release: the frame is as accurate as n is unit.
 #[inline]
 pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
     debug_assert!(n.is_finite(), "n = {n}");
-    let sign = libm::copysignf(1.0, n.z);
+    let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
     let t = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
@@ -258,12 +261,28 @@ pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
     (t, bt)
 }
 
+/// The frame of a cluster — tangent `t` of the unit mean normal `m` — carried to the unit
+/// normal `n` by the minimal rotation taking `m` to `n` (Rodrigues, about `m × n`); returns
+/// `(t', b')` with `t' × b' = n`. Texels whose normals are close map a point of the square
+/// to close directions, whatever the signs of their components. Needs `m · n > −1` (normals
+/// of one cluster lie within 60° of their mean); the result is re-orthonormalized
+/// (Gram–Schmidt against `n`).
+#[inline]
+pub fn carried_frame(t: Vec3, m: Vec3, n: Vec3) -> (Vec3, Vec3) {
+    let c = m.dot(n);
+    let k = m.cross(n);
+    let rotate = |v: Vec3| v * c + k.cross(v) + k * (k.dot(v) / (1.0 + c));
+    let t = if c > -0.999 { rotate(t) } else { t };
+    let t = (t - n * n.dot(t)).normalize_or(orthonormal_basis(n).0);
+    (t, n.cross(t))
+}
+
 /// [`orthonormal_basis`] for eight normals: returns ([tx, ty, tz], [bx, by, bz]).
 #[inline]
 pub fn orthonormal_basis_x8(n: [f32x8; 3]) -> ([f32x8; 3], [f32x8; 3]) {
     let [nx, ny, nz] = n;
     let one = f32x8::splat(1.0);
-    let sign = one.copysign(nz);
+    let sign = nz.simd_ge(f32x8::ZERO).select(one, -one);
     let a = -one / (sign + nz);
     let b = nx * ny * a;
     let t = [one + sign * nx * nx * a, sign * b, -sign * nx];

@@ -25,10 +25,13 @@ use std::time::Instant;
 
 use glam::Vec3;
 use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
-use guidebake_kernels::estimator::{GraybillDeal, TexelEstimate, Welford, plain_average};
+use guidebake_kernels::estimator::{
+    GraybillDeal, TexelEstimate, Welford, combine_weighted, plain_average,
+};
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::mapping::{
-    orthonormal_basis, sample_cosine_hemisphere, sample_cosine_hemisphere_x8,
+    carried_frame, invert_cosine_hemisphere, orthonormal_basis, sample_cosine_hemisphere,
+    sample_cosine_hemisphere_x8,
 };
 use guidebake_kernels::packet::{LANES, NO_HIT, Ray, Ray8};
 use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
@@ -41,7 +44,9 @@ use wide::{f32x8, u32x8};
 
 use super::grid::{self as grid_guide, GridGuide};
 use super::pipeline::{TileBaked, TileBuffer};
-use super::settings::{BakeSettings, Combine, Guiding};
+use super::settings::{
+    BakeSettings, Combine, Frame, Guiding, Learn, MAX_LEARNING_RECORDS,
+};
 use super::world::{SurfaceHit, World};
 use crate::output::journal::TileRecord;
 use crate::output::result_file::{
@@ -52,6 +57,12 @@ use crate::transport::rng::SampleRng;
 
 /// Guide nodes per cluster: enough for a 64-texel cluster's records at the default split rule.
 pub const GUIDE_CAPACITY: usize = 4096;
+/// The guide's ambient floor when a defensive mixture samples it (`--mix` > 0): the cosine
+/// share already bounds every sample's weight, so the guide need not spend a tenth of its
+/// mass on directions where learning saw nothing (measured on the small emitter: with
+/// 64-record splits, α = 10 % and a 25 % mixture, the floor 0.1 gives 6.6× less variance per
+/// guided sample than cosine, 0.02 gives 15–20×).
+pub const MIXED_AMBIENT: f32 = 0.02;
 /// Salts separating the random streams of one (texel, iteration).
 const LIGHT_SALT: u32 = 0x6c69_6768;
 const ORIGIN_SALT: u32 = 0x6f72_6967;
@@ -119,8 +130,13 @@ pub struct TileBaker<'w> {
     /// Presorted Sobol order for each iteration's sample count.
     orders: Vec<Vec<u32>>,
     rotated: Vec<u32>,
+    /// The cluster's learning records in the order they were taken.
     records: Vec<Record>,
+    /// The copy of `records` a guide is built from (the build reorders it).
+    scratch: Vec<Record>,
     nodes: Vec<Node>,
+    /// Per valid texel and iteration: the weight of `--combine cluster`.
+    weights: Vec<f64>,
     batches: Vec<Welford>,
     /// Per valid texel: its gather-only samples `L π / q` (all iterations), the series
     /// transport's indirect irradiance for the next pass.
@@ -161,7 +177,9 @@ impl<'w> TileBaker<'w> {
             orders,
             rotated: Vec::new(),
             records: Vec::new(),
+            scratch: Vec::new(),
             nodes: vec![Node::default(); GUIDE_CAPACITY],
+            weights: Vec::new(),
             batches: Vec::new(),
             gathered: Vec::new(),
             valid: Vec::new(),
@@ -200,6 +218,8 @@ impl<'w> TileBaker<'w> {
         let k = self.settings.iterations as usize;
         self.batches.clear();
         self.batches.resize(self.valid.len() * k, Welford::new());
+        self.weights.clear();
+        self.weights.resize(self.valid.len() * k, 1.0);
         self.gathered.clear();
         self.gathered.resize(self.valid.len(), Welford::new());
         self.unguided.clear();
@@ -300,8 +320,10 @@ impl<'w> TileBaker<'w> {
             orders,
             rotated,
             records,
+            scratch,
             nodes,
             batches,
+            weights,
             gathered,
             valid,
             unguided,
@@ -312,11 +334,34 @@ impl<'w> TileBaker<'w> {
         let iterations = settings.iterations;
         let mut guide: Option<Guide<'_>> = None;
         let mut grid: Option<GridGuide> = None;
+        let frame = cluster_frame(members.iter().map(|&m| {
+            let t = &texels[valid[m as usize] as usize];
+            Vec3::from(t.normal)
+        }));
+        let params = GuideParams {
+            min_records: settings.min_split,
+            alpha: settings.smooth as f32 / 100.0,
+            // With a mixture the cosine share is the defence: the guide's own floor drops.
+            ambient: if settings.mix > 0 {
+                MIXED_AMBIENT
+            } else {
+                guide::DEFAULT_AMBIENT
+            },
+            ..GuideParams::default()
+        };
+        records.clear();
         for k in 0..iterations {
-            records.clear();
+            if settings.learn == Learn::Last {
+                records.clear();
+            }
             for &m in members {
                 let i = valid[m as usize];
-                let t = gather_texel(&texels[i as usize], first_texel + u64::from(i));
+                let t = gather_texel(
+                    &texels[i as usize],
+                    first_texel + u64::from(i),
+                    settings.frame,
+                    frame,
+                );
                 let learned = match (&guide, &grid) {
                     (Some(g), _) => Some(Learned::Tree(g)),
                     (None, Some(g)) => Some(Learned::Grid(g)),
@@ -330,12 +375,7 @@ impl<'w> TileBaker<'w> {
                     gathered: &mut gathered[m as usize],
                     records,
                 };
-                let ctx = IterationCtx {
-                    world,
-                    settings,
-                    k,
-                    guide: learned,
-                };
+                let ctx = IterationCtx::new(world, settings, k, learned);
                 match settings.guiding {
                     Guiding::Naive => ctx.gather_naive(&t, &mut sinks, counters),
                     Guiding::Off | Guiding::Coherent | Guiding::Grid => {
@@ -343,17 +383,25 @@ impl<'w> TileBaker<'w> {
                     }
                 }
             }
+            if records.len() > MAX_LEARNING_RECORDS {
+                records.drain(..records.len() - MAX_LEARNING_RECORDS);
+            }
             if k + 1 < iterations {
                 let clock = Instant::now();
                 match settings.guiding {
                     Guiding::Off => {}
                     Guiding::Grid => grid = learn_grid(records, counters),
                     Guiding::Naive | Guiding::Coherent => {
-                        guide = learn(records, nodes, counters);
+                        scratch.clear();
+                        scratch.extend_from_slice(records);
+                        guide = learn(scratch, &params, nodes, counters);
                     }
                 }
                 counters.guide_build_ns += clock.elapsed().as_nanos() as u64;
             }
+        }
+        if settings.combine == Combine::Cluster {
+            cluster_weights(members, batches, iterations as usize, weights);
         }
     }
 
@@ -371,6 +419,7 @@ impl<'w> TileBaker<'w> {
             let combined = match self.settings.combine {
                 Combine::Average => average,
                 Combine::Texel => gd.combine(batches),
+                Combine::Cluster => combine_weighted(batches, &self.weights[m * k..(m + 1) * k]),
                 // Combined in the final pass, once every texel's variances give the weights;
                 // until then the plain average stands in.
                 Combine::Global => {
@@ -416,10 +465,11 @@ impl<'w> TileBaker<'w> {
 /// should stay unguided (no energy seen, or a uniform guide), which is counted.
 fn learn<'n>(
     records: &mut [Record],
+    params: &GuideParams,
     nodes: &'n mut [Node],
     counters: &mut GatherCounters,
 ) -> Option<Guide<'n>> {
-    let (learned, stats) = guide::build(records, &GuideParams::default(), nodes);
+    let (learned, stats) = guide::build(records, params, nodes);
     if stats.total_flux.is_nan() || stats.total_flux <= 0.0 {
         counters.iterations_unguided_no_energy += 1;
         None
@@ -466,9 +516,76 @@ fn relative_std_error(batches: &[Welford]) -> f32 {
     }
 }
 
-fn gather_texel(t: &TexelRecord, id: u64) -> GatherTexel {
+/// The weights of `--combine cluster` for the cluster's `members` (indices of valid texels,
+/// `k` batches each in `batches`), written to `weights`: iteration j's weight is
+/// `n_j / max(v_j, floor)` with `v_j = Σ_texels σ̂²_j / Σ_texels μ̂²` the cluster's pooled
+/// relative per-sample variance of iteration j (σ̂²_j a texel's luminance variance in
+/// iteration j, μ̂ its mean over all iterations) and the floor a hundredth of the largest
+/// `v_j` (and of a relative standard deviation of 0.1): a batch of zeros beside noisy ones
+/// cannot take all the weight. Without any variance every iteration weighs its sample count.
+fn cluster_weights(members: &[u32], batches: &[Welford], k: usize, weights: &mut [f64]) {
+    let mut var = [0.0f64; super::settings::MAX_ITERATIONS];
+    let mut mean2 = 0.0f64;
+    for &m in members {
+        let b = &batches[m as usize * k..(m as usize + 1) * k];
+        let Some(mu) = plain_average(b).luminance() else {
+            continue;
+        };
+        if !(mu.is_finite() && mu > 0.0) {
+            continue;
+        }
+        mean2 += mu * mu;
+        for (j, batch) in b.iter().enumerate() {
+            if let Some(v) = batch.luminance_variance().filter(|v| v.is_finite()) {
+                var[j] += v;
+            }
+        }
+    }
+    let rel: Vec<f64> = (0..k).map(|j| var[j] / mean2).collect();
+    let largest = rel.iter().copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
+    let floor = (largest * 0.01).max(0.01);
+    for &m in members {
+        for j in 0..k {
+            let b = &batches[m as usize * k + j];
+            let w = if mean2 > 0.0 && largest > 0.0 {
+                b.count() as f64 / rel[j].max(floor)
+            } else {
+                b.count() as f64
+            };
+            weights[m as usize * k + j] = w;
+        }
+    }
+}
+
+/// A cluster's frame: its mean normal and that normal's tangent (the mean of unit normals
+/// within 60° of each other is never zero; should it be, +z).
+fn cluster_frame(normals: impl Iterator<Item = Vec3>) -> (Vec3, Vec3) {
+    let mean = normals.sum::<Vec3>().normalize_or(Vec3::Z);
+    (mean, orthonormal_basis(mean).0)
+}
+
+/// The per-texel frame as it was before the cluster frame (`--frame texel`): the sign of
+/// n.z by `copysign`, so −0 and +0 flip the frame. Kept only to measure the fix.
+fn texel_basis(n: Vec3) -> (Vec3, Vec3) {
+    let sign = 1.0f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    let t = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    let bt = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+    (t, bt)
+}
+
+fn gather_texel(
+    t: &TexelRecord,
+    id: u64,
+    mode: Frame,
+    (mean, tangent): (Vec3, Vec3),
+) -> GatherTexel {
     let normal = Vec3::from(t.normal);
-    let (tangent, bitangent) = orthonormal_basis(normal);
+    let (tangent, bitangent) = match mode {
+        Frame::Texel => texel_basis(normal),
+        Frame::Cluster => carried_frame(tangent, mean, normal),
+    };
     GatherTexel {
         id,
         position: Vec3::from(t.position),
@@ -505,9 +622,81 @@ struct IterationCtx<'a> {
     settings: &'a BakeSettings,
     k: u32,
     guide: Option<Learned<'a>>,
+    /// Packets in this iteration, and how many of them come from the cosine baseline when a
+    /// guide is sampled (the defensive mixture; 0 without a guide).
+    packets: u32,
+    cosine_packets: u32,
 }
 
-impl IterationCtx<'_> {
+impl<'a> IterationCtx<'a> {
+    fn new(
+        world: &'a World,
+        settings: &'a BakeSettings,
+        k: u32,
+        guide: Option<Learned<'a>>,
+    ) -> Self {
+        let packets = settings.samples_in_iteration(k) / LANES as u32;
+        let cosine_packets = if guide.is_some() {
+            settings.cosine_packets(k)
+        } else {
+            0
+        };
+        Self {
+            world,
+            settings,
+            k,
+            guide,
+            packets,
+            cosine_packets,
+        }
+    }
+
+    /// The cosine baseline's share `c` of the mixture this iteration samples: the fraction of
+    /// its packets drawn from the baseline.
+    fn cosine_share(&self) -> f32 {
+        self.cosine_packets as f32 / self.packets.max(1) as f32
+    }
+
+    /// Whether packet `j` (in the order traced) is drawn from the cosine baseline: the
+    /// `cosine_packets` of `packets` spread evenly (Bresenham), the same for every texel.
+    fn is_cosine_packet(&self, j: u32) -> bool {
+        let (n, c) = (u64::from(self.packets.max(1)), u64::from(self.cosine_packets));
+        (u64::from(j) + 1) * c / n > u64::from(j) * c / n
+    }
+
+    /// The density on the primary sample square this iteration's gather samples with, at
+    /// `u`: `c + (1 − c)·q(u)` for the mixture of the cosine baseline (share `c`) and the
+    /// guide `q`; 1 without a guide.
+    fn mixture_density(&self, q: f32) -> f32 {
+        let c = self.cosine_share();
+        c + (1.0 - c) * q
+    }
+
+    /// The guide's own density at `u` (1 without a guide).
+    fn guide_pdf(&self, u: [f32; 2]) -> f32 {
+        match self.guide {
+            Some(Learned::Tree(g)) => warp::pdf(g, u),
+            Some(Learned::Grid(g)) => g.pdf(u),
+            None => 1.0,
+        }
+    }
+
+    /// The density on the primary sample square that this iteration's gather at texel `t`
+    /// sampled the world direction `dir` with (the point is the inverse cosine map of `dir`
+    /// in the texel's frame): the solid-angle pdf is this × cosθ/π. 0 below the horizon.
+    #[allow(dead_code)]
+    fn sampled_density(&self, t: &GatherTexel, dir: Vec3) -> f32 {
+        let local = Vec3::new(dir.dot(t.tangent), dir.dot(t.bitangent), dir.dot(t.normal));
+        if local.z <= 0.0 {
+            return 0.0;
+        }
+        let u = invert_cosine_hemisphere(local.normalize());
+        if self.guide.is_none() {
+            return 1.0;
+        }
+        self.mixture_density(self.guide_pdf(u))
+    }
+
     /// The origin of packet `packet`: a point of the texel's footprint (its centre for
     /// partly covered texels), brought back onto the texel's triangle and off its edges so
     /// no origin lies past a wall's corner, then offset from the surface.
@@ -553,13 +742,26 @@ impl IterationCtx<'_> {
             let [sx, sy] = rotate_x8(sobol_2d_x8(index), rot);
             let (x, y) = (to_unit_x8(sx), to_unit_x8(sy));
             let clock = self.guide.map(|_| Instant::now());
+            let cosine = self.is_cosine_packet(j as u32);
             let (wx, wy, q) = match self.guide {
+                Some(Learned::Tree(g)) if cosine => (x, y, warp::pdf8(g, x, y)),
                 Some(Learned::Tree(g)) => {
                     let w = warp::sample8(g, x, y);
                     (w.x, w.y, w.pdf)
                 }
+                Some(Learned::Grid(g)) if cosine => {
+                    let (xa, ya) = (x.to_array(), y.to_array());
+                    let q: [f32; LANES] = core::array::from_fn(|l| g.pdf([xa[l], ya[l]]));
+                    (x, y, f32x8::from(q))
+                }
                 Some(Learned::Grid(g)) => grid_sample8(g, x, y),
                 None => (x, y, f32x8::ONE),
+            };
+            let q = if self.guide.is_some() {
+                let c = f32x8::splat(self.cosine_share());
+                c + (f32x8::ONE - c) * q
+            } else {
+                q
             };
             if let Some(clock) = clock {
                 counters.warp_ns += clock.elapsed().as_nanos() as u64;
@@ -611,17 +813,20 @@ impl IterationCtx<'_> {
             let mut samples = [(Vec3::ZERO, [0.0f32; 2], 1.0f32); LANES];
             // The packet's eight scalar warps first, timed together (the stats' warp time).
             let clock = self.guide.map(|_| Instant::now());
+            let cosine = self.is_cosine_packet(j);
             let warped: [([f32; 2], f32); LANES] = core::array::from_fn(|lane| {
                 let p = rotate(sobol_2d(j * LANES as u32 + lane as u32), rot);
                 let u = [to_unit(p[0]), to_unit(p[1])];
-                match self.guide {
+                let (w, q) = match self.guide {
+                    Some(_) if cosine => (u, self.guide_pdf(u)),
                     Some(Learned::Tree(g)) => {
                         let s = warp::sample(g, u);
                         (s.u, s.pdf)
                     }
                     Some(Learned::Grid(g)) => g.sample(u),
-                    None => (u, 1.0),
-                }
+                    None => return (u, 1.0),
+                };
+                (w, self.mixture_density(q))
             });
             if let Some(clock) = clock {
                 counters.warp_ns += clock.elapsed().as_nanos() as u64;
@@ -994,19 +1199,10 @@ mod tests {
         }
     }
 
-    /// What guiding is for (paper §2.2): 64 coincident texels on a black floor under a small
-    /// emissive panel (0.4 m square, 1 m up, form factor ≈ 0.05, not a light the bake
-    /// connects to), so a cosine sample finds the panel about once in twenty and the
-    /// texels' spread is the estimator's noise. Guided sampling learns the panel from the
-    /// first iteration and must cut the per-texel variance at equal samples; with the plain
-    /// average (unbiased) every mode agrees on the mean. Measured (128 spp in three
-    /// iterations of 40, 40 and 48, the first unguided): variance 12.9 unguided, 7.7 naive,
-    /// 7.2 coherent, 5.0 grid. The guided iterations alone do better — the default guide
-    /// learned from 2 560 cosine records of this panel cuts a random sample's variance 6.7×
-    /// — but the first iteration is a third of the budget and the unguided Sobol points are
-    /// already stratified.
-    #[test]
-    fn guiding_cuts_the_variance_under_a_small_emitter() {
+    /// 64 coincident texels on a black floor under a small emissive panel (0.4 m square, 1 m
+    /// up, form factor ≈ 0.05, not a light the bake connects to): a cosine sample finds the
+    /// panel about once in twenty.
+    fn small_emitter() -> (World, Vec<TexelRecord>) {
         let mut tris = quad(
             Vec3::new(-10.0, -10.0, 0.0),
             Vec3::X * 20.0,
@@ -1038,31 +1234,93 @@ mod tests {
                 ..t
             })
             .collect();
-        let spread = |guiding| {
-            let settings = BakeSettings {
-                combine: Combine::Average,
-                bias_correction: false,
-                ..settings(guiding)
-            };
-            let (mean, se, counters) = bake_mean(&world, settings, &texels);
-            (mean.x, se.x * 8.0, counters)
+        (world, texels)
+    }
+
+    /// The small emitter baked with `settings`: the texels' mean, the per-texel standard
+    /// deviation of the whole bake, each iteration's per-sample variance (the mean over the
+    /// texels of the variance within the iteration), and the counters.
+    fn emitter_bake(settings: BakeSettings) -> (f32, f32, Vec<f64>, GatherCounters) {
+        let (world, texels) = small_emitter();
+        let mut baker = TileBaker::new(&world, settings);
+        let mut out = TileBuffer::default();
+        baker.bake_tile(0, 1000, &texels, &mut out);
+        let values: Vec<f32> = out.results.iter().map(|r| r.irradiance[0]).collect();
+        let n = values.len() as f32;
+        let mean = values.iter().sum::<f32>() / n;
+        let var = values.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>() / (n - 1.0);
+        let k = settings.iterations as usize;
+        let per_iteration = (0..k)
+            .map(|j| {
+                (0..texels.len())
+                    .map(|m| baker.batches[m * k + j].variance().unwrap_or([0.0; 4])[0])
+                    .sum::<f64>()
+                    / texels.len() as f64
+            })
+            .collect();
+        (mean, var.sqrt(), per_iteration, baker.counters)
+    }
+
+    /// What guiding is for (paper §2.2), under [`small_emitter`]: the texels' spread is the
+    /// estimator's noise. Guided iterations must have at least 10× less variance per sample
+    /// than the cosine iteration 0 (a perfect guide with the default 50 % cosine mixture gives
+    /// ~21×), and the whole bake (plain average) at least 4× less than the unguided bake with
+    /// the same samples; every mode agrees on the mean. Every guiding mode and mixture share.
+    /// Measured figures: docs/guide.md ("The small emitter").
+    #[test]
+    fn guiding_cuts_the_variance_under_a_small_emitter() {
+        let base = BakeSettings {
+            combine: Combine::Average,
+            bias_correction: false,
+            ..settings(Guiding::Off)
         };
-        let (off_mean, off_sd, _) = spread(Guiding::Off);
-        for mode in [Guiding::Naive, Guiding::Coherent, Guiding::Grid] {
-            let (mean, sd, counters) = spread(mode);
-            assert!(counters.iterations_guided > 0, "{mode}: never guided");
-            let tol = 3.0 * (off_sd * off_sd + sd * sd).sqrt() / 8.0;
-            assert!(
-                (mean - off_mean).abs() <= tol,
-                "{mode}: {mean} vs {off_mean} ± {tol}"
-            );
-            assert!(
-                sd * sd < 0.7 * off_sd * off_sd,
-                "{mode}: per-texel variance {} not below 0.7 × unguided {}",
-                sd * sd,
-                off_sd * off_sd
-            );
+        let (off_mean, off_sd, off_iter, _) = emitter_bake(base);
+        let mut failures = Vec::new();
+        eprintln!("off: mean {off_mean} sd {off_sd} per-iteration {off_iter:?}");
+        let env = |k: &str, d: u32| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
+        for mix in [0, 25, 50] {
+            for mode in [Guiding::Naive, Guiding::Coherent, Guiding::Grid] {
+                let settings = BakeSettings {
+                    guiding: mode,
+                    mix,
+                    smooth: env("GB_SMOOTH", 25),
+                    min_split: env("GB_SPLIT", 4),
+                    ..base
+                };
+                let (mean, sd, iter, counters) = emitter_bake(settings);
+                eprintln!(
+                    "{mode} mix {mix}: mean {mean} sd {sd} (bake {:.1}×) per-iteration {:?}",
+                    (off_sd / sd).powi(2),
+                    iter.iter().map(|v| iter[0] / v).collect::<Vec<_>>()
+                );
+                assert_eq!(counters.iterations_guided, 2, "{mode}: {counters:?}");
+                let tol = 3.0 * (off_sd * off_sd + sd * sd).sqrt() / 8.0;
+                assert!(
+                    (mean - off_mean).abs() <= tol,
+                    "{mode} mix {mix}: {mean} vs {off_mean} ± {tol}"
+                );
+                if mode == Guiding::Grid {
+                    // The 16×16-bin comparator cannot concentrate on a 0.05 form factor.
+                    continue;
+                }
+                for (k, v) in iter.iter().enumerate().skip(1) {
+                    if *v * 10.0 > iter[0] {
+                        failures.push(format!(
+                            "{mode} mix {mix}: iteration {k} per-sample variance {v}, cosine {}",
+                            iter[0]
+                        ));
+                    }
+                }
+                if sd * sd * 4.0 > off_sd * off_sd {
+                    failures.push(format!(
+                        "{mode} mix {mix}: per-texel variance {} not 4× below unguided {}",
+                        sd * sd,
+                        off_sd * off_sd
+                    ));
+                }
+            }
         }
+        assert!(failures.is_empty(), "{failures:#?}");
     }
 
     #[test]

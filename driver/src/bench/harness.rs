@@ -18,7 +18,7 @@ use super::method::{Method, serialize_value_name, value_name};
 use super::metrics::{ErrorStats, compare};
 use super::readback::read_lightmap;
 use crate::bake::run::{BakeJob, BakeReport, bake, work_dir};
-use crate::bake::settings::{BakeSettings, Combine, Guiding, Transport};
+use crate::bake::settings::{BakeSettings, Guiding, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
 use crate::texels::TexelFile;
@@ -261,8 +261,8 @@ pub struct OverheadRecord {
     pub guided_fraction: f64,
 }
 
-/// The Figure-5 measurement: every `--guiding` mode at `spp` with the bake's default
-/// combination (Graybill–Deal per texel and ρ), `repeats` times, interleaved, the order
+/// The Figure-5 measurement: every `--guiding` mode at `spp` with the bake's defaults
+/// otherwise, `repeats` times, interleaved, the order
 /// rotated every repeat so that no mode always runs first; every bake with `transport` at
 /// `bounces`.
 ///
@@ -283,8 +283,7 @@ pub fn run_overhead(
             let guiding = modes[(i + repeat as usize) % modes.len()];
             let method = Method {
                 guiding,
-                combine: Combine::Texel,
-                rho: true,
+                ..Method::default_bake()
             };
             let settings = method.settings(spp, iterations, transport, bounces, 1);
             let baked = bench.bake_scratch(settings)?;

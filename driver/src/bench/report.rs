@@ -307,17 +307,36 @@ pub fn markdown(s: &Summary) -> String {
     let max_spp = s.ladder.spp.iter().copied().max().unwrap_or(0);
     let _ = writeln!(
         md,
-        "| method | time at {max_spp} spp (s) | RMSE at {max_spp} | relMSE at {max_spp} | rel. bias at {max_spp} | RMSE in {:.3} s | relMSE in {:.3} s | × baseline spp at {max_spp} | guided |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| method | time at {max_spp} spp (s) | RMSE at {max_spp} | relMSE at {max_spp} | rel. bias at {max_spp} | RMSE in {:.3} s | relMSE in {:.3} s | × baseline spp at {max_spp} | × baseline spp at equal time | guided |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         s.equal_time.budget_s, s.equal_time.budget_s
     );
+    let baseline_label = crate::bench::method::Method::baseline().label();
+    let baseline_s = s
+        .curves
+        .iter()
+        .find(|c| c.method == baseline_label)
+        .and_then(|c| c.points.iter().find(|p| p.spp == max_spp))
+        .map(|p| p.wall_s);
     for (c, t) in s.curves.iter().zip(&s.equal_time.methods) {
         let Some(p) = c.points.iter().find(|p| p.spp == max_spp) else {
             continue;
         };
-        let factor = s
+        let equivalent = s
             .equivalent_samples
             .iter()
-            .find(|e| e.method == c.method && e.spp == max_spp)
+            .find(|e| e.method == c.method && e.spp == max_spp);
+        // Baseline samples with the method's RMSE over the baseline samples that fit in the
+        // method's time: the equivalent-sample factor times the baseline's time over the
+        // method's, both at the top of the ladder.
+        let at_equal_time = match (equivalent, baseline_s) {
+            (Some(e), Some(b)) if p.wall_s > 0.0 => format!(
+                "{:.2}{}",
+                e.factor * b / p.wall_s,
+                if e.baseline_spp.extrapolated { "*" } else { "" }
+            ),
+            _ => "—".into(),
+        };
+        let factor = equivalent
             .map_or_else(
                 || "—".into(),
                 |e| {
@@ -330,7 +349,7 @@ pub fn markdown(s: &Summary) -> String {
             );
         let _ = writeln!(
             md,
-            "| {} | {:.3} | {:.3e} | {:.3e} | {:+.2}% | {} | {} | {} | {:.0}% |",
+            "| {} | {:.3} | {:.3e} | {:.3e} | {:+.2}% | {} | {} | {} | {} | {:.0}% |",
             c.method,
             p.wall_s,
             p.rmse,
@@ -339,6 +358,7 @@ pub fn markdown(s: &Summary) -> String {
             opt(t.rmse, 3),
             opt(t.rel_mse, 3),
             factor,
+            at_equal_time,
             100.0 * p.guided_fraction
         );
     }

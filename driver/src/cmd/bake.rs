@@ -6,7 +6,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_with_progress, work_dir};
-use crate::bake::settings::{BakeSettings, Combine, Guiding, Transport};
+use crate::bake::settings::{
+    BakeSettings, Combine, Frame, Guiding, Learn, Schedule, Transport,
+};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
 
@@ -28,11 +30,31 @@ pub struct BakeArgs {
     #[arg(long, default_value_t = 4)]
     pub iterations: u32,
     /// How gather directions are chosen.
-    #[arg(long, value_enum, default_value_t = Guiding::Coherent)]
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().guiding)]
     pub guiding: Guiding,
     /// How a texel's iterations are combined.
-    #[arg(long, value_enum, default_value_t = Combine::Texel)]
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().combine)]
     pub combine: Combine,
+    /// Percent of each guided iteration's packets drawn from the cosine baseline (the
+    /// defensive mixture; every sample is weighted with the mixture's density).
+    #[arg(long, default_value_t = BakeSettings::default().mix)]
+    pub mix: u32,
+    /// How the samples are split over the learning iterations.
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
+    pub schedule: Schedule,
+    /// Which records a cluster's guide learns from: the previous iteration's, or all so far.
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().learn)]
+    pub learn: Learn,
+    /// A guide node splits only if it holds at least this many records.
+    #[arg(long, default_value_t = BakeSettings::default().min_split)]
+    pub min_split: u32,
+    /// The guide's smoothing α in percent (paper §2.3): how far each child's share of its
+    /// parent is pulled toward a quarter.
+    #[arg(long, default_value_t = BakeSettings::default().smooth)]
+    pub smooth: u32,
+    /// The frame of the guide's square at each texel (`texel` only to measure the fix).
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().frame, hide = true)]
+    pub frame: Frame,
     /// Light transport at gather hits: `series` (passes through the previous pass's
     /// lightmap, the paper's production setting) or `path` (unbiased path tracing).
     #[arg(long, value_enum, default_value_t = Transport::Series)]
@@ -88,6 +110,12 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         seed: args.seed,
         transport: args.transport,
         bounces: args.bounces,
+        mix: args.mix,
+        schedule: args.schedule,
+        learn: args.learn,
+        min_split: args.min_split,
+        frame: args.frame,
+        smooth: args.smooth,
     };
     settings.validate()?;
     check_output(&args.out)?;
