@@ -66,6 +66,7 @@ pub const MIXED_AMBIENT: f32 = 0.02;
 /// Salts separating the random streams of one (texel, iteration).
 const LIGHT_SALT: u32 = 0x6c69_6768;
 const ORIGIN_SALT: u32 = 0x6f72_6967;
+const COSINE_SALT: u32 = 0x636f_7369;
 
 /// What the workers counted, merged over the bake.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -127,8 +128,8 @@ impl GatherCounters {
 pub struct TileBaker<'w> {
     world: &'w World,
     settings: BakeSettings,
-    /// Presorted Sobol order for each iteration's sample count.
-    orders: Vec<Vec<u32>>,
+    /// Presorted Sobol orders of each iteration.
+    orders: Vec<IterationOrders>,
     rotated: Vec<u32>,
     /// The cluster's learning records in the order they were taken.
     records: Vec<Record>,
@@ -151,6 +152,27 @@ pub struct TileBaker<'w> {
     pub counters: GatherCounters,
 }
 
+/// The presorted Sobol orders of one iteration: all its samples (traced when it samples no
+/// guide), and the cosine and guided parts of the mixture (when it does).
+struct IterationOrders {
+    all: Vec<u32>,
+    cosine: Vec<u32>,
+    guided: Vec<u32>,
+}
+
+impl IterationOrders {
+    fn new(settings: &BakeSettings, k: u32) -> Self {
+        let n = settings.samples_in_iteration(k);
+        let c = settings.cosine_packets(k) * LANES as u32;
+        let sorted = |n: u32| if n > 0 { presorted(n) } else { Vec::new() };
+        Self {
+            all: sorted(n),
+            cosine: sorted(c),
+            guided: sorted(n - c),
+        }
+    }
+}
+
 /// A texel as the gather needs it.
 #[derive(Clone, Copy, Debug)]
 struct GatherTexel {
@@ -169,7 +191,7 @@ impl<'w> TileBaker<'w> {
     /// A baker for `world` with `settings` (already validated).
     pub fn new(world: &'w World, settings: BakeSettings) -> Self {
         let orders = (0..settings.iterations)
-            .map(|k| presorted(settings.samples_in_iteration(k)))
+            .map(|k| IterationOrders::new(&settings, k))
             .collect();
         Self {
             world,
@@ -723,26 +745,58 @@ impl<'a> IterationCtx<'a> {
         (t.tangent * d.x + t.bitangent * d.y + t.normal * d.z).normalize_or(t.normal)
     }
 
-    /// Presorted packets, optionally warped 8-wide, traced as packets.
+    /// Presorted packets, optionally warped 8-wide, traced as packets. Without a guide, the
+    /// iteration's points are one presorted Sobol set. With one, the mixture's two parts are
+    /// two sets, each a whole presorted Sobol prefix with its own rotation: the cosine
+    /// packets first, then the guided ones. (Choosing packets of one set by their place in
+    /// the presorted order would pick them by position on the square, since the order
+    /// depends on the rotation: the cosine points would not be uniform, nor the guided
+    /// ones distributed as the guide.)
     fn gather_packets(
         &self,
         t: &GatherTexel,
-        order: &[u32],
+        orders: &IterationOrders,
         rotated: &mut Vec<u32>,
         sinks: &mut Sinks<'_>,
         counters: &mut GatherCounters,
     ) {
         let rot = rotation(self.settings.seed, t.id, self.k);
+        if self.guide.is_none() {
+            self.gather_part(t, &orders.all, rot, false, 0, rotated, sinks, counters);
+        } else {
+            let cosine_rot = rotation(self.settings.seed ^ COSINE_SALT, t.id, self.k);
+            let n = orders.cosine.len() as u32;
+            self.gather_part(t, &orders.cosine, cosine_rot, true, 0, rotated, sinks, counters);
+            self.gather_part(t, &orders.guided, rot, false, n, rotated, sinks, counters);
+        }
+    }
+
+    /// One presorted set of points (`order`, rotated by `rot`), traced as packets: unwarped
+    /// if `cosine` or without a guide, else warped through the guide. The set's sample `i`
+    /// is the iteration's sample `first + i` (its packet origin, light sample and random
+    /// numbers).
+    #[allow(clippy::too_many_arguments)]
+    fn gather_part(
+        &self,
+        t: &GatherTexel,
+        order: &[u32],
+        rot: [u32; 2],
+        cosine: bool,
+        first: u32,
+        rotated: &mut Vec<u32>,
+        sinks: &mut Sinks<'_>,
+        counters: &mut GatherCounters,
+    ) {
         let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
         rotated.resize(order.len(), 0);
         reorder_after_rotation_into(order, rot, rotated);
         let bvh = self.world.bvh();
         for (j, chunk) in rotated.chunks_exact(LANES).enumerate() {
+            let j = j as u32 + first / LANES as u32;
             let index = u32x8::new(chunk.try_into().expect("packets of 8"));
             let [sx, sy] = rotate_x8(sobol_2d_x8(index), rot);
             let (x, y) = (to_unit_x8(sx), to_unit_x8(sy));
             let clock = self.guide.map(|_| Instant::now());
-            let cosine = self.is_cosine_packet(j as u32);
             let (wx, wy, q) = match self.guide {
                 Some(Learned::Tree(g)) if cosine => (x, y, warp::pdf8(g, x, y)),
                 Some(Learned::Tree(g)) => {
@@ -777,14 +831,14 @@ impl<'a> IterationCtx<'a> {
             );
             let dirs: [Vec3; LANES] =
                 core::array::from_fn(|i| self.to_world(t, Vec3::new(dx[i], dy[i], dz[i])));
-            let origin = self.origin(t, j as u32);
+            let origin = self.origin(t, j);
             let packet = Ray8::from_origin(origin, &dirs, 0.0, f32::INFINITY);
             let mut hits = guidebake_kernels::packet::Hit8::NONE;
             intersect8(&bvh, &packet, &mut hits);
             counters.gather_rays += LANES as u64;
             let (ht, hprim) = (hits.t.to_array(), hits.prim.to_array());
             let (hu, hv) = (hits.u.to_array(), hits.v.to_array());
-            let lu = rotate_x8(sobol_2d_x8(index), light_rot);
+            let lu = rotate_x8(sobol_2d_x8(index + u32x8::splat(first)), light_rot);
             let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
             let light_u: [[f32; 2]; LANES] = core::array::from_fn(|i| [lx[i], ly[i]]);
             let direct = self.direct8(t, origin, &light_u, counters);
@@ -795,7 +849,8 @@ impl<'a> IterationCtx<'a> {
                     u: hu[lane],
                     v: hv[lane],
                 });
-                let l = self.incoming(t.id, chunk[lane], origin, dirs[lane], hit, counters);
+                let l =
+                    self.incoming(t.id, chunk[lane] + first, origin, dirs[lane], hit, counters);
                 self.record(l, [wx[lane], wy[lane]], q[lane], direct[lane], sinks);
             }
         }

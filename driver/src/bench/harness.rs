@@ -44,6 +44,9 @@ pub struct Bench<'a> {
 pub struct Baked {
     /// Wall-clock seconds of the whole bake.
     pub wall_s: f64,
+    /// CPU seconds of the whole bake, every thread (user + system): on a machine shared
+    /// with other work this moves far less than the wall time.
+    pub cpu_s: f64,
     /// The bake's own report (phases, rays, ρ).
     pub report: BakeReport,
     /// The lightmap read back, per texel id.
@@ -70,7 +73,9 @@ impl Bench<'_> {
             aux: false,
         };
         let clock = Instant::now();
+        let cpu = process_cpu_s();
         let report = bake(&job, self.scene, self.cancel, &mut |_, _| {})?;
+        let cpu_s = (process_cpu_s() - cpu).max(0.0);
         let wall_s = clock.elapsed().as_secs_f64();
         if report.interrupted || self.cancel.load(Ordering::Relaxed) {
             let _ = std::fs::remove_dir_all(&dir);
@@ -79,6 +84,7 @@ impl Bench<'_> {
         let values = read_lightmap(self.texels, out)?;
         Ok(Baked {
             wall_s,
+            cpu_s,
             report,
             values,
         })
@@ -101,6 +107,20 @@ impl Bench<'_> {
     }
 }
 
+/// CPU seconds this process has used (user + system, every thread), from `/proc/self/stat`
+/// in clock ticks of 1/100 s; 0 where that file does not exist.
+fn process_cpu_s() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    let Some((_, rest)) = stat.rsplit_once(')') else {
+        return 0.0;
+    };
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let tick = |i: usize| fields.get(i).and_then(|f| f.parse::<f64>().ok()).unwrap_or(0.0);
+    (tick(11) + tick(12)) / 100.0
+}
+
 /// One run of the ladder: a CSV row.
 #[derive(Clone, Debug, Serialize)]
 pub struct RunRecord {
@@ -120,6 +140,8 @@ pub struct RunRecord {
     pub seed: u32,
     /// Wall-clock seconds of the whole bake.
     pub wall_s: f64,
+    /// CPU seconds of the whole bake (every thread, user + system; 0 where unknown).
+    pub cpu_s: f64,
     /// Seconds opening the texel file.
     pub open_s: f64,
     /// Seconds building the BVH.
@@ -156,6 +178,7 @@ impl RunRecord {
             iterations: settings.iterations,
             seed: settings.seed,
             wall_s: baked.wall_s,
+            cpu_s: baked.cpu_s,
             open_s: r.seconds.open_texels,
             bvh_s: r.seconds.build_bvh,
             gather_s: r.seconds.gather,
