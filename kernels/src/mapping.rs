@@ -655,4 +655,45 @@ mod tests {
             "errors {worst:?}"
         );
     }
+
+    #[test]
+    fn both_zeros_of_n_z_give_one_frame() {
+        for n in [Vec3::X, Vec3::new(0.6, 0.8, 0.0), Vec3::new(0.0, -1.0, 0.0)] {
+            let minus = Vec3::new(n.x, n.y, -0.0);
+            assert_eq!(orthonormal_basis(n), orthonormal_basis(minus), "{n}");
+            let (t, b) = orthonormal_basis_x8([
+                f32x8::splat(n.x),
+                f32x8::splat(n.y),
+                f32x8::new([0.0, -0.0, 0.0, -0.0, 0.0, -0.0, 0.0, -0.0]),
+            ]);
+            let (t0, b0) = orthonormal_basis(n);
+            for a in [t, b].iter().zip([t0, b0]) {
+                for (lane, want) in a.0.iter().zip([a.1.x, a.1.y, a.1.z]) {
+                    assert!(lane.to_array().iter().all(|&v| v == want), "{n}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn carried_frames_are_orthonormal_and_continuous() {
+        let m = Vec3::new(1.0, 0.0, 0.0);
+        let (t, _) = orthonormal_basis(m);
+        for n in [
+            m,
+            Vec3::new(1.0, 0.0, 1e-7).normalize(),
+            Vec3::new(1.0, 0.0, -1e-7).normalize(),
+            Vec3::new(0.8, 0.0, 0.6),
+            Vec3::new(0.8, 0.6, 0.0),
+            Vec3::new(0.6, -0.5, -0.62).normalize(),
+        ] {
+            let (a, b) = carried_frame(t, m, n);
+            assert!((a.length() - 1.0).abs() < 1e-5 && (b.length() - 1.0).abs() < 1e-5);
+            assert!(a.dot(n).abs() < 1e-5 && b.dot(n).abs() < 1e-5 && a.dot(b).abs() < 1e-5);
+            assert!((a.cross(b) - n).length() < 1e-5, "right-handed about {n}");
+            // The minimal rotation moves the tangent no more than the normal moved.
+            let turned = m.angle_between(n);
+            assert!(a.angle_between(t) <= turned + 1e-3, "{n}: {a} vs {t}");
+        }
+    }
 }

@@ -1332,14 +1332,11 @@ mod tests {
         let (off_mean, off_sd, off_iter, _) = emitter_bake(base);
         let mut failures = Vec::new();
         eprintln!("off: mean {off_mean} sd {off_sd} per-iteration {off_iter:?}");
-        let env = |k: &str, d: u32| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
         for mix in [0, 25, 50] {
             for mode in [Guiding::Naive, Guiding::Coherent, Guiding::Grid] {
                 let settings = BakeSettings {
                     guiding: mode,
                     mix,
-                    smooth: env("GB_SMOOTH", 25),
-                    min_split: env("GB_SPLIT", 4),
                     ..base
                 };
                 let (mean, sd, iter, counters) = emitter_bake(settings);
@@ -1376,6 +1373,98 @@ mod tests {
             }
         }
         assert!(failures.is_empty(), "{failures:#?}");
+    }
+
+    /// One frame per cluster: texels on a wall facing +x whose normals have n.z = +0 and
+    /// n.z = −0 (and ±1e-7) map every point of the square to the same direction. The old
+    /// per-texel frame turned by 180° between them.
+    #[test]
+    fn texels_of_one_cluster_sample_the_same_directions() {
+        let world = world(ground(), grey(0.5, 0.0), Vec3::ONE, None);
+        let settings = BakeSettings::default();
+        let normals = [
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, -0.0),
+            Vec3::new(1.0, 0.0, 1e-7),
+            Vec3::new(1.0, 0.0, -1e-7),
+        ];
+        let records: Vec<TexelRecord> = normals
+            .iter()
+            .map(|n| TexelRecord {
+                normal: n.to_array(),
+                ..texels_on_plane(1, 0.0)[0]
+            })
+            .collect();
+        let frame = cluster_frame(normals.iter().copied());
+        let ctx = IterationCtx::new(&world, &settings, 0, None);
+        let directions = |mode: Frame| -> Vec<Vec<Vec3>> {
+            records
+                .iter()
+                .map(|r| {
+                    let t = gather_texel(r, 0, mode, frame);
+                    (0..64)
+                        .map(|i| {
+                            let u = [(i % 8) as f32 / 8.0 + 0.06, (i / 8) as f32 / 8.0 + 0.02];
+                            ctx.to_world(&t, sample_cosine_hemisphere(u))
+                        })
+                        .collect()
+                })
+                .collect()
+        };
+        let cluster = directions(Frame::Cluster);
+        for texel in &cluster[1..] {
+            for (a, b) in texel.iter().zip(&cluster[0]) {
+                assert!((*a - *b).length() < 1e-5, "{a} vs {b}");
+            }
+        }
+        let texel = directions(Frame::Texel);
+        let apart = texel[1]
+            .iter()
+            .zip(&texel[0])
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, f32::max);
+        assert!(apart > 1.0, "the per-texel frame flips at n.z = -0 ({apart})");
+    }
+
+    /// The density the gather reports for a direction is the mixture's: `c + (1 − c)·q(u)`
+    /// at the inverse-mapped point, for points it sampled from either part.
+    #[test]
+    fn the_sampled_density_is_the_mixtures() {
+        let world = world(ground(), grey(0.5, 0.0), Vec3::ONE, None);
+        let settings = BakeSettings::default();
+        let mut records: Vec<Record> = (0..4096)
+            .map(|i| {
+                let u = [((i * 37) % 4096) as f32 / 4096.0, (i % 64) as f32 / 64.0];
+                let flux = if u[0] < 0.3 && u[1] > 0.6 { 10.0 } else { 0.1 };
+                Record { u, flux }
+            })
+            .collect();
+        let mut nodes = vec![Node::default(); GUIDE_CAPACITY];
+        let (g, _) = guide::build(&mut records, &GuideParams::default(), &mut nodes);
+        assert!(!g.is_uniform());
+        let ctx = IterationCtx::new(&world, &settings, 2, Some(Learned::Tree(&g)));
+        let c = ctx.cosine_share();
+        assert!(c > 0.2 && c < 0.3, "{c}");
+        let t = gather_texel(
+            &texels_on_plane(1, 0.0)[0],
+            0,
+            Frame::Cluster,
+            cluster_frame([Vec3::Z].into_iter()),
+        );
+        for i in 0..200u32 {
+            // Off the square's rim, which maps to the horizon (density 0 there).
+            let u = [
+                0.02 + 0.96 * to_unit(i.wrapping_mul(0x9e37_79b9)),
+                0.02 + 0.96 * (i as f32 + 0.5) / 200.0,
+            ];
+            let s = warp::sample(&g, u);
+            for (w, q) in [(u, warp::pdf(&g, u)), (s.u, s.pdf)] {
+                let dir = ctx.to_world(&t, sample_cosine_hemisphere(w));
+                let got = ctx.sampled_density(&t, dir);
+                let want = c + (1.0 - c) * q;
+                assert!((got - want).abs() <= 1e-3 * want, "{w:?}: {got} vs {want}");
+            }
+        }
     }
 
     #[test]

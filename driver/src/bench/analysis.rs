@@ -343,6 +343,7 @@ mod tests {
                     spp,
                     wall_s,
                     gather_s: wall_s,
+                    cpu_s: wall_s,
                     rmse,
                     rmse_range: [rmse; 2],
                     rel_mse: rmse * rmse,

@@ -64,7 +64,7 @@ pub struct BakeArgs {
     #[arg(long, default_value_t = BakeSettings::default().bounces)]
     pub bounces: u32,
     /// The world-wide bias correction ρ (paper §2.5).
-    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    #[arg(long, value_enum, default_value_t = if BakeSettings::default().bias_correction { OnOff::On } else { OnOff::Off })]
     pub bias_correction: OnOff,
     /// Worker threads (default: every core).
     #[arg(long, value_parser = super::parse_threads)]
