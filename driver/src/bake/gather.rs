@@ -539,62 +539,49 @@ fn relative_std_error(batches: &[Welford]) -> f32 {
 }
 
 /// The weights of `--combine cluster` for the cluster's `members` (indices of valid texels,
-/// `k` batches each in `batches`), written to `weights`. A texel's weight of iteration j is
-/// `n_j / max(v_j, floor)`, with `v_j = Σ σ̂²_j / Σ μ̂²` the pooled relative per-sample
-/// variance of iteration j over the cluster's **other** texels (σ̂²_j a texel's luminance
-/// variance in iteration j, μ̂ its mean over all iterations) and the floor a hundredth of the
-/// largest `v_j` (and a relative standard deviation of 0.1), so a batch of zeros beside noisy
-/// ones cannot take all the weight. Leaving the texel out makes its weights independent of
-/// its own samples given the guides, so its estimate stays unbiased (pooling over all
-/// texels, a firefly in a texel lowered that iteration's weight in that very texel: −2.9 %
-/// on the ajar room, path). A texel alone in its cluster, or whose others saw no variance,
-/// weighs its iterations by their sample counts.
+/// `k` batches each in `batches`), written to `weights`: iteration j's weight is
+/// `n_j / max(v_j, floor)` with `v_j = Σ_texels σ̂²_j / Σ_texels μ̂²` the cluster's pooled
+/// relative per-sample variance of iteration j (σ̂²_j a texel's luminance variance in
+/// iteration j, μ̂ its mean over all iterations) and the floor a hundredth of the largest
+/// `v_j` (and of a relative standard deviation of 0.1): a batch of zeros beside noisy ones
+/// cannot take all the weight. Without any variance every iteration weighs its sample count.
+///
+/// The texel's own samples are part of the pool, so its weights are not independent of
+/// its values: a firefly raises its iteration's pooled variance and lowers that iteration's
+/// weight in its own texel (−2.9 % on the ajar room, path; ρ, on by default with this
+/// combination, restores the world's mean). Leaving the texel out of its pool removes that
+/// bias but gives a firefly in an otherwise quiet iteration that iteration's large weight:
+/// measured and dropped (docs/estimator.md).
 fn cluster_weights(members: &[u32], batches: &[Welford], k: usize, weights: &mut [f64]) {
-    const MAX: usize = super::settings::MAX_ITERATIONS;
-    // Per member: its squared mean and per-iteration variances (0 for a dark texel).
-    let texel = |m: u32| -> (f64, [f64; MAX]) {
-        let b = &batches[m as usize * k..(m as usize + 1) * k];
-        let mut var = [0.0f64; MAX];
-        match plain_average(b).luminance() {
-            Some(mu) if mu.is_finite() && mu > 0.0 => {
-                for (j, batch) in b.iter().enumerate() {
-                    var[j] = batch
-                        .luminance_variance()
-                        .filter(|v| v.is_finite())
-                        .unwrap_or(0.0);
-                }
-                (mu * mu, var)
-            }
-            _ => (0.0, var),
-        }
-    };
-    let (mut mean2, mut var) = (0.0f64, [0.0f64; MAX]);
+    let mut var = [0.0f64; super::settings::MAX_ITERATIONS];
+    let mut mean2 = 0.0f64;
     for &m in members {
-        let (m2, v) = texel(m);
-        mean2 += m2;
-        for j in 0..k {
-            var[j] += v[j];
+        let b = &batches[m as usize * k..(m as usize + 1) * k];
+        let Some(mu) = plain_average(b).luminance() else {
+            continue;
+        };
+        if !(mu.is_finite() && mu > 0.0) {
+            continue;
+        }
+        mean2 += mu * mu;
+        for (j, batch) in b.iter().enumerate() {
+            if let Some(v) = batch.luminance_variance().filter(|v| v.is_finite()) {
+                var[j] += v;
+            }
         }
     }
+    let rel: Vec<f64> = (0..k).map(|j| var[j] / mean2).collect();
+    let largest = rel.iter().copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
+    let floor = (largest * 0.01).max(0.01);
     for &m in members {
-        let (m2, v) = texel(m);
-        let others = mean2 - m2;
-        let rel: [f64; MAX] = core::array::from_fn(|j| {
-            if j < k && others > 0.0 {
-                ((var[j] - v[j]) / others).max(0.0)
-            } else {
-                0.0
-            }
-        });
-        let largest = rel[..k].iter().copied().fold(0.0, f64::max);
-        let floor = (largest * 0.01).max(0.01);
         for j in 0..k {
-            let n = batches[m as usize * k + j].count() as f64;
-            weights[m as usize * k + j] = if largest > 0.0 && largest.is_finite() {
-                n / rel[j].max(floor)
+            let b = &batches[m as usize * k + j];
+            let w = if mean2 > 0.0 && largest > 0.0 {
+                b.count() as f64 / rel[j].max(floor)
             } else {
-                n
+                b.count() as f64
             };
+            weights[m as usize * k + j] = w;
         }
     }
 }

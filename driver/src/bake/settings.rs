@@ -31,10 +31,11 @@ pub enum Combine {
     /// iterations' batches are kept in a file and combined in the final pass.
     Global,
     /// Weights from the cluster: each iteration's weight ∝ its sample count over the
-    /// cluster's pooled relative variance of that iteration (the mean over the cluster's
-    /// texels of each texel's per-sample variance in the iteration over its squared mean).
-    /// The guide's quality is a property of the cluster; a texel's own samples barely move
-    /// its weights, so the per-texel bias of Graybill–Deal does not arise.
+    /// cluster's pooled relative variance of that iteration (the sum over the cluster's
+    /// texels of each texel's per-sample variance in the iteration over the sum of their
+    /// squared means). The guide's quality is a property of the cluster, which 64 texels'
+    /// samples estimate far better than one texel's; a firefly still lowers its own
+    /// iteration's weight, so use it with ρ (the default).
     Cluster,
 }
 
@@ -135,7 +136,7 @@ impl Default for BakeSettings {
             iterations: 4,
             guiding: Guiding::Coherent,
             combine: Combine::Cluster,
-            bias_correction: false,
+            bias_correction: true,
             seed: 0,
             transport: Transport::Series,
             bounces: 3,
