@@ -550,7 +550,11 @@ fn the_defensive_mixture_samples_its_density() {
             let s = warp::sample(&g, u);
             (s.u, s.pdf)
         };
-        assert_eq!(q, warp::pdf(&g, w), "the density at the point is the one sampled");
+        assert_eq!(
+            q,
+            warp::pdf(&g, w),
+            "the density at the point is the one sampled"
+        );
         let mixture = c + (1.0 - c) * f64::from(q);
         estimate += f64::from(disk_and_sky(w)) / mixture;
         uniform += f64::from(disk_and_sky([rng.next_f32(), rng.next_f32()]));

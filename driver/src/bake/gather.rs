@@ -44,9 +44,7 @@ use wide::{f32x8, u32x8};
 
 use super::grid::{self as grid_guide, GridGuide};
 use super::pipeline::{TileBaked, TileBuffer};
-use super::settings::{
-    BakeSettings, Combine, Frame, Guiding, Learn, MAX_LEARNING_RECORDS,
-};
+use super::settings::{BakeSettings, Combine, Guiding};
 use super::world::{SurfaceHit, World};
 use crate::output::journal::TileRecord;
 use crate::output::result_file::{
@@ -131,10 +129,8 @@ pub struct TileBaker<'w> {
     /// Presorted Sobol orders of each iteration.
     orders: Vec<IterationOrders>,
     rotated: Vec<u32>,
-    /// The cluster's learning records in the order they were taken.
+    /// The cluster's learning records of the current iteration.
     records: Vec<Record>,
-    /// The copy of `records` a guide is built from (the build reorders it).
-    scratch: Vec<Record>,
     nodes: Vec<Node>,
     /// Per valid texel and iteration: the weight of `--combine cluster`.
     weights: Vec<f64>,
@@ -199,7 +195,6 @@ impl<'w> TileBaker<'w> {
             orders,
             rotated: Vec::new(),
             records: Vec::new(),
-            scratch: Vec::new(),
             nodes: vec![Node::default(); GUIDE_CAPACITY],
             weights: Vec::new(),
             batches: Vec::new(),
@@ -342,7 +337,6 @@ impl<'w> TileBaker<'w> {
             orders,
             rotated,
             records,
-            scratch,
             nodes,
             batches,
             weights,
@@ -371,19 +365,11 @@ impl<'w> TileBaker<'w> {
             },
             ..GuideParams::default()
         };
-        records.clear();
         for k in 0..iterations {
-            if settings.learn == Learn::Last {
-                records.clear();
-            }
+            records.clear();
             for &m in members {
                 let i = valid[m as usize];
-                let t = gather_texel(
-                    &texels[i as usize],
-                    first_texel + u64::from(i),
-                    settings.frame,
-                    frame,
-                );
+                let t = gather_texel(&texels[i as usize], first_texel + u64::from(i), frame);
                 let learned = match (&guide, &grid) {
                     (Some(g), _) => Some(Learned::Tree(g)),
                     (None, Some(g)) => Some(Learned::Grid(g)),
@@ -405,18 +391,13 @@ impl<'w> TileBaker<'w> {
                     }
                 }
             }
-            if records.len() > MAX_LEARNING_RECORDS {
-                records.drain(..records.len() - MAX_LEARNING_RECORDS);
-            }
             if k + 1 < iterations {
                 let clock = Instant::now();
                 match settings.guiding {
                     Guiding::Off => {}
                     Guiding::Grid => grid = learn_grid(records, counters),
                     Guiding::Naive | Guiding::Coherent => {
-                        scratch.clear();
-                        scratch.extend_from_slice(records);
-                        guide = learn(scratch, &params, nodes, counters);
+                        guide = learn(records, &params, nodes, counters);
                     }
                 }
                 counters.guide_build_ns += clock.elapsed().as_nanos() as u64;
@@ -571,7 +552,11 @@ fn cluster_weights(members: &[u32], batches: &[Welford], k: usize, weights: &mut
         }
     }
     let rel: Vec<f64> = (0..k).map(|j| var[j] / mean2).collect();
-    let largest = rel.iter().copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
+    let largest = rel
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
     let floor = (largest * 0.01).max(0.01);
     for &m in members {
         for j in 0..k {
@@ -593,8 +578,9 @@ fn cluster_frame(normals: impl Iterator<Item = Vec3>) -> (Vec3, Vec3) {
     (mean, orthonormal_basis(mean).0)
 }
 
-/// The per-texel frame as it was before the cluster frame (`--frame texel`): the sign of
-/// n.z by `copysign`, so −0 and +0 flip the frame. Kept only to measure the fix.
+/// The per-texel frame as it was before the cluster frame: the sign of n.z by `copysign`,
+/// so −0 and +0 flip the frame (the test of the fix shows the flip).
+#[cfg(test)]
 fn texel_basis(n: Vec3) -> (Vec3, Vec3) {
     let sign = 1.0f32.copysign(n.z);
     let a = -1.0 / (sign + n.z);
@@ -604,17 +590,11 @@ fn texel_basis(n: Vec3) -> (Vec3, Vec3) {
     (t, bt)
 }
 
-fn gather_texel(
-    t: &TexelRecord,
-    id: u64,
-    mode: Frame,
-    (mean, tangent): (Vec3, Vec3),
-) -> GatherTexel {
+/// A texel of a cluster whose frame is `(mean normal, its tangent)`: the cluster's frame
+/// carried to the texel's normal by the minimal rotation.
+fn gather_texel(t: &TexelRecord, id: u64, (mean, tangent): (Vec3, Vec3)) -> GatherTexel {
     let normal = Vec3::from(t.normal);
-    let (tangent, bitangent) = match mode {
-        Frame::Texel => texel_basis(normal),
-        Frame::Cluster => carried_frame(tangent, mean, normal),
-    };
+    let (tangent, bitangent) = carried_frame(tangent, mean, normal);
     GatherTexel {
         id,
         position: Vec3::from(t.position),
@@ -689,7 +669,10 @@ impl<'a> IterationCtx<'a> {
     /// Whether packet `j` (in the order traced) is drawn from the cosine baseline: the
     /// `cosine_packets` of `packets` spread evenly (Bresenham), the same for every texel.
     fn is_cosine_packet(&self, j: u32) -> bool {
-        let (n, c) = (u64::from(self.packets.max(1)), u64::from(self.cosine_packets));
+        let (n, c) = (
+            u64::from(self.packets.max(1)),
+            u64::from(self.cosine_packets),
+        );
         (u64::from(j) + 1) * c / n > u64::from(j) * c / n
     }
 
@@ -773,7 +756,16 @@ impl<'a> IterationCtx<'a> {
         } else {
             let cosine_rot = rotation(self.settings.seed ^ COSINE_SALT, t.id, self.k);
             let n = orders.cosine.len() as u32;
-            self.gather_part(t, &orders.cosine, cosine_rot, true, 0, rotated, sinks, counters);
+            self.gather_part(
+                t,
+                &orders.cosine,
+                cosine_rot,
+                true,
+                0,
+                rotated,
+                sinks,
+                counters,
+            );
             self.gather_part(t, &orders.guided, rot, false, n, rotated, sinks, counters);
         }
     }
@@ -856,8 +848,7 @@ impl<'a> IterationCtx<'a> {
                     u: hu[lane],
                     v: hv[lane],
                 });
-                let l =
-                    self.incoming(t.id, chunk[lane] + first, origin, dirs[lane], hit, counters);
+                let l = self.incoming(t.id, chunk[lane] + first, origin, dirs[lane], hit, counters);
                 self.record(l, [wx[lane], wy[lane]], q[lane], direct[lane], sinks);
             }
         }
@@ -1424,11 +1415,14 @@ mod tests {
             .collect();
         let frame = cluster_frame(normals.iter().copied());
         let ctx = IterationCtx::new(&world, &settings, 0, None);
-        let directions = |mode: Frame| -> Vec<Vec<Vec3>> {
+        let directions = |per_texel: bool| -> Vec<Vec<Vec3>> {
             records
                 .iter()
                 .map(|r| {
-                    let t = gather_texel(r, 0, mode, frame);
+                    let mut t = gather_texel(r, 0, frame);
+                    if per_texel {
+                        (t.tangent, t.bitangent) = texel_basis(t.normal);
+                    }
                     (0..64)
                         .map(|i| {
                             let u = [(i % 8) as f32 / 8.0 + 0.06, (i / 8) as f32 / 8.0 + 0.02];
@@ -1438,19 +1432,22 @@ mod tests {
                 })
                 .collect()
         };
-        let cluster = directions(Frame::Cluster);
+        let cluster = directions(false);
         for texel in &cluster[1..] {
             for (a, b) in texel.iter().zip(&cluster[0]) {
                 assert!((*a - *b).length() < 1e-5, "{a} vs {b}");
             }
         }
-        let texel = directions(Frame::Texel);
+        let texel = directions(true);
         let apart = texel[1]
             .iter()
             .zip(&texel[0])
             .map(|(a, b)| (*a - *b).length())
             .fold(0.0, f32::max);
-        assert!(apart > 1.0, "the per-texel frame flips at n.z = -0 ({apart})");
+        assert!(
+            apart > 1.0,
+            "the per-texel frame flips at n.z = -0 ({apart})"
+        );
     }
 
     /// The density the gather reports for a direction is the mixture's: `c + (1 − c)·q(u)`
@@ -1475,7 +1472,6 @@ mod tests {
         let t = gather_texel(
             &texels_on_plane(1, 0.0)[0],
             0,
-            Frame::Cluster,
             cluster_frame([Vec3::Z].into_iter()),
         );
         for i in 0..200u32 {

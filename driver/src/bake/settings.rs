@@ -49,31 +49,6 @@ pub enum Schedule {
     Doubling,
 }
 
-/// Which records a cluster's guide learns from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum Learn {
-    /// The previous iteration's records only.
-    Last,
-    /// Every record of the cluster so far (a record's flux `L/q` is unbiased whichever
-    /// density drew it), the most recent [`MAX_LEARNING_RECORDS`] at most.
-    All,
-}
-
-/// The frame a texel maps the primary sample square through.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum Frame {
-    /// Each texel's own `orthonormal_basis(normal)`: neighbours whose normals straddle
-    /// n.z = 0 get frames rotated 180° about the normal. Kept only to measure the fix.
-    Texel,
-    /// One frame per cluster, from its mean normal, carried to each texel's normal by the
-    /// minimal rotation: every texel maps a guide point to (nearly) the same direction.
-    Cluster,
-}
-
-/// Most learning records a cluster keeps (`--learn all`): 2¹⁶ records of 12 bytes, 768 KiB
-/// per worker; beyond it the oldest records are dropped.
-pub const MAX_LEARNING_RECORDS: usize = 1 << 16;
-
 /// How the radiance a gather ray brings back from its hit is computed (DESIGN.md, light
 /// transport).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
@@ -112,12 +87,8 @@ pub struct BakeSettings {
     pub mix: u32,
     /// How the samples are split over the iterations.
     pub schedule: Schedule,
-    /// Which records the guides learn from.
-    pub learn: Learn,
     /// A guide node splits only if it holds at least this many records.
     pub min_split: u32,
-    /// The frame of the primary sample square at each texel.
-    pub frame: Frame,
     /// The guide's smoothing α (paper §2.3) in percent: each child's share of its parent
     /// pulled toward a quarter by this much (the paper's filter: a prior toward the parent).
     pub smooth: u32,
@@ -142,9 +113,7 @@ impl Default for BakeSettings {
             bounces: 3,
             mix: 25,
             schedule: Schedule::Doubling,
-            learn: Learn::Last,
             min_split: 64,
-            frame: Frame::Cluster,
             smooth: 10,
         }
     }

@@ -7,13 +7,10 @@
 
 use clap::ValueEnum;
 
-use crate::bake::settings::{
-    BakeSettings, Combine, Frame, Guiding, Learn, Schedule, Transport,
-};
+use crate::bake::settings::{BakeSettings, Combine, Guiding, Schedule, Transport};
 
 /// One way of baking: what the bake's `--guiding`, `--combine` and `--bias-correction` say,
-/// and the guiding levers (`--mix`, `--schedule`, `--learn`, `--min-split`, `--smooth`,
-/// `--frame`).
+/// and the guiding levers (`--mix`, `--schedule`, `--min-split`, `--smooth`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Method {
     /// Direction choice.
@@ -33,14 +30,10 @@ pub struct Levers {
     pub mix: u32,
     /// `--schedule`.
     pub schedule: Schedule,
-    /// `--learn`.
-    pub learn: Learn,
     /// `--min-split`.
     pub min_split: u32,
     /// `--smooth`.
     pub smooth: u32,
-    /// `--frame`.
-    pub frame: Frame,
 }
 
 impl Default for Levers {
@@ -49,25 +42,21 @@ impl Default for Levers {
         Levers {
             mix: d.mix,
             schedule: d.schedule,
-            learn: d.learn,
             min_split: d.min_split,
             smooth: d.smooth,
-            frame: d.frame,
         }
     }
 }
 
 impl Levers {
-    /// The levers before issue 14: no mixture, an even schedule, learning from the last
-    /// iteration, splits at 4 records, α = 25 %, per-texel frames.
+    /// The levers before issue 14: no mixture, an even schedule, splits at 4 records,
+    /// α = 25 % (the per-texel frame, which flipped at n.z = −0, is gone).
     pub fn before() -> Levers {
         Levers {
             mix: 0,
             schedule: Schedule::Even,
-            learn: Learn::Last,
             min_split: 4,
             smooth: 25,
-            frame: Frame::Texel,
         }
     }
 
@@ -81,17 +70,11 @@ impl Levers {
         if self.schedule != d.schedule {
             s += &format!("+schedule={}", value_name(&self.schedule));
         }
-        if self.learn != d.learn {
-            s += &format!("+learn={}", value_name(&self.learn));
-        }
         if self.min_split != d.min_split {
             s += &format!("+split={}", self.min_split);
         }
         if self.smooth != d.smooth {
             s += &format!("+smooth={}", self.smooth);
-        }
-        if self.frame != d.frame {
-            s += &format!("+frame={}", value_name(&self.frame));
         }
         s
     }
@@ -156,7 +139,7 @@ impl Method {
     }
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
-    /// `+key=value` levers (`mix`, `schedule`, `learn`, `split`, `smooth`, `frame`); the
+    /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -196,14 +179,6 @@ impl Method {
                 "schedule" => {
                     levers.schedule =
                         Schedule::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
-                }
-                "learn" => {
-                    levers.learn =
-                        Learn::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
-                }
-                "frame" => {
-                    levers.frame =
-                        Frame::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
                 }
                 _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
             }
@@ -258,10 +233,8 @@ impl Method {
             seed,
             mix: self.levers.mix,
             schedule: self.levers.schedule,
-            learn: self.levers.learn,
             min_split: self.levers.min_split,
             smooth: self.levers.smooth,
-            frame: self.levers.frame,
             ..Default::default()
         }
     }

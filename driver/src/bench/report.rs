@@ -339,17 +339,16 @@ pub fn markdown(s: &Summary) -> String {
         };
         let at_equal_time = baseline_top.map_or_else(|| "—".into(), |b| at(b.wall_s, p.wall_s));
         let at_equal_cpu = baseline_top.map_or_else(|| "—".into(), |b| at(b.cpu_s, p.cpu_s));
-        let factor = equivalent
-            .map_or_else(
-                || "—".into(),
-                |e| {
-                    format!(
-                        "{:.2}{}",
-                        e.factor,
-                        if e.baseline_spp.extrapolated { "*" } else { "" }
-                    )
-                },
-            );
+        let factor = equivalent.map_or_else(
+            || "—".into(),
+            |e| {
+                format!(
+                    "{:.2}{}",
+                    e.factor,
+                    if e.baseline_spp.extrapolated { "*" } else { "" }
+                )
+            },
+        );
         let _ = writeln!(
             md,
             "| {} | {:.3} | {:.3e} | {:.3e} | {:+.2}% | {} | {} | {} | {} | {} | {:.0}% |",

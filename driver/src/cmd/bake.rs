@@ -6,9 +6,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_with_progress, work_dir};
-use crate::bake::settings::{
-    BakeSettings, Combine, Frame, Guiding, Learn, Schedule, Transport,
-};
+use crate::bake::settings::{BakeSettings, Combine, Guiding, Schedule, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
 
@@ -42,9 +40,6 @@ pub struct BakeArgs {
     /// How the samples are split over the learning iterations.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
     pub schedule: Schedule,
-    /// Which records a cluster's guide learns from: the previous iteration's, or all so far.
-    #[arg(long, value_enum, default_value_t = BakeSettings::default().learn)]
-    pub learn: Learn,
     /// A guide node splits only if it holds at least this many records.
     #[arg(long, default_value_t = BakeSettings::default().min_split)]
     pub min_split: u32,
@@ -52,9 +47,6 @@ pub struct BakeArgs {
     /// parent is pulled toward a quarter.
     #[arg(long, default_value_t = BakeSettings::default().smooth)]
     pub smooth: u32,
-    /// The frame of the guide's square at each texel (`texel` only to measure the fix).
-    #[arg(long, value_enum, default_value_t = BakeSettings::default().frame, hide = true)]
-    pub frame: Frame,
     /// Light transport at gather hits: `series` (passes through the previous pass's
     /// lightmap, the paper's production setting) or `path` (unbiased path tracing).
     #[arg(long, value_enum, default_value_t = Transport::Series)]
@@ -112,9 +104,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         bounces: args.bounces,
         mix: args.mix,
         schedule: args.schedule,
-        learn: args.learn,
         min_split: args.min_split,
-        frame: args.frame,
         smooth: args.smooth,
     };
     settings.validate()?;

@@ -71,8 +71,8 @@ pub struct BenchArgs {
     #[arg(long)]
     pub overhead_spp: Option<u32>,
     /// Methods of the ladder, comma-separated labels as the tables print them
-    /// (`guiding/combine/rho|-`, optional `+mix=N+schedule=even|doubling+learn=last|all+split=N
-    /// +smooth=N+frame=texel|cluster`, or `+before` for every lever as before issue 14);
+    /// (`guiding/combine/rho|-`, optional `+mix=N+schedule=even|doubling+split=N+smooth=N`,
+    /// or `+before` for every lever as before issue 14);
     /// default every guiding × combine × ρ with the bake's levers. The baseline
     /// (`off/average/-`) is always run, first.
     #[arg(long, value_delimiter = ',')]
