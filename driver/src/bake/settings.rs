@@ -35,7 +35,7 @@ pub enum Combine {
     /// texels of each texel's per-sample variance in the iteration over the sum of their
     /// squared means). The guide's quality is a property of the cluster, which 64 texels'
     /// samples estimate far better than one texel's; a firefly still lowers its own
-    /// iteration's weight, so use it with ρ (the default).
+    /// iteration's weight, so use it with ρ.
     Cluster,
 }
 
@@ -106,8 +106,8 @@ impl Default for BakeSettings {
             spp: 256,
             iterations: 4,
             guiding: Guiding::Coherent,
-            combine: Combine::Cluster,
-            bias_correction: true,
+            combine: Combine::Global,
+            bias_correction: false,
             seed: 0,
             transport: Transport::Series,
             bounces: 3,
