@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
 use guidebake::bake::run::{BakeError, BakeJob, bake, finish, work_dir};
-use guidebake::bake::settings::{BakeSettings, Combine, Guiding, Transport};
+use guidebake::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Transport};
 use guidebake::bake::shard::Shard;
 use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle, inward_box_faces};
 use guidebake::texels::{
@@ -411,11 +411,14 @@ fn red_channel(path: &Path) -> Vec<f64> {
     channel(path, "R").into_iter().map(f64::from).collect()
 }
 
-/// Irradiance inside a closed box of albedo ρ emitting Le everywhere after B bounces:
-/// E_B = π Le (1 + ρ + … + ρ^(B−1)) = π Le (1 − ρ^B) / (1 − ρ), at every point.
-fn closed_box_irradiance(le: f32, albedo: f32, bounces: u32) -> f64 {
+/// Irradiance inside a closed box of albedo ρ emitting Le everywhere, from light that left
+/// an emitter and was reflected at most `reflections` times:
+/// E = π Le (1 + ρ + … + ρ^reflections) = π Le (1 − ρ^(reflections+1)) / (1 − ρ), at every
+/// point. A bake of B bounces reflects emitters' light B times when emitters are lights
+/// (next-event estimation at the last hit), B − 1 times when only rays find them.
+fn closed_box_irradiance(le: f32, albedo: f32, reflections: u32) -> f64 {
     let rho = f64::from(albedo);
-    std::f64::consts::PI * f64::from(le) * (1.0 - rho.powi(bounces as i32)) / (1.0 - rho)
+    std::f64::consts::PI * f64::from(le) * (1.0 - rho.powi(reflections as i32 + 1)) / (1.0 - rho)
 }
 
 #[test]
@@ -424,16 +427,30 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
     let dir = tempfile::tempdir().unwrap();
     let texels = dir.path().join("box.texels");
     let scene = emissive_box(&texels, albedo, le);
-    for (transport, bounces, guiding) in [
-        (Transport::Series, 1, Guiding::Off),
-        (Transport::Series, 4, Guiding::Off),
-        (Transport::Series, 4, Guiding::Coherent),
-        (Transport::Path, 4, Guiding::Coherent),
-        (Transport::Path, 64, Guiding::Off),
+    for (transport, bounces, guiding, emitters) in [
+        (Transport::Series, 1, Guiding::Off, EmitterSampling::Hits),
+        (Transport::Series, 4, Guiding::Off, EmitterSampling::Hits),
+        (Transport::Series, 1, Guiding::Off, EmitterSampling::Mis),
+        (Transport::Series, 4, Guiding::Off, EmitterSampling::Mis),
+        (
+            Transport::Series,
+            4,
+            Guiding::Coherent,
+            EmitterSampling::Mis,
+        ),
+        (
+            Transport::Series,
+            3,
+            Guiding::Coherent,
+            EmitterSampling::Nee,
+        ),
+        (Transport::Path, 4, Guiding::Coherent, EmitterSampling::Mis),
+        (Transport::Path, 4, Guiding::Off, EmitterSampling::Hits),
+        (Transport::Path, 64, Guiding::Off, EmitterSampling::Mis),
     ] {
         let out = dir
             .path()
-            .join(format!("{transport}-{bounces}-{guiding}.exr"));
+            .join(format!("{transport}-{bounces}-{guiding}-{emitters}.exr"));
         let job = BakeJob {
             texels: texels.clone(),
             out: out.clone(),
@@ -443,6 +460,7 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
                 transport,
                 bounces,
                 guiding,
+                emitters,
                 ..Default::default()
             },
             threads: 2,
@@ -456,11 +474,20 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
         let n = values.len() as f64;
         let mean = values.iter().sum::<f64>() / n;
         let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
-        let want = closed_box_irradiance(le, albedo, bounces);
+        let reflections = match emitters {
+            EmitterSampling::Hits => bounces - 1,
+            EmitterSampling::Mis | EmitterSampling::Nee => bounces,
+        };
+        let want = closed_box_irradiance(le, albedo, reflections);
         let se = (var / n).sqrt();
-        let what = format!("{transport} B={bounces} {guiding}: {mean} ± {se}, want {want}");
-        if transport == Transport::Series && guiding == Guiding::Off {
-            // Constant radiance everywhere and cosine sampling: every sample is the same.
+        let what =
+            format!("{transport} B={bounces} {guiding} {emitters}: {mean} ± {se}, want {want}");
+        if transport == Transport::Series
+            && guiding == Guiding::Off
+            && emitters == EmitterSampling::Hits
+        {
+            // Constant radiance everywhere, cosine sampling and no light sampled: every
+            // sample is the same.
             assert!(
                 values.iter().all(|v| (v - want).abs() < 1e-4 * want),
                 "{what}"
@@ -489,6 +516,7 @@ fn global_weights_bake_the_closed_form_and_merge_shards_to_the_same_bits() {
     let texels = dir.path().join("box.texels");
     let scene = emissive_box(&texels, albedo, le);
     let want = closed_box_irradiance(le, albedo, 3);
+    // Emitters are lights: paths of 3 vertices carry light reflected up to 3 times.
     let job = |out: &str, shard: Shard| BakeJob {
         texels: texels.clone(),
         out: dir.path().join(out),

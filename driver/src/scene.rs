@@ -120,9 +120,10 @@ impl Material {
     }
 }
 
-/// A punctual light (`KHR_lights_punctual`), in world space.
+/// A light as the scene file declares it (glTF `KHR_lights_punctual`, or a TOML sphere), in
+/// world space; the bake samples it as a [`crate::transport::lights::AnalyticLight`].
 #[derive(Clone, Debug, PartialEq)]
-pub enum Light {
+pub enum SceneLight {
     /// Infinitely far light travelling along `direction`.
     Directional {
         /// Unit direction the light travels in (the node's −Z).
@@ -248,7 +249,7 @@ pub struct Scene {
     /// Materials; the last one may be [`Material::default_grey`].
     pub materials: Vec<Material>,
     /// Punctual lights.
-    pub lights: Vec<Light>,
+    pub lights: Vec<SceneLight>,
     /// Sun, if any (from a scene file or the command line).
     pub sun: Option<Sun>,
     /// Sky radiance.
@@ -437,7 +438,7 @@ impl SceneBuilder {
         }
     }
 
-    fn finish(self, materials: Vec<Material>, lights: Vec<Light>) -> Scene {
+    fn finish(self, materials: Vec<Material>, lights: Vec<SceneLight>) -> Scene {
         Scene {
             path: self.path,
             meshes: self.meshes,
@@ -599,14 +600,22 @@ mod gltf_source {
                         albedo *= avg;
                     }
                 }
-                let e = m.emissive_factor();
+                // An emissive texture is averaged like the base colour: emitters are sampled
+                // as lights of uniform radiance (transport::emitters).
+                let mut e = Vec3::from(m.emissive_factor());
+                if let Some(info) = m.emissive_texture() {
+                    let img = &images[info.texture().source().index()];
+                    if let Some(avg) = average_image(img) {
+                        e *= avg;
+                    }
+                }
                 let strength = m.emissive_strength().unwrap_or(1.0);
                 Material {
                     name: m
                         .name()
                         .map_or_else(|| format!("material#{i}"), str::to_owned),
                     albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE),
-                    emission: (Vec3::from(e) * strength).max(Vec3::ZERO),
+                    emission: (e * strength).max(Vec3::ZERO),
                 }
             })
             .collect()
@@ -670,24 +679,24 @@ mod gltf_source {
         }
     }
 
-    fn read_light(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> Light {
+    fn read_light(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> SceneLight {
         use gltf::khr_lights_punctual::Kind;
         let colour = Vec3::from(light.color()) * light.intensity();
         let position = world.transform_point3(Vec3::ZERO);
         let direction = world.transform_vector3(-Vec3::Z).normalize_or(-Vec3::Z);
         match light.kind() {
-            Kind::Directional => Light::Directional {
+            Kind::Directional => SceneLight::Directional {
                 direction,
                 irradiance: colour,
             },
-            Kind::Point => Light::Point {
+            Kind::Point => SceneLight::Point {
                 position,
                 intensity: colour,
             },
             Kind::Spot {
                 inner_cone_angle,
                 outer_cone_angle,
-            } => Light::Spot {
+            } => SceneLight::Spot {
                 position,
                 direction,
                 intensity: colour,
@@ -951,7 +960,7 @@ impl SphereSpec {
     /// # Errors
     /// A message when the centre is not finite, the radius not positive and finite, or the
     /// radiance negative or not finite.
-    pub fn to_light(&self) -> Result<Light, String> {
+    pub fn to_light(&self) -> Result<SceneLight, String> {
         let center = Vec3::from(self.center);
         let radiance = Vec3::from(self.radiance);
         if !center.is_finite() {
@@ -968,7 +977,7 @@ impl SphereSpec {
                 "sphere_light radiance {radiance} must be finite and non-negative"
             ));
         }
-        Ok(Light::Sphere {
+        Ok(SceneLight::Sphere {
             center,
             radius: self.radius,
             radiance,

@@ -19,6 +19,21 @@
 //! Files: `OUT` (texel file), `OUT` with extension `.glb` (geometry), and `.toml` (scene file
 //! naming the .glb, with a sun and a constant sky) — load the scene with
 //! [`crate::scene::Scene::load`] on the `.toml`.
+//!
+//! **Lit windows** ([`SynthOptions::lit_windows`], `--lit-windows N`): a many-emitter world
+//! for comparing emitter samplers (the light tree against the power alias table, issue
+//! "Emissive triangles are lights"). The box sides get a grid of window slots, 4·s columns
+//! by ⌊h / 3 m⌋·s floors per side, s the smallest integer that makes at least N slots in
+//! the whole city; exactly N of them, evenly spread over the slot order, become lit
+//! windows: quads of 60% × 50% of their slot, 2 cm in front of the wall, emitting outward
+//! (winding normal = the wall's). Their radiance spans 1.5..1000 (`emissiveFactor` ×
+//! `KHR_materials_emissive_strength`): of every 1000 lit windows one has strength 1000,
+//! nine 100, ninety 12, the rest 1.5, by their rank — deterministic, no random stream. The
+//! windows are one glTF mesh `lit_windows` after the pages, without lightmap UVs (no
+//! texels; its mesh record has flag 0), 2N emissive triangles. [`SynthOptions::night`]
+//! drops the sun and dims the sky to [`NIGHT_SKY`], so the windows carry the lighting.
+//! Windows cost about 150 bytes each while the geometry is written (up to
+//! [`MAX_LIT_WINDOWS`]); the texels still stream.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -36,6 +51,28 @@ pub const PAGE: u32 = 4096;
 pub const MIN_TEXELS: u64 = 6 * (TILE_SIZE as u64 * TILE_SIZE as u64);
 const CELL: f32 = 10.0;
 const BOX: f32 = 6.0;
+/// Most lit windows a city takes (its geometry is built in memory).
+pub const MAX_LIT_WINDOWS: u32 = 1 << 20;
+/// The constant sky of a night city (no sun).
+pub const NIGHT_SKY: [f32; 3] = [0.004, 0.005, 0.01];
+/// Window radiance classes: emissive colour (max 1) and `emissiveStrength`.
+const WINDOW_CLASSES: [([f32; 3], f32); 4] = [
+    ([1.0, 0.85, 0.6], 1.5),
+    ([0.8, 0.9, 1.0], 12.0),
+    ([1.0, 0.7, 0.4], 100.0),
+    ([1.0, 1.0, 1.0], 1000.0),
+];
+/// Floor height of the window grid.
+const FLOOR: f32 = 3.0;
+
+/// What to add to the city besides boxes and ground.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SynthOptions {
+    /// Lit windows (emissive quads) on the box sides; 0 for none.
+    pub lit_windows: u32,
+    /// Night: no sun and a dim sky ([`NIGHT_SKY`]).
+    pub night: bool,
+}
 
 /// Why `synth` failed.
 #[derive(Debug, thiserror::Error)]
@@ -47,6 +84,14 @@ pub enum SynthError {
         n: u64,
         /// Largest supported.
         max: u64,
+    },
+    /// More lit windows than a city takes.
+    #[error("--lit-windows {n} is above {max}")]
+    Windows {
+        /// Requested.
+        n: u32,
+        /// Largest supported.
+        max: u32,
     },
     /// Writing the texel file failed.
     #[error(transparent)]
@@ -74,6 +119,8 @@ pub struct SynthReport {
     pub grid: u32,
     /// Triangles in the scene.
     pub triangles: u32,
+    /// Emissive triangles among them (two per lit window).
+    pub emissive_triangles: u32,
     /// Texels per world unit.
     pub texels_per_unit: f32,
     /// The glTF geometry.
@@ -100,6 +147,13 @@ struct Placed {
     w: u32,
     h: u32,
     first_triangle: u32,
+}
+
+/// A lit window: its quad and its radiance class (index into [`WINDOW_CLASSES`]).
+#[derive(Clone, Copy, Debug)]
+struct Window {
+    quad: Quad,
+    class: usize,
 }
 
 /// Integer hash (Wang/splitmix finalizer) of a cell → [0, 1); not a random stream.
@@ -152,6 +206,76 @@ fn city(grid: u32) -> Vec<Quad> {
         }
     }
     q
+}
+
+/// Whether a city quad is a box side (see [`city`]: ground, top, then four sides).
+fn is_side(k: usize) -> bool {
+    k % 6 >= 2
+}
+
+/// Window columns and floors of a side quad at grid scale `s`.
+fn window_grid(side: &Quad, s: u32) -> (u32, u32) {
+    let floors = ((side.ev.length() / FLOOR).floor() as u32).max(1);
+    (4 * s, floors * s)
+}
+
+/// Exactly `count` lit windows on the sides of `quads`, spread evenly over the slots of the
+/// smallest grid scale with at least `count` slots.
+fn windows(quads: &[Quad], count: u32) -> Vec<Window> {
+    if count == 0 {
+        return Vec::new();
+    }
+    let slots = |s: u32| -> u64 {
+        let sides = quads.iter().enumerate().filter(|(k, _)| is_side(*k));
+        sides
+            .map(|(_, q)| {
+                let (c, f) = window_grid(q, s);
+                u64::from(c) * u64::from(f)
+            })
+            .sum()
+    };
+    let base = slots(1);
+    let mut s = ((f64::from(count) / base as f64).sqrt().ceil() as u32).max(1);
+    while slots(s) < u64::from(count) {
+        s += 1;
+    }
+    let total = slots(s);
+    let (count, mut slot, mut out) = (u64::from(count), 0u64, Vec::with_capacity(count as usize));
+    for (_, q) in quads.iter().enumerate().filter(|(k, _)| is_side(*k)) {
+        let (cols, floors) = window_grid(q, s);
+        let normal = q.eu.cross(q.ev).normalize();
+        let (du, dv) = (q.eu / cols as f32, q.ev / floors as f32);
+        for f in 0..floors {
+            for c in 0..cols {
+                // Slot j is lit when ⌊(j + 1)·N / T⌋ steps past ⌊j·N / T⌋.
+                let lit = (slot + 1) * count / total > slot * count / total;
+                slot += 1;
+                if !lit {
+                    continue;
+                }
+                let rank = out.len() % 1000;
+                let class = match rank {
+                    0 => 3,
+                    r if r % 100 == 50 => 2,
+                    r if r % 10 == 5 => 1,
+                    _ => 0,
+                };
+                out.push(Window {
+                    quad: Quad {
+                        origin: q.origin
+                            + du * (c as f32 + 0.2)
+                            + dv * (f as f32 + 0.25)
+                            + normal * 0.02,
+                        eu: du * 0.6,
+                        ev: dv * 0.5,
+                    },
+                    class,
+                });
+            }
+        }
+    }
+    debug_assert_eq!(out.len() as u64, count);
+    out
 }
 
 fn rect_side(len: f32, d: f64) -> u32 {
@@ -216,17 +340,35 @@ fn pack(quads: &[Quad], d: f64) -> (Vec<Placed>, u32) {
     (out, page + 1)
 }
 
-/// Writes a city of about `n` texels to `out` (+ `.glb` and `.toml` beside it).
+/// Writes a city of about `n` texels to `out` (+ `.glb` and `.toml` beside it), by day and
+/// without lit windows.
 ///
 /// # Errors
-/// [`SynthError::Count`] when `n` is too small or too large; I/O errors naming the file.
+/// As [`synth_with`].
 pub fn synth(n: u64, out: &Path) -> Result<SynthReport, SynthError> {
+    synth_with(n, out, &SynthOptions::default())
+}
+
+/// Writes a city of about `n` texels to `out` (+ `.glb` and `.toml` beside it) with the
+/// lit windows and the time of day of `options`.
+///
+/// # Errors
+/// [`SynthError::Count`] when `n` is too small or too large, [`SynthError::Windows`] when
+/// `options.lit_windows` exceeds [`MAX_LIT_WINDOWS`]; I/O errors naming the file.
+pub fn synth_with(n: u64, out: &Path, options: &SynthOptions) -> Result<SynthReport, SynthError> {
     let max = 64 * 64 * 6 * u64::from(PAGE / 2) * u64::from(PAGE / 2);
     if !(MIN_TEXELS..=max).contains(&n) {
         return Err(SynthError::Count { n, max });
     }
+    if options.lit_windows > MAX_LIT_WINDOWS {
+        return Err(SynthError::Windows {
+            n: options.lit_windows,
+            max: MAX_LIT_WINDOWS,
+        });
+    }
     let grid = ((n as f64 / 24576.0).sqrt().floor() as u32).clamp(1, 64);
     let quads = city(grid);
+    let lit = windows(&quads, options.lit_windows);
     let d = density_for(&quads, n);
     let (placed, pages) = pack(&quads, d);
     // Triangles are ordered by page (one glTF mesh per page), then quad order.
@@ -237,8 +379,9 @@ pub fn synth(n: u64, out: &Path) -> Result<SynthReport, SynthError> {
     }
     let geometry = out.with_extension("glb");
     let scene = out.with_extension("toml");
-    let meshes = write_glb(&geometry, &placed, pages)?;
-    write_scene_file(&scene, &geometry)?;
+    let meshes = write_glb(&geometry, &placed, pages, &lit)?;
+    write_scene_file(&scene, &geometry, options.night)?;
+    let triangles = 2 * (placed.len() + lit.len()) as u32;
     let page_records = vec![
         PageRecord {
             width: PAGE,
@@ -246,13 +389,7 @@ pub fn synth(n: u64, out: &Path) -> Result<SynthReport, SynthError> {
         };
         pages as usize
     ];
-    let mut w = TexelWriter::create(
-        out,
-        &page_records,
-        &meshes,
-        2 * placed.len() as u32,
-        d as f32,
-    )?;
+    let mut w = TexelWriter::create(out, &page_records, &meshes, triangles, d as f32)?;
     let mut buf = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
     let mut tiles = 0u64;
     for p in &placed {
@@ -279,7 +416,8 @@ pub fn synth(n: u64, out: &Path) -> Result<SynthReport, SynthError> {
         tiles,
         pages,
         grid,
-        triangles: 2 * placed.len() as u32,
+        triangles,
+        emissive_triangles: 2 * lit.len() as u32,
         texels_per_unit: d as f32,
         geometry,
         scene,
@@ -342,7 +480,12 @@ fn write_atomically(path: &Path, bytes: &[&[u8]]) -> Result<(), SynthError> {
 }
 
 /// Writes one glTF mesh per page; returns the mesh records of the texel file.
-fn write_glb(path: &Path, placed: &[Placed], pages: u32) -> Result<Vec<MeshRecord>, SynthError> {
+fn write_glb(
+    path: &Path,
+    placed: &[Placed],
+    pages: u32,
+    windows: &[Window],
+) -> Result<Vec<MeshRecord>, SynthError> {
     use serde_json::json;
     let mut bin: Vec<u8> = Vec::new();
     let (mut views, mut accessors, mut meshes, mut nodes, mut records) =
@@ -406,13 +549,68 @@ fn write_glb(path: &Path, placed: &[Placed], pages: u32) -> Result<Vec<MeshRecor
             uv_offset: [0.0; 2],
         });
     }
+    let mut materials = vec![
+        json!({"name": "concrete", "doubleSided": true, "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.58, 0.55, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}}),
+    ];
+    if !windows.is_empty() {
+        // One primitive per radiance class; the scene numbers triangles in primitive order.
+        let mut primitives = vec![];
+        for (class, (color, strength)) in WINDOW_CLASSES.iter().enumerate() {
+            materials.push(json!({"name": format!("window_{strength}"),
+                "pbrMetallicRoughness": {"baseColorFactor": [0.05, 0.05, 0.05, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
+                "emissiveFactor": color,
+                "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": strength}}}));
+            let (mut pos, mut nrm, mut idx) = (vec![], vec![], vec![]);
+            for w in windows.iter().filter(|w| w.class == class) {
+                let q = w.quad;
+                let base = pos.len() as u32;
+                let n = q.eu.cross(q.ev).normalize();
+                for (s, t) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
+                    pos.push(q.origin + q.eu * s + q.ev * t);
+                    nrm.push(n);
+                }
+                idx.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
+            }
+            if pos.is_empty() {
+                continue;
+            }
+            let (lo, hi) = pos.iter().fold(
+                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                |(a, b), p| (a.min(*p), b.max(*p)),
+            );
+            let a0 = accessors.len();
+            let v = push_view(&mut bin, bytemuck::cast_slice(&pos), 34962);
+            accessors.push(json!({"bufferView": v, "componentType": 5126, "count": pos.len(), "type": "VEC3", "min": lo.to_array(), "max": hi.to_array()}));
+            let v = push_view(&mut bin, bytemuck::cast_slice(&nrm), 34962);
+            accessors.push(
+                json!({"bufferView": v, "componentType": 5126, "count": nrm.len(), "type": "VEC3"}),
+            );
+            let v = push_view(&mut bin, bytemuck::cast_slice(&idx), 34963);
+            accessors.push(
+                json!({"bufferView": v, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
+            );
+            primitives.push(json!({"attributes": {"POSITION": a0, "NORMAL": a0 + 1},
+                "indices": a0 + 2, "material": 1 + class, "mode": 4}));
+        }
+        meshes.push(json!({"name": "lit_windows", "primitives": primitives}));
+        nodes.push(json!({"name": "lit_windows", "mesh": pages}));
+        records.push(MeshRecord {
+            first_triangle: 2 * placed.len() as u32,
+            triangle_count: 2 * windows.len() as u32,
+            page: 0,
+            flags: 0,
+            uv_scale: [0.0; 2],
+            uv_offset: [0.0; 2],
+        });
+    }
     let doc = json!({
         "asset": {"version": "2.0", "generator": "guidebake synth"},
         "scene": 0,
-        "scenes": [{"nodes": (0..pages).collect::<Vec<_>>()}],
+        "extensionsUsed": ["KHR_materials_emissive_strength"],
+        "scenes": [{"nodes": (0..nodes.len()).collect::<Vec<_>>()}],
         "nodes": nodes,
         "meshes": meshes,
-        "materials": [{"name": "concrete", "doubleSided": true, "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.58, 0.55, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}}],
+        "materials": materials,
         "accessors": accessors,
         "bufferViews": views,
         "buffers": [{"byteLength": bin.len()}],
@@ -434,16 +632,23 @@ fn write_glb(path: &Path, placed: &[Placed], pages: u32) -> Result<Vec<MeshRecor
     Ok(records)
 }
 
-fn write_scene_file(path: &Path, geometry: &Path) -> Result<(), SynthError> {
+fn write_scene_file(path: &Path, geometry: &Path, night: bool) -> Result<(), SynthError> {
     let name = geometry
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let text = format!(
-        "# Written by guidebake synth: a city of boxes under a sun and a blue sky.\n\
-         geometry = {name:?}\n\n[sky]\nconstant = [0.25, 0.35, 0.6]\n\n\
-         [sun]\ndirection = [0.4, 1.0, 0.25]\nangular_radius_deg = 0.267\nirradiance = [3.0, 2.85, 2.6]\n"
-    );
+    let text = if night {
+        format!(
+            "# Written by guidebake synth: a city of boxes at night, lit by its windows.\n\
+             geometry = {name:?}\n\n[sky]\nconstant = {NIGHT_SKY:?}\n"
+        )
+    } else {
+        format!(
+            "# Written by guidebake synth: a city of boxes under a sun and a blue sky.\n\
+             geometry = {name:?}\n\n[sky]\nconstant = [0.25, 0.35, 0.6]\n\n\
+             [sun]\ndirection = [0.4, 1.0, 0.25]\nangular_radius_deg = 0.267\nirradiance = [3.0, 2.85, 2.6]\n"
+        )
+    };
     write_atomically(path, &[text.as_bytes()])
 }
 
@@ -474,5 +679,107 @@ mod tests {
             let t = total(&quads, d) as f64;
             assert!((t / n as f64 - 1.0).abs() < 0.02, "{n}: {t}");
         }
+    }
+
+    /// The box whose side a window is on: the cell of its centre, box centre at mid height.
+    fn cell_center(p: Vec3) -> Vec3 {
+        Vec3::new(
+            (p.x / CELL).floor() * CELL + CELL / 2.0,
+            p.y,
+            (p.z / CELL).floor() * CELL + CELL / 2.0,
+        )
+    }
+
+    #[test]
+    fn windows_are_exactly_n_outside_their_walls_facing_out() {
+        for (grid, n) in [(1, 1), (1, 999), (2, 10_000), (3, 12_345), (1, 100_000)] {
+            let quads = city(grid);
+            let w = windows(&quads, n);
+            assert_eq!(w.len(), n as usize, "grid {grid}");
+            for (k, win) in w.iter().enumerate() {
+                let q = win.quad;
+                let normal = q.eu.cross(q.ev).normalize();
+                let mid = q.origin + 0.5 * (q.eu + q.ev);
+                let c = cell_center(mid);
+                assert!(normal.dot(mid - c) > 0.0, "window {k} faces inward");
+                assert!(normal.y.abs() < 1e-6, "window {k} not on a side");
+                // 2 cm in front of its wall: the box half-width plus 0.02 along the normal.
+                let out = normal.dot(mid - c);
+                assert!((out - (BOX / 2.0 + 0.02)).abs() < 1e-3, "window {k}: {out}");
+                assert!(q.eu.cross(q.ev).length() > 0.0);
+            }
+            if n >= 1000 {
+                for class in 0..WINDOW_CLASSES.len() {
+                    assert!(w.iter().any(|x| x.class == class), "class {class} missing");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lit_window_night_city_loads_with_its_emitters() {
+        use crate::scene::{Scene, Sky};
+        use crate::texels::TexelFile;
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("night.texels");
+        let n = 10_000;
+        let options = SynthOptions {
+            lit_windows: n,
+            night: true,
+        };
+        let r = synth_with(100_000, &out, &options).unwrap();
+        assert_eq!(r.emissive_triangles, 2 * n);
+        let scene = Scene::load(&r.scene).unwrap();
+        assert!(scene.sun.is_none());
+        assert!(matches!(scene.sky, Sky::Constant(c) if c == Vec3::from(NIGHT_SKY)));
+        let f = TexelFile::open(&out).unwrap();
+        assert_eq!(scene.triangles.len() as u32, r.triangles);
+        assert_eq!(f.header().triangle_count, r.triangles);
+        let emissive: Vec<usize> = (0..scene.triangles.len())
+            .filter(|&i| scene.triangle_material(i).emission != Vec3::ZERO)
+            .collect();
+        assert!(emissive.len() >= 2 * n as usize, "{}", emissive.len());
+        let lum = |i: usize| {
+            let e = scene.triangle_material(i).emission;
+            0.2126 * e.x + 0.7152 * e.y + 0.0722 * e.z
+        };
+        let (lo, hi) = emissive.iter().fold((f32::MAX, 0f32), |(a, b), &i| {
+            (a.min(lum(i)), b.max(lum(i)))
+        });
+        assert!(lo < 2.0 && hi > 900.0, "radiance spans {lo}..{hi}");
+        let windows = f.meshes().last().unwrap();
+        assert_eq!(windows.flags, 0);
+        assert_eq!(windows.triangle_count, 2 * n);
+        for &i in &emissive {
+            let t = &scene.triangles[i];
+            assert!(t.lightmap_uv.is_none());
+            assert_eq!(t.mesh as usize, scene.meshes.len() - 1);
+            let mid = (t.positions[0] + t.positions[1] + t.positions[2]) / 3.0;
+            assert!(
+                t.geometric_normal().dot(mid - cell_center(mid)) > 0.0,
+                "emitter {i} faces its wall"
+            );
+        }
+        // Deterministic: the same options write the same geometry.
+        let again = synth_with(100_000, &dir.path().join("again.texels"), &options).unwrap();
+        assert_eq!(
+            std::fs::read(&r.geometry).unwrap(),
+            std::fs::read(&again.geometry).unwrap()
+        );
+        // The day city is unchanged by the option's existence.
+        let day = synth(100_000, &dir.path().join("day.texels")).unwrap();
+        assert_eq!(day.emissive_triangles, 0);
+        assert!(Scene::load(&day.scene).unwrap().sun.is_some());
+        assert!(matches!(
+            synth_with(
+                100_000,
+                &out,
+                &SynthOptions {
+                    lit_windows: MAX_LIT_WINDOWS + 1,
+                    night: false
+                }
+            ),
+            Err(SynthError::Windows { .. })
+        ));
     }
 }

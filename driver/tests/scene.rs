@@ -72,7 +72,7 @@ fn scene_file_adds_sphere_lights_and_rejects_bad_ones() {
     assert_eq!(s.lights.len(), 2);
     assert_eq!(
         s.lights[0],
-        guidebake::scene::Light::Sphere {
+        guidebake::scene::SceneLight::Sphere {
             center: Vec3::Y,
             radius: 0.25,
             radiance: Vec3::new(5.0, 4.0, 3.0),

@@ -53,78 +53,34 @@
 //! table visits every node and writes every cell once; each shortcut is one short descent
 //! of the cell's part (exact f32 interval tests against the thresholds).
 //!
-//! # Embedding: guide + warp + estimator in a baker with its own ray tracer
-//! One texel (in a real baker: every texel of a cluster shares the guide), three learning
-//! iterations: iteration 0 gathers with the uniform guide (the cosine baseline), each later
-//! one with the guide learned from the previous iteration's samples. Samples are presorted
-//! Sobol packets warped 8-wide; the caller's tracer is `trace`. The per-iteration batches
-//! are combined with Graybill–Deal, and ρ is accumulated for the global bias correction.
+//! # Embedding
+//! A whole tiny baker — clustering, a guide learned per cluster over iterations, 8-wide
+//! warps, packet tracing, Graybill–Deal with ρ, checked against an analytic light — is
+//! `kernels/examples/embed.rs` (`cargo run -p guidebake-kernels --example embed`); the same
+//! in C and C++ through the C ABI is under `examples/`, and `kernels/README.md` ("Embedding")
+//! gives the ABI's rules. The core of it: learn from one iteration's records, warp the next.
 //! ```
-//! use glam::Vec3;
-//! use guidebake_kernels::estimator::{GraybillDeal, RhoAccumulator, Welford, luminance, plain_average};
-//! use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
-//! use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere};
-//! use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
-//! use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
+//! use guidebake_kernels::guide::{self, GuideParams, Node, Record};
 //! use guidebake_kernels::warp;
 //! use wide::f32x8;
 //!
-//! // The baker's own tracer: radiance arriving from `dir` (a bright window, a dim room).
-//! fn trace(dir: Vec3) -> [f32; 3] {
-//!     if dir.x > 0.8 { [40.0, 36.0, 30.0] } else { [0.1, 0.1, 0.12] }
-//! }
-//!
-//! const N: u32 = 256; // gather samples per texel and iteration, a multiple of 8
-//! let order = presorted(N); // once per N
-//! let mut packet_order = vec![0u32; N as usize];
-//! let (normal, texel) = (Vec3::Z, 42u64);
-//! let (t, b) = orthonormal_basis(normal);
-//! let mut storage = vec![Node::default(); 1024]; // fixed memory, reused per cluster
-//! let (mut learn, mut next) = (Vec::<Record>::new(), Vec::<Record>::new());
-//! let mut batches = [Welford::new(); 3];
-//! for (k, batch) in batches.iter_mut().enumerate() {
-//!     let g = if k == 0 {
-//!         Guide::uniform(&mut storage)
-//!     } else {
-//!         guide::build(&mut learn, &GuideParams::default(), &mut storage).0
-//!     };
-//!     let r = rotation(7, texel, k as u32);
-//!     reorder_after_rotation_into(&order, r, &mut packet_order); // coherent after the wrap
-//!     next.clear();
-//!     for packet in packet_order.chunks_exact(8) {
-//!         let p: [[u32; 2]; 8] = core::array::from_fn(|l| rotate(sobol_2d(packet[l]), r));
-//!         let x = f32x8::new(p.map(|q| to_unit(q[0])));
-//!         let y = f32x8::new(p.map(|q| to_unit(q[1])));
-//!         let w = warp::sample8(&g, x, y);
-//!         let (wx, wy, pdf) = (w.x.to_array(), w.y.to_array(), w.pdf.to_array());
-//!         for l in 0..8 {
-//!             let local = sample_cosine_hemisphere([wx[l], wy[l]]);
-//!             let radiance = trace(t * local.x + b * local.y + normal * local.z);
-//!             // p(ω) = pdf · cosθ/π, so L·cosθ/p(ω) = π·L/pdf: an irradiance sample.
-//!             batch.push(radiance.map(|c| core::f32::consts::PI * c / pdf[l]));
-//!             // Learning flux: luminance over the density that drew the sample.
-//!             let lum = luminance(radiance.map(f64::from)) as f32;
-//!             next.push(Record { u: [wx[l], wy[l]], flux: lum / pdf[l] });
-//!         }
-//!     }
-//!     core::mem::swap(&mut learn, &mut next);
-//! }
-//! let combined = GraybillDeal::default().combine(&batches);
-//! let average = plain_average(&batches);
-//! let mut rho = RhoAccumulator::new(); // one per thread or shard, merged at the end
-//! rho.add_texel(&average, &combined);
-//! let e = combined.value().expect("the texel has finite samples");
-//! assert!(e.rgb.iter().all(|c| c.is_finite() && *c > 0.0));
-//! assert!(rho.rho().is_finite());
-//! // Reference: the unguided estimator with 2¹⁶ Sobol samples.
-//! let m = 1u32 << 16;
-//! let reference = (0..m)
+//! // Records of the previous iteration: bright light arrived around u = (0.9, 0.5).
+//! let mut records: Vec<Record> = (0..256)
 //!     .map(|i| {
-//!         let l = sample_cosine_hemisphere(sobol_2d(i).map(to_unit));
-//!         luminance(trace(t * l.x + b * l.y + normal * l.z).map(f64::from))
+//!         let u = [(i % 16) as f32 / 16.0, (i / 16) as f32 / 16.0];
+//!         Record { u, flux: if u[0] > 0.8 { 50.0 } else { 0.5 } }
 //!     })
-//!     .sum::<f64>() * core::f64::consts::PI / f64::from(m);
-//! assert!((e.luminance / reference - 1.0).abs() < 0.1, "{} vs {reference}", e.luminance);
+//!     .collect();
+//! let mut storage = vec![Node::default(); 1024]; // fixed memory, reused per cluster
+//! let (g, stats) = guide::build(&mut records, &GuideParams::default(), &mut storage);
+//! assert!(stats.nodes > 1);
+//! // One packet of eight points of [0,1)² (presorted, rotated Sobol points in a baker).
+//! let x = f32x8::new([0.05, 0.15, 0.3, 0.45, 0.55, 0.7, 0.85, 0.95]);
+//! let w = warp::sample8(&g, x, f32x8::splat(0.5));
+//! // Most warped points land where the light was; each carries its density for the estimate.
+//! let bright = w.x.to_array().iter().filter(|&&x| x >= 0.8).count();
+//! assert!(bright >= 4, "{bright}");
+//! assert!(w.pdf.to_array().iter().all(|&p| p > 0.0));
 //! ```
 //!
 //! # Deviations from the paper

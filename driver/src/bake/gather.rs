@@ -51,6 +51,8 @@ use crate::output::result_file::{
     FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_UNGUIDED, FLAG_VALID, TexelResult,
 };
 use crate::texels::{FLAG_PARTIAL, FLAG_VALID as TEXEL_VALID, TexelRecord};
+use crate::transport::direct::Receiver;
+use crate::transport::path::{Departure, Leaving};
 use crate::transport::rng::SampleRng;
 
 /// Guide nodes per cluster: enough for a 64-texel cluster's records at the default split rule.
@@ -63,6 +65,7 @@ pub const GUIDE_CAPACITY: usize = 4096;
 pub const MIXED_AMBIENT: f32 = 0.02;
 /// Salts separating the random streams of one (texel, iteration).
 const LIGHT_SALT: u32 = 0x6c69_6768;
+const EMITTER_SALT: u32 = 0x656d_6974;
 const ORIGIN_SALT: u32 = 0x6f72_6967;
 const COSINE_SALT: u32 = 0x636f_7369;
 
@@ -695,8 +698,8 @@ impl<'a> IterationCtx<'a> {
 
     /// The density on the primary sample square that this iteration's gather at texel `t`
     /// sampled the world direction `dir` with (the point is the inverse cosine map of `dir`
-    /// in the texel's frame): the solid-angle pdf is this × cosθ/π. 0 below the horizon.
-    #[allow(dead_code)]
+    /// in the texel's frame): the solid-angle pdf is this × cosθ/π ([`Self::gather_pdf`]).
+    /// 0 below the horizon.
     fn sampled_density(&self, t: &GatherTexel, dir: Vec3) -> f32 {
         let local = Vec3::new(dir.dot(t.tangent), dir.dot(t.bitangent), dir.dot(t.normal));
         if local.z <= 0.0 {
@@ -840,7 +843,8 @@ impl<'a> IterationCtx<'a> {
             let lu = rotate_x8(sobol_2d_x8(index + u32x8::splat(first)), light_rot);
             let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
             let light_u: [[f32; 2]; LANES] = core::array::from_fn(|i| [lx[i], ly[i]]);
-            let direct = self.direct8(t, origin, &light_u, counters);
+            let samples: [u32; LANES] = core::array::from_fn(|i| chunk[i] + first);
+            let direct = self.direct8(t, origin, &samples, &light_u, counters);
             for lane in 0..LANES {
                 let hit = (hprim[lane] != NO_HIT).then(|| SurfaceHit {
                     prim: hprim[lane],
@@ -848,7 +852,12 @@ impl<'a> IterationCtx<'a> {
                     u: hu[lane],
                     v: hv[lane],
                 });
-                let l = self.incoming(t.id, chunk[lane] + first, origin, dirs[lane], hit, counters);
+                let from = Departure {
+                    point: origin,
+                    normal: t.normal,
+                    pdf: q[lane] * dz[lane] * core::f32::consts::FRAC_1_PI,
+                };
+                let l = self.incoming(t.id, chunk[lane] + first, &from, dirs[lane], hit, counters);
                 self.record(l, [wx[lane], wy[lane]], q[lane], direct[lane], sinks);
             }
         }
@@ -863,7 +872,7 @@ impl<'a> IterationCtx<'a> {
         for j in 0..n / LANES as u32 {
             let origin = self.origin(t, j);
             let mut light_u = [[0.0; 2]; LANES];
-            let mut samples = [(Vec3::ZERO, [0.0f32; 2], 1.0f32); LANES];
+            let mut samples = [(Leaving::default(), [0.0f32; 2], 1.0f32); LANES];
             // The packet's eight scalar warps first, timed together (the stats' warp time).
             let clock = self.guide.map(|_| Instant::now());
             let cosine = self.is_cosine_packet(j);
@@ -886,7 +895,8 @@ impl<'a> IterationCtx<'a> {
             }
             for (lane, &(w, q)) in warped.iter().enumerate() {
                 let index = j * LANES as u32 + lane as u32;
-                let dir = self.to_world(t, sample_cosine_hemisphere(w));
+                let local = sample_cosine_hemisphere(w);
+                let dir = self.to_world(t, local);
                 let hit = intersect1(&bvh, &Ray::new(origin, dir, 0.0, f32::INFINITY)).map(|h| {
                     SurfaceHit {
                         prim: h.prim,
@@ -896,12 +906,18 @@ impl<'a> IterationCtx<'a> {
                     }
                 });
                 counters.gather_rays += 1;
-                let l = self.incoming(t.id, index, origin, dir, hit, counters);
+                let from = Departure {
+                    point: origin,
+                    normal: t.normal,
+                    pdf: q * local.z * core::f32::consts::FRAC_1_PI,
+                };
+                let l = self.incoming(t.id, index, &from, dir, hit, counters);
                 let lp = rotate(sobol_2d(index), light_rot);
                 light_u[lane] = [to_unit(lp[0]), to_unit(lp[1])];
                 samples[lane] = (l, w, q);
             }
-            let direct = self.direct8(t, origin, &light_u, counters);
+            let indices: [u32; LANES] = core::array::from_fn(|lane| j * LANES as u32 + lane as u32);
+            let direct = self.direct8(t, origin, &indices, &light_u, counters);
             for lane in 0..LANES {
                 let (l, w, q) = samples[lane];
                 self.record(l, w, q, direct[lane], sinks);
@@ -909,52 +925,91 @@ impl<'a> IterationCtx<'a> {
         }
     }
 
-    /// Next-event estimation at the texel for one packet's eight samples (shared origin),
-    /// counting the shadow rays.
+    /// Next-event estimation at the texel for one packet's eight samples (shared origin,
+    /// sample indices `samples`), weighted against the gather's own density by MIS, counting
+    /// the shadow rays.
     fn direct8(
         &self,
         t: &GatherTexel,
         origin: Vec3,
+        samples: &[u32],
         light_u: &[[f32; 2]; LANES],
         counters: &mut GatherCounters,
     ) -> [Vec3; LANES] {
         let mut direct = [Vec3::ZERO; LANES];
+        if !self.world.has_direct_light() {
+            return direct;
+        }
+        let pick: [f32; LANES] = core::array::from_fn(|lane| {
+            let seed = self.settings.seed ^ EMITTER_SALT;
+            SampleRng::new(seed, t.id, self.k, samples[lane]).unit()
+        });
+        let gather_pdf = |d: Vec3| self.gather_pdf(t, d);
+        let at = Receiver {
+            point: origin,
+            normal: t.normal,
+            other: Some(&gather_pdf),
+        };
         let rays = self
             .world
-            .direct_irradiance8(origin, t.normal, light_u, &mut direct);
+            .direct_irradiance8(&at, light_u, &pick, &mut direct);
         counters.shadow_rays += u64::from(rays);
         direct
     }
 
-    /// Radiance arriving along `dir` at `origin`: the sky on a miss, else what leaves the hit.
+    /// The solid-angle density with which this iteration's gather at texel `t` samples the
+    /// world direction `dir`: [`Self::sampled_density`] (the mixture's density on the
+    /// primary sample square at the point the cosine map sends to `dir`; 1 unguided) times
+    /// `cosθ / π`.
+    fn gather_pdf(&self, t: &GatherTexel, dir: Vec3) -> f32 {
+        let cos = dir.dot(t.normal);
+        if cos <= 0.0 {
+            return 0.0;
+        }
+        self.sampled_density(t, dir) * cos * core::f32::consts::FRAC_1_PI
+    }
+
+    /// What arrives along `dir` at the ray's origin `from`: the sky on a miss, else what
+    /// leaves the hit.
     fn incoming(
         &self,
         texel: u64,
         sample: u32,
-        origin: Vec3,
+        from: &Departure,
         dir: Vec3,
         hit: Option<SurfaceHit>,
         counters: &mut GatherCounters,
-    ) -> Vec3 {
+    ) -> Leaving {
         match hit {
-            None => self.world.sky(dir),
+            None => Leaving {
+                reflected: self.world.sky(dir),
+                ..Leaving::default()
+            },
             Some(hit) => {
                 let mut rng = SampleRng::new(self.settings.seed, texel, self.k, sample);
-                let leaving = self.world.hit_radiance(origin, dir, hit, &mut rng);
+                let leaving = self.world.radiance_from_hit(from, dir, hit, &mut rng);
                 counters.shadow_rays += u64::from(leaving.shadow_rays);
                 counters.path_rays += u64::from(leaving.path_rays);
-                leaving.radiance
+                leaving
             }
         }
     }
 
-    /// One sample into the texel's estimator (irradiance `L π / q` + direct light) and the
+    /// One sample into the texel's estimator (irradiance `L π / q` + direct light), its
+    /// gather-only channel (what series passes look up: the light the hit sends, without the
+    /// direct light of emitters that next-event estimation connects at the hits) and the
     /// cluster's learning records (point and flux `lum(L) / q`).
-    fn record(&self, l: Vec3, w: [f32; 2], q: f32, direct: Vec3, sinks: &mut Sinks<'_>) {
-        let gathered = l * (core::f32::consts::PI / q);
-        sinks.gathered.push(gathered.to_array());
-        sinks.batch.push((gathered + direct).to_array());
-        let flux = luminance(l) / q;
+    fn record(&self, l: Leaving, w: [f32; 2], q: f32, direct: Vec3, sinks: &mut Sinks<'_>) {
+        let scale = core::f32::consts::PI / q;
+        let indirect = if self.world.emitters().is_some() {
+            l.reflected
+        } else {
+            l.reflected + l.emitted
+        };
+        sinks.gathered.push((indirect * scale).to_array());
+        let radiance = l.emitted + l.reflected;
+        sinks.batch.push((radiance * scale + direct).to_array());
+        let flux = luminance(radiance) / q;
         if flux.is_finite() {
             sinks.records.push(Record { u: w, flux });
         }
@@ -970,8 +1025,10 @@ mod tests {
     use glam::Vec2;
 
     use super::*;
+    use crate::bake::settings::EmitterSampling;
     use crate::bvh::Preset;
     use crate::scene::{Material, Scene, Sky, Sun, Triangle, inward_box_faces};
+    use crate::transport::emitters::EmitterSelection;
 
     /// A quad `origin + s·u + t·v` as two triangles facing `u × v`.
     fn quad(origin: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {
@@ -1168,7 +1225,7 @@ mod tests {
     }
 
     /// A black ground under a black sky lit by `lights` only.
-    fn lit_world(lights: Vec<crate::scene::Light>) -> World {
+    fn lit_world(lights: Vec<crate::scene::SceneLight>) -> World {
         let mut scene = scene(ground(), vec![grey(0.0, 0.0)], Sky::None, None);
         scene.lights = lights;
         World::new(&scene, Preset::DEFAULT).unwrap()
@@ -1177,7 +1234,7 @@ mod tests {
     #[test]
     fn a_sphere_light_facing_a_point_gives_pi_l_r_over_d_squared() {
         let (radius, d, l) = (0.25f32, 2.0f32, Vec3::new(40.0, 20.0, 10.0));
-        let world = lit_world(vec![crate::scene::Light::Sphere {
+        let world = lit_world(vec![crate::scene::SceneLight::Sphere {
             center: Vec3::new(0.0, 0.0, d),
             radius,
             radiance: l,
@@ -1214,11 +1271,11 @@ mod tests {
         let axis = (Vec3::new(0.4, 0.0, 0.0) - position).normalize();
         // A penumbra wide against the 1 cm texels, whose origins are jittered over them.
         let (inner, outer) = (0.05f32, 0.3f32);
-        let point = crate::scene::Light::Point {
+        let point = crate::scene::SceneLight::Point {
             position,
             intensity,
         };
-        let spot = crate::scene::Light::Spot {
+        let spot = crate::scene::SceneLight::Spot {
             position,
             direction: axis,
             intensity,
@@ -1253,8 +1310,8 @@ mod tests {
     }
 
     /// 64 coincident texels on a black floor under a small emissive panel (0.4 m square, 1 m
-    /// up, form factor ≈ 0.05, not a light the bake connects to): a cosine sample finds the
-    /// panel about once in twenty.
+    /// up, form factor ≈ 0.05, found by gather hits alone: `EmitterSampling::Hits`): a cosine
+    /// sample finds the panel about once in twenty.
     fn small_emitter() -> (World, Vec<TexelRecord>) {
         let mut tris = quad(
             Vec3::new(-10.0, -10.0, 0.0),
@@ -1269,16 +1326,15 @@ mod tests {
             Vec3::X * 0.4,
             1,
         ));
-        let world = World::new(
-            &scene(
-                tris,
-                vec![grey(0.0, 0.0), grey(0.0, 100.0)],
-                Sky::Constant(Vec3::ZERO),
-                None,
-            ),
-            Preset::DEFAULT,
-        )
-        .unwrap();
+        let panel = scene(
+            tris,
+            vec![grey(0.0, 0.0), grey(0.0, 100.0)],
+            Sky::Constant(Vec3::ZERO),
+            None,
+        );
+        // Emitters found by hits alone: this test is about the gather finding light.
+        let mut world = World::new(&panel, Preset::DEFAULT).unwrap();
+        world.set_emitters(EmitterSampling::Hits, EmitterSelection::default());
         let texels: Vec<TexelRecord> = texels_on_plane(64, 0.0)
             .into_iter()
             .map(|t| TexelRecord {

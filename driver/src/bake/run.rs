@@ -103,8 +103,11 @@ pub struct BakeReport {
     pub rho: f64,
     /// Gather and shadow rays per second of the gather phase.
     pub rays_per_second: f64,
-    /// Analytic lights in the scene (0: no shadow rays at all).
+    /// Analytic lights in the scene.
     pub lights: usize,
+    /// Emissive triangles sampled by next-event estimation (0: no emitter table, no shadow
+    /// rays to emitters; with `lights` also 0, no shadow rays at all).
+    pub emitters: usize,
     /// The pages written (empty for a shard).
     pub pages: Vec<PathBuf>,
     /// Pixels with non-finite results replaced by zero when writing (should be 0).
@@ -252,8 +255,10 @@ pub fn bake_with_progress(
     let clock = Instant::now();
     let mut world = World::new(scene, Preset::DEFAULT)?;
     world.set_transport(job.settings.transport, job.settings.bounces);
+    world.set_emitters(job.settings.emitters, job.settings.emitter_selection);
     report.seconds.build_bvh = clock.elapsed().as_secs_f64();
     report.lights = world.lights().len();
+    report.emitters = world.emitters().map_or(0, |e| e.len());
 
     let passes = job.settings.passes();
     let bake_id = job.settings.bake_id(texel_file_id(&texels));
@@ -316,12 +321,7 @@ pub fn bake_with_progress(
         report.rho = written.rho;
         report.pages = written.pages;
         report.non_finite_pixels = written.non_finite_pixels;
-        std::fs::remove_dir_all(&dir).map_err(|e| {
-            file_error(
-                &dir,
-                format!("cannot remove the finished work directory: {e}"),
-            )
-        })?;
+        retire_work(&dir)?;
     }
     Ok(report)
 }
@@ -527,6 +527,22 @@ fn open_work(dir: &Path, manifest: &Manifest, resume: bool) -> Result<(), BakeEr
         .map_err(|e| file_error(&manifest_path, format!("cannot write: {e}")))?;
     std::fs::rename(&staging, dir)
         .map_err(|e| file_error(dir, format!("cannot create the work directory: {e}")))
+}
+
+/// Removes a finished bake's work directory. It is renamed out of the way first, so a crash
+/// during the removal leaves no half-deleted work directory (one without its manifest) for
+/// `--resume` to refuse; at worst a hidden temporary directory beside it.
+fn retire_work(dir: &Path) -> Result<(), BakeError> {
+    let retired = temporary_name(dir);
+    let _ = std::fs::remove_dir_all(&retired);
+    std::fs::rename(dir, &retired)
+        .and_then(|()| std::fs::remove_dir_all(&retired))
+        .map_err(|e| {
+            file_error(
+                dir,
+                format!("cannot remove the finished work directory: {e}"),
+            )
+        })
 }
 
 /// Opens pass `pass`'s result file and journal in `dir` (with the tiles its journal holds),

@@ -4,6 +4,7 @@
 use std::fmt;
 
 use crate::output::fnv1a64;
+use crate::transport::emitters::EmitterSelection;
 
 /// How gather directions are chosen (DESIGN.md, comparators).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
@@ -62,6 +63,18 @@ pub enum Transport {
     Path,
 }
 
+/// How emissive triangles light a shading point (`crate::transport::direct`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum EmitterSampling {
+    /// Next-event estimation and the rays that hit them, weighted by the power heuristic.
+    #[default]
+    Mis,
+    /// Next-event estimation alone; emission that rays hit is not counted.
+    Nee,
+    /// Only rays that happen to hit them (the bake before emitters were lights).
+    Hits,
+}
+
 /// The bake's settings; everything that changes its bits is part of [`Self::bake_id`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BakeSettings {
@@ -92,6 +105,10 @@ pub struct BakeSettings {
     /// The guide's smoothing α (paper §2.3) in percent: each child's share of its parent
     /// pulled toward a quarter by this much (the paper's filter: a prior toward the parent).
     pub smooth: u32,
+    /// How emissive triangles are found.
+    pub emitters: EmitterSampling,
+    /// How next-event estimation picks an emitter.
+    pub emitter_selection: EmitterSelection,
 }
 
 /// Most learning iterations a bake may ask for.
@@ -115,6 +132,8 @@ impl Default for BakeSettings {
             schedule: Schedule::Doubling,
             min_split: 64,
             smooth: 10,
+            emitters: EmitterSampling::default(),
+            emitter_selection: EmitterSelection::default(),
         }
     }
 }
@@ -233,6 +252,16 @@ impl fmt::Display for Transport {
         f.write_str(match self {
             Transport::Series => "series",
             Transport::Path => "path",
+        })
+    }
+}
+
+impl fmt::Display for EmitterSampling {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            EmitterSampling::Mis => "mis",
+            EmitterSampling::Nee => "nee",
+            EmitterSampling::Hits => "hits",
         })
     }
 }

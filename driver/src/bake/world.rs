@@ -1,29 +1,22 @@
 //! Everything a gather ray can meet, shared read-only by every worker: the BVH in the
-//! kernels' layout, per-triangle shading data, the analytic lights and the sky.
+//! kernels' layout, per-triangle shading data, the lights (analytic lights and emissive
+//! triangles), the sky, and the transport settings.
 //!
-//! The radiance a gather ray brings back from a hit ([`World::hit_radiance`]) is the hit's
-//! emission (front faces only) plus its albedo/π times the direct irradiance there, connected
-//! explicitly with shadow rays, plus indirect light by the bake's transport: in `series`
-//! passes after the first, albedo/π × the previous pass's indirect irradiance at the hit
-//! ([`PreviousPass`]); in `path` mode albedo × the radiance arriving along a cosine-sampled
-//! direction, recursively, up to `bounces` vertices, with Russian roulette from the third.
-//! A ray that leaves the scene sees the sky. Light kinds the scene lacks cost nothing: no
-//! light, no shadow rays; a black sky, no lookups; a black surface, no continuation.
+//! How light is carried lives in [`crate::transport`]: next-event estimation
+//! ([`crate::transport::direct`]), what leaves a gather hit ([`crate::transport::path`]),
+//! the emitters ([`crate::transport::emitters`]). Light kinds the scene lacks cost nothing:
+//! no light, no shadow rays; no emitter, no emitter table; a black sky, no lookups; a black
+//! surface, no continuation.
 
 use glam::Vec3;
-use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere};
-use guidebake_kernels::packet::{LANES, Ray, Ray8};
-use guidebake_kernels::traverse::{
-    BvhRef, intersect1, occluded1, occluded8, offset_origin, triangle_extent,
-};
-use wide::f32x8;
+use guidebake_kernels::traverse::{BvhRef, offset_origin, triangle_extent};
 
-use super::settings::Transport;
+use super::settings::{EmitterSampling, Transport};
 
 use crate::bvh::{Bvh, BvhError, Preset};
-use crate::scene::{self, Scene, Sky};
-use crate::transport::lights::Light;
-use crate::transport::rng::SampleRng;
+use crate::scene::{Scene, Sky};
+use crate::transport::emitters::{EmitterSelection, Emitters};
+use crate::transport::lights::{AnalyticLight, analytic_lights};
 use crate::transport::series::PreviousPass;
 use crate::transport::sky::{sky_is_black, sky_radiance};
 
@@ -44,7 +37,9 @@ pub struct World {
     bvh: Bvh,
     corners: Vec<[Vec3; 3]>,
     surfaces: Vec<Surface>,
-    lights: Vec<Light>,
+    lights: Vec<AnalyticLight>,
+    emitters: Option<Emitters>,
+    emitter_sampling: EmitterSampling,
     sky: Sky,
     sky_black: bool,
     transport: Transport,
@@ -66,33 +61,16 @@ pub struct SurfaceHit {
     pub v: f32,
 }
 
-/// What [`World::hit_radiance`] brings back and what it cost.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Leaving {
-    /// Radiance leaving the hit towards the gather ray's origin.
-    pub radiance: Vec3,
-    /// Shadow rays traced (next-event estimation at the path's vertices).
-    pub shadow_rays: u32,
-    /// Path continuation rays traced (`path` transport).
-    pub path_rays: u32,
-}
-
-/// Path vertices from which Russian roulette may end a path (the first two always continue).
-const ROULETTE_FROM: u32 = 3;
-
-/// Shadow rays stop this fraction short of a light at a finite distance, so the light's own
-/// geometry (a sphere light's surface) does not occlude it.
-const SHADOW_SHORTEN: f32 = 1.0 - 1e-4;
-
 impl World {
-    /// Builds the BVH over the scene's triangles and gathers its lights.
+    /// Builds the BVH over the scene's triangles and gathers its lights: the analytic ones,
+    /// and the emissive triangles, sampled by the default [`EmitterSelection`] with MIS.
     ///
     /// # Errors
     /// [`BvhError`] when the BVH cannot be built (a non-finite vertex).
     pub fn new(scene: &Scene, preset: Preset) -> Result<Self, BvhError> {
         let corners = scene.triangle_positions();
         let bvh = Bvh::build(&corners, preset)?;
-        let surfaces = scene
+        let surfaces: Vec<Surface> = scene
             .triangles
             .iter()
             .map(|t| {
@@ -104,17 +82,21 @@ impl World {
                 }
             })
             .collect();
-        Ok(Self {
+        let mut world = Self {
             bvh,
             corners,
             surfaces,
-            lights: lights_of(scene),
+            lights: analytic_lights(scene),
+            emitters: None,
+            emitter_sampling: EmitterSampling::default(),
             sky_black: sky_is_black(&scene.sky),
             sky: scene.sky.clone(),
             transport: Transport::Series,
             bounces: 1,
             previous: None,
-        })
+        };
+        world.set_emitters(EmitterSampling::default(), EmitterSelection::default());
+        Ok(world)
     }
 
     /// Sets the transport at gather hits: `path` with at most `bounces` vertices, or
@@ -122,6 +104,23 @@ impl World {
     pub fn set_transport(&mut self, transport: Transport, bounces: u32) {
         self.transport = transport;
         self.bounces = bounces.max(1);
+    }
+
+    /// Sets how emissive triangles are lit by: next-event estimation, hits, or both with MIS;
+    /// and how next-event estimation picks one. Builds the emitters' table or tree (none
+    /// when the scene has no emitter, or when only hits find them).
+    pub fn set_emitters(&mut self, sampling: EmitterSampling, selection: EmitterSelection) {
+        self.emitter_sampling = sampling;
+        self.emitters = match sampling {
+            EmitterSampling::Hits => None,
+            EmitterSampling::Mis | EmitterSampling::Nee => {
+                let triangles = self.corners.iter().zip(&self.surfaces);
+                Emitters::new(
+                    triangles.map(|(c, s)| (*c, s.normal, s.emission)),
+                    selection,
+                )
+            }
+        };
     }
 
     /// The previous series pass, looked up at gather hits (`None` in the first pass).
@@ -182,8 +181,47 @@ impl World {
     }
 
     /// The analytic lights.
-    pub fn lights(&self) -> &[Light] {
+    pub fn lights(&self) -> &[AnalyticLight] {
         &self.lights
+    }
+
+    /// The emissive triangles next-event estimation samples (`None`: it samples none).
+    pub fn emitters(&self) -> Option<&Emitters> {
+        self.emitters.as_ref()
+    }
+
+    /// How emitters are found ([`EmitterSampling`]); with no emitter sampled, as by hits.
+    pub fn emitter_sampling(&self) -> EmitterSampling {
+        if self.emitters.is_some() {
+            self.emitter_sampling
+        } else {
+            EmitterSampling::Hits
+        }
+    }
+
+    /// Whether next-event estimation has any light to sample (else it traces nothing).
+    pub fn has_direct_light(&self) -> bool {
+        !self.lights.is_empty() || self.emitters.is_some()
+    }
+
+    /// Per-triangle shading data, by primitive id.
+    pub fn surfaces(&self) -> &[Surface] {
+        &self.surfaces
+    }
+
+    /// The transport at gather hits.
+    pub fn transport(&self) -> Transport {
+        self.transport
+    }
+
+    /// Most path vertices (`path`) or passes (`series`).
+    pub fn bounces(&self) -> u32 {
+        self.bounces
+    }
+
+    /// The previous series pass, if any.
+    pub fn previous_pass(&self) -> Option<&PreviousPass> {
+        self.previous.as_ref()
     }
 
     /// Radiance of the sky along `dir` (zero without a lookup when the sky is black).
@@ -193,138 +231,6 @@ impl World {
         } else {
             sky_radiance(&self.sky, dir)
         }
-    }
-
-    /// Radiance leaving `hit` of the gather ray from `origin` along `dir`, back towards
-    /// `origin`, by the world's transport (module docs). `rng` is the sample's own stream.
-    pub fn hit_radiance(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        hit: SurfaceHit,
-        rng: &mut SampleRng,
-    ) -> Leaving {
-        let mut out = Leaving::default();
-        let (mut origin, mut dir, mut hit) = (origin, dir, hit);
-        let mut throughput = Vec3::ONE;
-        for vertex in 1.. {
-            let Some(s) = self.surfaces.get(hit.prim as usize) else {
-                break;
-            };
-            let front = s.normal.dot(dir) < 0.0;
-            if front {
-                out.radiance += throughput * s.emission;
-            }
-            if s.albedo == Vec3::ZERO {
-                break;
-            }
-            let facing = if front { s.normal } else { -s.normal };
-            let p = self.leave_surface(hit.prim, origin + dir * hit.t, facing, hit.t);
-            let reflect = throughput * s.albedo;
-            let mut irradiance = Vec3::ZERO;
-            if !self.lights.is_empty() {
-                let (direct, rays) = self.direct_irradiance(p, facing, rng.pair());
-                irradiance += direct;
-                out.shadow_rays += rays;
-            }
-            if let (Transport::Series, Some(previous)) = (self.transport, &self.previous) {
-                irradiance += previous.irradiance(hit.prim, hit.u, hit.v);
-            }
-            out.radiance += reflect * core::f32::consts::FRAC_1_PI * irradiance;
-            if self.transport != Transport::Path || vertex >= self.bounces {
-                break;
-            }
-            // Continue: cosine-weighted direction, so the estimate's weight is the albedo.
-            throughput = reflect;
-            if vertex + 1 >= ROULETTE_FROM {
-                let survive = throughput.max_element().clamp(0.05, 0.95);
-                if rng.unit() >= survive {
-                    break;
-                }
-                throughput /= survive;
-            }
-            let (tangent, bitangent) = orthonormal_basis(facing);
-            let d = sample_cosine_hemisphere(rng.pair());
-            let next = (tangent * d.x + bitangent * d.y + facing * d.z).normalize_or(facing);
-            out.path_rays += 1;
-            match intersect1(&self.bvh(), &Ray::new(p, next, 0.0, f32::INFINITY)) {
-                None => {
-                    out.radiance += throughput * self.sky(next);
-                    break;
-                }
-                Some(h) => {
-                    (origin, dir) = (p, next);
-                    hit = SurfaceHit {
-                        prim: h.prim,
-                        t: h.t,
-                        u: h.u,
-                        v: h.v,
-                    };
-                }
-            }
-        }
-        out
-    }
-
-    /// Direct irradiance at `p` (already offset from its surface) with normal `n`: one sample
-    /// of every light, each with a single shadow ray. Returns it and the shadow rays traced.
-    pub fn direct_irradiance(&self, p: Vec3, n: Vec3, u: [f32; 2]) -> (Vec3, u32) {
-        let bvh = self.bvh();
-        let (mut e, mut rays) = (Vec3::ZERO, 0);
-        for light in &self.lights {
-            if let Some(s) = light.sample(p, n, u) {
-                rays += 1;
-                if s.distance == 0.0 || !occluded1(&bvh, &shadow_ray(p, s.direction, s.distance)) {
-                    e += s.weight;
-                }
-            }
-        }
-        (e, rays)
-    }
-
-    /// Direct irradiance for eight samples sharing origin `p` (offset) and normal `n`, light
-    /// sample `u[lane]` each: shadow rays traced as packets, one packet per light. Adds into
-    /// `out` and returns the shadow rays traced.
-    pub fn direct_irradiance8(
-        &self,
-        p: Vec3,
-        n: Vec3,
-        u: &[[f32; 2]; LANES],
-        out: &mut [Vec3; LANES],
-    ) -> u32 {
-        let bvh = self.bvh();
-        let mut rays = 0;
-        for light in &self.lights {
-            let mut packet = Ray8::INACTIVE;
-            let mut weights = [Vec3::ZERO; LANES];
-            let mut unshadowed = 0u8;
-            for lane in 0..LANES {
-                let Some(s) = light.sample(p, n, u[lane]) else {
-                    continue;
-                };
-                weights[lane] = s.weight;
-                if s.distance == 0.0 {
-                    unshadowed |= 1 << lane;
-                } else {
-                    packet.set_lane(lane, &shadow_ray(p, s.direction, s.distance));
-                    rays += 1;
-                }
-            }
-            let traced = lanes_traced(&packet);
-            let blocked = if traced != 0 {
-                occluded8(&bvh, &packet)
-            } else {
-                0
-            };
-            for lane in 0..LANES {
-                let visible =
-                    unshadowed & (1 << lane) != 0 || (traced & !blocked) & (1 << lane) != 0;
-                if visible {
-                    out[lane] += weights[lane];
-                }
-            }
-        }
-        rays
     }
 }
 
@@ -363,90 +269,6 @@ pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
         return a; // degenerate triangle
     }
     a + ab * v + ac * w
-}
-
-fn lanes_traced(packet: &Ray8) -> u8 {
-    let tmin = packet.tmin.to_array();
-    (0..LANES).fold(0, |m, i| if tmin[i].is_finite() { m | 1 << i } else { m })
-}
-
-fn shadow_ray(p: Vec3, dir: Vec3, distance: f32) -> Ray {
-    let tmax = if distance.is_finite() {
-        distance * SHADOW_SHORTEN
-    } else {
-        f32::INFINITY
-    };
-    Ray::new(p, dir, 0.0, tmax)
-}
-
-/// The scene's punctual lights and sun as next-event estimation samplers.
-pub fn lights_of(scene: &Scene) -> Vec<Light> {
-    let mut lights: Vec<Light> = scene
-        .lights
-        .iter()
-        .map(|l| match *l {
-            scene::Light::Directional {
-                direction,
-                irradiance,
-            } => Light::Sun {
-                to_sun: -direction,
-                angular_radius: 0.0,
-                irradiance,
-            },
-            scene::Light::Point {
-                position,
-                intensity,
-            } => Light::Point {
-                position,
-                intensity,
-            },
-            scene::Light::Spot {
-                position,
-                direction,
-                intensity,
-                inner_cone,
-                outer_cone,
-            } => Light::Spot {
-                position,
-                direction,
-                intensity,
-                cos_inner: inner_cone.cos(),
-                cos_outer: outer_cone.cos(),
-            },
-            scene::Light::Sphere {
-                center,
-                radius,
-                radiance,
-            } => Light::Sphere {
-                center,
-                radius,
-                radiance,
-            },
-        })
-        .collect();
-    if let Some(sun) = &scene.sun {
-        lights.push(Light::Sun {
-            to_sun: sun.direction,
-            angular_radius: sun.angular_radius,
-            irradiance: sun.irradiance,
-        });
-    }
-    lights.retain(|l| power_of(l) > 0.0);
-    lights
-}
-
-fn power_of(light: &Light) -> f32 {
-    match *light {
-        Light::Sun { irradiance: c, .. }
-        | Light::Point { intensity: c, .. }
-        | Light::Spot { intensity: c, .. }
-        | Light::Sphere { radiance: c, .. } => c.max_element(),
-    }
-}
-
-/// Lanes of a packet as an array (for per-lane shading after a packet trace).
-pub fn lanes(v: f32x8) -> [f32; LANES] {
-    v.to_array()
 }
 
 #[cfg(test)]

@@ -18,10 +18,11 @@ use super::method::{Method, serialize_value_name, value_name};
 use super::metrics::{ErrorStats, compare};
 use super::readback::read_lightmap;
 use crate::bake::run::{BakeJob, BakeReport, bake, work_dir};
-use crate::bake::settings::{BakeSettings, Guiding, Transport};
+use crate::bake::settings::{BakeSettings, EmitterSampling, Guiding, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
 use crate::texels::TexelFile;
+use crate::transport::emitters::EmitterSelection;
 
 /// What the loops need: the scene, its texels, where to bake, how many threads.
 pub struct Bench<'a> {
@@ -35,8 +36,20 @@ pub struct Bench<'a> {
     pub scratch: PathBuf,
     /// Worker threads of every bake.
     pub threads: usize,
+    /// Emitter sampling of the measured bakes ([`Self::bake_scratch`]).
+    pub light: LightSampling,
     /// Ctrl-C.
     pub cancel: &'a AtomicBool,
+}
+
+/// How a bake lights emissive triangles: the bake's `--emitters` and
+/// `--emitter-selection`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LightSampling {
+    /// Next-event estimation, hits, or both with MIS.
+    pub emitters: EmitterSampling,
+    /// How next-event estimation picks an emitter.
+    pub selection: EmitterSelection,
 }
 
 /// One bake as measured.
@@ -95,6 +108,11 @@ impl Bench<'_> {
     /// # Errors
     /// As [`Self::bake_to`].
     pub fn bake_scratch(&self, settings: BakeSettings) -> Result<Baked, BenchError> {
+        let settings = BakeSettings {
+            emitters: self.light.emitters,
+            emitter_selection: self.light.selection,
+            ..settings
+        };
         let out = self.scratch.join("run.exr");
         let baked = self.bake_to(settings, &out);
         if let Ok(b) = &baked {

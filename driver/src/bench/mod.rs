@@ -29,6 +29,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use analysis::log_log_at;
+pub use harness::LightSampling;
 use harness::{Bench, Ladder};
 use method::Method;
 use report::{EqualTimeSummary, Machine, OverheadSummary, Summary, Target};
@@ -123,6 +124,9 @@ pub struct BenchConfig {
     pub overhead_spp: u32,
     /// Repeats of the overhead runs.
     pub repeats: u32,
+    /// How the measured bakes light emissive triangles (the reference uses the bake's
+    /// default, which all of these converge to).
+    pub light: LightSampling,
 }
 
 impl BenchConfig {
@@ -203,6 +207,7 @@ pub fn run(
         texels: &texels,
         scratch: scratch.clone(),
         threads: config.threads,
+        light: config.light,
         cancel,
     };
     let mut files = Vec::new();

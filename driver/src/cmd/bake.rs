@@ -6,9 +6,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_with_progress, work_dir};
-use crate::bake::settings::{BakeSettings, Combine, Guiding, Schedule, Transport};
+use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Schedule, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
+use crate::transport::emitters::EmitterSelection;
 
 /// Arguments of `guidebake bake`.
 #[derive(Debug, clap::Args)]
@@ -55,6 +56,14 @@ pub struct BakeArgs {
     /// vertices of a path, Russian roulette from the third).
     #[arg(long, default_value_t = BakeSettings::default().bounces)]
     pub bounces: u32,
+    /// How emissive triangles are found: next-event estimation and hits weighted by MIS,
+    /// next-event estimation alone, or hits alone (the bake before emitters were lights).
+    #[arg(long, value_enum, default_value_t = EmitterSampling::default())]
+    pub emitters: EmitterSampling,
+    /// How next-event estimation picks an emitter: by power, or by the light tree (which
+    /// prefers emitters that matter at the shading point).
+    #[arg(long, value_enum, default_value_t = EmitterSelection::default())]
+    pub emitter_selection: EmitterSelection,
     /// The world-wide bias correction ρ (paper §2.5).
     #[arg(long, value_enum, default_value_t = if BakeSettings::default().bias_correction { OnOff::On } else { OnOff::Off })]
     pub bias_correction: OnOff,
@@ -106,6 +115,8 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         schedule: args.schedule,
         min_split: args.min_split,
         smooth: args.smooth,
+        emitters: args.emitters,
+        emitter_selection: args.emitter_selection,
     };
     settings.validate()?;
     check_output(&args.out)?;

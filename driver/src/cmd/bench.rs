@@ -5,12 +5,13 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::bake::settings::{BakeSettings, Transport};
+use crate::bake::settings::{BakeSettings, EmitterSampling, Transport};
 use crate::bench::method::Method;
-use crate::bench::{BenchConfig, run};
+use crate::bench::{BenchConfig, LightSampling, run};
 use crate::demo::{DEMO_TEXELS_PER_METRE, ajar_room};
 use crate::prepare::{Layout, PrepareOptions, Resolution, prepare};
 use crate::scene::Scene;
+use crate::transport::emitters::EmitterSelection;
 
 /// Arguments of `guidebake bench`.
 #[derive(Debug, clap::Args)]
@@ -83,6 +84,13 @@ pub struct BenchArgs {
     /// Worker threads of every bake (default: every core).
     #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
+    /// How the measured bakes light emissive triangles (`guidebake bake --emitters`); the
+    /// reference always uses the bake's default.
+    #[arg(long, value_enum, default_value_t = EmitterSampling::default())]
+    pub emitters: EmitterSampling,
+    /// How the measured bakes pick an emitter (`guidebake bake --emitter-selection`).
+    #[arg(long, value_enum, default_value_t = EmitterSelection::default())]
+    pub emitter_selection: EmitterSelection,
     /// Name of the scene in the outputs (default: the file's stem, or `demo-ajar`).
     #[arg(long)]
     pub name: Option<String>,
@@ -137,6 +145,10 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
         reference_spp: pick(args.ref_spp, 4096, 512),
         overhead_spp: pick(args.overhead_spp, 256, 32),
         repeats: pick(args.repeats, 5, 3),
+        light: LightSampling {
+            emitters: args.emitters,
+            selection: args.emitter_selection,
+        },
     };
     if let Some(d) = args.texels_per_unit
         && !(d.is_finite() && d > 0.0)

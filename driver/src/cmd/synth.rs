@@ -1,5 +1,6 @@
-//! `guidebake synth --texels N -o OUT`: write a procedural city of about N texels (see
-//! [`crate::synth`]) as a texel file plus its scene (`OUT` with `.glb` and `.toml`).
+//! `guidebake synth --texels N -o OUT [--lit-windows W] [--night]`: write a procedural city
+//! of about N texels (see [`crate::synth`]) as a texel file plus its scene (`OUT` with
+//! `.glb` and `.toml`), optionally with W emissive windows and by night.
 
 use std::path::PathBuf;
 
@@ -9,6 +10,13 @@ pub struct SynthArgs {
     /// Number of texels (rounded to whole 32x32 tiles, within about 1%).
     #[arg(long)]
     pub texels: u64,
+    /// Lit windows: this many small emissive quads on the box sides (2 triangles each),
+    /// radiance 1.5 to 1000.
+    #[arg(long, default_value_t = 0)]
+    pub lit_windows: u32,
+    /// Night: no sun, a dim sky; the windows light the city.
+    #[arg(long)]
+    pub night: bool,
     /// Output texel file; the .glb and .toml scene are written beside it.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -22,12 +30,16 @@ pub struct SynthArgs {
 /// # Errors
 /// N out of range or a write failure.
 pub fn run(args: &SynthArgs) -> Result<(), super::CmdError> {
-    let r = crate::synth::synth(args.texels, &args.output)?;
+    let options = crate::synth::SynthOptions {
+        lit_windows: args.lit_windows,
+        night: args.night,
+    };
+    let r = crate::synth::synth_with(args.texels, &args.output, &options)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
         println!(
-            "{}: {} texels in {} tiles on {} page(s); {}x{} cells, {} triangles; scene {}",
+            "{}: {} texels in {} tiles on {} page(s); {}x{} cells, {} triangles ({} emissive); scene {}",
             args.output.display(),
             r.texels,
             r.tiles,
@@ -35,6 +47,7 @@ pub fn run(args: &SynthArgs) -> Result<(), super::CmdError> {
             r.grid,
             r.grid,
             r.triangles,
+            r.emissive_triangles,
             r.scene.display()
         );
     }

@@ -21,9 +21,12 @@
 
 use glam::Vec3;
 
-/// An analytic light, in world space.
+use crate::scene::{Scene, SceneLight};
+
+/// An analytic light as next-event estimation samples it, in world space (from the scene's
+/// [`SceneLight`]s and sun by [`analytic_lights`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Light {
+pub enum AnalyticLight {
     /// A distant disk: unit `to_sun` direction, half-angle `angular_radius` (radians), and
     /// `irradiance` on a plane facing it.
     Sun {
@@ -77,22 +80,22 @@ pub struct LightSample {
     pub weight: Vec3,
 }
 
-impl Light {
+impl AnalyticLight {
     /// Samples the light from surface point `p` with unit normal `n` using the random pair
     /// `u` ∈ [0,1)². Returns `None` when the light cannot reach the point's upper hemisphere
     /// (behind the surface, outside the spot cone, zero power) — no shadow ray is needed.
     pub fn sample(&self, p: Vec3, n: Vec3, u: [f32; 2]) -> Option<LightSample> {
         let sample = match *self {
-            Light::Sun {
+            AnalyticLight::Sun {
                 to_sun,
                 angular_radius,
                 irradiance,
             } => sample_sun(to_sun, angular_radius, irradiance, n, u),
-            Light::Point {
+            AnalyticLight::Point {
                 position,
                 intensity,
             } => sample_point(position, intensity, p, n),
-            Light::Spot {
+            AnalyticLight::Spot {
                 position,
                 direction,
                 intensity,
@@ -106,7 +109,7 @@ impl Light {
                     ..s
                 })
             }
-            Light::Sphere {
+            AnalyticLight::Sphere {
                 center,
                 radius,
                 radiance,
@@ -115,6 +118,74 @@ impl Light {
         let usable = sample.weight.cmpgt(Vec3::ZERO).any() && sample.weight.is_finite();
         usable.then_some(sample)
     }
+
+    /// The largest channel of the light's strength (irradiance, intensity or radiance):
+    /// zero for a light that cannot light anything.
+    pub fn power(&self) -> f32 {
+        match *self {
+            AnalyticLight::Sun { irradiance: c, .. }
+            | AnalyticLight::Point { intensity: c, .. }
+            | AnalyticLight::Spot { intensity: c, .. }
+            | AnalyticLight::Sphere { radiance: c, .. } => c.max_element(),
+        }
+    }
+}
+
+/// The scene's declared lights and its sun as next-event estimation samplers; lights of no
+/// power are dropped (they would cost shadow rays for nothing).
+pub fn analytic_lights(scene: &Scene) -> Vec<AnalyticLight> {
+    let mut lights: Vec<AnalyticLight> = scene
+        .lights
+        .iter()
+        .map(|l| match *l {
+            SceneLight::Directional {
+                direction,
+                irradiance,
+            } => AnalyticLight::Sun {
+                to_sun: -direction,
+                angular_radius: 0.0,
+                irradiance,
+            },
+            SceneLight::Point {
+                position,
+                intensity,
+            } => AnalyticLight::Point {
+                position,
+                intensity,
+            },
+            SceneLight::Spot {
+                position,
+                direction,
+                intensity,
+                inner_cone,
+                outer_cone,
+            } => AnalyticLight::Spot {
+                position,
+                direction,
+                intensity,
+                cos_inner: inner_cone.cos(),
+                cos_outer: outer_cone.cos(),
+            },
+            SceneLight::Sphere {
+                center,
+                radius,
+                radiance,
+            } => AnalyticLight::Sphere {
+                center,
+                radius,
+                radiance,
+            },
+        })
+        .collect();
+    if let Some(sun) = &scene.sun {
+        lights.push(AnalyticLight::Sun {
+            to_sun: sun.direction,
+            angular_radius: sun.angular_radius,
+            irradiance: sun.irradiance,
+        });
+    }
+    lights.retain(|l| l.power() > 0.0);
+    lights
 }
 
 /// glTF `KHR_lights_punctual` spot falloff: `t²` with `t` linear in cosφ between the cones.
@@ -236,7 +307,7 @@ mod tests {
 
     /// Mean and standard error of the light's irradiance estimate over `n` samples
     /// (accumulated in f64: an f32 running sum of 20 000 equal terms is biased by 1e-4).
-    fn estimate(light: &Light, p: Vec3, normal: Vec3, n: usize) -> (Vec3, Vec3) {
+    fn estimate(light: &AnalyticLight, p: Vec3, normal: Vec3, n: usize) -> (Vec3, Vec3) {
         let mut rng = Pcg32::new(11, 3);
         let (mut sum, mut sum2) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
         for _ in 0..n {
@@ -269,7 +340,7 @@ mod tests {
         let to_sun = Vec3::new(0.3, 0.2, 1.0).normalize();
         for alpha in [0.0f32, 0.00465, 0.05, 0.3] {
             for normal in [Vec3::Z, Vec3::new(0.5, -0.2, 1.0).normalize()] {
-                let light = Light::Sun {
+                let light = AnalyticLight::Sun {
                     to_sun,
                     angular_radius: alpha,
                     irradiance,
@@ -282,7 +353,7 @@ mod tests {
 
     #[test]
     fn point_light_follows_inverse_square_and_cosine() {
-        let light = Light::Point {
+        let light = AnalyticLight::Point {
             position: Vec3::new(0.0, 3.0, 4.0),
             intensity: Vec3::splat(50.0),
         };
@@ -299,7 +370,7 @@ mod tests {
     #[test]
     fn spot_light_falls_off_between_its_cones() {
         let (cos_inner, cos_outer) = (0.9f32, 0.7f32);
-        let light = Light::Spot {
+        let light = AnalyticLight::Spot {
             position: Vec3::new(0.0, 0.0, 2.0),
             direction: -Vec3::Z,
             intensity: Vec3::splat(8.0),
@@ -321,7 +392,7 @@ mod tests {
     fn sphere_light_gives_pi_l_r_over_d_squared_facing_it() {
         let radiance = Vec3::new(10.0, 5.0, 1.0);
         for (radius, distance) in [(0.5f32, 4.0f32), (1.0, 1.5), (0.01, 100.0)] {
-            let light = Light::Sphere {
+            let light = AnalyticLight::Sphere {
                 center: Vec3::new(0.0, 0.0, distance),
                 radius,
                 radiance,
@@ -333,7 +404,7 @@ mod tests {
 
     #[test]
     fn sphere_light_shadow_rays_stop_at_its_surface() {
-        let light = Light::Sphere {
+        let light = AnalyticLight::Sphere {
             center: Vec3::new(0.0, 0.0, 5.0),
             radius: 1.0,
             radiance: Vec3::ONE,
@@ -356,12 +427,12 @@ mod tests {
     #[test]
     fn far_off_points_and_extreme_powers_stay_finite() {
         let far = Vec3::splat(1e6);
-        let sphere = Light::Sphere {
+        let sphere = AnalyticLight::Sphere {
             center: far + Vec3::new(0.0, 0.0, 3.0),
             radius: 0.5,
             radiance: Vec3::splat(1e5),
         };
-        let point = Light::Point {
+        let point = AnalyticLight::Point {
             position: far + Vec3::Z,
             intensity: Vec3::splat(1e-4),
         };
@@ -372,7 +443,7 @@ mod tests {
                 "{light:?}: {mean:?}"
             );
         }
-        let coincident = Light::Point {
+        let coincident = AnalyticLight::Point {
             position: Vec3::ONE,
             intensity: Vec3::ONE,
         };

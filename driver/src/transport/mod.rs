@@ -1,19 +1,28 @@
-//! Light transport for the final gather (DESIGN.md, "The bake", light transport).
+//! Light transport for the final gather (DESIGN.md, "The bake", light transport): one home
+//! for how light reaches a texel.
 //!
-//! Surfaces are two-sided Lambertian. Analytic lights (sun, point, spot, sphere) are
-//! connected explicitly by next-event estimation with shadow rays ([`lights`]); the final
-//! gather itself sees the sky, emissive triangles and indirect light — and that is what the
-//! guide learns (paper §2.2). The two never overlap: a gather ray that misses sees the sky
-//! without the sun, so no light is counted twice.
+//! Surfaces are two-sided Lambertian. Lights are of two kinds: analytic lights (sun, point,
+//! spot, sphere: [`lights`]) and emissive triangles ([`emitters`]), which emit from their
+//! front face. Both are connected explicitly by next-event estimation with shadow rays
+//! ([`direct`]) at the texel and at every gather hit or path vertex. Emitters can also be hit
+//! by the rays the bake traces anyway; the two estimates are combined by multiple importance
+//! sampling (power heuristic), so every light path counts once. A gather ray that misses sees
+//! the sky without the sun, so the sun is never counted twice.
 //!
-//! What leaves a gather hit depends on the transport (`--transport`): in `series` mode
-//! emission plus albedo/π × (direct light + the previous pass's indirect irradiance, looked
-//! up in its lightmap: [`series`]); in `path` mode the path continues from the hit with
-//! cosine-weighted directions, next-event estimation at every vertex and Russian roulette
-//! ([`crate::bake::world::World::hit_radiance`]). Random numbers beyond the gather's Sobol
+//! What leaves a gather hit depends on the transport (`--transport`, [`path`]): in `series`
+//! mode emission (MIS-weighted) plus albedo/π × (direct light + the previous pass's indirect
+//! irradiance, looked up in its lightmap: [`series`]); in `path` mode the path continues
+//! from the hit with cosine-weighted directions, next-event estimation and MIS at every
+//! vertex and Russian roulette. What a gather sample contains, and so what the guide learns
+//! from (paper §2.2), is documented in [`path`]. Random numbers beyond the gather's Sobol
 //! point come from [`rng`].
 
+pub mod alias;
+pub mod direct;
+pub mod emitters;
+pub mod light_tree;
 pub mod lights;
+pub mod path;
 pub mod rng;
 pub mod series;
 pub mod sky;

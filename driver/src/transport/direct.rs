@@ -1,0 +1,419 @@
+//! Next-event estimation: direct irradiance at a shading point from every analytic light
+//! ([`super::lights`]) and from one sampled emitter ([`super::emitters`]), each with one
+//! shadow ray; the emitter's sample weighted against the point's other strategy by multiple
+//! importance sampling (Veach 1997, power heuristic).
+//!
+//! An emitter can be found two ways from a shading point: by next-event estimation, and by
+//! the direction the point samples anyway — the final gather's (cosine or guided) at a
+//! texel, the cosine continuation at a path vertex. Under [`EmitterSampling::Mis`] the two
+//! estimates are weighted `w_nee = p_nee² / (p_nee² + p_other²)` and `w_hit = 1 − w_nee`
+//! (the latter applied by [`super::path`] where a ray hits an emitter), so every light path
+//! counts once. Where no ray will leave the point (a series hit, a path's last vertex), the
+//! point has no other strategy and next-event estimation weighs 1.
+//! [`EmitterSampling::Nee`] and [`EmitterSampling::Hits`] keep one strategy alone (the
+//! latter is the bake before emitters were lights); they are unbiased too and serve as
+//! comparators.
+
+use glam::Vec3;
+use guidebake_kernels::packet::{LANES, Ray, Ray8};
+use guidebake_kernels::traverse::{occluded1, occluded8};
+
+use super::emitters::EmitterSample;
+use crate::bake::settings::EmitterSampling;
+use crate::bake::world::World;
+
+/// Shadow rays stop this fraction short of a light at a finite distance, so the light's own
+/// geometry (a sphere light's surface) does not occlude it.
+const SHADOW_SHORTEN: f32 = 1.0 - 1e-4;
+
+/// The power heuristic's weight of a strategy of density `a` against one of density `b`
+/// (β = 2). An infinite `a` (a delta) weighs 1; two zero densities weigh 0.
+pub fn power_heuristic(a: f32, b: f32) -> f32 {
+    if a == f32::INFINITY {
+        return 1.0;
+    }
+    let (a2, b2) = (a * a, b * b);
+    let w = a2 / (a2 + b2);
+    if w.is_finite() { w } else { 0.0 }
+}
+
+/// A shading point as next-event estimation sees it.
+#[derive(Clone, Copy)]
+pub struct Receiver<'a> {
+    /// The point, already offset off its surface.
+    pub point: Vec3,
+    /// Its unit normal (the side being lit).
+    pub normal: Vec3,
+    /// The solid-angle density of the point's other strategy for a direction: the final
+    /// gather's at a texel, the path's continuation at a vertex; `None` when no ray leaves
+    /// the point.
+    pub other: Option<&'a dyn Fn(Vec3) -> f32>,
+}
+
+impl World {
+    /// Weight of a next-event sample of an emitter at density `pdf` from `at`.
+    fn nee_weight(&self, at: &Receiver<'_>, direction: Vec3, pdf: f32) -> f32 {
+        match (self.emitter_sampling(), at.other) {
+            (EmitterSampling::Mis, Some(other)) => power_heuristic(pdf, other(direction)),
+            _ => 1.0,
+        }
+    }
+
+    /// Direct irradiance at `at`: one sample of every analytic light (`u`) and of one
+    /// emitter (`pick` chooses it, `u` the point on it), each with a single shadow ray.
+    /// Returns it and the shadow rays traced.
+    pub fn direct_irradiance(&self, at: &Receiver<'_>, u: [f32; 2], pick: f32) -> (Vec3, u32) {
+        let bvh = self.bvh();
+        let (p, n) = (at.point, at.normal);
+        let (mut e, mut rays) = (Vec3::ZERO, 0);
+        for light in self.lights() {
+            if let Some(s) = light.sample(p, n, u) {
+                rays += 1;
+                if s.distance == 0.0 || !occluded1(&bvh, &shadow_ray(p, s.direction, s.distance)) {
+                    e += s.weight;
+                }
+            }
+        }
+        if let Some(s) = self.sample_emitter(p, n, pick, u) {
+            rays += 1;
+            if !occluded1(&bvh, &self.emitter_shadow_ray(p, &s)) {
+                e += self.emitter_weight(at, &s);
+            }
+        }
+        (e, rays)
+    }
+
+    /// Direct irradiance for eight samples sharing `at`, light sample `u[lane]` and emitter
+    /// choice `pick[lane]` each: shadow rays traced as packets, one packet per light and one
+    /// for the emitters. Adds into `out` and returns the shadow rays traced.
+    pub fn direct_irradiance8(
+        &self,
+        at: &Receiver<'_>,
+        u: &[[f32; 2]; LANES],
+        pick: &[f32; LANES],
+        out: &mut [Vec3; LANES],
+    ) -> u32 {
+        let bvh = self.bvh();
+        let (p, n) = (at.point, at.normal);
+        let mut rays = 0;
+        for light in self.lights() {
+            let mut packet = Ray8::INACTIVE;
+            let mut weights = [Vec3::ZERO; LANES];
+            let mut unshadowed = 0u8;
+            for lane in 0..LANES {
+                let Some(s) = light.sample(p, n, u[lane]) else {
+                    continue;
+                };
+                weights[lane] = s.weight;
+                if s.distance == 0.0 {
+                    unshadowed |= 1 << lane;
+                } else {
+                    packet.set_lane(lane, &shadow_ray(p, s.direction, s.distance));
+                }
+            }
+            rays += add_visible(&bvh, &packet, unshadowed, &weights, out);
+        }
+        if self.emitters().is_some() {
+            let mut packet = Ray8::INACTIVE;
+            let mut weights = [Vec3::ZERO; LANES];
+            for lane in 0..LANES {
+                if let Some(s) = self.sample_emitter(p, n, pick[lane], u[lane]) {
+                    weights[lane] = self.emitter_weight(at, &s);
+                    packet.set_lane(lane, &self.emitter_shadow_ray(p, &s));
+                }
+            }
+            rays += add_visible(&bvh, &packet, 0, &weights, out);
+        }
+        rays
+    }
+
+    /// A next-event sample of an emitter from `(p, n)`, unless the world samples none.
+    fn sample_emitter(&self, p: Vec3, n: Vec3, pick: f32, u: [f32; 2]) -> Option<EmitterSample> {
+        self.emitters()?.sample(p, n, pick, u)
+    }
+
+    /// `L cosθ / p · w_nee`: the emitter sample's irradiance if unoccluded.
+    fn emitter_weight(&self, at: &Receiver<'_>, s: &EmitterSample) -> Vec3 {
+        let cos = at.normal.dot(s.direction);
+        s.radiance * (cos / s.pdf * self.nee_weight(at, s.direction, s.pdf))
+    }
+
+    /// The shadow ray from `p` to an emitter sample. It stops short of the sampled point by
+    /// a ten-thousandth of the distance ([`SHADOW_SHORTEN`], as for the analytic lights) plus
+    /// a few ulps of the coordinates divided by the cosine at the emitter — the rounding of
+    /// the emitter's own intersection along a grazing ray — so the emitter never shadows
+    /// itself, near or far from the origin.
+    fn emitter_shadow_ray(&self, p: Vec3, s: &EmitterSample) -> Ray {
+        let d = (s.point - p).dot(s.direction);
+        let cos_emitter = (-s.normal.dot(s.direction)).max(1e-3);
+        let scale = p.abs().max_element().max(s.point.abs().max_element());
+        let rounding = 8.0 * f32::EPSILON * scale / cos_emitter;
+        let tmax = (d * SHADOW_SHORTEN - rounding).max(0.5 * d);
+        Ray::new(p, s.direction, 0.0, tmax)
+    }
+}
+
+/// Traces `packet`'s live lanes for occlusion and adds `weights[lane]` for every visible
+/// lane (and every lane of `unshadowed`). Returns the lanes traced.
+fn add_visible(
+    bvh: &guidebake_kernels::traverse::BvhRef<'_>,
+    packet: &Ray8,
+    unshadowed: u8,
+    weights: &[Vec3; LANES],
+    out: &mut [Vec3; LANES],
+) -> u32 {
+    let traced = lanes_traced(packet);
+    let blocked = if traced != 0 {
+        occluded8(bvh, packet)
+    } else {
+        0
+    };
+    let visible = unshadowed | (traced & !blocked);
+    for lane in 0..LANES {
+        if visible & (1 << lane) != 0 {
+            out[lane] += weights[lane];
+        }
+    }
+    traced.count_ones()
+}
+
+fn lanes_traced(packet: &Ray8) -> u8 {
+    let tmin = packet.tmin.to_array();
+    (0..LANES).fold(0, |m, i| if tmin[i].is_finite() { m | 1 << i } else { m })
+}
+
+fn shadow_ray(p: Vec3, dir: Vec3, distance: f32) -> Ray {
+    let tmax = if distance.is_finite() {
+        distance * SHADOW_SHORTEN
+    } else {
+        f32::INFINITY
+    };
+    Ray::new(p, dir, 0.0, tmax)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{DVec3, Vec2};
+    use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere};
+    use guidebake_kernels::testing::Pcg32;
+    use guidebake_kernels::traverse::intersect1;
+
+    use super::*;
+    use crate::bake::world::SurfaceHit;
+    use crate::bvh::Preset;
+    use crate::scene::{Material, Scene, Triangle};
+    use crate::transport::emitters::EmitterSelection;
+    use crate::transport::path::Departure;
+    use crate::transport::rng::SampleRng;
+
+    /// Irradiance at `p` (normal `n`) from a Lambertian polygon of radiance `l` (Lambert's
+    /// formula, `E = L/2 · Σ γᵢ n·(rᵢ × rᵢ₊₁)/|rᵢ × rᵢ₊₁|`), after clipping the polygon to
+    /// the receiver's upper half-space.
+    fn lambert(p: Vec3, n: Vec3, polygon: &[Vec3], l: f32) -> f64 {
+        let (p, n) = (p.as_dvec3(), n.as_dvec3());
+        let clipped = clip_above(polygon.iter().map(|v| v.as_dvec3() - p).collect(), n);
+        let mut sum = 0.0;
+        for i in 0..clipped.len() {
+            let (a, b) = (
+                clipped[i].normalize(),
+                clipped[(i + 1) % clipped.len()].normalize(),
+            );
+            let cross = a.cross(b);
+            if cross.length() > 0.0 {
+                sum += a.dot(b).clamp(-1.0, 1.0).acos() * n.dot(cross.normalize());
+            }
+        }
+        f64::from(l) * 0.5 * sum.abs()
+    }
+
+    /// Sutherland–Hodgman against the plane through the origin with normal `n`.
+    fn clip_above(polygon: Vec<DVec3>, n: DVec3) -> Vec<DVec3> {
+        let mut out = Vec::new();
+        for i in 0..polygon.len() {
+            let (a, b) = (polygon[i], polygon[(i + 1) % polygon.len()]);
+            let (da, db) = (a.dot(n), b.dot(n));
+            if da >= 0.0 {
+                out.push(a);
+            }
+            if (da >= 0.0) != (db >= 0.0) {
+                out.push(a + (b - a) * (da / (da - db)));
+            }
+        }
+        out
+    }
+
+    /// A world holding one emissive quad (`corners` in order, front face `(b−a)×(c−a)`) of
+    /// radiance `l`, albedo 0, black sky.
+    fn lamp(corners: [Vec3; 4], l: f32, sampling: EmitterSampling, sel: EmitterSelection) -> World {
+        let [a, b, c, d] = corners;
+        let tri = |positions: [Vec3; 3]| Triangle {
+            positions,
+            normals: [(b - a).cross(c - a).normalize(); 3],
+            lightmap_uv: Some([Vec2::ZERO; 3]),
+            mesh: 0,
+            material: 0,
+        };
+        let material = Material {
+            name: "lamp".into(),
+            albedo: Vec3::ZERO,
+            emission: Vec3::splat(l),
+        };
+        let scene =
+            Scene::of_triangles("lamp", vec![tri([a, b, c]), tri([a, c, d])], vec![material]);
+        let mut world = World::new(&scene, Preset::DEFAULT).unwrap();
+        world.set_emitters(sampling, sel);
+        world
+    }
+
+    /// Mean and standard error of `n` samples of `f`.
+    fn estimate(n: usize, mut f: impl FnMut(usize) -> f64) -> (f64, f64) {
+        let (mut sum, mut sum2) = (0.0, 0.0);
+        for i in 0..n {
+            let x = f(i);
+            assert!(x.is_finite() && x >= 0.0, "sample {i}: {x}");
+            sum += x;
+            sum2 += x * x;
+        }
+        let mean = sum / n as f64;
+        (
+            mean,
+            ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt(),
+        )
+    }
+
+    /// One sample of the irradiance at `(p, n)` from `world`'s emitters by next-event
+    /// estimation (weighted against cosine gathering when `mis`) and by a cosine-sampled
+    /// ray that may hit one (weighted by the world's emitter sampling).
+    fn sample(world: &World, p: Vec3, n: Vec3, rng: &mut Pcg32, i: usize) -> (f64, f64) {
+        let cosine = |d: Vec3| n.dot(d).max(0.0) * core::f32::consts::FRAC_1_PI;
+        let at = Receiver {
+            point: p,
+            normal: n,
+            other: Some(&cosine),
+        };
+        let u = [rng.next_f32(), rng.next_f32()];
+        let (nee, _) = world.direct_irradiance(&at, u, rng.next_f32());
+        let (t, b) = orthonormal_basis(n);
+        let d = sample_cosine_hemisphere([rng.next_f32(), rng.next_f32()]);
+        let dir = (t * d.x + b * d.y + n * d.z).normalize();
+        let hit = intersect1(&world.bvh(), &Ray::new(p, dir, 0.0, f32::INFINITY));
+        let hit_e = hit.map_or(0.0, |h| {
+            let from = Departure {
+                point: p,
+                normal: n,
+                pdf: cosine(dir),
+            };
+            let hit = SurfaceHit {
+                prim: h.prim,
+                t: h.t,
+                u: h.u,
+                v: h.v,
+            };
+            let mut rng = SampleRng::new(1, 0, 0, i as u32);
+            let leaving = world.radiance_from_hit(&from, dir, hit, &mut rng);
+            assert_eq!(
+                leaving.reflected,
+                Vec3::ZERO,
+                "a black lamp reflects nothing"
+            );
+            f64::from(leaving.emitted.x) * core::f64::consts::PI
+        });
+        (f64::from(nee.x), hit_e)
+    }
+
+    #[test]
+    fn an_emissive_quad_gives_lamberts_irradiance_by_nee_hits_and_mis() {
+        let l = 7.0;
+        // A 1 m square 1 m above the origin, facing down.
+        let quad = [
+            Vec3::new(-0.5, -0.5, 1.0),
+            Vec3::new(-0.5, 0.5, 1.0),
+            Vec3::new(0.5, 0.5, 1.0),
+            Vec3::new(0.5, -0.5, 1.0),
+        ];
+        let cases = [
+            ("facing it", Vec3::ZERO, Vec3::Z),
+            (
+                "at a slant",
+                Vec3::new(0.7, 0.2, 0.0),
+                Vec3::new(-0.5, 0.1, 1.0).normalize(),
+            ),
+            (
+                "partly below the horizon",
+                Vec3::new(0.1, 0.0, 0.6),
+                Vec3::new(1.0, 0.0, 0.3).normalize(),
+            ),
+        ];
+        let n = 40_000;
+        let selections = [EmitterSelection::Power, EmitterSelection::Tree];
+        for ((what, p, normal), sel) in cases.into_iter().flat_map(|c| selections.map(|s| (c, s))) {
+            let what = format!("{what} ({sel})");
+            let want = lambert(p, normal, &quad, l);
+            assert!(want > 0.05, "{what}: {want}");
+            let nee_alone = lamp(quad, l, EmitterSampling::Nee, sel);
+            let hits_alone = lamp(quad, l, EmitterSampling::Hits, sel);
+            let mis = lamp(quad, l, EmitterSampling::Mis, sel);
+            let mut rng = Pcg32::new(7, 1);
+            let nee = estimate(n, |i| sample(&nee_alone, p, normal, &mut rng, i).0);
+            let hits = estimate(n, |i| sample(&hits_alone, p, normal, &mut rng, i).1);
+            let both = estimate(n, |i| {
+                let (a, b) = sample(&mis, p, normal, &mut rng, i);
+                a + b
+            });
+            // The strategies that are off contribute nothing.
+            let mut rng = Pcg32::new(8, 1);
+            assert_eq!(
+                estimate(1000, |i| sample(&nee_alone, p, normal, &mut rng, i).1).0,
+                0.0
+            );
+            assert_eq!(
+                estimate(1000, |i| sample(&hits_alone, p, normal, &mut rng, i).0).0,
+                0.0
+            );
+            for (name, (mean, se)) in [("nee", nee), ("hits", hits), ("mis", both)] {
+                assert!(
+                    (mean - want).abs() <= 3.0 * se + 1e-4 * want,
+                    "{what}, {name}: {mean} ± {se}, Lambert {want}"
+                );
+            }
+            assert!(
+                nee.1 < hits.1 && both.1 < hits.1,
+                "{what}: {nee:?} {hits:?} {both:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn an_emitter_seen_from_behind_gives_nothing() {
+        // The quad faces up (+z).
+        let quad = [
+            Vec3::new(-0.5, -0.5, 0.0),
+            Vec3::new(0.5, -0.5, 0.0),
+            Vec3::new(0.5, 0.5, 0.0),
+            Vec3::new(-0.5, 0.5, 0.0),
+        ];
+        let world = lamp(quad, 5.0, EmitterSampling::Mis, EmitterSelection::Power);
+        let (p, n) = (Vec3::new(0.0, 0.0, -1.0), Vec3::Z);
+        let mut rng = Pcg32::new(3, 3);
+        let (mean, _) = estimate(2000, |i| {
+            let (a, b) = sample(&world, p, n, &mut rng, i);
+            a + b
+        });
+        assert_eq!(mean, 0.0, "from below, only the back is seen");
+        let (p, n) = (Vec3::new(0.0, 0.0, 1.0), -Vec3::Z);
+        let (mean, _) = estimate(2000, |i| {
+            let (a, b) = sample(&world, p, n, &mut rng, i);
+            a + b
+        });
+        assert!(mean > 0.0, "from above, the front is seen");
+    }
+
+    #[test]
+    fn the_power_heuristic_weighs_in_zero_to_one() {
+        assert_eq!(power_heuristic(f32::INFINITY, 3.0), 1.0);
+        assert_eq!(power_heuristic(0.0, 0.0), 0.0);
+        assert_eq!(power_heuristic(2.0, 2.0), 0.5);
+        assert!((power_heuristic(1.0, 3.0) - 0.1).abs() < 1e-7);
+        assert!((power_heuristic(3.0, 1.0) + power_heuristic(1.0, 3.0) - 1.0).abs() < 1e-7);
+    }
+}

@@ -1,0 +1,397 @@
+//! Emissive triangles as lights: the set next-event estimation samples, and the density it
+//! samples them with, which multiple importance sampling needs for the emission that gather
+//! and path rays hit ([`super::direct`], [`super::path`]).
+//!
+//! Every triangle whose material emits is an emitter: Lambertian, radiance `emission` from
+//! its front face (winding order) only, uniform over the triangle (a glTF emissive texture is
+//! averaged into the material's emission when the scene is loaded). A receiver at `p` with
+//! normal `n` samples one emitter by the [`EmitterSelection`] in force, then one point `y`
+//! uniformly by area on it (the square-root map of Shirley & Chiu; sampling the spherical
+//! triangle by solid angle, Arvo 1995, was not built). The solid-angle density of the
+//! direction to `y` is `P(e | p, n) · |y − p|² / (A · cos θ_e)`.
+//!
+//! Selection ([`EmitterSelection`]): in proportion to power (area × luminance of the
+//! emission) by Vose's alias table ([`super::alias`], O(1), the same at every receiver), or
+//! by the light tree ([`super::light_tree`], O(log N)), which prefers the emitters that
+//! matter at the receiver and picks none where none can light it.
+//!
+//! A world without emitters builds none of this and traces no shadow rays for them.
+
+use glam::{DVec3, Vec3};
+
+use super::alias::AliasTable;
+use super::light_tree::{EmitterBounds, LightTree};
+
+/// How next-event estimation picks an emitter.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum EmitterSelection {
+    /// In proportion to power, the same at every receiver (Vose's alias table).
+    #[default]
+    Power,
+    /// By the light tree: power, distance and orientation of clusters of emitters as seen
+    /// from the receiver (Conty Estevez & Kulla 2018).
+    Tree,
+}
+
+impl std::fmt::Display for EmitterSelection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            EmitterSelection::Power => "power",
+            EmitterSelection::Tree => "tree",
+        })
+    }
+}
+
+/// One emissive triangle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Emitter {
+    /// The scene triangle (BVH primitive id).
+    prim: u32,
+    /// First corner and the two edges from it.
+    a: Vec3,
+    ab: Vec3,
+    ac: Vec3,
+    /// Unit front normal.
+    normal: Vec3,
+    area: f32,
+    radiance: Vec3,
+}
+
+/// Marks a triangle that is not an emitter in [`Emitters::of_prim`].
+const NOT_AN_EMITTER: u32 = u32::MAX;
+
+/// The picker of [`EmitterSelection`].
+#[derive(Debug)]
+enum Picker {
+    Power(AliasTable),
+    Tree(LightTree),
+}
+
+/// The emissive triangles of a world and how to sample them.
+#[derive(Debug)]
+pub struct Emitters {
+    emitters: Vec<Emitter>,
+    /// Emitter index of every scene triangle ([`NOT_AN_EMITTER`] for the others).
+    of_prim: Vec<u32>,
+    picker: Picker,
+}
+
+/// One next-event sample of an emitter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EmitterSample {
+    /// The emitter's scene triangle.
+    pub prim: u32,
+    /// The sampled point on it.
+    pub point: Vec3,
+    /// Its front normal.
+    pub normal: Vec3,
+    /// Unit direction from the receiver to `point`.
+    pub direction: Vec3,
+    /// Radiance leaving `point` towards the receiver.
+    pub radiance: Vec3,
+    /// Solid-angle density of `direction` under this sampling, > 0 and finite.
+    pub pdf: f32,
+}
+
+/// Luminance of linear RGB (Rec. 709), the emitters' power measure.
+pub fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+impl Emitters {
+    /// The emitters among `triangles` (corners, unit front normal and emitted radiance per
+    /// scene triangle, in primitive order); `None` when none emits (a world without emitters
+    /// samples none). Triangles of no power (no area, black or non-finite emission) are not
+    /// emitters: nothing can hit them, or they give nothing.
+    pub fn new(
+        triangles: impl ExactSizeIterator<Item = ([Vec3; 3], Vec3, Vec3)>,
+        selection: EmitterSelection,
+    ) -> Option<Self> {
+        let mut of_prim = vec![NOT_AN_EMITTER; triangles.len()];
+        let mut emitters = Vec::new();
+        for (prim, ([a, b, c], normal, radiance)) in triangles.enumerate() {
+            let area = 0.5 * (b - a).cross(c - a).length();
+            let power = area * luminance(radiance);
+            if !(power > 0.0 && power.is_finite() && radiance.is_finite()) {
+                continue;
+            }
+            of_prim[prim] = emitters.len() as u32;
+            emitters.push(Emitter {
+                prim: prim as u32,
+                a,
+                ab: b - a,
+                ac: c - a,
+                normal,
+                area,
+                radiance,
+            });
+        }
+        let picker = match selection {
+            EmitterSelection::Power => {
+                let powers: Vec<f32> = emitters.iter().map(Emitter::power).collect();
+                Picker::Power(AliasTable::new(&powers)?)
+            }
+            EmitterSelection::Tree => {
+                let bounds: Vec<EmitterBounds> = emitters.iter().map(Emitter::bounds).collect();
+                Picker::Tree(LightTree::build(&bounds)?)
+            }
+        };
+        Some(Self {
+            emitters,
+            of_prim,
+            picker,
+        })
+    }
+
+    /// Number of emitters.
+    pub fn len(&self) -> usize {
+        self.emitters.len()
+    }
+
+    /// Always false: a world without emitters has no [`Emitters`].
+    pub fn is_empty(&self) -> bool {
+        self.emitters.is_empty()
+    }
+
+    /// Samples a direction towards an emitter from receiver `p` with unit normal `n`: `pick`
+    /// chooses the emitter, `u` the point on it. `None` when the sample cannot light the
+    /// receiver (the emitter faces away, the point is below the receiver's horizon, or no
+    /// emitter can reach it): it contributes zero and needs no shadow ray.
+    pub fn sample(&self, p: Vec3, n: Vec3, pick: f32, u: [f32; 2]) -> Option<EmitterSample> {
+        let (index, pmf) = match &self.picker {
+            Picker::Power(table) => table.pick(pick),
+            Picker::Tree(tree) => tree.pick(p, n, pick)?,
+        };
+        let e = &self.emitters[index as usize];
+        let (point, density) = e.sample_point(p, u)?;
+        let to = point - p;
+        let direction = to.normalize_or_zero();
+        if !(-e.normal.dot(direction) > 0.0 && n.dot(direction) > 0.0) {
+            return None;
+        }
+        let pdf = pmf * density;
+        (pdf > 0.0 && pdf.is_finite()).then_some(EmitterSample {
+            prim: e.prim,
+            point,
+            normal: e.normal,
+            direction,
+            radiance: e.radiance,
+            pdf,
+        })
+    }
+
+    /// The solid-angle density with which [`Self::sample`] at receiver `(p, n)` picks the
+    /// direction `direction` that meets triangle `prim` at distance `t`: 0 when `prim` is not
+    /// an emitter or is seen from behind.
+    pub fn pdf(&self, p: Vec3, n: Vec3, prim: u32, direction: Vec3, t: f32) -> f32 {
+        let Some(&index) = self.of_prim.get(prim as usize) else {
+            return 0.0;
+        };
+        let Some(e) = self.emitters.get(index as usize) else {
+            return 0.0;
+        };
+        if -e.normal.dot(direction) <= 0.0 {
+            return 0.0;
+        }
+        let pmf = match &self.picker {
+            Picker::Power(table) => table.pmf(index),
+            Picker::Tree(tree) => tree.pmf(p, n, index),
+        };
+        let pdf = pmf * e.density(p, direction, t);
+        if pdf.is_finite() { pdf } else { f32::MAX }
+    }
+}
+
+/// Solid angles (sr) within which an emitter is sampled by solid angle: below, the
+/// spherical triangle is too thin for Arvo's formulas in floating point, and area sampling is
+/// uniform in solid angle anyway; above, the receiver is so close to the triangle's plane that
+/// the sphere's cap degenerates (pbrt-v4's bounds).
+const SPHERICAL_SOLID_ANGLES: core::ops::RangeInclusive<f64> = 3e-4..=6.22;
+
+impl Emitter {
+    fn power(&self) -> f32 {
+        self.area * luminance(self.radiance)
+    }
+
+    fn bounds(&self) -> EmitterBounds {
+        EmitterBounds {
+            corners: self.corners(),
+            normal: self.normal,
+            power: self.power(),
+        }
+    }
+
+    fn corners(&self) -> [Vec3; 3] {
+        [self.a, self.a + self.ab, self.a + self.ac]
+    }
+
+    /// The solid angle the triangle subtends at `p` (Van Oosterom & Strackee 1983), in f64;
+    /// 0 when `p` lies behind it (it emits from its front only) or in its plane.
+    fn solid_angle(&self, p: Vec3) -> f64 {
+        if (p - self.a).dot(self.normal) <= 0.0 {
+            return 0.0;
+        }
+        let [a, b, c] = self.corners().map(|v| (v - p).as_dvec3());
+        let (la, lb, lc) = (a.length(), b.length(), c.length());
+        let triple = a.dot(b.cross(c)).abs();
+        let below = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+        2.0 * triple.atan2(below)
+    }
+
+    /// Where next-event estimation samples this emitter from `p`: uniformly in the solid
+    /// angle it subtends (Arvo 1995), so a receiver close to an emitter gets bounded weights,
+    /// or uniformly by area where the solid angle is out of [`SPHERICAL_SOLID_ANGLES`].
+    /// Returns the point and the solid-angle density of its direction (given this emitter).
+    fn sample_point(&self, p: Vec3, u: [f32; 2]) -> Option<(Vec3, f32)> {
+        let omega = self.solid_angle(p);
+        if omega <= 0.0 {
+            return None;
+        }
+        if SPHERICAL_SOLID_ANGLES.contains(&omega) {
+            let [a, b, c] = self.corners().map(|v| (v - p).as_dvec3().normalize());
+            let dir = sample_spherical_triangle(a, b, c, omega, u)?.as_vec3();
+            let t = (self.a - p).dot(self.normal) / dir.dot(self.normal);
+            let point = p + dir * t;
+            return (t > 0.0 && point.is_finite()).then_some((point, (1.0 / omega) as f32));
+        }
+        let su = u[0].sqrt();
+        let point = self.a + self.ab * (1.0 - su) + self.ac * (u[1] * su);
+        let to = point - p;
+        let d2 = to.length_squared();
+        Some((point, self.density(p, to / d2.sqrt(), d2.sqrt())))
+    }
+
+    /// The solid-angle density of [`Self::sample_point`] from `p` for the direction
+    /// `direction` that meets the triangle at distance `t`.
+    fn density(&self, p: Vec3, direction: Vec3, t: f32) -> f32 {
+        let omega = self.solid_angle(p);
+        if SPHERICAL_SOLID_ANGLES.contains(&omega) {
+            return (1.0 / omega) as f32;
+        }
+        let cos_emitter = -self.normal.dot(direction);
+        if cos_emitter <= 0.0 {
+            return 0.0;
+        }
+        t * t / (self.area * cos_emitter)
+    }
+}
+
+/// A direction uniformly distributed over the spherical triangle of unit vectors `a`, `b`,
+/// `c` of solid angle `area` (Arvo, *Stratified Sampling of Spherical Triangles*, 1995); in
+/// f64, `None` where the triangle is too degenerate to sample.
+fn sample_spherical_triangle(
+    a: DVec3,
+    b: DVec3,
+    c: DVec3,
+    area: f64,
+    u: [f32; 2],
+) -> Option<DVec3> {
+    // The angle at vertex a, between the great circles a–b and a–c.
+    let n_ab = a.cross(b).try_normalize()?;
+    let n_ac = a.cross(c).try_normalize()?;
+    let cos_alpha = n_ab.dot(n_ac).clamp(-1.0, 1.0);
+    let sin_alpha = (1.0 - cos_alpha * cos_alpha).max(0.0).sqrt();
+    let alpha = cos_alpha.acos();
+    // The sub-triangle a–b–ĉ of area u₀ · area: ĉ on the arc a–c.
+    let sub = f64::from(u[0]) * area;
+    let (s, t) = (sub - alpha).sin_cos();
+    let uu = t - cos_alpha;
+    let v = s + sin_alpha * a.dot(b);
+    let q = ((v * t - uu * s) * cos_alpha - v) / ((v * s + uu * t) * sin_alpha);
+    let q = q.clamp(-1.0, 1.0);
+    let c_hat = a * q + (c - a * c.dot(a)).try_normalize()? * (1.0 - q * q).max(0.0).sqrt();
+    // Uniform in z along the arc b–ĉ.
+    let z = 1.0 - f64::from(u[1]) * (1.0 - c_hat.dot(b));
+    let z = z.clamp(-1.0, 1.0);
+    let dir = b * z + (c_hat - b * c_hat.dot(b)).try_normalize()? * (1.0 - z * z).max(0.0).sqrt();
+    dir.is_finite().then_some(dir)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use guidebake_kernels::testing::Pcg32;
+
+    fn emitter(corners: [Vec3; 3]) -> Emitter {
+        let [a, b, c] = corners;
+        Emitter {
+            prim: 0,
+            a,
+            ab: b - a,
+            ac: c - a,
+            normal: (b - a).cross(c - a).normalize(),
+            area: 0.5 * (b - a).cross(c - a).length(),
+            radiance: Vec3::ONE,
+        }
+    }
+
+    /// The triangle's four midpoint children, `depth` times: 4^depth cells covering it.
+    fn subdivide(t: [Vec3; 3], depth: u32) -> Vec<[Vec3; 3]> {
+        if depth == 0 {
+            return vec![t];
+        }
+        let [a, b, c] = t;
+        let (ab, bc, ca) = ((a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5);
+        [[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]
+            .into_iter()
+            .flat_map(|s| subdivide(s, depth - 1))
+            .collect()
+    }
+
+    /// Which cell of `cells` (coplanar) the point `y` lies in.
+    fn cell_of(cells: &[[Vec3; 3]], normal: Vec3, y: Vec3) -> usize {
+        let inside = |[a, b, c]: [Vec3; 3]| {
+            let edge = |p: Vec3, q: Vec3| (q - p).cross(y - p).dot(normal) >= -1e-6;
+            edge(a, b) && edge(b, c) && edge(c, a)
+        };
+        cells
+            .iter()
+            .position(|&t| inside(t))
+            .expect("inside the triangle")
+    }
+
+    #[test]
+    fn sampled_points_are_uniform_in_solid_angle_chi_square() {
+        let corners = [
+            Vec3::new(-1.0, -0.5, 1.0),
+            Vec3::new(1.5, -0.5, 1.0),
+            Vec3::new(0.0, 1.0, 1.0),
+        ];
+        // Facing down (towards the receivers below).
+        let tri = emitter([corners[0], corners[2], corners[1]]);
+        let cells = subdivide(corners, 2);
+        for p in [
+            Vec3::new(0.1, 0.0, 0.9),
+            Vec3::new(2.0, 0.3, 0.2),
+            Vec3::new(0.0, 0.0, -5.0),
+        ] {
+            let omega = tri.solid_angle(p);
+            assert!(SPHERICAL_SOLID_ANGLES.contains(&omega), "{p}: {omega}");
+            let want: Vec<f64> = cells
+                .iter()
+                .map(|&[a, b, c]| emitter([a, c, b]).solid_angle(p) / omega)
+                .collect();
+            assert!((want.iter().sum::<f64>() - 1.0).abs() < 1e-6);
+            let n = 200_000;
+            let mut counts = vec![0u32; cells.len()];
+            let mut rng = Pcg32::new(5, 9);
+            for _ in 0..n {
+                let (y, density) = tri
+                    .sample_point(p, [rng.next_f32(), rng.next_f32()])
+                    .unwrap();
+                assert!((f64::from(density) - 1.0 / omega).abs() < 1e-6 / omega);
+                counts[cell_of(&cells, Vec3::Z, y)] += 1;
+            }
+            let chi2: f64 = counts
+                .iter()
+                .zip(&want)
+                .map(|(&k, &w)| (f64::from(k) - w * n as f64).powi(2) / (w * n as f64))
+                .sum();
+            // 15 degrees of freedom: P(χ² > 37.7) = 0.001.
+            assert!(
+                chi2 < 37.7,
+                "{p}: χ² = {chi2}, counts {counts:?}, want {want:?}"
+            );
+        }
+    }
+}
