@@ -15,7 +15,7 @@ use std::io::Write;
 use wide::f32x8;
 
 /// Chi-square tests in this file, for the Šidák correction.
-const CHI2_TESTS: u32 = 6;
+const CHI2_TESTS: u32 = 7;
 const ALPHA: f64 = 0.01;
 /// Odd histogram resolution, so cell edges never line up with the quadtree's dyadic edges.
 const RES: usize = 31;
@@ -524,5 +524,56 @@ fn learning_from_guided_samples_is_unbiased() {
     assert!(
         (gui - truth).abs() < 0.03,
         "guided learning: {gui} vs {truth}"
+    );
+}
+
+/// The bake's defensive mixture (driver `gather.rs`, `--mix`): a share `c` of the samples
+/// drawn uniformly on the square (the cosine baseline), the rest warped through the guide,
+/// every sample weighted with the density `c + (1 − c)·q`. The pooled points must follow that
+/// density (chi-square over the whole square), and a weighted estimate of the disk-and-sky
+/// integral must agree with the uniform one.
+#[test]
+fn the_defensive_mixture_samples_its_density() {
+    let mut storage = vec![Node::default(); 4096];
+    let (g, _) = learned(&mut storage, 4096);
+    assert!(!g.is_uniform());
+    let c = 0.25f64;
+    let n_cosine = (SAMPLES as f64 * c) as usize;
+    let mut rng = Pcg32::new(21, 3);
+    let mut observed = vec![0.0; RES * RES + 1];
+    let (mut estimate, mut uniform) = (0.0f64, 0.0f64);
+    for i in 0..SAMPLES {
+        let u = [rng.next_f32(), rng.next_f32()];
+        let (w, q) = if i < n_cosine {
+            (u, warp::pdf(&g, u))
+        } else {
+            let s = warp::sample(&g, u);
+            (s.u, s.pdf)
+        };
+        assert_eq!(
+            q,
+            warp::pdf(&g, w),
+            "the density at the point is the one sampled"
+        );
+        let mixture = c + (1.0 - c) * f64::from(q);
+        estimate += f64::from(disk_and_sky(w)) / mixture;
+        uniform += f64::from(disk_and_sky([rng.next_f32(), rng.next_f32()]));
+        let i = ((f64::from(w[0]) * RES as f64) as usize).min(RES - 1);
+        let j = ((f64::from(w[1]) * RES as f64) as usize).min(RES - 1);
+        observed[j * RES + i] += 1.0;
+    }
+    let guided = expected(&g, 0.0, 1.0, SAMPLES - n_cosine);
+    let cell = n_cosine as f64 / (RES * RES) as f64;
+    let e: Vec<f64> = guided
+        .iter()
+        .enumerate()
+        .map(|(k, &x)| x + if k < RES * RES { cell } else { 0.0 })
+        .collect();
+    let r = chi_square(&observed, &e, 5.0);
+    assert!(r.passes(ALPHA, CHI2_TESTS), "mixture: {r:?}");
+    let (estimate, uniform) = (estimate / SAMPLES as f64, uniform / SAMPLES as f64);
+    assert!(
+        (estimate / uniform - 1.0).abs() < 0.02,
+        "mixture estimate {estimate} vs uniform {uniform}"
     );
 }

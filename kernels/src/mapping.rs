@@ -242,15 +242,18 @@ pub fn invert_cosine_hemisphere_x8(w: [f32x8; 3]) -> [f32x8; 2] {
     ]
 }
 
-/// A right-handed orthonormal basis (t, b) with t × b = n, for a unit normal `n`, without a
-/// branch on the sign of n.z (Duff et al. 2017, listing 3).
+/// A right-handed orthonormal basis (t, b) with t × b = n, for a unit normal `n` (Duff et
+/// al. 2017, listing 3). The sign is that of n.z with −0 counted as +0, so the two zeros of
+/// a wall facing sideways get the same frame. The frame still turns by 180° about n where
+/// n.z crosses 0: a texel's frame that must agree with its neighbours' comes from
+/// [`carried_frame`].
 ///
 /// # Panics
 /// Debug builds assert n is finite. Release: the frame is as accurate as n is unit.
 #[inline]
 pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
     debug_assert!(n.is_finite(), "n = {n}");
-    let sign = libm::copysignf(1.0, n.z);
+    let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
     let t = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
@@ -258,12 +261,28 @@ pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
     (t, bt)
 }
 
+/// The frame of a cluster — tangent `t` of the unit mean normal `m` — carried to the unit
+/// normal `n` by the minimal rotation taking `m` to `n` (Rodrigues, about `m × n`); returns
+/// `(t', b')` with `t' × b' = n`. Texels whose normals are close map a point of the square
+/// to close directions, whatever the signs of their components. Needs `m · n > −1` (normals
+/// of one cluster lie within 60° of their mean); the result is re-orthonormalized
+/// (Gram–Schmidt against `n`).
+#[inline]
+pub fn carried_frame(t: Vec3, m: Vec3, n: Vec3) -> (Vec3, Vec3) {
+    let c = m.dot(n);
+    let k = m.cross(n);
+    let rotate = |v: Vec3| v * c + k.cross(v) + k * (k.dot(v) / (1.0 + c));
+    let t = if c > -0.999 { rotate(t) } else { t };
+    let t = (t - n * n.dot(t)).normalize_or(orthonormal_basis(n).0);
+    (t, n.cross(t))
+}
+
 /// [`orthonormal_basis`] for eight normals: returns ([tx, ty, tz], [bx, by, bz]).
 #[inline]
 pub fn orthonormal_basis_x8(n: [f32x8; 3]) -> ([f32x8; 3], [f32x8; 3]) {
     let [nx, ny, nz] = n;
     let one = f32x8::splat(1.0);
-    let sign = one.copysign(nz);
+    let sign = nz.simd_ge(f32x8::ZERO).select(one, -one);
     let a = -one / (sign + nz);
     let b = nx * ny * a;
     let t = [one + sign * nx * nx * a, sign * b, -sign * nx];
@@ -635,5 +654,46 @@ mod tests {
             worst[0] < 2e-7 && worst[1] < 2e-7 && worst[2] < 2e-7,
             "errors {worst:?}"
         );
+    }
+
+    #[test]
+    fn both_zeros_of_n_z_give_one_frame() {
+        for n in [Vec3::X, Vec3::new(0.6, 0.8, 0.0), Vec3::new(0.0, -1.0, 0.0)] {
+            let minus = Vec3::new(n.x, n.y, -0.0);
+            assert_eq!(orthonormal_basis(n), orthonormal_basis(minus), "{n}");
+            let (t, b) = orthonormal_basis_x8([
+                f32x8::splat(n.x),
+                f32x8::splat(n.y),
+                f32x8::new([0.0, -0.0, 0.0, -0.0, 0.0, -0.0, 0.0, -0.0]),
+            ]);
+            let (t0, b0) = orthonormal_basis(n);
+            for a in [t, b].iter().zip([t0, b0]) {
+                for (lane, want) in a.0.iter().zip([a.1.x, a.1.y, a.1.z]) {
+                    assert!(lane.to_array().iter().all(|&v| v == want), "{n}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn carried_frames_are_orthonormal_and_continuous() {
+        let m = Vec3::new(1.0, 0.0, 0.0);
+        let (t, _) = orthonormal_basis(m);
+        for n in [
+            m,
+            Vec3::new(1.0, 0.0, 1e-7).normalize(),
+            Vec3::new(1.0, 0.0, -1e-7).normalize(),
+            Vec3::new(0.8, 0.0, 0.6),
+            Vec3::new(0.8, 0.6, 0.0),
+            Vec3::new(0.6, -0.5, -0.62).normalize(),
+        ] {
+            let (a, b) = carried_frame(t, m, n);
+            assert!((a.length() - 1.0).abs() < 1e-5 && (b.length() - 1.0).abs() < 1e-5);
+            assert!(a.dot(n).abs() < 1e-5 && b.dot(n).abs() < 1e-5 && a.dot(b).abs() < 1e-5);
+            assert!((a.cross(b) - n).length() < 1e-5, "right-handed about {n}");
+            // The minimal rotation moves the tangent no more than the normal moved.
+            let turned = m.angle_between(n);
+            assert!(a.angle_between(t) <= turned + 1e-3, "{n}: {a} vs {t}");
+        }
     }
 }

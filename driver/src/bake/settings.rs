@@ -31,6 +31,23 @@ pub enum Combine {
     /// the mean over all texels of that iteration's variance; unbiased, needs no ρ. The
     /// iterations' batches are kept in a file and combined in the final pass.
     Global,
+    /// Weights from the cluster: each iteration's weight ∝ its sample count over the
+    /// cluster's pooled relative variance of that iteration (the sum over the cluster's
+    /// texels of each texel's per-sample variance in the iteration over the sum of their
+    /// squared means). The guide's quality is a property of the cluster, which 64 texels'
+    /// samples estimate far better than one texel's; a firefly still lowers its own
+    /// iteration's weight, so use it with ρ.
+    Cluster,
+}
+
+/// How a bake's samples are split over its learning iterations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Schedule {
+    /// The same number of packets in every iteration (the remainder to the last).
+    Even,
+    /// Each iteration twice the previous one's packets, the last at least half the budget
+    /// (Müller et al. 2017): the guide the most samples use learned from the most records.
+    Doubling,
 }
 
 /// How the radiance a gather ray brings back from its hit is computed (DESIGN.md, light
@@ -78,6 +95,16 @@ pub struct BakeSettings {
     /// Bounces of light after the gather hit: 1 = emission and direct light at the hit
     /// only; `series` runs this many passes, `path` paths of at most this many vertices.
     pub bounces: u32,
+    /// Percent of every guided iteration's packets drawn from the cosine baseline (the
+    /// defensive mixture); every sample is weighted with the mixture's density.
+    pub mix: u32,
+    /// How the samples are split over the iterations.
+    pub schedule: Schedule,
+    /// A guide node splits only if it holds at least this many records.
+    pub min_split: u32,
+    /// The guide's smoothing α (paper §2.3) in percent: each child's share of its parent
+    /// pulled toward a quarter by this much (the paper's filter: a prior toward the parent).
+    pub smooth: u32,
     /// How emissive triangles are found.
     pub emitters: EmitterSampling,
     /// How next-event estimation picks an emitter.
@@ -96,11 +123,15 @@ impl Default for BakeSettings {
             spp: 256,
             iterations: 4,
             guiding: Guiding::Coherent,
-            combine: Combine::Texel,
-            bias_correction: true,
+            combine: Combine::Global,
+            bias_correction: false,
             seed: 0,
             transport: Transport::Series,
             bounces: 3,
+            mix: 25,
+            schedule: Schedule::Doubling,
+            min_split: 64,
+            smooth: 10,
             emitters: EmitterSampling::default(),
             emitter_selection: EmitterSelection::default(),
         }
@@ -139,6 +170,24 @@ impl BakeSettings {
                 self.spp, self.iterations
             )));
         }
+        if self.mix > 100 {
+            return Err(SettingsError(format!(
+                "--mix {}: a percentage of the packets, between 0 and 100",
+                self.mix
+            )));
+        }
+        if self.smooth > 100 {
+            return Err(SettingsError(format!(
+                "--smooth {}: a percentage, between 0 and 100",
+                self.smooth
+            )));
+        }
+        if self.min_split < 1 {
+            return Err(SettingsError(format!(
+                "--min-split {}: at least 1 record",
+                self.min_split
+            )));
+        }
         if !(1..=MAX_BOUNCES).contains(&self.bounces) {
             return Err(SettingsError(format!(
                 "--bounces {}: between 1 and {MAX_BOUNCES}",
@@ -156,17 +205,40 @@ impl BakeSettings {
         }
     }
 
-    /// Gather rays per texel in iteration `k`: the budget split evenly in whole packets of
-    /// 8, the remainder going to the last iteration (which learns from the best guide).
+    /// Gather rays per texel in iteration `k`, in whole packets of 8.
+    ///
+    /// `even`: the budget split evenly, the remainder going to the last iteration (which
+    /// learns from the best guide). `doubling`: from the last iteration backwards, each takes
+    /// half of what is left (rounded up) while leaving one packet to every earlier one, and
+    /// iteration 0 takes the rest: 32 packets over 4 iterations are 4, 4, 8, 16.
     pub fn samples_in_iteration(&self, k: u32) -> u32 {
         let packets = self.spp / 8;
-        let base = packets / self.iterations;
-        let extra = if k + 1 == self.iterations {
-            packets % self.iterations
-        } else {
-            0
-        };
-        (base + extra) * 8
+        let n = self.iterations;
+        match self.schedule {
+            Schedule::Even => {
+                let base = packets / n;
+                let extra = if k + 1 == n { packets % n } else { 0 };
+                (base + extra) * 8
+            }
+            Schedule::Doubling => {
+                let mut left = packets;
+                for j in (1..n).rev() {
+                    let take = left.div_ceil(2).min(left.saturating_sub(j)).max(1);
+                    if j == k {
+                        return take * 8;
+                    }
+                    left -= take.min(left);
+                }
+                left * 8
+            }
+        }
+    }
+
+    /// How many of iteration `k`'s packets are drawn from the cosine baseline when it samples
+    /// a learned guide: `--mix` percent of its packets, rounded to whole packets.
+    pub fn cosine_packets(&self, k: u32) -> u32 {
+        let packets = self.samples_in_iteration(k) / 8;
+        (packets * self.mix + 50) / 100
     }
 
     /// Identity of a bake of `texel_file_id` with these settings.
@@ -211,6 +283,7 @@ impl fmt::Display for Combine {
             Combine::Average => "average",
             Combine::Texel => "texel",
             Combine::Global => "global",
+            Combine::Cluster => "cluster",
         })
     }
 }
@@ -224,12 +297,39 @@ mod tests {
         let s = BakeSettings {
             spp: 200,
             iterations: 3,
+            schedule: Schedule::Even,
             ..Default::default()
         };
         let per: Vec<u32> = (0..3).map(|k| s.samples_in_iteration(k)).collect();
         assert_eq!(per, [64, 64, 72]);
         assert!(per.iter().all(|n| n % 8 == 0));
         assert!(s.validate().is_ok());
+    }
+
+    #[test]
+    fn doubling_gives_the_last_iteration_half() {
+        let s = BakeSettings {
+            spp: 256,
+            iterations: 4,
+            schedule: Schedule::Doubling,
+            ..Default::default()
+        };
+        let per: Vec<u32> = (0..4).map(|k| s.samples_in_iteration(k)).collect();
+        assert_eq!(per, [32, 32, 64, 128]);
+        for (spp, iterations) in [(32, 4), (128, 16), (8, 1), (200, 3), (4096, 7)] {
+            let s = BakeSettings {
+                spp,
+                iterations,
+                schedule: Schedule::Doubling,
+                ..Default::default()
+            };
+            let per: Vec<u32> = (0..iterations).map(|k| s.samples_in_iteration(k)).collect();
+            assert_eq!(per.iter().sum::<u32>(), spp / 8 * 8, "{per:?}");
+            assert!(per.iter().all(|&n| n >= 8 && n % 8 == 0), "{per:?}");
+            if spp / 8 >= 1 << (iterations - 1) {
+                assert!(2 * per[per.len() - 1] >= spp / 8 * 8, "{per:?}");
+            }
+        }
     }
 
     #[test]

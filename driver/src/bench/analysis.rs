@@ -20,6 +20,8 @@ pub struct CurvePoint {
     pub wall_s: f64,
     /// Median gather seconds over the seeds.
     pub gather_s: f64,
+    /// Median CPU seconds of the whole bake over the seeds.
+    pub cpu_s: f64,
     /// RMSE over the seeds: the square root of the mean MSE.
     pub rmse: f64,
     /// Smallest and largest RMSE of one seed.
@@ -80,6 +82,7 @@ pub fn curves(methods: &[Method], runs: &[RunRecord]) -> Vec<Curve> {
                         spp,
                         wall_s: median(&col(|r| r.wall_s)),
                         gather_s: median(&col(|r| r.gather_s)),
+                        cpu_s: median(&col(|r| r.cpu_s)),
                         rmse: (rmses.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
                         rmse_range: [
                             rmses.iter().copied().fold(f64::INFINITY, f64::min),
@@ -340,6 +343,7 @@ mod tests {
                     spp,
                     wall_s,
                     gather_s: wall_s,
+                    cpu_s: wall_s,
                     rmse,
                     rmse_range: [rmse; 2],
                     rel_mse: rmse * rmse,

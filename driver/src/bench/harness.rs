@@ -18,7 +18,7 @@ use super::method::{Method, serialize_value_name, value_name};
 use super::metrics::{ErrorStats, compare};
 use super::readback::read_lightmap;
 use crate::bake::run::{BakeJob, BakeReport, bake, work_dir};
-use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Transport};
+use crate::bake::settings::{BakeSettings, EmitterSampling, Guiding, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
 use crate::texels::TexelFile;
@@ -57,6 +57,9 @@ pub struct LightSampling {
 pub struct Baked {
     /// Wall-clock seconds of the whole bake.
     pub wall_s: f64,
+    /// CPU seconds of the whole bake, every thread (user + system): on a machine shared
+    /// with other work this moves far less than the wall time.
+    pub cpu_s: f64,
     /// The bake's own report (phases, rays, ρ).
     pub report: BakeReport,
     /// The lightmap read back, per texel id.
@@ -83,7 +86,9 @@ impl Bench<'_> {
             aux: false,
         };
         let clock = Instant::now();
+        let cpu = process_cpu_s();
         let report = bake(&job, self.scene, self.cancel, &mut |_, _| {})?;
+        let cpu_s = (process_cpu_s() - cpu).max(0.0);
         let wall_s = clock.elapsed().as_secs_f64();
         if report.interrupted || self.cancel.load(Ordering::Relaxed) {
             let _ = std::fs::remove_dir_all(&dir);
@@ -92,6 +97,7 @@ impl Bench<'_> {
         let values = read_lightmap(self.texels, out)?;
         Ok(Baked {
             wall_s,
+            cpu_s,
             report,
             values,
         })
@@ -119,6 +125,25 @@ impl Bench<'_> {
     }
 }
 
+/// CPU seconds this process has used (user + system, every thread), from `/proc/self/stat`
+/// in clock ticks of 1/100 s; 0 where that file does not exist.
+fn process_cpu_s() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    let Some((_, rest)) = stat.rsplit_once(')') else {
+        return 0.0;
+    };
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let tick = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|f| f.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    (tick(11) + tick(12)) / 100.0
+}
+
 /// One run of the ladder: a CSV row.
 #[derive(Clone, Debug, Serialize)]
 pub struct RunRecord {
@@ -138,6 +163,8 @@ pub struct RunRecord {
     pub seed: u32,
     /// Wall-clock seconds of the whole bake.
     pub wall_s: f64,
+    /// CPU seconds of the whole bake (every thread, user + system; 0 where unknown).
+    pub cpu_s: f64,
     /// Seconds opening the texel file.
     pub open_s: f64,
     /// Seconds building the BVH.
@@ -174,6 +201,7 @@ impl RunRecord {
             iterations: settings.iterations,
             seed: settings.seed,
             wall_s: baked.wall_s,
+            cpu_s: baked.cpu_s,
             open_s: r.seconds.open_texels,
             bvh_s: r.seconds.build_bvh,
             gather_s: r.seconds.gather,
@@ -279,8 +307,8 @@ pub struct OverheadRecord {
     pub guided_fraction: f64,
 }
 
-/// The Figure-5 measurement: every `--guiding` mode at `spp` with the bake's default
-/// combination (Graybill–Deal per texel and ρ), `repeats` times, interleaved, the order
+/// The Figure-5 measurement: every `--guiding` mode at `spp` with the bake's defaults
+/// otherwise, `repeats` times, interleaved, the order
 /// rotated every repeat so that no mode always runs first; every bake with `transport` at
 /// `bounces`.
 ///
@@ -301,8 +329,7 @@ pub fn run_overhead(
             let guiding = modes[(i + repeat as usize) % modes.len()];
             let method = Method {
                 guiding,
-                combine: Combine::Texel,
-                rho: true,
+                ..Method::default_bake()
             };
             let settings = method.settings(spp, iterations, transport, bounces, 1);
             let baked = bench.bake_scratch(settings)?;

@@ -7,9 +7,10 @@
 
 use clap::ValueEnum;
 
-use crate::bake::settings::{BakeSettings, Combine, Guiding, Transport};
+use crate::bake::settings::{BakeSettings, Combine, Guiding, Schedule, Transport};
 
-/// One way of baking: what the bake's `--guiding`, `--combine` and `--bias-correction` say.
+/// One way of baking: what the bake's `--guiding`, `--combine` and `--bias-correction` say,
+/// and the guiding levers (`--mix`, `--schedule`, `--min-split`, `--smooth`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Method {
     /// Direction choice.
@@ -18,6 +19,65 @@ pub struct Method {
     pub combine: Combine,
     /// Apply ρ.
     pub rho: bool,
+    /// The guiding levers.
+    pub levers: Levers,
+}
+
+/// The bake's guiding levers, as a method sets them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Levers {
+    /// `--mix`: percent of guided packets from the cosine baseline.
+    pub mix: u32,
+    /// `--schedule`.
+    pub schedule: Schedule,
+    /// `--min-split`.
+    pub min_split: u32,
+    /// `--smooth`.
+    pub smooth: u32,
+}
+
+impl Default for Levers {
+    fn default() -> Self {
+        let d = BakeSettings::default();
+        Levers {
+            mix: d.mix,
+            schedule: d.schedule,
+            min_split: d.min_split,
+            smooth: d.smooth,
+        }
+    }
+}
+
+impl Levers {
+    /// The levers before issue 14: no mixture, an even schedule, splits at 4 records,
+    /// α = 25 % (the per-texel frame, which flipped at n.z = −0, is gone).
+    pub fn before() -> Levers {
+        Levers {
+            mix: 0,
+            schedule: Schedule::Even,
+            min_split: 4,
+            smooth: 25,
+        }
+    }
+
+    /// `+key=value` for every lever that differs from the bake's default.
+    fn suffix(&self) -> String {
+        let d = Levers::default();
+        let mut s = String::new();
+        if self.mix != d.mix {
+            s += &format!("+mix={}", self.mix);
+        }
+        if self.schedule != d.schedule {
+            s += &format!("+schedule={}", value_name(&self.schedule));
+        }
+        if self.min_split != d.min_split {
+            s += &format!("+split={}", self.min_split);
+        }
+        if self.smooth != d.smooth {
+            s += &format!("+smooth={}", self.smooth);
+        }
+        s
+    }
 }
 
 /// The command-line name of a clap value (`off`, `coherent`, `texel`, …).
@@ -48,6 +108,7 @@ impl Method {
                         guiding,
                         combine,
                         rho,
+                        levers: Levers::default(),
                     });
                 }
             }
@@ -62,7 +123,72 @@ impl Method {
             guiding: Guiding::Off,
             combine: Combine::Average,
             rho: false,
+            levers: Levers::default(),
         }
+    }
+
+    /// The bake's defaults.
+    pub fn default_bake() -> Method {
+        let d = BakeSettings::default();
+        Method {
+            guiding: d.guiding,
+            combine: d.combine,
+            rho: d.bias_correction,
+            levers: Levers::default(),
+        }
+    }
+
+    /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
+    /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`); the
+    /// single word `before` stands for every lever as it was before issue 14.
+    ///
+    /// # Errors
+    /// A message naming the part that is not understood.
+    pub fn parse(label: &str) -> Result<Method, String> {
+        let mut parts = label.split('+');
+        let head = parts.next().unwrap_or_default();
+        let fields: Vec<&str> = head.split('/').collect();
+        let [g, c, r] = fields[..] else {
+            return Err(format!("method {label:?}: want guiding/combine/rho|-"));
+        };
+        let guiding = Guiding::from_str(g, true).map_err(|e| format!("{label:?}: {e}"))?;
+        let combine = Combine::from_str(c, true).map_err(|e| format!("{label:?}: {e}"))?;
+        let rho = match r {
+            "rho" => true,
+            "-" => false,
+            _ => return Err(format!("method {label:?}: rho or -, not {r:?}")),
+        };
+        let mut levers = Levers::default();
+        for part in parts {
+            if part == "before" {
+                levers = Levers::before();
+                continue;
+            }
+            let (key, value) = part
+                .split_once('=')
+                .ok_or_else(|| format!("method {label:?}: lever {part:?} is not key=value"))?;
+            let number = || {
+                value
+                    .parse::<u32>()
+                    .map_err(|e| format!("method {label:?}: {key}={value}: {e}"))
+            };
+            match key {
+                "mix" => levers.mix = number()?,
+                "split" => levers.min_split = number()?,
+                "smooth" => levers.smooth = number()?,
+                "schedule" => {
+                    levers.schedule =
+                        Schedule::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
+                }
+                _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
+            }
+        }
+        Ok(Method {
+            guiding,
+            combine,
+            rho,
+            levers,
+        })
     }
 
     /// The paper's full method: coherent guiding, Graybill–Deal per texel, ρ.
@@ -71,23 +197,23 @@ impl Method {
             guiding: Guiding::Coherent,
             combine: Combine::Texel,
             rho: true,
+            levers: Levers::default(),
         }
     }
 
     /// A short label: `coherent/texel/rho`, `off/average/-`.
     pub fn label(&self) -> String {
         format!(
-            "{}/{}/{}",
+            "{}/{}/{}{}",
             value_name(&self.guiding),
             value_name(&self.combine),
-            if self.rho { "rho" } else { "-" }
+            if self.rho { "rho" } else { "-" },
+            self.levers.suffix()
         )
     }
 
     /// The bake settings of this method with `transport` at `bounces`; everything else keeps
     /// the bake's defaults, so settings added to the bake need no change here.
-    // Every field is set today; the update stays so that a new bake setting gets its default.
-    #[allow(clippy::needless_update)]
     pub fn settings(
         &self,
         spp: u32,
@@ -105,6 +231,10 @@ impl Method {
             combine: self.combine,
             bias_correction: self.rho,
             seed,
+            mix: self.levers.mix,
+            schedule: self.levers.schedule,
+            min_split: self.levers.min_split,
+            smooth: self.levers.smooth,
             ..Default::default()
         }
     }
@@ -138,5 +268,20 @@ mod tests {
         assert!(s.validate().is_ok());
         assert_eq!(m.label(), "coherent/texel/rho");
         assert_eq!(Method::baseline().label(), "off/average/-");
+    }
+
+    #[test]
+    fn labels_parse_back() {
+        for m in Method::all() {
+            assert_eq!(Method::parse(&m.label()), Ok(m));
+        }
+        let m = Method::parse("coherent/texel/rho+before").unwrap();
+        assert_eq!(m.levers, Levers::before());
+        assert_eq!(Method::parse(&m.label()), Ok(m));
+        let m = Method::parse("naive/cluster/-+mix=25+split=16").unwrap();
+        assert_eq!((m.levers.mix, m.levers.min_split), (25, 16));
+        assert_eq!(Method::parse(&m.label()), Ok(m));
+        assert!(Method::parse("coherent/texel").is_err());
+        assert!(Method::parse("coherent/texel/rho+nope=1").is_err());
     }
 }

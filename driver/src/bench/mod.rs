@@ -145,8 +145,8 @@ impl BenchConfig {
                 self.spp
             ));
         }
-        if self.seeds.is_empty() || self.repeats == 0 || self.methods.is_empty() {
-            return bad("--seeds and --repeats must be at least 1".into());
+        if self.seeds.is_empty() || self.methods.is_empty() {
+            return bad("--seeds must be at least 1 and --methods not empty".into());
         }
         let counts = spp.iter().chain([&self.reference_spp, &self.overhead_spp]);
         for &n in counts {
@@ -356,7 +356,7 @@ fn targets(
             .filter(|r| r.is_finite())
     };
     let (coherent, naive) = (ratio("coherent"), ratio("naive"));
-    let guided = Method::guided_gd_rho().label();
+    let guided = Method::default_bake().label();
     let guided_rmse = equal_time
         .iter()
         .find(|t| t.method == guided)
@@ -435,8 +435,10 @@ fn write_outputs(
         overhead: &summary.overhead.modes,
         target: COHERENT_OVERHEAD_TARGET,
     };
-    chart("overhead", &|stem| {
-        charts::write_chart(&overhead_chart, stem)
-    })?;
+    if !summary.overhead.modes.is_empty() {
+        chart("overhead", &|stem| {
+            charts::write_chart(&overhead_chart, stem)
+        })?;
+    }
     Ok(())
 }

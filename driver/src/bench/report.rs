@@ -160,7 +160,7 @@ fn write_atomic(path: &Path, text: &str) -> Result<(), BenchError> {
 }
 
 /// The columns of `runs.csv`.
-pub const RUN_COLUMNS: [&str; 23] = [
+pub const RUN_COLUMNS: [&str; 24] = [
     "scene",
     "method",
     "guiding",
@@ -170,6 +170,7 @@ pub const RUN_COLUMNS: [&str; 23] = [
     "iterations",
     "seed",
     "wall_s",
+    "cpu_s",
     "open_s",
     "bvh_s",
     "gather_s",
@@ -208,7 +209,7 @@ pub fn write_runs_csv(path: &Path, scene: &str, runs: &[RunRecord]) -> Result<()
         let e = &r.error;
         let _ = writeln!(
             text,
-            "{scene},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{:.1},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.6e},{}",
+            "{scene},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{:.1},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.6e},{}",
             r.method,
             r.guiding,
             r.combine,
@@ -217,6 +218,7 @@ pub fn write_runs_csv(path: &Path, scene: &str, runs: &[RunRecord]) -> Result<()
             r.iterations,
             r.seed,
             r.wall_s,
+            r.cpu_s,
             r.open_s,
             r.bvh_s,
             r.gather_s,
@@ -307,30 +309,49 @@ pub fn markdown(s: &Summary) -> String {
     let max_spp = s.ladder.spp.iter().copied().max().unwrap_or(0);
     let _ = writeln!(
         md,
-        "| method | time at {max_spp} spp (s) | RMSE at {max_spp} | relMSE at {max_spp} | rel. bias at {max_spp} | RMSE in {:.3} s | relMSE in {:.3} s | × baseline spp at {max_spp} | guided |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| method | time at {max_spp} spp (s) | RMSE at {max_spp} | relMSE at {max_spp} | rel. bias at {max_spp} | RMSE in {:.3} s | relMSE in {:.3} s | × baseline spp at {max_spp} | × baseline spp at equal time | at equal CPU time | guided |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         s.equal_time.budget_s, s.equal_time.budget_s
     );
+    let baseline_label = crate::bench::method::Method::baseline().label();
+    let baseline_top = s
+        .curves
+        .iter()
+        .find(|c| c.method == baseline_label)
+        .and_then(|c| c.points.iter().find(|p| p.spp == max_spp));
     for (c, t) in s.curves.iter().zip(&s.equal_time.methods) {
         let Some(p) = c.points.iter().find(|p| p.spp == max_spp) else {
             continue;
         };
-        let factor = s
+        let equivalent = s
             .equivalent_samples
             .iter()
-            .find(|e| e.method == c.method && e.spp == max_spp)
-            .map_or_else(
-                || "—".into(),
-                |e| {
-                    format!(
-                        "{:.2}{}",
-                        e.factor,
-                        if e.baseline_spp.extrapolated { "*" } else { "" }
-                    )
-                },
-            );
+            .find(|e| e.method == c.method && e.spp == max_spp);
+        // Baseline samples with the method's RMSE over the baseline samples that fit in the
+        // method's time: the equivalent-sample factor times the baseline's time over the
+        // method's, both at the top of the ladder.
+        let at = |b: f64, m: f64| match equivalent {
+            Some(e) if m > 0.0 && b > 0.0 => format!(
+                "{:.2}{}",
+                e.factor * b / m,
+                if e.baseline_spp.extrapolated { "*" } else { "" }
+            ),
+            _ => "—".into(),
+        };
+        let at_equal_time = baseline_top.map_or_else(|| "—".into(), |b| at(b.wall_s, p.wall_s));
+        let at_equal_cpu = baseline_top.map_or_else(|| "—".into(), |b| at(b.cpu_s, p.cpu_s));
+        let factor = equivalent.map_or_else(
+            || "—".into(),
+            |e| {
+                format!(
+                    "{:.2}{}",
+                    e.factor,
+                    if e.baseline_spp.extrapolated { "*" } else { "" }
+                )
+            },
+        );
         let _ = writeln!(
             md,
-            "| {} | {:.3} | {:.3e} | {:.3e} | {:+.2}% | {} | {} | {} | {:.0}% |",
+            "| {} | {:.3} | {:.3e} | {:.3e} | {:+.2}% | {} | {} | {} | {} | {} | {:.0}% |",
             c.method,
             p.wall_s,
             p.rmse,
@@ -339,6 +360,8 @@ pub fn markdown(s: &Summary) -> String {
             opt(t.rmse, 3),
             opt(t.rel_mse, 3),
             factor,
+            at_equal_time,
+            at_equal_cpu,
             100.0 * p.guided_fraction
         );
     }

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_with_progress, work_dir};
-use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Transport};
+use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Schedule, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
 use crate::transport::emitters::EmitterSelection;
@@ -29,11 +29,25 @@ pub struct BakeArgs {
     #[arg(long, default_value_t = 4)]
     pub iterations: u32,
     /// How gather directions are chosen.
-    #[arg(long, value_enum, default_value_t = Guiding::Coherent)]
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().guiding)]
     pub guiding: Guiding,
     /// How a texel's iterations are combined.
-    #[arg(long, value_enum, default_value_t = Combine::Texel)]
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().combine)]
     pub combine: Combine,
+    /// Percent of each guided iteration's packets drawn from the cosine baseline (the
+    /// defensive mixture; every sample is weighted with the mixture's density).
+    #[arg(long, default_value_t = BakeSettings::default().mix)]
+    pub mix: u32,
+    /// How the samples are split over the learning iterations.
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
+    pub schedule: Schedule,
+    /// A guide node splits only if it holds at least this many records.
+    #[arg(long, default_value_t = BakeSettings::default().min_split)]
+    pub min_split: u32,
+    /// The guide's smoothing α in percent (paper §2.3): how far each child's share of its
+    /// parent is pulled toward a quarter.
+    #[arg(long, default_value_t = BakeSettings::default().smooth)]
+    pub smooth: u32,
     /// Light transport at gather hits: `series` (passes through the previous pass's
     /// lightmap, the paper's production setting) or `path` (unbiased path tracing).
     #[arg(long, value_enum, default_value_t = Transport::Series)]
@@ -51,7 +65,7 @@ pub struct BakeArgs {
     #[arg(long, value_enum, default_value_t = EmitterSelection::default())]
     pub emitter_selection: EmitterSelection,
     /// The world-wide bias correction ρ (paper §2.5).
-    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    #[arg(long, value_enum, default_value_t = if BakeSettings::default().bias_correction { OnOff::On } else { OnOff::Off })]
     pub bias_correction: OnOff,
     /// Worker threads (default: every core).
     #[arg(long, value_parser = super::parse_threads)]
@@ -97,6 +111,10 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         seed: args.seed,
         transport: args.transport,
         bounces: args.bounces,
+        mix: args.mix,
+        schedule: args.schedule,
+        min_split: args.min_split,
+        smooth: args.smooth,
         emitters: args.emitters,
         emitter_selection: args.emitter_selection,
     };

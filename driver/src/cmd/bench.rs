@@ -71,7 +71,14 @@ pub struct BenchArgs {
     /// Rays per texel of the overhead runs (default 256).
     #[arg(long)]
     pub overhead_spp: Option<u32>,
-    /// Interleaved repeats of the overhead runs (default 5).
+    /// Methods of the ladder, comma-separated labels as the tables print them
+    /// (`guiding/combine/rho|-`, optional `+mix=N+schedule=even|doubling+split=N+smooth=N`,
+    /// or `+before` for every lever as before issue 14);
+    /// default every guiding × combine × ρ with the bake's levers. The baseline
+    /// (`off/average/-`) is always run, first.
+    #[arg(long, value_delimiter = ',')]
+    pub methods: Option<Vec<String>>,
+    /// Interleaved repeats of the overhead runs (default 5; 0 skips them).
     #[arg(long)]
     pub repeats: Option<u32>,
     /// Worker threads of every bake (default: every core).
@@ -109,7 +116,19 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
             .max(1),
-        methods: Method::all(),
+        methods: match &args.methods {
+            None => Method::all(),
+            Some(labels) => {
+                let mut methods = vec![Method::baseline()];
+                for l in labels {
+                    let m = Method::parse(l)?;
+                    if !methods.contains(&m) {
+                        methods.push(m);
+                    }
+                }
+                methods
+            }
+        },
         spp: args.spp.clone().unwrap_or_else(|| {
             if quick {
                 vec![32, 64]
