@@ -705,10 +705,10 @@ impl<'a> IterationCtx<'a> {
         if local.z <= 0.0 {
             return 0.0;
         }
-        let u = invert_cosine_hemisphere(local.normalize());
         if self.guide.is_none() {
             return 1.0;
         }
+        let u = invert_cosine_hemisphere(local.normalize());
         self.mixture_density(self.guide_pdf(u))
     }
 
