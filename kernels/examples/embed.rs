@@ -129,6 +129,8 @@ fn main() {
     let mut cluster_of = [0usize; TEXELS];
     for (c, range) in ranges[..clusters].iter().enumerate() {
         let texels = &perm[range.start as usize..range.end as usize];
+        // k is the learning iteration (it seeds the rotation), not only an index.
+        #[allow(clippy::needless_range_loop)]
         for k in 0..K {
             let g = if k == 0 {
                 Guide::uniform(&mut storage)
