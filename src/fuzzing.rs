@@ -20,7 +20,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use guidebake::bvh::{Bvh, Preset};
 use guidebake::output::journal::Journal;
-use guidebake::output::result_file::{ResultFile, TexelResult};
+use guidebake::output::result_file::{PerTexel, RecordFile, TexelResult};
 use guidebake::scene::Scene;
 use guidebake::texels::TexelFile;
 use guidebake_kernels::estimator::{
@@ -133,24 +133,48 @@ pub fn journal(data: &[u8]) {
     assert_eq!(again, records);
 }
 
-/// Arbitrary bytes as a result file: opening never panics, and an accepted file's every
-/// record can be read.
+/// Arbitrary bytes as a result file and as a batch file: opening never panics and a refused
+/// file's error names it; an accepted file has exactly the record layout asked for (one
+/// [`TexelResult`] per texel; K [`Welford`]s per texel, K = 1 + byte 32 % 16, a reserved
+/// header byte), its every declared texel can be read, and reads past the end or of partial
+/// texels are errors.
 pub fn result_file(data: &[u8]) {
     let file = ScratchFile::with(data);
-    let Ok((results, header)) = ResultFile::open(&file.0, false, None) else {
-        return;
+    records::<TexelResult>(&file.0, 1);
+    let k = 1 + u32::from(data.get(32).map_or(0, |b| b % 16));
+    records::<Welford>(&file.0, k);
+}
+
+/// [`result_file`] for one kind of [`RecordFile`] of `per_texel` records per texel.
+fn records<T: PerTexel>(path: &Path, per_texel: u32) {
+    let (records, header) = match RecordFile::<T>::open_with(path, false, per_texel, None) {
+        Ok(opened) => opened,
+        Err(e) => {
+            assert_names(&e.to_string(), path);
+            return;
+        }
     };
-    assert_eq!(results.texel_count(), header.texel_count);
-    let mut buffer = [TexelResult::default(); 64];
+    let k = per_texel as usize;
+    assert_eq!(header.record_bytes as usize, k * size_of::<T>());
+    assert_eq!(records.per_texel(), u64::from(per_texel));
+    assert_eq!(records.texel_count(), header.texel_count);
+    let mut buffer = vec![T::zeroed(); 64 * k];
     let mut first = 0;
     while first < header.texel_count {
         let n = (header.texel_count - first).min(64) as usize;
-        results
-            .read(first, &mut buffer[..n])
+        records
+            .read(first, &mut buffer[..n * k])
             .expect("declared records are readable");
         first += n as u64;
     }
-    assert!(results.read(header.texel_count, &mut buffer[..1]).is_err());
+    let past = records
+        .read(header.texel_count, &mut buffer[..k])
+        .unwrap_err();
+    assert_names(&past.to_string(), path);
+    if k > 1 {
+        let partial = records.read(0, &mut buffer[..k - 1]).unwrap_err();
+        assert_names(&partial.to_string(), path);
+    }
 }
 
 /// Arbitrary bytes as a texel file: opening never panics; a rejected file's error names it;
