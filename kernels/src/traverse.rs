@@ -69,10 +69,18 @@ const NEAR_DOWN: f32 = 1.0 - SLACK;
 /// primitive id, which the tie rule prefers).
 const FAR_FLOOR: f32 = f32::MIN_POSITIVE;
 
-/// The far end of the conservative slab interval: `far · (1 + 2⁻¹⁸) + 2⁻¹²⁶`.
+/// The far end of the conservative slab interval: `far · (1 + 2⁻¹⁸) + span · 2⁻¹⁸ + 2⁻¹²⁶`,
+/// where `span` is the larger distance to the box's two planes on the ray's dominant axis
+/// `kz` (`max(|tn_kz|, |tf_kz|)`, finite: `d[kz]` is the largest component).
+///
+/// The `span` term covers the watertight test's shear: `a[kx] − s·a[kz]` rounds away the
+/// origin's offsets across the ray relative to the vertices' distance along `kz`, so a hit can
+/// lie outside its box by that rounding, whatever `far` is. An origin 10⁻³⁶ outside a box face
+/// (far = −5·10⁻³⁷, the triangle 80 units long along `kz`) was culled although the test put
+/// the origin on the triangle's edge, `t = 0` (found by the `traverse` fuzz target, issue 22).
 #[inline(always)]
-fn widened(far: f32) -> f32 {
-    far * FAR_UP + FAR_FLOOR
+fn widened(far: f32, span: f32) -> f32 {
+    far * FAR_UP + (span * SLACK + FAR_FLOOR)
 }
 
 /// One BVH node: the boxes of its two children, one 64-byte cache line.
@@ -291,6 +299,7 @@ impl Pre {
 fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
     let mut near = pre.tmin * NEAR_DOWN;
     let mut far = tmax;
+    let mut span = 0.0;
     for axis in 0..3 {
         let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
         let (pn, pf) = if pre.inv[axis].is_sign_negative() {
@@ -302,8 +311,11 @@ fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
         let tf = (pf - pre.org[axis]) * pre.inv[axis];
         near = if tn > near { tn } else { near };
         far = if tf < far { tf } else { far };
+        if axis == pre.k[2] {
+            span = tn.abs().max(tf.abs());
+        }
     }
-    (near <= widened(far)).then_some(near)
+    (near <= widened(far, span)).then_some(near)
 }
 
 /// Edge functions in `f64`, Woop et al. 2013's fallback when one is exactly zero.
@@ -521,6 +533,8 @@ struct Pre8 {
     sel: [[f32x8; 2]; 3],
     /// Lanes whose direction has the sign bit set, per axis.
     neg: [f32x8; 3],
+    /// Lanes whose dominant axis `kz` is 0, 1, 2.
+    kz: [f32x8; 3],
     /// The shared direction sign bits when all traced lanes have the same ones.
     octant: Option<[bool; 3]>,
     /// The shared permutation when all traced lanes have the same one.
@@ -582,6 +596,9 @@ impl Interval {
     fn misses(&self, node: &Node, slot: usize) -> bool {
         let mut near = self.tmin;
         let mut far = f32::INFINITY;
+        // Every lane's dominant-axis span (see `widened`) is at most the largest plane
+        // distance on any axis; an unbounded one (a zero direction component) culls nothing.
+        let mut span = 0.0f32;
         for axis in 0..3 {
             let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
             let (pn, pf) = if self.neg[axis] { (hi, lo) } else { (lo, hi) };
@@ -594,8 +611,9 @@ impl Interval {
             if !(f0.is_nan() || f1.is_nan()) {
                 far = far.min(f0.max(f1));
             }
+            span = span.max(n0.abs()).max(n1.abs()).max(f0.abs()).max(f1.abs());
         }
-        near > widened(far)
+        span != f32::INFINITY && near > widened(far, span)
     }
 }
 
@@ -673,6 +691,7 @@ impl Pre8 {
             inv,
             sel: [sel[0], sel[1], sel[2]],
             neg,
+            kz: [kz0, kz1, kz2],
             octant,
             uniform,
             tmin,
@@ -708,6 +727,7 @@ impl Pre8 {
     fn box8(&self, node: &Node, slot: usize, tmax: f32x8) -> (f32x8, f32x8) {
         let mut near = self.tmin_down;
         let mut far = tmax;
+        let mut span = f32x8::ZERO;
         for axis in 0..3 {
             let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
             let (pn, pf) = match self.octant {
@@ -726,11 +746,15 @@ impl Pre8 {
             // fast_max(a, b) is maxps(a, b): `b` when either is NaN, like `box1`.
             near = tn.fast_max(near);
             far = tf.fast_min(far);
+            // The dominant axis's plane distances (finite) for `widened`'s span.
+            match self.uniform {
+                Some(k) if k[2] == axis => span = tn.abs().fast_max(tf.abs()),
+                Some(_) => {}
+                None => span = self.kz[axis].bitselect(tn.abs().fast_max(tf.abs()), span),
+            }
         }
-        (
-            near.simd_le(far.mul_add(f32x8::splat(FAR_UP), f32x8::splat(FAR_FLOOR))),
-            near,
-        )
+        let slack = span.mul_add(f32x8::splat(SLACK), f32x8::splat(FAR_FLOOR));
+        (near.simd_le(far.mul_add(f32x8::splat(FAR_UP), slack)), near)
     }
 
     /// Vertex `v` relative to the origin in each lane's permuted axes.
@@ -1449,6 +1473,36 @@ mod tests {
             "outside the triangle"
         );
         assert_eq!(intersect_brute(&tris, &rays[3]).map(|h| h.prim), Some(0));
+    }
+
+    /// An origin 10⁻³⁶ outside a triangle's box, on the triangle's edge once the shear has
+    /// rounded it (the `traverse` fuzz target, issue 22): the box test must not cull the hit
+    /// the watertight test finds at `t = 0`.
+    #[test]
+    fn origins_rounded_onto_an_edge_by_the_shear_are_not_culled() {
+        let soup = [
+            [
+                Vec3::new(-0.078125, 0.0, 0.0),
+                Vec3::new(0.015625, -48.0, 0.015625),
+                Vec3::new(80.0, 0.0, 0.0),
+            ],
+            [
+                Vec3::new(-4.0, 0.0, 0.0),
+                Vec3::new(0.0, -0.078125, 0.0),
+                Vec3::new(0.0, 0.0, -100.0),
+            ],
+        ];
+        let (nodes, tris) = build(&soup);
+        let bvh = BvhRef::new(&nodes, &tris).unwrap();
+        let org = Vec3::new(3.762_040_7e-37, 1.504_563_9e-36, 3.761_926_3e-37);
+        let r = Ray::new(org, Vec3::new(-6400.0, 3.0, -1280.0), 0.0, f32::INFINITY);
+        let oracle = intersect_brute(&tris, &r);
+        assert_eq!(oracle.map(|h| (h.t, h.prim)), Some((0.0, 0)));
+        assert_eq!(intersect1(&bvh, &r), oracle);
+        let mut hits = Hit8::NONE;
+        intersect8(&bvh, &Ray8::from_rays(&[r; LANES]), &mut hits);
+        assert_eq!(hits.lane(7), oracle);
+        assert!(occluded1(&bvh, &r) && occluded_brute(&tris, &r));
     }
 
     #[test]
