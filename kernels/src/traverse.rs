@@ -16,7 +16,9 @@
 //!   exactly zero (their exact signs decide inside or outside), no backface culling. Rays through a closed mesh's shared edges and
 //!   vertices never slip through.
 //! - **Box test.** Slabs with `(b − o) · (1/d)`; the interval is widened by 32 ulps (pbrt-v4
-//!   §6.8.2's `1 + 2γ₃` plus room for the triangle test's rounding of `t`, see `SLACK`) so
+//!   §6.8.2's `1 + 2γ₃` plus room for the triangle test's rounding of `t`, see `SLACK`), and
+//!   the far bound gains 2⁻¹⁸ of the root box's extent along the ray's dominant axis, seen
+//!   from the origin, plus 2⁻¹²⁶ (`slack_of`: the shear's rounding, computed once per ray), so
 //!   that rounding never culls a box holding a hit the oracle accepts. Planes are taken near
 //!   first by the direction's sign bits and a NaN plane distance (`0 · ∞`, a ray running inside
 //!   a box face) leaves the interval unconstrained, so rays along faces are kept.
@@ -48,7 +50,7 @@
 //!   it (a leaf tests all its triangles), while brute force always reports it. The contract
 //!   is: each traversal's result equals [`intersect_brute`] over all triangles or over the
 //!   triangles whose own box [`slab_meets`] the ray, and the two differ only through such
-//!   hits. The slack of the box test (`widened`) removes the cases found so far at moderate
+//!   hits. The slack of the box test (`slack_of`) removes the cases found so far at moderate
 //!   magnitudes; the `traverse` fuzz target checks exactly this contract.
 
 use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
@@ -78,9 +80,11 @@ const NEAR_DOWN: f32 = 1.0 - SLACK;
 /// primitive id, which the tie rule prefers).
 const FAR_FLOOR: f32 = f32::MIN_POSITIVE;
 
-/// The far end of the conservative slab interval: `far · (1 + 2⁻¹⁸) + span · 2⁻¹⁸ + 2⁻¹²⁶`,
-/// where `span` is the larger distance to the box's two planes on the ray's dominant axis
-/// `kz` (`max(|tn_kz|, |tf_kz|)`, finite: `d[kz]` is the largest component).
+/// The far end of the conservative slab interval is `far · (1 + 2⁻¹⁸) + slack` with
+/// `slack = span · 2⁻¹⁸ + 2⁻¹²⁶`, where `span` bounds the distance to any box plane on the
+/// ray's dominant axis `kz`: the larger of the two distances to the root box's `kz` planes
+/// (finite: `d[kz]` is the largest component). It is computed once per ray or packet, so
+/// the per-box test costs what it did before ([`Pre::with_root`], [`Pre8::set_root`]).
 ///
 /// The `span` term covers the watertight test's shear: `a[kx] − s·a[kz]` rounds away the
 /// origin's offsets across the ray relative to the vertices' distance along `kz`, so a hit can
@@ -88,8 +92,14 @@ const FAR_FLOOR: f32 = f32::MIN_POSITIVE;
 /// (far = −5·10⁻³⁷, the triangle 80 units long along `kz`) was culled although the test put
 /// the origin on the triangle's edge, `t = 0` (found by the `traverse` fuzz target, issue 22).
 #[inline(always)]
-fn widened(far: f32, span: f32) -> f32 {
-    far * FAR_UP + (span * SLACK + FAR_FLOOR)
+fn slack_of(span: f32) -> f32 {
+    span * SLACK + FAR_FLOOR
+}
+
+/// The larger distance from `org` to the planes `lo`, `hi` along an axis with `inv = 1/d`.
+#[inline(always)]
+fn plane_span(lo: f32, hi: f32, org: f32, inv: f32) -> f32 {
+    ((lo - org) * inv).abs().max(((hi - org) * inv).abs())
 }
 
 /// One BVH node: the boxes of its two children, one 64-byte cache line.
@@ -272,6 +282,8 @@ struct Pre {
     /// Shear `[d[kx]/d[kz], d[ky]/d[kz], 1/d[kz]]`.
     s: [f32; 3],
     tmin: f32,
+    /// Absolute slack of the box test's far bound (`slack_of`); 2⁻¹²⁶ until a root is given.
+    slack: f32,
 }
 
 impl Pre {
@@ -295,7 +307,22 @@ impl Pre {
             k: [kx, ky, kz],
             s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
             tmin: ray.tmin,
+            slack: FAR_FLOOR,
         }
+    }
+
+    /// The box test's slack for a tree whose boxes lie inside `[lo, hi]` (`slack_of`).
+    fn with_bounds(mut self, lo: [f32; 3], hi: [f32; 3]) -> Self {
+        let kz = self.k[2];
+        self.slack = slack_of(plane_span(lo[kz], hi[kz], self.org[kz], self.inv[kz]));
+        self
+    }
+
+    /// [`Pre::with_bounds`] of the root node's two boxes.
+    fn with_root(self, root: &Node) -> Self {
+        let lo = [0, 1, 2].map(|a| root.lo[a][0].min(root.lo[a][1]));
+        let hi = [0, 1, 2].map(|a| root.hi[a][0].max(root.hi[a][1]));
+        self.with_bounds(lo, hi)
     }
 }
 
@@ -308,7 +335,6 @@ impl Pre {
 fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
     let mut near = pre.tmin * NEAR_DOWN;
     let mut far = tmax;
-    let mut span = 0.0;
     for axis in 0..3 {
         let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
         let (pn, pf) = if pre.inv[axis].is_sign_negative() {
@@ -320,11 +346,8 @@ fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
         let tf = (pf - pre.org[axis]) * pre.inv[axis];
         near = if tn > near { tn } else { near };
         far = if tf < far { tf } else { far };
-        if axis == pre.k[2] {
-            span = tn.abs().max(tf.abs());
-        }
     }
-    (near <= widened(far, span)).then_some(near)
+    (near <= far * FAR_UP + pre.slack).then_some(near)
 }
 
 /// Edge functions in `f64`, Woop et al. 2013's fallback when one is exactly zero.
@@ -440,7 +463,8 @@ pub fn slab_meets(ray: &Ray, lo: Vec3, hi: Vec3) -> bool {
     }
     let mut node = Node::EMPTY;
     node.set_box(0, lo, hi);
-    box1(&node, 0, &Pre::new(ray), ray.tmax.min(f32::MAX)).is_some()
+    let pre = Pre::new(ray).with_bounds(lo.to_array(), hi.to_array());
+    box1(&node, 0, &pre, ray.tmax.min(f32::MAX)).is_some()
 }
 
 /// Whether any triangle blocks the ray on `[tmin, tmax]`, testing every triangle: the oracle.
@@ -469,7 +493,7 @@ pub fn intersect1(bvh: &BvhRef<'_>, ray: &Ray) -> Option<Hit> {
     if !traceable(ray) {
         return None;
     }
-    let pre = Pre::new(ray);
+    let pre = Pre::new(ray).with_root(&bvh.nodes[0]);
     let mut best = no_hit(ray.tmax);
     walk1(bvh, &pre, (0, 0), |leaf| {
         for tri in leaf {
@@ -485,7 +509,7 @@ pub fn occluded1(bvh: &BvhRef<'_>, ray: &Ray) -> bool {
     if !traceable(ray) {
         return false;
     }
-    let pre = Pre::new(ray);
+    let pre = Pre::new(ray).with_root(&bvh.nodes[0]);
     let tmax = ray.tmax.min(f32::MAX);
     let mut hit = false;
     walk1(bvh, &pre, (0, 0), |leaf| {
@@ -557,6 +581,8 @@ struct Pre8 {
     neg: [f32x8; 3],
     /// Lanes whose dominant axis `kz` is 0, 1, 2.
     kz: [f32x8; 3],
+    /// Per lane, the box test's absolute slack (`slack_of`, set by [`Pre8::set_root`]).
+    slack: f32x8,
     /// The shared direction sign bits when all traced lanes have the same ones.
     octant: Option<[bool; 3]>,
     /// The shared permutation when all traced lanes have the same one.
@@ -581,6 +607,8 @@ struct Interval {
     inv_hi: [f32; 3],
     neg: [bool; 3],
     tmin: f32,
+    /// The largest of the traced lanes' box slacks (set by [`Pre8::set_root`]).
+    slack: f32,
 }
 
 impl Interval {
@@ -607,6 +635,7 @@ impl Interval {
             inv_hi: [0, 1, 2].map(|a| fold(&inv[a], f32::NEG_INFINITY, f32::max)),
             neg,
             tmin: fold(&tmin, f32::INFINITY, f32::min) * NEAR_DOWN,
+            slack: FAR_FLOOR,
         })
     }
 
@@ -618,9 +647,6 @@ impl Interval {
     fn misses(&self, node: &Node, slot: usize) -> bool {
         let mut near = self.tmin;
         let mut far = f32::INFINITY;
-        // Every lane's dominant-axis span (see `widened`) is at most the largest plane
-        // distance on any axis; an unbounded one (a zero direction component) culls nothing.
-        let mut span = 0.0f32;
         for axis in 0..3 {
             let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
             let (pn, pf) = if self.neg[axis] { (hi, lo) } else { (lo, hi) };
@@ -633,9 +659,8 @@ impl Interval {
             if !(f0.is_nan() || f1.is_nan()) {
                 far = far.min(f0.max(f1));
             }
-            span = span.max(n0.abs()).max(n1.abs()).max(f0.abs()).max(f1.abs());
         }
-        span != f32::INFINITY && near > widened(far, span)
+        near > far * FAR_UP + self.slack
     }
 }
 
@@ -714,6 +739,7 @@ impl Pre8 {
             sel: [sel[0], sel[1], sel[2]],
             neg,
             kz: [kz0, kz1, kz2],
+            slack: f32x8::splat(FAR_FLOOR),
             octant,
             uniform,
             tmin,
@@ -726,7 +752,32 @@ impl Pre8 {
 
     /// Lane `i`'s scalar constants (for the rare per-lane paths); `i` must be traced.
     fn lane(&self, i: usize) -> Pre {
-        Pre::new(&self.rays.lane(i))
+        Pre {
+            slack: self.slack.as_array()[i],
+            ..Pre::new(&self.rays.lane(i))
+        }
+    }
+
+    /// Sets the box test's slack from the root node's boxes, per lane as
+    /// [`Pre::with_root`] does (the same IEEE operations), and the interval's.
+    fn set_root(&mut self, root: &Node) {
+        let span = |a: usize| {
+            let lo = f32x8::splat(root.lo[a][0].min(root.lo[a][1]));
+            let hi = f32x8::splat(root.hi[a][0].max(root.hi[a][1]));
+            let (n, f) = (
+                (lo - self.org[a]) * self.inv[a],
+                (hi - self.org[a]) * self.inv[a],
+            );
+            // Only each lane's own kz is used, where both are finite.
+            n.abs().fast_max(f.abs())
+        };
+        let span = self.kz[0].bitselect(span(0), self.kz[1].bitselect(span(1), span(2)));
+        self.slack = span * f32x8::splat(SLACK) + f32x8::splat(FAR_FLOOR);
+        if let Some(iv) = &mut self.interval {
+            iv.slack = (0..LANES)
+                .filter(|&i| self.traced >> i & 1 == 1)
+                .fold(FAR_FLOOR, |m, i| m.max(self.slack.as_array()[i]));
+        }
     }
 
     /// [`Pre8::box8`], after the packet's [`Interval`] test when `interval` is set and the
@@ -749,7 +800,6 @@ impl Pre8 {
     fn box8(&self, node: &Node, slot: usize, tmax: f32x8) -> (f32x8, f32x8) {
         let mut near = self.tmin_down;
         let mut far = tmax;
-        let mut span = f32x8::ZERO;
         for axis in 0..3 {
             let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
             let (pn, pf) = match self.octant {
@@ -768,15 +818,11 @@ impl Pre8 {
             // fast_max(a, b) is maxps(a, b): `b` when either is NaN, like `box1`.
             near = tn.fast_max(near);
             far = tf.fast_min(far);
-            // The dominant axis's plane distances (finite) for `widened`'s span.
-            match self.uniform {
-                Some(k) if k[2] == axis => span = tn.abs().fast_max(tf.abs()),
-                Some(_) => {}
-                None => span = self.kz[axis].bitselect(tn.abs().fast_max(tf.abs()), span),
-            }
         }
-        let slack = span.mul_add(f32x8::splat(SLACK), f32x8::splat(FAR_FLOOR));
-        (near.simd_le(far.mul_add(f32x8::splat(FAR_UP), slack)), near)
+        (
+            near.simd_le(far.mul_add(f32x8::splat(FAR_UP), self.slack)),
+            near,
+        )
     }
 
     /// Vertex `v` relative to the origin in each lane's permuted axes.
@@ -1153,10 +1199,11 @@ pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
 
 /// [`intersect8`] with a chosen [`Traversal`] (same results, different speed).
 pub fn intersect8_with(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8, how: &Traversal) -> u8 {
-    let pre = Pre8::new(rays, how.interval);
+    let mut pre = Pre8::new(rays, how.interval);
     if pre.traced == 0 {
         return 0;
     }
+    pre.set_root(&bvh.nodes[0]);
     let traced = mask_of(pre.traced);
     let tmax = traced.bitselect(
         rays.tmax.fast_min(f32x8::splat(f32::MAX)),
@@ -1191,10 +1238,11 @@ pub fn occluded8(bvh: &BvhRef<'_>, rays: &Ray8) -> u8 {
 
 /// [`occluded8`] with a chosen [`Traversal`] (same results, different speed).
 pub fn occluded8_with(bvh: &BvhRef<'_>, rays: &Ray8, how: &Traversal) -> u8 {
-    let pre = Pre8::new(rays, how.interval);
+    let mut pre = Pre8::new(rays, how.interval);
     if pre.traced == 0 {
         return 0;
     }
+    pre.set_root(&bvh.nodes[0]);
     let traced = mask_of(pre.traced);
     let tmax = traced.bitselect(
         rays.tmax.fast_min(f32x8::splat(f32::MAX)),
