@@ -22,7 +22,9 @@
 #   MACHINE="..." describes the machine in the table's caption (default: /proc/cpuinfo).
 # - Toolchain as fuzz/run.sh: nightly with AddressSanitizer when installed, else stable with
 #   -s none (SANITIZER=none forces the latter on nightly); release with debug assertions;
-#   the AVX2 code path when the CPU has it. Builds every target first, in the foreground.
+#   the AVX2 code path when the CPU has it. Builds every target first, in the foreground,
+#   then runs the built binaries themselves: `cargo fuzz run` would rebuild on a source
+#   change and, after a crash, build the target once more to print the input.
 #
 # Logs: fuzz/artifacts/campaign-TARGET.log (every restart appended).
 set -euo pipefail
@@ -56,6 +58,7 @@ echo "building every target ($sanitizer)"
 mkdir -p artifacts
 cargo "${tc[@]}" fuzz build "${san[@]}" >artifacts/campaign-build.log 2>&1 ||
     { tail -40 artifacts/campaign-build.log; exit 1; }
+bin_dir="target/$(rustc -vV | sed -n 's/^host: //p')/release"
 
 start=$(date +%s)
 deadline=$((start + total))
@@ -74,10 +77,10 @@ campaign() {
         [ "$done_execs" -lt "$goal" ] || break
         segments=$((segments + 1))
         before=$(find "artifacts/$target" -type f | wc -l)
-        t=$( { TIMEFORMAT='%U %S'; time cargo "${tc[@]}" fuzz run "${san[@]}" "$target" \
-            "artifacts/corpus/$target" "corpus/$target" -- \
+        t=$( { TIMEFORMAT='%U %S'; time "$bin_dir/$target" -artifact_prefix="artifacts/$target/" \
             -max_total_time="$left" -runs=$((goal - done_execs)) -print_final_stats=1 \
-            -rss_limit_mb=4096 >>"$log" 2>&1 || true; } 2>&1 | tail -1)
+            -rss_limit_mb=4096 "artifacts/corpus/$target" "corpus/$target" >>"$log" 2>&1 ||
+            true; } 2>&1 | tail -1)
         cpu=$(awk -v a="$cpu" -v t="$t" 'BEGIN { split(t, p, " "); printf "%.1f", a + p[1] + p[2] }')
         execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1 || true)
         done_execs=$((done_execs + ${execs:-0}))
