@@ -7,7 +7,8 @@
 # New inputs go to fuzz/artifacts/corpus/TARGET (the checked-in seeds in fuzz/corpus/TARGET
 # are read, never written); crashes land in fuzz/artifacts/TARGET/. Once a crash is fixed,
 # copy its input into fuzz/corpus/TARGET/ so `cargo test --test fuzz_corpus` replays it.
-# Full logs: fuzz/artifacts/run-TARGET.log.
+# Full logs: fuzz/artifacts/run-TARGET.log. Exits non-zero when any target crashed (CI's
+# smoke run relies on it).
 set -euo pipefail
 cd "$(dirname "$0")"
 seconds=${1:-60}
@@ -19,13 +20,18 @@ if grep -q avx2 /proc/cpuinfo 2>/dev/null; then
 fi
 if [ $# -gt 0 ]; then targets=("$@"); else mapfile -t targets < <(cargo "${tc[@]}" fuzz list); fi
 mkdir -p artifacts/corpus
+crashed=()
 for target in "${targets[@]}"; do
     mkdir -p "artifacts/corpus/$target"
     log="artifacts/run-$target.log"
     status=ok
     cargo "${tc[@]}" fuzz run "${san[@]}" "$target" "artifacts/corpus/$target" "corpus/$target" -- \
-        -max_total_time="$seconds" -print_final_stats=1 -rss_limit_mb=4096 >"$log" 2>&1 || status=CRASH
+        -max_total_time="$seconds" -print_final_stats=1 -rss_limit_mb=4096 >"$log" 2>&1 || { status=CRASH; crashed+=("$log"); }
     execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1 || true)
     secs=$(grep -o 'Done [0-9]* runs in [0-9]* second' "$log" | grep -o 'in [0-9]*' | grep -o '[0-9]*' | tail -1 || true)
     echo "$target: ${execs:-?} executions in ${secs:-?} s, $status (log: fuzz/$log)"
 done
+if [ ${#crashed[@]} -gt 0 ]; then
+    grep -h -A3 "panicked at\|ERROR: AddressSanitizer\|ERROR: libFuzzer" "${crashed[@]}" | head -40 >&2 || true
+    exit 1
+fi

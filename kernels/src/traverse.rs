@@ -13,7 +13,7 @@
 //! - **Ray/triangle test.** Woop, Benthin & Wald, *Watertight Ray/Triangle Intersection*,
 //!   JCGT 2(1), 2013: shear into the ray's space (`kz` = largest direction axis, `kx`/`ky`
 //!   swapped when `d[kz] < 0`), 2D edge functions `U, V, W`, recomputed in `f64` when one is
-//!   exactly zero, no backface culling. Rays through a closed mesh's shared edges and
+//!   exactly zero (their exact signs decide inside or outside), no backface culling. Rays through a closed mesh's shared edges and
 //!   vertices never slip through.
 //! - **Box test.** Slabs with `(b − o) · (1/d)`; the interval is widened by 32 ulps (pbrt-v4
 //!   §6.8.2's `1 + 2γ₃` plus room for the triangle test's rounding of `t`, see `SLACK`) so
@@ -41,6 +41,18 @@
 //! - Rays with `tmin < 0` are not traced (they never hit): the conservative box bound assumes
 //!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
 //! - The tree depth is capped at [`MAX_DEPTH`]; [`BvhRef::new`] rejects deeper trees.
+//! - **Hits outside their own box.** At extreme magnitudes (origins of 10⁻³⁶ beside
+//!   triangles of size 10–100, directions of 10²⁸ beside components of 10⁻⁴⁰) the watertight
+//!   test's rounding can report a hit on a triangle whose own bounding box the slab test
+//!   rejects for that ray ([`slab_meets`]): its shear `a[kx] − s·a[kz]` rounds the origin's
+//!   offsets across the ray relative to the vertices' distance along `kz`, which no slack
+//!   relative to the box distances covers. The traversals may then miss that hit, or find it
+//!   (a leaf tests all its triangles), while brute force always reports it. The contract is:
+//!   each traversal's result equals [`intersect_brute`] over all triangles or over the
+//!   triangles whose own box [`slab_meets`] the ray, and the two differ only through such
+//!   hits. The `traverse` fuzz target checks exactly this contract. (A far bound widened by
+//!   2⁻¹⁸ of the root box's extent along `kz` removes the cases found so far, but culls so
+//!   much less that the packet path ran 12–46 % slower on `benches/traverse.rs`.)
 
 use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
 use bytemuck::{Pod, Zeroable};
@@ -307,13 +319,27 @@ fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
 }
 
 /// Edge functions in `f64`, Woop et al. 2013's fallback when one is exactly zero.
-fn uvw_f64(a: [f32; 2], b: [f32; 2], c: [f32; 2]) -> [f32; 3] {
+///
+/// The products of two `f32`s are exact in `f64` and their difference is rounded once, so the
+/// signs are exact. The `f64` values are returned as they are: rounded to `f32`, a nonzero
+/// value below 2⁻¹⁵⁰ becomes ±0, and a point a subnormal distance outside an edge would pass
+/// the inside test (found by the `traverse` fuzz target: origins 10⁻⁴³ beyond a box face
+/// at 0 hit a triangle the box test had culled, so the BVH missed hits brute force found).
+fn uvw_f64(a: [f32; 2], b: [f32; 2], c: [f32; 2]) -> [f64; 3] {
     let d = |p: f32| f64::from(p);
     [
-        (d(c[0]) * d(b[1]) - d(c[1]) * d(b[0])) as f32,
-        (d(a[0]) * d(c[1]) - d(a[1]) * d(c[0])) as f32,
-        (d(b[0]) * d(a[1]) - d(b[1]) * d(a[0])) as f32,
+        d(c[0]) * d(b[1]) - d(c[1]) * d(b[0]),
+        d(a[0]) * d(c[1]) - d(a[1]) * d(c[0]),
+        d(b[0]) * d(a[1]) - d(b[1]) * d(a[0]),
     ]
+}
+
+/// Whether edge functions of mixed signs put the point outside the triangle (zeros are on
+/// an edge, inside).
+#[inline(always)]
+fn outside<T: PartialOrd + Default>(u: T, v: T, w: T) -> bool {
+    let zero = T::default();
+    (u < zero || v < zero || w < zero) && (u > zero || v > zero || w > zero)
 }
 
 /// Watertight ray/triangle test (Woop, Benthin & Wald 2013, two-sided): `(t, u, v)` of the
@@ -336,9 +362,13 @@ fn tri1(pre: &Pre, tri: &Tri) -> Option<(f32, f32, f32)> {
     let mut v = a2[0] * c2[1] - a2[1] * c2[0];
     let mut w = b2[0] * a2[1] - b2[1] * a2[0];
     if u == 0.0 || v == 0.0 || w == 0.0 {
-        [u, v, w] = uvw_f64(a2, b2, c2);
-    }
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        // The inside test on the exact signs, then the values rounded for `t`, `u`, `v`.
+        let exact = uvw_f64(a2, b2, c2);
+        if outside(exact[0], exact[1], exact[2]) {
+            return None;
+        }
+        [u, v, w] = exact.map(|e| e as f32);
+    } else if outside(u, v, w) {
         return None;
     }
     let det = u + v + w;
@@ -389,6 +419,19 @@ pub fn intersect_brute(tris: &[Tri], ray: &Ray) -> Option<Hit> {
         closest1(&pre, tri, &mut best);
     }
     (best.prim != NO_HIT).then_some(best)
+}
+
+/// Whether the ray's conservative slab interval on `[tmin, tmax]` meets the box `[lo, hi]`:
+/// the traversals' box test for one box (false for rays that are not traced). With it a test
+/// oracle can tell the hits the contract lets a traversal miss (module docs, "Hits outside
+/// their own box").
+pub fn slab_meets(ray: &Ray, lo: Vec3, hi: Vec3) -> bool {
+    if !traceable(ray) {
+        return false;
+    }
+    let mut node = Node::EMPTY;
+    node.set_box(0, lo, hi);
+    box1(&node, 0, &Pre::new(ray), ray.tmax.min(f32::MAX)).is_some()
 }
 
 /// Whether any triangle blocks the ray on `[tmin, tmax]`, testing every triangle: the oracle.
@@ -1360,6 +1403,111 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Origins a subnormal distance beyond a box face at 0, rays along the other axes (the
+    /// `traverse` fuzz target, issue 22): an edge function of ~10⁻⁴⁶ rounded to 0 in `f32`
+    /// let the triangle test accept a point outside the triangle that the box test had
+    /// culled, so brute force found a hit (at `t = −0`) the BVH missed. Both now miss it.
+    #[test]
+    fn subnormal_origins_beyond_a_box_face_agree_with_brute_force() {
+        let s = (-20f32).exp2();
+        // An edge on x = 0 from y = −s to y = s, the triangle on the x ≤ 0 side; the median
+        // split along x puts it in a leaf whose box ends at x = 0.
+        let tri = |x0: f32, x1: f32| {
+            [
+                Vec3::new(x0 * s, -s, 0.0),
+                Vec3::new(x0 * s, s, 0.0),
+                Vec3::new(x1 * s, 0.0, 0.0),
+            ]
+        };
+        let soup = [
+            tri(0.0, -1.0),
+            tri(4.0, 5.0),
+            tri(-9.0, -8.0),
+            tri(9.0, 8.0),
+        ];
+        let (nodes, tris) = build(&soup);
+        assert_eq!(nodes[0].hi[0][0], 0.0, "the left leaf's box ends at x = 0");
+        let bvh = BvhRef::new(&nodes, &tris).unwrap();
+        let rays = [
+            // The issue's ray: origin (8.8e-44, −6.7e-9, 9.2e-41), direction (0, 0, 56.06).
+            Ray::new(
+                Vec3::new(8.8e-44, -6.7e-9, 9.2e-41),
+                Vec3::new(0.0, 0.0, 56.06),
+                0.0,
+                f32::INFINITY,
+            ),
+            Ray::new(
+                Vec3::new(8.8e-44, 0.0, 0.0),
+                Vec3::new(0.0, 0.0, -1.0),
+                0.0,
+                f32::INFINITY,
+            ),
+            Ray::new(
+                Vec3::new(f32::from_bits(1), 1e-40, -1e-41),
+                Vec3::new(0.0, 0.0, 3.0),
+                0.0,
+                f32::INFINITY,
+            ),
+            // On the edge itself: a hit for all of them.
+            Ray::new(
+                Vec3::new(0.0, 1e-9, -1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+                0.0,
+                2.0,
+            ),
+        ];
+        for r in &rays {
+            let oracle = intersect_brute(&tris, r);
+            assert_eq!(intersect1(&bvh, r), oracle, "{r:?}");
+            assert_eq!(occluded1(&bvh, r), occluded_brute(&tris, r), "{r:?}");
+            let packet = Ray8::from_rays(&[*r; LANES]);
+            let mut hits = Hit8::NONE;
+            intersect8(&bvh, &packet, &mut hits);
+            assert_eq!(hits.lane(0), oracle, "{r:?}");
+            assert_eq!(occluded8(&bvh, &packet) & 1 == 1, oracle.is_some(), "{r:?}");
+        }
+        assert_eq!(
+            intersect_brute(&tris, &rays[0]),
+            None,
+            "outside the triangle"
+        );
+        assert_eq!(intersect_brute(&tris, &rays[3]).map(|h| h.prim), Some(0));
+    }
+
+    /// An origin 10⁻³⁶ outside a triangle's box, on the triangle's edge once the shear has
+    /// rounded it (the `traverse` fuzz target, issue 22): brute force hits it at `t = 0`, the
+    /// box test culls it; the traversals keep to the contract ("Hits outside their own box").
+    #[test]
+    fn origins_rounded_onto_an_edge_by_the_shear_keep_to_the_contract() {
+        let soup = [
+            [
+                Vec3::new(-0.078125, 0.0, 0.0),
+                Vec3::new(0.015625, -48.0, 0.015625),
+                Vec3::new(80.0, 0.0, 0.0),
+            ],
+            [
+                Vec3::new(-4.0, 0.0, 0.0),
+                Vec3::new(0.0, -0.078125, 0.0),
+                Vec3::new(0.0, 0.0, -100.0),
+            ],
+        ];
+        let (nodes, tris) = build(&soup);
+        let bvh = BvhRef::new(&nodes, &tris).unwrap();
+        let org = Vec3::new(3.762_040_7e-37, 1.504_563_9e-36, 3.761_926_3e-37);
+        let r = Ray::new(org, Vec3::new(-6400.0, 3.0, -1280.0), 0.0, f32::INFINITY);
+        let brute = intersect_brute(&tris, &r);
+        assert_eq!(brute.map(|h| (h.t, h.prim)), Some((0.0, 0)));
+        let [lo, hi] = [Vec3::min, Vec3::max].map(|f| f(f(soup[0][0], soup[0][1]), soup[0][2]));
+        assert!(!slab_meets(&r, lo, hi), "the hit lies outside its own box");
+        let others: Vec<Tri> = tris.iter().filter(|t| t.prim != 0).copied().collect();
+        let boxed = intersect_brute(&others, &r);
+        let allowed = [brute, boxed];
+        assert!(allowed.contains(&intersect1(&bvh, &r)));
+        let mut hits = Hit8::NONE;
+        let mask = intersect8(&bvh, &Ray8::from_rays(&[r; LANES]), &mut hits);
+        assert!(allowed.contains(&(mask & 1 == 1).then(|| hits.lane(0)).flatten()));
     }
 
     #[test]

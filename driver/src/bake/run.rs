@@ -578,7 +578,8 @@ fn open_batches(
 ) -> Result<BatchFile, BakeError> {
     let path = dir.join("batches.bin");
     if resume && path.exists() {
-        let (file, _) = BatchFile::open(&path, true, Some((texel_count, bake_id)))?;
+        let (file, _) =
+            BatchFile::open_with(&path, true, iterations, Some((texel_count, bake_id)))?;
         return Ok(file);
     }
     Ok(BatchFile::create_with(
@@ -747,9 +748,10 @@ fn open_batch_files(
     }
     let mut files = Vec::new();
     for shard in shards {
-        let (file, _) = BatchFile::open(
+        let (file, _) = BatchFile::open_with(
             &shard.dir.join("batches.bin"),
             false,
+            shard.manifest.iterations,
             Some((texels.header().texel_count, shard.manifest.bake_id)),
         )?;
         files.push(file);

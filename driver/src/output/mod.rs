@@ -67,6 +67,16 @@ pub enum OutputFileError {
         /// Texels in the file.
         count: u64,
     },
+    /// Records to read or write that are not whole texels of the file's layout.
+    #[error("{path}: {records} records are not whole texels of {per_texel} records each")]
+    PartialTexel {
+        /// The file.
+        path: PathBuf,
+        /// Records asked for.
+        records: u64,
+        /// Records per texel in the file.
+        per_texel: u64,
+    },
 }
 
 /// An [`OutputFileError::Io`] for `path`.

@@ -71,7 +71,8 @@ pub struct ResultHeader {
     pub magic: [u8; 8],
     /// [`RESULT_VERSION`].
     pub version: u32,
-    /// Bytes per record, 48.
+    /// Bytes of one texel's records: 48 in a result file, K · 80 in a batch file of K
+    /// iterations.
     pub record_bytes: u32,
     /// Records in the file.
     pub texel_count: u64,
@@ -168,16 +169,32 @@ impl<T: PerTexel> RecordFile<T> {
         })
     }
 
-    /// Opens an existing result file and checks that it belongs to bake `bake_id` with
-    /// `texel_count` texels (pass `None` to accept any bake, as `merge` does after checking
-    /// the shards agree among themselves).
+    /// Opens an existing file of one `T` record per texel (a result file) and checks that it
+    /// belongs to bake `bake_id` with `texel_count` texels (pass `None` to accept any bake, as
+    /// `merge` does after checking the shards agree among themselves).
     ///
     /// # Errors
-    /// [`OutputFileError::Io`] when it cannot be opened or read; [`OutputFileError::Mismatch`]
-    /// when the magic, version, record size, length or bake identity differ.
+    /// As [`Self::open_with`] with one record per texel.
     pub fn open(
         path: &Path,
         writable: bool,
+        expect: Option<(u64, u64)>,
+    ) -> Result<(Self, ResultHeader), OutputFileError> {
+        Self::open_with(path, writable, 1, expect)
+    }
+
+    /// [`Self::open`] for a file of `per_texel` `T` records per texel (as [`Self::create_with`]
+    /// wrote it). The header's record size must be exactly `per_texel` records of `T`: a file
+    /// of another layout is refused, never read with the wrong stride.
+    ///
+    /// # Errors
+    /// [`OutputFileError::Io`] when it cannot be opened or read; [`OutputFileError::Mismatch`]
+    /// when the magic, version, record layout, length or bake identity differ. Every error
+    /// names the file.
+    pub fn open_with(
+        path: &Path,
+        writable: bool,
+        per_texel: u32,
         expect: Option<(u64, u64)>,
     ) -> Result<(Self, ResultHeader), OutputFileError> {
         let (file, len, bytes) = open_with_header(path, writable, T::KIND, T::MAGIC, T::VERSION)?;
@@ -186,14 +203,19 @@ impl<T: PerTexel> RecordFile<T> {
             path: path.to_owned(),
             what,
         };
-        let record_bytes = header.record_bytes as usize;
-        if record_bytes == 0 || !record_bytes.is_multiple_of(size_of::<T>()) {
+        let per_texel = u64::from(per_texel.max(1));
+        let expected = per_texel * size_of::<T>() as u64;
+        if u64::from(header.record_bytes) != expected {
+            let records = |n: u64| if n == 1 { "record" } else { "records" };
             return Err(mismatch(format!(
-                "record size {record_bytes} (expected a multiple of {})",
-                size_of::<T>()
+                "record layout of {} bytes per texel, where this {} holds {per_texel} {} of {} bytes per texel ({expected} bytes)",
+                header.record_bytes,
+                T::KIND,
+                records(per_texel),
+                size_of::<T>(),
             )));
         }
-        if records_end(header.texel_count, record_bytes as u64) != Some(len) {
+        if records_end(header.texel_count, expected) != Some(len) {
             return Err(mismatch(format!(
                 "length {len} does not hold the {} texels its header declares",
                 header.texel_count
@@ -213,7 +235,7 @@ impl<T: PerTexel> RecordFile<T> {
                 file,
                 path: path.to_owned(),
                 texel_count,
-                per_texel: (record_bytes / size_of::<T>()) as u64,
+                per_texel,
                 record: PhantomData,
             },
             header,
@@ -238,7 +260,8 @@ impl<T: PerTexel> RecordFile<T> {
     /// Writes `results` (whole texels' records) for the texels from `first_texel` on, in place.
     ///
     /// # Errors
-    /// [`OutputFileError::OutOfRange`] past the end; [`OutputFileError::Io`] on a failed write.
+    /// [`OutputFileError::OutOfRange`] past the end; [`OutputFileError::PartialTexel`] when
+    /// `results` is not whole texels; [`OutputFileError::Io`] on a failed write.
     pub fn write(&self, first_texel: u64, results: &[T]) -> Result<(), OutputFileError> {
         let offset = self.range_offset(first_texel, results.len())?;
         self.file
@@ -249,7 +272,8 @@ impl<T: PerTexel> RecordFile<T> {
     /// Reads the records of the texels from `first_texel` on into `out` (whole texels).
     ///
     /// # Errors
-    /// [`OutputFileError::OutOfRange`] past the end; [`OutputFileError::Io`] on a failed read.
+    /// [`OutputFileError::OutOfRange`] past the end; [`OutputFileError::PartialTexel`] when
+    /// `out` is not whole texels; [`OutputFileError::Io`] on a failed read.
     pub fn read(&self, first_texel: u64, out: &mut [T]) -> Result<(), OutputFileError> {
         let offset = self.range_offset(first_texel, out.len())?;
         self.file
@@ -269,8 +293,15 @@ impl<T: PerTexel> RecordFile<T> {
 
     /// Where the records of `records` / `per_texel` texels from `first` on start.
     fn range_offset(&self, first: u64, records: usize) -> Result<u64, OutputFileError> {
-        debug_assert!((records as u64).is_multiple_of(self.per_texel));
-        let end = first.checked_add(records as u64 / self.per_texel);
+        let records = records as u64;
+        if !records.is_multiple_of(self.per_texel) {
+            return Err(OutputFileError::PartialTexel {
+                path: self.path.clone(),
+                records,
+                per_texel: self.per_texel,
+            });
+        }
+        let end = first.checked_add(records / self.per_texel);
         let stride = self.per_texel * size_of::<T>() as u64;
         match end {
             Some(end) if end <= self.texel_count => Ok(RESULT_HEADER_BYTES + first * stride),
@@ -384,5 +415,60 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("too short"), "{err}");
+    }
+
+    /// A result file whose header declares 7 records per texel (found by the `result_file`
+    /// fuzz target) is refused with an error naming it, not read with the wrong stride; so
+    /// is a batch file of another iteration count.
+    #[test]
+    fn refuses_a_record_layout_other_than_its_own() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.bin");
+        // 7 TexelResults per texel, as a 7-iteration batch file would hold Welfords.
+        RecordFile::<TexelResult>::create_with(&path, 3, 7, 1).unwrap();
+        let err = ResultFile::open(&path, false, None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("r.bin") && err.contains("record layout of 336 bytes per texel"),
+            "{err}"
+        );
+        let (seven, _) = RecordFile::<TexelResult>::open_with(&path, false, 7, None).unwrap();
+        assert_eq!(seven.per_texel(), 7);
+
+        let batches = dir.path().join("b.bin");
+        BatchFile::create_with(&batches, 3, 4, 1).unwrap();
+        for k in [1, 3, 5, 16] {
+            let err = BatchFile::open_with(&batches, false, k, None)
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains("b.bin") && err.contains("320 bytes"), "{err}");
+        }
+        let (four, header) = BatchFile::open_with(&batches, false, 4, None).unwrap();
+        assert_eq!((four.per_texel(), header.record_bytes), (4, 320));
+    }
+
+    /// Reads and writes of records that are not whole texels are errors, not panics.
+    #[test]
+    fn refuses_partial_texels() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("b.bin");
+        let file = BatchFile::create_with(&path, 3, 4, 1).unwrap();
+        let mut out = vec![Welford::new(); 6];
+        let err = file.read(0, &mut out).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                OutputFileError::PartialTexel {
+                    records: 6,
+                    per_texel: 4,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("b.bin"), "{err}");
+        assert!(file.write(1, &out[..3]).is_err());
+        assert!(file.read(1, &mut out[..4]).is_ok());
     }
 }
