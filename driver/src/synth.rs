@@ -490,16 +490,46 @@ fn write_glb(
     let mut bin: Vec<u8> = Vec::new();
     let (mut views, mut accessors, mut meshes, mut nodes, mut records) =
         (vec![], vec![], vec![], vec![], vec![]);
-    let mut push_view = |bin: &mut Vec<u8>, data: &[u8], target: u32| {
-        let offset = bin.len();
-        bin.extend_from_slice(data);
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        views.push(
-            json!({"buffer": 0, "byteOffset": offset, "byteLength": data.len(), "target": target}),
+    // Positions, normals, optional lightmap UVs and indices as buffer views and accessors;
+    // returns the index of the first accessor (POSITION, NORMAL, [TEXCOORD_1,] indices).
+    let mut push_geometry = |bin: &mut Vec<u8>,
+                             pos: &[Vec3],
+                             nrm: &[Vec3],
+                             uv: Option<&[Vec2]>,
+                             idx: &[u32]| {
+        let mut push_view = |data: &[u8], target: u32| {
+            let offset = bin.len();
+            bin.extend_from_slice(data);
+            while !bin.len().is_multiple_of(4) {
+                bin.push(0);
+            }
+            views.push(
+                json!({"buffer": 0, "byteOffset": offset, "byteLength": data.len(), "target": target}),
+            );
+            views.len() - 1
+        };
+        let (lo, hi) = pos.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(a, b), p| (a.min(*p), b.max(*p)),
         );
-        views.len() - 1
+        let a0 = accessors.len();
+        let v = push_view(bytemuck::cast_slice(pos), 34962);
+        accessors.push(json!({"bufferView": v, "componentType": 5126, "count": pos.len(), "type": "VEC3", "min": lo.to_array(), "max": hi.to_array()}));
+        let v = push_view(bytemuck::cast_slice(nrm), 34962);
+        accessors.push(
+            json!({"bufferView": v, "componentType": 5126, "count": nrm.len(), "type": "VEC3"}),
+        );
+        if let Some(uv) = uv {
+            let v = push_view(bytemuck::cast_slice(uv), 34962);
+            accessors.push(
+                json!({"bufferView": v, "componentType": 5126, "count": uv.len(), "type": "VEC2"}),
+            );
+        }
+        let v = push_view(bytemuck::cast_slice(idx), 34963);
+        accessors.push(
+            json!({"bufferView": v, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
+        );
+        a0
     };
     for page in 0..pages {
         let quads: Vec<&Placed> = placed.iter().filter(|p| p.page == page).collect();
@@ -517,25 +547,7 @@ fn write_glb(
             }
             idx.extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
         }
-        let (lo, hi) = pos.iter().fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(a, b), p| (a.min(*p), b.max(*p)),
-        );
-        let a0 = accessors.len();
-        let v = push_view(&mut bin, bytemuck::cast_slice(&pos), 34962);
-        accessors.push(json!({"bufferView": v, "componentType": 5126, "count": pos.len(), "type": "VEC3", "min": lo.to_array(), "max": hi.to_array()}));
-        let v = push_view(&mut bin, bytemuck::cast_slice(&nrm), 34962);
-        accessors.push(
-            json!({"bufferView": v, "componentType": 5126, "count": nrm.len(), "type": "VEC3"}),
-        );
-        let v = push_view(&mut bin, bytemuck::cast_slice(&uv), 34962);
-        accessors.push(
-            json!({"bufferView": v, "componentType": 5126, "count": uv.len(), "type": "VEC2"}),
-        );
-        let v = push_view(&mut bin, bytemuck::cast_slice(&idx), 34963);
-        accessors.push(
-            json!({"bufferView": v, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
-        );
+        let a0 = push_geometry(&mut bin, &pos, &nrm, Some(&uv), &idx);
         meshes.push(json!({"name": format!("city_page{page}"), "primitives": [{
             "attributes": {"POSITION": a0, "NORMAL": a0 + 1, "TEXCOORD_1": a0 + 2},
             "indices": a0 + 3, "material": 0, "mode": 4}]}));
@@ -574,21 +586,7 @@ fn write_glb(
             if pos.is_empty() {
                 continue;
             }
-            let (lo, hi) = pos.iter().fold(
-                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-                |(a, b), p| (a.min(*p), b.max(*p)),
-            );
-            let a0 = accessors.len();
-            let v = push_view(&mut bin, bytemuck::cast_slice(&pos), 34962);
-            accessors.push(json!({"bufferView": v, "componentType": 5126, "count": pos.len(), "type": "VEC3", "min": lo.to_array(), "max": hi.to_array()}));
-            let v = push_view(&mut bin, bytemuck::cast_slice(&nrm), 34962);
-            accessors.push(
-                json!({"bufferView": v, "componentType": 5126, "count": nrm.len(), "type": "VEC3"}),
-            );
-            let v = push_view(&mut bin, bytemuck::cast_slice(&idx), 34963);
-            accessors.push(
-                json!({"bufferView": v, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
-            );
+            let a0 = push_geometry(&mut bin, &pos, &nrm, None, &idx);
             primitives.push(json!({"attributes": {"POSITION": a0, "NORMAL": a0 + 1},
                 "indices": a0 + 2, "material": 1 + class, "mode": 4}));
         }
