@@ -44,13 +44,13 @@ fn records(rng: &mut Pcg32, n: usize) -> Vec<Record> {
         .collect()
 }
 
-#[test]
-fn guide_build_sample8_and_pdf8_match_the_kernels() {
-    let mut rng = Pcg32::new(1, 20);
-    let recs = records(&mut rng, 2000);
-    let mut storage = vec![Node::default(); 1024];
-    let (g, stats) = guide::build(&mut recs.clone(), &GuideParams::default(), &mut storage);
-    let mut c_storage = vec![Node::default(); 1024];
+/// Builds a guide through the ABI from `recs` into `storage` (which the handle borrows),
+/// with `params` (null: the defaults); the status, the handle and the build's statistics.
+fn c_build(
+    recs: &[Record],
+    params: *const GuidebakeGuideParams,
+    storage: &mut [Node],
+) -> (S, GuidebakeGuide, GuidebakeGuideStats) {
     let mut c_recs: Vec<GuidebakeRecord> = recs
         .iter()
         .map(|r| GuidebakeRecord {
@@ -63,18 +63,30 @@ fn guide_build_sample8_and_pdf8_match_the_kernels() {
         size: size_of::<GuidebakeGuideStats>() as u32,
         ..Default::default()
     };
-    // SAFETY: every buffer is valid for its length; storage outlives the handle.
+    // SAFETY: every buffer is valid for its length; the caller keeps `storage` while it
+    // uses the handle.
     let s = unsafe {
         guidebake_guide_build(
             c_recs.as_mut_ptr(),
             c_recs.len(),
-            std::ptr::null(),
-            c_storage.as_mut_ptr().cast(),
-            c_storage.len() * guidebake_guide_node_size(),
+            params,
+            storage.as_mut_ptr().cast(),
+            size_of_val(storage),
             &mut handle,
             &mut st,
         )
     };
+    (s, handle, st)
+}
+
+#[test]
+fn guide_build_sample8_and_pdf8_match_the_kernels() {
+    let mut rng = Pcg32::new(1, 20);
+    let recs = records(&mut rng, 2000);
+    let mut storage = vec![Node::default(); 1024];
+    let (g, stats) = guide::build(&mut recs.clone(), &GuideParams::default(), &mut storage);
+    let mut c_storage = vec![Node::default(); 1024];
+    let (s, handle, st) = c_build(&recs, std::ptr::null(), &mut c_storage);
     assert_eq!(s, S::Ok, "{}", last_error());
     assert_eq!(
         (st.nodes, st.leaves, st.accepted, st.has_start_table),
@@ -121,26 +133,7 @@ fn sample_packets_equals_sample8_per_packet_and_works_in_place() {
     let mut storage = vec![Node::default(); 1024];
     let (g, _) = guide::build(&mut recs.clone(), &GuideParams::default(), &mut storage);
     let mut c_storage = vec![Node::default(); 1024];
-    let mut c_recs: Vec<GuidebakeRecord> = recs
-        .iter()
-        .map(|r| GuidebakeRecord {
-            u: r.u,
-            flux: r.flux,
-        })
-        .collect();
-    let mut h = GuidebakeGuide { opaque: [0; 8] };
-    // SAFETY: valid buffers; the storage outlives the handle.
-    let s = unsafe {
-        guidebake_guide_build(
-            c_recs.as_mut_ptr(),
-            c_recs.len(),
-            std::ptr::null(),
-            c_storage.as_mut_ptr().cast(),
-            1024 * 64,
-            &mut h,
-            std::ptr::null_mut(),
-        )
-    };
+    let (s, h, _) = c_build(&recs, std::ptr::null(), &mut c_storage);
     assert_eq!(s, S::Ok);
     let packets = 37;
     let mut x: Vec<f32> = (0..8 * packets).map(|_| rng.next_f32()).collect();
@@ -188,30 +181,7 @@ fn versioned_params_read_only_what_the_caller_knows() {
     let recs = records(&mut rng, 3000);
     let build = |params: &GuidebakeGuideParams| {
         let mut storage = vec![Node::default(); 2048];
-        let mut r: Vec<GuidebakeRecord> = recs
-            .iter()
-            .map(|r| GuidebakeRecord {
-                u: r.u,
-                flux: r.flux,
-            })
-            .collect();
-        let mut handle = GuidebakeGuide { opaque: [0; 8] };
-        let mut st = GuidebakeGuideStats {
-            size: size_of::<GuidebakeGuideStats>() as u32,
-            ..Default::default()
-        };
-        // SAFETY: valid buffers.
-        let s = unsafe {
-            guidebake_guide_build(
-                r.as_mut_ptr(),
-                r.len(),
-                params,
-                storage.as_mut_ptr().cast(),
-                storage.len() * 64,
-                &mut handle,
-                &mut st,
-            )
-        };
+        let (s, _, st) = c_build(&recs, params, &mut storage);
         (s, st.depth)
     };
     let mut p = guidebake_guide_params_default();
