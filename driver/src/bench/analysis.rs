@@ -196,33 +196,60 @@ pub fn equal_time(curves: &[Curve], budget_s: f64) -> Vec<EqualTime> {
         .collect()
 }
 
-/// How many baseline samples reach a method's RMSE, per sample of the method.
+/// The error an equivalent-sample factor is read by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorMetric {
+    /// Root-mean-square error: the bright texels weigh the most.
+    Rmse,
+    /// Relative MSE: every texel's error relative to its own value (the path-guiding
+    /// literature's measure, and closer to what a viewer sees in a lightmap).
+    RelMse,
+}
+
+impl ErrorMetric {
+    fn of(self, p: &CurvePoint) -> f64 {
+        match self {
+            Self::Rmse => p.rmse,
+            Self::RelMse => p.rel_mse,
+        }
+    }
+}
+
+/// How many baseline samples reach a method's error, per sample of the method.
 #[derive(Clone, Debug, Serialize)]
 pub struct EquivalentSamples {
     /// Method label.
     pub method: String,
+    /// The error compared.
+    pub metric: ErrorMetric,
     /// Rays per texel of the method.
     pub spp: u32,
-    /// Baseline rays per texel with the same RMSE.
+    /// Baseline rays per texel with the same error.
     pub baseline_spp: Interpolated,
     /// `baseline_spp / spp`: above 1, the method is worth that many more baseline samples.
     pub factor: f64,
 }
 
-/// The equivalent-sample factor of every point of `curve` against `baseline`.
-pub fn equivalent_samples(curve: &Curve, baseline: &Curve) -> Vec<EquivalentSamples> {
+/// The equivalent-sample factor of every point of `curve` against `baseline`, by `metric`.
+pub fn equivalent_samples(
+    curve: &Curve,
+    baseline: &Curve,
+    metric: ErrorMetric,
+) -> Vec<EquivalentSamples> {
     let inverse: Vec<(f64, f64)> = baseline
         .points
         .iter()
-        .map(|p| (p.rmse, f64::from(p.spp)))
+        .map(|p| (metric.of(p), f64::from(p.spp)))
         .collect();
     curve
         .points
         .iter()
         .filter_map(|p| {
-            let b = log_log_at(&inverse, p.rmse)?;
+            let b = log_log_at(&inverse, metric.of(p))?;
             Some(EquivalentSamples {
                 method: curve.method.clone(),
+                metric,
                 spp: p.spp,
                 baseline_spp: b,
                 factor: b.value / f64::from(p.spp),
@@ -359,16 +386,20 @@ mod tests {
     fn a_method_with_half_the_error_is_worth_four_times_the_samples() {
         let base = curve("b", &[(64, 1.0, 0.4), (256, 4.0, 0.2), (1024, 16.0, 0.1)]);
         let better = curve("g", &[(64, 1.0, 0.2), (256, 4.0, 0.1)]);
-        let eq = equivalent_samples(&better, &base);
+        let eq = equivalent_samples(&better, &base, ErrorMetric::Rmse);
         assert_eq!(eq.len(), 2);
         assert!((eq[0].factor - 4.0).abs() < 1e-9);
         assert!(!eq[0].baseline_spp.extrapolated);
         assert!((eq[1].factor - 4.0).abs() < 1e-9);
-        let t = equal_time(&[base.clone(), better], 4.0);
+        let t = equal_time(&[base.clone(), better.clone()], 4.0);
         assert!((t[0].rmse.unwrap().value - 0.2).abs() < 1e-12);
         assert!((t[1].rmse.unwrap().value - 0.1).abs() < 1e-12);
         let slope = convergence_slope(&base).unwrap();
         assert!((slope + 0.5).abs() < 1e-12);
+        // Relative MSE goes as 1/spp like MSE: half the RMSE is a quarter of the relMSE,
+        // and again four times the samples.
+        let rel = equivalent_samples(&better, &base, ErrorMetric::RelMse);
+        assert!(rel.iter().all(|e| (e.factor - 4.0).abs() < 1e-9), "{rel:?}");
     }
 
     #[test]

@@ -291,7 +291,12 @@ fn measure_and_write(
     let equivalent_samples = baseline.map_or_else(Vec::new, |b| {
         curves
             .iter()
-            .flat_map(|c| analysis::equivalent_samples(c, b))
+            .flat_map(|c| {
+                let by = |m| analysis::equivalent_samples(c, b, m);
+                let mut all = by(analysis::ErrorMetric::Rmse);
+                all.extend(by(analysis::ErrorMetric::RelMse));
+                all
+            })
             .collect()
     });
     let overhead = analysis::overhead(&overhead_runs);

@@ -7,7 +7,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::BenchError;
-use super::analysis::{Curve, EqualTime, EquivalentSamples, Interpolated, Overhead};
+use super::analysis::{Curve, EqualTime, EquivalentSamples, ErrorMetric, Interpolated, Overhead};
 use super::harness::{Ladder, OverheadRecord, RunRecord};
 use super::method::{serialize_value_name, value_name};
 use super::reference::ReferenceInfo;
@@ -139,7 +139,7 @@ pub struct Summary {
     pub slopes: Vec<(String, Option<f64>)>,
     /// Errors at equal time.
     pub equal_time: EqualTimeSummary,
-    /// Equivalent-sample factors against the baseline.
+    /// Equivalent-sample factors against the baseline, by RMSE and by relative MSE.
     pub equivalent_samples: Vec<EquivalentSamples>,
     /// The Figure-5 overhead.
     pub overhead: OverheadSummary,
@@ -309,7 +309,7 @@ pub fn markdown(s: &Summary) -> String {
     let max_spp = s.ladder.spp.iter().copied().max().unwrap_or(0);
     let _ = writeln!(
         md,
-        "| method | time at {max_spp} spp (s) | RMSE at {max_spp} | relMSE at {max_spp} | rel. bias at {max_spp} | RMSE in {:.3} s | relMSE in {:.3} s | × baseline spp at {max_spp} | × baseline spp at equal time | at equal CPU time | guided |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| method | time at {max_spp} spp (s) | RMSE at {max_spp} | relMSE at {max_spp} | rel. bias at {max_spp} | RMSE in {:.3} s | relMSE in {:.3} s | × baseline spp at {max_spp} | × baseline spp at equal time | at equal CPU time | at equal CPU time, by relMSE | guided |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
         s.equal_time.budget_s, s.equal_time.budget_s
     );
     let baseline_label = crate::bench::method::Method::baseline().label();
@@ -322,14 +322,15 @@ pub fn markdown(s: &Summary) -> String {
         let Some(p) = c.points.iter().find(|p| p.spp == max_spp) else {
             continue;
         };
-        let equivalent = s
-            .equivalent_samples
-            .iter()
-            .find(|e| e.method == c.method && e.spp == max_spp);
-        // Baseline samples with the method's RMSE over the baseline samples that fit in the
+        let equivalent = |metric| {
+            s.equivalent_samples
+                .iter()
+                .find(|e| e.method == c.method && e.spp == max_spp && e.metric == metric)
+        };
+        // Baseline samples with the method's error over the baseline samples that fit in the
         // method's time: the equivalent-sample factor times the baseline's time over the
         // method's, both at the top of the ladder.
-        let at = |b: f64, m: f64| match equivalent {
+        let at_by = |metric, b: f64, m: f64| match equivalent(metric) {
             Some(e) if m > 0.0 && b > 0.0 => format!(
                 "{:.2}{}",
                 e.factor * b / m,
@@ -337,8 +338,14 @@ pub fn markdown(s: &Summary) -> String {
             ),
             _ => "—".into(),
         };
+        let at = |b, m| at_by(ErrorMetric::Rmse, b, m);
+        let equivalent = equivalent(ErrorMetric::Rmse);
         let at_equal_time = baseline_top.map_or_else(|| "—".into(), |b| at(b.wall_s, p.wall_s));
         let at_equal_cpu = baseline_top.map_or_else(|| "—".into(), |b| at(b.cpu_s, p.cpu_s));
+        let rel_at_equal_cpu = baseline_top.map_or_else(
+            || "—".into(),
+            |b| at_by(ErrorMetric::RelMse, b.cpu_s, p.cpu_s),
+        );
         let factor = equivalent.map_or_else(
             || "—".into(),
             |e| {
@@ -351,7 +358,7 @@ pub fn markdown(s: &Summary) -> String {
         );
         let _ = writeln!(
             md,
-            "| {} | {:.3} | {:.3e} | {:.3e} | {:+.2}% | {} | {} | {} | {} | {} | {:.0}% |",
+            "| {} | {:.3} | {:.3e} | {:.3e} | {:+.2}% | {} | {} | {} | {} | {} | {} | {:.0}% |",
             c.method,
             p.wall_s,
             p.rmse,
@@ -362,6 +369,7 @@ pub fn markdown(s: &Summary) -> String {
             factor,
             at_equal_time,
             at_equal_cpu,
+            rel_at_equal_cpu,
             100.0 * p.guided_fraction
         );
     }
