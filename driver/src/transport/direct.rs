@@ -111,18 +111,30 @@ impl World {
                     packet.set_lane(lane, &shadow_ray(p, s.direction, s.distance));
                 }
             }
-            rays += add_visible(&bvh, &packet, unshadowed, &weights, out);
+            let (visible, traced) = visible_lanes(&bvh, &packet, unshadowed);
+            for lane in lanes_of(visible) {
+                out[lane] += weights[lane];
+            }
+            rays += traced;
         }
         if self.emitters().is_some() {
             let mut packet = Ray8::INACTIVE;
-            let mut weights = [Vec3::ZERO; LANES];
+            let mut samples = [None; LANES];
             for lane in 0..LANES {
                 if let Some(s) = self.sample_emitter(p, n, pick[lane], u[lane]) {
-                    weights[lane] = self.emitter_weight(at, &s);
                     packet.set_lane(lane, &self.emitter_shadow_ray(p, &s));
+                    samples[lane] = Some(s);
                 }
             }
-            rays += add_visible(&bvh, &packet, 0, &weights, out);
+            // The weight (and its MIS density, a guide lookup when the gather is guided) only
+            // for the lanes that see their emitter, as in the scalar version.
+            let (visible, traced) = visible_lanes(&bvh, &packet, 0);
+            for lane in lanes_of(visible) {
+                if let Some(s) = &samples[lane] {
+                    out[lane] += self.emitter_weight(at, s);
+                }
+            }
+            rays += traced;
         }
         rays
     }
@@ -153,28 +165,25 @@ impl World {
     }
 }
 
-/// Traces `packet`'s live lanes for occlusion and adds `weights[lane]` for every visible
-/// lane (and every lane of `unshadowed`). Returns the lanes traced.
-fn add_visible(
+/// Traces `packet`'s live lanes for occlusion: the mask of visible lanes (the unoccluded
+/// traced lanes and every lane of `unshadowed`) and the lanes traced.
+fn visible_lanes(
     bvh: &guidebake_kernels::traverse::BvhRef<'_>,
     packet: &Ray8,
     unshadowed: u8,
-    weights: &[Vec3; LANES],
-    out: &mut [Vec3; LANES],
-) -> u32 {
+) -> (u8, u32) {
     let traced = lanes_traced(packet);
     let blocked = if traced != 0 {
         occluded8(bvh, packet)
     } else {
         0
     };
-    let visible = unshadowed | (traced & !blocked);
-    for lane in 0..LANES {
-        if visible & (1 << lane) != 0 {
-            out[lane] += weights[lane];
-        }
-    }
-    traced.count_ones()
+    (unshadowed | (traced & !blocked), traced.count_ones())
+}
+
+/// The lanes set in `mask`, in order.
+fn lanes_of(mask: u8) -> impl Iterator<Item = usize> {
+    (0..LANES).filter(move |lane| mask & (1 << lane) != 0)
 }
 
 fn lanes_traced(packet: &Ray8) -> u8 {
