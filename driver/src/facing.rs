@@ -1,6 +1,6 @@
 //! Which side of a two-sided surface its lightmap texels describe.
 //!
-//! The scenes are two-sided Lambertian (DESIGN.md, light transport), but a lightmap texel
+//! The scenes are two-sided Lambertian (docs/bake.md), but a lightmap texel
 //! stores one irradiance, gathered over one hemisphere. Scene files do not say which side
 //! matters: the converted Bitterli scenes have no normals and arbitrary winding, so a wall's
 //! geometric normal may point out of the room, where its texels would gather nothing and

@@ -1,4 +1,4 @@
-//! `prepare`: rasterize a scene's lightmap UV charts into texel tiles (DESIGN.md, "prepare").
+//! `prepare`: rasterize a scene's lightmap UV charts into texel tiles (docs/ARCHITECTURE.md, "The bake, as data flows").
 //!
 //! The paper (Silvennoinen & Sloan 2019, §2.1) bakes lightmap texels, each with a world
 //! position and normal, grouped into clusters; it assumes the texels exist. This module makes
@@ -16,7 +16,7 @@
 //! 3. **Conservative pass.** A texel still empty but overlapped by a triangle (separating
 //!    axis test of the texel square against the UV triangle) takes that triangle's point
 //!    *closest to the texel centre* and is flagged [`FLAG_PARTIAL`], so thin triangles and
-//!    chart borders keep texels. Deviation: the blog in DESIGN.md's seeds clips the triangle
+//!    chart borders keep texels. Deviation: the public write-ups on lightmap rasterisation clip the triangle
 //!    to the texel and spreads samples over the clipped polygons; we store one point and the
 //!    footprint axes instead, so the bake can still spread ray origins over the texel.
 //! 4. **Records.** Position and normal are interpolated with the barycentrics of that point

@@ -4,7 +4,7 @@
 //! Sources: glTF 2.0 (`.gltf`, `.glb`, with `KHR_lights_punctual` and
 //! `KHR_materials_emissive_strength`), Wavefront OBJ + MTL (`.obj`), and a small TOML scene
 //! file (`.toml`, see [`SceneFile`]) that names one of those and adds the sky and the sun.
-//! DESIGN.md, "The bake, as data flows" and "Light transport".
+//! docs/ARCHITECTURE.md, "The bake, as data flows", and docs/bake.md.
 //!
 //! What the paper (Silvennoinen & Sloan 2019) assumes and we keep: diffuse (Lambertian,
 //! two-sided) surfaces whose lightmap texels receive irradiance. Deviations and choices:

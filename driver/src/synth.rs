@@ -1,5 +1,5 @@
-//! `synth`: procedural worlds of any size for scaling tests (DESIGN.md, "prepare" — "a city
-//! of boxes"), written straight to a texel file and a scene, streaming.
+//! `synth`: procedural worlds of any size for scaling tests (a city of boxes;
+//! docs/ARCHITECTURE.md), written straight to a texel file and a scene, streaming.
 //!
 //! Not from the paper: the paper's scenes are production levels. This is the "huge world"
 //! the bake must stream in bounded memory.

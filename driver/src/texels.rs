@@ -1,5 +1,5 @@
 //! `texels`: the texel file — the contract between whatever laid out the lightmap and the
-//! bake (DESIGN.md, "Texel file"). Field-by-field layout: `driver/docs/texel-format.md`.
+//! bake (docs/ARCHITECTURE.md). Field-by-field layout: `docs/texel-format.md`.
 //!
 //! The paper (Silvennoinen & Sloan 2019, §2.1) bakes texels grouped into clusters of nearby
 //! texels with similar normals; the bake therefore streams **tiles** of up to 32×32 texels

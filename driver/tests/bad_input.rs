@@ -102,7 +102,7 @@ fn u64_at(b: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(b[at..at + 8].try_into().unwrap())
 }
 
-/// Header offsets (driver/docs/texel-format.md).
+/// Header offsets (docs/texel-format.md).
 const TILE_COUNT: usize = 32;
 const PAGES_OFFSET: usize = 56;
 const TEXELS_OFFSET: usize = 72;

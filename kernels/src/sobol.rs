@@ -18,7 +18,7 @@
 //!
 //! Deviation: the paper does not say how the rotation offsets are drawn; we hash instead of
 //! storing a random table so that any texel of any world gets its offset without state, and a
-//! bake is bit-identical for any tile order or shard split (DESIGN.md, determinism).
+//! bake is bit-identical for any tile order or shard split (docs/ARCHITECTURE.md, "Invariants").
 //!
 //! Scalar and 8-wide versions compute the same integers, so they agree bit for bit; `to_unit`
 //! and `to_unit_x8` are exact (24-bit integer times a power of two).

@@ -1,4 +1,4 @@
-//! The grid guide, a comparator (DESIGN.md, "Comparators"): the first-bounce guiding of the
+//! The grid guide, a comparator (docs/ARCHITECTURE.md, "Comparators"): the first-bounce guiding of the
 //! HWRTL baker and of Unreal's GPU Lightmass. Each square of 8×8 lightmap texels learns one
 //! 16×16-bin piecewise-constant density over the primary sample square from the previous
 //! iteration's gather samples of all its texels, and samples it by inverting the marginal

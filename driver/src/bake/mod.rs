@@ -1,4 +1,4 @@
-//! The streaming bake (DESIGN.md, "The bake"; paper §2): tiles stream from the texel file
+//! The streaming bake (docs/ARCHITECTURE.md, "The bake, as data flows"; paper §2): tiles stream from the texel file
 //! through per-worker buffers to one writer, in memory that does not grow with the world.
 //!
 //! This module holds the machinery that does not depend on light transport: which tiles a

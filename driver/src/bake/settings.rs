@@ -6,7 +6,7 @@ use std::fmt;
 use crate::output::fnv1a64;
 use crate::transport::emitters::EmitterSelection;
 
-/// How gather directions are chosen (DESIGN.md, comparators).
+/// How gather directions are chosen (docs/ARCHITECTURE.md, "Comparators").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum Guiding {
     /// Unguided cosine-weighted gather from presorted packets: the baseline.
@@ -50,7 +50,7 @@ pub enum Schedule {
     Doubling,
 }
 
-/// How the radiance a gather ray brings back from its hit is computed (DESIGN.md, light
+/// How the radiance a gather ray brings back from its hit is computed (docs/bake.md, light
 /// transport).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum Transport {

@@ -1,4 +1,4 @@
-//! Light transport for the final gather (DESIGN.md, "The bake", light transport): one home
+//! Light transport for the final gather (docs/bake.md): one home
 //! for how light reaches a texel.
 //!
 //! Surfaces are two-sided Lambertian. Lights are of two kinds: analytic lights (sun, point,

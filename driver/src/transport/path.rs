@@ -1,4 +1,4 @@
-//! What leaves a gather ray's hit, by the bake's transport (DESIGN.md, "Light transport"):
+//! What leaves a gather ray's hit, by the bake's transport (docs/bake.md):
 //! the hit's emission, weighted by multiple importance sampling against the next-event
 //! estimate of the point the ray left ([`super::direct`]), plus its albedo/π times the
 //! irradiance arriving there — direct light by next-event estimation, and indirect light

@@ -1,7 +1,7 @@
 //! Random numbers of one gather sample beyond its Sobol point: the light sample at the hit,
 //! the directions and Russian-roulette decisions of a path, each derived from
 //! (seed, texel, iteration, sample) so a sample's bits never depend on the thread or shard
-//! that baked it (DESIGN.md, determinism).
+//! that baked it (docs/ARCHITECTURE.md, "Invariants").
 
 use guidebake_kernels::sobol::rotation;
 

@@ -1,4 +1,4 @@
-//! Series transport's memory of the previous pass (DESIGN.md, "Two transport modes"; the
+//! Series transport's memory of the previous pass (docs/bake.md, the `series` transport; the
 //! paper's production setting, §1 and §3): pass b's gather rays, where they hit a surface,
 //! bring back albedo/π × the *indirect* irradiance pass b−1 baked there, looked up in pass
 //! b−1's lightmap through the hit triangle's lightmap UVs.
