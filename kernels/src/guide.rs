@@ -15,7 +15,12 @@
 //! 2. splits top-down, breadth first: a node splits into four quadrants while it holds at
 //!    least [`GuideParams::min_records`] records (4) and at least
 //!    [`GuideParams::min_flux_fraction`] (1%) of the total flux, up to
-//!    [`GuideParams::max_depth`];
+//!    [`GuideParams::max_depth`]. The records are first sorted by the Morton order of their
+//!    quadtree cells, only as deep as the rule can split (`cells`: an MSD radix sort, up to
+//!    four levels a pass), so every node's records are one contiguous range and a split
+//!    finds its children's ranges by binary search and sums their fluxes (f64) — no
+//!    per-level partitioning (issue 15; the tree is the one the partitioning build gave,
+//!    kept as the test oracle `reference`);
 //! 3. gives every leaf `max(flux, ambient · total · area)`: the **ambient floor** is a floor
 //!    on the density relative to its mean, so no direction has zero probability (default
 //!    [`DEFAULT_AMBIENT`] = 0.1: no leaf below a tenth of the uniform density, which bounds
@@ -37,8 +42,10 @@
 //!
 //! # Storage and capacity
 //! The caller supplies the node array (`&mut [Node]`, at most [`MAX_NODES`] nodes are used,
-//! because child links are `u16`); nothing allocates. The records are partitioned in place
-//! (their order changes). Nodes are created breadth first, so **when the storage is full**
+//! because child links are `u16`); nothing allocates. The records are sorted in place
+//! (their order changes). Before the tree is written the whole storage is the sort's
+//! scratch (13 bytes a record; with less room the sort runs in place, slower): past the tree
+//! and the start table its contents are unspecified after a build. Nodes are created breadth first, so **when the storage is full**
 //! every level that was split is complete and the nodes that would split further simply stay
 //! leaves: the guide is the best coarser tree that fits, still a valid normalized density.
 //! The number of refused splits is reported in [`BuildStats::capacity_refusals`].
@@ -175,7 +182,7 @@ pub struct Node {
     pub(crate) t: [f32; 3],
     /// Probability mass of the node after floor, normalization and smoothing (root 1).
     pub(crate) mass: f32,
-    /// First record of the node during the build (records are partitioned in place).
+    /// First record of the node during the build (the records are sorted in place).
     first: u32,
     /// Number of records of the node.
     count: u32,
@@ -371,7 +378,9 @@ fn root_leaf(count: u32) -> Node {
 
 /// Builds the guide from `records` into `storage` (see the module docs for the rule).
 /// `records` is reordered in place; rejected records end up after the accepted ones.
-/// Records beyond the first `u32::MAX` are ignored (node record counts are `u32`).
+/// Records beyond the first `u32::MAX` are ignored (node record counts are `u32`). All of
+/// `storage` is scratch during the build: past the tree and the start table its contents
+/// are unspecified afterwards.
 ///
 /// # Panics
 /// If `storage` is empty. Parameters out of range are clamped (depth to [`MAX_DEPTH`], α and
@@ -395,7 +404,7 @@ fn sort(records: &mut [Record], params: &GuideParams, storage: &mut [Node]) {
     let n = records.len();
     let (scratch, digits) = match bytes.get_mut(..n * (size_of::<Record>() + 1)) {
         Some(room) => {
-            let (scratch, digits) = room.split_at_mut(n * size_of::<Record>());
+            let (scratch, digits) = room.split_at_mut(size_of_val(records));
             (bytemuck::cast_slice_mut(scratch), digits)
         }
         None => (&mut [][..], &mut [][..]),
@@ -616,9 +625,10 @@ fn sanitize(x: f32, lo: f32, hi: f32) -> f32 {
 /// time ([`count_leading_valid`]); from the first rejected one on, every record is swapped
 /// to the front of the rejected ones, which grows past it only if it is valid (branch-free).
 fn partition_valid(records: &mut [Record], stats: &mut BuildStats) -> usize {
-    let in_square = |v: f32| (v >= 0.0) & (v < 1.0);
-    let mut kept = count_leading_valid(records);
-    for i in kept..records.len() {
+    let in_square = |v: f32| (0.0..1.0).contains(&v);
+    let leading = count_leading_valid(records);
+    let mut kept = leading;
+    for i in leading..records.len() {
         let r = records[i];
         let flux_ok = r.flux.is_finite() & (r.flux >= 0.0);
         let point_ok = in_square(r.u[0]) & in_square(r.u[1]);
@@ -950,7 +960,7 @@ mod tests {
                     }
                     let c = count_leading_valid(&r);
                     assert!(
-                        c % 8 == 0 && c <= p && p < c + 8 + n % 8,
+                        c.is_multiple_of(8) && c <= p && p < c + 8 + n % 8,
                         "n {n} bad {k} at {p}: {c}"
                     );
                     let mut stats = BuildStats::default();
