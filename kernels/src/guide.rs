@@ -45,7 +45,8 @@
 //! because child links are `u16`); nothing allocates. The records are sorted in place
 //! (their order changes). Before the tree is written the whole storage is the sort's
 //! scratch (13 bytes a record; with less room the sort runs in place, slower): past the tree
-//! and the start table its contents are unspecified after a build. Nodes are created breadth first, so **when the storage is full**
+//! and the start table its contents are unspecified after a build. Nodes are created
+//! breadth first, so **when the storage is full**
 //! every level that was split is complete and the nodes that would split further simply stay
 //! leaves: the guide is the best coarser tree that fits, still a valid normalized density.
 //! The number of refused splits is reported in [`BuildStats::capacity_refusals`].
@@ -417,7 +418,7 @@ fn sort(records: &mut [Record], params: &GuideParams, storage: &mut [Node]) {
 type SplitFn = fn(&mut [Record], &mut [Node], usize, usize, f64);
 
 /// [`build`] with its record order (`sort`, run on the accepted records before the
-/// subdivision) and its `split`; [`reference::build`] passes the partitioning ones.
+/// subdivision) and its `split`; `reference::build` passes the partitioning ones.
 fn build_with<'a>(
     records: &mut [Record],
     params: &GuideParams,

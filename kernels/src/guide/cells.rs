@@ -11,10 +11,11 @@
 //! [`sort`] is an MSD radix sort on windows of up to four levels (256 buckets), so a record
 //! moves once per four levels instead of being partitioned twice per level: a counting sort
 //! through scratch memory (the caller's node storage, free before the tree is written), or
-//! without room for it an in-place American flag sort. It recurses only into cells that the split rule may split
-//! (at least [`super::GuideParams::min_records`] records, above the depth cap): the order
-//! inside a cell that never splits does not matter. Nothing allocates; the recursion is at
-//! most [`MAX_DEPTH`] windows deep (2 KB of stack each).
+//! without room for it an in-place American flag sort. It recurses only into cells that the
+//! split rule may split (at least [`super::GuideParams::min_records`] records, above the
+//! depth cap): the order inside a cell that never splits does not matter. Nothing
+//! allocates; a window spans at least two levels, so the recursion is at most eight
+//! windows deep (~5 KB of stack each).
 
 use super::{MAX_DEPTH, Record};
 
@@ -58,14 +59,13 @@ const SPREAD: [u8; 16] = {
 };
 
 /// Ranges up to this length are insertion-sorted by their full keys.
-const SMALL: usize = 32;
+const SMALL: usize = 64;
 
-/// Levels of a radix window for a range of `len` records: about one bucket per four
-/// records, at most four levels (256 buckets).
+/// Levels of a radix window for a range of `len` (> [`SMALL`]) records: about one bucket
+/// per four records, two to four levels (16 to 256 buckets).
 fn window(len: usize) -> u32 {
     match len {
-        0..64 => 1,
-        64..256 => 2,
+        0..256 => 2,
         256..1024 => 3,
         _ => 4,
     }
@@ -102,19 +102,17 @@ pub(super) fn sort(
     };
     let buckets = 1usize << (2 * levels);
     let room = scratch.len() >= len && digits.len() >= len;
-    let counts = if room {
+    // Each stream's bucket counts, turned into its first slot in each bucket.
+    let mut next = if room {
         histogram(records, &mut digits[..len], &digit)
     } else {
         histogram(records, &mut [], &digit)
     };
-    // Bucket starts, and each stream's first slot in each bucket.
     let mut start = [0u32; 257];
-    let mut next = [[0u32; 256]; STREAMS];
     for b in 0..buckets {
         let mut at = start[b];
-        for (next, counts) in next.iter_mut().zip(&counts) {
-            next[b] = at;
-            at += counts[b];
+        for next in next.iter_mut() {
+            (next[b], at) = (at, at + next[b]);
         }
         start[b + 1] = at;
     }
@@ -338,6 +336,9 @@ mod tests {
             (1, 10, 4),
             (31, 16, 1),
             (33, 16, 1),
+            (64, 16, 1),
+            (65, 16, 1),
+            (300, 16, 1),
             (500, 10, 4),
             (5000, 16, 4),
             (5000, 3, 4),
