@@ -9,8 +9,7 @@
 //! (benchmark ids `warp/<function>/<samples>`). The guide is a realistic learned one: a small
 //! bright disk and a dim sky, learned in two iterations from 256 uniform and 512 guided
 //! records.
-//! Group `guide` (records/s): `build` from those 512 records, and the same build with
-//! storage for the tree only (`build_without_start_table`), which shows the start table's cost.
+//! The guide build has its own bench, `benches/guide.rs` (`guide/build/<records>`).
 //!
 //! Every function's output is checked against the scalar reference once before timing.
 //!
@@ -20,7 +19,7 @@
 //! Run: `cargo bench --bench warp -- --warm-up-time 1 --measurement-time 3`
 //! (`cargo bench --bench warp -- none` prints the round-robin medians only).
 
-use criterion::{BatchSize, BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
@@ -341,33 +340,6 @@ fn bench(c: &mut Criterion) {
         interleaved(&g, &pts, samples);
         timed(&mut group, &g, &pts, samples);
     }
-    group.finish();
-
-    let mut group = c.benchmark_group("guide");
-    group.throughput(Throughput::Elements(learned.len() as u64));
-    group.bench_function("build", |b| {
-        b.iter_batched_ref(
-            || learned.clone(),
-            |r| {
-                let (g, s) = guide::build(r, &GuideParams::default(), &mut storage);
-                black_box((g.nodes().len(), s));
-            },
-            BatchSize::SmallInput,
-        )
-    });
-    // The same build with storage for the tree only: no start table, to show its cost.
-    let tree_only = stats.nodes as usize;
-    group.bench_function("build_without_start_table", |b| {
-        b.iter_batched_ref(
-            || learned.clone(),
-            |r| {
-                let (g, s) = guide::build(r, &GuideParams::default(), &mut storage[..tree_only]);
-                assert!(g.start_table().is_empty());
-                black_box((g.nodes().len(), s));
-            },
-            BatchSize::SmallInput,
-        )
-    });
     group.finish();
 }
 

@@ -412,6 +412,9 @@ mod tests {
             gather_s,
             rays: 0,
             guided_fraction: 0.5,
+            cpu_s: gather_s + 1.0,
+            guide_build_s: 0.0,
+            warp_s: 0.0,
         };
         let records = vec![
             rec("coherent", 0, 1.1),

@@ -305,6 +305,12 @@ pub struct OverheadRecord {
     pub rays: u64,
     /// Guided cluster-iterations over all learning iterations after the first.
     pub guided_fraction: f64,
+    /// CPU seconds of the whole bake (every thread, user + system).
+    pub cpu_s: f64,
+    /// Seconds spent building guides (`guide_build_ns` of the stats, summed over threads).
+    pub guide_build_s: f64,
+    /// Seconds spent warping samples through guides (`warp_ns`, summed over threads).
+    pub warp_s: f64,
 }
 
 /// The Figure-5 measurement: every `--guiding` mode at `spp` with the bake's defaults
@@ -342,6 +348,9 @@ pub fn run_overhead(
                 gather_s: baked.report.seconds.gather,
                 rays: c.gather_rays + c.shadow_rays,
                 guided_fraction: guided_fraction(&baked.report, iterations),
+                cpu_s: baked.cpu_s,
+                guide_build_s: c.guide_build_ns as f64 * 1e-9,
+                warp_s: c.warp_ns as f64 * 1e-9,
             };
             eprintln!(
                 "overhead {}/{repeats} {:<9} spp {spp}: gather {:.3} s, wall {:.3} s",

@@ -188,7 +188,7 @@ pub const RUN_COLUMNS: [&str; 24] = [
 ];
 
 /// The columns of `overhead.csv`.
-pub const OVERHEAD_COLUMNS: [&str; 8] = [
+pub const OVERHEAD_COLUMNS: [&str; 11] = [
     "scene",
     "guiding",
     "repeat",
@@ -197,6 +197,9 @@ pub const OVERHEAD_COLUMNS: [&str; 8] = [
     "gather_s",
     "rays",
     "guided_fraction",
+    "cpu_s",
+    "guide_build_s",
+    "warp_s",
 ];
 
 /// Writes `runs.csv`: one row per bake of the ladder.
@@ -251,8 +254,17 @@ pub fn write_overhead_csv(
     for r in records {
         let _ = writeln!(
             text,
-            "{scene},{},{},{},{:.6},{:.6},{},{:.6}",
-            r.guiding, r.repeat, r.spp, r.wall_s, r.gather_s, r.rays, r.guided_fraction
+            "{scene},{},{},{},{:.6},{:.6},{},{:.6},{:.6},{:.6},{:.6}",
+            r.guiding,
+            r.repeat,
+            r.spp,
+            r.wall_s,
+            r.gather_s,
+            r.rays,
+            r.guided_fraction,
+            r.cpu_s,
+            r.guide_build_s,
+            r.warp_s
         );
     }
     write_atomic(path, &text)
