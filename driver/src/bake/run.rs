@@ -32,7 +32,7 @@ use super::shard::{Shard, tiles_to_bake};
 use super::world::World;
 use crate::bvh::{BvhError, Preset};
 use crate::output::OutputFileError;
-use crate::output::exr_pages::{PageImage, PageWriteError, page_path, temporary_name};
+use crate::output::exr_pages::{PageStream, PageWriteError, page_path, temporary_name};
 use crate::output::fnv1a64;
 use crate::output::journal::{Journal, RhoSums, TileRecord, dedup_tiles};
 use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
@@ -739,10 +739,14 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
     let mut texel_batches = Vec::new();
     let page_count = texels.pages().len() as u32;
     for (page, size) in texels.pages().iter().enumerate() {
-        let mut image = PageImage::new(size.width, size.height);
-        let aux = first
-            .aux
-            .then(|| AUX_CHANNELS.map(|c| image.add_aux_channel(c)));
+        let path = page_path(out, page as u32, page_count);
+        let aux: &[&str] = if first.aux { &AUX_CHANNELS } else { &[] };
+        let mut image = PageStream::create(
+            &temporary_name(&path.with_extension("pixels")),
+            size.width,
+            size.height,
+            aux,
+        )?;
         let mut buffer = Vec::new();
         for (t, tile) in texels
             .tiles()
@@ -757,6 +761,7 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
                 texel_batches.resize(buffer.len() * k, Welford::new());
                 files[t % files.len()].read(tile.first_texel, &mut texel_batches)?;
             }
+            let mut rect = image.rect(tile.x, tile.y, tile.width, tile.height)?;
             for (i, (texel, r)) in texels.tile_texels(t).iter().zip(&buffer).enumerate() {
                 if r.flags & FLAG_BAKED == 0 {
                     continue;
@@ -767,30 +772,28 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
                     None => r.irradiance.map(f64::from),
                 };
                 let rgb = irradiance.map(|c| (c * rho) as f32);
-                if !image.set(x, y, rgb) {
-                    written.non_finite_pixels += 1;
-                }
-                if let Some([samples, error, validity, px, py, pz, nx, ny, nz]) = aux {
-                    image.set_aux(samples, x, y, r.samples as f32);
-                    image.set_aux(error, x, y, r.rel_std_error);
-                    image.set_aux(validity, x, y, 1.0);
-                    for (c, v) in [px, py, pz].into_iter().zip(texel.position) {
-                        image.set_aux(c, x, y, v);
-                    }
-                    for (c, v) in [nx, ny, nz].into_iter().zip(texel.normal) {
-                        image.set_aux(c, x, y, v);
-                    }
-                }
+                let [px, py, pz] = texel.position;
+                let [nx, ny, nz] = texel.normal;
+                // In AUX_CHANNELS' order; unused without --aux.
+                let aux = [
+                    r.samples as f32,
+                    r.rel_std_error,
+                    1.0,
+                    px,
+                    py,
+                    pz,
+                    nx,
+                    ny,
+                    nz,
+                ];
+                image.set(&mut rect, x, y, rgb, &aux);
             }
+            image.put_rect(&rect)?;
             texels.release_tile(t);
         }
-        image.dilate(DILATION_PIXELS);
-        let path = page_path(out, page as u32, page_count);
-        image.write_exr(&path)?;
+        written.non_finite_pixels += image.non_finite_pixels();
         let preview = path.with_extension("png");
-        image
-            .write_preview(&preview)
-            .map_err(|e| file_error(&preview, e))?;
+        image.finish(DILATION_PIXELS, &path, &preview)?;
         written.pages.push(path);
         written.previews.push(preview);
     }
