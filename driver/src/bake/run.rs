@@ -370,7 +370,7 @@ fn passes_to_run(
                 "--shard {}/{} with --transport series --bounces {passes}: each series pass needs \
                  the whole previous pass, so shard the passes one by one: `bake --pass B --shard \
                  {}/{}` for B = 1..={passes}, each pass followed by `merge --pass B` over its \
-                 shards (docs/bake.md, \"Sharding\")",
+                 shards (docs/farm.md)",
                 job.shard.index, job.shard.count, job.shard.index, job.shard.count
             ))))
         }

@@ -86,7 +86,7 @@ pub struct BakeArgs {
     #[arg(long, default_value = "0/1")]
     pub shard: Shard,
     /// Bake series pass B only (1-based), reading pass B−1 from `merge --pass B−1`; finish
-    /// with `merge --pass B` (docs/bake.md, "Sharding").
+    /// with `merge --pass B` (docs/farm.md).
     #[arg(long)]
     pub pass: Option<u32>,
 }
