@@ -1,5 +1,11 @@
 //! Lightmap pages as OpenEXR files: the last step of a bake and of `guidebake merge`.
 //!
+//! The bake writes its pages through a [`PageStream`], which never holds a page image: a
+//! scratch file beside the page, dilation on a rolling window of rows, EXR blocks and PNG rows
+//! read from it on demand (issue 18; docs/farm.md). [`PageImage`], the page in memory, is the
+//! reference it is tested against byte for byte, and what small pages (the bench's read-back
+//! tests) use.
+//!
 //! A [`PageImage`] holds one atlas page: irradiance RGB, which pixels hold a texel, and any
 //! auxiliary channels (`--aux`). Before writing, [`PageImage::dilate`] pushes the irradiance of
 //! covered pixels into the empty pixels around them, so bilinear lookups at chart borders do
