@@ -17,9 +17,9 @@
 //! triangle per 32 texels, 3 M triangles at 10^8 texels. Rectangles are shelf-packed onto
 //! 4096×4096 pages; every page is one glTF mesh whose `TEXCOORD_1` maps onto that page.
 //!
-//! Memory: the geometry is built in memory (about 30 bytes per triangle while the .glb is
-//! written: ~100 MB at 10^8 texels), and texels are produced one tile at a time into
-//! [`TexelWriter`].
+//! Memory: the geometry is built in memory while the .glb is written (measured: 20 MB peak
+//! RSS, 15 MB anonymous, for 10^7 texels and 312 k triangles — about 50 bytes per triangle),
+//! and texels are produced one tile at a time into [`TexelWriter`].
 //!
 //! Files: `OUT` (texel file), `OUT` with extension `.glb` (geometry), and `.toml` (scene file
 //! naming the .glb, with a sun and a constant sky) — load the scene with
