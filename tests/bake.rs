@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
-use guidebake::bake::run::{BakeError, BakeJob, bake, finish, work_dir};
+use guidebake::bake::run::{
+    BakeError, BakeJob, bake, bake_pass_with_progress, finish, merge_pass, merged_results, work_dir,
+};
 use guidebake::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Transport};
 use guidebake::bake::shard::Shard;
 use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle, inward_box_faces};
@@ -228,16 +230,153 @@ fn three_shards_merged_equal_one_bake() {
 }
 
 #[test]
-fn series_passes_cannot_be_sharded() {
+fn series_shards_must_name_their_pass() {
     let f = Fixture::new();
-    let err = f
-        .run(&f.job("s.exr", 1, Shard { index: 0, count: 2 }), None)
-        .unwrap_err()
-        .to_string();
+    let job = f.job("s.exr", 1, Shard { index: 0, count: 2 });
+    let err = f.run(&job, None).unwrap_err().to_string();
     assert!(
-        err.contains("--shard 0/2") && err.contains("--transport path"),
+        err.contains("--shard 0/2") && err.contains("bake --pass B --shard 0/2"),
         "{err}"
     );
+    for pass in [0, PASSES as u32 + 1] {
+        let err = bake_pass(&job, pass, &f.scene).unwrap_err().to_string();
+        assert!(
+            err.contains(&format!("--pass {pass}")) && err.contains("1..=3"),
+            "{err}"
+        );
+    }
+    let err = bake_pass(&job, 2, &f.scene).unwrap_err().to_string();
+    assert!(
+        err.contains("pass 1 is not merged") && err.contains("merge --pass 1"),
+        "{err}"
+    );
+}
+
+/// Bakes pass `pass` of `job` alone (`bake --pass`).
+fn bake_pass(
+    job: &BakeJob,
+    pass: u32,
+    scene: &Scene,
+) -> Result<guidebake::bake::run::BakeReport, BakeError> {
+    bake_pass_with_progress(job, Some(pass), scene, &AtomicBool::new(false), &mut |_| {})
+}
+
+/// Bakes `job` pass by pass in `count` shards (shards in a scrambled order), merging each
+/// pass, and returns the final lightmap's path.
+fn bake_sharded_passes(job: &BakeJob, count: u32, scene: &Scene) -> PathBuf {
+    let texels = TexelFile::open(&job.texels).unwrap();
+    let passes = job.settings.passes();
+    for pass in 1..=passes {
+        let mut dirs = Vec::new();
+        for index in (0..count).rev() {
+            let shard = BakeJob {
+                shard: Shard { index, count },
+                ..job.clone()
+            };
+            let report = bake_pass(&shard, pass, scene).unwrap();
+            assert_eq!(report.passes, 1);
+            assert!(report.pages.is_empty(), "a pass of a shard writes no pages");
+            dirs.push(work_dir(&shard.out, shard.shard));
+        }
+        if pass < passes {
+            let merged = merge_pass(&texels, &dirs, &job.out, pass).unwrap();
+            assert_eq!(merged, merged_results(&job.out, pass));
+            let err = merge_pass(&texels, &dirs[1..], &job.out, pass).unwrap_err();
+            assert!(err.to_string().contains("shards"), "{err}");
+        } else {
+            let err = merge_pass(&texels, &dirs, &job.out, pass).unwrap_err();
+            assert!(err.to_string().contains("into pages"), "{err}");
+            finish(&texels, &dirs, &job.out).unwrap();
+        }
+    }
+    job.out.clone()
+}
+
+#[test]
+fn series_passes_sharded_pass_by_pass_merge_to_the_same_bits() {
+    let (albedo, le) = (0.5f32, 1.5f32);
+    let dir = tempfile::tempdir().unwrap();
+    let texels = dir.path().join("box.texels");
+    let scene = emissive_box(&texels, albedo, le);
+    // Graybill–Deal per texel with ρ, and Müller's global weights: 3 bounces, 3 shards.
+    for (name, combine, bias_correction) in [
+        ("texel", Combine::Texel, true),
+        ("global", Combine::Global, false),
+    ] {
+        let job = |out: &str| BakeJob {
+            texels: texels.clone(),
+            out: dir.path().join(out),
+            settings: BakeSettings {
+                spp: 64,
+                iterations: 3,
+                combine,
+                bias_correction,
+                transport: Transport::Series,
+                bounces: 3,
+                ..Default::default()
+            },
+            threads: 2,
+            shard: Shard::WHOLE,
+            resume: false,
+            aux: true,
+        };
+        let whole = job(&format!("{name}-whole.exr"));
+        let report = bake(&whole, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+        assert_eq!(report.passes, 3);
+        if bias_correction {
+            assert_ne!(report.rho, 1.0, "ρ is applied");
+        }
+        let sharded = bake_sharded_passes(&job(&format!("{name}-sharded.exr")), 3, &scene);
+        assert_eq!(exr_bytes(&whole.out), exr_bytes(&sharded), "{name}");
+        assert_eq!(
+            exr_bytes(&whole.out.with_extension("png")),
+            exr_bytes(&sharded.with_extension("png")),
+            "{name}"
+        );
+    }
+}
+
+#[test]
+fn a_pass_run_resumes_and_continues_its_work_directory() {
+    let f = Fixture::new();
+    let whole = f.job("whole.exr", 1, Shard::WHOLE);
+    f.run(&whole, None).unwrap();
+    let texels = TexelFile::open(&whole.texels).unwrap();
+    let out = f.dir.path().join("passes.exr");
+    let cancel = AtomicBool::new(false);
+    // `--pass B` without `--shard`: one work directory that every pass continues.
+    let mut job = f.job("passes.exr", 1, Shard::WHOLE);
+    let dirs = [work_dir(&job.out, job.shard)];
+    for pass in 1..=PASSES as u32 {
+        job.resume = false;
+        if pass == 2 {
+            // One worker and a window of 4 tiles: cut after the first tile, refused without
+            // --resume, resumed.
+            let cut = bake_pass_with_progress(&job, Some(pass), &f.scene, &cancel, &mut |p| {
+                cancel.store(p.texels_done >= 64, Ordering::Relaxed);
+            })
+            .unwrap();
+            cancel.store(false, Ordering::Relaxed);
+            assert!(cut.interrupted && cut.tiles_baked < TILES, "{cut:?}");
+            let again = bake_pass(&job, pass, &f.scene).unwrap_err();
+            assert!(matches!(again, BakeError::WorkExists { .. }), "{again}");
+            job.resume = true;
+            let rest = bake_pass(&job, pass, &f.scene).unwrap();
+            assert_eq!(rest.tiles_resumed, cut.tiles_baked);
+            assert_eq!(rest.tiles_baked + cut.tiles_baked, TILES);
+        } else {
+            assert_eq!(bake_pass(&job, pass, &f.scene).unwrap().tiles_baked, TILES);
+        }
+        // A finished pass rerun with --resume (a scheduler's retry) bakes nothing.
+        job.resume = true;
+        assert_eq!(bake_pass(&job, pass, &f.scene).unwrap().tiles_baked, 0);
+        if pass < PASSES as u32 {
+            merge_pass(&texels, &dirs, &out, pass).unwrap();
+        } else {
+            finish(&texels, &dirs, &out).unwrap();
+        }
+    }
+    assert_eq!(exr_bytes(&whole.out), exr_bytes(&out));
 }
 
 #[test]

@@ -103,3 +103,19 @@ fn cli_synth_then_inspect_json() {
         "{err}"
     );
 }
+
+/// The world grows with N at a fixed texel density, and its geometry with it (issue 18): 16×
+/// the texels is 25× the cells (5× the grid edge) at about the same texels per metre (within
+/// 25%: box heights, so wall areas, vary from cell to cell), and one triangle per 32 texels.
+#[test]
+fn synth_grows_the_world_not_the_density() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = synth(150_000, &dir.path().join("small.texels")).unwrap();
+    let large = synth(2_400_000, &dir.path().join("large.texels")).unwrap();
+    assert_eq!((small.grid, large.grid), (2, 10), "{small:?} {large:?}");
+    let ratio = large.texels_per_unit / small.texels_per_unit;
+    assert!((ratio - 1.0).abs() < 0.25, "density ratio {ratio}");
+    for r in [&small, &large] {
+        assert_eq!(u64::from(r.triangles), r.texels / 32, "{r:?}");
+    }
+}

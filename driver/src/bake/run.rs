@@ -9,6 +9,13 @@
 //! shard leaves its work directory for `guidebake merge`. An interrupted run leaves it for
 //! `--resume`. A work directory is never overwritten without `--resume`: nothing baked is
 //! lost by a repeated command.
+//!
+//! Series bakes shard pass by pass, in commands a batch scheduler chains: `bake --pass B
+//! --shard I/N` bakes pass B of one shard into its work directory, `merge --pass B` gathers
+//! pass B of every shard into one result file in `OUT.exr.merged/` ([`merge_pass`]), which
+//! the shards of pass B + 1 read as their previous pass; the last pass is merged into pages by
+//! [`finish`] as before. Every tile's bytes depend on its index, the settings and the previous
+//! pass only, so N shards × B passes give the bytes of one unsharded bake.
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -25,7 +32,7 @@ use super::shard::{Shard, tiles_to_bake};
 use super::world::World;
 use crate::bvh::{BvhError, Preset};
 use crate::output::OutputFileError;
-use crate::output::exr_pages::{PageImage, PageWriteError, page_path, temporary_name};
+use crate::output::exr_pages::{PageStream, PageWriteError, page_path, temporary_name};
 use crate::output::fnv1a64;
 use crate::output::journal::{Journal, RhoSums, TileRecord, dedup_tiles};
 use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
@@ -234,15 +241,27 @@ pub fn bake_with_progress(
     cancel: &AtomicBool,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<BakeReport, BakeError> {
+    bake_pass_with_progress(job, None, scene, cancel, progress)
+}
+
+/// [`bake_with_progress`] of one series pass only (`bake --pass B`), or of every pass
+/// (`only_pass` `None`). A run of one pass never writes pages: it leaves its work directory
+/// for `guidebake merge --pass B` ([`merge_pass`] before the last pass, [`finish`] after it).
+/// Pass B > 1 reads pass B − 1 from the merged result file that [`merge_pass`] wrote
+/// ([`merged_results`]), so the shards of a pass may run anywhere once the previous pass is
+/// merged.
+///
+/// # Errors
+/// As [`bake`]; also a pass out of range, or pass B − 1 not merged yet.
+pub fn bake_pass_with_progress(
+    job: &BakeJob,
+    only_pass: Option<u32>,
+    scene: &Scene,
+    cancel: &AtomicBool,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<BakeReport, BakeError> {
     job.settings.validate()?;
-    if job.shard.count > 1 && job.settings.passes() > 1 {
-        return Err(BakeError::Settings(SettingsError::new(format!(
-            "--shard {}/{} with --transport series --bounces {}: each series pass needs the whole \
-             previous pass, so shards cannot bake them apart; bake unsharded, or shard a \
-             --transport path bake (or --bounces 1)",
-            job.shard.index, job.shard.count, job.settings.bounces
-        ))));
-    }
+    let run_passes = passes_to_run(job, only_pass)?;
     let mut report = BakeReport {
         rho: 1.0,
         ..Default::default()
@@ -275,16 +294,23 @@ pub fn bake_with_progress(
         iterations: job.settings.iterations,
         settings: format!("{:?}", job.settings),
     };
-    open_work(&dir, &manifest, job.resume)?;
+    open_work(&dir, &manifest, job.resume, only_pass)?;
     let pass_texels = shard_texels(&texels, job.shard);
     let mut now = Progress {
-        texels_total: pass_texels * u64::from(passes),
+        texels_total: pass_texels * u64::from(run_passes.end() + 1 - run_passes.start()),
         ..Default::default()
     };
     let clock = Instant::now();
-    for pass in 1..=passes {
+    for pass in run_passes.clone() {
         if pass > 1 {
-            let previous = previous_pass(&texels, scene, &dir, pass - 1, bake_id, &mut report)?;
+            // A one-pass run reads the merged previous pass; a run of every pass its own.
+            let source = match only_pass {
+                Some(_) => merged_results(&job.out, pass - 1),
+                None => pass_files(&dir, pass - 1).0,
+            };
+            let image = dir.join(format!("indirect.{}.bin", pass - 1));
+            let previous = previous_pass(&texels, scene, &source, &image, bake_id, &mut report)
+                .map_err(|e| not_merged_hint(e, &source, pass - 1))?;
             world.set_previous_pass(Some(previous));
         }
         let run = bake_pass(
@@ -308,13 +334,13 @@ pub fn bake_with_progress(
             report.interrupted = true;
             break;
         }
-        now.texels_done = pass_texels * u64::from(pass);
+        now.texels_done = pass_texels * u64::from(pass + 1 - run_passes.start());
     }
-    report.passes = passes;
+    report.passes = run_passes.end() + 1 - run_passes.start();
     report.seconds.gather = clock.elapsed().as_secs_f64() - report.seconds.previous_pass_images;
     report.rays_per_second = report.counters.rays() as f64 / report.seconds.gather.max(1e-9);
     drop(world);
-    if !report.interrupted && job.shard.count == 1 {
+    if !report.interrupted && job.shard.count == 1 && only_pass.is_none() {
         let clock = Instant::now();
         let written = finish(&texels, std::slice::from_ref(&dir), &job.out)?;
         report.seconds.write_pages = clock.elapsed().as_secs_f64();
@@ -324,6 +350,60 @@ pub fn bake_with_progress(
         retire_work(&dir)?;
     }
     Ok(report)
+}
+
+/// The passes a run bakes: `only_pass`, or every pass of the bake. A shard of a multi-pass
+/// series bake must name its pass: each pass needs the whole previous one, merged.
+fn passes_to_run(
+    job: &BakeJob,
+    only_pass: Option<u32>,
+) -> Result<std::ops::RangeInclusive<u32>, BakeError> {
+    let passes = job.settings.passes();
+    match only_pass {
+        Some(b) if b == 0 || b > passes => Err(BakeError::Settings(SettingsError::new(format!(
+            "--pass {b}: this bake has passes 1..={passes} (--transport series makes one pass \
+             per bounce, other transports one pass)"
+        )))),
+        Some(b) => Ok(b..=b),
+        None if job.shard.count > 1 && passes > 1 => {
+            Err(BakeError::Settings(SettingsError::new(format!(
+                "--shard {}/{} with --transport series --bounces {passes}: each series pass needs \
+                 the whole previous pass, so shard the passes one by one: `bake --pass B --shard \
+                 {}/{}` for B = 1..={passes}, each pass followed by `merge --pass B` over its \
+                 shards (docs/farm.md)",
+                job.shard.index, job.shard.count, job.shard.index, job.shard.count
+            ))))
+        }
+        None => Ok(1..=passes),
+    }
+}
+
+/// The directory `merge --pass B` writes the merged result files of the passes before the
+/// last into: `OUT.exr.merged/`.
+pub fn merged_dir(out: &Path) -> PathBuf {
+    let name = out
+        .file_name()
+        .map_or_else(|| "lightmap".into(), |s| s.to_string_lossy());
+    out.with_file_name(format!("{name}.merged"))
+}
+
+/// The merged result file of pass `pass`, which the shards of pass `pass + 1` read.
+pub fn merged_results(out: &Path, pass: u32) -> PathBuf {
+    merged_dir(out).join(format!("results.{pass}.bin"))
+}
+
+/// Says how to make the previous pass's merged result file when it is missing.
+fn not_merged_hint(e: BakeError, source: &Path, pass: u32) -> BakeError {
+    if source.exists() {
+        return e;
+    }
+    file_error(
+        source,
+        format!(
+            "pass {pass} is not merged: run `guidebake merge --pass {pass}` over every shard of \
+             pass {pass} first"
+        ),
+    )
 }
 
 /// Texels in the tiles of `shard`.
@@ -427,25 +507,23 @@ fn bake_pass(
     })
 }
 
-/// Writes the image of pass `pass`'s gather-only irradiance and maps it for the next pass
-/// (series transport).
+/// Writes the image (at `image_path`) of the gather-only irradiance in a pass's result file
+/// `results_path` and maps it for the next pass (series transport).
 fn previous_pass(
     texels: &TexelFile,
     scene: &Scene,
-    dir: &Path,
-    pass: u32,
+    results_path: &Path,
+    image_path: &Path,
     bake_id: u64,
     report: &mut BakeReport,
 ) -> Result<PreviousPass, BakeError> {
     let clock = Instant::now();
-    let (results_path, _) = pass_files(dir, pass);
     let (results, _) = ResultFile::open(
-        &results_path,
+        results_path,
         false,
         Some((texels.header().texel_count, bake_id)),
     )?;
-    let image_path = dir.join(format!("indirect.{pass}.bin"));
-    let mut image = PreviousPassWriter::create(&image_path, texels.pages())
+    let mut image = PreviousPassWriter::create(image_path, texels.pages())
         .map_err(|e| file_error(&e.path, e.what))?;
     let mut buffer = Vec::new();
     for (t, tile) in texels.tiles().iter().enumerate() {
@@ -498,11 +576,21 @@ fn check_scene_matches(texels: &TexelFile, scene: &Scene) -> Result<(), BakeErro
 }
 
 /// Creates the work directory and its manifest, or, with `resume`, checks that the one there
-/// belongs to this bake.
-fn open_work(dir: &Path, manifest: &Manifest, resume: bool) -> Result<(), BakeError> {
+/// belongs to this bake. A run of one pass (`only_pass`) continues the work directory its
+/// earlier passes left without `--resume`, unless its own pass has begun there.
+fn open_work(
+    dir: &Path,
+    manifest: &Manifest,
+    resume: bool,
+    only_pass: Option<u32>,
+) -> Result<(), BakeError> {
     let manifest_path = dir.join("manifest.json");
     if dir.exists() {
-        if !resume {
+        let begun = only_pass.is_none_or(|b| {
+            let (results, journal) = pass_files(dir, b);
+            results.exists() || journal.exists()
+        });
+        if !resume && begun {
             return Err(BakeError::WorkExists {
                 dir: dir.to_owned(),
             });
@@ -630,24 +718,9 @@ pub struct Written {
 /// A [`BakeError`] naming the work directory or page: a shard missing, shards of different
 /// bakes, a tile not baked, a page that cannot be written.
 pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Written, BakeError> {
-    let shards = open_shards(texels, dirs)?;
+    let shards = open_shards(texels, dirs, None)?;
     let first = &shards[0].manifest;
-    let mut all: Vec<TileRecord> = shards
-        .iter()
-        .flat_map(|s| s.records.iter().copied())
-        .collect();
-    dedup_tiles(&mut all);
-    let tile_count = texels.tiles().len();
-    if all.len() != tile_count {
-        let done: HashSet<u32> = all.iter().map(|r| r.tile).collect();
-        let missing = (0..tile_count as u32)
-            .find(|t| !done.contains(t))
-            .unwrap_or(0);
-        return Err(BakeError::Mismatch(format!(
-            "{} of {tile_count} tiles are baked (tile {missing} is not): finish every shard, or --resume the interrupted one",
-            all.len()
-        )));
-    }
+    let all = every_tile(texels, &shards)?;
     let batches = open_batch_files(texels, &shards)?;
     let global = batches
         .as_deref()
@@ -666,10 +739,14 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
     let mut texel_batches = Vec::new();
     let page_count = texels.pages().len() as u32;
     for (page, size) in texels.pages().iter().enumerate() {
-        let mut image = PageImage::new(size.width, size.height);
-        let aux = first
-            .aux
-            .then(|| AUX_CHANNELS.map(|c| image.add_aux_channel(c)));
+        let path = page_path(out, page as u32, page_count);
+        let aux: &[&str] = if first.aux { &AUX_CHANNELS } else { &[] };
+        let mut image = PageStream::create(
+            &temporary_name(&path.with_extension("pixels")),
+            size.width,
+            size.height,
+            aux,
+        )?;
         let mut buffer = Vec::new();
         for (t, tile) in texels
             .tiles()
@@ -684,6 +761,7 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
                 texel_batches.resize(buffer.len() * k, Welford::new());
                 files[t % files.len()].read(tile.first_texel, &mut texel_batches)?;
             }
+            let mut rect = image.rect(tile.x, tile.y, tile.width, tile.height)?;
             for (i, (texel, r)) in texels.tile_texels(t).iter().zip(&buffer).enumerate() {
                 if r.flags & FLAG_BAKED == 0 {
                     continue;
@@ -694,34 +772,104 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
                     None => r.irradiance.map(f64::from),
                 };
                 let rgb = irradiance.map(|c| (c * rho) as f32);
-                if !image.set(x, y, rgb) {
-                    written.non_finite_pixels += 1;
-                }
-                if let Some([samples, error, validity, px, py, pz, nx, ny, nz]) = aux {
-                    image.set_aux(samples, x, y, r.samples as f32);
-                    image.set_aux(error, x, y, r.rel_std_error);
-                    image.set_aux(validity, x, y, 1.0);
-                    for (c, v) in [px, py, pz].into_iter().zip(texel.position) {
-                        image.set_aux(c, x, y, v);
-                    }
-                    for (c, v) in [nx, ny, nz].into_iter().zip(texel.normal) {
-                        image.set_aux(c, x, y, v);
-                    }
-                }
+                let [px, py, pz] = texel.position;
+                let [nx, ny, nz] = texel.normal;
+                // In AUX_CHANNELS' order; unused without --aux.
+                let aux = [
+                    r.samples as f32,
+                    r.rel_std_error,
+                    1.0,
+                    px,
+                    py,
+                    pz,
+                    nx,
+                    ny,
+                    nz,
+                ];
+                image.set(&mut rect, x, y, rgb, &aux);
             }
+            image.put_rect(&rect)?;
             texels.release_tile(t);
         }
-        image.dilate(DILATION_PIXELS);
-        let path = page_path(out, page as u32, page_count);
-        image.write_exr(&path)?;
+        written.non_finite_pixels += image.non_finite_pixels();
         let preview = path.with_extension("png");
-        image
-            .write_preview(&preview)
-            .map_err(|e| file_error(&preview, e))?;
+        image.finish(DILATION_PIXELS, &path, &preview)?;
         written.pages.push(path);
         written.previews.push(preview);
     }
     Ok(written)
+}
+
+/// The journal records of every tile from the shards' work (each tile once), or an error
+/// naming a tile no shard has baked.
+fn every_tile(texels: &TexelFile, shards: &[ShardWork]) -> Result<Vec<TileRecord>, BakeError> {
+    let mut all: Vec<TileRecord> = shards
+        .iter()
+        .flat_map(|s| s.records.iter().copied())
+        .collect();
+    dedup_tiles(&mut all);
+    let tile_count = texels.tiles().len();
+    if all.len() != tile_count {
+        let done: HashSet<u32> = all.iter().map(|r| r.tile).collect();
+        let missing = (0..tile_count as u32)
+            .find(|t| !done.contains(t))
+            .unwrap_or(0);
+        return Err(BakeError::Mismatch(format!(
+            "{} of {tile_count} tiles are baked (tile {missing} is not): finish every shard, or --resume the interrupted one",
+            all.len()
+        )));
+    }
+    Ok(all)
+}
+
+/// `guidebake merge --pass B` before the last pass: gathers pass `pass` of every shard
+/// (together they must cover every tile once) into one result file, [`merged_results`] of
+/// `out`, which the shards of pass `pass + 1` read. Each tile's records are copied from the
+/// shard that baked it, so the merged file holds the same bytes as an unsharded bake's result
+/// file of that pass. The file appears under its name only when complete. Returns its path.
+///
+/// # Errors
+/// A [`BakeError`] naming the work directory or file: a shard missing or of another bake, a
+/// tile not baked, `pass` not before the last pass, a write that fails.
+pub fn merge_pass(
+    texels: &TexelFile,
+    dirs: &[PathBuf],
+    out: &Path,
+    pass: u32,
+) -> Result<PathBuf, BakeError> {
+    let shards = open_shards(texels, dirs, Some(pass.max(1)))?;
+    let first = &shards[0].manifest;
+    if pass == 0 || pass >= first.passes {
+        return Err(BakeError::Settings(SettingsError::new(format!(
+            "merge --pass {pass}: the bake has passes 1..={}; passes before the last are merged \
+             into a result file, the last into pages by `merge` with --pass {} or without --pass",
+            first.passes, first.passes
+        ))));
+    }
+    every_tile(texels, &shards)?;
+    let path = merged_results(out, pass);
+    let dir = merged_dir(out);
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| file_error(&dir, format!("cannot create the directory: {e}")))?;
+    let staging = temporary_name(&path);
+    let copy = || -> Result<(), BakeError> {
+        let merged = ResultFile::create(&staging, texels.header().texel_count, first.bake_id)?;
+        let mut buffer = Vec::new();
+        for (t, tile) in texels.tiles().iter().enumerate() {
+            buffer.resize(tile.texel_count as usize, TexelResult::default());
+            shards[t % shards.len()]
+                .results
+                .read(tile.first_texel, &mut buffer)?;
+            merged.write(tile.first_texel, &buffer)?;
+        }
+        merged.sync()?;
+        std::fs::rename(&staging, &path)
+            .map_err(|e| file_error(&path, format!("cannot rename into place: {e}")))
+    };
+    copy().inspect_err(|_| {
+        let _ = std::fs::remove_file(&staging);
+    })?;
+    Ok(path)
 }
 
 /// The auxiliary EXR channels of `--aux`: gather samples, relative standard error of the
@@ -823,18 +971,23 @@ fn global_weights(
 struct ShardWork {
     manifest: Manifest,
     dir: PathBuf,
-    /// The last pass's results.
+    /// The opened pass's results (the last pass's for the pages).
     results: ResultFile,
-    /// The last pass's journal records.
+    /// The opened pass's journal records.
     records: Vec<TileRecord>,
 }
 
-/// Opens the work directories in shard order and checks they belong to one bake.
-fn open_shards(texels: &TexelFile, dirs: &[PathBuf]) -> Result<Vec<ShardWork>, BakeError> {
+/// Opens pass `pass` (default: the last) of the work directories in shard order and checks
+/// they belong to one bake.
+fn open_shards(
+    texels: &TexelFile,
+    dirs: &[PathBuf],
+    pass: Option<u32>,
+) -> Result<Vec<ShardWork>, BakeError> {
     let mut shards = Vec::new();
     for dir in dirs {
         let manifest = read_manifest(&dir.join("manifest.json"))?;
-        let (results_path, journal_path) = pass_files(dir, manifest.passes);
+        let (results_path, journal_path) = pass_files(dir, pass.unwrap_or(manifest.passes));
         let (results, _) = ResultFile::open(
             &results_path,
             false,

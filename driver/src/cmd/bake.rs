@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::bake::run::{BakeJob, BakeReport, Progress, bake_with_progress, work_dir};
+use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress, work_dir};
 use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Schedule, Transport};
 use crate::bake::shard::Shard;
 use crate::scene::Scene;
@@ -85,6 +85,10 @@ pub struct BakeArgs {
     /// Bake only shard I of N (I/N, 0-based); combine with `guidebake merge`.
     #[arg(long, default_value = "0/1")]
     pub shard: Shard,
+    /// Bake series pass B only (1-based), reading pass B−1 from `merge --pass B−1`; finish
+    /// with `merge --pass B` (docs/farm.md).
+    #[arg(long)]
+    pub pass: Option<u32>,
 }
 
 /// `on` or `off`.
@@ -132,7 +136,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         resume: args.resume,
         aux: args.aux,
     };
-    let report = run_with_progress(&job, &scene)?;
+    let report = run_with_progress(&job, args.pass, &scene)?;
     if let Some(path) = &args.stats {
         write_stats(path, &report)?;
     }
@@ -147,11 +151,16 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
     Ok(())
 }
 
-/// Runs a bake with Ctrl-C handling and, on a terminal, a progress bar.
+/// Runs a bake (of pass `only_pass`, or every pass) with Ctrl-C handling and, on a terminal,
+/// a progress bar.
 ///
 /// # Errors
-/// What [`bake`] returns.
-pub fn run_with_progress(job: &BakeJob, scene: &Scene) -> Result<BakeReport, super::CmdError> {
+/// What [`bake_pass_with_progress`] returns.
+pub fn run_with_progress(
+    job: &BakeJob,
+    only_pass: Option<u32>,
+    scene: &Scene,
+) -> Result<BakeReport, super::CmdError> {
     let cancel = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&cancel);
     // A second handler cannot be installed (demo bakes twice): the first one keeps working.
@@ -175,7 +184,7 @@ pub fn run_with_progress(job: &BakeJob, scene: &Scene) -> Result<BakeReport, sup
             bar.set_message(format!("{:.1} Mrays/s", p.rays as f64 / seconds / 1e6));
         }
     };
-    let report = bake_with_progress(job, scene, &cancel, &mut progress)?;
+    let report = bake_pass_with_progress(job, only_pass, scene, &cancel, &mut progress)?;
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }

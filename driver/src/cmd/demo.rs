@@ -65,7 +65,7 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
             resume: false,
             aux: true,
         };
-        let report = super::bake::run_with_progress(&job, &scene)?;
+        let report = super::bake::run_with_progress(&job, None, &scene)?;
         if report.interrupted {
             return Err("interrupted".into());
         }

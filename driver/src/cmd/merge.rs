@@ -1,9 +1,11 @@
-//! `guidebake merge TEXELS SHARD_DIRS... -o OUT.exr`: reduces the shards' ρ sums in tile order
-//! and writes the final lightmap. The result equals an unsharded bake's bit for bit.
+//! `guidebake merge TEXELS SHARD_DIRS... -o OUT.exr [--pass B]`: without `--pass` (or with the
+//! last pass), reduces the shards' ρ sums in tile order and writes the final lightmap; with
+//! `--pass B` before the last series pass, gathers pass B of every shard into the merged
+//! result file the shards of pass B + 1 read. Either equals an unsharded bake's bytes.
 
 use std::path::PathBuf;
 
-use crate::bake::run::finish;
+use crate::bake::run::{finish, merge_pass, read_manifest};
 use crate::texels::TexelFile;
 
 /// Arguments of `guidebake merge`.
@@ -14,9 +16,13 @@ pub struct MergeArgs {
     /// The shards' work directories (`OUT.exr.shard-I-of-N`), every one of them.
     #[arg(required = true)]
     pub shards: Vec<PathBuf>,
-    /// The lightmap to write.
+    /// The lightmap to write (and, with `--pass`, beside which `OUT.exr.merged/` is made).
     #[arg(short, long)]
     pub out: PathBuf,
+    /// Merge series pass B of a pass-by-pass bake (`bake --pass B --shard I/N`); the last
+    /// pass writes the pages, as without `--pass`.
+    #[arg(long)]
+    pub pass: Option<u32>,
 }
 
 /// Runs `guidebake merge`.
@@ -25,6 +31,14 @@ pub struct MergeArgs {
 /// A missing or foreign shard, an unbaked tile, an unwritable page: each named.
 pub fn run(args: &MergeArgs) -> Result<(), super::CmdError> {
     let texels = TexelFile::open(&args.texels)?;
+    if let Some(pass) = args.pass {
+        let passes = read_manifest(&args.shards[0].join("manifest.json"))?.passes;
+        if pass != passes {
+            let merged = merge_pass(&texels, &args.shards, &args.out, pass)?;
+            println!("{}", merged.display());
+            return Ok(());
+        }
+    }
     let written = finish(&texels, &args.shards, &args.out)?;
     for page in &written.pages {
         println!("{}", page.display());

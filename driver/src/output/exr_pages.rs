@@ -1,5 +1,11 @@
 //! Lightmap pages as OpenEXR files: the last step of a bake and of `guidebake merge`.
 //!
+//! The bake writes its pages through a [`PageStream`], which never holds a page image: a
+//! scratch file beside the page, dilation on a rolling window of rows, EXR blocks and PNG rows
+//! read from it on demand (issue 18; docs/farm.md). [`PageImage`], the page in memory, is the
+//! reference it is tested against byte for byte, and what small pages (the bench's read-back
+//! tests) use.
+//!
 //! A [`PageImage`] holds one atlas page: irradiance RGB, which pixels hold a texel, and any
 //! auxiliary channels (`--aux`). Before writing, [`PageImage::dilate`] pushes the irradiance of
 //! covered pixels into the empty pixels around them, so bilinear lookups at chart borders do
@@ -10,6 +16,11 @@
 
 use std::path::{Path, PathBuf};
 
+use exr::block::{BlockIndex, UncompressedBlock};
+use exr::image::write::channels::{ChannelsWriter, WritableChannels};
+use exr::math::RoundingMode;
+use exr::meta::attribute::{ChannelList, LevelMode};
+use exr::meta::header::Header;
 use exr::prelude::{
     AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder,
     SmallVec, WritableImage,
@@ -239,6 +250,550 @@ impl PageImage {
     }
 }
 
+/// One atlas page written without holding its image: pixels go to a scratch file beside the
+/// page (one record of `1 + channels` `f32` per pixel: covered, then the EXR channels in the
+/// file's order), tile by tile through positioned reads and writes; [`Self::finish`] dilates
+/// it on a rolling window of rows, streams the EXR's blocks from it, and streams the PNG
+/// preview row by row. The EXR holds the same bytes as a [`PageImage`] of the same pixels
+/// (tested); memory is a few rows of the page, whatever its height — no page image, and the
+/// scratch file is file-backed, left to the page cache.
+pub struct PageStream {
+    scratch: std::fs::File,
+    scratch_path: PathBuf,
+    width: usize,
+    height: usize,
+    /// Channel names in the EXR's order (sorted), R, G, B among them.
+    names: Vec<String>,
+    /// Record index of R, G, B.
+    rgb: [usize; 3],
+    /// Record index of each auxiliary channel, in the order they were given.
+    aux: Vec<usize>,
+    /// Pixels whose values were not finite, replaced by zero.
+    non_finite: u64,
+}
+
+/// Record slot of the covered flag (1.0 where a texel was written).
+const COVERED: usize = 0;
+/// Bytes of compressed preview held before they go out as one PNG `IDAT` chunk.
+const PNG_CHUNK_BYTES: usize = 1 << 20;
+
+/// The pixels of one rectangle of a [`PageStream`], read from and written back to its
+/// scratch file.
+pub struct PageRect {
+    x: usize,
+    y: usize,
+    width: usize,
+    height: usize,
+    stride: usize,
+    records: Vec<f32>,
+}
+
+impl PageStream {
+    /// A black, uncovered page of `width` × `height` pixels with auxiliary channels `aux`
+    /// (zero everywhere), its scratch file at `scratch` (created sparse; removed by
+    /// [`Self::finish`] or on drop).
+    ///
+    /// # Errors
+    /// [`PageWriteError`] naming the scratch file when it cannot be created.
+    ///
+    /// # Panics
+    /// If the page is empty.
+    pub fn create(
+        scratch: &Path,
+        width: u32,
+        height: u32,
+        aux: &[&str],
+    ) -> Result<Self, PageWriteError> {
+        assert!(
+            width > 0 && height > 0,
+            "a lightmap page has at least one pixel"
+        );
+        let mut names: Vec<String> = ["R", "G", "B"]
+            .into_iter()
+            .chain(aux.iter().copied())
+            .map(str::to_owned)
+            .collect();
+        names.sort_by(|a, b| a.as_bytes().cmp(b.as_bytes()));
+        let slot = |name: &str| 1 + names.iter().position(|n| n == name).expect("a channel");
+        let rgb = ["R", "G", "B"].map(slot);
+        let aux = aux.iter().map(|a| slot(a)).collect();
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(scratch)
+            .map_err(|e| {
+                page_error(
+                    scratch,
+                    format!("cannot create the page's scratch file: {e}"),
+                )
+            })?;
+        let stream = Self {
+            scratch: file,
+            scratch_path: scratch.to_owned(),
+            width: width as usize,
+            height: height as usize,
+            rgb,
+            aux,
+            names,
+            non_finite: 0,
+        };
+        let bytes = (stream.width * stream.height * stream.stride() * 4) as u64;
+        stream
+            .scratch
+            .set_len(bytes)
+            .map_err(|e| page_error(scratch, format!("cannot size the scratch file: {e}")))?;
+        Ok(stream)
+    }
+
+    /// `f32`s per pixel record.
+    fn stride(&self) -> usize {
+        1 + self.names.len()
+    }
+
+    fn scratch_error(&self, what: &str, e: std::io::Error) -> PageWriteError {
+        page_error(
+            &self.scratch_path,
+            format!("cannot {what} the scratch file: {e}"),
+        )
+    }
+
+    /// Reads `n` records from pixel index `first` into `out`.
+    fn read_records(&self, first: usize, out: &mut [f32]) -> Result<(), PageWriteError> {
+        use std::os::unix::fs::FileExt;
+        let offset = (first * self.stride() * 4) as u64;
+        self.scratch
+            .read_exact_at(bytemuck::cast_slice_mut(out), offset)
+            .map_err(|e| self.scratch_error("read", e))
+    }
+
+    fn write_records(&self, first: usize, records: &[f32]) -> Result<(), PageWriteError> {
+        use std::os::unix::fs::FileExt;
+        let offset = (first * self.stride() * 4) as u64;
+        self.scratch
+            .write_all_at(bytemuck::cast_slice(records), offset)
+            .map_err(|e| self.scratch_error("write", e))
+    }
+
+    /// The pixels of the rectangle at (`x`, `y`) of `width` × `height`, as they are now.
+    ///
+    /// # Errors
+    /// [`PageWriteError`] when the scratch file cannot be read.
+    ///
+    /// # Panics
+    /// If the rectangle leaves the page.
+    pub fn rect(
+        &self,
+        x: u32,
+        y: u32,
+        width: u32,
+        height: u32,
+    ) -> Result<PageRect, PageWriteError> {
+        let (x, y, w, h) = (x as usize, y as usize, width as usize, height as usize);
+        assert!(
+            x + w <= self.width && y + h <= self.height,
+            "rectangle off the page"
+        );
+        let stride = self.stride();
+        let mut records = vec![0.0; w * h * stride];
+        for row in 0..h {
+            let line = &mut records[row * w * stride..(row + 1) * w * stride];
+            self.read_records((y + row) * self.width + x, line)?;
+        }
+        Ok(PageRect {
+            x,
+            y,
+            width: w,
+            height: h,
+            stride,
+            records,
+        })
+    }
+
+    /// Writes a rectangle back.
+    ///
+    /// # Errors
+    /// [`PageWriteError`] when the scratch file cannot be written.
+    pub fn put_rect(&self, rect: &PageRect) -> Result<(), PageWriteError> {
+        let row_len = rect.width * rect.stride;
+        for row in 0..rect.height {
+            let line = &rect.records[row * row_len..(row + 1) * row_len];
+            self.write_records((rect.y + row) * self.width + rect.x, line)?;
+        }
+        Ok(())
+    }
+
+    /// Sets the irradiance of pixel (`x`, `y`) of `rect` (page coordinates) and marks it
+    /// covered, then its auxiliary channels `aux` (in [`Self::create`]'s order). Non-finite
+    /// values are stored as zero; a pixel whose irradiance is not finite is counted.
+    ///
+    /// # Panics
+    /// If the pixel lies outside the rectangle.
+    pub fn set(&mut self, rect: &mut PageRect, x: u32, y: u32, rgb: [f32; 3], aux: &[f32]) {
+        let (x, y) = (x as usize, y as usize);
+        assert!(
+            (rect.x..rect.x + rect.width).contains(&x)
+                && (rect.y..rect.y + rect.height).contains(&y),
+            "pixel off the rectangle"
+        );
+        let at = ((y - rect.y) * rect.width + (x - rect.x)) * rect.stride;
+        let record = &mut rect.records[at..at + rect.stride];
+        let finite = rgb.iter().all(|c| c.is_finite());
+        for (slot, c) in self.rgb.iter().zip(rgb) {
+            record[*slot] = if finite { c } else { 0.0 };
+        }
+        record[COVERED] = 1.0;
+        for (slot, v) in self.aux.iter().zip(aux) {
+            record[*slot] = if v.is_finite() { *v } else { 0.0 };
+        }
+        if !finite {
+            self.non_finite += 1;
+        }
+    }
+
+    /// Pixels with non-finite values replaced by zero so far.
+    pub fn non_finite_pixels(&self) -> u64 {
+        self.non_finite
+    }
+
+    /// Dilates by `passes` pixels (as [`PageImage::dilate`]), writes the EXR at `path` and
+    /// the tone-mapped PNG preview at `preview` (as [`PageImage::write_exr`] and
+    /// [`PageImage::write_preview`]), and removes the scratch file.
+    ///
+    /// # Errors
+    /// [`PageWriteError`] naming the file at fault; no partial page or preview is left.
+    pub fn finish(self, passes: u32, path: &Path, preview: &Path) -> Result<(), PageWriteError> {
+        let luminance = self.dilate(passes)?;
+        let tmp = temporary_name(path);
+        let written = self
+            .encode(&tmp)
+            .and_then(|()| {
+                std::fs::rename(&tmp, path).map_err(|e| format!("cannot rename into place: {e}"))
+            })
+            .map_err(|what| page_error(path, what));
+        if let Err(e) = written {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e);
+        }
+        self.write_preview(preview, luminance)
+    }
+
+    /// Dilates the scratch file in place on a rolling window of rows; returns the sum and count
+    /// of the covered pixels' luminance (row-major, as [`PageImage::write_preview`] sums).
+    fn dilate(&self, passes: u32) -> Result<(f32, usize), PageWriteError> {
+        let stride = self.stride();
+        let mut window = DilationWindow::new(passes as usize, self.width, stride, self.rgb);
+        let (mut sum, mut count) = (0.0f32, 0usize);
+        let mut failure = None;
+        let mut emit = |y: usize, row: &[f32], changed: bool| {
+            if changed && failure.is_none() {
+                failure = self.write_records(y * self.width, row).err();
+            }
+        };
+        for y in 0..self.height {
+            let mut row = vec![0.0f32; self.width * stride];
+            self.read_records(y * self.width, &mut row)?;
+            for record in row.chunks_exact(stride).filter(|r| r[COVERED] != 0.0) {
+                let [r, g, b] = self.rgb.map(|s| record[s]);
+                sum += 0.2126 * r + 0.7152 * g + 0.0722 * b;
+                count += 1;
+            }
+            window.push(y, row, y + 1 == self.height, &mut emit);
+        }
+        failure.map_or(Ok((sum, count)), Err)
+    }
+
+    /// Writes the EXR to `tmp` as [`PageImage::encode`] does, its blocks read from the
+    /// scratch file as the writer asks for them.
+    fn encode(&self, tmp: &Path) -> Result<(), String> {
+        let failure = std::sync::Mutex::new(None);
+        let layer = Layer::new(
+            (self.width, self.height),
+            LayerAttributes::named("lightmap"),
+            Encoding {
+                line_order: LineOrder::Increasing,
+                ..Encoding::SMALL_FAST_LOSSLESS
+            },
+            StreamedChannels {
+                page: self,
+                failure: &failure,
+            },
+        );
+        Image::from_layer(layer)
+            .write()
+            .to_file(tmp)
+            .map_err(|e| format!("cannot write EXR: {e}"))?;
+        match failure.into_inner().unwrap_or(None) {
+            Some(e) => Err(e.to_string()),
+            None => Ok(()),
+        }
+    }
+
+    fn write_preview(&self, path: &Path, (sum, count): (f32, usize)) -> Result<(), PageWriteError> {
+        let mean = sum / count.max(1) as f32;
+        let exposure = if mean > 0.0 && mean.is_finite() {
+            1.0 / mean
+        } else {
+            1.0
+        };
+        let stride = self.stride();
+        let mut row = vec![0.0f32; self.width * stride];
+        let mut bytes = Vec::with_capacity(self.width * 3);
+        let tmp = temporary_name(path);
+        let written = (|| -> Result<(), String> {
+            let file = std::fs::File::create(&tmp).map_err(|e| format!("cannot create: {e}"))?;
+            let mut encoder = png::Encoder::new(
+                std::io::BufWriter::new(file),
+                self.width as u32,
+                self.height as u32,
+            );
+            // The settings `image` uses for a PNG (what `write_png_rgb8` wrote).
+            encoder.set_color(png::ColorType::Rgb);
+            encoder.set_depth(png::BitDepth::Eight);
+            encoder.set_compression(png::Compression::Balanced);
+            encoder.set_filter(png::Filter::Adaptive);
+            let mut header = encoder.write_header().map_err(|e| e.to_string())?;
+            let mut stream = header
+                .stream_writer_with_size(PNG_CHUNK_BYTES)
+                .map_err(|e| e.to_string())?;
+            for y in 0..self.height {
+                self.read_records(y * self.width, &mut row)
+                    .map_err(|e| e.to_string())?;
+                bytes.clear();
+                bytes.extend(row.chunks_exact(stride).flat_map(|r| {
+                    crate::preview::tonemap_reinhard(self.rgb.map(|s| r[s]), exposure)
+                }));
+                std::io::Write::write_all(&mut stream, &bytes).map_err(|e| e.to_string())?;
+            }
+            stream.finish().map_err(|e| e.to_string())?;
+            header.finish().map_err(|e| e.to_string())?;
+            std::fs::rename(&tmp, path).map_err(|e| format!("cannot rename into place: {e}"))
+        })();
+        written.map_err(|what| {
+            let _ = std::fs::remove_file(&tmp);
+            page_error(path, format!("cannot write the PNG preview: {what}"))
+        })
+    }
+}
+
+impl Drop for PageStream {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.scratch_path);
+    }
+}
+
+fn page_error(path: &Path, what: String) -> PageWriteError {
+    PageWriteError {
+        path: path.to_owned(),
+        what,
+    }
+}
+
+/// [`PageImage::dilate`] on a rolling window: level k holds the last rows after k passes; a
+/// row of level k + 1 is made once level k has the row below it, so only `3 (passes + 1)`
+/// rows are held, whatever the page's height. Each pass fills an unfilled pixel with the mean
+/// of its filled 8-neighbours (summed in the same order as [`PageImage`], so the same bits).
+struct DilationWindow {
+    passes: usize,
+    width: usize,
+    stride: usize,
+    rgb: [usize; 3],
+    /// Per level below the last: (row index, records, filled, changed) of its last two rows.
+    levels: Vec<std::collections::VecDeque<WindowRow>>,
+}
+
+struct WindowRow {
+    y: usize,
+    records: Vec<f32>,
+    filled: Vec<bool>,
+    changed: bool,
+}
+
+impl DilationWindow {
+    fn new(passes: usize, width: usize, stride: usize, rgb: [usize; 3]) -> Self {
+        Self {
+            passes,
+            width,
+            stride,
+            rgb,
+            levels: (0..passes)
+                .map(|_| std::collections::VecDeque::new())
+                .collect(),
+        }
+    }
+
+    /// Feeds row `y` of the undilated page (`last`: the page's last row); `emit` receives
+    /// every finished row in order, with whether dilation changed it.
+    fn push(
+        &mut self,
+        y: usize,
+        records: Vec<f32>,
+        last: bool,
+        emit: &mut dyn FnMut(usize, &[f32], bool),
+    ) {
+        let filled = records
+            .chunks_exact(self.stride)
+            .map(|r| r[COVERED] != 0.0)
+            .collect();
+        self.push_level(
+            0,
+            WindowRow {
+                y,
+                records,
+                filled,
+                changed: false,
+            },
+            last,
+            emit,
+        );
+    }
+
+    fn push_level(
+        &mut self,
+        level: usize,
+        row: WindowRow,
+        last: bool,
+        emit: &mut dyn FnMut(usize, &[f32], bool),
+    ) {
+        if level == self.passes {
+            emit(row.y, &row.records, row.changed);
+            return;
+        }
+        let y = row.y;
+        self.levels[level].push_back(row);
+        let mut ready = Vec::new();
+        if y >= 1 {
+            ready.push(self.next_row(level, y - 1));
+        }
+        if last {
+            ready.push(self.next_row(level, y));
+        }
+        let window = &mut self.levels[level];
+        while window.len() > 2 {
+            window.pop_front();
+        }
+        let count = ready.len();
+        for (i, next) in ready.into_iter().enumerate() {
+            self.push_level(level + 1, next, last && i + 1 == count, emit);
+        }
+    }
+
+    /// Row `y` after one more pass, from rows y − 1, y, y + 1 of `level`.
+    fn next_row(&self, level: usize, y: usize) -> WindowRow {
+        let window = &self.levels[level];
+        let find = |row: usize| window.iter().find(|r| r.y == row);
+        let centre = find(y).expect("the window holds the row");
+        let rows: Vec<&WindowRow> = [y.checked_sub(1), Some(y), Some(y + 1)]
+            .into_iter()
+            .flatten()
+            .filter_map(find)
+            .collect();
+        let mut next = WindowRow {
+            y,
+            records: centre.records.clone(),
+            filled: centre.filled.clone(),
+            changed: centre.changed,
+        };
+        for x in 0..self.width {
+            if centre.filled[x] {
+                continue;
+            }
+            let (mut sum, mut n) = ([0.0f32; 3], 0u32);
+            for row in &rows {
+                for nx in x.saturating_sub(1)..=(x + 1).min(self.width - 1) {
+                    if row.filled[nx] {
+                        let record = &row.records[nx * self.stride..];
+                        (0..3).for_each(|c| sum[c] += record[self.rgb[c]]);
+                        n += 1;
+                    }
+                }
+            }
+            if n > 0 {
+                let record = &mut next.records[x * self.stride..];
+                (0..3).for_each(|c| record[self.rgb[c]] = sum[c] / n as f32);
+                next.filled[x] = true;
+                next.changed = true;
+            }
+        }
+        next
+    }
+}
+
+/// A [`PageStream`]'s channels as the EXR writer sees them: the header of an
+/// [`AnyChannels`] of the same names, and blocks read from the scratch file on request.
+struct StreamedChannels<'p> {
+    page: &'p PageStream,
+    /// The first scratch-file read that failed while the writer pulled blocks.
+    failure: &'p std::sync::Mutex<Option<PageWriteError>>,
+}
+
+impl StreamedChannels<'_> {
+    /// The same channels, empty, for the header: what [`PageImage::encode`] describes.
+    fn described(&self) -> AnyChannels<FlatSamples> {
+        let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = self
+            .page
+            .names
+            .iter()
+            .map(|n| AnyChannel::new(n.as_str(), FlatSamples::F32(Vec::new())))
+            .collect();
+        AnyChannels::sort(list)
+    }
+}
+
+impl<'p> WritableChannels<'p> for StreamedChannels<'p> {
+    fn infer_channel_list(&self) -> ChannelList {
+        self.described().infer_channel_list()
+    }
+
+    fn infer_level_modes(&self) -> (LevelMode, RoundingMode) {
+        self.described().infer_level_modes()
+    }
+
+    type Writer = StreamedBlocks<'p>;
+
+    fn create_writer(&'p self, _header: &Header) -> Self::Writer {
+        StreamedBlocks {
+            page: self.page,
+            failure: self.failure,
+        }
+    }
+}
+
+/// Extracts EXR blocks from a [`PageStream`]'s scratch file.
+struct StreamedBlocks<'p> {
+    page: &'p PageStream,
+    failure: &'p std::sync::Mutex<Option<PageWriteError>>,
+}
+
+impl ChannelsWriter for StreamedBlocks<'_> {
+    fn extract_uncompressed_block(&self, header: &Header, block: BlockIndex) -> Vec<u8> {
+        let page = self.page;
+        let stride = page.stride();
+        let mut line = Vec::new();
+        let mut line_y = usize::MAX;
+        UncompressedBlock::collect_block_data_from_lines(&header.channels, block, |out| {
+            let at = out.location.position;
+            let n = out.location.sample_count;
+            if at.y() != line_y {
+                line.resize(n * stride, 0.0f32);
+                // The writer cannot take an error from here: a failed read is kept, and
+                // `encode` fails the page with it once the writer returns.
+                if let Err(e) = page.read_records(at.y() * page.width + at.x(), &mut line) {
+                    line.fill(0.0);
+                    if let Ok(mut first) = self.failure.lock() {
+                        first.get_or_insert(e);
+                    }
+                }
+                line_y = at.y();
+            }
+            let slot = 1 + out.location.channel;
+            out.write_samples(|i| line[i * stride + slot])
+                .expect("a line of the block's own size");
+        })
+    }
+}
+
 /// The file of page `page` of `page_count`: `OUT.exr` itself for a single page, otherwise
 /// `OUT.page{N}.exr` beside it.
 pub fn page_path(out: &Path, page: u32, page_count: u32) -> PathBuf {
@@ -354,6 +909,80 @@ mod tests {
         assert_eq!(png.dimensions(), (3, 2));
         assert!(png.get_pixel(0, 0)[0] > png.get_pixel(1, 0)[0]);
         assert_eq!(png.get_pixel(2, 1).0, [0, 0, 0]);
+    }
+
+    /// A page of `width` × `height` with charts of random rectangles (some values not finite),
+    /// written both ways: as a [`PageImage`] and streamed through a [`PageStream`] in random
+    /// rectangles. Returns the two EXRs' bytes and the two previews' pixels.
+    fn both_ways(width: u32, height: u32, aux: &[&str], seed: u64) -> [(Vec<u8>, Vec<u8>); 2] {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+        let mut next = |n: u32| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng % u64::from(n)) as u32
+        };
+        let mut image = PageImage::new(width, height);
+        let channels: Vec<usize> = aux.iter().map(|a| image.add_aux_channel(a)).collect();
+        let mut stream =
+            PageStream::create(&dir.path().join("scratch"), width, height, aux).unwrap();
+        let mut non_finite = 0;
+        for _ in 0..12 {
+            let (w, h) = (1 + next(width.min(40)), 1 + next(height.min(40)));
+            let (x0, y0) = (next(width - w + 1), next(height - h + 1));
+            let mut rect = stream.rect(x0, y0, w, h).unwrap();
+            for y in y0..y0 + h {
+                for x in x0..x0 + w {
+                    if next(4) == 0 {
+                        continue; // a hole inside the chart
+                    }
+                    let mut rgb = [next(1000) as f32 * 0.37, next(7) as f32, 1e-4];
+                    if next(50) == 0 {
+                        rgb[1] = f32::NAN;
+                    }
+                    let values: Vec<f32> = aux.iter().map(|_| next(100) as f32 - 50.0).collect();
+                    non_finite += u64::from(!image.set(x, y, rgb));
+                    for (c, v) in channels.iter().zip(&values) {
+                        image.set_aux(*c, x, y, *v);
+                    }
+                    stream.set(&mut rect, x, y, rgb, &values);
+                }
+            }
+            stream.put_rect(&rect).unwrap();
+        }
+        assert_eq!(stream.non_finite_pixels(), non_finite);
+        image.dilate(DILATION);
+        let (a, b) = (dir.path().join("a.exr"), dir.path().join("b.exr"));
+        image.write_exr(&a).unwrap();
+        image.write_preview(&a.with_extension("png")).unwrap();
+        stream
+            .finish(DILATION, &b, &b.with_extension("png"))
+            .unwrap();
+        assert!(
+            !dir.path().join("scratch").exists(),
+            "the scratch file is removed"
+        );
+        let pixels = |p: &Path| image::open(p).unwrap().to_rgb8().into_raw();
+        [a, b].map(|p| (std::fs::read(&p).unwrap(), pixels(&p.with_extension("png"))))
+    }
+
+    const DILATION: u32 = 2;
+
+    #[test]
+    fn a_streamed_page_is_the_page_image_byte_for_byte() {
+        let aux = ["samples", "rel_std_error", "validity", "P.X", "N.Z"];
+        for (seed, (w, h), aux) in [
+            (1, (64, 48), &aux[..]),
+            (2, (300, 257), &aux[..2]),
+            (3, (1, 1), &[][..]),
+            (4, (5, 90), &[][..]),
+            (5, (513, 3), &aux[..]),
+        ] {
+            let [(exr_a, png_a), (exr_b, png_b)] = both_ways(w, h, aux, seed);
+            assert!(exr_a == exr_b, "EXR bytes differ: {w}x{h} seed {seed}");
+            assert!(png_a == png_b, "preview pixels differ: {w}x{h} seed {seed}");
+        }
     }
 
     #[test]
