@@ -1,7 +1,7 @@
 //! The bounded tile pipeline: workers on a rayon pool bake tiles into buffers drawn from a
 //! fixed pool; one writer commits them to the [result file](crate::output::result_file) and
-//! [journal](crate::output::journal) (DESIGN.md, "Bounded memory, parallelism,
-//! determinism").
+//! [journal](crate::output::journal) (docs/ARCHITECTURE.md,
+//! "Invariants").
 //!
 //! - **Bounded memory.** A tile's results live in one of `window` buffers. A worker takes a
 //!   free buffer before it bakes and the writer hands it back after writing it, so at most

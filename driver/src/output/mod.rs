@@ -1,5 +1,5 @@
-//! What a bake leaves on disk, and how it survives a crash (DESIGN.md, "Bounded memory,
-//! parallelism, determinism").
+//! What a bake leaves on disk, and how it survives a crash (docs/ARCHITECTURE.md,
+//! "Invariants"; docs/bake.md).
 //!
 //! A bake never holds the lightmap in memory. Workers hand finished tiles to one writer,
 //! which writes them **in place** into a preallocated [`result_file`] (one fixed-size record
