@@ -8,7 +8,8 @@ use guidebake_kernels::mapping::{
     cosine_hemisphere_pdf, cosine_hemisphere_pdf_x8, orthonormal_basis, sample_cosine_hemisphere,
     sample_cosine_hemisphere_x8,
 };
-use guidebake_kernels::presort::{PACKET, presorted, reorder_after_rotation_into};
+use guidebake_kernels::packet::LANES;
+use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{
     rotate, rotate_x8, rotation, sobol_2d, sobol_2d_x8, to_unit, to_unit_x8,
 };
@@ -25,7 +26,7 @@ fn packet_pipeline_x8_equals_scalar_for_any_n() {
         for texel in [0u64, 1, 12_345, u64::MAX] {
             let r = rotation(42, texel, 2);
             reorder_after_rotation_into(&order, r, &mut reordered);
-            for packet in reordered.chunks(PACKET) {
+            for packet in reordered.chunks(LANES) {
                 let lanes = std::array::from_fn(|i| packet[i.min(packet.len() - 1)]);
                 let [x, y] = rotate_x8(sobol_2d_x8(u32x8::new(lanes)), r);
                 let w8 = sample_cosine_hemisphere_x8([to_unit_x8(x), to_unit_x8(y)]);

@@ -52,7 +52,9 @@ fn valid_luminance(path: &Path) -> Vec<Option<f64>> {
         channel("validity"),
     );
     (0..r.len())
-        .map(|i| (valid[i] > 0.0).then(|| 0.2126 * r[i] + 0.7152 * g[i] + 0.0722 * b[i]))
+        .map(|i| {
+            (valid[i] > 0.0).then(|| guidebake_kernels::estimator::luminance([r[i], g[i], b[i]]))
+        })
         .collect()
 }
 

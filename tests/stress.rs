@@ -152,7 +152,7 @@ fn mean_se(values: &[Vec3]) -> (Vec3, Vec3) {
 }
 
 fn luminance(c: Vec3) -> f32 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+    guidebake_kernels::estimator::luminance_f32(c.to_array())
 }
 
 // ---------------------------------------------------------------------------------------------

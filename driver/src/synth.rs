@@ -782,8 +782,9 @@ mod tests {
             .collect();
         assert!(emissive.len() >= 2 * n as usize, "{}", emissive.len());
         let lum = |i: usize| {
-            let e = scene.triangle_material(i).emission;
-            0.2126 * e.x + 0.7152 * e.y + 0.0722 * e.z
+            guidebake_kernels::estimator::luminance_f32(
+                scene.triangle_material(i).emission.to_array(),
+            )
         };
         let (lo, hi) = emissive.iter().fold((f32::MAX, 0f32), |(a, b), &i| {
             (a.min(lum(i)), b.max(lum(i)))

@@ -131,6 +131,16 @@ pub fn luminance(rgb: [f64; 3]) -> f64 {
     LUMINANCE_WEIGHTS[0] * rgb[0] + LUMINANCE_WEIGHTS[1] * rgb[1] + LUMINANCE_WEIGHTS[2] * rgb[2]
 }
 
+/// [`LUMINANCE_WEIGHTS`] in `f32` (each the nearest `f32` to the decimal weight).
+pub const LUMINANCE_WEIGHTS_F32: [f32; 3] = [0.2126, 0.7152, 0.0722];
+
+/// [`luminance`] in `f32`, for radiance and emission (the one luminance of the workspace).
+#[inline]
+pub fn luminance_f32(rgb: [f32; 3]) -> f32 {
+    let w = LUMINANCE_WEIGHTS_F32;
+    w[0] * rgb[0] + w[1] * rgb[1] + w[2] * rgb[2]
+}
+
 /// One batch of samples (one texel, one iteration): Welford's running mean and sum of
 /// squared deviations (M2) for R, G, B and luminance, in `f64`.
 ///
@@ -752,6 +762,16 @@ fn sub256(a: [u64; 4], b: [u64; 4]) -> [u64; 4] {
 mod tests {
     use super::*;
     use crate::testing::Pcg32;
+
+    #[test]
+    fn the_f32_luminance_has_the_f64_weights_rounded() {
+        for (w32, w64) in LUMINANCE_WEIGHTS_F32.iter().zip(LUMINANCE_WEIGHTS) {
+            assert_eq!(*w32, w64 as f32);
+        }
+        let rgb = [0.25f32, 3.0, 1e5];
+        let want = luminance(rgb.map(f64::from));
+        assert!((f64::from(luminance_f32(rgb)) - want).abs() <= 1e-6 * want);
+    }
 
     #[test]
     fn exact_sum_recovers_small_terms_that_f64_loses() {

@@ -26,10 +26,8 @@
 
 use wide::{f32x8, u32x8};
 
+use crate::packet::LANES;
 use crate::sobol::{rotate_x8, sobol_2d, sobol_2d_x8, to_unit_x8};
-
-/// Points per packet: the SIMD width of the warp and the traversal.
-pub const PACKET: usize = 8;
 
 /// The order in which a quadtree node's four children are visited.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -86,7 +84,7 @@ fn hilbert_key(p: [u32; 2]) -> u64 {
 }
 
 /// Writes the presorted order of the first `n` Sobol points into `out`: a permutation of
-/// `0..n`; consecutive groups of [`PACKET`] indices are the packets (the last one short when
+/// `0..n`; consecutive groups of [`LANES`](crate::packet::LANES) indices are the packets (the last one short when
 /// `n` is not a multiple of 8).
 ///
 /// Uses [`CurveOrder::Hilbert`]. Not a hot path: call once per sample count.
@@ -196,12 +194,12 @@ pub fn reorder_after_rotation_into(order: &[u32], r: [u32; 2], out: &mut [u32]) 
 #[inline]
 pub fn packet_u_x8(packet: &[u32], r: [u32; 2]) -> [f32x8; 2] {
     debug_assert!(
-        (1..=PACKET).contains(&packet.len()),
+        (1..=LANES).contains(&packet.len()),
         "packet of {} indices",
         packet.len()
     );
-    let last = packet.len().min(PACKET).saturating_sub(1);
-    let lanes: [u32; PACKET] =
+    let last = packet.len().min(LANES).saturating_sub(1);
+    let lanes: [u32; LANES] =
         core::array::from_fn(|i| packet.get(i.min(last)).copied().unwrap_or(0));
     let [x, y] = rotate_x8(sobol_2d_x8(u32x8::new(lanes)), r);
     [to_unit_x8(x), to_unit_x8(y)]
@@ -230,7 +228,7 @@ mod tests {
             order: CurveOrder,
             leaves: &mut Vec<Vec<u32>>,
         ) {
-            if pts.len() < PACKET {
+            if pts.len() < LANES {
                 if !pts.is_empty() {
                     leaves.push(pts.iter().map(|p| p.0).collect());
                 }
@@ -268,7 +266,7 @@ mod tests {
         let leaves = quadtree_leaves(&points, order);
         let mut pos = 0;
         for leaf in &leaves {
-            assert!(leaf.len() < PACKET);
+            assert!(leaf.len() < LANES);
             let mut got = out[pos..pos + leaf.len()].to_vec();
             let mut want = leaf.clone();
             got.sort_unstable();
@@ -312,10 +310,10 @@ mod tests {
         use crate::sobol::to_unit;
         let order = presorted(203);
         let r = crate::sobol::rotation(4, 99, 1);
-        for count in 1..=PACKET {
+        for count in 1..=LANES {
             for packet in order.chunks(count) {
                 let [x, y] = packet_u_x8(packet, r);
-                for lane in 0..PACKET {
+                for lane in 0..LANES {
                     let i = packet[lane.min(packet.len() - 1)];
                     let u = rotate(sobol_2d(i), r).map(to_unit);
                     assert_eq!([x.to_array()[lane], y.to_array()[lane]], u, "lane {lane}");

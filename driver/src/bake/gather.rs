@@ -1030,7 +1030,7 @@ fn count_warp(clock: Option<Instant>, counters: &mut GatherCounters) {
 }
 
 fn luminance(c: Vec3) -> f32 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+    guidebake_kernels::estimator::luminance_f32(c.to_array())
 }
 
 #[cfg(test)]

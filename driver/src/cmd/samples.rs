@@ -17,9 +17,9 @@ use std::path::PathBuf;
 
 use glam::Vec3;
 use guidebake_kernels::mapping::sample_cosine_hemisphere;
+use guidebake_kernels::packet::LANES;
 use guidebake_kernels::presort::{
-    CurveOrder, PACKET, presort_with_into, quadtree_sort_by, reorder_after_rotation_into,
-    wrap_quadrant,
+    CurveOrder, presort_with_into, quadtree_sort_by, reorder_after_rotation_into, wrap_quadrant,
 };
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
 
@@ -100,7 +100,7 @@ fn run_typed(args: &SamplesArgs) -> Result<(), SamplesError> {
         "wrote {} (N = {}, {} packets, rotation of texel {} seed {}: {:.3}, {:.3})",
         output.display(),
         args.n,
-        args.n.div_ceil(PACKET as u32),
+        args.n.div_ceil(LANES as u32),
         args.texel,
         args.seed,
         to_unit(r[0]),
@@ -150,7 +150,7 @@ pub fn packet_spread_deg(dirs: &[Vec3]) -> f64 {
 /// Packets of fewer than 2 rays (a short last packet) are skipped.
 pub fn mean_spread_deg(order: &[u32], r: [u32; 2]) -> f64 {
     let (mut sum, mut count) = (0.0, 0usize);
-    for packet in order.chunks(PACKET).filter(|p| p.len() > 1) {
+    for packet in order.chunks(LANES).filter(|p| p.len() > 1) {
         let dirs: Vec<Vec3> = packet
             .iter()
             .map(|&i| direction(rotate(sobol_2d(i), r)))
@@ -217,7 +217,7 @@ fn coherence_row(n: u32, rotations: u32, seed: u32) -> CoherenceRow {
 
 /// Fraction of full packets of `order` whose points fall in more than one wrap quadrant.
 fn split_fraction(order: &[u32], r: [u32; 2]) -> f64 {
-    let packets = order.chunks_exact(PACKET);
+    let packets = order.chunks_exact(LANES);
     let total = packets.len();
     let split = packets
         .filter(|p| {
@@ -321,7 +321,7 @@ fn draw_disk_panel(canvas: &mut Canvas, x0: f32, y0: f32, order: &[u32], r: [u32
 
 /// Each packet: spokes from its centroid to its points, then the points, in its colour.
 fn draw_packets(canvas: &mut Canvas, order: &[u32], at: impl Fn(u32) -> (f32, f32), radius: f32) {
-    for (k, packet) in order.chunks(PACKET).enumerate() {
+    for (k, packet) in order.chunks(LANES).enumerate() {
         let color = categorical_color(k);
         let pts: Vec<(f32, f32)> = packet.iter().map(|&i| at(i)).collect();
         let m = pts.len() as f32;
@@ -373,7 +373,7 @@ mod tests {
         );
         // Every packet's colour is on the canvas (not just a blank frame).
         let colours: std::collections::HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
-        for k in 0..100usize.div_ceil(PACKET) {
+        for k in 0..100usize.div_ceil(LANES) {
             assert!(
                 colours.contains(&categorical_color(k)),
                 "packet {k} not drawn"

@@ -25,6 +25,7 @@ use exr::prelude::{
     AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, LineOrder,
     SmallVec, WritableImage,
 };
+use guidebake_kernels::estimator::luminance_f32;
 
 /// One atlas page of a lightmap.
 #[derive(Clone, Debug, PartialEq)]
@@ -231,11 +232,8 @@ impl PageImage {
             .filter(|(_, c)| **c)
             .map(|(p, _)| p)
             .collect();
-        let mean = covered
-            .iter()
-            .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
-            .sum::<f32>()
-            / covered.len().max(1) as f32;
+        let mean =
+            covered.iter().map(|p| luminance_f32(**p)).sum::<f32>() / covered.len().max(1) as f32;
         let exposure = if mean > 0.0 && mean.is_finite() {
             1.0 / mean
         } else {
@@ -496,7 +494,7 @@ impl PageStream {
             self.read_records(y * self.width, &mut row)?;
             for record in row.chunks_exact(stride).filter(|r| r[COVERED] != 0.0) {
                 let [r, g, b] = self.rgb.map(|s| record[s]);
-                sum += 0.2126 * r + 0.7152 * g + 0.0722 * b;
+                sum += luminance_f32([r, g, b]);
                 count += 1;
             }
             window.push(y, row, y + 1 == self.height, &mut emit);

@@ -95,7 +95,7 @@ pub struct EmitterSample {
 
 /// Luminance of linear RGB (Rec. 709), the emitters' power measure.
 pub fn luminance(c: Vec3) -> f32 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+    guidebake_kernels::estimator::luminance_f32(c.to_array())
 }
 
 impl Emitters {
