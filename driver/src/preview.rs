@@ -235,10 +235,7 @@ pub fn write_png_rgb8(
         path: dir.to_owned(),
         source,
     })?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(format!(".tmp-{}", std::process::id()));
-    let tmp = dir.join(tmp_name);
+    let tmp = crate::output::atomic::temporary_name(&dir.join(name));
     let written = image::save_buffer_with_format(
         &tmp,
         rgb,

@@ -40,7 +40,6 @@
 //! Windows cost about 150 bytes each while the geometry is written (up to
 //! [`MAX_LIT_WINDOWS`]); the texels still stream.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
@@ -492,25 +491,7 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> SynthError + '_ {
 
 /// Writes `bytes` to `path` through a temporary name.
 fn write_atomically(path: &Path, bytes: &[&[u8]]) -> Result<(), SynthError> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-    let result = (|| {
-        let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
-        for b in bytes {
-            f.write_all(b)?;
-        }
-        f.into_inner()
-            .map_err(std::io::IntoInnerError::into_error)?
-            .sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(io_err(path))
+    crate::output::atomic::write_parts(path, bytes).map_err(io_err(path))
 }
 
 /// Writes one glTF mesh per page; returns the mesh records of the texel file.

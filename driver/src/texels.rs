@@ -421,12 +421,8 @@ impl TexelWriter {
                 "mesh record {m:?} does not fit {triangle_count} triangles or is not finite"
             )));
         }
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-        let tiles_tmp = path.with_file_name(format!(".{name}.tiles-{}", std::process::id()));
+        let tmp = crate::output::atomic::temporary_name(path);
+        let tiles_tmp = crate::output::atomic::with_suffix(path, "tiles");
         let io = |what| {
             move |source| TexelFileError::Io {
                 path: path.to_owned(),

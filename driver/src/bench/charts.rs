@@ -16,7 +16,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::analysis::{Curve, Overhead};
-use crate::output::exr_pages::temporary_name;
+use crate::output::atomic;
 
 const FONT: &[u8] = include_bytes!("font/DejaVuSans.ttf");
 const SIZE: (u32, u32) = (1000, 680);
@@ -75,10 +75,7 @@ pub fn write_chart(chart: &impl Chart, stem: &Path) -> Result<Vec<PathBuf>, Char
         chart.draw(&root).map_err(|e| fail(&svg, e))?;
         root.present().map_err(|e| fail(&svg, e.to_string()))?;
     }
-    let tmp = temporary_name(&svg);
-    std::fs::write(&tmp, text)
-        .and_then(|()| std::fs::rename(&tmp, &svg))
-        .map_err(|e| fail(&svg, format!("cannot write: {e}")))?;
+    atomic::write(&svg, text).map_err(|e| fail(&svg, format!("cannot write: {e}")))?;
     Ok(vec![png, svg])
 }
 

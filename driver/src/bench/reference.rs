@@ -27,7 +27,7 @@ use super::harness::Bench;
 use super::method::Method;
 use super::readback::read_lightmap;
 use crate::bake::settings::{BakeSettings, Transport};
-use crate::output::exr_pages::temporary_name;
+use crate::output::atomic;
 use crate::output::fnv1a64;
 use crate::scene::Scene;
 use crate::texels::TexelFile;
@@ -136,10 +136,7 @@ pub fn reference(
         cached: false,
     };
     let text = serde_json::to_string_pretty(&info).map_err(|e| BenchError::file(&json, e))?;
-    let tmp = temporary_name(&json);
-    std::fs::write(&tmp, text)
-        .and_then(|()| std::fs::rename(&tmp, &json))
-        .map_err(|e| BenchError::file(&json, e))?;
+    atomic::write(&json, text).map_err(|e| BenchError::file(&json, e))?;
     Ok(Reference {
         info,
         values: baked.values,

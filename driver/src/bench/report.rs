@@ -12,7 +12,7 @@ use super::harness::{Ladder, OverheadRecord, RunRecord};
 use super::method::{serialize_value_name, value_name};
 use super::reference::ReferenceInfo;
 use crate::bake::settings::Transport;
-use crate::output::exr_pages::temporary_name;
+use crate::output::atomic;
 
 /// The machine the numbers were measured on.
 #[derive(Clone, Debug, Serialize)]
@@ -150,13 +150,7 @@ pub struct Summary {
 }
 
 fn write_atomic(path: &Path, text: &str) -> Result<(), BenchError> {
-    let tmp = temporary_name(path);
-    std::fs::write(&tmp, text)
-        .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            BenchError::file(path, e)
-        })
+    atomic::write(path, text).map_err(|e| BenchError::file(path, e))
 }
 
 /// The columns of `runs.csv`.

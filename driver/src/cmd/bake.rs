@@ -214,9 +214,7 @@ fn check_output(out: &std::path::Path) -> Result<(), super::CmdError> {
 /// When the file cannot be written; names it.
 pub fn write_stats(path: &std::path::Path, report: &BakeReport) -> Result<(), super::CmdError> {
     let json = serde_json::to_string_pretty(report)?;
-    let tmp = crate::output::exr_pages::temporary_name(path);
-    std::fs::write(&tmp, json)
-        .and_then(|()| std::fs::rename(&tmp, path))
+    crate::output::atomic::write(path, json)
         .map_err(|e| format!("{}: cannot write the stats: {e}", path.display()))?;
     Ok(())
 }

@@ -27,6 +27,8 @@ use exr::prelude::{
 };
 use guidebake_kernels::estimator::luminance_f32;
 
+use super::atomic::temporary_name;
+
 /// One atlas page of a lightmap.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PageImage {
@@ -805,15 +807,6 @@ pub fn page_path(out: &Path, page: u32, page_count: u32) -> PathBuf {
         .extension()
         .map_or_else(|| "exr".into(), |s| s.to_string_lossy());
     out.with_file_name(format!("{stem}.page{page}.{ext}"))
-}
-
-/// `DIR/.NAME.tmp-PID`: a temporary name in the target's own directory, so the rename that
-/// publishes it is atomic.
-pub fn temporary_name(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map_or_else(|| "out".into(), |s| s.to_string_lossy());
-    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
 }
 
 #[cfg(test)]

@@ -19,6 +19,7 @@ use std::io;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
+pub mod atomic;
 pub mod exr_pages;
 pub mod journal;
 pub mod result_file;
