@@ -1,4 +1,4 @@
-//! Criterion bench of the guide build (issue 15): `guide/build/<records>` in records/s at
+//! Criterion bench of the guide build: `guide/build/<records>` in records/s at
 //! 512, 4 096 and 16 384 records, with the bake's guide parameters, beside
 //! `guide/build_partitioning/<records>`, the build it replaced (kept as the test oracle
 //! `guide::reference::build`). Before criterion's groups the two are timed round-robin and

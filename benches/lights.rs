@@ -1,4 +1,4 @@
-//! Criterion benches for emitter selection (issue "Emissive triangles are lights"): the power
+//! Criterion benches for emitter selection: the power
 //! alias table (`transport::alias`) against the light tree (`transport::light_tree`).
 //!
 //! The emitters are the lit windows of a night city from `guidebake synth --lit-windows`

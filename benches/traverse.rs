@@ -11,7 +11,7 @@
 //! `TRAVERSE_SCENES=ajar` (or `city1m`) to run one scene, `TRAVERSE_DUEL=N` to also time the
 //! gather tracers round-robin for N rounds (ratios per round: robust on a loaded machine).
 //!
-//! Besides the default traversal, the ideas are measured as `*_packet8_<idea>` (and
+//! Besides the default traversal, the ideas tried are measured as `*_packet8_<idea>` (and
 //! `shadow_occluded8_<idea>`), and a `gather_resorted` set (each texel's rotated points fully
 //! re-sorted) feeds Embree's `rtcIntersect16` two of our packets at a time.
 

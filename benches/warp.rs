@@ -1,4 +1,4 @@
-//! Criterion benches for the learned guide and hierarchical warping (issue 3).
+//! Criterion benches for the learned guide and hierarchical warping.
 //!
 //! Group `warp` (samples/s): the scalar reference and the 8-wide warp, each on the same
 //! Sobol points in two orders — `unsorted` (Sobol index order after the texel's rotation:

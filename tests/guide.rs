@@ -1,5 +1,5 @@
 //! Statistical and differential tests of the learned guide and its hierarchical warp
-//! (issue 3, "Show"): chi-square tests of `sample` against `pdf` for degenerate and learned
+//! chi-square tests of `sample` against `pdf` for degenerate and learned
 //! guides, pdf normalization, `pdf(sample(u)) == sample(u).pdf`, `invert(sample(u)) ≈ u`,
 //! and the 8-wide warp against the scalar reference bit for bit.
 //!

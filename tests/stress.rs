@@ -1,4 +1,4 @@
-//! Numerical stress tests of the bake (issue 8): worlds far from the origin and at small
+//! Numerical stress tests of the bake: worlds far from the origin and at small
 //! scales, a dynamic range of 10⁹ in one scene, zero albedo, sub-texel and sliver
 //! triangles, coincident texels, normals nearly tangent to the surface, a guide learned
 //! from a single firefly, and a gather that sees nothing. Every output must be finite,

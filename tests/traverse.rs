@@ -1,4 +1,4 @@
-//! Per-ray checks of the packet traversal (issue 4): every ray's result from `intersect8`,
+//! Per-ray checks of the packet traversal: every ray's result from `intersect8`,
 //! `intersect1` and the brute-force oracle must be equal — hit or not, primitive id, and `t`,
 //! `u`, `v` bit for bit (the scalar and 8-wide arithmetic are the same IEEE operations; equal
 //! `t` goes to the smallest primitive id). Occlusion likewise.

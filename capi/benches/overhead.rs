@@ -1,4 +1,4 @@
-//! What the C ABI costs over calling the kernels from Rust, in one criterion run (issue 20's
+//! What the C ABI costs over calling the kernels from Rust, in one criterion run (the
 //! target: within 5 %): `sample8` (the 8-wide guided warp) and `intersect8` (packet
 //! traversal). Each pair reads its inputs from and writes its outputs to the same plain
 //! arrays, as a C caller's would be; the ABI side calls through a function pointer hidden

@@ -5,7 +5,7 @@
 //! the bake must stream in bounded memory.
 //!
 //! The city is a g×g grid of 10 m cells (g = round(√(N / 24576)), from 1 to 2048): the
-//! world grows with N at a fixed texel density (issue 18; it used to stop growing at 64²
+//! world grows with N at a fixed texel density (it used to stop growing at 64²
 //! cells, so larger N made texels denser instead). Every cell has a ground quad and one box
 //! (6 m × 6 m, height 5–40 m from an integer hash of the cell, so the world is
 //! deterministic). Every quad (ground, box top, four sides) becomes a texel rectangle whose
@@ -26,8 +26,7 @@
 //! [`crate::scene::Scene::load`] on the `.toml`.
 //!
 //! **Lit windows** ([`SynthOptions::lit_windows`], `--lit-windows N`): a many-emitter world
-//! for comparing emitter samplers (the light tree against the power alias table, issue
-//! "Emissive triangles are lights"). The box sides get a grid of window slots, 4·s columns
+//! for comparing emitter samplers (the light tree against the power alias table). The box sides get a grid of window slots, 4·s columns
 //! by ⌊h / 3 m⌋·s floors per side, s the smallest integer that makes at least N slots in
 //! the whole city; exactly N of them, evenly spread over the slot order, become lit
 //! windows: quads of 60% × 50% of their slot, 2 cm in front of the wall, emitting outward

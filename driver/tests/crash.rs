@@ -1,4 +1,4 @@
-//! Crash safety of `guidebake bake` (issue 8): the command is killed with SIGKILL at
+//! Crash safety of `guidebake bake`: the command is killed with SIGKILL at
 //! pseudo-random moments (fixed seeds, so a failure reproduces), then run again with
 //! `--resume`; the lightmap must equal an uninterrupted bake's bit for bit, and between the
 //! kill and the resume no output file may exist unless it already is that complete result.

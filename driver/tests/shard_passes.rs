@@ -1,4 +1,4 @@
-//! Pass-by-pass sharding of a series bake through the command line (issue 18): `bake --pass B
+//! Pass-by-pass sharding of a series bake through the command line: `bake --pass B
 //! --shard I/N` for every pass and shard, `merge --pass B` after each pass, and a shard
 //! SIGKILLed in the middle of its pass and run again with `--resume`; the lightmap must equal
 //! the single-process bake's bytes. The Slurm variant runs the same chain through a real

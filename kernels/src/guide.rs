@@ -19,7 +19,7 @@
 //!    quadtree cells, only as deep as the rule can split (`cells`: an MSD radix sort, up to
 //!    four levels a pass), so every node's records are one contiguous range and a split
 //!    finds its children's ranges by binary search and sums their fluxes (f64) — no
-//!    per-level partitioning (issue 15; the tree is the one the partitioning build gave,
+//!    per-level partitioning (the tree is the one the partitioning build gave,
 //!    kept as the test oracle `reference`);
 //! 3. gives every leaf `max(flux, ambient · total · area)`: the **ambient floor** is a floor
 //!    on the density relative to its mean, so no direction has zero probability (default

@@ -1,4 +1,4 @@
-//! The run-time-against-error harness behind `guidebake bench` (issue 7): the measurements
+//! The run-time-against-error harness behind `guidebake bench`: the measurements
 //! that back the paper's claims (Silvennoinen & Sloan 2019, §3 and Figure 5) on our scenes.
 //!
 //! On one scene and its texel file it bakes every method of the bake ([`method`]: guiding ×

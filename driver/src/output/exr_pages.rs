@@ -2,7 +2,7 @@
 //!
 //! The bake writes its pages through a [`PageStream`], which never holds a page image: a
 //! scratch file beside the page, dilation on a rolling window of rows, EXR blocks and PNG rows
-//! read from it on demand (issue 18; docs/farm.md). [`PageImage`], the page in memory, is the
+//! read from it on demand (docs/farm.md). [`PageImage`], the page in memory, is the
 //! reference it is tested against byte for byte, and what small pages (the bench's read-back
 //! tests) use.
 //!

@@ -1,5 +1,5 @@
 //! The quadtree cells of the guide's records and the in-place radix sort that orders them
-//! for [`super::build`] (issue 15).
+//! for [`super::build`].
 //!
 //! A record's **cell** at depth [`MAX_DEPTH`] is `⌊u · 2¹⁶⌋` per axis, exact in f32 (a power
 //! of two scale of `u ∈ [0,1)`), and its quadrant at every depth `d < MAX_DEPTH` is bit

@@ -1,4 +1,4 @@
-//! The guide build before issue 15, kept as the test oracle of [`super::build`] and for the
+//! The guide build by per-level partitioning, kept as the test oracle of [`super::build`] and for the
 //! `guide` bench's same-run comparison (feature `testing`; not part of the product): the same
 //! breadth-first split rule, but each split partitions its node's records in place, first by
 //! x and then each half by y (three passes per split, one data-dependent branch per record
