@@ -667,7 +667,7 @@ impl<'a> IterationCtx<'a> {
     /// The clock of packet `j`'s warp, if the iteration warps and the packet is one of the
     /// timed ones ([`GatherCounters::warp_ns`]).
     fn warp_clock(&self, j: u32) -> Option<Instant> {
-        (self.guide.is_some() && j % WARP_TIMED_EVERY == 0).then(Instant::now)
+        (self.guide.is_some() && j.is_multiple_of(WARP_TIMED_EVERY)).then(Instant::now)
     }
 
     /// The cosine baseline's share `c` of the mixture this iteration samples: the fraction of
