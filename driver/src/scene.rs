@@ -46,6 +46,18 @@ pub enum SceneError {
         /// The importer's error.
         source: gltf::Error,
     },
+    /// One of a glTF file's buffers or images could not be loaded: a data URI that is not
+    /// base64, a relative URI whose percent-escapes do not decode to UTF-8, a file that
+    /// cannot be read, a buffer shorter than its `byteLength`, an image that does not decode.
+    #[error("{path}: {item}: {message}")]
+    GltfResource {
+        /// The glTF file.
+        path: PathBuf,
+        /// Which one, e.g. `buffers[0]` or `images[2]`.
+        item: String,
+        /// What is wrong.
+        message: String,
+    },
     /// tobj rejected the OBJ or its MTL.
     #[error("{path}: not a loadable OBJ file: {source}")]
     Obj {
@@ -481,10 +493,7 @@ mod gltf_source {
     use super::*;
 
     pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
-        let (doc, buffers, images) = import(path).map_err(|source| SceneError::Gltf {
-            path: path.to_owned(),
-            source,
-        })?;
+        let (doc, buffers, images) = import(path)?;
         let materials = read_materials(&doc, &images);
         let default_material = materials.len() as u32;
         let mut materials = materials;
@@ -516,28 +525,127 @@ mod gltf_source {
         Ok(b.finish(materials, lights))
     }
 
-    /// `gltf::import` with two checks of ours where the crate panics instead of erring
-    /// (both found by the `scene` fuzz target): the GLB header's length
-    /// ([`check_glb_length`]), and, before the crate's validation, that every `POSITION`
-    /// names an existing accessor (gltf-json 1.4.1 indexes it unchecked in `mesh.rs`,
-    /// `primitive_validate_hook`; [`check_position_accessors`]).
+    /// `gltf::import` with checks of ours where the crate panics instead of erring (each
+    /// found by the `scene` fuzz target): the GLB header's length ([`check_glb_length`]),
+    /// before the crate's validation that every `POSITION` names an existing accessor
+    /// (gltf-json 1.4.1 indexes it unchecked in `mesh.rs`, `primitive_validate_hook`;
+    /// [`check_position_accessors`]), and every buffer's and image's URI ([`check_uri`]).
+    /// Buffers and images are loaded one by one, so an error names the one at fault.
     fn import(
         path: &Path,
-    ) -> gltf::Result<(
-        gltf::Document,
-        Vec<gltf::buffer::Data>,
-        Vec<gltf::image::Data>,
-    )> {
-        let bytes = std::fs::read(path).map_err(gltf::Error::Io)?;
-        check_glb_length(&bytes)?;
-        let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes)?;
+    ) -> Result<
+        (
+            gltf::Document,
+            Vec<gltf::buffer::Data>,
+            Vec<gltf::image::Data>,
+        ),
+        SceneError,
+    > {
+        let whole = |source| SceneError::Gltf {
+            path: path.to_owned(),
+            source,
+        };
+        let bytes = std::fs::read(path).map_err(|e| whole(gltf::Error::Io(e)))?;
+        check_glb_length(&bytes).map_err(whole)?;
+        let gltf::Gltf { document, mut blob } =
+            gltf::Gltf::from_slice_without_validation(&bytes).map_err(whole)?;
         let json = document.into_json();
-        check_position_accessors(&json)?;
-        let doc = gltf::Document::from_json(json)?;
+        check_position_accessors(&json).map_err(whole)?;
+        let doc = gltf::Document::from_json(json).map_err(whole)?;
         let base = path.parent().unwrap_or_else(|| Path::new("./"));
-        let buffers = gltf::import_buffers(&doc, Some(base), blob)?;
-        let images = gltf::import_images(&doc, Some(base), &buffers)?;
+        let resource = |item: String, message: String| SceneError::GltfResource {
+            path: path.to_owned(),
+            item,
+            message,
+        };
+
+        let mut buffers = Vec::with_capacity(doc.buffers().len());
+        for buffer in doc.buffers() {
+            let item = format!("buffers[{}]", buffer.index());
+            let source = buffer.source();
+            if let gltf::buffer::Source::Uri(uri) = source {
+                check_uri(uri).map_err(|m| resource(item.clone(), m))?;
+            }
+            let data = gltf::buffer::Data::from_source_and_blob(source, Some(base), &mut blob)
+                .map_err(|e| resource(item.clone(), describe(&e)))?;
+            if data.len() < buffer.length() {
+                let message = format!(
+                    "{} bytes, fewer than its byteLength of {}",
+                    data.len(),
+                    buffer.length()
+                );
+                return Err(resource(item, message));
+            }
+            buffers.push(data);
+        }
+        let mut images = Vec::with_capacity(doc.images().len());
+        for image in doc.images() {
+            let item = format!("images[{}]", image.index());
+            let source = image.source();
+            match &source {
+                gltf::image::Source::Uri { uri, .. } => {
+                    check_uri(uri).map_err(|m| resource(item.clone(), m))?;
+                }
+                gltf::image::Source::View { view, .. } => {
+                    check_view(view, &buffers).map_err(|m| resource(item.clone(), m))?;
+                }
+            }
+            let data = gltf::image::Data::from_source(source, Some(base), &buffers)
+                .map_err(|e| resource(item, describe(&e)))?;
+            images.push(data);
+        }
         Ok((doc, buffers, images))
+    }
+
+    /// A URI the importer can resolve without panicking: gltf 1.4.1 (`import.rs`,
+    /// `Scheme::parse`) takes a URI without a `:` as a relative path and unwraps its
+    /// percent-decoding as UTF-8, so `%AC` panicked (found by the `scene` fuzz target, on a
+    /// buffer URI `data+application/octet-stream;base64,…%AC…`). `urlencoding` is the crate
+    /// the importer decodes with, so this check refuses exactly what it would panic on.
+    pub(super) fn check_uri(uri: &str) -> Result<(), String> {
+        if uri.contains(':') || urlencoding::decode(uri).is_ok() {
+            return Ok(());
+        }
+        const SHOWN: usize = 48;
+        let shown: String = uri.chars().take(SHOWN).collect();
+        let more = if uri.chars().nth(SHOWN).is_some() {
+            "…"
+        } else {
+            ""
+        };
+        Err(format!(
+            "uri \"{shown}{more}\" is a relative path (no scheme) whose percent-escapes \
+             decode to bytes that are not UTF-8"
+        ))
+    }
+
+    /// An image's buffer view lies inside its buffer: gltf 1.4.1 slices the buffer with the
+    /// view's range unchecked (`import.rs`, `image::Data::from_source`) and gltf-json does not
+    /// validate it (found while fixing [`check_uri`]).
+    fn check_view(view: &gltf::buffer::View, buffers: &[gltf::buffer::Data]) -> Result<(), String> {
+        let buffer = view.buffer().index();
+        let len = buffers[buffer].len();
+        let (offset, length) = (view.offset(), view.length());
+        if offset.checked_add(length).is_some_and(|end| end <= len) {
+            return Ok(());
+        }
+        Err(format!(
+            "bufferViews[{}] (byteOffset {offset}, byteLength {length}) runs past the end of \
+             buffers[{buffer}] ({len} bytes)",
+            view.index()
+        ))
+    }
+
+    /// The importer's error for one buffer or image, said in the loader's words.
+    fn describe(e: &gltf::Error) -> String {
+        match e {
+            gltf::Error::Base64(e) => format!("its data URI is not valid base64: {e}"),
+            gltf::Error::Io(e) => format!("cannot read the file its uri names: {e}"),
+            gltf::Error::UnsupportedScheme => {
+                "unsupported uri scheme (data:, file: or a relative path)".to_owned()
+            }
+            other => other.to_string(),
+        }
     }
 
     /// A GLB header's total length covers at least the header: gltf 1.4.1 subtracts the
@@ -1359,6 +1467,96 @@ mod tests {
             e.to_string()
                 .contains("x.glb: bad scene file: command line: sun direction"),
             "{e}"
+        );
+    }
+
+    /// A glTF of one buffer (4 bytes long) and one image with these URIs, loaded.
+    fn load_gltf_with_uris(buffer_uri: &str, image_uri: &str) -> (PathBuf, SceneError) {
+        load_gltf_with(buffer_uri, 4, image_uri)
+    }
+
+    fn load_gltf_with(buffer_uri: &str, length: usize, image_uri: &str) -> (PathBuf, SceneError) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("uris.gltf");
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "buffers": [{ "byteLength": length, "uri": buffer_uri }],
+            "images": [{ "uri": image_uri }],
+        });
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = Scene::load(&path).expect_err("a bad URI is an error");
+        (path, e)
+    }
+
+    #[test]
+    fn uris_whose_percent_escapes_are_not_utf8_are_errors_naming_the_buffer() {
+        // The `scene` fuzz target's input (fuzz/corpus/scene/gltf-import-non-utf8-data-uri):
+        // "data+…" has no ':', so the importer reads it as a relative path and unwrapped its
+        // percent-decoding, which `%AC` makes invalid UTF-8.
+        let uri = "data+application/octet-stream;base64,AAAA%ACAP%wAA";
+        let (path, e) = load_gltf_with_uris(uri, "ok.png");
+        let message = e.to_string();
+        assert!(
+            matches!(&e, SceneError::GltfResource { item, .. } if item == "buffers[0]"),
+            "{message}"
+        );
+        assert!(message.contains(&*path.to_string_lossy()), "{message}");
+        assert!(
+            message.contains("not UTF-8") && message.contains("%AC"),
+            "{message}"
+        );
+
+        // The same URI on an image (the importer parses image URIs the same way).
+        let data = "data:application/octet-stream;base64,AAAAAA==";
+        let (_, e) = load_gltf_with_uris(data, "tex%FF.png");
+        assert!(
+            matches!(&e, SceneError::GltfResource { item, .. } if item == "images[0]"),
+            "{e}"
+        );
+        // Escapes that decode to UTF-8 are a path like any other: a missing file.
+        let (_, e) = load_gltf_with_uris("b%C3%A4r.bin", "ok.png");
+        assert!(e.to_string().contains("buffers[0]: cannot read"), "{e}");
+    }
+
+    #[test]
+    fn data_uris_that_are_not_base64_are_errors_naming_the_buffer() {
+        let (path, e) = load_gltf_with_uris("data:application/octet-stream;base64,AA%AC", "x.png");
+        let message = e.to_string();
+        assert!(
+            message.starts_with(&format!(
+                "{}: buffers[0]: its data URI is not valid base64",
+                path.display()
+            )),
+            "{message}"
+        );
+        // 3 bytes, padded to 4 by the importer: short of 8.
+        let (_, e) = load_gltf_with("data:application/octet-stream;base64,AAAA", 8, "x.png");
+        assert!(
+            e.to_string()
+                .contains("buffers[0]: 4 bytes, fewer than its byteLength of 8"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn an_image_whose_buffer_view_runs_past_its_buffer_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("view.gltf");
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "buffers": [{ "byteLength": 4, "uri": "data:application/octet-stream;base64,AAAAAA==" }],
+            "bufferViews": [{ "buffer": 0, "byteOffset": 2, "byteLength": 100 }],
+            "images": [{ "bufferView": 0, "mimeType": "image/png" }],
+        });
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = Scene::load(&path).expect_err("a view past its buffer is an error");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: images[0]: bufferViews[0] (byteOffset 2, byteLength 100) runs past the end \
+                 of buffers[0] (4 bytes)",
+                path.display()
+            )
         );
     }
 
