@@ -41,18 +41,31 @@
 //! - Rays with `tmin < 0` are not traced (they never hit): the conservative box bound assumes
 //!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
 //! - The tree depth is capped at [`MAX_DEPTH`]; [`BvhRef::new`] rejects deeper trees.
-//! - **Hits outside their own box.** At extreme magnitudes (origins of 10⁻³⁶ beside
-//!   triangles of size 10–100, directions of 10²⁸ beside components of 10⁻⁴⁰) the watertight
-//!   test's rounding can report a hit on a triangle whose own bounding box the slab test
-//!   rejects for that ray ([`slab_meets`]): its shear `a[kx] − s·a[kz]` rounds the origin's
-//!   offsets across the ray relative to the vertices' distance along `kz`, which no slack
-//!   relative to the box distances covers. The traversals may then miss that hit, or find it
-//!   (a leaf tests all its triangles), while brute force always reports it. The contract is:
-//!   each traversal's result equals [`intersect_brute`] over all triangles or over the
-//!   triangles whose own box [`slab_meets`] the ray, and the two differ only through such
-//!   hits. The `traverse` fuzz target checks exactly this contract. (A far bound widened by
-//!   2⁻¹⁸ of the root box's extent along `kz` removes the cases found so far, but culls so
-//!   much less that the packet path ran 12–46 % slower on `benches/traverse.rs`.)
+//! - **Hits outside their own box.** At extreme magnitudes the triangle test can report a hit
+//!   that lies outside the slab interval of the triangle's own bounding box ([`slab_meets`]):
+//!   - *outside the box*: origins of 10⁻³⁶ beside triangles of size 10–100, directions of
+//!     10²⁸ beside components of 10⁻⁴⁰: the shear `a[kx] − s·a[kz]` rounds the origin's
+//!     offsets across the ray relative to the vertices' distance along `kz`, which no slack
+//!     relative to the box distances covers;
+//!   - *before the box*: origins of 10⁻²⁶–10⁻³⁸ on triangles of 10⁻⁶: `t = T/det` is the
+//!     quotient of products that underflow (the terms `U·(s_z·a_z)` of 10⁻⁵⁰ round to 0), so
+//!     a hit at a true distance of 2·10⁻³⁸ comes out at `t = 0`, below the box's entry
+//!     distance, and no absolute slack covers `2⁻¹⁴⁹ / det` for every `det`.
+//!
+//!   A traversal culls a box once its entry distance passes the closest hit found so far,
+//!   so it may miss such a hit, find it (a leaf tests all its triangles), or find it in place
+//!   of a closer one of its kind that brute force reports. The contract, checked by
+//!   [`closest_hit_allowed`] and [`occlusion_allowed`] (the `traverse` fuzz target runs
+//!   them on every ray): a traversal's closest hit is the closest hit (tie rule) over *some*
+//!   set of triangles that holds every triangle whose own box the slab test lets the ray
+//!   meet on `[tmin, t]`, `t` the returned hit's distance (`tmax` without a hit) — which is
+//!   what culling by conservative boxes guarantees; its occlusion answer is brute force's
+//!   over all triangles or over those whose own box the ray meets on `[tmin, tmax]`. Where
+//!   every hit lies inside its own box's interval (every ray at ordinary magnitudes, and
+//!   every ray a bake traces: unit directions, origins lifted off their surface by
+//!   `offset_origin`) that is exactly brute force. (A far bound widened by 2⁻¹⁸ of the root
+//!   box's extent along `kz` removes the first kind found so far, but culls so much less that
+//!   the packet path ran 12–46 % slower on `benches/traverse.rs`.)
 
 use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
 use bytemuck::{Pod, Zeroable};
@@ -432,6 +445,63 @@ pub fn slab_meets(ray: &Ray, lo: Vec3, hi: Vec3) -> bool {
     let mut node = Node::EMPTY;
     node.set_box(0, lo, hi);
     box1(&node, 0, &Pre::new(ray), ray.tmax.min(f32::MAX)).is_some()
+}
+
+/// Whether `got` is a closest-hit result the traversal contract allows for `ray` over
+/// `tris` (module docs, "Hits outside their own box"): either no hit or bit for bit the hit
+/// of one triangle of `tris` on the ray's interval, and no triangle whose own box the slab
+/// test lets the ray meet on `[tmin, t]` (`t` = `got`'s distance, else `tmax`) has a hit
+/// the tie rule prefers. Where every hit lies inside its own box's interval this holds
+/// exactly for `got == intersect_brute(tris, ray)`. The test oracle for the traversals.
+pub fn closest_hit_allowed(tris: &[Tri], ray: &Ray, got: Option<Hit>) -> bool {
+    if !traceable(ray) {
+        return got.is_none();
+    }
+    let pre = Pre::new(ray);
+    let best = match got {
+        None => no_hit(ray.tmax),
+        Some(h) => {
+            let Some(tri) = tris.iter().find(|t| t.prim == h.prim) else {
+                return false;
+            };
+            let mut own = no_hit(ray.tmax);
+            closest1(&pre, tri, &mut own);
+            let bits = |h: &Hit| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim);
+            if bits(&own) != bits(&h) {
+                return false;
+            }
+            h
+        }
+    };
+    !tris.iter().any(|tri| {
+        tri1(&pre, tri).is_some_and(|(t, _, _)| accept(t, tri.prim, pre.tmin, &best))
+            && own_box_meets(&pre, tri, best.t)
+    })
+}
+
+/// Whether `got` is an occlusion answer the traversal contract allows: that of
+/// [`occluded_brute`] over all of `tris`, or over those whose own box the slab test lets the
+/// ray meet on `[tmin, tmax]` (module docs, "Hits outside their own box").
+pub fn occlusion_allowed(tris: &[Tri], ray: &Ray, got: bool) -> bool {
+    if !traceable(ray) {
+        return !got;
+    }
+    let pre = Pre::new(ray);
+    let tmax = ray.tmax.min(f32::MAX);
+    let mut occluders = tris.iter().filter(|tri| occludes1(&pre, tri, tmax));
+    if got {
+        occluders.next().is_some()
+    } else {
+        !occluders.any(|tri| own_box_meets(&pre, tri, tmax))
+    }
+}
+
+/// Whether the ray's conservative slab interval on `[tmin, tmax]` meets `tri`'s own box.
+fn own_box_meets(pre: &Pre, tri: &Tri, tmax: f32) -> bool {
+    let v = tri.v.map(Vec3::from);
+    let mut node = Node::EMPTY;
+    node.set_box(0, v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]));
+    box1(&node, 0, pre, tmax).is_some()
 }
 
 /// Whether any triangle blocks the ray on `[tmin, tmax]`, testing every triangle: the oracle.
@@ -1508,6 +1578,113 @@ mod tests {
         let mut hits = Hit8::NONE;
         let mask = intersect8(&bvh, &Ray8::from_rays(&[r; LANES]), &mut hits);
         assert!(allowed.contains(&(mask & 1 == 1).then(|| hits.lane(0)).flatten()));
+    }
+
+    /// A triangle of the `traverse` fuzz target's grid: i16 coordinates times 2⁻²⁰.
+    fn grid_triangle(k: [i16; 9]) -> [Vec3; 3] {
+        let c = |i: usize| f32::from(k[i]) * (-20.0f32).exp2();
+        [0, 3, 6].map(|i| Vec3::new(c(i), c(i + 1), c(i + 2)))
+    }
+
+    /// The closest hits of both traversals on a test-built tree, which the contract must allow.
+    fn traversals_keep_to_the_contract(soup: &[[Vec3; 3]], r: &Ray) {
+        let (nodes, tris) = build(soup);
+        let bvh = BvhRef::new(&nodes, &tris).unwrap();
+        assert!(closest_hit_allowed(&tris, r, intersect1(&bvh, r)));
+        let mut hits = Hit8::NONE;
+        let mask = intersect8(&bvh, &Ray8::from_rays(&[*r; LANES]), &mut hits);
+        assert!(closest_hit_allowed(
+            &tris,
+            r,
+            (mask & 1 == 1).then(|| hits.lane(0)).flatten()
+        ));
+        assert!(occlusion_allowed(&tris, r, occluded1(&bvh, r)));
+    }
+
+    /// `fuzz/corpus/traverse/contract-t-underflows-before-its-box` (issue 22): an origin
+    /// 2.35·10⁻³⁸ above a box face at z = 0, tracing down. The triangle test's `t = T/det`
+    /// underflows to 0 (its terms are ~10⁻⁵⁰), while the box is entered at 2.35·10⁻³⁸, more
+    /// than the far bound's absolute slack 2⁻¹²⁶ above `t = 0`. So once another triangle was
+    /// hit at `t = 0`, the BVH culled the box of the one the tie rule prefers: the contract
+    /// allows either answer.
+    #[test]
+    fn hits_whose_t_underflows_before_their_box_keep_to_the_contract() {
+        let under = grid_triangle([0, 0, 0, 20, 0, 0, -1, 256, -25600]);
+        let other = grid_triangle([
+            -25600, 25855, -25600, -25345, 156, -25345, 25855, -25600, 25855,
+        ]);
+        let org = Vec3::new(
+            f32::from_bits(0x1400_00ff),
+            0.0,
+            f32::from_bits(0x00ff_ff00),
+        );
+        let r = Ray::new(org, Vec3::new(0.0, 0.0, -1.0), 0.0, f32::INFINITY);
+        let tris = [Tri::new(under, 0), Tri::new(other, 1)];
+        let pre = Pre::new(&r);
+        let t = |i: usize| tri1(&pre, &tris[i]).map(|(t, _, _)| t.to_bits());
+        assert_eq!(
+            (t(0), t(1)),
+            (Some(0), Some(0)),
+            "both hits round to t = +0"
+        );
+        assert!(own_box_meets(&pre, &tris[0], f32::INFINITY));
+        assert!(
+            !own_box_meets(&pre, &tris[0], 0.0),
+            "entered beyond t = 0 + 2⁻¹²⁶"
+        );
+        let brute = intersect_brute(&tris, &r);
+        assert_eq!(
+            brute.map(|h| h.prim),
+            Some(0),
+            "the tie rule prefers prim 0"
+        );
+        let found_first = intersect_brute(&tris[1..], &r);
+        for allowed in [brute, found_first] {
+            assert!(closest_hit_allowed(&tris, &r, allowed), "{allowed:?}");
+        }
+        // Neither no hit nor a hit that is not one triangle's own.
+        assert!(!closest_hit_allowed(&tris, &r, None));
+        let moved = brute.map(|h| Hit {
+            u: h.v,
+            v: h.u,
+            ..h
+        });
+        assert!(!closest_hit_allowed(&tris, &r, moved));
+        traversals_keep_to_the_contract(&[under, other], &r);
+    }
+
+    /// `fuzz/corpus/traverse/contract-stand-in-hit-outside-its-box` (issue 22): origin and
+    /// direction both (−1.5·10⁻²⁶)·(1, 1, 1), beside two triangles of 10⁻⁶ through the
+    /// origin. `t = T/det` underflows for both: prim 1 lies in the plane z = 0, one direction length behind the
+    /// origin (true `t` = −1), yet comes out at `t = −0`, and prim 0 at `+0`; neither hit lies
+    /// in its own box's interval. Brute force reports prim 0; the BVH reached prim 1's leaf
+    /// and culled prim 0's, so it reported prim 1 — an answer neither brute force over all
+    /// triangles nor over the own-box ones gives (the contract before this fix), which the
+    /// contract allows: a hit outside its box found in place of a closer one of its kind.
+    #[test]
+    fn hits_outside_their_boxes_may_stand_in_for_each_other() {
+        let first = grid_triangle([-5, 0, 0, 1, 0, 0, -513, 1023, 768]);
+        let second = grid_triangle([768, 768, 0, 20, 0, 0, -1, 0, 0]);
+        let tiny = f32::from_bits(0x9494_9494);
+        let tmax = 1e-4 * (-20.0f32).exp2();
+        let r = Ray::new(Vec3::splat(tiny), Vec3::splat(tiny), 0.0, tmax);
+        let tris = [Tri::new(first, 0), Tri::new(second, 1)];
+        let pre = Pre::new(&r);
+        let hits = tris.map(|tri| tri1(&pre, &tri).map(|(t, _, _)| t.to_bits()));
+        assert_eq!(
+            hits,
+            [Some(0), Some(0x8000_0000)],
+            "prim 0 at +0, prim 1 at −0"
+        );
+        assert!(tris.iter().all(|tri| !own_box_meets(&pre, tri, tmax)));
+        let brute = intersect_brute(&tris, &r);
+        assert_eq!(brute.map(|h| h.prim), Some(0));
+        let stand_in = intersect_brute(&tris[1..], &r);
+        for allowed in [brute, stand_in, None] {
+            assert!(closest_hit_allowed(&tris, &r, allowed), "{allowed:?}");
+        }
+        assert!(occlusion_allowed(&tris, &r, true) && occlusion_allowed(&tris, &r, false));
+        traversals_keep_to_the_contract(&[first, second], &r);
     }
 
     #[test]
