@@ -551,6 +551,7 @@ mod gltf_source {
             gltf::Gltf::from_slice_without_validation(&bytes).map_err(whole)?;
         let json = document.into_json();
         check_position_accessors(&json).map_err(whole)?;
+        check_image_sources(&json).map_err(whole)?;
         let doc = gltf::Document::from_json(json).map_err(whole)?;
         let base = path.parent().unwrap_or_else(|| Path::new("./"));
         let resource = |item: String, message: String| SceneError::GltfResource {
@@ -665,6 +666,32 @@ mod gltf_source {
                 Ok(())
             }
             _ => Ok(()),
+        }
+    }
+
+    /// Every image has a source the importer can take: a `uri`, or a `bufferView` with a
+    /// `mimeType` (the spec's rule). gltf 1.4.1's `Image::source` unwraps both, unvalidated
+    /// (`image.rs`; found by the `scene` fuzz target once images were loaded one by one).
+    fn check_image_sources(json: &gltf::json::Root) -> gltf::Result<()> {
+        use gltf::json::{Path as JsonPath, validation::Error};
+        let errors: Vec<_> = json
+            .images
+            .iter()
+            .enumerate()
+            .filter_map(|(i, image)| {
+                let missing = match (&image.buffer_view, &image.mime_type, &image.uri) {
+                    (Some(_), None, _) => "mimeType",
+                    (None, _, None) => "uri",
+                    _ => return None,
+                };
+                let at = JsonPath::new().field("images").index(i).field(missing);
+                Some((at, Error::Missing))
+            })
+            .collect();
+        if errors.is_empty() {
+            Ok(())
+        } else {
+            Err(gltf::Error::Validation(errors))
         }
     }
 
@@ -1558,6 +1585,31 @@ mod tests {
                 path.display()
             )
         );
+    }
+
+    #[test]
+    fn images_without_a_source_are_errors_naming_the_image() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("image.gltf");
+        for (image, missing) in [
+            (serde_json::json!({ "name": "no source" }), "images[0].uri"),
+            (serde_json::json!({ "bufferView": 0 }), "images[0].mimeType"),
+        ] {
+            let json = serde_json::json!({
+                "asset": { "version": "2.0" },
+                "buffers": [{ "byteLength": 4, "uri": "data:application/octet-stream;base64,AAAAAA==" }],
+                "bufferViews": [{ "buffer": 0, "byteLength": 4 }],
+                "images": [image],
+            });
+            std::fs::write(&path, json.to_string()).unwrap();
+            let e = Scene::load(&path).expect_err("an image without a source is an error");
+            let message = e.to_string();
+            assert!(matches!(e, SceneError::Gltf { .. }), "{message}");
+            assert!(
+                message.contains(&*path.to_string_lossy()) && message.contains(missing),
+                "{message}"
+            );
+        }
     }
 
     #[test]
