@@ -9,7 +9,7 @@
 //! | [`texel_file`] | a texel file | opens or errs naming the file; every accessor in bounds |
 //! | [`guide`] | guide parameters, records, sample points | pdf > 0 and finite, warped points in [0,1)², `pdf(sample(u))` = its pdf, scalar == 8-wide |
 //! | [`estimator`] | batches of samples, NaN/∞/huge included | a finite combination inside the batches' range, or an explicit no-samples texel |
-//! | [`traverse`] | triangles and rays | packet == scalar == brute force, bit for bit, closest hit and occlusion |
+//! | [`traverse`] | triangles and rays | packet == scalar == brute force, bit for bit, closest hit and occlusion (at extreme magnitudes: the kernels' contract for hits outside their own box) |
 //! | [`scene`] | glTF / GLB / OBJ / TOML bytes | a scene of finite, indexed triangles, or an error naming the file |
 //!
 //! The structured targets read their input with [`Bytes`], which returns zeros once the
