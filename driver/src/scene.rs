@@ -796,22 +796,33 @@ mod gltf_source {
                 a.data_type()
             )
         };
-        for (semantic, a) in prim.attributes() {
+        let attributes = prim.attributes().map(|(semantic, a)| {
             let allowed = match semantic {
                 Semantic::Positions | Semantic::Normals => fits(&a, D::Vec3, &[T::F32]),
                 Semantic::TexCoords(_) => fits(&a, D::Vec2, &[T::F32, T::U8, T::U16]),
                 _ => true,
             };
+            (format!("{semantic:?}"), a, allowed)
+        });
+        let indices = prim.indices().map(|a| {
+            let allowed = fits(&a, D::Scalar, &[T::U8, T::U16, T::U32]);
+            ("indices".to_owned(), a, allowed)
+        });
+        for (what, a, allowed) in attributes.chain(indices) {
             if !allowed {
-                return Err(b.bad_mesh(id, describe(format!("{semantic:?}"), &a)));
+                return Err(b.bad_mesh(id, describe(what, &a)));
+            }
+            // The readers compute `count - 1` unchecked (gltf 1.4.1, `accessor/util.rs`; a
+            // subtraction overflow found by the `scene` fuzz target): the spec's minimum is 1.
+            if a.count() == 0 || a.sparse().is_some_and(|s| s.count() == 0) {
+                let message = format!(
+                    "{what} accessor {} has a count of 0 (the glTF spec's minimum is 1)",
+                    a.index()
+                );
+                return Err(b.bad_mesh(id, message));
             }
         }
-        match prim.indices() {
-            Some(a) if !fits(&a, D::Scalar, &[T::U8, T::U16, T::U32]) => {
-                Err(b.bad_mesh(id, describe("indices".into(), &a)))
-            }
-            _ => Ok(()),
-        }
+        Ok(())
     }
 
     fn read_light(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> SceneLight {
@@ -1610,6 +1621,36 @@ mod tests {
                 "{message}"
             );
         }
+    }
+
+    #[test]
+    fn accessors_of_count_zero_are_errors_naming_the_mesh() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("empty.gltf");
+        let zeros = "A".repeat(64); // 48 zero bytes
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "scene": 0, "scenes": [{ "nodes": [0] }], "nodes": [{ "mesh": 0 }],
+            "meshes": [{ "name": "tri", "primitives": [{ "attributes": { "POSITION": 0 }, "indices": 1 }] }],
+            "accessors": [
+                { "bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [0, 0, 0] },
+                { "bufferView": 1, "componentType": 5125, "count": 0, "type": "SCALAR" },
+            ],
+            "bufferViews": [
+                { "buffer": 0, "byteLength": 36 },
+                { "buffer": 0, "byteOffset": 36, "byteLength": 12 },
+            ],
+            "buffers": [{ "byteLength": 48, "uri": format!("data:application/octet-stream;base64,{zeros}") }],
+        });
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = Scene::load(&path).expect_err("an accessor of count 0 is an error");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: mesh 'tri': indices accessor 1 has a count of 0 (the glTF spec's minimum is 1)",
+                path.display()
+            )
+        );
     }
 
     #[test]
