@@ -31,8 +31,8 @@ use guidebake_kernels::guide::{self, DEFAULT_AMBIENT, GuideParams, Node, Record}
 use guidebake_kernels::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
 use guidebake_kernels::sobol::to_unit;
 use guidebake_kernels::traverse::{
-    Tri, closest_hit_allowed, intersect_brute, intersect1, intersect8, occluded_brute, occluded1,
-    occluded8, occlusion_allowed,
+    BvhRef, LEAF, Tri, closest_hit_allowed, intersect_brute, intersect1, intersect8,
+    occluded_brute, occluded1, occluded8, occlusion_allowed,
 };
 use guidebake_kernels::warp::{self, ONE_MINUS_EPS};
 
@@ -577,6 +577,7 @@ pub fn traverse(data: &[u8]) {
         .enumerate()
         .map(|(i, &v)| Tri::new(v, i as u32))
         .collect();
+    leaves_cover_their_triangles(&view, &soup);
     let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim));
     let sentinel = Hit {
         t: -7.0,
@@ -595,7 +596,7 @@ pub fn traverse(data: &[u8]) {
             // their own box"; in the corpus: `contract-*`).
             let brute = intersect_brute(&tris, ray);
             let allowed =
-                |h: Option<Hit>| bits(h) == bits(brute) || closest_hit_allowed(&tris, ray, h);
+                |h: Option<Hit>| bits(h) == bits(brute) || closest_hit_allowed(&view, ray, h);
             let scalar = intersect1(&view, ray);
             let n = p * LANES + l;
             assert!(
@@ -619,7 +620,7 @@ pub fn traverse(data: &[u8]) {
                 );
             }
             let occluded = occluded_brute(&tris, ray);
-            let occlusion_ok = |got: bool| got == occluded || occlusion_allowed(&tris, ray, got);
+            let occlusion_ok = |got: bool| got == occluded || occlusion_allowed(&view, ray, got);
             assert!(occlusion_ok(occluded1(&view, ray)), "ray {ray:?}");
             assert!(
                 occlusion_ok(blocked >> l & 1 != 0),
@@ -635,6 +636,37 @@ pub fn traverse(data: &[u8]) {
             u32::from(blocked) >> packet.len(),
             0,
             "inactive lanes are never blocked"
+        );
+    }
+}
+
+/// The traversal contract is stated on the leaves' boxes (a leaf of a spatial-split BVH holds
+/// a clipped part of its triangle), so the builder must not shrink them: every vertex of
+/// every triangle lies in the box of a leaf that holds the triangle.
+fn leaves_cover_their_triangles(view: &BvhRef<'_>, corners: &[[[f32; 3]; 3]]) {
+    let mut covered = vec![[false; 3]; corners.len()];
+    for node in view.nodes() {
+        for slot in 0..2 {
+            if node.meta[slot] == 0 {
+                continue;
+            }
+            let inside = |v: &[f32; 3]| {
+                (0..3).all(|a| (node.lo[a][slot]..=node.hi[a][slot]).contains(&v[a]))
+            };
+            let first = node.child[slot] as usize;
+            let count = (node.meta[slot] & !LEAF) as usize;
+            for tri in &view.tris()[first..first + count] {
+                let prim = tri.prim as usize;
+                for (k, v) in corners[prim].iter().enumerate() {
+                    covered[prim][k] |= inside(v);
+                }
+            }
+        }
+    }
+    if let Some(prim) = covered.iter().position(|c| !c.iter().all(|&b| b)) {
+        panic!(
+            "triangle {prim} {:?}: a vertex outside every leaf box holding it",
+            corners[prim]
         );
     }
 }

@@ -447,13 +447,14 @@ pub fn slab_meets(ray: &Ray, lo: Vec3, hi: Vec3) -> bool {
     box1(&node, 0, &Pre::new(ray), ray.tmax.min(f32::MAX)).is_some()
 }
 
-/// Whether `got` is a closest-hit result the traversal contract allows for `ray` over
-/// `tris` (module docs, "Hits outside their own box"): either no hit or bit for bit the hit
-/// of one triangle of `tris` on the ray's interval, and no triangle whose own box the slab
-/// test lets the ray meet on `[tmin, t]` (`t` = `got`'s distance, else `tmax`) has a hit
-/// the tie rule prefers. Where every hit lies inside its own box's interval this holds
-/// exactly for `got == intersect_brute(tris, ray)`. The test oracle for the traversals.
-pub fn closest_hit_allowed(tris: &[Tri], ray: &Ray, got: Option<Hit>) -> bool {
+/// Whether `got` is a closest-hit result the traversal contract allows for `ray` through
+/// `bvh` (module docs, "Hits outside their own box"): either no hit or bit for bit the hit
+/// of one of the BVH's triangles on the ray's interval, and no triangle of a leaf whose box
+/// the slab test lets the ray meet on `[tmin, t]` (`t` = `got`'s distance, else `tmax`) has
+/// a hit the tie rule prefers. Where every hit lies inside its leaf's box interval this
+/// holds exactly for the closest hit over the BVH's triangles, brute force. The test oracle
+/// for the traversals where they differ from brute force.
+pub fn closest_hit_allowed(bvh: &BvhRef<'_>, ray: &Ray, got: Option<Hit>) -> bool {
     if !traceable(ray) {
         return got.is_none();
     }
@@ -461,47 +462,50 @@ pub fn closest_hit_allowed(tris: &[Tri], ray: &Ray, got: Option<Hit>) -> bool {
     let best = match got {
         None => no_hit(ray.tmax),
         Some(h) => {
-            let Some(tri) = tris.iter().find(|t| t.prim == h.prim) else {
-                return false;
-            };
-            let mut own = no_hit(ray.tmax);
-            closest1(&pre, tri, &mut own);
             let bits = |h: &Hit| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim);
-            if bits(&own) != bits(&h) {
+            let own = |tri: &Tri| {
+                let mut own = no_hit(ray.tmax);
+                closest1(&pre, tri, &mut own);
+                bits(&own) == bits(&h)
+            };
+            if !bvh.tris.iter().any(|tri| tri.prim == h.prim && own(tri)) {
                 return false;
             }
             h
         }
     };
-    !tris.iter().any(|tri| {
-        tri1(&pre, tri).is_some_and(|(t, _, _)| accept(t, tri.prim, pre.tmin, &best))
-            && own_box_meets(&pre, tri, best.t)
-    })
+    !leaves_met(bvh, &pre, best.t)
+        .any(|tri| tri1(&pre, tri).is_some_and(|(t, _, _)| accept(t, tri.prim, pre.tmin, &best)))
 }
 
-/// Whether `got` is an occlusion answer the traversal contract allows: that of
-/// [`occluded_brute`] over all of `tris`, or over those whose own box the slab test lets the
-/// ray meet on `[tmin, tmax]` (module docs, "Hits outside their own box").
-pub fn occlusion_allowed(tris: &[Tri], ray: &Ray, got: bool) -> bool {
+/// Whether `got` is an occlusion answer the traversal contract allows: `true` only when a
+/// triangle of `bvh` occludes the ray, `false` only when no triangle of a leaf whose box
+/// the slab test lets the ray meet on `[tmin, tmax]` does (module docs, "Hits outside their
+/// own box").
+pub fn occlusion_allowed(bvh: &BvhRef<'_>, ray: &Ray, got: bool) -> bool {
     if !traceable(ray) {
         return !got;
     }
     let pre = Pre::new(ray);
     let tmax = ray.tmax.min(f32::MAX);
-    let mut occluders = tris.iter().filter(|tri| occludes1(&pre, tri, tmax));
     if got {
-        occluders.next().is_some()
+        bvh.tris.iter().any(|tri| occludes1(&pre, tri, tmax))
     } else {
-        !occluders.any(|tri| own_box_meets(&pre, tri, tmax))
+        !leaves_met(bvh, &pre, tmax).any(|tri| occludes1(&pre, tri, tmax))
     }
 }
 
-/// Whether the ray's conservative slab interval on `[tmin, tmax]` meets `tri`'s own box.
-fn own_box_meets(pre: &Pre, tri: &Tri, tmax: f32) -> bool {
-    let v = tri.v.map(Vec3::from);
-    let mut node = Node::EMPTY;
-    node.set_box(0, v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]));
-    box1(&node, 0, pre, tmax).is_some()
+/// The triangles of every leaf whose box the ray's conservative slab interval on
+/// `[tmin, tmax]` meets: what a traversal whose closest hit is at `tmax` must have tested
+/// (a parent's box contains its children's, and the slab test is monotone in the box).
+fn leaves_met<'a>(bvh: &BvhRef<'a>, pre: &Pre, tmax: f32) -> impl Iterator<Item = &'a Tri> {
+    let (nodes, view) = (bvh.nodes, *bvh);
+    let pre = *pre;
+    nodes.iter().flat_map(move |node| {
+        (0..2)
+            .filter(move |&slot| node.meta[slot] != 0 && box1(node, slot, &pre, tmax).is_some())
+            .flat_map(move |slot| view.leaf(node.child[slot], node.meta[slot]))
+    })
 }
 
 /// Whether any triangle blocks the ray on `[tmin, tmax]`, testing every triangle: the oracle.
@@ -1586,19 +1590,42 @@ mod tests {
         [0, 3, 6].map(|i| Vec3::new(c(i), c(i + 1), c(i + 2)))
     }
 
-    /// The closest hits of both traversals on a test-built tree, which the contract must allow.
-    fn traversals_keep_to_the_contract(soup: &[[Vec3; 3]], r: &Ray) {
-        let (nodes, tris) = build(soup);
-        let bvh = BvhRef::new(&nodes, &tris).unwrap();
-        assert!(closest_hit_allowed(&tris, r, intersect1(&bvh, r)));
+    /// The box of `v`.
+    fn aabb(v: &[Vec3; 3]) -> (Vec3, Vec3) {
+        (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]))
+    }
+
+    /// A root of two leaves of one triangle each, with the given boxes.
+    fn two_leaves(leaves: [(Tri, (Vec3, Vec3)); 2]) -> (Vec<Node>, Vec<Tri>) {
+        let mut root = Node::EMPTY;
+        for (slot, (_, (lo, hi))) in leaves.iter().enumerate() {
+            root.set_box(slot, *lo, *hi);
+            root.child[slot] = slot as u32;
+            root.meta[slot] = LEAF | 1;
+        }
+        (std::vec![root], leaves.map(|(t, _)| t).to_vec())
+    }
+
+    /// Whether the ray's slab interval on `[tmin, tmax]` meets the box `(lo, hi)`.
+    fn meets(pre: &Pre, (lo, hi): (Vec3, Vec3), tmax: f32) -> bool {
+        let mut node = Node::EMPTY;
+        node.set_box(0, lo, hi);
+        box1(&node, 0, pre, tmax).is_some()
+    }
+
+    /// Both traversals' answers, which the contract must allow.
+    fn traversals_keep_to_the_contract(bvh: &BvhRef<'_>, r: &Ray) {
+        assert!(closest_hit_allowed(bvh, r, intersect1(bvh, r)));
         let mut hits = Hit8::NONE;
-        let mask = intersect8(&bvh, &Ray8::from_rays(&[*r; LANES]), &mut hits);
-        assert!(closest_hit_allowed(
-            &tris,
+        let mask = intersect8(bvh, &Ray8::from_rays(&[*r; LANES]), &mut hits);
+        let lane = (mask & 1 == 1).then(|| hits.lane(0)).flatten();
+        assert!(closest_hit_allowed(bvh, r, lane));
+        assert!(occlusion_allowed(bvh, r, occluded1(bvh, r)));
+        assert!(occlusion_allowed(
+            bvh,
             r,
-            (mask & 1 == 1).then(|| hits.lane(0)).flatten()
+            occluded8(bvh, &Ray8::from_rays(&[*r; LANES])) & 1 == 1
         ));
-        assert!(occlusion_allowed(&tris, r, occluded1(&bvh, r)));
     }
 
     /// `fuzz/corpus/traverse/contract-t-underflows-before-its-box` (issue 22): an origin
@@ -1627,9 +1654,9 @@ mod tests {
             (Some(0), Some(0)),
             "both hits round to t = +0"
         );
-        assert!(own_box_meets(&pre, &tris[0], f32::INFINITY));
+        assert!(meets(&pre, aabb(&under), f32::INFINITY));
         assert!(
-            !own_box_meets(&pre, &tris[0], 0.0),
+            !meets(&pre, aabb(&under), 0.0),
             "entered beyond t = 0 + 2⁻¹²⁶"
         );
         let brute = intersect_brute(&tris, &r);
@@ -1638,29 +1665,34 @@ mod tests {
             Some(0),
             "the tie rule prefers prim 0"
         );
+        let (nodes, leaf_tris) = two_leaves([(tris[0], aabb(&under)), (tris[1], aabb(&other))]);
+        let bvh = BvhRef::new(&nodes, &leaf_tris).unwrap();
         let found_first = intersect_brute(&tris[1..], &r);
         for allowed in [brute, found_first] {
-            assert!(closest_hit_allowed(&tris, &r, allowed), "{allowed:?}");
+            assert!(closest_hit_allowed(&bvh, &r, allowed), "{allowed:?}");
         }
         // Neither no hit nor a hit that is not one triangle's own.
-        assert!(!closest_hit_allowed(&tris, &r, None));
+        assert!(!closest_hit_allowed(&bvh, &r, None));
         let moved = brute.map(|h| Hit {
             u: h.v,
             v: h.u,
             ..h
         });
-        assert!(!closest_hit_allowed(&tris, &r, moved));
-        traversals_keep_to_the_contract(&[under, other], &r);
+        assert!(!closest_hit_allowed(&bvh, &r, moved));
+        traversals_keep_to_the_contract(&bvh, &r);
+        let (nodes, tris) = build(&[under, other]);
+        traversals_keep_to_the_contract(&BvhRef::new(&nodes, &tris).unwrap(), &r);
     }
 
     /// `fuzz/corpus/traverse/contract-stand-in-hit-outside-its-box` (issue 22): origin and
     /// direction both (−1.5·10⁻²⁶)·(1, 1, 1), beside two triangles of 10⁻⁶ through the
-    /// origin. `t = T/det` underflows for both: prim 1 lies in the plane z = 0, one direction length behind the
-    /// origin (true `t` = −1), yet comes out at `t = −0`, and prim 0 at `+0`; neither hit lies
-    /// in its own box's interval. Brute force reports prim 0; the BVH reached prim 1's leaf
-    /// and culled prim 0's, so it reported prim 1 — an answer neither brute force over all
-    /// triangles nor over the own-box ones gives (the contract before this fix), which the
-    /// contract allows: a hit outside its box found in place of a closer one of its kind.
+    /// origin. `t = T/det` underflows for both: prim 1 lies in the plane z = 0, one direction
+    /// length behind the origin (true `t` = −1), yet comes out at `t = −0`, and prim 0 at
+    /// `+0`; neither hit lies in its own box's interval. Brute force reports prim 0; the BVH
+    /// reached prim 1's leaf and culled prim 0's, so it reported prim 1 — an answer neither
+    /// brute force over all triangles nor over the own-box ones gives (the contract before
+    /// this fix), which the contract allows: a hit outside its box found in place of a
+    /// closer one of its kind.
     #[test]
     fn hits_outside_their_boxes_may_stand_in_for_each_other() {
         let first = grid_triangle([-5, 0, 0, 1, 0, 0, -513, 1023, 768]);
@@ -1676,15 +1708,60 @@ mod tests {
             [Some(0), Some(0x8000_0000)],
             "prim 0 at +0, prim 1 at −0"
         );
-        assert!(tris.iter().all(|tri| !own_box_meets(&pre, tri, tmax)));
+        assert!(!meets(&pre, aabb(&first), tmax) && !meets(&pre, aabb(&second), tmax));
         let brute = intersect_brute(&tris, &r);
         assert_eq!(brute.map(|h| h.prim), Some(0));
+        let (nodes, leaf_tris) = two_leaves([(tris[0], aabb(&first)), (tris[1], aabb(&second))]);
+        let bvh = BvhRef::new(&nodes, &leaf_tris).unwrap();
         let stand_in = intersect_brute(&tris[1..], &r);
         for allowed in [brute, stand_in, None] {
-            assert!(closest_hit_allowed(&tris, &r, allowed), "{allowed:?}");
+            assert!(closest_hit_allowed(&bvh, &r, allowed), "{allowed:?}");
         }
-        assert!(occlusion_allowed(&tris, &r, true) && occlusion_allowed(&tris, &r, false));
-        traversals_keep_to_the_contract(&[first, second], &r);
+        assert!(occlusion_allowed(&bvh, &r, true) && occlusion_allowed(&bvh, &r, false));
+        traversals_keep_to_the_contract(&bvh, &r);
+    }
+
+    /// `fuzz/corpus/traverse/contract-spatial-split-reference` (issue 22): with spatial
+    /// splits (obvhs's slow presets) a leaf holds a triangle's part clipped to the leaf's
+    /// box, not its whole box. Origin (−1.5·10⁻²⁶)·(1, 1, 1), direction (−1.5·10⁻²⁶,
+    /// 3.8·10²², −6.5·10⁻²⁷): the watertight test rounds the ray, which passes 3·10⁻²⁶
+    /// beside the triangle's long edge, onto the edge's midpoint (u = v = 0.5), at x = 0,
+    /// z = 0, where the split clipped the triangle into a part at x ≤ 0, z ≥ 0 and one at
+    /// x ≥ 0, z ≤ 0; the ray, at x < 0 and z < 0 and moving away from both planes, meets
+    /// neither part's box, though it meets the triangle's whole box. So the contract is
+    /// stated on the leaves' boxes.
+    #[test]
+    fn hits_outside_every_clipped_reference_box_keep_to_the_contract() {
+        let tri = grid_triangle([
+            -25345, 25855, 25600, -25600, 25855, 25600, 25600, 25600, -25600,
+        ]);
+        let g = |x: f32, y: f32, z: f32| Vec3::new(x, y, z) * (-20.0f32).exp2();
+        let left = (g(-25600.0, 25727.0, 0.0), g(0.0, 25855.0, 25600.0));
+        let right = (g(0.0, 25600.0, -25600.0), g(25600.0, 25729.0, 129.0));
+        let tiny = f32::from_bits(0x9494_9494);
+        let dir = Vec3::new(tiny, 3.772_186e22, -6.48207e-27);
+        let r = Ray::new(Vec3::splat(tiny), dir, 0.0, 1e-4 * (-20.0f32).exp2());
+        let t = Tri::new(tri, 0);
+        let pre = Pre::new(&r);
+        let (_, u, v) = tri1(&pre, &t).expect("rounded onto the edge");
+        assert_eq!((u, v), (0.5, 0.5));
+        let brute = intersect_brute(&[t], &r);
+        assert!(brute.is_some() && meets(&pre, aabb(&tri), r.tmax));
+        assert!(!meets(&pre, left, r.tmax) && !meets(&pre, right, r.tmax));
+        let (nodes, leaf_tris) = two_leaves([(t, left), (t, right)]);
+        let bvh = BvhRef::new(&nodes, &leaf_tris).unwrap();
+        assert_eq!(intersect1(&bvh, &r), None, "the BVH misses it");
+        for allowed in [brute, None] {
+            assert!(closest_hit_allowed(&bvh, &r, allowed), "{allowed:?}");
+        }
+        traversals_keep_to_the_contract(&bvh, &r);
+        // With the whole box as the leaf's, missing the hit breaks the contract.
+        let (nodes, leaf_tris) = two_leaves([(t, aabb(&tri)), (t, aabb(&tri))]);
+        assert!(!closest_hit_allowed(
+            &BvhRef::new(&nodes, &leaf_tris).unwrap(),
+            &r,
+            None
+        ));
     }
 
     #[test]
