@@ -42,11 +42,14 @@
 //!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
 //! - The tree depth is capped at [`MAX_DEPTH`]; [`BvhRef::new`] rejects deeper trees.
 //! - **Hits outside their own box.** At extreme magnitudes the triangle test can report a hit
-//!   that lies outside the slab interval of the triangle's own bounding box ([`slab_meets`]):
+//!   that lies outside the slab interval of the box of the leaf holding the triangle (its
+//!   own bounding box, or with spatial splits the box of the part clipped to the leaf):
 //!   - *outside the box*: origins of 10⁻³⁶ beside triangles of size 10–100, directions of
 //!     10²⁸ beside components of 10⁻⁴⁰: the shear `a[kx] − s·a[kz]` rounds the origin's
 //!     offsets across the ray relative to the vertices' distance along `kz`, which no slack
-//!     relative to the box distances covers;
+//!     relative to the box distances covers; a ray passing 3·10⁻²⁶ beside an edge is
+//!     rounded onto it, where a spatial split clipped the triangle into parts whose boxes
+//!     the ray misses;
 //!   - *before the box*: origins of 10⁻²⁶–10⁻³⁸ on triangles of 10⁻⁶: `t = T/det` is the
 //!     quotient of products that underflow (the terms `U·(s_z·a_z)` of 10⁻⁵⁰ round to 0), so
 //!     a hit at a true distance of 2·10⁻³⁸ comes out at `t = 0`, below the box's entry
@@ -56,16 +59,18 @@
 //!   so it may miss such a hit, find it (a leaf tests all its triangles), or find it in place
 //!   of a closer one of its kind that brute force reports. The contract, checked by
 //!   [`closest_hit_allowed`] and [`occlusion_allowed`] (the `traverse` fuzz target runs
-//!   them on every ray): a traversal's closest hit is the closest hit (tie rule) over *some*
-//!   set of triangles that holds every triangle whose own box the slab test lets the ray
-//!   meet on `[tmin, t]`, `t` the returned hit's distance (`tmax` without a hit) — which is
-//!   what culling by conservative boxes guarantees; its occlusion answer is brute force's
-//!   over all triangles or over those whose own box the ray meets on `[tmin, tmax]`. Where
-//!   every hit lies inside its own box's interval (every ray at ordinary magnitudes, and
-//!   every ray a bake traces: unit directions, origins lifted off their surface by
-//!   `offset_origin`) that is exactly brute force. (A far bound widened by 2⁻¹⁸ of the root
-//!   box's extent along `kz` removes the first kind found so far, but culls so much less that
-//!   the packet path ran 12–46 % slower on `benches/traverse.rs`.)
+//!   them on every ray that differs from brute force): a traversal's closest hit is the
+//!   closest hit (tie rule) over *some* set of the BVH's triangles that holds every triangle
+//!   of every leaf whose box the slab test lets the ray meet on `[tmin, t]`, `t` the
+//!   returned hit's distance (`tmax` without a hit) — which is what culling by conservative
+//!   boxes guarantees, a parent's box holding its children's; it answers occlusion `true`
+//!   only for a triangle that occludes, `false` only when no triangle of a leaf the ray
+//!   meets on `[tmin, tmax]` does. Where every hit lies inside its leaf's box interval
+//!   (every ray at ordinary magnitudes, and every ray a bake traces: unit directions,
+//!   origins lifted off their surface by `offset_origin`) that is exactly brute force.
+//!   (A far bound widened by 2⁻¹⁸ of the root box's extent along `kz` removes the first kind
+//!   found first, but culls so much less that the packet path ran 12–46 % slower on
+//!   `benches/traverse.rs`.)
 
 use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
 use bytemuck::{Pod, Zeroable};
@@ -432,19 +437,6 @@ pub fn intersect_brute(tris: &[Tri], ray: &Ray) -> Option<Hit> {
         closest1(&pre, tri, &mut best);
     }
     (best.prim != NO_HIT).then_some(best)
-}
-
-/// Whether the ray's conservative slab interval on `[tmin, tmax]` meets the box `[lo, hi]`:
-/// the traversals' box test for one box (false for rays that are not traced). With it a test
-/// oracle can tell the hits the contract lets a traversal miss (module docs, "Hits outside
-/// their own box").
-pub fn slab_meets(ray: &Ray, lo: Vec3, hi: Vec3) -> bool {
-    if !traceable(ray) {
-        return false;
-    }
-    let mut node = Node::EMPTY;
-    node.set_box(0, lo, hi);
-    box1(&node, 0, &Pre::new(ray), ray.tmax.min(f32::MAX)).is_some()
 }
 
 /// Whether `got` is a closest-hit result the traversal contract allows for `ray` through
@@ -1574,7 +1566,10 @@ mod tests {
         let brute = intersect_brute(&tris, &r);
         assert_eq!(brute.map(|h| (h.t, h.prim)), Some((0.0, 0)));
         let [lo, hi] = [Vec3::min, Vec3::max].map(|f| f(f(soup[0][0], soup[0][1]), soup[0][2]));
-        assert!(!slab_meets(&r, lo, hi), "the hit lies outside its own box");
+        assert!(
+            !meets(&Pre::new(&r), (lo, hi), r.tmax),
+            "the hit lies outside its own box"
+        );
         let others: Vec<Tri> = tris.iter().filter(|t| t.prim != 0).copied().collect();
         let boxed = intersect_brute(&others, &r);
         let allowed = [brute, boxed];
