@@ -529,8 +529,10 @@ mod gltf_source {
     /// found by the `scene` fuzz target): the GLB header's length ([`check_glb_length`]),
     /// before the crate's validation that every `POSITION` names an existing accessor
     /// (gltf-json 1.4.1 indexes it unchecked in `mesh.rs`, `primitive_validate_hook`;
-    /// [`check_position_accessors`]), and every buffer's and image's URI ([`check_uri`]).
-    /// Buffers and images are loaded one by one, so an error names the one at fault.
+    /// [`check_position_accessors`]) and that every image has a source
+    /// ([`check_image_sources`]), and every buffer's and image's URI ([`check_uri`]) and
+    /// image's buffer view ([`check_view`]). Buffers and images are loaded one by one, so an
+    /// error names the one at fault.
     fn import(
         path: &Path,
     ) -> Result<
@@ -603,7 +605,7 @@ mod gltf_source {
     /// percent-decoding as UTF-8, so `%AC` panicked (found by the `scene` fuzz target, on a
     /// buffer URI `data+application/octet-stream;base64,…%AC…`). `urlencoding` is the crate
     /// the importer decodes with, so this check refuses exactly what it would panic on.
-    pub(super) fn check_uri(uri: &str) -> Result<(), String> {
+    fn check_uri(uri: &str) -> Result<(), String> {
         if uri.contains(':') || urlencoding::decode(uri).is_ok() {
             return Ok(());
         }
