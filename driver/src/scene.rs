@@ -58,6 +58,16 @@ pub enum SceneError {
         /// What is wrong.
         message: String,
     },
+    /// An OBJ face or line names an element the file does not have.
+    #[error("{path}: line {line}: {message}")]
+    ObjIndex {
+        /// The file.
+        path: PathBuf,
+        /// The line, from 1.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
     /// tobj rejected the OBJ or its MTL.
     #[error("{path}: not a loadable OBJ file: {source}")]
     Obj {
@@ -963,6 +973,7 @@ mod obj_source {
             single_index: true,
             ..Default::default()
         };
+        check_element_indices(path)?;
         let (models, mtl) = tobj::load_obj(path, &opts).map_err(|source| SceneError::Obj {
             path: path.to_owned(),
             source,
@@ -988,6 +999,65 @@ mod obj_source {
             read_model(&mut b, id, &model.mesh, default_material)?;
         }
         Ok(b.finish(materials, Vec::new()))
+    }
+
+    /// Every index of a face (`f`) or line (`l`) names an element of the file: tobj 4.0.5
+    /// resolves a relative index before the first element (`f 1/-5` with one `vt`), or a
+    /// huge one, to a huge `usize` and computes `vt * 2 + 1` and `vn * 3 + 2` unchecked
+    /// (`add_vertex`; an overflow found by the `scene` fuzz target). Indices are resolved as
+    /// tobj does (relative ones against the elements so far; 0 and −count+… resolving to −1
+    /// mean "none"), and only kinds the file has are checked, as tobj only reads those.
+    fn check_element_indices(path: &Path) -> Result<(), SceneError> {
+        let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let text = String::from_utf8_lossy(&bytes);
+        const KINDS: [(&str, &str); 3] = [
+            ("v", "vertex"),
+            ("vt", "texture coordinate"),
+            ("vn", "normal"),
+        ];
+        let kind = |word: Option<&str>| KINDS.iter().position(|k| Some(k.0) == word);
+        let mut total = [0isize; 3];
+        for line in text.lines() {
+            if let Some(k) = kind(line.split_whitespace().next()) {
+                total[k] += 1;
+            }
+        }
+        let mut seen = [0isize; 3];
+        for (n, line) in text.lines().enumerate() {
+            let mut words = line.split_whitespace();
+            let first = words.next();
+            if let Some(k) = kind(first) {
+                seen[k] += 1;
+                continue;
+            }
+            if !matches!(first, Some("f" | "l")) {
+                continue;
+            }
+            for (k, field) in words.flat_map(|w| w.split('/').take(3).enumerate()) {
+                let Ok(x) = field.parse::<isize>() else {
+                    continue; // tobj refuses the face itself
+                };
+                let resolved = if x < 0 {
+                    seen[k].saturating_add(x)
+                } else {
+                    x - 1
+                };
+                if total[k] > 0 && (resolved < -1 || resolved >= total[k]) {
+                    return Err(SceneError::ObjIndex {
+                        path: path.to_owned(),
+                        line: n + 1,
+                        message: format!(
+                            "{} index {x} names no {} (the file has {}, {} before this line)",
+                            KINDS[k].1, KINDS[k].1, total[k], seen[k]
+                        ),
+                    });
+                }
+            }
+        }
+        Ok(())
     }
 
     fn read_material(m: &tobj::Material, dir: &Path) -> Material {
@@ -1653,6 +1723,35 @@ mod tests {
                 path.display()
             )
         );
+    }
+
+    #[test]
+    fn obj_indices_naming_no_element_are_errors_naming_the_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("quad.obj");
+        let head = "v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvn 0 0 1\n";
+        for (face, message) in [
+            // Relative, before the first texture coordinate: overflowed in tobj.
+            (
+                "f 1/-3 2/1 3/1",
+                "line 6: texture coordinate index -3 names no texture coordinate (the file has 1, 1 before this line)",
+            ),
+            (
+                "f 1//1 2//1 3//9223372036854775807",
+                "line 6: normal index 9223372036854775807 names no normal (the file has 1, 1 before this line)",
+            ),
+            (
+                "f 1 2 4",
+                "line 6: vertex index 4 names no vertex (the file has 3, 3 before this line)",
+            ),
+        ] {
+            std::fs::write(&path, format!("{head}{face}\n")).unwrap();
+            let e = Scene::load(&path).expect_err("an index naming no element is an error");
+            assert_eq!(e.to_string(), format!("{}: {message}", path.display()));
+        }
+        // 0 and a relative index to just before the first element mean "none", as in tobj.
+        std::fs::write(&path, format!("{head}f 1/0/-1 2/-2/1 3/1/1\n")).unwrap();
+        assert_eq!(Scene::load(&path).unwrap().triangles.len(), 1);
     }
 
     #[test]
