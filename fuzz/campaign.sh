@@ -26,12 +26,19 @@
 #   then runs the built binaries themselves: `cargo fuzz run` would rebuild on a source
 #   change and, after a crash, build the target once more to print the input.
 #
+# - SEQUENTIAL=1 runs the targets one after another instead (on a shared machine: one core
+#   for the fuzzer), each until its goal or the common deadline, in the order given.
+# - `fuzz/campaign.sh --table TARGET...` only writes the table again from the targets' last
+#   results (fuzz/artifacts/campaign-TARGET.sum), e.g. after campaigns of separate targets.
+#
 # Logs: fuzz/artifacts/campaign-TARGET.log (every restart appended).
 set -euo pipefail
 cd "$(dirname "$0")"
-total=${1:?usage: fuzz/campaign.sh TOTAL_SECONDS [TARGET...]}
+usage="usage: fuzz/campaign.sh TOTAL_SECONDS [TARGET...] | fuzz/campaign.sh --table TARGET..."
+total=${1:?$usage}
 shift
 max_restarts=${MAX_RESTARTS:-5}
+table_only=$([ "$total" = --table ] && echo 1 || echo "")
 
 if [ "${SANITIZER:-}" != none ] && rustup run nightly rustc --version >/dev/null 2>&1; then
     tc=(+nightly); san=(); sanitizer="nightly, AddressSanitizer"
@@ -43,6 +50,7 @@ if grep -q avx2 /proc/cpuinfo 2>/dev/null; then
     export RUSTFLAGS="${RUSTFLAGS:+$RUSTFLAGS }-C target-feature=+avx2,+fma"
 fi
 if [ $# -gt 0 ]; then targets=("$@"); else mapfile -t targets < <(cargo "${tc[@]}" fuzz list); fi
+[ -z "$table_only" ] || [ $# -gt 0 ] || { echo "$usage" >&2; exit 2; }
 
 # goal_of TARGET EXECUTIONS CPU_SECONDS [final]: the target's goal after that much work
 # (while running, the rate counts only after 10^6 executions: the seeds run fast).
@@ -54,20 +62,23 @@ goal_of() {
         print ((e >= 1000000 || f) && c > 0 && e / c > 5000) ? 10000000 : 1000000 }'
 }
 
-echo "building every target ($sanitizer)"
 mkdir -p artifacts
-cargo "${tc[@]}" fuzz build "${san[@]}" >artifacts/campaign-build.log 2>&1 ||
-    { tail -40 artifacts/campaign-build.log; exit 1; }
+if [ -z "$table_only" ]; then
+    echo "building every target ($sanitizer)"
+    cargo "${tc[@]}" fuzz build "${san[@]}" >artifacts/campaign-build.log 2>&1 ||
+        { tail -40 artifacts/campaign-build.log; exit 1; }
+    start=$(date +%s)
+    deadline=$((start + total))
+fi
 bin_dir="target/$(rustc -vV | sed -n 's/^host: //p')/release"
 
-start=$(date +%s)
-deadline=$((start + total))
-
 # One target's campaign: runs until its goal or the deadline, restarting after a crash.
-# Writes "executions cpu_seconds crashes segments" to artifacts/campaign-TARGET.sum.
+# Writes "executions cpu_seconds crashes segments seconds goal started toolchain" to
+# artifacts/campaign-TARGET.sum.
 campaign() {
     local target=$1 log="artifacts/campaign-$1.log" done_execs=0 cpu=0 crashes=0 segments=0
-    local before after left execs t goal
+    local before after left execs t goal t0
+    t0=$(date +%s)
     mkdir -p "artifacts/corpus/$target" "artifacts/$target"
     : >"$log"
     while :; do
@@ -96,36 +107,44 @@ campaign() {
         fi
     done
     goal=$(goal_of "$target" "$done_execs" "$cpu" final)
-    echo "$done_execs $cpu $crashes $segments $(( $(date +%s) - start )) $goal" >"artifacts/campaign-$target.sum"
+    echo "$done_execs $cpu $crashes $segments $(( $(date +%s) - t0 )) $goal" \
+        "$(date -u -d "@$t0" +%Y-%m-%dT%H:%M)" "${sanitizer// /_}" >"artifacts/campaign-$target.sum"
 }
 
-echo "campaign of ${total} s: ${targets[*]} (from $(date -u +%H:%M:%S) UTC)"
-pids=()
-for target in "${targets[@]}"; do
-    campaign "$target" &
-    pids+=($!)
-done
-for pid in "${pids[@]}"; do wait "$pid" || true; done
+if [ -z "$table_only" ]; then
+    echo "campaign of ${total} s: ${targets[*]} (from $(date -u +%H:%M:%S) UTC)"
+    if [ "${SEQUENTIAL:-}" = 1 ]; then
+        for target in "${targets[@]}"; do campaign "$target" || true; done
+    else
+        pids=()
+        for target in "${targets[@]}"; do
+            campaign "$target" &
+            pids+=($!)
+        done
+        for pid in "${pids[@]}"; do wait "$pid" || true; done
+    fi
+fi
 
 machine=${MACHINE:-"$(nproc)-core $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//')"}
 table=artifacts/campaign.md
 {
-    echo "Campaign of $(date -u -d "@$start" +'%Y-%m-%d %H:%M') UTC, ${total} s wall time, every target at once: $machine; $sanitizer, release with debug assertions. Executions per second are per wall second (the targets share the cores) and per CPU second of the target; the goal is 10^7 for targets faster than 5 000 per CPU second, else 10^6; time is when the target stopped (its goal reached, or the campaign's end)."
+    echo "Fuzz campaign, $machine; release with debug assertions. Each target resumes from its grown corpus and stops at its goal (10^7 executions for targets faster than 5 000 per CPU second, else 10^6) or at the campaign's end; started: its start (UTC), time: its wall time. Executions per second are per wall second of the target and per CPU second of it (the machine is shared, so the wall rate is indicative only)."
     echo
-    echo "| target | executions | goal | time | exec/s (wall) | exec/s (CPU) | corpus | crashes |"
-    echo "|---|---:|---:|---:|---:|---:|---:|---:|"
+    echo "| target | started (UTC) | toolchain | executions | goal | time | exec/s (wall) | exec/s (CPU) | corpus | crashes |"
+    echo "|---|---|---|---:|---:|---:|---:|---:|---:|---:|"
     for target in "${targets[@]}"; do
-        read -r execs cpu crashes segments secs goal <"artifacts/campaign-$target.sum"
+        read -r execs cpu crashes segments secs goal started toolchain <"artifacts/campaign-$target.sum"
         corpus=$(find "artifacts/corpus/$target" -type f | wc -l)
         seeds=$(find "corpus/$target" -type f | wc -l)
         met=$([ "$execs" -ge "$goal" ] && echo "" || echo " **(missed)**")
         awk -v t="$target" -v e="$execs" -v g="$goal" -v s="$secs" -v c="$cpu" -v k="$corpus" \
-            -v d="$seeds" -v x="$crashes" -v m="$met" 'function th(n,   s, r) {
+            -v d="$seeds" -v x="$crashes" -v m="$met" -v st="${started/T/ }" \
+            -v tc="${toolchain//_/ }" 'function th(n,   s, r) {
                 s = sprintf("%d", n); r = ""
                 while (length(s) > 3) { r = "," substr(s, length(s) - 2) r; s = substr(s, 1, length(s) - 3) }
                 return s r }
-            BEGIN { printf "| `%s` | %s%s | %s | %d s | %s | %s | %s + %d seeds | %d |\n",
-                t, th(e), m, th(g), s, th(s > 0 ? e / s : 0), th(c > 0 ? e / c : 0), th(k), d, x }'
+            BEGIN { printf "| `%s` | %s | %s | %s%s | %s | %d s | %s | %s | %s + %d seeds | %d |\n",
+                t, st, tc, th(e), m, th(g), s, th(s > 0 ? e / s : 0), th(c > 0 ? e / c : 0), th(k), d, x }'
     done
 } >"$table"
 cat "$table"
@@ -143,5 +162,6 @@ if [ -n "${REPORT:-}" ]; then
         echo "$report has no <!-- campaign:begin --> / <!-- campaign:end --> markers: table left in fuzz/$table" >&2
     fi
 fi
-crashed=$(cat artifacts/campaign-*.sum 2>/dev/null | awk '{ s += $3 } END { print s + 0 }')
+crashed=$(for target in "${targets[@]}"; do cat "artifacts/campaign-$target.sum"; done |
+    awk '{ s += $3 } END { print s + 0 }')
 [ "$crashed" -eq 0 ] || { echo "crashes: see fuzz/artifacts/*/crash-*" >&2; exit 1; }

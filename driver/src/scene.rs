@@ -46,6 +46,28 @@ pub enum SceneError {
         /// The importer's error.
         source: gltf::Error,
     },
+    /// One of a glTF file's buffers or images could not be loaded: a data URI that is not
+    /// base64, a relative URI whose percent-escapes do not decode to UTF-8, a file that
+    /// cannot be read, a buffer shorter than its `byteLength`, an image that does not decode.
+    #[error("{path}: {item}: {message}")]
+    GltfResource {
+        /// The glTF file.
+        path: PathBuf,
+        /// Which one, e.g. `buffers[0]` or `images[2]`.
+        item: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// An OBJ face or line names an element the file does not have.
+    #[error("{path}: line {line}: {message}")]
+    ObjIndex {
+        /// The file.
+        path: PathBuf,
+        /// The line, from 1.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
     /// tobj rejected the OBJ or its MTL.
     #[error("{path}: not a loadable OBJ file: {source}")]
     Obj {
@@ -481,10 +503,7 @@ mod gltf_source {
     use super::*;
 
     pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
-        let (doc, buffers, images) = import(path).map_err(|source| SceneError::Gltf {
-            path: path.to_owned(),
-            source,
-        })?;
+        let (doc, buffers, images) = import(path)?;
         let materials = read_materials(&doc, &images);
         let default_material = materials.len() as u32;
         let mut materials = materials;
@@ -516,28 +535,130 @@ mod gltf_source {
         Ok(b.finish(materials, lights))
     }
 
-    /// `gltf::import` with two checks of ours where the crate panics instead of erring
-    /// (both found by the `scene` fuzz target): the GLB header's length
-    /// ([`check_glb_length`]), and, before the crate's validation, that every `POSITION`
-    /// names an existing accessor (gltf-json 1.4.1 indexes it unchecked in `mesh.rs`,
-    /// `primitive_validate_hook`; [`check_position_accessors`]).
+    /// `gltf::import` with checks of ours where the crate panics instead of erring (each
+    /// found by the `scene` fuzz target): the GLB header's length ([`check_glb_length`]),
+    /// before the crate's validation that every `POSITION` names an existing accessor
+    /// (gltf-json 1.4.1 indexes it unchecked in `mesh.rs`, `primitive_validate_hook`;
+    /// [`check_position_accessors`]) and that every image has a source
+    /// ([`check_image_sources`]), and every buffer's and image's URI ([`check_uri`]) and
+    /// image's buffer view ([`check_view`]). Buffers and images are loaded one by one, so an
+    /// error names the one at fault.
     fn import(
         path: &Path,
-    ) -> gltf::Result<(
-        gltf::Document,
-        Vec<gltf::buffer::Data>,
-        Vec<gltf::image::Data>,
-    )> {
-        let bytes = std::fs::read(path).map_err(gltf::Error::Io)?;
-        check_glb_length(&bytes)?;
-        let gltf::Gltf { document, blob } = gltf::Gltf::from_slice_without_validation(&bytes)?;
+    ) -> Result<
+        (
+            gltf::Document,
+            Vec<gltf::buffer::Data>,
+            Vec<gltf::image::Data>,
+        ),
+        SceneError,
+    > {
+        let whole = |source| SceneError::Gltf {
+            path: path.to_owned(),
+            source,
+        };
+        let bytes = std::fs::read(path).map_err(|e| whole(gltf::Error::Io(e)))?;
+        check_glb_length(&bytes).map_err(whole)?;
+        let gltf::Gltf { document, mut blob } =
+            gltf::Gltf::from_slice_without_validation(&bytes).map_err(whole)?;
         let json = document.into_json();
-        check_position_accessors(&json)?;
-        let doc = gltf::Document::from_json(json)?;
+        check_position_accessors(&json).map_err(whole)?;
+        check_image_sources(&json).map_err(whole)?;
+        let doc = gltf::Document::from_json(json).map_err(whole)?;
         let base = path.parent().unwrap_or_else(|| Path::new("./"));
-        let buffers = gltf::import_buffers(&doc, Some(base), blob)?;
-        let images = gltf::import_images(&doc, Some(base), &buffers)?;
+        let resource = |item: String, message: String| SceneError::GltfResource {
+            path: path.to_owned(),
+            item,
+            message,
+        };
+
+        let mut buffers = Vec::with_capacity(doc.buffers().len());
+        for buffer in doc.buffers() {
+            let item = format!("buffers[{}]", buffer.index());
+            let source = buffer.source();
+            if let gltf::buffer::Source::Uri(uri) = source {
+                check_uri(uri).map_err(|m| resource(item.clone(), m))?;
+            }
+            let data = gltf::buffer::Data::from_source_and_blob(source, Some(base), &mut blob)
+                .map_err(|e| resource(item.clone(), describe(&e)))?;
+            if data.len() < buffer.length() {
+                let message = format!(
+                    "{} bytes, fewer than its byteLength of {}",
+                    data.len(),
+                    buffer.length()
+                );
+                return Err(resource(item, message));
+            }
+            buffers.push(data);
+        }
+        let mut images = Vec::with_capacity(doc.images().len());
+        for image in doc.images() {
+            let item = format!("images[{}]", image.index());
+            let source = image.source();
+            match &source {
+                gltf::image::Source::Uri { uri, .. } => {
+                    check_uri(uri).map_err(|m| resource(item.clone(), m))?;
+                }
+                gltf::image::Source::View { view, .. } => {
+                    check_view(view, &buffers).map_err(|m| resource(item.clone(), m))?;
+                }
+            }
+            let data = gltf::image::Data::from_source(source, Some(base), &buffers)
+                .map_err(|e| resource(item, describe(&e)))?;
+            images.push(data);
+        }
         Ok((doc, buffers, images))
+    }
+
+    /// A URI the importer can resolve without panicking: gltf 1.4.1 (`import.rs`,
+    /// `Scheme::parse`) takes a URI without a `:` as a relative path and unwraps its
+    /// percent-decoding as UTF-8, so `%AC` panicked (found by the `scene` fuzz target, on a
+    /// buffer URI `data+application/octet-stream;base64,…%AC…`). `urlencoding` is the crate
+    /// the importer decodes with, so this check refuses exactly what it would panic on.
+    fn check_uri(uri: &str) -> Result<(), String> {
+        if uri.contains(':') || urlencoding::decode(uri).is_ok() {
+            return Ok(());
+        }
+        const SHOWN: usize = 48;
+        let shown: String = uri.chars().take(SHOWN).collect();
+        let more = if uri.chars().nth(SHOWN).is_some() {
+            "…"
+        } else {
+            ""
+        };
+        Err(format!(
+            "uri \"{shown}{more}\" is a relative path (no scheme) whose percent-escapes \
+             decode to bytes that are not UTF-8"
+        ))
+    }
+
+    /// An image's buffer view lies inside its buffer: gltf 1.4.1 slices the buffer with the
+    /// view's range unchecked (`import.rs`, `image::Data::from_source`) and gltf-json does not
+    /// validate it (found while fixing [`check_uri`]).
+    fn check_view(view: &gltf::buffer::View, buffers: &[gltf::buffer::Data]) -> Result<(), String> {
+        let buffer = view.buffer().index();
+        let len = buffers[buffer].len();
+        let (offset, length) = (view.offset(), view.length());
+        if offset.checked_add(length).is_some_and(|end| end <= len) {
+            return Ok(());
+        }
+        Err(format!(
+            "bufferViews[{}] (byteOffset {offset}, byteLength {length}) runs past the end of \
+             buffers[{buffer}] ({len} bytes)",
+            view.index()
+        ))
+    }
+
+    /// The importer's error for one buffer or image, said in the loader's words.
+    fn describe(e: &gltf::Error) -> String {
+        match e {
+            gltf::Error::Base64(e) => format!("its data URI is not valid base64: {e}"),
+            gltf::Error::Io(e) => format!("cannot read the file its uri names: {e}"),
+            gltf::Error::UnsupportedScheme => {
+                "unsupported uri scheme (data:, file: or a relative path)".to_owned()
+            }
+            other => other.to_string(),
+        }
     }
 
     /// A GLB header's total length covers at least the header: gltf 1.4.1 subtracts the
@@ -557,6 +678,32 @@ mod gltf_source {
                 Ok(())
             }
             _ => Ok(()),
+        }
+    }
+
+    /// Every image has a source the importer can take: a `uri`, or a `bufferView` with a
+    /// `mimeType` (the spec's rule). gltf 1.4.1's `Image::source` unwraps both, unvalidated
+    /// (`image.rs`; found by the `scene` fuzz target once images were loaded one by one).
+    fn check_image_sources(json: &gltf::json::Root) -> gltf::Result<()> {
+        use gltf::json::{Path as JsonPath, validation::Error};
+        let errors: Vec<_> = json
+            .images
+            .iter()
+            .enumerate()
+            .filter_map(|(i, image)| {
+                let missing = match (&image.buffer_view, &image.mime_type, &image.uri) {
+                    (Some(_), None, _) => "mimeType",
+                    (None, _, None) => "uri",
+                    _ => return None,
+                };
+                let at = JsonPath::new().field("images").index(i).field(missing);
+                Some((at, Error::Missing))
+            })
+            .collect();
+        if errors.is_empty() {
+            Ok(())
+        } else {
+            Err(gltf::Error::Validation(errors))
         }
     }
 
@@ -661,22 +808,33 @@ mod gltf_source {
                 a.data_type()
             )
         };
-        for (semantic, a) in prim.attributes() {
+        let attributes = prim.attributes().map(|(semantic, a)| {
             let allowed = match semantic {
                 Semantic::Positions | Semantic::Normals => fits(&a, D::Vec3, &[T::F32]),
                 Semantic::TexCoords(_) => fits(&a, D::Vec2, &[T::F32, T::U8, T::U16]),
                 _ => true,
             };
+            (format!("{semantic:?}"), a, allowed)
+        });
+        let indices = prim.indices().map(|a| {
+            let allowed = fits(&a, D::Scalar, &[T::U8, T::U16, T::U32]);
+            ("indices".to_owned(), a, allowed)
+        });
+        for (what, a, allowed) in attributes.chain(indices) {
             if !allowed {
-                return Err(b.bad_mesh(id, describe(format!("{semantic:?}"), &a)));
+                return Err(b.bad_mesh(id, describe(what, &a)));
+            }
+            // The readers compute `count - 1` unchecked (gltf 1.4.1, `accessor/util.rs`; a
+            // subtraction overflow found by the `scene` fuzz target): the spec's minimum is 1.
+            if a.count() == 0 || a.sparse().is_some_and(|s| s.count() == 0) {
+                let message = format!(
+                    "{what} accessor {} has a count of 0 (the glTF spec's minimum is 1)",
+                    a.index()
+                );
+                return Err(b.bad_mesh(id, message));
             }
         }
-        match prim.indices() {
-            Some(a) if !fits(&a, D::Scalar, &[T::U8, T::U16, T::U32]) => {
-                Err(b.bad_mesh(id, describe("indices".into(), &a)))
-            }
-            _ => Ok(()),
-        }
+        Ok(())
     }
 
     fn read_light(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> SceneLight {
@@ -815,6 +973,7 @@ mod obj_source {
             single_index: true,
             ..Default::default()
         };
+        check_element_indices(path)?;
         let (models, mtl) = tobj::load_obj(path, &opts).map_err(|source| SceneError::Obj {
             path: path.to_owned(),
             source,
@@ -840,6 +999,65 @@ mod obj_source {
             read_model(&mut b, id, &model.mesh, default_material)?;
         }
         Ok(b.finish(materials, Vec::new()))
+    }
+
+    /// Every index of a face (`f`) or line (`l`) names an element of the file: tobj 4.0.5
+    /// resolves a relative index before the first element (`f 1/-5` with one `vt`), or a
+    /// huge one, to a huge `usize` and computes `vt * 2 + 1` and `vn * 3 + 2` unchecked
+    /// (`add_vertex`; an overflow found by the `scene` fuzz target). Indices are resolved as
+    /// tobj does (relative ones against the elements so far; 0 and −count+… resolving to −1
+    /// mean "none"), and only kinds the file has are checked, as tobj only reads those.
+    fn check_element_indices(path: &Path) -> Result<(), SceneError> {
+        let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let text = String::from_utf8_lossy(&bytes);
+        const KINDS: [(&str, &str); 3] = [
+            ("v", "vertex"),
+            ("vt", "texture coordinate"),
+            ("vn", "normal"),
+        ];
+        let kind = |word: Option<&str>| KINDS.iter().position(|k| Some(k.0) == word);
+        let mut total = [0isize; 3];
+        for line in text.lines() {
+            if let Some(k) = kind(line.split_whitespace().next()) {
+                total[k] += 1;
+            }
+        }
+        let mut seen = [0isize; 3];
+        for (n, line) in text.lines().enumerate() {
+            let mut words = line.split_whitespace();
+            let first = words.next();
+            if let Some(k) = kind(first) {
+                seen[k] += 1;
+                continue;
+            }
+            if !matches!(first, Some("f" | "l")) {
+                continue;
+            }
+            for (k, field) in words.flat_map(|w| w.split('/').take(3).enumerate()) {
+                let Ok(x) = field.parse::<isize>() else {
+                    continue; // tobj refuses the face itself
+                };
+                let resolved = if x < 0 {
+                    seen[k].saturating_add(x)
+                } else {
+                    x - 1
+                };
+                if total[k] > 0 && (resolved < -1 || resolved >= total[k]) {
+                    return Err(SceneError::ObjIndex {
+                        path: path.to_owned(),
+                        line: n + 1,
+                        message: format!(
+                            "{} index {x} names no {} (the file has {}, {} before this line)",
+                            KINDS[k].1, KINDS[k].1, total[k], seen[k]
+                        ),
+                    });
+                }
+            }
+        }
+        Ok(())
     }
 
     fn read_material(m: &tobj::Material, dir: &Path) -> Material {
@@ -1360,6 +1578,180 @@ mod tests {
                 .contains("x.glb: bad scene file: command line: sun direction"),
             "{e}"
         );
+    }
+
+    /// A glTF of one buffer (4 bytes long) and one image with these URIs, loaded.
+    fn load_gltf_with_uris(buffer_uri: &str, image_uri: &str) -> (PathBuf, SceneError) {
+        load_gltf_with(buffer_uri, 4, image_uri)
+    }
+
+    fn load_gltf_with(buffer_uri: &str, length: usize, image_uri: &str) -> (PathBuf, SceneError) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("uris.gltf");
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "buffers": [{ "byteLength": length, "uri": buffer_uri }],
+            "images": [{ "uri": image_uri }],
+        });
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = Scene::load(&path).expect_err("a bad URI is an error");
+        (path, e)
+    }
+
+    #[test]
+    fn uris_whose_percent_escapes_are_not_utf8_are_errors_naming_the_buffer() {
+        // The `scene` fuzz target's input (fuzz/corpus/scene/gltf-import-non-utf8-data-uri):
+        // "data+…" has no ':', so the importer reads it as a relative path and unwrapped its
+        // percent-decoding, which `%AC` makes invalid UTF-8.
+        let uri = "data+application/octet-stream;base64,AAAA%ACAP%wAA";
+        let (path, e) = load_gltf_with_uris(uri, "ok.png");
+        let message = e.to_string();
+        assert!(
+            matches!(&e, SceneError::GltfResource { item, .. } if item == "buffers[0]"),
+            "{message}"
+        );
+        assert!(message.contains(&*path.to_string_lossy()), "{message}");
+        assert!(
+            message.contains("not UTF-8") && message.contains("%AC"),
+            "{message}"
+        );
+
+        // The same URI on an image (the importer parses image URIs the same way).
+        let data = "data:application/octet-stream;base64,AAAAAA==";
+        let (_, e) = load_gltf_with_uris(data, "tex%FF.png");
+        assert!(
+            matches!(&e, SceneError::GltfResource { item, .. } if item == "images[0]"),
+            "{e}"
+        );
+        // Escapes that decode to UTF-8 are a path like any other: a missing file.
+        let (_, e) = load_gltf_with_uris("b%C3%A4r.bin", "ok.png");
+        assert!(e.to_string().contains("buffers[0]: cannot read"), "{e}");
+    }
+
+    #[test]
+    fn data_uris_that_are_not_base64_are_errors_naming_the_buffer() {
+        let (path, e) = load_gltf_with_uris("data:application/octet-stream;base64,AA%AC", "x.png");
+        let message = e.to_string();
+        assert!(
+            message.starts_with(&format!(
+                "{}: buffers[0]: its data URI is not valid base64",
+                path.display()
+            )),
+            "{message}"
+        );
+        // 3 bytes, padded to 4 by the importer: short of 8.
+        let (_, e) = load_gltf_with("data:application/octet-stream;base64,AAAA", 8, "x.png");
+        assert!(
+            e.to_string()
+                .contains("buffers[0]: 4 bytes, fewer than its byteLength of 8"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn an_image_whose_buffer_view_runs_past_its_buffer_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("view.gltf");
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "buffers": [{ "byteLength": 4, "uri": "data:application/octet-stream;base64,AAAAAA==" }],
+            "bufferViews": [{ "buffer": 0, "byteOffset": 2, "byteLength": 100 }],
+            "images": [{ "bufferView": 0, "mimeType": "image/png" }],
+        });
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = Scene::load(&path).expect_err("a view past its buffer is an error");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: images[0]: bufferViews[0] (byteOffset 2, byteLength 100) runs past the end \
+                 of buffers[0] (4 bytes)",
+                path.display()
+            )
+        );
+    }
+
+    #[test]
+    fn images_without_a_source_are_errors_naming_the_image() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("image.gltf");
+        for (image, missing) in [
+            (serde_json::json!({ "name": "no source" }), "images[0].uri"),
+            (serde_json::json!({ "bufferView": 0 }), "images[0].mimeType"),
+        ] {
+            let json = serde_json::json!({
+                "asset": { "version": "2.0" },
+                "buffers": [{ "byteLength": 4, "uri": "data:application/octet-stream;base64,AAAAAA==" }],
+                "bufferViews": [{ "buffer": 0, "byteLength": 4 }],
+                "images": [image],
+            });
+            std::fs::write(&path, json.to_string()).unwrap();
+            let e = Scene::load(&path).expect_err("an image without a source is an error");
+            let message = e.to_string();
+            assert!(matches!(e, SceneError::Gltf { .. }), "{message}");
+            assert!(
+                message.contains(&*path.to_string_lossy()) && message.contains(missing),
+                "{message}"
+            );
+        }
+    }
+
+    #[test]
+    fn accessors_of_count_zero_are_errors_naming_the_mesh() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("empty.gltf");
+        let zeros = "A".repeat(64); // 48 zero bytes
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "scene": 0, "scenes": [{ "nodes": [0] }], "nodes": [{ "mesh": 0 }],
+            "meshes": [{ "name": "tri", "primitives": [{ "attributes": { "POSITION": 0 }, "indices": 1 }] }],
+            "accessors": [
+                { "bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [0, 0, 0] },
+                { "bufferView": 1, "componentType": 5125, "count": 0, "type": "SCALAR" },
+            ],
+            "bufferViews": [
+                { "buffer": 0, "byteLength": 36 },
+                { "buffer": 0, "byteOffset": 36, "byteLength": 12 },
+            ],
+            "buffers": [{ "byteLength": 48, "uri": format!("data:application/octet-stream;base64,{zeros}") }],
+        });
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = Scene::load(&path).expect_err("an accessor of count 0 is an error");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: mesh 'tri': indices accessor 1 has a count of 0 (the glTF spec's minimum is 1)",
+                path.display()
+            )
+        );
+    }
+
+    #[test]
+    fn obj_indices_naming_no_element_are_errors_naming_the_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("quad.obj");
+        let head = "v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvn 0 0 1\n";
+        for (face, message) in [
+            // Relative, before the first texture coordinate: overflowed in tobj.
+            (
+                "f 1/-3 2/1 3/1",
+                "line 6: texture coordinate index -3 names no texture coordinate (the file has 1, 1 before this line)",
+            ),
+            (
+                "f 1//1 2//1 3//9223372036854775807",
+                "line 6: normal index 9223372036854775807 names no normal (the file has 1, 1 before this line)",
+            ),
+            (
+                "f 1 2 4",
+                "line 6: vertex index 4 names no vertex (the file has 3, 3 before this line)",
+            ),
+        ] {
+            std::fs::write(&path, format!("{head}{face}\n")).unwrap();
+            let e = Scene::load(&path).expect_err("an index naming no element is an error");
+            assert_eq!(e.to_string(), format!("{}: {message}", path.display()));
+        }
+        // 0 and a relative index to just before the first element mean "none", as in tobj.
+        std::fs::write(&path, format!("{head}f 1/0/-1 2/-2/1 3/1/1\n")).unwrap();
+        assert_eq!(Scene::load(&path).unwrap().triangles.len(), 1);
     }
 
     #[test]

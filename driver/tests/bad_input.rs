@@ -298,7 +298,11 @@ fn bad_scenes_are_clear_errors() {
     // Missing buffer file.
     let (json, _) = triangle_gltf("nobuf", true, [0, 1, 2]);
     let p = write_gltf(d, "nobuf", &json, None);
-    assert!(matches!(Scene::load(&p), Err(SceneError::Gltf { .. })));
+    let e = Scene::load(&p).unwrap_err();
+    assert!(
+        matches!(&e, SceneError::GltfResource { item, .. } if item == "buffers[0]"),
+        "{e}"
+    );
     assert_cli_fails(&["prepare", p.to_str().unwrap(), "-o", out_s], "nobuf.gltf");
 
     // Out-of-range index.

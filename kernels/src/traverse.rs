@@ -41,18 +41,36 @@
 //! - Rays with `tmin < 0` are not traced (they never hit): the conservative box bound assumes
 //!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
 //! - The tree depth is capped at [`MAX_DEPTH`]; [`BvhRef::new`] rejects deeper trees.
-//! - **Hits outside their own box.** At extreme magnitudes (origins of 10⁻³⁶ beside
-//!   triangles of size 10–100, directions of 10²⁸ beside components of 10⁻⁴⁰) the watertight
-//!   test's rounding can report a hit on a triangle whose own bounding box the slab test
-//!   rejects for that ray ([`slab_meets`]): its shear `a[kx] − s·a[kz]` rounds the origin's
-//!   offsets across the ray relative to the vertices' distance along `kz`, which no slack
-//!   relative to the box distances covers. The traversals may then miss that hit, or find it
-//!   (a leaf tests all its triangles), while brute force always reports it. The contract is:
-//!   each traversal's result equals [`intersect_brute`] over all triangles or over the
-//!   triangles whose own box [`slab_meets`] the ray, and the two differ only through such
-//!   hits. The `traverse` fuzz target checks exactly this contract. (A far bound widened by
-//!   2⁻¹⁸ of the root box's extent along `kz` removes the cases found so far, but culls so
-//!   much less that the packet path ran 12–46 % slower on `benches/traverse.rs`.)
+//! - **Hits outside their own box.** At extreme magnitudes the triangle test can report a hit
+//!   that lies outside the slab interval of the box of the leaf holding the triangle (its
+//!   own bounding box, or with spatial splits the box of the part clipped to the leaf):
+//!   - *outside the box*: origins of 10⁻³⁶ beside triangles of size 10–100, directions of
+//!     10²⁸ beside components of 10⁻⁴⁰: the shear `a[kx] − s·a[kz]` rounds the origin's
+//!     offsets across the ray relative to the vertices' distance along `kz`, which no slack
+//!     relative to the box distances covers; a ray passing 3·10⁻²⁶ beside an edge is
+//!     rounded onto it, where a spatial split clipped the triangle into parts whose boxes
+//!     the ray misses;
+//!   - *before the box*: origins of 10⁻²⁶–10⁻³⁸ on triangles of 10⁻⁶: `t = T/det` is the
+//!     quotient of products that underflow (the terms `U·(s_z·a_z)` of 10⁻⁵⁰ round to 0), so
+//!     a hit at a true distance of 2·10⁻³⁸ comes out at `t = 0`, below the box's entry
+//!     distance, and no absolute slack covers `2⁻¹⁴⁹ / det` for every `det`.
+//!
+//!   A traversal culls a box once its entry distance passes the closest hit found so far,
+//!   so it may miss such a hit, find it (a leaf tests all its triangles), or find it in place
+//!   of a closer one of its kind that brute force reports. The contract, checked by
+//!   [`closest_hit_allowed`] and [`occlusion_allowed`] (the `traverse` fuzz target runs
+//!   them on every ray that differs from brute force): a traversal's closest hit is the
+//!   closest hit (tie rule) over *some* set of the BVH's triangles that holds every triangle
+//!   of every leaf whose box the slab test lets the ray meet on `[tmin, t]`, `t` the
+//!   returned hit's distance (`tmax` without a hit) — which is what culling by conservative
+//!   boxes guarantees, a parent's box holding its children's; it answers occlusion `true`
+//!   only for a triangle that occludes, `false` only when no triangle of a leaf the ray
+//!   meets on `[tmin, tmax]` does. Where every hit lies inside its leaf's box interval
+//!   (every ray at ordinary magnitudes, and every ray a bake traces: unit directions,
+//!   origins lifted off their surface by `offset_origin`) that is exactly brute force.
+//!   (A far bound widened by 2⁻¹⁸ of the root box's extent along `kz` removes the first kind
+//!   found first, but culls so much less that the packet path ran 12–46 % slower on
+//!   `benches/traverse.rs`.)
 
 use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
 use bytemuck::{Pod, Zeroable};
@@ -421,17 +439,65 @@ pub fn intersect_brute(tris: &[Tri], ray: &Ray) -> Option<Hit> {
     (best.prim != NO_HIT).then_some(best)
 }
 
-/// Whether the ray's conservative slab interval on `[tmin, tmax]` meets the box `[lo, hi]`:
-/// the traversals' box test for one box (false for rays that are not traced). With it a test
-/// oracle can tell the hits the contract lets a traversal miss (module docs, "Hits outside
-/// their own box").
-pub fn slab_meets(ray: &Ray, lo: Vec3, hi: Vec3) -> bool {
+/// Whether `got` is a closest-hit result the traversal contract allows for `ray` through
+/// `bvh` (module docs, "Hits outside their own box"): either no hit or bit for bit the hit
+/// of one of the BVH's triangles on the ray's interval, and no triangle of a leaf whose box
+/// the slab test lets the ray meet on `[tmin, t]` (`t` = `got`'s distance, else `tmax`) has
+/// a hit the tie rule prefers. Where every hit lies inside its leaf's box interval this
+/// holds exactly for the closest hit over the BVH's triangles, brute force. The test oracle
+/// for the traversals where they differ from brute force.
+pub fn closest_hit_allowed(bvh: &BvhRef<'_>, ray: &Ray, got: Option<Hit>) -> bool {
     if !traceable(ray) {
-        return false;
+        return got.is_none();
     }
-    let mut node = Node::EMPTY;
-    node.set_box(0, lo, hi);
-    box1(&node, 0, &Pre::new(ray), ray.tmax.min(f32::MAX)).is_some()
+    let pre = Pre::new(ray);
+    let best = match got {
+        None => no_hit(ray.tmax),
+        Some(h) => {
+            let bits = |h: &Hit| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim);
+            let own = |tri: &Tri| {
+                let mut own = no_hit(ray.tmax);
+                closest1(&pre, tri, &mut own);
+                bits(&own) == bits(&h)
+            };
+            if !bvh.tris.iter().any(|tri| tri.prim == h.prim && own(tri)) {
+                return false;
+            }
+            h
+        }
+    };
+    !leaves_met(bvh, &pre, best.t)
+        .any(|tri| tri1(&pre, tri).is_some_and(|(t, _, _)| accept(t, tri.prim, pre.tmin, &best)))
+}
+
+/// Whether `got` is an occlusion answer the traversal contract allows: `true` only when a
+/// triangle of `bvh` occludes the ray, `false` only when no triangle of a leaf whose box
+/// the slab test lets the ray meet on `[tmin, tmax]` does (module docs, "Hits outside their
+/// own box").
+pub fn occlusion_allowed(bvh: &BvhRef<'_>, ray: &Ray, got: bool) -> bool {
+    if !traceable(ray) {
+        return !got;
+    }
+    let pre = Pre::new(ray);
+    let tmax = ray.tmax.min(f32::MAX);
+    if got {
+        bvh.tris.iter().any(|tri| occludes1(&pre, tri, tmax))
+    } else {
+        !leaves_met(bvh, &pre, tmax).any(|tri| occludes1(&pre, tri, tmax))
+    }
+}
+
+/// The triangles of every leaf whose box the ray's conservative slab interval on
+/// `[tmin, tmax]` meets: what a traversal whose closest hit is at `tmax` must have tested
+/// (a parent's box contains its children's, and the slab test is monotone in the box).
+fn leaves_met<'a>(bvh: &BvhRef<'a>, pre: &Pre, tmax: f32) -> impl Iterator<Item = &'a Tri> {
+    let (nodes, view) = (bvh.nodes, *bvh);
+    let pre = *pre;
+    nodes.iter().flat_map(move |node| {
+        (0..2)
+            .filter(move |&slot| node.meta[slot] != 0 && box1(node, slot, &pre, tmax).is_some())
+            .flat_map(move |slot| view.leaf(node.child[slot], node.meta[slot]))
+    })
 }
 
 /// Whether any triangle blocks the ray on `[tmin, tmax]`, testing every triangle: the oracle.
@@ -1500,7 +1566,10 @@ mod tests {
         let brute = intersect_brute(&tris, &r);
         assert_eq!(brute.map(|h| (h.t, h.prim)), Some((0.0, 0)));
         let [lo, hi] = [Vec3::min, Vec3::max].map(|f| f(f(soup[0][0], soup[0][1]), soup[0][2]));
-        assert!(!slab_meets(&r, lo, hi), "the hit lies outside its own box");
+        assert!(
+            !meets(&Pre::new(&r), (lo, hi), r.tmax),
+            "the hit lies outside its own box"
+        );
         let others: Vec<Tri> = tris.iter().filter(|t| t.prim != 0).copied().collect();
         let boxed = intersect_brute(&others, &r);
         let allowed = [brute, boxed];
@@ -1508,6 +1577,186 @@ mod tests {
         let mut hits = Hit8::NONE;
         let mask = intersect8(&bvh, &Ray8::from_rays(&[r; LANES]), &mut hits);
         assert!(allowed.contains(&(mask & 1 == 1).then(|| hits.lane(0)).flatten()));
+    }
+
+    /// A triangle of the `traverse` fuzz target's grid: i16 coordinates times 2⁻²⁰.
+    fn grid_triangle(k: [i16; 9]) -> [Vec3; 3] {
+        let c = |i: usize| f32::from(k[i]) * (-20.0f32).exp2();
+        [0, 3, 6].map(|i| Vec3::new(c(i), c(i + 1), c(i + 2)))
+    }
+
+    /// The box of `v`.
+    fn aabb(v: &[Vec3; 3]) -> (Vec3, Vec3) {
+        (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]))
+    }
+
+    /// A root of two leaves of one triangle each, with the given boxes.
+    fn two_leaves(leaves: [(Tri, (Vec3, Vec3)); 2]) -> (Vec<Node>, Vec<Tri>) {
+        let mut root = Node::EMPTY;
+        for (slot, (_, (lo, hi))) in leaves.iter().enumerate() {
+            root.set_box(slot, *lo, *hi);
+            root.child[slot] = slot as u32;
+            root.meta[slot] = LEAF | 1;
+        }
+        (std::vec![root], leaves.map(|(t, _)| t).to_vec())
+    }
+
+    /// Whether the ray's slab interval on `[tmin, tmax]` meets the box `(lo, hi)`.
+    fn meets(pre: &Pre, (lo, hi): (Vec3, Vec3), tmax: f32) -> bool {
+        let mut node = Node::EMPTY;
+        node.set_box(0, lo, hi);
+        box1(&node, 0, pre, tmax).is_some()
+    }
+
+    /// Both traversals' answers, which the contract must allow.
+    fn traversals_keep_to_the_contract(bvh: &BvhRef<'_>, r: &Ray) {
+        assert!(closest_hit_allowed(bvh, r, intersect1(bvh, r)));
+        let mut hits = Hit8::NONE;
+        let mask = intersect8(bvh, &Ray8::from_rays(&[*r; LANES]), &mut hits);
+        let lane = (mask & 1 == 1).then(|| hits.lane(0)).flatten();
+        assert!(closest_hit_allowed(bvh, r, lane));
+        assert!(occlusion_allowed(bvh, r, occluded1(bvh, r)));
+        assert!(occlusion_allowed(
+            bvh,
+            r,
+            occluded8(bvh, &Ray8::from_rays(&[*r; LANES])) & 1 == 1
+        ));
+    }
+
+    /// `fuzz/corpus/traverse/contract-t-underflows-before-its-box` (issue 22): an origin
+    /// 2.35·10⁻³⁸ above a box face at z = 0, tracing down. The triangle test's `t = T/det`
+    /// underflows to 0 (its terms are ~10⁻⁵⁰), while the box is entered at 2.35·10⁻³⁸, more
+    /// than the far bound's absolute slack 2⁻¹²⁶ above `t = 0`. So once another triangle was
+    /// hit at `t = 0`, the BVH culled the box of the one the tie rule prefers: the contract
+    /// allows either answer.
+    #[test]
+    fn hits_whose_t_underflows_before_their_box_keep_to_the_contract() {
+        let under = grid_triangle([0, 0, 0, 20, 0, 0, -1, 256, -25600]);
+        let other = grid_triangle([
+            -25600, 25855, -25600, -25345, 156, -25345, 25855, -25600, 25855,
+        ]);
+        let org = Vec3::new(
+            f32::from_bits(0x1400_00ff),
+            0.0,
+            f32::from_bits(0x00ff_ff00),
+        );
+        let r = Ray::new(org, Vec3::new(0.0, 0.0, -1.0), 0.0, f32::INFINITY);
+        let tris = [Tri::new(under, 0), Tri::new(other, 1)];
+        let pre = Pre::new(&r);
+        let t = |i: usize| tri1(&pre, &tris[i]).map(|(t, _, _)| t.to_bits());
+        assert_eq!(
+            (t(0), t(1)),
+            (Some(0), Some(0)),
+            "both hits round to t = +0"
+        );
+        assert!(meets(&pre, aabb(&under), f32::INFINITY));
+        assert!(
+            !meets(&pre, aabb(&under), 0.0),
+            "entered beyond t = 0 + 2⁻¹²⁶"
+        );
+        let brute = intersect_brute(&tris, &r);
+        assert_eq!(
+            brute.map(|h| h.prim),
+            Some(0),
+            "the tie rule prefers prim 0"
+        );
+        let (nodes, leaf_tris) = two_leaves([(tris[0], aabb(&under)), (tris[1], aabb(&other))]);
+        let bvh = BvhRef::new(&nodes, &leaf_tris).unwrap();
+        let found_first = intersect_brute(&tris[1..], &r);
+        for allowed in [brute, found_first] {
+            assert!(closest_hit_allowed(&bvh, &r, allowed), "{allowed:?}");
+        }
+        // Neither no hit nor a hit that is not one triangle's own.
+        assert!(!closest_hit_allowed(&bvh, &r, None));
+        let moved = brute.map(|h| Hit {
+            u: h.v,
+            v: h.u,
+            ..h
+        });
+        assert!(!closest_hit_allowed(&bvh, &r, moved));
+        traversals_keep_to_the_contract(&bvh, &r);
+        let (nodes, tris) = build(&[under, other]);
+        traversals_keep_to_the_contract(&BvhRef::new(&nodes, &tris).unwrap(), &r);
+    }
+
+    /// `fuzz/corpus/traverse/contract-stand-in-hit-outside-its-box` (issue 22): origin and
+    /// direction both (−1.5·10⁻²⁶)·(1, 1, 1), beside two triangles of 10⁻⁶ through the
+    /// origin. `t = T/det` underflows for both: prim 1 lies in the plane z = 0, one direction
+    /// length behind the origin (true `t` = −1), yet comes out at `t = −0`, and prim 0 at
+    /// `+0`; neither hit lies in its own box's interval. Brute force reports prim 0; the BVH
+    /// reached prim 1's leaf and culled prim 0's, so it reported prim 1 — an answer neither
+    /// brute force over all triangles nor over the own-box ones gives (the contract before
+    /// this fix), which the contract allows: a hit outside its box found in place of a
+    /// closer one of its kind.
+    #[test]
+    fn hits_outside_their_boxes_may_stand_in_for_each_other() {
+        let first = grid_triangle([-5, 0, 0, 1, 0, 0, -513, 1023, 768]);
+        let second = grid_triangle([768, 768, 0, 20, 0, 0, -1, 0, 0]);
+        let tiny = f32::from_bits(0x9494_9494);
+        let tmax = 1e-4 * (-20.0f32).exp2();
+        let r = Ray::new(Vec3::splat(tiny), Vec3::splat(tiny), 0.0, tmax);
+        let tris = [Tri::new(first, 0), Tri::new(second, 1)];
+        let pre = Pre::new(&r);
+        let hits = tris.map(|tri| tri1(&pre, &tri).map(|(t, _, _)| t.to_bits()));
+        assert_eq!(
+            hits,
+            [Some(0), Some(0x8000_0000)],
+            "prim 0 at +0, prim 1 at −0"
+        );
+        assert!(!meets(&pre, aabb(&first), tmax) && !meets(&pre, aabb(&second), tmax));
+        let brute = intersect_brute(&tris, &r);
+        assert_eq!(brute.map(|h| h.prim), Some(0));
+        let (nodes, leaf_tris) = two_leaves([(tris[0], aabb(&first)), (tris[1], aabb(&second))]);
+        let bvh = BvhRef::new(&nodes, &leaf_tris).unwrap();
+        let stand_in = intersect_brute(&tris[1..], &r);
+        for allowed in [brute, stand_in, None] {
+            assert!(closest_hit_allowed(&bvh, &r, allowed), "{allowed:?}");
+        }
+        assert!(occlusion_allowed(&bvh, &r, true) && occlusion_allowed(&bvh, &r, false));
+        traversals_keep_to_the_contract(&bvh, &r);
+    }
+
+    /// `fuzz/corpus/traverse/contract-spatial-split-reference` (issue 22): with spatial
+    /// splits (obvhs's slow presets) a leaf holds a triangle's part clipped to the leaf's
+    /// box, not its whole box. Origin (−1.5·10⁻²⁶)·(1, 1, 1), direction (−1.5·10⁻²⁶,
+    /// 3.8·10²², −6.5·10⁻²⁷): the watertight test rounds the ray, which passes 3·10⁻²⁶
+    /// beside the triangle's long edge, onto the edge's midpoint (u = v = 0.5), at x = 0,
+    /// z = 0, where the split clipped the triangle into a part at x ≤ 0, z ≥ 0 and one at
+    /// x ≥ 0, z ≤ 0; the ray, at x < 0 and z < 0 and moving away from both planes, meets
+    /// neither part's box, though it meets the triangle's whole box. So the contract is
+    /// stated on the leaves' boxes.
+    #[test]
+    fn hits_outside_every_clipped_reference_box_keep_to_the_contract() {
+        let tri = grid_triangle([
+            -25345, 25855, 25600, -25600, 25855, 25600, 25600, 25600, -25600,
+        ]);
+        let g = |x: f32, y: f32, z: f32| Vec3::new(x, y, z) * (-20.0f32).exp2();
+        let left = (g(-25600.0, 25727.0, 0.0), g(0.0, 25855.0, 25600.0));
+        let right = (g(0.0, 25600.0, -25600.0), g(25600.0, 25729.0, 129.0));
+        let tiny = f32::from_bits(0x9494_9494);
+        let dir = Vec3::new(tiny, 3.772_186e22, -6.48207e-27);
+        let r = Ray::new(Vec3::splat(tiny), dir, 0.0, 1e-4 * (-20.0f32).exp2());
+        let t = Tri::new(tri, 0);
+        let pre = Pre::new(&r);
+        let (_, u, v) = tri1(&pre, &t).expect("rounded onto the edge");
+        assert_eq!((u, v), (0.5, 0.5));
+        let brute = intersect_brute(&[t], &r);
+        assert!(brute.is_some() && meets(&pre, aabb(&tri), r.tmax));
+        assert!(!meets(&pre, left, r.tmax) && !meets(&pre, right, r.tmax));
+        let (nodes, leaf_tris) = two_leaves([(t, left), (t, right)]);
+        let bvh = BvhRef::new(&nodes, &leaf_tris).unwrap();
+        assert_eq!(intersect1(&bvh, &r), None, "the BVH misses it");
+        for allowed in [brute, None] {
+            assert!(closest_hit_allowed(&bvh, &r, allowed), "{allowed:?}");
+        }
+        traversals_keep_to_the_contract(&bvh, &r);
+        // With the whole box as the leaf's, missing the hit breaks the contract.
+        let (nodes, leaf_tris) = two_leaves([(t, aabb(&tri)), (t, aabb(&tri))]);
+        assert!(!closest_hit_allowed(
+            &BvhRef::new(&nodes, &leaf_tris).unwrap(),
+            &r,
+            None
+        ));
     }
 
     #[test]
