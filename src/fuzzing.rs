@@ -29,12 +29,13 @@ use guidebake_kernels::estimator::{
 };
 use guidebake_kernels::guide::{self, DEFAULT_AMBIENT, GuideParams, Node, Record};
 use guidebake_kernels::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
+use guidebake_kernels::sobol::ONE_MINUS_EPSILON;
 use guidebake_kernels::sobol::to_unit;
 use guidebake_kernels::traverse::{
     BvhRef, LEAF, Tri, closest_hit_allowed, intersect_brute, intersect1, intersect8,
     occluded_brute, occluded1, occluded8, occlusion_allowed,
 };
-use guidebake_kernels::warp::{self, ONE_MINUS_EPS};
+use guidebake_kernels::warp;
 
 /// A fuzz target's body: arbitrary bytes in, a panic only on a broken invariant.
 pub type Body = fn(&[u8]);
@@ -343,8 +344,8 @@ fn guide_checks(
     // The split thresholds and their neighbours: where rounding decides the path.
     points.extend([
         [0.0, 0.0],
-        [ONE_MINUS_EPS, ONE_MINUS_EPS],
-        [0.0, ONE_MINUS_EPS],
+        [ONE_MINUS_EPSILON, ONE_MINUS_EPSILON],
+        [0.0, ONE_MINUS_EPSILON],
     ]);
     for n in g.nodes().iter().take(64).filter(|n| !n.is_leaf()) {
         let [tx, ty0, ty1] = n.thresholds();

@@ -9,8 +9,9 @@
 use guidebake_kernels::guide::{
     self, BuildStats, Guide, GuideParams, MAX_DEPTH, Node, Record, START_GRID,
 };
+use guidebake_kernels::sobol::ONE_MINUS_EPSILON;
 use guidebake_kernels::testing::{Pcg32, chi_square, disk_and_sky, learning_records};
-use guidebake_kernels::warp::{self, ONE_MINUS_EPS};
+use guidebake_kernels::warp;
 use std::io::Write;
 use wide::f32x8;
 
@@ -162,8 +163,8 @@ fn check_consistency(name: &str, g: &Guide<'_>, seed: u64) {
     for k in 0..50_000 {
         let u = match k {
             0 => [0.0, 0.0],
-            1 => [ONE_MINUS_EPS, ONE_MINUS_EPS],
-            2 => [0.0, ONE_MINUS_EPS],
+            1 => [ONE_MINUS_EPSILON, ONE_MINUS_EPSILON],
+            2 => [0.0, ONE_MINUS_EPSILON],
             _ => [rng.next_f32(), rng.next_f32()],
         };
         let s = warp::sample(g, u);
@@ -415,7 +416,7 @@ fn sample8_matches_scalar_on_every_guide_and_packet_kind() {
 
     let edges = [
         0.0,
-        ONE_MINUS_EPS,
+        ONE_MINUS_EPSILON,
         0.5,
         f32::from_bits(0x3eff_ffff),
         0.25,
@@ -462,8 +463,8 @@ fn sample8_matches_scalar_on_every_guide_and_packet_kind() {
             for lanes in 1..=8 {
                 assert_packet_matches(g, xs, ys, lanes);
             }
-            assert_packet_matches(g, [0.0; 8], [ONE_MINUS_EPS; 8], 8);
-            assert_packet_matches(g, [ONE_MINUS_EPS; 8], [0.0; 8], 8);
+            assert_packet_matches(g, [0.0; 8], [ONE_MINUS_EPSILON; 8], 8);
+            assert_packet_matches(g, [ONE_MINUS_EPSILON; 8], [0.0; 8], 8);
         }
     }
 }

@@ -66,14 +66,14 @@
 //! `(u − lo)/(hi − lo)` can round up to exactly 1 when `u` is just below `hi`, and
 //! `origin + t·size` can round up onto the leaf's upper edge (at depth ≥ 2 the leaf's
 //! resolution is finer than the f32 spacing near 1). Both are clamped: the rescaled
-//! coordinate to [`ONE_MINUS_EPS`], the largest f32 below 1, and the point to the largest f32
+//! coordinate to [`ONE_MINUS_EPSILON`], the largest f32 below 1, and the point to the largest f32
 //! below the leaf's upper edge. The clamp keeps the warped point in [0,1) *and* in the leaf
 //! that produced it, so `pdf(sample(u).u) == sample(u).pdf` exactly. It moves a point by at
 //! most one ulp, far below the sampling resolution.
 //!
 //! # Preconditions
 //! Inputs must lie in [0,1)² (`debug_assert!`). In release builds a negative or NaN
-//! coordinate is treated as 0 and one ≥ 1 as [`ONE_MINUS_EPS`], in both widths alike.
+//! coordinate is treated as 0 and one ≥ 1 as [`ONE_MINUS_EPSILON`], in both widths alike.
 //!
 //! # Deviation
 //! Clarberg et al. warp a wavelet-defined image; we warp a quadtree built by
@@ -86,8 +86,7 @@ use crate::guide::{Guide, Node, START_GRID};
 use core::ops::{Add, Div, Mul, Sub};
 use wide::{f32x8, i32x8};
 
-/// The largest f32 below 1 (1 − 2⁻²⁴).
-pub const ONE_MINUS_EPS: f32 = f32::from_bits(0x3f7f_ffff);
+use crate::sobol::ONE_MINUS_EPSILON;
 
 /// A warped point of the square and its density there.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -176,10 +175,10 @@ impl Value for f32x8 {
     }
 }
 
-/// Maps NaN and negatives to 0 and values ≥ 1 to [`ONE_MINUS_EPS`].
+/// Maps NaN and negatives to 0 and values ≥ 1 to [`ONE_MINUS_EPSILON`].
 #[inline(always)]
 fn to_unit<V: Value>(v: V) -> V {
-    V::select(v.ge(V::splat(0.0)), v, V::splat(0.0)).min_of(V::splat(ONE_MINUS_EPS))
+    V::select(v.ge(V::splat(0.0)), v, V::splat(0.0)).min_of(V::splat(ONE_MINUS_EPSILON))
 }
 
 /// The fields of a leaf the final step reads, per lane.
@@ -243,7 +242,8 @@ impl LeafData<f32x8> {
 #[inline(always)]
 fn place<V: Value>(leaf: &LeafData<V>, u: [V; 2]) -> ([V; 2], V) {
     let axis = |a: usize| {
-        let t = ((u[a] - leaf.lo[a]) / (leaf.hi[a] - leaf.lo[a])).min_of(V::splat(ONE_MINUS_EPS));
+        let t =
+            ((u[a] - leaf.lo[a]) / (leaf.hi[a] - leaf.lo[a])).min_of(V::splat(ONE_MINUS_EPSILON));
         let top = (leaf.origin[a] + leaf.size).prev_float();
         (leaf.origin[a] + t * leaf.size).min_of(top)
     };
@@ -519,7 +519,7 @@ mod tests {
         let g = learned(&mut st);
         assert!(g.nodes().len() > 20);
         let mut rng = Pcg32::new(5, 9);
-        let edge = [0.0, ONE_MINUS_EPS, 0.5, f32::from_bits(0x3effffff)];
+        let edge = [0.0, ONE_MINUS_EPSILON, 0.5, f32::from_bits(0x3effffff)];
         for k in 0..20_000 {
             let u = if k < 16 {
                 [edge[k % 4], edge[k / 4]]
@@ -562,7 +562,7 @@ mod tests {
         let mut st = [Node::default(); 1024];
         let g = learned(&mut st);
         let mut rng = Pcg32::new(4, 12);
-        let edge = [0.0, ONE_MINUS_EPS, 0.5, f32::from_bits(0x3effffff)];
+        let edge = [0.0, ONE_MINUS_EPSILON, 0.5, f32::from_bits(0x3effffff)];
         for p in 0..2000 {
             let xs: [f32; 8] =
                 core::array::from_fn(|l| if p == 0 { edge[l % 4] } else { rng.next_f32() });

@@ -18,7 +18,7 @@
 //! - [`AliasTable::pmf`] is the weight over the f64 sum, rounded once to f32; the pick
 //!   frequencies match it to the f32 rounding of the thresholds.
 
-use guidebake_kernels::warp::ONE_MINUS_EPS;
+use guidebake_kernels::sobol::ONE_MINUS_EPSILON;
 
 /// One slot of the table: keep the slot's own entry when the rescaled fraction of `u` is
 /// below `threshold`, otherwise take `alias`.
@@ -116,7 +116,11 @@ impl AliasTable {
     /// 0): the entry's index and its probability, [`AliasTable::pmf`] of it.
     #[must_use]
     pub fn pick(&self, u: f32) -> (u32, f32) {
-        let u = if u > 0.0 { u.min(ONE_MINUS_EPS) } else { 0.0 };
+        let u = if u > 0.0 {
+            u.min(ONE_MINUS_EPSILON)
+        } else {
+            0.0
+        };
         let n = self.slots.len();
         let x = f64::from(u) * n as f64;
         let slot = (x as usize).min(n - 1);
@@ -282,7 +286,7 @@ mod tests {
             0.74,
             0.75,
             0.9999,
-            ONE_MINUS_EPS,
+            ONE_MINUS_EPSILON,
             1.0,
             7.0,
             -1.0,

@@ -82,7 +82,7 @@ use std::f32::consts::{FRAC_PI_2, PI};
 
 use glam::{Vec3, Vec4};
 use guidebake_kernels::estimator::luminance;
-use guidebake_kernels::warp::ONE_MINUS_EPS;
+use guidebake_kernels::sobol::ONE_MINUS_EPSILON;
 
 /// How far below 0 a bound's cos θ' or cos θ'_i may round before the node counts as dark.
 pub const COS_SLACK: f32 = 1e-5;
@@ -416,7 +416,11 @@ impl LightTree {
             return None;
         }
         let n = receiver(n);
-        let mut u = f64::from(if u > 0.0 { u.min(ONE_MINUS_EPS) } else { 0.0 });
+        let mut u = f64::from(if u > 0.0 {
+            u.min(ONE_MINUS_EPSILON)
+        } else {
+            0.0
+        });
         let mut prob = 1.0f64;
         let mut at = 0usize;
         if self.nodes[0].is_leaf() {
@@ -430,7 +434,7 @@ impl LightTree {
             }
             let (left, right) = (at + 1, node.link as usize);
             let [pl, pr] = choice(&self.nodes[left], &self.nodes[right], &self.planes, p, n)?;
-            let one_below = f64::from(ONE_MINUS_EPS);
+            let one_below = f64::from(ONE_MINUS_EPSILON);
             if u < pl {
                 (u, prob, at) = ((u / pl).min(one_below), prob * pl, left);
             } else {
