@@ -203,13 +203,7 @@ impl PageImage {
         let layer = Layer::new(
             (self.width, self.height),
             LayerAttributes::named("lightmap"),
-            // Blocks are compressed in parallel; an increasing line order makes the writer
-            // put them in the file in order, so the same lightmap is the same bytes whatever
-            // the threads' timing (with `Unspecified` the order follows completion).
-            Encoding {
-                line_order: LineOrder::Increasing,
-                ..Encoding::SMALL_FAST_LOSSLESS
-            },
+            page_encoding(),
             AnyChannels::sort(channels),
         );
         Image::from_layer(layer)
@@ -511,10 +505,7 @@ impl PageStream {
         let layer = Layer::new(
             (self.width, self.height),
             LayerAttributes::named("lightmap"),
-            Encoding {
-                line_order: LineOrder::Increasing,
-                ..Encoding::SMALL_FAST_LOSSLESS
-            },
+            page_encoding(),
             StreamedChannels {
                 page: self,
                 failure: &failure,
@@ -791,6 +782,17 @@ impl ChannelsWriter for StreamedBlocks<'_> {
             out.write_samples(|i| line[i * stride + slot])
                 .expect("a line of the block's own size");
         })
+    }
+}
+
+/// The pages' encoding, one for the streamed writer and the in-memory reference. Blocks are
+/// compressed in parallel; an increasing line order makes the writer put them in the file in
+/// order, so the same lightmap is the same bytes whatever the threads' timing (with
+/// `Unspecified` the order follows completion).
+fn page_encoding() -> Encoding {
+    Encoding {
+        line_order: LineOrder::Increasing,
+        ..Encoding::SMALL_FAST_LOSSLESS
     }
 }
 
