@@ -26,7 +26,7 @@ use std::time::Instant;
 use glam::Vec3;
 use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
 use guidebake_kernels::estimator::{
-    GraybillDeal, TexelEstimate, Welford, combine_weighted, plain_average,
+    GraybillDeal, TexelEstimate, Welford, combine_weighted, luminance_f32, plain_average,
 };
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::mapping::{
@@ -1012,7 +1012,7 @@ impl<'a> IterationCtx<'a> {
         sinks.gathered.push((indirect * scale).to_array());
         let radiance = l.emitted + l.reflected;
         sinks.batch.push((radiance * scale + direct).to_array());
-        let flux = luminance(radiance) / q;
+        let flux = luminance_f32(radiance.to_array()) / q;
         if flux.is_finite() {
             sinks.records.push(Record { u: w, flux });
         }
@@ -1027,10 +1027,6 @@ fn count_warp(clock: Option<Instant>, counters: &mut GatherCounters) {
     if let Some(clock) = clock {
         counters.warp_ns += clock.elapsed().as_nanos() as u64 * u64::from(WARP_TIMED_EVERY);
     }
-}
-
-fn luminance(c: Vec3) -> f32 {
-    guidebake_kernels::estimator::luminance_f32(c.to_array())
 }
 
 #[cfg(test)]
