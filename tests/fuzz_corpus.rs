@@ -409,8 +409,8 @@ fn write_scene_seeds() {
                 [sun]\ndirection = [0.3, 1.0, 0.2]\nangular_radius_deg = 0.267\nirradiance = [4, 3.8, 3.5]\n";
     write("scene", "scene.toml", &with(3, toml.as_bytes()));
     // The real Cornell box (CC0, Bitterli; ../shared/scenes/converted), when present.
-    let cornell =
-        guidebake::scene::shared_scenes_dir().map(|d| d.join("converted/bitterli_cornell_box.glb"));
+    let cornell = guidebake::test_support::shared_scenes_dir()
+        .map(|d| d.join("converted/bitterli_cornell_box.glb"));
     match cornell.and_then(|p| std::fs::read(p).ok()) {
         Some(glb) => write("scene", "bitterli-cornell-box.glb", &with(1, &glb)),
         None => println!("../shared/scenes absent: the Cornell box seed is kept as it is"),

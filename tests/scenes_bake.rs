@@ -21,7 +21,8 @@ use guidebake::bake::run::{BakeJob, bake};
 use guidebake::bake::settings::{BakeSettings, Guiding, Transport};
 use guidebake::bake::shard::Shard;
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
-use guidebake::scene::{Scene, shared_scenes_dir};
+use guidebake::scene::Scene;
+use guidebake::test_support::shared_scenes_dir;
 
 const SCENES: [&str; 3] = [
     "bitterli_cornell_box.glb",

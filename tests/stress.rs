@@ -22,7 +22,8 @@ use guidebake::bake::world::World;
 use guidebake::bvh::Preset;
 use guidebake::output::journal::RhoSums;
 use guidebake::output::result_file::{FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_VALID};
-use guidebake::scene::{Material, Scene, Sky, Sun, Triangle, inward_box_faces};
+use guidebake::scene::{Material, Scene, Sky, Sun, Triangle};
+use guidebake::test_support::inward_box_faces;
 use guidebake::texels::{FLAG_VALID as TEXEL_VALID, TexelRecord};
 
 const MODES: [Guiding; 3] = [Guiding::Off, Guiding::Naive, Guiding::Coherent];

@@ -19,9 +19,9 @@ use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::{offset_origin, triangle_extent};
 use wide::u32x8;
 
-/// `converted/` of the shared scenes ([`guidebake::scene::shared_scenes_dir`]), if present.
+/// `converted/` of the shared scenes ([`guidebake::test_support::shared_scenes_dir`]), if present.
 pub fn converted_dir() -> Option<PathBuf> {
-    guidebake::scene::shared_scenes_dir()
+    guidebake::test_support::shared_scenes_dir()
         .map(|d| d.join("converted"))
         .filter(|d| d.is_dir())
 }

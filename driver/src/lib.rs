@@ -32,5 +32,7 @@ pub mod prepare;
 pub mod preview;
 pub mod scene;
 pub mod synth;
+#[doc(hidden)]
+pub mod test_support;
 pub mod texels;
 pub mod transport;

@@ -9,7 +9,7 @@ use guidebake::scene::Scene;
 use guidebake::texels::{FLAG_PARTIAL, TexelFile};
 
 fn scenes_dir() -> Option<PathBuf> {
-    guidebake::scene::shared_scenes_dir()
+    guidebake::test_support::shared_scenes_dir()
 }
 
 /// Total UV area and UV perimeter of the scene's triangles, in page pixels.

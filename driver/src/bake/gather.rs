@@ -1036,7 +1036,8 @@ mod tests {
     use super::*;
     use crate::bake::settings::EmitterSampling;
     use crate::bvh::Preset;
-    use crate::scene::{Material, Scene, Sky, Sun, Triangle, inward_box_faces};
+    use crate::scene::{Material, Scene, Sky, Sun, Triangle};
+    use crate::test_support::inward_box_faces;
     use crate::transport::emitters::EmitterSelection;
 
     /// A quad `origin + s·u + t·v` as two triangles facing `u × v`.

@@ -1,0 +1,701 @@
+//! glTF 2.0 through the `gltf` crate.
+use super::*;
+
+pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
+    let (doc, buffers, images) = import(path)?;
+    let materials = read_materials(&doc, &images);
+    let default_material = materials.len() as u32;
+    let mut materials = materials;
+    materials.push(Material::default_grey());
+
+    let mut b = SceneBuilder::new(path);
+    let mut lights = Vec::new();
+    let roots: Vec<::gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(s) => s.nodes().collect(),
+        None => Vec::new(),
+    };
+    let mut stack: Vec<(::gltf::Node, Mat4)> = roots
+        .into_iter()
+        .rev()
+        .map(|n| (n, Mat4::IDENTITY))
+        .collect();
+    while let Some((node, parent)) = stack.pop() {
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        if let Some(mesh) = node.mesh() {
+            read_mesh(&mut b, &node, &mesh, &buffers, world, default_material)?;
+        }
+        if let Some(light) = node.light() {
+            lights.push(read_light(&light, world));
+        }
+        for child in node.children().collect::<Vec<_>>().into_iter().rev() {
+            stack.push((child, world));
+        }
+    }
+    Ok(b.finish(materials, lights))
+}
+
+/// `::gltf::import` with checks of ours where the crate panics instead of erring (each
+/// found by the `scene` fuzz target): the GLB header's length ([`check_glb_length`]),
+/// before the crate's validation that every `POSITION` names an existing accessor
+/// (gltf-json 1.4.1 indexes it unchecked in `mesh.rs`, `primitive_validate_hook`;
+/// [`check_position_accessors`]) and that every image has a source
+/// ([`check_image_sources`]), and every buffer's and image's URI ([`check_uri`]) and
+/// image's buffer view ([`check_view`]). Buffers and images are loaded one by one, so an
+/// error names the one at fault.
+fn import(
+    path: &Path,
+) -> Result<
+    (
+        ::gltf::Document,
+        Vec<::gltf::buffer::Data>,
+        Vec<::gltf::image::Data>,
+    ),
+    SceneError,
+> {
+    let whole = |source| SceneError::Gltf {
+        path: path.to_owned(),
+        source,
+    };
+    let bytes = std::fs::read(path).map_err(|e| whole(::gltf::Error::Io(e)))?;
+    check_glb_length(&bytes).map_err(whole)?;
+    let ::gltf::Gltf { document, mut blob } =
+        ::gltf::Gltf::from_slice_without_validation(&bytes).map_err(whole)?;
+    let json = document.into_json();
+    check_position_accessors(&json).map_err(whole)?;
+    check_image_sources(&json).map_err(whole)?;
+    let doc = ::gltf::Document::from_json(json).map_err(whole)?;
+    let base = path.parent().unwrap_or_else(|| Path::new("./"));
+    let resource = |item: String, message: String| SceneError::GltfResource {
+        path: path.to_owned(),
+        item,
+        message,
+    };
+
+    let mut buffers = Vec::with_capacity(doc.buffers().len());
+    for buffer in doc.buffers() {
+        let item = format!("buffers[{}]", buffer.index());
+        let source = buffer.source();
+        if let ::gltf::buffer::Source::Uri(uri) = source {
+            check_uri(uri).map_err(|m| resource(item.clone(), m))?;
+        }
+        let data = ::gltf::buffer::Data::from_source_and_blob(source, Some(base), &mut blob)
+            .map_err(|e| resource(item.clone(), describe(&e)))?;
+        if data.len() < buffer.length() {
+            let message = format!(
+                "{} bytes, fewer than its byteLength of {}",
+                data.len(),
+                buffer.length()
+            );
+            return Err(resource(item, message));
+        }
+        buffers.push(data);
+    }
+    let mut images = Vec::with_capacity(doc.images().len());
+    for image in doc.images() {
+        let item = format!("images[{}]", image.index());
+        let source = image.source();
+        match &source {
+            ::gltf::image::Source::Uri { uri, .. } => {
+                check_uri(uri).map_err(|m| resource(item.clone(), m))?;
+            }
+            ::gltf::image::Source::View { view, .. } => {
+                check_view(view, &buffers).map_err(|m| resource(item.clone(), m))?;
+            }
+        }
+        let data = ::gltf::image::Data::from_source(source, Some(base), &buffers)
+            .map_err(|e| resource(item, describe(&e)))?;
+        images.push(data);
+    }
+    Ok((doc, buffers, images))
+}
+
+/// A URI the importer can resolve without panicking: gltf 1.4.1 (`import.rs`,
+/// `Scheme::parse`) takes a URI without a `:` as a relative path and unwraps its
+/// percent-decoding as UTF-8, so `%AC` panicked (found by the `scene` fuzz target, on a
+/// buffer URI `data+application/octet-stream;base64,…%AC…`). `urlencoding` is the crate
+/// the importer decodes with, so this check refuses exactly what it would panic on.
+fn check_uri(uri: &str) -> Result<(), String> {
+    if uri.contains(':') || urlencoding::decode(uri).is_ok() {
+        return Ok(());
+    }
+    const SHOWN: usize = 48;
+    let shown: String = uri.chars().take(SHOWN).collect();
+    let more = if uri.chars().nth(SHOWN).is_some() {
+        "…"
+    } else {
+        ""
+    };
+    Err(format!(
+        "uri \"{shown}{more}\" is a relative path (no scheme) whose percent-escapes \
+         decode to bytes that are not UTF-8"
+    ))
+}
+
+/// An image's buffer view lies inside its buffer: gltf 1.4.1 slices the buffer with the
+/// view's range unchecked (`import.rs`, `image::Data::from_source`) and gltf-json does not
+/// validate it (found while fixing [`check_uri`]).
+fn check_view(view: &::gltf::buffer::View, buffers: &[::gltf::buffer::Data]) -> Result<(), String> {
+    let buffer = view.buffer().index();
+    let len = buffers[buffer].len();
+    let (offset, length) = (view.offset(), view.length());
+    if offset.checked_add(length).is_some_and(|end| end <= len) {
+        return Ok(());
+    }
+    Err(format!(
+        "bufferViews[{}] (byteOffset {offset}, byteLength {length}) runs past the end of \
+         buffers[{buffer}] ({len} bytes)",
+        view.index()
+    ))
+}
+
+/// The importer's error for one buffer or image, said in the loader's words.
+fn describe(e: &::gltf::Error) -> String {
+    match e {
+        ::gltf::Error::Base64(e) => format!("its data URI is not valid base64: {e}"),
+        ::gltf::Error::Io(e) => format!("cannot read the file its uri names: {e}"),
+        ::gltf::Error::UnsupportedScheme => {
+            "unsupported uri scheme (data:, file: or a relative path)".to_owned()
+        }
+        other => other.to_string(),
+    }
+}
+
+/// A GLB header's total length covers at least the header: gltf 1.4.1 subtracts the
+/// header's 12 bytes from it unchecked (`binary.rs`), which panics on overflow in a debug
+/// build and wraps to a 4 GiB read in a release one (found by the `scene` fuzz target).
+fn check_glb_length(bytes: &[u8]) -> ::gltf::Result<()> {
+    const HEADER: usize = 12;
+    match bytes.get(8..HEADER) {
+        Some(length) if bytes.starts_with(b"glTF") => {
+            let length = u32::from_le_bytes(length.try_into().expect("4 bytes"));
+            if (length as usize) < HEADER {
+                return Err(::gltf::Error::Binary(::gltf::binary::Error::Length {
+                    length,
+                    length_read: bytes.len(),
+                }));
+            }
+            Ok(())
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Every image has a source the importer can take: a `uri`, or a `bufferView` with a
+/// `mimeType` (the spec's rule). gltf 1.4.1's `Image::source` unwraps both, unvalidated
+/// (`image.rs`; found by the `scene` fuzz target once images were loaded one by one).
+fn check_image_sources(json: &::gltf::json::Root) -> ::gltf::Result<()> {
+    use ::gltf::json::{Path as JsonPath, validation::Error};
+    let errors: Vec<_> = json
+        .images
+        .iter()
+        .enumerate()
+        .filter_map(|(i, image)| {
+            let missing = match (&image.buffer_view, &image.mime_type, &image.uri) {
+                (Some(_), None, _) => "mimeType",
+                (None, _, None) => "uri",
+                _ => return None,
+            };
+            let at = JsonPath::new().field("images").index(i).field(missing);
+            Some((at, Error::Missing))
+        })
+        .collect();
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(::gltf::Error::Validation(errors))
+    }
+}
+
+/// Every primitive's `POSITION` names an accessor that exists.
+fn check_position_accessors(json: &::gltf::json::Root) -> ::gltf::Result<()> {
+    use ::gltf::json::validation::Error;
+    use ::gltf::json::{Path as JsonPath, mesh::Semantic, validation::Checked};
+    let mut errors = Vec::new();
+    for (m, mesh) in json.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let position = prim.attributes.get(&Checked::Valid(Semantic::Positions));
+            if position.is_some_and(|a| a.value() >= json.accessors.len()) {
+                let at = JsonPath::new()
+                    .field("meshes")
+                    .index(m)
+                    .field("primitives")
+                    .index(p)
+                    .field("attributes")
+                    .key("POSITION");
+                errors.push((at, Error::IndexOutOfBounds));
+            }
+        }
+    }
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(::gltf::Error::Validation(errors))
+    }
+}
+
+fn read_materials(doc: &::gltf::Document, images: &[::gltf::image::Data]) -> Vec<Material> {
+    doc.materials()
+        .enumerate()
+        .map(|(i, m)| {
+            let pbr = m.pbr_metallic_roughness();
+            let f = pbr.base_color_factor();
+            let mut albedo = Vec3::new(f[0], f[1], f[2]);
+            if let Some(info) = pbr.base_color_texture() {
+                let img = &images[info.texture().source().index()];
+                if let Some(avg) = average_image(img) {
+                    albedo *= avg;
+                }
+            }
+            // An emissive texture is averaged like the base colour: emitters are sampled
+            // as lights of uniform radiance (transport::emitters).
+            let mut e = Vec3::from(m.emissive_factor());
+            if let Some(info) = m.emissive_texture() {
+                let img = &images[info.texture().source().index()];
+                if let Some(avg) = average_image(img) {
+                    e *= avg;
+                }
+            }
+            let strength = m.emissive_strength().unwrap_or(1.0);
+            Material {
+                name: m
+                    .name()
+                    .map_or_else(|| format!("material#{i}"), str::to_owned),
+                albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE),
+                emission: (e * strength).max(Vec3::ZERO),
+            }
+        })
+        .collect()
+}
+
+/// Linear average of a base-colour image (8-bit sRGB; 16-bit and float images are taken
+/// as linear already, which is what the glTF importers produce for them).
+fn average_image(img: &::gltf::image::Data) -> Option<Vec3> {
+    use ::gltf::image::Format;
+    match img.format {
+        Format::R8G8B8 => average_srgb8(&img.pixels, 3),
+        Format::R8G8B8A8 => average_srgb8(&img.pixels, 4),
+        Format::R8 | Format::R8G8 => {
+            let ch = if img.format == Format::R8 { 1 } else { 2 };
+            let grey: Vec<u8> = img
+                .pixels
+                .chunks_exact(ch)
+                .flat_map(|p| [p[0], p[0], p[0]])
+                .collect();
+            average_srgb8(&grey, 3)
+        }
+        _ => None,
+    }
+}
+
+/// The `gltf` crate's readers assert an accessor's layout (a VEC4 `TEXCOORD_1` panics,
+/// found by issue 8's scene fuzz target): check what the glTF spec allows first.
+fn check_accessors(b: &SceneBuilder, id: u32, prim: &::gltf::Primitive) -> Result<(), SceneError> {
+    use ::gltf::Semantic;
+    use ::gltf::accessor::{DataType as T, Dimensions as D};
+    let fits = |a: &::gltf::Accessor, dims: D, types: &[T]| {
+        a.dimensions() == dims && types.contains(&a.data_type())
+    };
+    let describe = |what: String, a: &::gltf::Accessor| {
+        format!(
+            "{what} accessor {} is {:?} of {:?}, which the glTF spec does not allow",
+            a.index(),
+            a.dimensions(),
+            a.data_type()
+        )
+    };
+    let attributes = prim.attributes().map(|(semantic, a)| {
+        let allowed = match semantic {
+            Semantic::Positions | Semantic::Normals => fits(&a, D::Vec3, &[T::F32]),
+            Semantic::TexCoords(_) => fits(&a, D::Vec2, &[T::F32, T::U8, T::U16]),
+            _ => true,
+        };
+        (format!("{semantic:?}"), a, allowed)
+    });
+    let indices = prim.indices().map(|a| {
+        let allowed = fits(&a, D::Scalar, &[T::U8, T::U16, T::U32]);
+        ("indices".to_owned(), a, allowed)
+    });
+    for (what, a, allowed) in attributes.chain(indices) {
+        if !allowed {
+            return Err(b.bad_mesh(id, describe(what, &a)));
+        }
+        // The readers compute `count - 1` unchecked (gltf 1.4.1, `accessor/util.rs`; a
+        // subtraction overflow found by the `scene` fuzz target): the spec's minimum is 1.
+        if a.count() == 0 || a.sparse().is_some_and(|s| s.count() == 0) {
+            let message = format!(
+                "{what} accessor {} has a count of 0 (the glTF spec's minimum is 1)",
+                a.index()
+            );
+            return Err(b.bad_mesh(id, message));
+        }
+    }
+    Ok(())
+}
+
+fn read_light(light: &::gltf::khr_lights_punctual::Light, world: Mat4) -> SceneLight {
+    use ::gltf::khr_lights_punctual::Kind;
+    let colour = Vec3::from(light.color()) * light.intensity();
+    let position = world.transform_point3(Vec3::ZERO);
+    let direction = world.transform_vector3(-Vec3::Z).normalize_or(-Vec3::Z);
+    match light.kind() {
+        Kind::Directional => SceneLight::Directional {
+            direction,
+            irradiance: colour,
+        },
+        Kind::Point => SceneLight::Point {
+            position,
+            intensity: colour,
+        },
+        Kind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } => SceneLight::Spot {
+            position,
+            direction,
+            intensity: colour,
+            inner_cone: inner_cone_angle,
+            outer_cone: outer_cone_angle,
+        },
+    }
+}
+
+fn read_mesh(
+    b: &mut SceneBuilder,
+    node: &::gltf::Node,
+    mesh: &::gltf::Mesh,
+    buffers: &[::gltf::buffer::Data],
+    world: Mat4,
+    default_material: u32,
+) -> Result<(), SceneError> {
+    let name = node
+        .name()
+        .or(mesh.name())
+        .map_or_else(|| format!("mesh#{}", mesh.index()), str::to_owned);
+    let id = b.begin_mesh(name);
+    let normal_m = Mat3::from_mat4(world).inverse().transpose();
+    let mirrored = Mat3::from_mat4(world).determinant() < 0.0;
+    for prim in mesh.primitives() {
+        if prim.mode() != ::gltf::mesh::Mode::Triangles {
+            return Err(b.bad_mesh(
+                id,
+                format!(
+                    "primitive mode {:?} (only triangles are supported)",
+                    prim.mode()
+                ),
+            ));
+        }
+        check_accessors(b, id, &prim)?;
+        let reader = prim.reader(|buf| buffers.get(buf.index()).map(|d| d.0.as_slice()));
+        let Some(positions) = reader.read_positions() else {
+            return Err(b.bad_mesh(id, "primitive without POSITION".into()));
+        };
+        let positions: Vec<Vec3> = positions
+            .map(|p| world.transform_point3(Vec3::from(p)))
+            .collect();
+        let normals: Option<Vec<Vec3>> = reader
+            .read_normals()
+            .map(|n| n.map(|n| normal_m * Vec3::from(n)).collect());
+        let uvs: Option<Vec<Vec2>> = reader
+            .read_tex_coords(1)
+            .map(|t| t.into_f32().map(Vec2::from).collect());
+        let count = positions.len();
+        check_len(b, id, "NORMAL", normals.as_ref().map(Vec::len), count)?;
+        check_len(b, id, "TEXCOORD_1", uvs.as_ref().map(Vec::len), count)?;
+        let indices: Vec<u32> = match reader.read_indices() {
+            Some(i) => i.into_u32().collect(),
+            None => (0..count as u32).collect(),
+        };
+        if !indices.len().is_multiple_of(3) {
+            return Err(b.bad_mesh(
+                id,
+                format!("{} indices is not a multiple of 3", indices.len()),
+            ));
+        }
+        if let Some((k, &bad)) = indices
+            .iter()
+            .enumerate()
+            .find(|&(_, &i)| i as usize >= count)
+        {
+            return Err(b.bad_mesh(id, format!("index {bad} at position {k} is out of range (the primitive has {count} vertices)")));
+        }
+        let material = prim
+            .material()
+            .index()
+            .map_or(default_material, |m| m as u32);
+        for tri in indices.chunks_exact(3) {
+            let mut v = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
+            if mirrored {
+                v.swap(1, 2);
+            }
+            b.push(Triangle {
+                positions: v.map(|i| positions[i]),
+                normals: normals
+                    .as_ref()
+                    .map_or([Vec3::ZERO; 3], |n| v.map(|i| n[i])),
+                lightmap_uv: uvs.as_ref().map(|u| v.map(|i| u[i])),
+                mesh: id,
+                material,
+            });
+        }
+    }
+    Ok(())
+}
+
+fn check_len(
+    b: &SceneBuilder,
+    id: u32,
+    what: &str,
+    len: Option<usize>,
+    count: usize,
+) -> Result<(), SceneError> {
+    match len {
+        Some(n) if n != count => Err(b.bad_mesh(
+            id,
+            format!("{what} has {n} entries but POSITION has {count}"),
+        )),
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::*;
+    use std::path::PathBuf;
+
+    #[test]
+    fn veach_ajar_loads_all_triangles_with_lightmap_uvs() {
+        let Some(dir) = crate::test_support::shared_scenes_dir() else {
+            return;
+        };
+        let s = Scene::load(&dir.join("converted/bitterli_veach_ajar_no_teapots.glb")).unwrap();
+        assert_eq!(s.triangles.len() + s.degenerate_triangles, 4546);
+        assert!(s.meshes_without_lightmap_uvs().is_empty());
+        assert!(
+            s.triangles
+                .iter()
+                .all(|t| t.normals.iter().all(|n| (n.length() - 1.0).abs() < 1e-5))
+        );
+        // Two emissive meshes with radiance 1000 (scenes/README.md).
+        let emissive: Vec<_> = s
+            .materials
+            .iter()
+            .filter(|m| m.emission != Vec3::ZERO)
+            .collect();
+        assert!(!emissive.is_empty());
+        assert!(
+            emissive
+                .iter()
+                .all(|m| (m.emission.max_element() - 1000.0).abs() < 1e-2)
+        );
+        assert_eq!(s.triangle_positions().len(), s.triangles.len());
+    }
+
+    #[test]
+    fn bitterli_cornell_box_matches_its_sidecar() {
+        let Some(dir) = crate::test_support::shared_scenes_dir() else {
+            return;
+        };
+        let s = Scene::load(&dir.join("converted/bitterli_cornell_box.glb")).unwrap();
+        assert_eq!(s.triangles.len(), 36);
+        let names: Vec<_> = s.meshes.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(names, ["Light", "LeftWall", "RightWall", "Mesh"]);
+        let light = s.triangle_material(0);
+        assert!(
+            (light.emission - Vec3::new(17.0, 12.0, 4.0))
+                .abs()
+                .max_element()
+                < 1e-3
+        );
+        assert!(
+            (s.triangle_material(2).albedo - Vec3::new(0.63, 0.065, 0.05))
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        let (lo, hi) = s.bounds();
+        assert!(lo.cmpge(Vec3::splat(-1.01)).all() && hi.cmple(Vec3::splat(2.01)).all());
+    }
+
+    #[test]
+    fn vinc3r_node_transforms_and_missing_lightmap_uvs() {
+        let Some(dir) = crate::test_support::shared_scenes_dir() else {
+            return;
+        };
+        let p = dir
+            .join("vinc3r_cornellbox/BJS-2.80-Eevee-gltf/assets/cornellBox-2.80-Eevee-gltf.gltf");
+        let s = Scene::load(&p).unwrap();
+        assert_eq!(s.triangles.len() + s.degenerate_triangles, 4410);
+        let with_uv = s
+            .triangles
+            .iter()
+            .filter(|t| t.lightmap_uv.is_some())
+            .count();
+        // 8 primitives with TEXCOORD_1 hold 4052 triangles (scenes/README.md).
+        assert!(
+            with_uv <= 4052 && with_uv + s.degenerate_triangles >= 4052,
+            "{with_uv}"
+        );
+        assert!(s.meshes_without_lightmap_uvs().contains(&"lamp.000"));
+        // Bounds [-2,0,-2]..[2,3,2] (scenes/README.md) after node transforms.
+        let (lo, hi) = s.bounds();
+        assert!(
+            (lo - Vec3::new(-2.0, 0.0, -2.0)).abs().max_element() < 0.05,
+            "{lo}"
+        );
+        assert!(
+            (hi - Vec3::new(2.0, 3.0, 2.0)).abs().max_element() < 0.05,
+            "{hi}"
+        );
+        // lamp.000 is emissive (1,1,1); the checker texture multiplies the block's albedo.
+        let lamp = s.meshes.iter().find(|m| m.name == "lamp.000").unwrap();
+        assert_eq!(
+            s.triangle_material(lamp.first_triangle as usize).emission,
+            Vec3::ONE
+        );
+    }
+
+    /// A glTF of one buffer (4 bytes long) and one image with these URIs, loaded.
+    fn load_gltf_with_uris(buffer_uri: &str, image_uri: &str) -> (PathBuf, SceneError) {
+        load_gltf_with(buffer_uri, 4, image_uri)
+    }
+
+    fn load_gltf_with(buffer_uri: &str, length: usize, image_uri: &str) -> (PathBuf, SceneError) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("uris.gltf");
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "buffers": [{ "byteLength": length, "uri": buffer_uri }],
+            "images": [{ "uri": image_uri }],
+        });
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = Scene::load(&path).expect_err("a bad URI is an error");
+        (path, e)
+    }
+
+    #[test]
+    fn uris_whose_percent_escapes_are_not_utf8_are_errors_naming_the_buffer() {
+        // The `scene` fuzz target's input (fuzz/corpus/scene/gltf-import-non-utf8-data-uri):
+        // "data+…" has no ':', so the importer reads it as a relative path and unwrapped its
+        // percent-decoding, which `%AC` makes invalid UTF-8.
+        let uri = "data+application/octet-stream;base64,AAAA%ACAP%wAA";
+        let (path, e) = load_gltf_with_uris(uri, "ok.png");
+        let message = e.to_string();
+        assert!(
+            matches!(&e, SceneError::GltfResource { item, .. } if item == "buffers[0]"),
+            "{message}"
+        );
+        assert!(message.contains(&*path.to_string_lossy()), "{message}");
+        assert!(
+            message.contains("not UTF-8") && message.contains("%AC"),
+            "{message}"
+        );
+
+        // The same URI on an image (the importer parses image URIs the same way).
+        let data = "data:application/octet-stream;base64,AAAAAA==";
+        let (_, e) = load_gltf_with_uris(data, "tex%FF.png");
+        assert!(
+            matches!(&e, SceneError::GltfResource { item, .. } if item == "images[0]"),
+            "{e}"
+        );
+        // Escapes that decode to UTF-8 are a path like any other: a missing file.
+        let (_, e) = load_gltf_with_uris("b%C3%A4r.bin", "ok.png");
+        assert!(e.to_string().contains("buffers[0]: cannot read"), "{e}");
+    }
+
+    #[test]
+    fn data_uris_that_are_not_base64_are_errors_naming_the_buffer() {
+        let (path, e) = load_gltf_with_uris("data:application/octet-stream;base64,AA%AC", "x.png");
+        let message = e.to_string();
+        assert!(
+            message.starts_with(&format!(
+                "{}: buffers[0]: its data URI is not valid base64",
+                path.display()
+            )),
+            "{message}"
+        );
+        // 3 bytes, padded to 4 by the importer: short of 8.
+        let (_, e) = load_gltf_with("data:application/octet-stream;base64,AAAA", 8, "x.png");
+        assert!(
+            e.to_string()
+                .contains("buffers[0]: 4 bytes, fewer than its byteLength of 8"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn an_image_whose_buffer_view_runs_past_its_buffer_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("view.gltf");
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "buffers": [{ "byteLength": 4, "uri": "data:application/octet-stream;base64,AAAAAA==" }],
+            "bufferViews": [{ "buffer": 0, "byteOffset": 2, "byteLength": 100 }],
+            "images": [{ "bufferView": 0, "mimeType": "image/png" }],
+        });
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = Scene::load(&path).expect_err("a view past its buffer is an error");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: images[0]: bufferViews[0] (byteOffset 2, byteLength 100) runs past the end \
+                 of buffers[0] (4 bytes)",
+                path.display()
+            )
+        );
+    }
+
+    #[test]
+    fn images_without_a_source_are_errors_naming_the_image() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("image.gltf");
+        for (image, missing) in [
+            (serde_json::json!({ "name": "no source" }), "images[0].uri"),
+            (serde_json::json!({ "bufferView": 0 }), "images[0].mimeType"),
+        ] {
+            let json = serde_json::json!({
+                "asset": { "version": "2.0" },
+                "buffers": [{ "byteLength": 4, "uri": "data:application/octet-stream;base64,AAAAAA==" }],
+                "bufferViews": [{ "buffer": 0, "byteLength": 4 }],
+                "images": [image],
+            });
+            std::fs::write(&path, json.to_string()).unwrap();
+            let e = Scene::load(&path).expect_err("an image without a source is an error");
+            let message = e.to_string();
+            assert!(matches!(e, SceneError::Gltf { .. }), "{message}");
+            assert!(
+                message.contains(&*path.to_string_lossy()) && message.contains(missing),
+                "{message}"
+            );
+        }
+    }
+
+    #[test]
+    fn accessors_of_count_zero_are_errors_naming_the_mesh() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("empty.gltf");
+        let zeros = "A".repeat(64); // 48 zero bytes
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "scene": 0, "scenes": [{ "nodes": [0] }], "nodes": [{ "mesh": 0 }],
+            "meshes": [{ "name": "tri", "primitives": [{ "attributes": { "POSITION": 0 }, "indices": 1 }] }],
+            "accessors": [
+                { "bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [0, 0, 0] },
+                { "bufferView": 1, "componentType": 5125, "count": 0, "type": "SCALAR" },
+            ],
+            "bufferViews": [
+                { "buffer": 0, "byteLength": 36 },
+                { "buffer": 0, "byteOffset": 36, "byteLength": 12 },
+            ],
+            "buffers": [{ "byteLength": 48, "uri": format!("data:application/octet-stream;base64,{zeros}") }],
+        });
+        std::fs::write(&path, json.to_string()).unwrap();
+        let e = Scene::load(&path).expect_err("an accessor of count 0 is an error");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: mesh 'tri': indices accessor 1 has a count of 0 (the glTF spec's minimum is 1)",
+                path.display()
+            )
+        );
+    }
+}

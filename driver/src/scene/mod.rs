@@ -1,0 +1,517 @@
+//! `scene`: the world a bake lights — world-space triangles with their lightmap UVs and
+//! Lambertian materials, punctual lights, a sun and a sky.
+//!
+//! Sources: glTF 2.0 (`.gltf`, `.glb`, with `KHR_lights_punctual` and
+//! `KHR_materials_emissive_strength`), Wavefront OBJ + MTL (`.obj`), and a small TOML scene
+//! file (`.toml`, see [`SceneFile`]) that names one of those and adds the sky and the sun.
+//! docs/ARCHITECTURE.md, "The bake, as data flows", and docs/bake.md.
+//!
+//! What the paper (Silvennoinen & Sloan 2019) assumes and we keep: diffuse (Lambertian,
+//! two-sided) surfaces whose lightmap texels receive irradiance. Deviations and choices:
+//! - Only the diffuse albedo of a material is kept: `baseColorFactor` × the average of the
+//!   base-colour texture (texels converted sRGB → linear before averaging). Metallic,
+//!   roughness and transmission are ignored.
+//! - Emission is `emissiveFactor` × `KHR_materials_emissive_strength` (radiance, front face).
+//! - All geometry is flattened into one triangle soup in world space (node transforms
+//!   applied; normals by the inverse transpose; a mirroring transform swaps two vertices so
+//!   the winding — and with it the geometric normal — stays outward).
+//! - A triangle whose area is zero or whose positions are not finite is **dropped and
+//!   counted** ([`Scene::degenerate_triangles`]).
+//! - Lightmap UVs are glTF `TEXCOORD_1`. OBJ has one UV set only: it is taken as the lightmap
+//!   UV set (OBJ exporters that lay out lightmaps write them there).
+//! - A "mesh" here is one glTF mesh instanced by one node (all its primitives), or one OBJ
+//!   model; it carries the name used in messages (e.g. a mesh without lightmap UVs).
+
+use std::path::{Path, PathBuf};
+
+use glam::{Mat3, Mat4, Vec2, Vec3};
+
+/// Why a scene could not be loaded. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The glTF importer rejected the file (bad JSON, a missing buffer or image, a bad GLB
+    /// chunk, a buffer shorter than declared, ...).
+    #[error("{path}: not a loadable glTF file: {source}")]
+    Gltf {
+        /// The file.
+        path: PathBuf,
+        /// The importer's error.
+        source: ::gltf::Error,
+    },
+    /// One of a glTF file's buffers or images could not be loaded: a data URI that is not
+    /// base64, a relative URI whose percent-escapes do not decode to UTF-8, a file that
+    /// cannot be read, a buffer shorter than its `byteLength`, an image that does not decode.
+    #[error("{path}: {item}: {message}")]
+    GltfResource {
+        /// The glTF file.
+        path: PathBuf,
+        /// Which one, e.g. `buffers[0]` or `images[2]`.
+        item: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// An OBJ face or line names an element the file does not have.
+    #[error("{path}: line {line}: {message}")]
+    ObjIndex {
+        /// The file.
+        path: PathBuf,
+        /// The line, from 1.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// tobj rejected the OBJ or its MTL.
+    #[error("{path}: not a loadable OBJ file: {source}")]
+    Obj {
+        /// The file.
+        path: PathBuf,
+        /// tobj's error.
+        source: tobj::LoadError,
+    },
+    /// The TOML scene file is malformed.
+    #[error("{path}: bad scene file: {message}")]
+    SceneFile {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A mesh's data is inconsistent (index out of range, attribute count mismatch, ...).
+    #[error("{path}: mesh '{mesh}': {message}")]
+    BadMesh {
+        /// The file.
+        path: PathBuf,
+        /// The mesh name.
+        mesh: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The file extension is none we read.
+    #[error("{path}: unknown scene format (expected .gltf, .glb, .obj or .toml)")]
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// After dropping degenerate triangles nothing is left.
+    #[error("{path}: the scene has no triangles ({degenerate} degenerate triangles dropped)")]
+    Empty {
+        /// The file.
+        path: PathBuf,
+        /// How many degenerate triangles were dropped.
+        degenerate: usize,
+    },
+    /// The equirectangular sky image could not be read.
+    #[error("{path}: cannot read sky image: {message}")]
+    Sky {
+        /// The EXR file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// A Lambertian material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Name from the source file (may be empty).
+    pub name: String,
+    /// Diffuse albedo, linear RGB in [0, 1].
+    pub albedo: Vec3,
+    /// Emitted radiance, linear RGB (front face only).
+    pub emission: Vec3,
+}
+
+impl Material {
+    /// The material used by primitives that have none: albedo 0.8 grey, no emission (the
+    /// glTF default material is white; 0.8 keeps bounce counts finite).
+    #[must_use]
+    pub fn default_grey() -> Self {
+        Self {
+            name: "default".into(),
+            albedo: Vec3::splat(0.8),
+            emission: Vec3::ZERO,
+        }
+    }
+}
+
+/// A light as the scene file declares it (glTF `KHR_lights_punctual`, or a TOML sphere), in
+/// world space; the bake samples it as a [`crate::transport::lights::AnalyticLight`].
+#[derive(Clone, Debug, PartialEq)]
+pub enum SceneLight {
+    /// Infinitely far light travelling along `direction`.
+    Directional {
+        /// Unit direction the light travels in (the node's −Z).
+        direction: Vec3,
+        /// Irradiance on a plane facing the light, RGB (colour × intensity, lux).
+        irradiance: Vec3,
+    },
+    /// A point light.
+    Point {
+        /// World position.
+        position: Vec3,
+        /// Radiant intensity RGB (colour × intensity, candela ~ W/sr).
+        intensity: Vec3,
+    },
+    /// A spot light.
+    Spot {
+        /// World position.
+        position: Vec3,
+        /// Unit direction of the cone axis (the node's −Z).
+        direction: Vec3,
+        /// Radiant intensity RGB on the axis.
+        intensity: Vec3,
+        /// Angle (radians) inside which the intensity is full.
+        inner_cone: f32,
+        /// Angle (radians) outside which the intensity is zero.
+        outer_cone: f32,
+    },
+    /// A sphere of uniform radiance (scene files only: glTF has no area lights of this kind).
+    Sphere {
+        /// Centre.
+        center: Vec3,
+        /// Radius, > 0.
+        radius: f32,
+        /// Radiance of its surface, RGB.
+        radiance: Vec3,
+    },
+}
+
+/// The sun: a directional light with a finite angular radius.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sun {
+    /// Unit direction **towards** the sun.
+    pub direction: Vec3,
+    /// Angular radius in radians (the real sun: 0.00465).
+    pub angular_radius: f32,
+    /// Irradiance on a plane facing the sun, linear RGB.
+    pub irradiance: Vec3,
+}
+
+/// Radiance arriving from infinitely far away where no geometry is hit.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Sky {
+    /// No sky: black.
+    None,
+    /// The same radiance from every direction.
+    Constant(Vec3),
+    /// An equirectangular (latitude-longitude) environment map, +Y up, loaded whole.
+    Equirect {
+        /// The EXR file it came from.
+        path: PathBuf,
+        /// Width in pixels (longitude).
+        width: u32,
+        /// Height in pixels (latitude, row 0 is the zenith).
+        height: u32,
+        /// Row-major linear RGB radiance.
+        pixels: Vec<Vec3>,
+    },
+}
+
+/// One mesh instance: a contiguous run of [`Scene::triangles`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mesh {
+    /// Name (node name, else mesh name, else `mesh#i`).
+    pub name: String,
+    /// Index of its first triangle in [`Scene::triangles`].
+    pub first_triangle: u32,
+    /// Number of triangles kept (degenerate ones dropped).
+    pub triangle_count: u32,
+    /// Whether every triangle of the mesh has lightmap UVs.
+    pub has_lightmap_uvs: bool,
+}
+
+/// One world-space triangle with everything the bake needs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Triangle {
+    /// Vertex positions, world space.
+    pub positions: [Vec3; 3],
+    /// Unit vertex normals, world space (the geometric normal where the source has none).
+    pub normals: [Vec3; 3],
+    /// Lightmap UVs (glTF `TEXCOORD_1`), or `None` when the mesh has none.
+    pub lightmap_uv: Option<[Vec2; 3]>,
+    /// Index into [`Scene::meshes`].
+    pub mesh: u32,
+    /// Index into [`Scene::materials`].
+    pub material: u32,
+}
+
+impl Triangle {
+    /// Unit geometric normal (right-handed winding), or zero for a degenerate triangle.
+    #[must_use]
+    pub fn geometric_normal(&self) -> Vec3 {
+        let [a, b, c] = self.positions;
+        (b - a).cross(c - a).normalize_or_zero()
+    }
+
+    /// World-space area.
+    #[must_use]
+    pub fn area(&self) -> f32 {
+        let [a, b, c] = self.positions;
+        0.5 * (b - a).cross(c - a).length()
+    }
+}
+
+/// A loaded scene. See the module docs for what is kept and dropped.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// The file it was loaded from.
+    pub path: PathBuf,
+    /// Mesh instances in file order; their triangles are contiguous.
+    pub meshes: Vec<Mesh>,
+    /// All triangles, world space.
+    pub triangles: Vec<Triangle>,
+    /// Materials; the last one may be [`Material::default_grey`].
+    pub materials: Vec<Material>,
+    /// Punctual lights.
+    pub lights: Vec<SceneLight>,
+    /// Sun, if any (from a scene file or the command line).
+    pub sun: Option<Sun>,
+    /// Sky radiance.
+    pub sky: Sky,
+    /// Triangles dropped because their area was zero or a position was not finite.
+    pub degenerate_triangles: usize,
+}
+
+impl Scene {
+    /// A scene made in code: `triangles` as one mesh named `name` (with lightmap UVs where
+    /// the triangles have them), `materials`, no lights, no sun, a black sky. Callers set
+    /// the other fields.
+    pub fn of_triangles(name: &str, triangles: Vec<Triangle>, materials: Vec<Material>) -> Scene {
+        Scene {
+            path: PathBuf::from(format!("<{name}>")),
+            meshes: vec![Mesh {
+                name: name.into(),
+                first_triangle: 0,
+                triangle_count: triangles.len() as u32,
+                has_lightmap_uvs: triangles.iter().all(|t| t.lightmap_uv.is_some()),
+            }],
+            triangles,
+            materials,
+            lights: Vec::new(),
+            sun: None,
+            sky: Sky::None,
+            degenerate_triangles: 0,
+        }
+    }
+
+    /// Loads a scene from `.gltf`, `.glb`, `.obj` or a `.toml` scene file.
+    ///
+    /// # Errors
+    /// A [`SceneError`] naming the file and what is wrong; [`SceneError::Empty`] when no
+    /// triangle survives.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        let scene = match ext.as_deref() {
+            Some("gltf" | "glb") => gltf::load(path)?,
+            Some("obj") => obj::load(path)?,
+            Some("toml") => SceneFile::load(path)?,
+            _ => {
+                return Err(SceneError::UnknownFormat {
+                    path: path.to_owned(),
+                });
+            }
+        };
+        if scene.triangles.is_empty() {
+            return Err(SceneError::Empty {
+                path: path.to_owned(),
+                degenerate: scene.degenerate_triangles,
+            });
+        }
+        Ok(scene)
+    }
+
+    /// The flat triangle soup, world space, in [`Scene::triangles`] order (the order BVH
+    /// primitive ids refer to).
+    #[must_use]
+    pub fn triangle_positions(&self) -> Vec<[Vec3; 3]> {
+        self.triangles.iter().map(|t| t.positions).collect()
+    }
+
+    /// The mesh a triangle belongs to.
+    ///
+    /// # Panics
+    /// If `triangle` is out of range.
+    #[must_use]
+    pub fn triangle_mesh(&self, triangle: usize) -> &Mesh {
+        &self.meshes[self.triangles[triangle].mesh as usize]
+    }
+
+    /// The material of a triangle.
+    ///
+    /// # Panics
+    /// If `triangle` is out of range.
+    #[must_use]
+    pub fn triangle_material(&self, triangle: usize) -> &Material {
+        &self.materials[self.triangles[triangle].material as usize]
+    }
+
+    /// Names of meshes that lack lightmap UVs (reported by `prepare`).
+    #[must_use]
+    pub fn meshes_without_lightmap_uvs(&self) -> Vec<&str> {
+        self.meshes
+            .iter()
+            .filter(|m| !m.has_lightmap_uvs)
+            .map(|m| m.name.as_str())
+            .collect()
+    }
+
+    /// World-space bounds of all triangles, `(min, max)`.
+    #[must_use]
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for p in self.triangles.iter().flat_map(|t| t.positions) {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        (lo, hi)
+    }
+}
+
+/// Accumulates meshes and triangles while a source is read; drops degenerate triangles.
+struct SceneBuilder {
+    path: PathBuf,
+    meshes: Vec<Mesh>,
+    triangles: Vec<Triangle>,
+    degenerate: usize,
+}
+
+impl SceneBuilder {
+    fn new(path: &Path) -> Self {
+        Self {
+            path: path.to_owned(),
+            meshes: Vec::new(),
+            triangles: Vec::new(),
+            degenerate: 0,
+        }
+    }
+
+    fn begin_mesh(&mut self, name: String) -> u32 {
+        let first = self.triangles.len() as u32;
+        self.meshes.push(Mesh {
+            name,
+            first_triangle: first,
+            triangle_count: 0,
+            has_lightmap_uvs: true,
+        });
+        (self.meshes.len() - 1) as u32
+    }
+
+    /// Adds a triangle unless it is degenerate; `normals` may be zero (then the geometric
+    /// normal is used).
+    fn push(&mut self, mut t: Triangle) {
+        let finite = t.positions.iter().all(|p| p.is_finite());
+        let n = t.geometric_normal();
+        if !finite || n == Vec3::ZERO || t.area() <= 0.0 {
+            self.degenerate += 1;
+            return;
+        }
+        for vn in &mut t.normals {
+            let u = vn.normalize_or_zero();
+            *vn = if u == Vec3::ZERO || !u.is_finite() {
+                n
+            } else {
+                u
+            };
+        }
+        if let Some(uv) = t.lightmap_uv
+            && !uv.iter().all(|v| v.is_finite())
+        {
+            t.lightmap_uv = None;
+        }
+        let mesh = &mut self.meshes[t.mesh as usize];
+        mesh.triangle_count += 1;
+        if t.lightmap_uv.is_none() {
+            mesh.has_lightmap_uvs = false;
+        }
+        self.triangles.push(t);
+    }
+
+    fn bad_mesh(&self, mesh: u32, message: String) -> SceneError {
+        SceneError::BadMesh {
+            path: self.path.clone(),
+            mesh: self.meshes[mesh as usize].name.clone(),
+            message,
+        }
+    }
+
+    fn finish(self, materials: Vec<Material>, lights: Vec<SceneLight>) -> Scene {
+        Scene {
+            path: self.path,
+            meshes: self.meshes,
+            triangles: self.triangles,
+            materials,
+            lights,
+            sun: None,
+            sky: Sky::None,
+            degenerate_triangles: self.degenerate,
+        }
+    }
+}
+
+/// sRGB 8-bit transfer function → linear.
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Average linear RGB of an 8-bit sRGB image given as interleaved channels.
+fn average_srgb8(pixels: &[u8], channels: usize) -> Option<Vec3> {
+    if channels < 3 || pixels.len() < channels {
+        return None;
+    }
+    let mut sum = glam::DVec3::ZERO;
+    let mut n = 0u64;
+    for px in pixels.chunks_exact(channels) {
+        let lin = |i: usize| f64::from(srgb_to_linear(f32::from(px[i]) / 255.0));
+        sum += glam::DVec3::new(lin(0), lin(1), lin(2));
+        n += 1;
+    }
+    Some((sum / n as f64).as_vec3())
+}
+
+mod gltf;
+mod obj;
+mod scene_file;
+
+pub use scene_file::{SceneFile, SkySpec, SphereSpec, SunSpec, load_equirect};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn degenerate_triangles_are_dropped_and_counted() {
+        let mut b = SceneBuilder::new(Path::new("x"));
+        let id = b.begin_mesh("m".into());
+        let t = |p: [Vec3; 3]| Triangle {
+            positions: p,
+            normals: [Vec3::ZERO; 3],
+            lightmap_uv: None,
+            mesh: id,
+            material: 0,
+        };
+        b.push(t([Vec3::ZERO, Vec3::X, Vec3::Y]));
+        b.push(t([Vec3::ZERO, Vec3::X, Vec3::X * 2.0]));
+        b.push(t([Vec3::ZERO, Vec3::X, Vec3::NAN]));
+        let s = b.finish(vec![], vec![]);
+        assert_eq!(s.triangles.len(), 1);
+        assert_eq!(s.degenerate_triangles, 2);
+        assert_eq!(s.triangles[0].normals, [Vec3::Z; 3]);
+        assert!(!s.meshes[0].has_lightmap_uvs);
+    }
+}

@@ -1,0 +1,197 @@
+//! Wavefront OBJ + MTL through `tobj`.
+use super::*;
+
+pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
+    let opts = tobj::LoadOptions {
+        triangulate: true,
+        single_index: true,
+        ..Default::default()
+    };
+    check_element_indices(path)?;
+    let (models, mtl) = tobj::load_obj(path, &opts).map_err(|source| SceneError::Obj {
+        path: path.to_owned(),
+        source,
+    })?;
+    // A missing or broken MTL is an error: the albedo would silently be wrong otherwise.
+    let mtl = mtl.map_err(|source| SceneError::Obj {
+        path: path.to_owned(),
+        source,
+    })?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut materials: Vec<Material> = mtl.iter().map(|m| read_material(m, dir)).collect();
+    let default_material = materials.len() as u32;
+    materials.push(Material::default_grey());
+
+    let mut b = SceneBuilder::new(path);
+    for (k, model) in models.iter().enumerate() {
+        let name = if model.name.is_empty() {
+            format!("mesh#{k}")
+        } else {
+            model.name.clone()
+        };
+        let id = b.begin_mesh(name);
+        read_model(&mut b, id, &model.mesh, default_material)?;
+    }
+    Ok(b.finish(materials, Vec::new()))
+}
+
+/// Every index of a face (`f`) or line (`l`) names an element of the file: tobj 4.0.5
+/// resolves a relative index before the first element (`f 1/-5` with one `vt`), or a
+/// huge one, to a huge `usize` and computes `vt * 2 + 1` and `vn * 3 + 2` unchecked
+/// (`add_vertex`; an overflow found by the `scene` fuzz target). Indices are resolved as
+/// tobj does (relative ones against the elements so far; 0 and −count+… resolving to −1
+/// mean "none"), and only kinds the file has are checked, as tobj only reads those.
+fn check_element_indices(path: &Path) -> Result<(), SceneError> {
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    let text = String::from_utf8_lossy(&bytes);
+    const KINDS: [(&str, &str); 3] = [
+        ("v", "vertex"),
+        ("vt", "texture coordinate"),
+        ("vn", "normal"),
+    ];
+    let kind = |word: Option<&str>| KINDS.iter().position(|k| Some(k.0) == word);
+    let mut total = [0isize; 3];
+    for line in text.lines() {
+        if let Some(k) = kind(line.split_whitespace().next()) {
+            total[k] += 1;
+        }
+    }
+    let mut seen = [0isize; 3];
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let first = words.next();
+        if let Some(k) = kind(first) {
+            seen[k] += 1;
+            continue;
+        }
+        if !matches!(first, Some("f" | "l")) {
+            continue;
+        }
+        for (k, field) in words.flat_map(|w| w.split('/').take(3).enumerate()) {
+            let Ok(x) = field.parse::<isize>() else {
+                continue; // tobj refuses the face itself
+            };
+            let resolved = if x < 0 {
+                seen[k].saturating_add(x)
+            } else {
+                x - 1
+            };
+            if total[k] > 0 && (resolved < -1 || resolved >= total[k]) {
+                return Err(SceneError::ObjIndex {
+                    path: path.to_owned(),
+                    line: n + 1,
+                    message: format!(
+                        "{} index {x} names no {} (the file has {}, {} before this line)",
+                        KINDS[k].1, KINDS[k].1, total[k], seen[k]
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+fn read_material(m: &tobj::Material, dir: &Path) -> Material {
+    let kd = m.diffuse.map_or(Vec3::splat(0.8), Vec3::from);
+    let tex = m
+        .diffuse_texture
+        .as_ref()
+        .and_then(|t| image::open(dir.join(t)).ok())
+        .and_then(|img| average_srgb8(img.to_rgb8().as_raw(), 3));
+    // tobj parses `Ke` into `emissive`; older files spell it as an unknown parameter.
+    let ke = m
+        .emissive
+        .map(Vec3::from)
+        .or_else(|| m.unknown_param.get("Ke").and_then(|s| parse_vec3(s)))
+        .unwrap_or(Vec3::ZERO);
+    Material {
+        name: m.name.clone(),
+        albedo: (kd * tex.unwrap_or(Vec3::ONE)).clamp(Vec3::ZERO, Vec3::ONE),
+        emission: ke.max(Vec3::ZERO),
+    }
+}
+
+fn parse_vec3(s: &str) -> Option<Vec3> {
+    let v: Vec<f32> = s
+        .split_whitespace()
+        .map(str::parse)
+        .collect::<Result<_, _>>()
+        .ok()?;
+    match v.as_slice() {
+        [x] => Some(Vec3::splat(*x)),
+        [x, y, z] => Some(Vec3::new(*x, *y, *z)),
+        _ => None,
+    }
+}
+
+fn read_model(
+    b: &mut SceneBuilder,
+    id: u32,
+    mesh: &tobj::Mesh,
+    default_material: u32,
+) -> Result<(), SceneError> {
+    let count = mesh.positions.len() / 3;
+    let at3 = |v: &[f32], i: usize| Vec3::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+    let has_n = mesh.normals.len() == mesh.positions.len();
+    let has_uv = mesh.texcoords.len() / 2 == count && count > 0;
+    if let Some(&bad) = mesh.indices.iter().find(|&&i| i as usize >= count) {
+        return Err(b.bad_mesh(
+            id,
+            format!("index {bad} is out of range ({count} vertices)"),
+        ));
+    }
+    let material = mesh.material_id.map_or(default_material, |m| m as u32);
+    for tri in mesh.indices.chunks_exact(3) {
+        let v = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
+        b.push(Triangle {
+            positions: v.map(|i| at3(&mesh.positions, i)),
+            normals: if has_n {
+                v.map(|i| at3(&mesh.normals, i))
+            } else {
+                [Vec3::ZERO; 3]
+            },
+            lightmap_uv: has_uv
+                .then(|| v.map(|i| Vec2::new(mesh.texcoords[2 * i], mesh.texcoords[2 * i + 1]))),
+            mesh: id,
+            material,
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::*;
+
+    #[test]
+    fn obj_indices_naming_no_element_are_errors_naming_the_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("quad.obj");
+        let head = "v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvn 0 0 1\n";
+        for (face, message) in [
+            // Relative, before the first texture coordinate: overflowed in tobj.
+            (
+                "f 1/-3 2/1 3/1",
+                "line 6: texture coordinate index -3 names no texture coordinate (the file has 1, 1 before this line)",
+            ),
+            (
+                "f 1//1 2//1 3//9223372036854775807",
+                "line 6: normal index 9223372036854775807 names no normal (the file has 1, 1 before this line)",
+            ),
+            (
+                "f 1 2 4",
+                "line 6: vertex index 4 names no vertex (the file has 3, 3 before this line)",
+            ),
+        ] {
+            std::fs::write(&path, format!("{head}{face}\n")).unwrap();
+            let e = Scene::load(&path).expect_err("an index naming no element is an error");
+            assert_eq!(e.to_string(), format!("{}: {message}", path.display()));
+        }
+        // 0 and a relative index to just before the first element mean "none", as in tobj.
+        std::fs::write(&path, format!("{head}f 1/0/-1 2/-2/1 3/1/1\n")).unwrap();
+        assert_eq!(Scene::load(&path).unwrap().triangles.len(), 1);
+    }
+}

@@ -1,0 +1,43 @@
+//! Fixtures the tests and benches of every crate share (one home instead of copies): where the
+//! third-party scenes are, and the closed box rooms of analytic tests. Not part of the API.
+
+use std::path::PathBuf;
+
+use glam::Vec3;
+
+/// Where the tests and benches find the third-party scenes: `GUIDEBAKE_SCENES` if set, else
+/// `../shared/scenes` beside the workspace (or `../../shared/scenes`, for a workspace that is a
+/// git worktree one level further down). Prints a "skipping" line and returns `None` when
+/// none exists, so a test on a fresh clone without `../shared` skips with a message.
+pub fn shared_scenes_dir() -> Option<PathBuf> {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let candidates = std::env::var_os("GUIDEBAKE_SCENES")
+        .map(PathBuf::from)
+        .into_iter()
+        .chain(
+            [
+                format!("{root}/../shared/scenes"),
+                format!("{root}/../../shared/scenes"),
+            ]
+            .map(PathBuf::from),
+        );
+    let found = candidates.into_iter().find(|p| p.is_dir());
+    if found.is_none() {
+        println!("skipping: ../shared/scenes is absent (set GUIDEBAKE_SCENES to point at it)");
+    }
+    found
+}
+
+/// The six faces of the axis-aligned box from `corner` with edge `size`, each as (corner,
+/// edge u, edge v) with u × v pointing into the box: the closed rooms of tests and examples.
+pub fn inward_box_faces(corner: Vec3, size: f32) -> [(Vec3, Vec3, Vec3); 6] {
+    let (o, x, y, z) = (corner, Vec3::X * size, Vec3::Y * size, Vec3::Z * size);
+    [
+        (o, x, y),
+        (o + z, y, x),
+        (o, y, z),
+        (o + x, z, y),
+        (o, z, x),
+        (o + y, x, z),
+    ]
+}
