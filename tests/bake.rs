@@ -6,12 +6,13 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
-use guidebake::bake::run::{
-    BakeError, BakeJob, bake, bake_pass_with_progress, finish, merge_pass, merged_results, work_dir,
-};
+use guidebake::bake::finish::{finish, merge_pass};
+use guidebake::bake::run::{BakeError, BakeJob, bake, bake_pass_with_progress};
 use guidebake::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Transport};
 use guidebake::bake::shard::Shard;
-use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle, inward_box_faces};
+use guidebake::bake::workdir::{merged_results, work_dir};
+use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle};
+use guidebake::test_support::inward_box_faces;
 use guidebake::texels::{
     FLAG_VALID, MeshRecord, PageRecord, TexelFile, TexelRecord, TexelWriter, TileRect,
 };
@@ -701,7 +702,7 @@ fn aux_channels_hold_samples_error_validity_position_and_normal() {
     let job = f.job("aux.exr", 2, Shard::WHOLE);
     f.run(&job, None).unwrap();
     let channel = |name: &str| channel(&job.out, name);
-    for name in guidebake::bake::run::AUX_CHANNELS {
+    for name in guidebake::bake::finish::AUX_CHANNELS {
         assert!(channel(name).iter().all(|v| v.is_finite()), "{name}");
     }
     assert!(channel("samples").iter().all(|&s| s == 64.0));

@@ -5,10 +5,12 @@
 //! run bakes ([`shard`]), and the bounded worker/writer [`pipeline`] that commits finished
 //! tiles to the [result file and journal](crate::output).
 
+pub mod finish;
 pub mod gather;
 pub mod grid;
 pub mod pipeline;
 pub mod run;
 pub mod settings;
 pub mod shard;
+pub mod workdir;
 pub mod world;

@@ -5,9 +5,10 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress, work_dir};
+use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress};
 use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Schedule, Transport};
 use crate::bake::shard::Shard;
+use crate::bake::workdir::work_dir;
 use crate::scene::Scene;
 use crate::transport::emitters::EmitterSelection;
 

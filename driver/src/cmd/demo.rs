@@ -51,7 +51,7 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
     for (name, guiding) in [("baseline", Guiding::Off), ("guided", Guiding::Coherent)] {
         let out = args.out.join(format!("{name}.exr"));
         // A demo is always baked afresh: an earlier, interrupted demo's work is not resumed.
-        let _ = std::fs::remove_dir_all(crate::bake::run::work_dir(&out, Shard::WHOLE));
+        let _ = std::fs::remove_dir_all(crate::bake::workdir::work_dir(&out, Shard::WHOLE));
         let job = BakeJob {
             texels: texels.clone(),
             out: out.clone(),

@@ -5,7 +5,8 @@
 
 use std::path::PathBuf;
 
-use crate::bake::run::{finish, merge_pass, read_manifest};
+use crate::bake::finish::{finish, merge_pass};
+use crate::bake::workdir::read_manifest;
 use crate::texels::TexelFile;
 
 /// Arguments of `guidebake merge`.
