@@ -29,6 +29,9 @@ use wide::{f32x8, u32x8};
 use crate::packet::LANES;
 use crate::sobol::{rotate_x8, sobol_2d, sobol_2d_x8, to_unit_x8};
 
+#[cfg(feature = "alloc")]
+pub mod coherence;
+
 /// The order in which a quadtree node's four children are visited.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CurveOrder {

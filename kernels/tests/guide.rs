@@ -98,7 +98,7 @@ fn chi2_check(name: &str, g: &Guide<'_>, lo: f64, hi: f64, seed: u64) {
     let e = expected(g, lo, hi, SAMPLES);
     let r = chi_square(&observed, &e, 5.0);
     if !r.passes(ALPHA, CHI2_TESTS) {
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/target/chi2");
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../target/chi2");
         std::fs::create_dir_all(dir).unwrap();
         let path = format!("{dir}/{name}.txt");
         let mut f = std::fs::File::create(&path).unwrap();

@@ -3,12 +3,12 @@
 //! and the packet coherence that README's figure reports.
 
 use glam::Vec3;
-use guidebake::cmd::samples::{coherence_table, mean_spread_deg};
 use guidebake_kernels::mapping::{
     cosine_hemisphere_pdf, cosine_hemisphere_pdf_x8, orthonormal_basis, sample_cosine_hemisphere,
     sample_cosine_hemisphere_x8,
 };
 use guidebake_kernels::packet::LANES;
+use guidebake_kernels::presort::coherence::{coherence_table, mean_spread_deg};
 use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{
     rotate, rotate_x8, rotation, sobol_2d, sobol_2d_x8, to_unit, to_unit_x8,
