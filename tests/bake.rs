@@ -11,6 +11,7 @@ use guidebake::bake::run::{BakeError, BakeJob, bake, bake_pass_with_progress};
 use guidebake::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Transport};
 use guidebake::bake::shard::Shard;
 use guidebake::bake::workdir::{merged_results, work_dir};
+use guidebake::output::readback::read_channel;
 use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle};
 use guidebake::test_support::inward_box_faces;
 use guidebake::texels::{
@@ -533,17 +534,7 @@ fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
 
 /// Channel `name` of the single-page lightmap at `path`, row by row.
 fn channel(path: &Path, name: &str) -> Vec<f32> {
-    let image = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
-    image
-        .layer_data
-        .channel_data
-        .list
-        .iter()
-        .find(|c| c.name == *name)
-        .unwrap_or_else(|| panic!("{}: no channel {name}", path.display()))
-        .sample_data
-        .values_as_f32()
-        .collect()
+    read_channel(path, name).unwrap()
 }
 
 /// Every texel's irradiance (R channel) of the single-page lightmap at `path`.

@@ -20,6 +20,7 @@ use std::sync::atomic::AtomicBool;
 use guidebake::bake::run::{BakeJob, bake};
 use guidebake::bake::settings::{BakeSettings, Guiding, Transport};
 use guidebake::bake::shard::Shard;
+use guidebake::output::readback::read_channel;
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
 use guidebake::scene::Scene;
 use guidebake::test_support::shared_scenes_dir;
@@ -32,20 +33,14 @@ const SCENES: [&str; 3] = [
 
 /// Irradiance luminance of every valid texel, in pixel order, and the validity mask.
 fn valid_luminance(path: &Path) -> Vec<Option<f64>> {
-    let image = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
     let channel = |name: &str| -> Vec<f64> {
-        image
-            .layer_data
-            .channel_data
-            .list
-            .iter()
-            .find(|c| c.name == *name)
-            .unwrap_or_else(|| panic!("{}: no channel {name}", path.display()))
-            .sample_data
-            .values_as_f32()
+        read_channel(path, name)
+            .unwrap()
+            .into_iter()
             .map(f64::from)
             .collect()
     };
+
     let (r, g, b, valid) = (
         channel("R"),
         channel("G"),

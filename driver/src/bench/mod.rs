@@ -20,7 +20,6 @@ pub mod charts;
 pub mod harness;
 pub mod method;
 pub mod metrics;
-pub mod readback;
 pub mod reference;
 pub mod report;
 
@@ -59,7 +58,7 @@ pub enum BenchError {
     Bake(#[from] BakeError),
     /// A lightmap could not be read back.
     #[error(transparent)]
-    Readback(#[from] readback::ReadbackError),
+    Readback(#[from] crate::output::readback::ReadbackError),
     /// A lightmap could not be compared with the reference.
     #[error("comparing with the reference: {0}")]
     Compare(#[from] metrics::CompareError),

@@ -25,10 +25,10 @@ use serde::{Deserialize, Serialize};
 use super::BenchError;
 use super::harness::Bench;
 use super::method::Method;
-use super::readback::read_lightmap;
 use crate::bake::settings::{BakeSettings, Transport};
 use crate::output::atomic;
 use crate::output::fnv1a64;
+use crate::output::readback::read_lightmap;
 use crate::scene::Scene;
 use crate::texels::TexelFile;
 

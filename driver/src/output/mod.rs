@@ -22,6 +22,7 @@ use std::path::{Path, PathBuf};
 pub mod atomic;
 pub mod exr_pages;
 pub mod journal;
+pub mod readback;
 pub mod result_file;
 
 /// A 64-bit FNV-1a hash: checksums of journal records and identities of bake settings.

@@ -1,6 +1,7 @@
-//! Reading a baked lightmap back, texel by texel: the value written at each valid texel's
-//! pixel of its EXR page (dilation only fills pixels no texel covers, so these are the bake's
-//! results, times ρ when it was applied).
+//! Reading a baked lightmap back — the other half of [`super::exr_pages`]: texel by texel, the
+//! value written at each valid texel's pixel of its EXR page (dilation only fills pixels no
+//! texel covers, so these are the bake's results, times ρ when it was applied); or one channel
+//! of a page, pixel by pixel. Used by the bench and the tests.
 
 use std::path::{Path, PathBuf};
 
@@ -41,6 +42,28 @@ fn read_page(path: &Path) -> Result<Page, ReadbackError> {
         what: format!("cannot read the lightmap page: {e}"),
     })?;
     Ok(image.layer_data.channel_data.pixels)
+}
+
+/// Channel `name` (e.g. `R`, or an auxiliary channel) of the single-layer EXR page at `path`,
+/// row by row.
+///
+/// # Errors
+/// [`ReadbackError`] when the file cannot be read or has no channel `name`.
+pub fn read_channel(path: &Path, name: &str) -> Result<Vec<f32>, ReadbackError> {
+    let error = |what: String| ReadbackError {
+        path: path.to_owned(),
+        what,
+    };
+    let image = exr::prelude::read_first_flat_layer_from_file(path)
+        .map_err(|e| error(format!("cannot read the lightmap page: {e}")))?;
+    let channel = image
+        .layer_data
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name == *name)
+        .ok_or_else(|| error(format!("no channel {name}")))?;
+    Ok(channel.sample_data.values_as_f32().collect())
 }
 
 /// The lightmap written at `out` for `texels`, one entry per texel id: `Some(rgb)` for a valid
