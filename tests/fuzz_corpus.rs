@@ -9,7 +9,8 @@
 
 use std::path::{Path, PathBuf};
 
-use guidebake::texels::{FLAG_VALID, PageRecord, TexelFile, TexelRecord, TexelWriter, TileRect};
+use guidebake::test_support::floor_texel;
+use guidebake::texels::{PageRecord, TexelFile, TexelWriter, TileRect};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_suite::fuzzing::TARGETS;
 
@@ -424,16 +425,7 @@ fn two_tile_texels(path: &Path) {
         height: 8,
     };
     let mut w = TexelWriter::create(path, &[page], &[], 0, 1.0).unwrap();
-    let texel = |x: u16, y: u16| TexelRecord {
-        position: [f32::from(x), 0.0, f32::from(y)],
-        normal: [0.0, 1.0, 0.0],
-        dpdu: [1.0, 0.0, 0.0],
-        dpdv: [0.0, 0.0, 1.0],
-        page: 0,
-        pixel: [x, y],
-        triangle: u32::MAX,
-        flags: FLAG_VALID,
-    };
+    let texel = floor_texel;
     let rect = |y| TileRect {
         page: 0,
         x: 0,

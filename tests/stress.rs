@@ -23,7 +23,7 @@ use guidebake::bvh::Preset;
 use guidebake::output::journal::RhoSums;
 use guidebake::output::result_file::{FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_VALID};
 use guidebake::scene::{Material, Scene, Sky, Sun, Triangle};
-use guidebake::test_support::inward_box_faces;
+use guidebake::test_support::{inward_box_faces, quad};
 use guidebake::texels::{FLAG_VALID as TEXEL_VALID, TexelRecord};
 
 const MODES: [Guiding; 3] = [Guiding::Off, Guiding::Naive, Guiding::Coherent];
@@ -35,22 +35,6 @@ fn settings(guiding: Guiding, spp: u32) -> BakeSettings {
         guiding,
         ..Default::default()
     }
-}
-
-/// A quad `origin + s·u + t·v`, s, t ∈ [0,1], as two triangles facing `u × v`.
-fn quad(origin: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {
-    let n = u.cross(v).normalize();
-    let tri = |a: Vec3, b: Vec3, c: Vec3| Triangle {
-        positions: [a, b, c],
-        normals: [n; 3],
-        lightmap_uv: Some([Vec2::ZERO; 3]),
-        mesh: 0,
-        material,
-    };
-    [
-        tri(origin, origin + u, origin + u + v),
-        tri(origin, origin + u + v, origin + v),
-    ]
 }
 
 /// A square of side `2·half` around `centre` in the plane z = centre.z, facing +z.

@@ -3,7 +3,10 @@
 
 use std::path::PathBuf;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+
+use crate::scene::Triangle;
+use crate::texels::{FLAG_VALID, TexelRecord};
 
 /// Where the tests and benches find the third-party scenes: `GUIDEBAKE_SCENES` if set, else
 /// `../shared/scenes` beside the workspace (or `../../shared/scenes`, for a workspace that is a
@@ -40,4 +43,36 @@ pub fn inward_box_faces(corner: Vec3, size: f32) -> [(Vec3, Vec3, Vec3); 6] {
         (o, z, x),
         (o + y, x, z),
     ]
+}
+
+/// A quad `origin + s·u + t·v`, s, t ∈ [0,1], as two triangles of mesh 0 facing `u × v`
+/// (lightmap UVs all zero: for scenes that are traced, not prepared).
+pub fn quad(origin: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {
+    let n = u.cross(v).normalize();
+    let tri = |a: Vec3, b: Vec3, c: Vec3| Triangle {
+        positions: [a, b, c],
+        normals: [n; 3],
+        lightmap_uv: Some([Vec2::ZERO; 3]),
+        mesh: 0,
+        material,
+    };
+    [
+        tri(origin, origin + u, origin + u + v),
+        tri(origin, origin + u + v, origin + v),
+    ]
+}
+
+/// A valid texel at pixel (x, y) of page 0 lying on the floor y = 0 at (x, 0, y), facing up,
+/// one unit per pixel, triangle unknown: the texels of hand-made texel files.
+pub fn floor_texel(x: u16, y: u16) -> TexelRecord {
+    TexelRecord {
+        position: [f32::from(x), 0.0, f32::from(y)],
+        normal: [0.0, 1.0, 0.0],
+        dpdu: [1.0, 0.0, 0.0],
+        dpdv: [0.0, 0.0, 1.0],
+        page: 0,
+        pixel: [x, y],
+        triangle: u32::MAX,
+        flags: FLAG_VALID,
+    }
 }

@@ -6,9 +6,8 @@ use std::process::Command;
 
 use guidebake::prepare::{Layout, PrepareError, PrepareOptions, Resolution, prepare};
 use guidebake::scene::{Scene, SceneError};
-use guidebake::texels::{
-    FLAG_VALID, PageRecord, TexelFile, TexelFileError, TexelRecord, TexelWriter, TileRect,
-};
+use guidebake::test_support::floor_texel;
+use guidebake::texels::{PageRecord, TexelFile, TexelFileError, TexelWriter, TileRect};
 
 /// Runs the CLI; returns (exit code, stderr).
 fn cli(args: &[&str]) -> (Option<i32>, String) {
@@ -46,16 +45,7 @@ fn valid_file(dir: &Path) -> PathBuf {
         1.0,
     )
     .unwrap();
-    let texel = |x: u16, y: u16| TexelRecord {
-        position: [f32::from(x), 0.0, f32::from(y)],
-        normal: [0.0, 1.0, 0.0],
-        dpdu: [1.0, 0.0, 0.0],
-        dpdv: [0.0, 0.0, 1.0],
-        page: 0,
-        pixel: [x, y],
-        triangle: u32::MAX,
-        flags: FLAG_VALID,
-    };
+    let texel = floor_texel;
     let a: Vec<_> = (0..8).map(|x| texel(x, 0)).collect();
     let b: Vec<_> = (0..4).map(|x| texel(x, 5)).collect();
     w.push_tile(

@@ -1031,30 +1031,13 @@ fn count_warp(clock: Option<Instant>, counters: &mut GatherCounters) {
 
 #[cfg(test)]
 mod tests {
-    use glam::Vec2;
 
     use super::*;
     use crate::bake::settings::EmitterSampling;
     use crate::bvh::Preset;
     use crate::scene::{Material, Scene, Sky, Sun, Triangle};
-    use crate::test_support::inward_box_faces;
+    use crate::test_support::{inward_box_faces, quad};
     use crate::transport::emitters::EmitterSelection;
-
-    /// A quad `origin + s·u + t·v` as two triangles facing `u × v`.
-    fn quad(origin: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {
-        let n = u.cross(v).normalize();
-        let tri = |a: Vec3, b: Vec3, c: Vec3| Triangle {
-            positions: [a, b, c],
-            normals: [n; 3],
-            lightmap_uv: Some([Vec2::ZERO; 3]),
-            mesh: 0,
-            material,
-        };
-        [
-            tri(origin, origin + u, origin + u + v),
-            tri(origin, origin + u + v, origin + v),
-        ]
-    }
 
     /// The 2 m cube around the origin, every face facing inwards.
     fn inward_cube(material: u32) -> Vec<Triangle> {
