@@ -31,7 +31,8 @@ use super::pipeline::{self, PipelineConfig, PipelineError, TileBuffer, TileFiles
 use super::settings::{BakeSettings, Combine, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::workdir::{
-    Manifest, merged_results, open_batches, open_pass, open_work, pass_files, retire_work, work_dir,
+    Manifest, merged_results, open_batches, open_pass, open_work, pass_files, pass_image,
+    retire_work, work_dir,
 };
 use super::world::World;
 use crate::bvh::{BvhError, Preset};
@@ -266,7 +267,11 @@ pub fn bake_pass_with_progress(
                 Some(_) => merged_results(&job.out, pass - 1),
                 None => pass_files(&dir, pass - 1).0,
             };
-            let image = dir.join(format!("indirect.{}.bin", pass - 1));
+            // The image of pass b − 2 goes first: memory holds one pass image, never two (each
+            // is rebuilt from its result file, so a resumed run needs none of them).
+            world.set_previous_pass(None);
+            let _ = std::fs::remove_file(pass_image(&dir, pass - 2));
+            let image = pass_image(&dir, pass - 1);
             let previous = previous_pass(&texels, scene, &source, &image, bake_id, &mut report)
                 .map_err(|e| not_merged_hint(e, &source, pass - 1))?;
             world.set_previous_pass(Some(previous));

@@ -168,6 +168,12 @@ pub(super) fn open_batches(
     )?)
 }
 
+/// The previous-pass image built from pass `pass` (1-based) for the next pass's gathers
+/// ([`crate::transport::series::PreviousPass`]); disposable, rebuilt from the result file.
+pub(super) fn pass_image(dir: &Path, pass: u32) -> PathBuf {
+    dir.join(format!("indirect.{pass}.bin"))
+}
+
 /// The result file and journal of pass `pass` (1-based) in a work directory.
 pub(super) fn pass_files(dir: &Path, pass: u32) -> (PathBuf, PathBuf) {
     (

@@ -165,4 +165,87 @@ mod tests {
         drop(w);
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
     }
+
+    /// Resident bytes of the mappings of `path` in this process (`/proc/self/smaps`).
+    #[cfg(target_os = "linux")]
+    fn resident_bytes_of(path: &Path) -> u64 {
+        let smaps = std::fs::read_to_string("/proc/self/smaps").unwrap();
+        let name = path.to_str().unwrap();
+        let mut ours = false;
+        let mut kib = 0;
+        for line in smaps.lines() {
+            let header = line.split_whitespace().next().is_some_and(|range| {
+                range.contains('-') && range.chars().all(|c| c.is_ascii_hexdigit() || c == '-')
+            });
+            if header {
+                ours = line.ends_with(name);
+            } else if ours && let Some(v) = line.strip_prefix("Rss:") {
+                kib += v
+                    .trim()
+                    .trim_end_matches("kB")
+                    .trim()
+                    .parse::<u64>()
+                    .unwrap();
+            }
+        }
+        kib * 1024
+    }
+
+    /// A streaming bake reads a texel file tile by tile and releases each tile behind it; the
+    /// file's resident pages must not grow with the file (docs/farm.md, "Bounded memory").
+    /// With a release margin smaller than the folios a fault maps, about half of the file
+    /// stayed resident.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn reading_tile_by_tile_and_releasing_keeps_the_file_out_of_memory() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("big.texels");
+        let side = 1024u32;
+        let pages = [PageRecord {
+            width: side,
+            height: side,
+        }];
+        // 1024 tiles of 32 × 32 texels: a 64 MiB file.
+        let mut w = TexelWriter::create(&path, &pages, &[], 0, 1.0).unwrap();
+        let mut rng = Pcg32::new(9, 1);
+        let mut tile = Vec::with_capacity(1024);
+        for ty in (0..side).step_by(32) {
+            for tx in (0..side).step_by(32) {
+                tile.clear();
+                for y in ty..ty + 32 {
+                    for x in tx..tx + 32 {
+                        tile.push(random_texel(&mut rng, 0, x as u16, y as u16));
+                    }
+                }
+                let rect = TileRect {
+                    page: 0,
+                    x: tx,
+                    y: ty,
+                    width: 32,
+                    height: 32,
+                };
+                w.push_tile(rect, &tile).unwrap();
+            }
+        }
+        w.finish().unwrap();
+        let f = TexelFile::open(&path).unwrap();
+        let mut peak = resident_bytes_of(&path);
+        let mut sum = 0.0f32;
+        for i in 0..f.tiles().len() {
+            sum += f.tile_texels(i).iter().map(|t| t.position[0]).sum::<f32>();
+            f.release_tile(i);
+            if i % 64 == 0 {
+                peak = peak.max(resident_bytes_of(&path));
+            }
+        }
+        assert!(sum.is_finite());
+        let left = resident_bytes_of(&path);
+        let file = std::fs::metadata(&path).unwrap().len();
+        // At most the folios around the tile being read (2 × RELEASE_MARGIN) and the tile table.
+        let bound = 3 * super::reader::RELEASE_MARGIN + 64 * 1024;
+        assert!(
+            peak <= bound && left <= bound,
+            "{peak} bytes resident at the peak, {left} at the end, of a {file}-byte file (bound {bound})"
+        );
+    }
 }
