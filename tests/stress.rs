@@ -6,7 +6,7 @@
 //!
 //! The bake is driven through its public API: a [`Scene`] built in code, [`World`], and
 //! [`TileBaker::bake_tile`] on hand-made texels, with ρ applied from the tiles' sums as the
-//! bake's final pass does ([`RhoSums`]).
+//! bake's final pass does ([`rho_sums`]).
 //!
 //! The default variants are small (a few seconds in the test profile). The long variants
 //! are `#[ignore]`d; run them with
@@ -20,7 +20,7 @@ use guidebake::bake::pipeline::TileBuffer;
 use guidebake::bake::settings::{BakeSettings, Combine, Guiding, MAX_BOUNCES, Transport};
 use guidebake::bake::world::World;
 use guidebake::bvh::Preset;
-use guidebake::output::journal::RhoSums;
+use guidebake::output::journal::rho_sums;
 use guidebake::output::result_file::{FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_VALID};
 use guidebake::scene::{Material, Scene, Sky, Sun, Triangle};
 use guidebake::test_support::{inward_box_faces, quad};
@@ -107,7 +107,7 @@ fn bake_with_rho(
         records.push(baked.record);
         raw.push(out);
     }
-    let rho = RhoSums::reduce(&records).rho();
+    let rho = rho_sums(&records).rho();
     assert!(rho.is_finite() && rho > 0.0, "ρ = {rho}");
     let values = raw
         .iter()
@@ -598,7 +598,7 @@ fn an_all_zero_gather_gives_exact_zeros() {
             let mut buffer = TileBuffer::default();
             let baked = baker.bake_tile(0, 0, &texels, &mut buffer);
             let out = buffer.results;
-            assert_eq!(RhoSums::reduce(&[baked.record]).rho(), 1.0, "{mode}");
+            assert_eq!(rho_sums(&[baked.record]).rho(), 1.0, "{mode}");
             for r in &out {
                 assert_eq!(r.irradiance, [0.0; 3], "{mode}: {r:?}");
                 assert_eq!(

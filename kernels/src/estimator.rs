@@ -540,12 +540,26 @@ impl RhoAccumulator {
         }
     }
 
-    /// Adds one texel's unweighted and weighted mean luminance.
+    /// Adds one texel's unweighted and weighted mean luminance; a pair with a non-finite
+    /// value is skipped (counted in [`RhoAccumulator::skipped`]), in both sums alike.
     #[inline]
     pub fn add(&mut self, unweighted: f64, weighted: f64) {
+        self.add_sums(unweighted, weighted, 1);
+    }
+
+    /// Adds the sums of `texels` texels at once (e.g. one tile's, as a bake's journal keeps
+    /// them); order does not matter, results are bit-identical. A pair with a non-finite
+    /// value is skipped in both sums (counted in [`RhoAccumulator::skipped`]), so one broken
+    /// tile neither enters ρ nor unbalances it.
+    #[inline]
+    pub fn add_sums(&mut self, unweighted: f64, weighted: f64, texels: u64) {
+        if !(unweighted.is_finite() && weighted.is_finite()) {
+            self.skipped += texels;
+            return;
+        }
         self.unweighted.add(unweighted);
         self.weighted.add(weighted);
-        self.texels += 1;
+        self.texels += texels;
     }
 
     /// Adds another accumulator; order does not matter, results are bit-identical.

@@ -10,7 +10,7 @@ use super::settings::{MAX_ITERATIONS, SettingsError};
 use super::workdir::{Manifest, merged_dir, merged_results, pass_files, read_manifest};
 use crate::output::atomic::temporary_name;
 use crate::output::exr_pages::{PageStream, page_path};
-use crate::output::journal::{Journal, RhoSums, TileRecord, dedup_tiles};
+use crate::output::journal::{Journal, TileRecord, dedup_tiles, rho_sums};
 use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
 use crate::texels::TexelFile;
 use guidebake_kernels::estimator::{
@@ -51,7 +51,7 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
         .transpose()?;
     let rho = match (first.bias_correction, &global) {
         (false, _) => 1.0,
-        (true, None) => RhoSums::reduce(&all).rho(),
+        (true, None) => rho_sums(&all).rho(),
         (true, Some(g)) => g.rho,
     };
     let mut written = Written {

@@ -1119,7 +1119,7 @@ mod tests {
         let mut out = TileBuffer::default();
         let baked = baker.bake_tile(0, 1000, texels, &mut out);
         let out = out.results;
-        let sums = crate::output::journal::RhoSums::reduce(&[baked.record]);
+        let sums = crate::output::journal::rho_sums(&[baked.record]);
         let rho = sums.rho() as f32;
         let values: Vec<Vec3> = out.iter().map(|r| Vec3::from(r.irradiance) * rho).collect();
         assert!(values.iter().all(|v| v.is_finite()));

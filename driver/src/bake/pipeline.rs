@@ -265,7 +265,8 @@ mod tests {
 
     use super::*;
     use crate::bake::shard::{Shard, tiles_to_bake};
-    use crate::output::journal::{RhoSums, dedup_tiles};
+    use crate::output::journal::{dedup_tiles, rho_sums};
+    use guidebake_kernels::estimator::RhoAccumulator;
 
     const TILE_TEXELS: u64 = 37;
     const TILES: u32 = 60;
@@ -351,13 +352,13 @@ mod tests {
             .unwrap()
         }
 
-        fn contents(&self) -> (Vec<u8>, RhoSums) {
+        fn contents(&self) -> (Vec<u8>, RhoAccumulator) {
             let bytes = std::fs::read(self.dir.path().join("r")).unwrap();
             let (_, _, mut records) =
                 Journal::open(&self.dir.path().join("j"), false, None).unwrap();
             dedup_tiles(&mut records);
             assert_eq!(records.len(), TILES as usize, "every tile journalled once");
-            (bytes, RhoSums::reduce(&records))
+            (bytes, rho_sums(&records))
         }
     }
 

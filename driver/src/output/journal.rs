@@ -16,6 +16,7 @@ use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use bytemuck::{Pod, Zeroable};
+use guidebake_kernels::estimator::RhoAccumulator;
 
 use super::{OutputFileError, create_with_header, fnv1a64, io_error, open_with_header};
 
@@ -82,41 +83,19 @@ impl TileRecord {
     }
 }
 
-/// The world-wide sums behind ρ = L̂ / L̂_GD, reduced in tile order so that the result is
-/// the same bits whatever order tiles finished in, on however many threads or shards.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct RhoSums {
-    /// Σ L̂ over all valid texels.
-    pub unweighted: f64,
-    /// Σ L̂_GD over all valid texels.
-    pub weighted: f64,
-    /// Valid texels counted.
-    pub texels: u64,
-}
-
-impl RhoSums {
-    /// Sums `records` in ascending tile order (sorting a copy; duplicates must have been
-    /// removed by the caller, see [`dedup_tiles`]).
-    pub fn reduce(records: &[TileRecord]) -> Self {
-        let mut sorted = records.to_vec();
-        sorted.sort_unstable_by_key(|r| r.tile);
-        sorted.iter().fold(Self::default(), |s, r| Self {
-            unweighted: s.unweighted + r.unweighted_luminance,
-            weighted: s.weighted + r.weighted_luminance,
-            texels: s.texels + u64::from(r.texels),
-        })
+/// The world-wide sums behind ρ = L̂ / L̂_GD (the kernels' [`RhoAccumulator`]: exact sums,
+/// so the result is the same bits whatever order tiles finished in, on however many threads
+/// or shards). Duplicates must have been removed by the caller, see [`dedup_tiles`].
+pub fn rho_sums(records: &[TileRecord]) -> RhoAccumulator {
+    let mut sums = RhoAccumulator::new();
+    for r in records {
+        sums.add_sums(
+            r.unweighted_luminance,
+            r.weighted_luminance,
+            u64::from(r.texels),
+        );
     }
-
-    /// ρ = L̂ / L̂_GD, or 1 when the weighted sum is zero or either sum is not finite (a
-    /// black world needs no correction, and ρ must never bring NaN into an output).
-    pub fn rho(&self) -> f64 {
-        let rho = self.unweighted / self.weighted;
-        if self.weighted > 0.0 && rho.is_finite() {
-            rho
-        } else {
-            1.0
-        }
-    }
+    sums
 }
 
 /// Keeps the last record of each tile (a tile baked again after a torn write appears twice
@@ -314,30 +293,34 @@ mod tests {
                 ..Default::default()
             })
             .collect();
-        let forward = RhoSums::reduce(&records);
+        let forward = rho_sums(&records);
         let mut shuffled = records.clone();
         shuffled.reverse();
         shuffled.swap(3, 150);
-        let backward = RhoSums::reduce(&shuffled);
+        let backward = rho_sums(&shuffled);
         assert_eq!(forward.rho().to_bits(), backward.rho().to_bits());
-        assert_eq!(forward.texels, 200);
+        assert_eq!(forward.texels(), 200);
     }
 
     #[test]
     fn rho_is_one_for_a_black_or_broken_world() {
-        assert_eq!(RhoSums::default().rho(), 1.0);
-        let nan = RhoSums {
-            unweighted: f64::NAN,
-            weighted: 1.0,
+        assert_eq!(rho_sums(&[]).rho(), 1.0);
+        let tile = |unweighted: f64, weighted: f64| TileRecord {
             texels: 1,
+            unweighted_luminance: unweighted,
+            weighted_luminance: weighted,
+            ..Default::default()
         };
-        assert_eq!(nan.rho(), 1.0);
-        let ok = RhoSums {
-            unweighted: 3.0,
-            weighted: 2.0,
-            texels: 1,
-        };
-        assert_eq!(ok.rho(), 1.5);
+        assert_eq!(rho_sums(&[tile(f64::NAN, 1.0)]).rho(), 1.0);
+        assert_eq!(rho_sums(&[tile(3.0, f64::INFINITY)]).rho(), 1.0);
+        assert_eq!(rho_sums(&[tile(3.0, 2.0)]).rho(), 1.5);
+        // A broken tile enters neither sum.
+        let mixed = rho_sums(&[
+            tile(3.0, 2.0),
+            tile(f64::NAN, 5.0),
+            tile(1.0, f64::INFINITY),
+        ]);
+        assert_eq!((mixed.rho(), mixed.texels(), mixed.skipped()), (1.5, 1, 2));
     }
 
     #[test]

@@ -9,8 +9,8 @@
 //! and dropped (its tile is baked again, which gives the same bits).
 //!
 //! The world-wide bias correction ρ = L̂ / L̂_GD of the paper (§2.5) needs every tile's sums:
-//! the journal keeps them per tile and [`journal::RhoSums`] reduces them **in tile order**, so
-//! ρ is bit-identical whatever the thread count, the order tiles finished in, or the shard
+//! the journal keeps them per tile and [`journal::rho_sums`] adds them exactly (the kernels'
+//! `RhoAccumulator`), so ρ is bit-identical whatever the thread count, the order tiles finished in, or the shard
 //! split. A final streaming pass ([`exr_pages`]) applies ρ and writes the EXR pages, each to
 //! a temporary name renamed into place, so an output that looks complete is complete.
 
