@@ -192,7 +192,8 @@ mod tests {
     }
 
     /// A streaming bake reads a texel file tile by tile and releases each tile behind it; the
-    /// file's resident pages must not grow with the file (docs/farm.md, "Bounded memory").
+    /// file's resident pages must not grow with the file (docs/farm.md, "Resident memory after
+    /// the release fix").
     /// With a release margin smaller than the folios a fault maps, about half of the file
     /// stayed resident.
     #[cfg(target_os = "linux")]

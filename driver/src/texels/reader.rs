@@ -123,7 +123,7 @@ impl TexelFile {
 /// range released with a smaller margin is mapped again by the next fault in the same folio
 /// and stays resident for good: measured on Linux 6.18, reading a 61 MB texel file tile by
 /// tile and releasing each with a 64 KiB margin left 28 MB resident; 512 KiB or more left
-/// none (docs/farm.md, "Bounded memory").
+/// none (docs/farm.md, "Resident memory after the release fix").
 pub(super) const RELEASE_MARGIN: u64 = 2 << 20;
 
 /// Drops the pages of `count` texel records at byte `start` of `map` from memory (advice;
