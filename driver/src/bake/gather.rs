@@ -30,7 +30,7 @@ use guidebake_kernels::estimator::{
 };
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::mapping::{
-    carried_frame, invert_cosine_hemisphere, orthonormal_basis, sample_cosine_hemisphere,
+    carried_frame, invert_cosine_hemisphere_x8, orthonormal_basis, sample_cosine_hemisphere,
     sample_cosine_hemisphere_x8,
 };
 use guidebake_kernels::packet::{LANES, NO_HIT, Ray, Ray8};
@@ -51,7 +51,7 @@ use crate::output::result_file::{
     FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_UNGUIDED, FLAG_VALID, TexelResult,
 };
 use crate::texels::{FLAG_PARTIAL, FLAG_VALID as TEXEL_VALID, TexelRecord};
-use crate::transport::direct::Receiver;
+use crate::transport::direct::Receiver8;
 use crate::transport::path::{Departure, Leaving};
 use crate::transport::rng::SampleRng;
 
@@ -706,7 +706,8 @@ impl<'a> IterationCtx<'a> {
     /// The density on the primary sample square that this iteration's gather at texel `t`
     /// sampled the world direction `dir` with (the point is the inverse cosine map of `dir`
     /// in the texel's frame): the solid-angle pdf is this × cosθ/π ([`Self::gather_pdf`]).
-    /// 0 below the horizon.
+    /// 0 below the horizon. The scalar reference of [`Self::gather_pdf8`].
+    #[cfg(test)]
     fn sampled_density(&self, t: &GatherTexel, dir: Vec3) -> f32 {
         let local = Vec3::new(dir.dot(t.tangent), dir.dot(t.bitangent), dir.dot(t.normal));
         if local.z <= 0.0 {
@@ -715,7 +716,7 @@ impl<'a> IterationCtx<'a> {
         if self.guide.is_none() {
             return 1.0;
         }
-        let u = invert_cosine_hemisphere(local.normalize());
+        let u = guidebake_kernels::mapping::invert_cosine_hemisphere(local.normalize());
         self.mixture_density(self.guide_pdf(u))
     }
 
@@ -947,11 +948,11 @@ impl<'a> IterationCtx<'a> {
             let seed = self.settings.seed ^ EMITTER_SALT;
             SampleRng::new(seed, t.id, self.k, samples[lane]).unit()
         });
-        let gather_pdf = |d: Vec3| self.gather_pdf(t, d);
-        let at = Receiver {
+        let gather_pdf8 = |dirs: &[Vec3; LANES], live: u8| self.gather_pdf8(t, dirs, live);
+        let at = Receiver8 {
             point: origin,
             normal: t.normal,
-            other: Some(&gather_pdf),
+            other: Some(&gather_pdf8),
         };
         let rays = self
             .world
@@ -964,12 +965,56 @@ impl<'a> IterationCtx<'a> {
     /// world direction `dir`: [`Self::sampled_density`] (the mixture's density on the
     /// primary sample square at the point the cosine map sends to `dir`; 1 unguided) times
     /// `cosθ / π`.
+    #[cfg(test)]
     fn gather_pdf(&self, t: &GatherTexel, dir: Vec3) -> f32 {
         let cos = dir.dot(t.normal);
         if cos <= 0.0 {
             return 0.0;
         }
         self.sampled_density(t, dir) * cos * core::f32::consts::FRAC_1_PI
+    }
+
+    /// [`Self::gather_pdf`] for the directions of the lanes of `live` (the others are 0),
+    /// the same bits: the inverse cosine map and the guide lookup run 8-wide
+    /// (`invert_cosine_hemisphere_x8`, `warp::pdf8`), the rest per lane as in the scalar
+    /// version.
+    fn gather_pdf8(&self, t: &GatherTexel, dirs: &[Vec3; LANES], live: u8) -> [f32; LANES] {
+        let local: [Vec3; LANES] = core::array::from_fn(|lane| {
+            let d = dirs[lane];
+            let l = Vec3::new(d.dot(t.tangent), d.dot(t.bitangent), d.dot(t.normal));
+            if live >> lane & 1 == 1 && l.z > 0.0 {
+                l
+            } else {
+                Vec3::ZERO
+            }
+        });
+        let q: [f32; LANES] = match self.guide {
+            None => [1.0; LANES],
+            Some(guide) => {
+                let unit = local.map(|l| if l.z > 0.0 { l.normalize() } else { Vec3::Z });
+                let w = [0, 1, 2].map(|axis| f32x8::new(unit.map(|u| u[axis])));
+                let [x, y] = invert_cosine_hemisphere_x8(w);
+                match guide {
+                    Learned::Tree(g) => warp::pdf8(g, x, y).to_array(),
+                    Learned::Grid(g) => {
+                        let (x, y) = (x.to_array(), y.to_array());
+                        core::array::from_fn(|lane| g.pdf([x[lane], y[lane]]))
+                    }
+                }
+            }
+        };
+        core::array::from_fn(|lane| {
+            let cos = dirs[lane].dot(t.normal);
+            if local[lane].z <= 0.0 || cos <= 0.0 {
+                return 0.0;
+            }
+            let density = if self.guide.is_none() {
+                1.0
+            } else {
+                self.mixture_density(q[lane])
+            };
+            density * cos * core::f32::consts::FRAC_1_PI
+        })
     }
 
     /// What arrives along `dir` at the ray's origin `from`: the sky on a miss, else what
@@ -1552,6 +1597,43 @@ mod tests {
                 let got = ctx.sampled_density(&t, dir);
                 let want = c + (1.0 - c) * q;
                 assert!((got - want).abs() <= 1e-3 * want, "{w:?}: {got} vs {want}");
+            }
+        }
+        gather_pdf8_is_gather_pdf(&ctx, &t);
+        let unguided = IterationCtx::new(&world, &settings, 0, None);
+        gather_pdf8_is_gather_pdf(&unguided, &t);
+    }
+
+    /// The 8-wide density equals the scalar one bit for bit in the lanes asked for, below the
+    /// horizon too, and is 0 in the others.
+    fn gather_pdf8_is_gather_pdf(ctx: &IterationCtx<'_>, t: &GatherTexel) {
+        let mut rng = guidebake_kernels::testing::Pcg32::new(3, 8);
+        for round in 0..300 {
+            let dirs: [Vec3; LANES] = core::array::from_fn(|_| {
+                let d = Vec3::new(
+                    rng.next_f32() * 2.0 - 1.0,
+                    rng.next_f32() * 2.0 - 1.0,
+                    rng.next_f32() * 2.0 - 1.0,
+                );
+                d.normalize_or(Vec3::Z)
+            });
+            let live = if round == 0 {
+                0xff
+            } else {
+                rng.next_u32() as u8
+            };
+            let got = ctx.gather_pdf8(t, &dirs, live);
+            for lane in 0..LANES {
+                let want = if live >> lane & 1 == 1 {
+                    ctx.gather_pdf(t, dirs[lane])
+                } else {
+                    0.0
+                };
+                assert_eq!(
+                    got[lane].to_bits(),
+                    want.to_bits(),
+                    "lane {lane} of {dirs:?}"
+                );
             }
         }
     }

@@ -50,6 +50,22 @@ pub struct Receiver<'a> {
     pub other: Option<&'a dyn Fn(Vec3) -> f32>,
 }
 
+/// The other strategy's solid-angle densities for the directions of the lanes in a mask.
+pub type Densities8<'a> = dyn Fn(&[Vec3; LANES], u8) -> [f32; LANES] + 'a;
+
+/// The receiver of a packet's eight next-event samples ([`World::direct_irradiance8`]): one
+/// point and normal, and the other strategy's solid-angle densities for eight directions at
+/// once (lanes outside the mask are not looked at and may hold anything), so a guided
+/// gather's density is looked up 8-wide.
+pub struct Receiver8<'a> {
+    /// The point, already offset off its surface.
+    pub point: Vec3,
+    /// Its unit normal (the side being lit).
+    pub normal: Vec3,
+    /// The other strategy's densities for directions `dirs` in the lanes of `mask`.
+    pub other: Option<&'a Densities8<'a>>,
+}
+
 impl World {
     /// Weight of a next-event sample of an emitter at density `pdf` from `at`.
     fn nee_weight(&self, at: &Receiver<'_>, direction: Vec3, pdf: f32) -> f32 {
@@ -88,7 +104,7 @@ impl World {
     /// for the emitters. Adds into `out` and returns the shadow rays traced.
     pub fn direct_irradiance8(
         &self,
-        at: &Receiver<'_>,
+        at: &Receiver8<'_>,
         u: &[[f32; 2]; LANES],
         pick: &[f32; LANES],
         out: &mut [Vec3; LANES],
@@ -127,16 +143,39 @@ impl World {
                 }
             }
             // The weight (and its MIS density, a guide lookup when the gather is guided) only
-            // for the lanes that see their emitter, as in the scalar version.
+            // for the lanes that see their emitter, as in the scalar version: the same bits.
             let (visible, traced) = visible_lanes(&bvh, &packet, 0);
-            for lane in lanes_of(visible) {
+            let live = lanes_of(visible)
+                .fold(0u8, |m, lane| m | u8::from(samples[lane].is_some()) << lane);
+            let others = self.other_densities8(at, &samples, live);
+            for lane in lanes_of(live) {
                 if let Some(s) = &samples[lane] {
-                    out[lane] += self.emitter_weight(at, s);
+                    let cos = at.normal.dot(s.direction);
+                    let w = others[lane].map_or(1.0, |other| power_heuristic(s.pdf, other));
+                    out[lane] += s.radiance * (cos / s.pdf * w);
                 }
             }
             rays += traced;
         }
         rays
+    }
+
+    /// The other strategy's densities at the sampled directions of the lanes of `live`, for
+    /// the MIS weight ([`Self::nee_weight`], 8-wide): `None` where no weighting applies.
+    fn other_densities8(
+        &self,
+        at: &Receiver8<'_>,
+        samples: &[Option<EmitterSample>; LANES],
+        live: u8,
+    ) -> [Option<f32>; LANES] {
+        let (EmitterSampling::Mis, Some(other), true) =
+            (self.emitter_sampling(), at.other, live != 0)
+        else {
+            return [None; LANES];
+        };
+        let dirs = core::array::from_fn(|lane| samples[lane].map_or(Vec3::Z, |s| s.direction));
+        let densities = other(&dirs, live);
+        core::array::from_fn(|lane| (live >> lane & 1 == 1).then_some(densities[lane]))
     }
 
     /// A next-event sample of an emitter from `(p, n)`, unless the world samples none.
