@@ -6,7 +6,12 @@
 
 extern "C" {
 
-void *gb_xatlas_create() { return xatlas::Create(); }
+// xatlas prints warnings with printf by default; stdout belongs to the caller (e.g.
+// `prepare --json`), so printing is switched off before every atlas is made.
+void *gb_xatlas_create() {
+    xatlas::SetPrint(nullptr, false);
+    return xatlas::Create();
+}
 
 void gb_xatlas_destroy(void *atlas) { xatlas::Destroy(static_cast<xatlas::Atlas *>(atlas)); }
 
