@@ -427,7 +427,10 @@ type Place = (u32, u32, u32);
 
 /// Shelf packing of square cells: returns per mesh (page, x, y) and the number of pages.
 fn shelf_pack(cells: &[Option<u32>], page: (u32, u32)) -> (Vec<Option<Place>>, u32) {
-    shelf_pack_rects(&cells.iter().map(|c| c.map(|c| (c, c))).collect::<Vec<_>>(), page)
+    shelf_pack_rects(
+        &cells.iter().map(|c| c.map(|c| (c, c))).collect::<Vec<_>>(),
+        page,
+    )
 }
 
 /// Shelf packing of `(width, height)` rectangles, tallest first, each with a [`GUTTER`] on
@@ -609,7 +612,8 @@ fn unwrap_layout(
         )));
     }
     let max = page.0.min(page.1) - 2 * GUTTER;
-    let fits = |a: &unwrap::Packed| a.width + 2 * GUTTER <= page.0 && a.height + 2 * GUTTER <= page.1;
+    let fits =
+        |a: &unwrap::Packed| a.width + 2 * GUTTER <= page.0 && a.height + 2 * GUTTER <= page.1;
     let mut charted = unwrap::Charted::new(scene, &to_unwrap)?;
     let mut per_mesh_seconds = 0.0;
     let (atlases, cs, places, n) = loop {
@@ -617,8 +621,9 @@ fn unwrap_layout(
         let atlases = if fits(&one) {
             vec![one]
         } else if one_page {
-            d *= 0.98 * (f64::from(page.0) / f64::from(one.width + 2 * GUTTER))
-                .min(f64::from(page.1) / f64::from(one.height + 2 * GUTTER));
+            d *= 0.98
+                * (f64::from(page.0) / f64::from(one.width + 2 * GUTTER))
+                    .min(f64::from(page.1) / f64::from(one.height + 2 * GUTTER));
             continue;
         } else {
             // Too big for one page: an atlas per mesh, each on one page.
@@ -696,7 +701,12 @@ fn unwrap_layout(
             }
         }
     }
-    for (i, ((c, s), place)) in cs.iter().zip(&kept).zip(&places[atlases.len()..]).enumerate() {
+    for (i, ((c, s), place)) in cs
+        .iter()
+        .zip(&kept)
+        .zip(&places[atlases.len()..])
+        .enumerate()
+    {
         let (Some(c), Some(s), Some((p, x, y))) = (c, s, place) else {
             continue;
         };
@@ -705,7 +715,10 @@ fn unwrap_layout(
         let offset = Vec2::new(*x as f32 - s.lo.x * k, *y as f32 - s.lo.y * k);
         let m = &scene.meshes[i];
         let range = m.first_triangle as usize..(m.first_triangle + m.triangle_count) as usize;
-        for (px, t) in pixels[range.clone()].iter_mut().zip(&scene.triangles[range]) {
+        for (px, t) in pixels[range.clone()]
+            .iter_mut()
+            .zip(&scene.triangles[range])
+        {
             *px = t.lightmap_uv.map(|q| q.map(|v| v * k + offset));
         }
     }
@@ -1063,6 +1076,58 @@ mod tests {
             "only touching the diagonal"
         );
         assert!(overlaps_square(&tilted, 1, 2), "above the diagonal");
+    }
+
+    /// Two closed 4 m rooms as two meshes without lightmap UVs.
+    fn two_rooms() -> Scene {
+        let mut triangles = Vec::new();
+        for (mesh, corner) in [(0, Vec3::splat(-2.0)), (1, Vec3::new(8.0, -2.0, -2.0))] {
+            for (c, u, v) in crate::test_support::inward_box_faces(corner, 4.0) {
+                let n = u.cross(v).normalize();
+                for p in [[c, c + u, c + u + v], [c, c + u + v, c + v]] {
+                    triangles.push(Triangle {
+                        positions: p,
+                        normals: [n; 3],
+                        lightmap_uv: None,
+                        mesh,
+                        material: 0,
+                    });
+                }
+            }
+        }
+        let mut s = Scene::of_triangles("room", triangles, vec![]);
+        s.meshes[0].triangle_count = 12;
+        s.meshes.push(crate::scene::Mesh {
+            name: "other room".into(),
+            first_triangle: 12,
+            triangle_count: 12,
+            has_lightmap_uvs: false,
+        });
+        s
+    }
+
+    #[test]
+    fn a_world_too_big_for_a_page_spills_onto_more() {
+        let s = two_rooms();
+        // 2 × 96 m² at 300 texels per unit: 17.3M texels, more than one 4096² page holds;
+        // each room's 8.6M fit one.
+        let (scene, pages, meshes, tpu, report) =
+            unwrap_layout(&s, Resolution::TexelsPerUnit(300.0), &[true, true]).unwrap();
+        assert_eq!(tpu, 300.0);
+        assert_eq!(report.atlases.len(), 2, "{report:?}");
+        assert_eq!(pages.len(), 2);
+        assert_ne!(meshes[0].page, meshes[1].page);
+        assert!(
+            scene
+                .triangles
+                .iter()
+                .all(|t| t.lightmap_uv.is_some_and(|q| q
+                    .iter()
+                    .all(|v| v.cmpge(Vec2::ZERO).all() && v.cmple(Vec2::ONE).all())))
+        );
+        // A room alone too big for a page is an error naming it.
+        let e = unwrap_layout(&s, Resolution::TexelsPerUnit(700.0), &[true, true]).unwrap_err();
+        assert!(e.to_string().contains("mesh 'room' unwraps to"), "{e}");
     }
 
     #[test]

@@ -5,6 +5,9 @@ use std::path::PathBuf;
 
 use glam::Vec3;
 
+use crate::scene::Scene;
+use crate::texels::TexelFile;
+
 /// Where the tests and benches find the third-party scenes: `GUIDEBAKE_SCENES` if set, else
 /// `../shared/scenes` beside the workspace (or `../../shared/scenes`, for a workspace that is a
 /// git worktree one level further down). Prints a "skipping" line and returns `None` when
@@ -40,4 +43,34 @@ pub fn inward_box_faces(corner: Vec3, size: f32) -> [(Vec3, Vec3, Vec3); 6] {
         (o, z, x),
         (o + y, x, z),
     ]
+}
+
+/// Asserts every texel of `f` lies on its triangle of `scene`: within 1e-5 (relative to the
+/// scene size) of its plane, with barycentrics ≥ −1e-3, and has a unit normal.
+///
+/// # Panics
+/// When a texel does not.
+pub fn assert_texels_on_triangles(scene: &Scene, f: &TexelFile) {
+    let (lo, hi) = scene.bounds();
+    let tol = 1e-5 * (hi - lo).max_element().max(1.0);
+    for (i, x) in f.texels().iter().enumerate() {
+        let t = &scene.triangles[x.triangle as usize];
+        let [a, b, c] = t.positions;
+        let p = Vec3::from(x.position);
+        let n = (b - a).cross(c - a);
+        let dist = (p - a).dot(n.normalize());
+        assert!(
+            dist.abs() <= tol,
+            "texel {i} is {dist} off its triangle's plane"
+        );
+        let area2 = n.length_squared();
+        let l1 = (p - a).cross(c - a).dot(n) / area2;
+        let l2 = (b - a).cross(p - a).dot(n) / area2;
+        let l0 = 1.0 - l1 - l2;
+        assert!(
+            l0 >= -1e-3 && l1 >= -1e-3 && l2 >= -1e-3,
+            "texel {i} barycentrics {l0} {l1} {l2}"
+        );
+        assert!((Vec3::from(x.normal).length() - 1.0).abs() < 1e-3);
+    }
 }

@@ -79,6 +79,12 @@ pub fn run(args: &PrepareArgs) -> Result<(), super::CmdError> {
             return Err(e.into());
         }
     }
+    if report.unwrap.is_some() && args.write_gltf.is_none() {
+        eprintln!(
+            "guidebake: warning: lightmap UVs were generated; bake with the scene that \
+             --write-gltf writes (the bake looks bounced light up through the scene's UVs)"
+        );
+    }
     for m in &report.meshes_without_lightmap_uvs {
         eprintln!(
             "guidebake: warning: mesh '{m}' has no lightmap UVs (TEXCOORD_1); it gets no texels"

@@ -292,7 +292,6 @@ mod tests {
             (extent.x - 32.0).abs() <= 2.0 && (extent.y - 32.0).abs() <= 2.0,
             "{extent}"
         );
-        assert!(lo.min_element() >= f32::from(PADDING as u16) - 1.0, "{lo}");
         assert!(hi.x <= p.width as f32 && hi.y <= p.height as f32);
     }
 }

@@ -180,8 +180,7 @@ impl Writer<'_> {
         doc: &::gltf::Document,
         buffers: &[::gltf::buffer::Data],
     ) -> Result<(), WriteError> {
-        let roots: Vec<::gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next())
-        {
+        let roots: Vec<::gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
             Some(s) => s.nodes().collect(),
             None => Vec::new(),
         };
@@ -405,7 +404,10 @@ impl Writer<'_> {
         for &s in sources {
             let at = start + s as usize * stride;
             let element = data.get(at..at + size).ok_or_else(|| {
-                self.unsupported(id, format!("accessor {} runs past its buffer", accessor.index()))
+                self.unsupported(
+                    id,
+                    format!("accessor {} runs past its buffer", accessor.index()),
+                )
             })?;
             bytes.extend_from_slice(element);
             bytes.resize(bytes.len() + padded - size, 0);
