@@ -269,9 +269,18 @@ mod tests {
     fn bad_meshes_are_refused() {
         let (p, _) = cube();
         let mut a = Atlas::new();
-        assert_eq!(a.add_mesh(&p, None, &[0, 1, 9]), Err(AddMeshError::IndexOutOfRange));
-        assert_eq!(a.add_mesh(&p, None, &[0, 1]), Err(AddMeshError::InvalidIndexCount));
+        assert_eq!(
+            a.add_mesh(&p, None, &[0, 1, 9]),
+            Err(AddMeshError::IndexOutOfRange)
+        );
+        assert_eq!(
+            a.add_mesh(&p, None, &[0, 1]),
+            Err(AddMeshError::InvalidIndexCount)
+        );
         let short = [[0.0; 3]; 2];
-        assert_eq!(a.add_mesh(&p, Some(&short), &[0, 1, 2]), Err(AddMeshError::BadLengths));
+        assert_eq!(
+            a.add_mesh(&p, Some(&short), &[0, 1, 2]),
+            Err(AddMeshError::BadLengths)
+        );
     }
 }

@@ -72,12 +72,12 @@ pub fn run(args: &PrepareArgs) -> Result<(), super::CmdError> {
         layout: args.layout,
     };
     let (report, lightmap) = prepare_with(&scene, &args.output, options, args.unwrap)?;
-    if let Some(glb) = &args.write_gltf {
-        if let Err(e) = crate::scene::gltf_write::write_glb(&scene, &lightmap, glb) {
-            // No partial output: the texel file belongs to the same request.
-            let _ = std::fs::remove_file(&args.output);
-            return Err(e.into());
-        }
+    if let Some(glb) = &args.write_gltf
+        && let Err(e) = crate::scene::gltf_write::write_glb(&scene, &lightmap, glb)
+    {
+        // No partial output: the texel file belongs to the same request.
+        let _ = std::fs::remove_file(&args.output);
+        return Err(e.into());
     }
     if report.unwrap.is_some() && args.write_gltf.is_none() {
         eprintln!(
