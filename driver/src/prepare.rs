@@ -48,13 +48,13 @@ use guidebake_kernels::presort::CurveOrder;
 
 use crate::facing::facing_sides;
 use crate::scene::{Scene, Triangle};
-pub use unwrap::{Unwrap, UnwrapError};
-
-pub mod unwrap;
 use crate::texels::{
     FLAG_PARTIAL, FLAG_VALID, MeshRecord, PageRecord, TILE_SIZE, TexelFileError, TexelRecord,
     TexelWriter, TileRect,
 };
+
+pub mod unwrap;
+pub use unwrap::{Unwrap, UnwrapError};
 
 /// Largest page edge `prepare` creates.
 pub const MAX_PAGE: u32 = 16384;
@@ -616,7 +616,15 @@ fn unwrap_layout(
         |a: &unwrap::Packed| a.width + 2 * GUTTER <= page.0 && a.height + 2 * GUTTER <= page.1;
     let mut charted = unwrap::Charted::new(scene, &to_unwrap)?;
     let mut per_mesh_seconds = 0.0;
+    let mut tries = 0;
     let (atlases, cs, places, n) = loop {
+        tries += 1;
+        if tries > 100 {
+            return Err(resolution_error(format!(
+                "the charts do not fit one {}x{} page at any density tried; choose a larger --size",
+                page.0, page.1
+            )));
+        }
         let one = charted.pack(scene, d as f32, max)?;
         let atlases = if fits(&one) {
             vec![one]
@@ -651,9 +659,6 @@ fn unwrap_layout(
         let (places, n) = shelf_pack_rects(&rects, page);
         if one_page && n > 1 {
             d *= 0.95;
-            if d < 1e-9 {
-                return Err(resolution_error("no density fits one page".into()));
-            }
             continue;
         }
         if n > 4096 {
@@ -1126,8 +1131,16 @@ mod tests {
                     .all(|v| v.cmpge(Vec2::ZERO).all() && v.cmple(Vec2::ONE).all())))
         );
         // A room alone too big for a page is an error naming it.
-        let e = unwrap_layout(&s, Resolution::TexelsPerUnit(700.0), &[true, true]).unwrap_err();
+        let e = unwrap_layout(&s, Resolution::TexelsPerUnit(450.0), &[true, true]).unwrap_err();
         assert!(e.to_string().contains("mesh 'room' unwraps to"), "{e}");
+    }
+
+    #[test]
+    fn charts_that_fit_no_page_of_the_size_are_an_error() {
+        let s = two_rooms();
+        // 12 charts with padding and gutters cannot share a 12×12 page.
+        let e = unwrap_layout(&s, Resolution::Size(12, 12), &[true, true]).unwrap_err();
+        assert!(e.to_string().contains("do not fit one 12x12 page"), "{e}");
     }
 
     #[test]
