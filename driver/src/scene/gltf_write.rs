@@ -12,7 +12,7 @@
 //! - `TEXCOORD_1` is the page UV (0..1 across the page); the node's `extras` get
 //!   `guidebake_lightmap: { page, width, height }`, since glTF has no field for it.
 //! - A mesh instanced by several nodes gets a copy per further node (each instance has its
-//!   own place in the lightmap).
+//!   own place in the lightmap); a mesh instance without texels is left as it is.
 //! - All buffers, and images stored as files beside the source, go into the GLB's one
 //!   binary chunk, so the output stands alone.
 //!
@@ -196,6 +196,11 @@ impl Writer<'_> {
             if let Some(mesh) = node.mesh() {
                 let id = next_mesh;
                 next_mesh += 1;
+                if self.without_texels(id) {
+                    // No lightmap place: the mesh stays as the source has it.
+                    continue_children(&mut stack, &node, world);
+                    continue;
+                }
                 let primitives = self.mesh_corners(id, &mesh, buffers, world)?;
                 let new = self.rewrite_mesh(id, &mesh, buffers, &primitives)?;
                 let index = if rewritten[mesh.index()] {
@@ -215,9 +220,7 @@ impl Writer<'_> {
                     serde_json::json!({ "page": page, "width": width, "height": height }),
                 );
             }
-            for child in node.children().collect::<Vec<_>>().into_iter().rev() {
-                stack.push((child, world));
-            }
+            continue_children(&mut stack, &node, world);
         }
         if next_mesh as usize != self.scene.meshes.len() {
             return Err(WriteError::Write {
@@ -229,6 +232,14 @@ impl Writer<'_> {
             });
         }
         Ok(())
+    }
+
+    /// Whether mesh instance `id` has no texels (no lightmap UVs at all).
+    fn without_texels(&self, id: u32) -> bool {
+        let m = &self.scene.meshes[id as usize];
+        self.lightmap.uv[m.first_triangle as usize..][..m.triangle_count as usize]
+            .iter()
+            .all(Option::is_none)
     }
 
     /// Per primitive of mesh instance `id`: the kept triangles' corners, matched to the
@@ -458,6 +469,17 @@ impl Writer<'_> {
         };
         let bytes = glb.to_vec().map_err(|e| write_error(e.to_string()))?;
         crate::output::atomic::write(out, bytes).map_err(|e| write_error(e.to_string()))
+    }
+}
+
+/// Pushes `node`'s children, in the loader's order, onto the walk's stack.
+fn continue_children<'a>(
+    stack: &mut Vec<(::gltf::Node<'a>, Mat4)>,
+    node: &::gltf::Node<'a>,
+    world: Mat4,
+) {
+    for child in node.children().collect::<Vec<_>>().into_iter().rev() {
+        stack.push((child, world));
     }
 }
 
