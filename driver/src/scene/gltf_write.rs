@@ -196,6 +196,9 @@ impl Writer<'_> {
             if let Some(mesh) = node.mesh() {
                 let id = next_mesh;
                 next_mesh += 1;
+                if id as usize >= self.scene.meshes.len() {
+                    return Err(self.changed(next_mesh));
+                }
                 if self.without_texels(id) {
                     // No lightmap place: the mesh stays as the source has it.
                     continue_children(&mut stack, &node, world);
@@ -223,15 +226,20 @@ impl Writer<'_> {
             continue_children(&mut stack, &node, world);
         }
         if next_mesh as usize != self.scene.meshes.len() {
-            return Err(WriteError::Write {
-                path: self.scene.path.clone(),
-                message: format!(
-                    "the file has {next_mesh} mesh instances but the scene {}",
-                    self.scene.meshes.len()
-                ),
-            });
+            return Err(self.changed(next_mesh));
         }
         Ok(())
+    }
+
+    /// The source no longer has the scene's mesh instances (changed since it was loaded).
+    fn changed(&self, instances: u32) -> WriteError {
+        WriteError::Write {
+            path: self.scene.path.clone(),
+            message: format!(
+                "the file has {instances} or more mesh instances but the scene loaded from it {}",
+                self.scene.meshes.len()
+            ),
+        }
     }
 
     /// Whether mesh instance `id` has no texels (no lightmap UVs at all).
