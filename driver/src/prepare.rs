@@ -35,6 +35,11 @@
 //! were made for (scenes/README.md).
 //!
 //! Memory: one page's ownership grid (4 bytes per texel) at a time, plus one tile.
+//!
+//! Meshes without lightmap UVs (or all meshes) can get them from xatlas first
+//! ([`prepare_with`], [`unwrap`]): their atlas and the other meshes' UV squares are packed
+//! onto pages, every triangle's UVs are rewritten as page UVs ([`Lightmap`]), and those are
+//! rasterised as above — the same UVs `--write-gltf` gives the engine.
 
 use std::path::{Path, PathBuf};
 
@@ -47,6 +52,9 @@ use crate::texels::{
     FLAG_PARTIAL, FLAG_VALID, MeshRecord, PageRecord, TILE_SIZE, TexelFileError, TexelRecord,
     TexelWriter, TileRect,
 };
+
+pub mod unwrap;
+pub use unwrap::{Unwrap, UnwrapError};
 
 /// Largest page edge `prepare` creates.
 pub const MAX_PAGE: u32 = 16384;
@@ -110,6 +118,27 @@ pub struct PrepareReport {
     /// Triangles whose texels face against their winding: the side that sees the scene
     /// ([`crate::facing`]).
     pub flipped_triangles: u64,
+    /// What the unwrapper did, when it ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unwrap: Option<UnwrapReport>,
+}
+
+/// What the unwrapper did ([`prepare_with`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct UnwrapReport {
+    /// Meshes that got their lightmap UVs from xatlas.
+    pub meshes: Vec<String>,
+    /// Charts xatlas made.
+    pub charts: u32,
+    /// Sizes of the xatlas atlases (one, or one per mesh when one atlas would not fit a page).
+    pub atlases: Vec<(u32, u32)>,
+    /// Seconds spent in xatlas (charting and packing).
+    pub seconds: f64,
+    /// Triangles of the unwrapped meshes too small for xatlas ([`unwrap::TINY_AREA`]):
+    /// they get no texels.
+    pub tiny_triangles: u64,
+    /// Texels written / total page area.
+    pub utilisation: f64,
 }
 
 /// Why `prepare` failed.
@@ -140,6 +169,9 @@ pub enum PrepareError {
         /// The scene file.
         path: PathBuf,
     },
+    /// The unwrapper failed on a mesh.
+    #[error(transparent)]
+    Unwrap(#[from] UnwrapError),
 }
 
 /// Per-mesh UV statistics.
@@ -175,7 +207,8 @@ fn mesh_uv_stats(scene: &Scene) -> Vec<Option<MeshUv>> {
     out
 }
 
-/// Writes the texel file for `scene` to `out`.
+/// Writes the texel file for `scene` to `out` from the scene's own lightmap UVs
+/// ([`prepare_with`] and [`Unwrap::Never`]).
 ///
 /// # Errors
 /// [`PrepareError`] when no mesh has lightmap UVs, the resolution cannot be met, nothing is
@@ -185,6 +218,55 @@ pub fn prepare(
     out: &Path,
     opts: PrepareOptions,
 ) -> Result<PrepareReport, PrepareError> {
+    prepare_with(scene, out, opts, Unwrap::Never).map(|(report, _)| report)
+}
+
+/// Where every triangle's texels are: the layout `prepare` rasterised, as UVs of the page
+/// (0..1 across it) — what `--write-gltf` writes as `TEXCOORD_1`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lightmap {
+    /// Page sizes in texels.
+    pub pages: Vec<(u32, u32)>,
+    /// Per mesh: its page.
+    pub mesh_page: Vec<u32>,
+    /// Per triangle: its UVs on its mesh's page, `None` where it has no texels.
+    pub uv: Vec<Option<[Vec2; 3]>>,
+}
+
+impl Lightmap {
+    /// The layout of `records` applied to the scene's own UVs.
+    fn of_records(scene: &Scene, pages: &[PageRecord], meshes: &[MeshRecord]) -> Self {
+        let uv = scene
+            .triangles
+            .iter()
+            .map(|t| {
+                let m = &meshes[t.mesh as usize];
+                let p = pages[m.page as usize];
+                let size = Vec2::new(p.width as f32, p.height as f32);
+                pixel_uv(t, m)
+                    .filter(|_| m.flags != 0)
+                    .map(|q| q.map(|v| v / size))
+            })
+            .collect();
+        Self {
+            pages: pages.iter().map(|p| (p.width, p.height)).collect(),
+            mesh_page: meshes.iter().map(|m| m.page).collect(),
+            uv,
+        }
+    }
+}
+
+/// Writes the texel file for `scene` to `out`, first giving the meshes `unwrap` selects
+/// lightmap UVs from xatlas ([`unwrap`]); returns the report and the layout rasterised.
+///
+/// # Errors
+/// As [`prepare`], and [`PrepareError::Unwrap`] naming a mesh xatlas cannot unwrap.
+pub fn prepare_with(
+    scene: &Scene,
+    out: &Path,
+    opts: PrepareOptions,
+    unwrap: Unwrap,
+) -> Result<(PrepareReport, Lightmap), PrepareError> {
     if scene.triangles.len() >= (PARTIAL_BIT - 1) as usize {
         return Err(PrepareError::Resolution {
             path: scene.path.clone(),
@@ -194,12 +276,21 @@ pub fn prepare(
             ),
         });
     }
+    let selected = unwrap.meshes(scene);
+    if selected.iter().any(|&u| u) {
+        let (unwrapped, pages, meshes, tpu, mut unwrap_report) =
+            unwrap_layout(scene, opts.resolution, &selected)?;
+        let lightmap = Lightmap::of_records(&unwrapped, &pages, &meshes);
+        let mut report = rasterise(&unwrapped, out, &pages, &meshes, tpu, false)?;
+        let area: f64 = pages
+            .iter()
+            .map(|p| f64::from(p.width) * f64::from(p.height))
+            .sum();
+        unwrap_report.utilisation = report.texels as f64 / area;
+        report.unwrap = Some(unwrap_report);
+        return Ok((report, lightmap));
+    }
     let stats = mesh_uv_stats(scene);
-    let missing: Vec<String> = scene
-        .meshes_without_lightmap_uvs()
-        .into_iter()
-        .map(str::to_owned)
-        .collect();
     if stats.iter().all(Option::is_none) {
         return Err(PrepareError::NoLightmapUvs {
             path: scene.path.clone(),
@@ -216,11 +307,24 @@ pub fn prepare(
     } else {
         shared_layout(scene, &stats, opts.resolution)?
     };
+    let report = rasterise(scene, out, &pages, &meshes, tpu, per_mesh)?;
+    Ok((report, Lightmap::of_records(scene, &pages, &meshes)))
+}
+
+/// Rasterises `scene`'s lightmap UVs through the layout `pages` and `meshes` into `out`.
+fn rasterise(
+    scene: &Scene,
+    out: &Path,
+    pages: &[PageRecord],
+    meshes: &[MeshRecord],
+    tpu: f32,
+    per_mesh: bool,
+) -> Result<PrepareReport, PrepareError> {
     let flip = facing_sides(scene).map_err(|e| PrepareError::Resolution {
         path: scene.path.clone(),
         message: format!("cannot trace the scene to orient its surfaces: {e}"),
     })?;
-    let mut w = TexelWriter::create(out, &pages, &meshes, scene.triangles.len() as u32, tpu)?;
+    let mut w = TexelWriter::create(out, pages, meshes, scene.triangles.len() as u32, tpu)?;
     let mut report = PrepareReport {
         texels: 0,
         partial_texels: 0,
@@ -228,13 +332,18 @@ pub fn prepare(
         pages: pages.iter().map(|p| (p.width, p.height)).collect(),
         per_mesh_layout: per_mesh,
         texels_per_unit: tpu,
-        meshes_without_lightmap_uvs: missing,
+        meshes_without_lightmap_uvs: scene
+            .meshes_without_lightmap_uvs()
+            .into_iter()
+            .map(str::to_owned)
+            .collect(),
         uv_degenerate_triangles: 0,
         flipped_triangles: flip.iter().filter(|&&f| f).count() as u64,
+        unwrap: None,
     };
     for (page_index, page) in pages.iter().enumerate() {
-        let raster = PageRaster::new(scene, &meshes, page_index as u32, *page, &mut report);
-        raster.emit_tiles(scene, &meshes, &flip, &mut w, &mut report)?;
+        let raster = PageRaster::new(scene, meshes, page_index as u32, *page, &mut report);
+        raster.emit_tiles(scene, meshes, &flip, &mut w, &mut report)?;
     }
     if report.texels == 0 {
         return Err(PrepareError::NoTexels {
@@ -313,31 +422,41 @@ fn cells(stats: &[Option<MeshUv>], d: f64, max: u32) -> Vec<Option<u32>> {
         .collect()
 }
 
-/// Shelf packing: returns per mesh (page, x, y) and the number of pages.
 /// A cell's place: (page, x, y).
 type Place = (u32, u32, u32);
 
+/// Shelf packing of square cells: returns per mesh (page, x, y) and the number of pages.
 fn shelf_pack(cells: &[Option<u32>], page: (u32, u32)) -> (Vec<Option<Place>>, u32) {
-    let mut order: Vec<usize> = (0..cells.len()).filter(|&i| cells[i].is_some()).collect();
-    order.sort_by_key(|&i| std::cmp::Reverse(cells[i]));
-    let mut out = vec![None; cells.len()];
+    shelf_pack_rects(
+        &cells.iter().map(|c| c.map(|c| (c, c))).collect::<Vec<_>>(),
+        page,
+    )
+}
+
+/// Shelf packing of `(width, height)` rectangles, tallest first, each with a [`GUTTER`] on
+/// every side: returns per rectangle (page, x, y) and the number of pages.
+fn shelf_pack_rects(rects: &[Option<(u32, u32)>], page: (u32, u32)) -> (Vec<Option<Place>>, u32) {
+    let mut order: Vec<usize> = (0..rects.len()).filter(|&i| rects[i].is_some()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(rects[i].map(|(w, h)| (h, w))));
+    let mut out = vec![None; rects.len()];
     let (mut p, mut x, mut y, mut shelf) = (0u32, 0u32, 0u32, 0u32);
     for i in order {
-        let s = cells[i].unwrap_or(0) + 2 * GUTTER;
-        if x + s > page.0 {
+        let (w, h) = rects[i].unwrap_or((0, 0));
+        let (sw, sh) = (w + 2 * GUTTER, h + 2 * GUTTER);
+        if x + sw > page.0 {
             x = 0;
             y += shelf;
             shelf = 0;
         }
-        if y + s > page.1 {
+        if y + sh > page.1 {
             p += 1;
             x = 0;
             y = 0;
             shelf = 0;
         }
         out[i] = Some((p, x + GUTTER, y + GUTTER));
-        x += s;
-        shelf = shelf.max(s);
+        x += sw;
+        shelf = shelf.max(sh);
     }
     (out, p + 1)
 }
@@ -433,6 +552,224 @@ fn per_mesh_layout(
         n as usize
     ];
     Ok((pages, meshes, d as f32))
+}
+
+/// Share of a page the charts are taken to fill when `prepare` derives the density of an
+/// unwrap from a page budget (xatlas's own estimate takes 0.75; the padding of many small
+/// charts costs more).
+const UNWRAP_FILL: f64 = 0.6;
+
+/// The scene with page UVs on every triangle that gets texels, its layout records, the
+/// density, and what the unwrapper did.
+type Unwrapped = (Scene, Vec<PageRecord>, Vec<MeshRecord>, f32, UnwrapReport);
+
+/// Unwraps the `selected` meshes with xatlas into one atlas (one per mesh when one would
+/// not fit a page), packs it with the other meshes' UV squares ([`cells`]) onto pages, and
+/// returns the scene with every triangle's UVs rewritten as page UVs.
+fn unwrap_layout(
+    scene: &Scene,
+    res: Resolution,
+    selected: &[bool],
+) -> Result<Unwrapped, PrepareError> {
+    let stats = mesh_uv_stats(scene);
+    let kept: Vec<Option<MeshUv>> = stats
+        .iter()
+        .zip(selected)
+        .map(|(s, &u)| if u { None } else { *s })
+        .collect();
+    let to_unwrap: Vec<usize> = (0..selected.len()).filter(|&i| selected[i]).collect();
+    let area: f64 = scene
+        .triangles
+        .iter()
+        .filter(|t| selected[t.mesh as usize] || kept[t.mesh as usize].is_some())
+        .map(|t| f64::from(t.area()))
+        .sum();
+    let resolution_error = |message: String| PrepareError::Resolution {
+        path: scene.path.clone(),
+        message,
+    };
+    let (page, one_page) = match res {
+        Resolution::Size(w, h) => ((w, h), true),
+        _ => ((PACK_PAGE, PACK_PAGE), false),
+    };
+    check_side(scene, f64::from(page.0.max(page.1)))?;
+    if page.0.min(page.1) <= 2 * GUTTER + 2 * unwrap::PADDING + 2 {
+        return Err(resolution_error(format!(
+            "page {}x{} is too small to pack charts",
+            page.0, page.1
+        )));
+    }
+    let mut d = match res {
+        Resolution::TexelsPerUnit(d) => f64::from(d),
+        Resolution::Default => f64::from(DEFAULT_PAGE) * (UNWRAP_FILL / area).sqrt(),
+        Resolution::Size(w, h) => (f64::from(w) * f64::from(h) * UNWRAP_FILL / area).sqrt(),
+    };
+    let max_texels = 4096.0 * f64::from(PACK_PAGE) * f64::from(PACK_PAGE);
+    if !(d.is_finite() && d > 0.0) || area * d * d / UNWRAP_FILL > max_texels {
+        return Err(resolution_error(format!(
+            "{:.3e} m² at {d} texels/unit needs more than 4096 pages of {PACK_PAGE}²; choose a smaller --texels-per-unit",
+            area
+        )));
+    }
+    let max = page.0.min(page.1) - 2 * GUTTER;
+    let fits =
+        |a: &unwrap::Packed| a.width + 2 * GUTTER <= page.0 && a.height + 2 * GUTTER <= page.1;
+    let mut charted = unwrap::Charted::new(scene, &to_unwrap)?;
+    let mut per_mesh_seconds = 0.0;
+    let mut tries = 0;
+    let (atlases, cs, places, n) = loop {
+        tries += 1;
+        if tries > 100 {
+            return Err(resolution_error(format!(
+                "the charts do not fit one {}x{} page at any density tried; choose a larger --size",
+                page.0, page.1
+            )));
+        }
+        let one = charted.pack(scene, d as f32, max)?;
+        let atlases = if fits(&one) {
+            vec![one]
+        } else if one_page {
+            d *= 0.98
+                * (f64::from(page.0) / f64::from(one.width + 2 * GUTTER))
+                    .min(f64::from(page.1) / f64::from(one.height + 2 * GUTTER));
+            continue;
+        } else {
+            // Too big for one page: an atlas per mesh, each on one page.
+            let mut atlases = Vec::with_capacity(to_unwrap.len());
+            for &m in &to_unwrap {
+                let mut c = unwrap::Charted::new(scene, &[m])?;
+                let a = c.pack(scene, d as f32, max)?;
+                per_mesh_seconds += c.seconds();
+                if !fits(&a) {
+                    return Err(resolution_error(format!(
+                        "mesh '{}' unwraps to {}x{} texels, more than a page of {}x{}; choose a smaller --texels-per-unit",
+                        scene.meshes[m].name, a.width, a.height, page.0, page.1
+                    )));
+                }
+                atlases.push(a);
+            }
+            atlases
+        };
+        let cs = cells(&kept, d, max);
+        let rects: Vec<Option<(u32, u32)>> = atlases
+            .iter()
+            .map(|a| Some((a.width, a.height)))
+            .chain(cs.iter().map(|c| c.map(|c| (c, c))))
+            .collect();
+        let (places, n) = shelf_pack_rects(&rects, page);
+        if one_page && n > 1 {
+            d *= 0.95;
+            continue;
+        }
+        if n > 4096 {
+            return Err(resolution_error(format!(
+                "{n} pages needed; choose a smaller --texels-per-unit"
+            )));
+        }
+        break (atlases, cs, places, n);
+    };
+    let rect_sizes: Vec<(u32, u32)> = atlases
+        .iter()
+        .map(|a| (a.width, a.height))
+        .chain(cs.iter().map(|c| c.map_or((0, 0), |c| (c, c))))
+        .collect();
+    // Without --size, a single page shrinks to what the packing used (32-texel multiples).
+    let used = if one_page || n > 1 {
+        page
+    } else {
+        let extent = |f: &dyn Fn(Place, (u32, u32)) -> u32| {
+            places
+                .iter()
+                .zip(&rect_sizes)
+                .filter_map(|(p, &r)| Some(f((*p)?, r)))
+                .max()
+                .unwrap_or(1)
+        };
+        let w = extent(&|p, r| p.1 + r.0 + GUTTER);
+        let h = extent(&|p, r| p.2 + r.1 + GUTTER);
+        (
+            w.next_multiple_of(TILE_SIZE).min(page.0),
+            h.next_multiple_of(TILE_SIZE).min(page.1),
+        )
+    };
+    let mut out = scene.clone();
+    let mut mesh_page = vec![0u32; scene.meshes.len()];
+    let mut pixels: Vec<Option<[Vec2; 3]>> = vec![None; scene.triangles.len()];
+    for (a, place) in atlases.iter().zip(&places) {
+        let (p, x, y) = place.unwrap_or((0, 0, 0));
+        let at = Vec2::new(x as f32, y as f32);
+        for (m, uvs) in &a.meshes {
+            mesh_page[*m] = p;
+            let first = scene.meshes[*m].first_triangle as usize;
+            for (k, q) in uvs.iter().enumerate() {
+                pixels[first + k] = q.map(|q| q.map(|v| v + at));
+            }
+        }
+    }
+    for (i, ((c, s), place)) in cs
+        .iter()
+        .zip(&kept)
+        .zip(&places[atlases.len()..])
+        .enumerate()
+    {
+        let (Some(c), Some(s), Some((p, x, y))) = (c, s, place) else {
+            continue;
+        };
+        mesh_page[i] = *p;
+        let k = *c as f32 / (s.hi - s.lo).max_element().max(1e-12);
+        let offset = Vec2::new(*x as f32 - s.lo.x * k, *y as f32 - s.lo.y * k);
+        let m = &scene.meshes[i];
+        let range = m.first_triangle as usize..(m.first_triangle + m.triangle_count) as usize;
+        for (px, t) in pixels[range.clone()]
+            .iter_mut()
+            .zip(&scene.triangles[range])
+        {
+            *px = t.lightmap_uv.map(|q| q.map(|v| v * k + offset));
+        }
+    }
+    let size = Vec2::new(used.0 as f32, used.1 as f32);
+    for (t, px) in out.triangles.iter_mut().zip(&pixels) {
+        t.lightmap_uv = px.map(|q| q.map(|v| v / size));
+    }
+    let mut records = Vec::with_capacity(out.meshes.len());
+    let mut ignored = 0;
+    for (i, m) in out.meshes.iter_mut().enumerate() {
+        let range = m.first_triangle as usize..(m.first_triangle + m.triangle_count) as usize;
+        let uvs = &pixels[range];
+        ignored += if selected[i] {
+            uvs.iter().filter(|q| q.is_none()).count() as u64
+        } else {
+            0
+        };
+        m.has_lightmap_uvs = selected[i] || uvs.iter().all(Option::is_some);
+        records.push(MeshRecord {
+            first_triangle: m.first_triangle,
+            triangle_count: m.triangle_count,
+            page: mesh_page[i],
+            flags: u32::from(selected[i] || kept[i].is_some()),
+            uv_scale: [size.x, size.y],
+            uv_offset: [0.0; 2],
+        });
+    }
+    let pages = vec![
+        PageRecord {
+            width: used.0,
+            height: used.1
+        };
+        n as usize
+    ];
+    let report = UnwrapReport {
+        meshes: to_unwrap
+            .iter()
+            .map(|&m| scene.meshes[m].name.clone())
+            .collect(),
+        charts: atlases.iter().map(|a| a.charts).sum(),
+        atlases: atlases.iter().map(|a| (a.width, a.height)).collect(),
+        seconds: charted.seconds() + per_mesh_seconds,
+        tiny_triangles: ignored,
+        utilisation: 0.0,
+    };
+    Ok((out, pages, records, d as f32, report))
 }
 
 /// `true` when texel centres of a 512² test grid are covered by triangles of two meshes.
@@ -744,6 +1081,66 @@ mod tests {
             "only touching the diagonal"
         );
         assert!(overlaps_square(&tilted, 1, 2), "above the diagonal");
+    }
+
+    /// Two closed 4 m rooms as two meshes without lightmap UVs.
+    fn two_rooms() -> Scene {
+        let mut triangles = Vec::new();
+        for (mesh, corner) in [(0, Vec3::splat(-2.0)), (1, Vec3::new(8.0, -2.0, -2.0))] {
+            for (c, u, v) in crate::test_support::inward_box_faces(corner, 4.0) {
+                let n = u.cross(v).normalize();
+                for p in [[c, c + u, c + u + v], [c, c + u + v, c + v]] {
+                    triangles.push(Triangle {
+                        positions: p,
+                        normals: [n; 3],
+                        lightmap_uv: None,
+                        mesh,
+                        material: 0,
+                    });
+                }
+            }
+        }
+        let mut s = Scene::of_triangles("room", triangles, vec![]);
+        s.meshes[0].triangle_count = 12;
+        s.meshes.push(crate::scene::Mesh {
+            name: "other room".into(),
+            first_triangle: 12,
+            triangle_count: 12,
+            has_lightmap_uvs: false,
+        });
+        s
+    }
+
+    #[test]
+    fn a_world_too_big_for_a_page_spills_onto_more() {
+        let s = two_rooms();
+        // 2 × 96 m² at 300 texels per unit: 17.3M texels, more than one 4096² page holds;
+        // each room's 8.6M fit one.
+        let (scene, pages, meshes, tpu, report) =
+            unwrap_layout(&s, Resolution::TexelsPerUnit(300.0), &[true, true]).unwrap();
+        assert_eq!(tpu, 300.0);
+        assert_eq!(report.atlases.len(), 2, "{report:?}");
+        assert_eq!(pages.len(), 2);
+        assert_ne!(meshes[0].page, meshes[1].page);
+        assert!(
+            scene
+                .triangles
+                .iter()
+                .all(|t| t.lightmap_uv.is_some_and(|q| q
+                    .iter()
+                    .all(|v| v.cmpge(Vec2::ZERO).all() && v.cmple(Vec2::ONE).all())))
+        );
+        // A room alone too big for a page is an error naming it.
+        let e = unwrap_layout(&s, Resolution::TexelsPerUnit(450.0), &[true, true]).unwrap_err();
+        assert!(e.to_string().contains("mesh 'room' unwraps to"), "{e}");
+    }
+
+    #[test]
+    fn charts_that_fit_no_page_of_the_size_are_an_error() {
+        let s = two_rooms();
+        // 12 charts with padding and gutters cannot share a 12×12 page.
+        let e = unwrap_layout(&s, Resolution::Size(12, 12), &[true, true]).unwrap_err();
+        assert!(e.to_string().contains("do not fit one 12x12 page"), "{e}");
     }
 
     #[test]

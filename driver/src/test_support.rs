@@ -1,12 +1,13 @@
 //! Fixtures the tests and benches of every crate share (one home instead of copies): where the
-//! third-party scenes are, and the closed box rooms of analytic tests. Not part of the API.
+//! third-party scenes are, the closed box rooms and quads of analytic tests, hand-made texels,
+//! and the check that every texel lies on its triangle. Not part of the API.
 
 use std::path::PathBuf;
 
 use glam::{Vec2, Vec3};
 
-use crate::scene::Triangle;
-use crate::texels::{FLAG_VALID, TexelRecord};
+use crate::scene::{Scene, Triangle};
+use crate::texels::{FLAG_VALID, TexelFile, TexelRecord};
 
 /// Where the tests and benches find the third-party scenes: `GUIDEBAKE_SCENES` if set, else
 /// `../shared/scenes` beside the workspace (or `../../shared/scenes`, for a workspace that is a
@@ -74,5 +75,35 @@ pub fn floor_texel(x: u16, y: u16) -> TexelRecord {
         pixel: [x, y],
         triangle: u32::MAX,
         flags: FLAG_VALID,
+    }
+}
+
+/// Asserts every texel of `f` lies on its triangle of `scene`: within 1e-5 (relative to the
+/// scene size) of its plane, with barycentrics ≥ −1e-3, and has a unit normal.
+///
+/// # Panics
+/// When a texel does not.
+pub fn assert_texels_on_triangles(scene: &Scene, f: &TexelFile) {
+    let (lo, hi) = scene.bounds();
+    let tol = 1e-5 * (hi - lo).max_element().max(1.0);
+    for (i, x) in f.texels().iter().enumerate() {
+        let t = &scene.triangles[x.triangle as usize];
+        let [a, b, c] = t.positions;
+        let p = Vec3::from(x.position);
+        let n = (b - a).cross(c - a);
+        let dist = (p - a).dot(n.normalize());
+        assert!(
+            dist.abs() <= tol,
+            "texel {i} is {dist} off its triangle's plane"
+        );
+        let area2 = n.length_squared();
+        let l1 = (p - a).cross(c - a).dot(n) / area2;
+        let l2 = (b - a).cross(p - a).dot(n) / area2;
+        let l0 = 1.0 - l1 - l2;
+        assert!(
+            l0 >= -1e-3 && l1 >= -1e-3 && l2 >= -1e-3,
+            "texel {i} barycentrics {l0} {l1} {l2}"
+        );
+        assert!((Vec3::from(x.normal).length() - 1.0).abs() < 1e-3);
     }
 }

@@ -308,7 +308,7 @@ fn bad_scenes_are_clear_errors() {
         "index 7 at position 2 is out of range",
     );
 
-    // No TEXCOORD_1: loads, but prepare names the mesh.
+    // No TEXCOORD_1: loads, but prepare without the unwrapper names the mesh.
     let (json, bin) = triangle_gltf("nouv", false, [0, 1, 2]);
     let p = write_gltf(d, "nouv", &json, Some(&bin));
     let scene = Scene::load(&p).unwrap();
@@ -321,8 +321,16 @@ fn bad_scenes_are_clear_errors() {
         prepare(&scene, &out, opts),
         Err(PrepareError::NoLightmapUvs { .. })
     ));
+    // (`--unwrap missing`, the default, gives it UVs: driver/tests/unwrap.rs.)
     assert_cli_fails(
-        &["prepare", p.to_str().unwrap(), "-o", out_s],
+        &[
+            "prepare",
+            p.to_str().unwrap(),
+            "-o",
+            out_s,
+            "--unwrap",
+            "never",
+        ],
         "no mesh has lightmap UVs (TEXCOORD_1); meshes without: tri",
     );
 

@@ -3,9 +3,10 @@
 
 use std::path::PathBuf;
 
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
 use guidebake::scene::Scene;
+use guidebake::test_support::assert_texels_on_triangles;
 use guidebake::texels::{FLAG_PARTIAL, TexelFile};
 
 fn scenes_dir() -> Option<PathBuf> {
@@ -23,33 +24,6 @@ fn pixel_area_and_perimeter(scene: &Scene, f: &TexelFile) -> (f64, f64) {
         perim += f64::from(q[0].distance(q[1]) + q[1].distance(q[2]) + q[2].distance(q[0]));
     }
     (area, perim)
-}
-
-/// Asserts every texel lies on its triangle: within 1e-4 (relative to the scene size) of its
-/// plane, with barycentrics ≥ −1e-3.
-fn assert_on_triangles(scene: &Scene, f: &TexelFile) {
-    let (lo, hi) = scene.bounds();
-    let tol = 1e-5 * (hi - lo).max_element().max(1.0);
-    for (i, x) in f.texels().iter().enumerate() {
-        let t = &scene.triangles[x.triangle as usize];
-        let [a, b, c] = t.positions;
-        let p = Vec3::from(x.position);
-        let n = (b - a).cross(c - a);
-        let dist = (p - a).dot(n.normalize());
-        assert!(
-            dist.abs() <= tol,
-            "texel {i} is {dist} off its triangle's plane"
-        );
-        let area2 = n.length_squared();
-        let l1 = (p - a).cross(c - a).dot(n) / area2;
-        let l2 = (b - a).cross(p - a).dot(n) / area2;
-        let l0 = 1.0 - l1 - l2;
-        assert!(
-            l0 >= -1e-3 && l1 >= -1e-3 && l2 >= -1e-3,
-            "texel {i} barycentrics {l0} {l1} {l2}"
-        );
-        assert!((Vec3::from(x.normal).length() - 1.0).abs() < 1e-3);
-    }
 }
 
 /// Converted Bitterli scenes at their atlas sizes. Every texel centre inside a UV triangle is
@@ -106,7 +80,7 @@ fn converted_scenes_have_expected_covered_texels() {
             centre > 0.5 * f64::from(w * h),
             "{name}: only {centre} of {w}x{h} covered"
         );
-        assert_on_triangles(&scene, &f);
+        assert_texels_on_triangles(&scene, &f);
     }
 }
 
@@ -153,7 +127,7 @@ fn vinc3r_meshes_are_packed_and_missing_uvs_reported() {
         (centre - area).abs() <= perim / 2.0,
         "centre-covered {centre} vs UV area {area}"
     );
-    assert_on_triangles(&scene, &f);
+    assert_texels_on_triangles(&scene, &f);
 }
 
 /// A texel density doubles the texel count about fourfold.

@@ -42,7 +42,7 @@ pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
 /// ([`check_image_sources`]), and every buffer's and image's URI ([`check_uri`]) and
 /// image's buffer view ([`check_view`]). Buffers and images are loaded one by one, so an
 /// error names the one at fault.
-fn import(
+pub(super) fn import(
     path: &Path,
 ) -> Result<
     (

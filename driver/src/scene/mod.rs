@@ -485,6 +485,7 @@ fn average_srgb8(pixels: &[u8], channels: usize) -> Option<Vec3> {
 }
 
 mod gltf;
+pub mod gltf_write;
 mod obj;
 mod scene_file;
 

@@ -1,0 +1,517 @@
+//! `prepare --write-gltf`: the glTF scene written back as one binary glTF whose
+//! `TEXCOORD_1` are the lightmap UVs the texels were made from, so an engine can bind the
+//! baked lightmap (a lightmap is only usable with the UVs it was baked for).
+//!
+//! The source document is kept as it is — nodes, materials, textures, lights, extensions,
+//! extras — and only mesh primitives are rewritten:
+//! - Every triangle the loader kept is matched to its source triangle by its world-space
+//!   positions (the loader drops degenerate triangles; they are dropped here too).
+//! - A vertex is split wherever its triangles give it different lightmap UVs (xatlas cuts
+//!   charts along seams); every attribute of the source vertex (normals, tangents, other UV
+//!   sets, colours, joints, weights, morph targets) is copied to each of its copies.
+//! - `TEXCOORD_1` is the page UV (0..1 across the page); the node's `extras` get
+//!   `guidebake_lightmap: { page, width, height }`, since glTF has no field for it.
+//! - A mesh instanced by several nodes gets a copy per further node (each instance has its
+//!   own place in the lightmap); a mesh instance without texels is left as it is.
+//! - All buffers, and images stored as files beside the source, go into the GLB's one
+//!   binary chunk, so the output stands alone.
+//!
+//! Loading the written file gives the same triangles in the same order with these UVs, so
+//! `prepare --unwrap never` of it rasterises the same texels (driver/tests/unwrap.rs).
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use ::gltf::json;
+use glam::{Mat4, Vec3};
+
+use super::{Scene, SceneError};
+use crate::prepare::Lightmap;
+
+/// Why the scene could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    /// The scene did not come from a glTF file.
+    #[error("{path}: --write-gltf needs a .gltf or .glb scene")]
+    NotGltf {
+        /// The scene file.
+        path: PathBuf,
+    },
+    /// Reading the source again failed.
+    #[error(transparent)]
+    Source(#[from] SceneError),
+    /// A primitive uses something the writer does not rewrite.
+    #[error("{path}: mesh '{mesh}': {message}")]
+    Unsupported {
+        /// The scene file.
+        path: PathBuf,
+        /// The mesh.
+        mesh: String,
+        /// What is not supported.
+        message: String,
+    },
+    /// Writing the output failed.
+    #[error("{path}: cannot write: {message}")]
+    Write {
+        /// The output file.
+        path: PathBuf,
+        /// What failed.
+        message: String,
+    },
+}
+
+/// Writes `scene` (loaded from a glTF file) with `lightmap`'s UVs as `TEXCOORD_1` to `out`
+/// as a binary glTF. Nothing is left at `out` on failure.
+///
+/// # Errors
+/// [`WriteError`] naming the file (and mesh) at fault.
+pub fn write_glb(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), WriteError> {
+    let path = &scene.path;
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("gltf" | "glb")) {
+        return Err(WriteError::NotGltf { path: path.clone() });
+    }
+    let (doc, buffers, _) = super::gltf::import(path)?;
+    let mut w = Writer {
+        scene,
+        lightmap,
+        root: doc.as_json().clone(),
+        bin: Vec::new(),
+    };
+    w.consolidate_buffers(&buffers, path.parent().unwrap_or(Path::new(".")))?;
+    w.rewrite_meshes(&doc, &buffers)?;
+    w.finish(out)
+}
+
+struct Writer<'a> {
+    scene: &'a Scene,
+    lightmap: &'a Lightmap,
+    root: json::Root,
+    bin: Vec<u8>,
+}
+
+/// One source triangle the loader kept: its corners (source vertex indices, in source
+/// winding) and their lightmap UVs.
+type Corners = [(u32, Option<[f32; 2]>); 3];
+
+impl Writer<'_> {
+    fn unsupported(&self, mesh: u32, message: String) -> WriteError {
+        WriteError::Unsupported {
+            path: self.scene.path.clone(),
+            mesh: self.scene.meshes[mesh as usize].name.clone(),
+            message,
+        }
+    }
+
+    /// Appends `bytes` to the binary chunk (4-byte aligned) as a new buffer view.
+    fn push_view(&mut self, bytes: &[u8], stride: Option<usize>, target: Option<u32>) -> u32 {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+        let offset = self.bin.len();
+        self.bin.extend_from_slice(bytes);
+        let mut view = serde_json::json!({
+            "buffer": 0, "byteOffset": offset, "byteLength": bytes.len(),
+        });
+        if let Some(s) = stride {
+            view["byteStride"] = s.into();
+        }
+        if let Some(t) = target {
+            view["target"] = t.into();
+        }
+        let view: json::buffer::View = serde_json::from_value(view).expect("a valid view");
+        self.root.buffer_views.push(view);
+        (self.root.buffer_views.len() - 1) as u32
+    }
+
+    /// Moves every buffer into the one binary chunk, and images stored as files beside the
+    /// source into buffer views.
+    fn consolidate_buffers(
+        &mut self,
+        buffers: &[::gltf::buffer::Data],
+        base: &Path,
+    ) -> Result<(), WriteError> {
+        let mut starts = Vec::with_capacity(buffers.len());
+        for b in buffers {
+            while !self.bin.len().is_multiple_of(4) {
+                self.bin.push(0);
+            }
+            starts.push(self.bin.len() as u64);
+            self.bin.extend_from_slice(&b.0);
+        }
+        for view in &mut self.root.buffer_views {
+            let start = starts[view.buffer.value()];
+            view.byte_offset = Some((view.byte_offset.map_or(0, |o| o.0) + start).into());
+            view.buffer = json::Index::new(0);
+        }
+        for i in 0..self.root.images.len() {
+            let Some(uri) = self.root.images[i].uri.clone() else {
+                continue;
+            };
+            if uri.starts_with("data:") {
+                continue;
+            }
+            let file = base.join(urlencoding::decode(&uri).map_or(uri.clone(), |u| u.into_owned()));
+            let bytes = std::fs::read(&file).map_err(|e| SceneError::GltfResource {
+                path: self.scene.path.clone(),
+                item: format!("images[{i}]"),
+                message: format!("cannot read {}: {e}", file.display()),
+            })?;
+            let mime = if bytes.starts_with(b"\x89PNG") {
+                "image/png"
+            } else {
+                "image/jpeg"
+            };
+            let view = self.push_view(&bytes, None, None);
+            let image = &mut self.root.images[i];
+            image.uri = None;
+            image.buffer_view = Some(json::Index::new(view));
+            image.mime_type = Some(json::image::MimeType(mime.into()));
+        }
+        Ok(())
+    }
+
+    /// Walks the nodes as the loader does and rewrites every mesh instance's primitives.
+    fn rewrite_meshes(
+        &mut self,
+        doc: &::gltf::Document,
+        buffers: &[::gltf::buffer::Data],
+    ) -> Result<(), WriteError> {
+        let roots: Vec<::gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+            Some(s) => s.nodes().collect(),
+            None => Vec::new(),
+        };
+        let mut stack: Vec<(::gltf::Node, Mat4)> = roots
+            .into_iter()
+            .rev()
+            .map(|n| (n, Mat4::IDENTITY))
+            .collect();
+        let mut next_mesh = 0u32;
+        let mut rewritten = vec![false; self.root.meshes.len()];
+        while let Some((node, parent)) = stack.pop() {
+            let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+            if let Some(mesh) = node.mesh() {
+                let id = next_mesh;
+                next_mesh += 1;
+                if id as usize >= self.scene.meshes.len() {
+                    return Err(self.changed(next_mesh));
+                }
+                if self.without_texels(id) {
+                    // No lightmap place: the mesh stays as the source has it.
+                    continue_children(&mut stack, &node, world);
+                    continue;
+                }
+                let primitives = self.mesh_corners(id, &mesh, buffers, world)?;
+                let new = self.rewrite_mesh(id, &mesh, buffers, &primitives)?;
+                let index = if rewritten[mesh.index()] {
+                    self.root.meshes.push(new);
+                    self.root.meshes.len() - 1
+                } else {
+                    rewritten[mesh.index()] = true;
+                    self.root.meshes[mesh.index()] = new;
+                    mesh.index()
+                };
+                let page = self.lightmap.mesh_page[id as usize];
+                let node_json = &mut self.root.nodes[node.index()];
+                node_json.mesh = Some(json::Index::new(index as u32));
+                let (width, height) = self.lightmap.pages[page as usize];
+                set_extra(
+                    &mut node_json.extras,
+                    serde_json::json!({ "page": page, "width": width, "height": height }),
+                );
+            }
+            continue_children(&mut stack, &node, world);
+        }
+        if next_mesh as usize != self.scene.meshes.len() {
+            return Err(self.changed(next_mesh));
+        }
+        Ok(())
+    }
+
+    /// The source no longer has the scene's mesh instances (changed since it was loaded).
+    fn changed(&self, instances: u32) -> WriteError {
+        WriteError::Write {
+            path: self.scene.path.clone(),
+            message: format!(
+                "the file has {instances} or more mesh instances but the scene loaded from it {}",
+                self.scene.meshes.len()
+            ),
+        }
+    }
+
+    /// Whether mesh instance `id` has no texels (no lightmap UVs at all).
+    fn without_texels(&self, id: u32) -> bool {
+        let m = &self.scene.meshes[id as usize];
+        self.lightmap.uv[m.first_triangle as usize..][..m.triangle_count as usize]
+            .iter()
+            .all(Option::is_none)
+    }
+
+    /// Per primitive of mesh instance `id`: the kept triangles' corners, matched to the
+    /// scene's triangles by world positions (as the loader computes them).
+    fn mesh_corners(
+        &self,
+        id: u32,
+        mesh: &::gltf::Mesh,
+        buffers: &[::gltf::buffer::Data],
+        world: Mat4,
+    ) -> Result<Vec<Vec<Corners>>, WriteError> {
+        let m = &self.scene.meshes[id as usize];
+        let tris = &self.scene.triangles[m.first_triangle as usize..][..m.triangle_count as usize];
+        let uvs = &self.lightmap.uv[m.first_triangle as usize..][..m.triangle_count as usize];
+        let mirrored = glam::Mat3::from_mat4(world).determinant() < 0.0;
+        let mut next = 0usize;
+        let mut out = Vec::new();
+        for prim in mesh.primitives() {
+            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.0.as_slice()));
+            let positions: Vec<Vec3> = reader
+                .read_positions()
+                .map(|p| p.map(|p| world.transform_point3(Vec3::from(p))).collect())
+                .unwrap_or_default();
+            let count = positions.len() as u32;
+            let indices: Vec<u32> = match reader.read_indices() {
+                Some(i) => i.into_u32().collect(),
+                None => (0..count).collect(),
+            };
+            let mut corners = Vec::with_capacity(indices.len() / 3);
+            for tri in indices.chunks_exact(3) {
+                let mut v = [tri[0], tri[1], tri[2]];
+                if mirrored {
+                    v.swap(1, 2);
+                }
+                let p = v.map(|i| positions[i as usize]);
+                if next < tris.len() && tris[next].positions == p {
+                    let uv = uvs[next].map(|q| q.map(|v| v.to_array()));
+                    let mut c = [0, 1, 2].map(|k| (v[k], uv.map(|q| q[k])));
+                    if mirrored {
+                        c.swap(1, 2);
+                    }
+                    corners.push(c);
+                    next += 1;
+                }
+            }
+            out.push(corners);
+        }
+        if next != tris.len() {
+            return Err(self.unsupported(
+                id,
+                format!(
+                    "{next} of its {} triangles were found again in the file",
+                    tris.len()
+                ),
+            ));
+        }
+        Ok(out)
+    }
+
+    /// The mesh with its primitives rewritten: vertices split by lightmap UV, every
+    /// attribute copied, `TEXCOORD_1` and 32-bit indices new.
+    fn rewrite_mesh(
+        &mut self,
+        id: u32,
+        mesh: &::gltf::Mesh,
+        buffers: &[::gltf::buffer::Data],
+        primitives: &[Vec<Corners>],
+    ) -> Result<json::Mesh, WriteError> {
+        let mut new = self.root.meshes[mesh.index()].clone();
+        for ((prim, corners), prim_json) in
+            mesh.primitives().zip(primitives).zip(&mut new.primitives)
+        {
+            let mut vertices: Vec<(u32, [f32; 2])> = Vec::new();
+            let mut ids: HashMap<(u32, [u32; 2]), u32> = HashMap::new();
+            let mut indices: Vec<u32> = Vec::with_capacity(corners.len() * 3);
+            for (v, uv) in corners.iter().flatten() {
+                let uv = uv.unwrap_or([0.0; 2]);
+                let key = (*v, uv.map(f32::to_bits));
+                let next = vertices.len() as u32;
+                let id = *ids.entry(key).or_insert(next);
+                if id == next {
+                    vertices.push((*v, uv));
+                }
+                indices.push(id);
+            }
+            let sources: Vec<u32> = vertices.iter().map(|v| v.0).collect();
+            let mut attributes = std::collections::BTreeMap::new();
+            for (semantic, accessor) in prim.attributes() {
+                if semantic == ::gltf::Semantic::TexCoords(1) {
+                    continue;
+                }
+                let is_position = semantic == ::gltf::Semantic::Positions;
+                let a = self.remap_accessor(id, &accessor, buffers, &sources, is_position)?;
+                attributes.insert(json::validation::Checked::Valid(semantic), a);
+            }
+            let uv_bytes: Vec<u8> = vertices
+                .iter()
+                .flat_map(|v| v.1)
+                .flat_map(f32::to_le_bytes)
+                .collect();
+            let uv_view = self.push_view(&uv_bytes, None, Some(json::buffer::ARRAY_BUFFER));
+            let uv = self.push_accessor(serde_json::json!({
+                "bufferView": uv_view, "componentType": json::accessor::FLOAT,
+                "count": vertices.len(), "type": "VEC2",
+            }));
+            attributes.insert(
+                json::validation::Checked::Valid(json::mesh::Semantic::TexCoords(1)),
+                uv,
+            );
+            let index_bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+            let index_view =
+                self.push_view(&index_bytes, None, Some(json::buffer::ELEMENT_ARRAY_BUFFER));
+            let index = self.push_accessor(serde_json::json!({
+                "bufferView": index_view, "componentType": json::accessor::UNSIGNED_INT,
+                "count": indices.len(), "type": "SCALAR",
+            }));
+            let mut targets = Vec::new();
+            for target in prim.morph_targets() {
+                let mut t = json::mesh::MorphTarget {
+                    positions: None,
+                    normals: None,
+                    tangents: None,
+                };
+                if let Some(a) = target.positions() {
+                    t.positions = Some(self.remap_accessor(id, &a, buffers, &sources, false)?);
+                }
+                if let Some(a) = target.normals() {
+                    t.normals = Some(self.remap_accessor(id, &a, buffers, &sources, false)?);
+                }
+                if let Some(a) = target.tangents() {
+                    t.tangents = Some(self.remap_accessor(id, &a, buffers, &sources, false)?);
+                }
+                targets.push(t);
+            }
+            prim_json.attributes = attributes;
+            prim_json.indices = Some(index);
+            prim_json.targets = (!targets.is_empty()).then_some(targets);
+        }
+        Ok(new)
+    }
+
+    fn push_accessor(&mut self, value: serde_json::Value) -> json::Index<json::Accessor> {
+        let a: json::Accessor = serde_json::from_value(value).expect("a valid accessor");
+        self.root.accessors.push(a);
+        json::Index::new((self.root.accessors.len() - 1) as u32)
+    }
+
+    /// A new accessor holding `accessor`'s elements at `sources`, tightly packed (each
+    /// element padded to 4 bytes, as vertex attributes must be).
+    fn remap_accessor(
+        &mut self,
+        id: u32,
+        accessor: &::gltf::Accessor,
+        buffers: &[::gltf::buffer::Data],
+        sources: &[u32],
+        with_bounds: bool,
+    ) -> Result<json::Index<json::Accessor>, WriteError> {
+        let (Some(view), None) = (accessor.view(), accessor.sparse()) else {
+            return Err(self.unsupported(
+                id,
+                format!(
+                    "accessor {} is sparse or has no buffer view, which --write-gltf does not rewrite",
+                    accessor.index()
+                ),
+            ));
+        };
+        let size = accessor.size();
+        let stride = view.stride().unwrap_or(size);
+        let data = &buffers[view.buffer().index()].0;
+        let start = view.offset() + accessor.offset();
+        let padded = size.next_multiple_of(4);
+        let mut bytes = Vec::with_capacity(sources.len() * padded);
+        for &s in sources {
+            let at = start + s as usize * stride;
+            let element = data.get(at..at + size).ok_or_else(|| {
+                self.unsupported(
+                    id,
+                    format!("accessor {} runs past its buffer", accessor.index()),
+                )
+            })?;
+            bytes.extend_from_slice(element);
+            bytes.resize(bytes.len() + padded - size, 0);
+        }
+        let new_view = self.push_view(
+            &bytes,
+            (padded != size).then_some(padded),
+            Some(json::buffer::ARRAY_BUFFER),
+        );
+        let mut a = self.root.accessors[accessor.index()].clone();
+        a.buffer_view = Some(json::Index::new(new_view));
+        a.byte_offset = None;
+        a.count = sources.len().into();
+        a.sparse = None;
+        a.min = None;
+        a.max = None;
+        if with_bounds {
+            let (lo, hi) = float3_bounds(&bytes, padded);
+            a.min = Some(serde_json::json!(lo));
+            a.max = Some(serde_json::json!(hi));
+        }
+        self.root.accessors.push(a);
+        Ok(json::Index::new((self.root.accessors.len() - 1) as u32))
+    }
+
+    /// One buffer (the binary chunk), the JSON, written atomically.
+    fn finish(mut self, out: &Path) -> Result<(), WriteError> {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+        let buffer: json::Buffer =
+            serde_json::from_value(serde_json::json!({ "byteLength": self.bin.len() }))
+                .expect("a valid buffer");
+        self.root.buffers = vec![buffer];
+        let write_error = |message: String| WriteError::Write {
+            path: out.to_owned(),
+            message,
+        };
+        let json = self.root.to_vec().map_err(|e| write_error(e.to_string()))?;
+        let glb = ::gltf::binary::Glb {
+            header: ::gltf::binary::Header {
+                magic: *b"glTF",
+                version: 2,
+                length: 0,
+            },
+            json: json.into(),
+            bin: Some(self.bin.into()),
+        };
+        let bytes = glb.to_vec().map_err(|e| write_error(e.to_string()))?;
+        crate::output::atomic::write(out, bytes).map_err(|e| write_error(e.to_string()))
+    }
+}
+
+/// Pushes `node`'s children, in the loader's order, onto the walk's stack.
+fn continue_children<'a>(
+    stack: &mut Vec<(::gltf::Node<'a>, Mat4)>,
+    node: &::gltf::Node<'a>,
+    world: Mat4,
+) {
+    for child in node.children().collect::<Vec<_>>().into_iter().rev() {
+        stack.push((child, world));
+    }
+}
+
+/// Per-component min and max of packed `f32` VEC3 elements `stride` bytes apart.
+fn float3_bounds(bytes: &[u8], stride: usize) -> ([f32; 3], [f32; 3]) {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for e in bytes.chunks_exact(stride) {
+        for k in 0..3 {
+            let v = f32::from_le_bytes(e[4 * k..4 * k + 4].try_into().expect("4 bytes"));
+            lo[k] = lo[k].min(v);
+            hi[k] = hi[k].max(v);
+        }
+    }
+    (lo, hi)
+}
+
+/// Sets `extras.guidebake_lightmap` to `value`, keeping other extras of an object.
+fn set_extra(extras: &mut json::Extras, value: serde_json::Value) {
+    let mut object = extras
+        .as_ref()
+        .and_then(|raw| serde_json::from_str::<serde_json::Value>(raw.get()).ok())
+        .filter(serde_json::Value::is_object)
+        .unwrap_or_else(|| serde_json::json!({}));
+    object["guidebake_lightmap"] = value;
+    *extras = serde_json::value::to_raw_value(&object).ok();
+}
