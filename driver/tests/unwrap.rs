@@ -317,6 +317,15 @@ fn a_room_without_lightmap_uvs_unwraps_bakes_and_round_trips() {
         resume: false,
         aux: false,
     };
+    // The original scene has no lightmap UVs to read bounces through: refused, naming the
+    // mesh, with nothing left behind.
+    let e = bake(&job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap_err();
+    let message = e.to_string();
+    assert!(
+        message.contains("mesh 'room' has texels") && message.contains("--write-gltf"),
+        "{message}"
+    );
+    assert!(!out.exists() && !dir.path().join("room.exr.bake").exists());
     bake(&job, &back, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
     let rho = f64::from(ALBEDO);
     let want =

@@ -41,7 +41,7 @@ use crate::output::exr_pages::PageWriteError;
 use crate::output::fnv1a64;
 use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
 use crate::scene::Scene;
-use crate::texels::{TexelFile, TexelFileError};
+use crate::texels::{MESH_HAS_LIGHTMAP_UVS, TexelFile, TexelFileError};
 use crate::transport::series::{PreviousPass, PreviousPassWriter};
 
 /// What a bake run is asked to do.
@@ -228,7 +228,7 @@ pub fn bake_pass_with_progress(
     let clock = Instant::now();
     let texels = TexelFile::open(&job.texels)?;
     report.seconds.open_texels = clock.elapsed().as_secs_f64();
-    check_scene_matches(&texels, scene)?;
+    check_scene_matches(&texels, scene, job.settings.passes() > 1)?;
 
     let clock = Instant::now();
     let mut world = World::new(scene, Preset::DEFAULT)?;
@@ -511,7 +511,11 @@ impl Drop for CountedBaker<'_, '_> {
     }
 }
 
-fn check_scene_matches(texels: &TexelFile, scene: &Scene) -> Result<(), BakeError> {
+/// The texel file must have been prepared from `scene`: the same triangles and, when a
+/// series pass reads the previous one through the scene's lightmap UVs (`uvs_read`), lightmap
+/// UVs on every mesh that has texels — a scene whose UVs `prepare --unwrap` generated must be
+/// baked as the file `--write-gltf` wrote, or its bounced light would silently be black.
+fn check_scene_matches(texels: &TexelFile, scene: &Scene, uvs_read: bool) -> Result<(), BakeError> {
     let expected = texels.header().triangle_count as usize;
     if expected != scene.triangles.len() {
         return Err(BakeError::Mismatch(format!(
@@ -519,6 +523,21 @@ fn check_scene_matches(texels: &TexelFile, scene: &Scene) -> Result<(), BakeErro
             texels.path().display(),
             scene.path.display(),
             scene.triangles.len()
+        )));
+    }
+    let without_uvs = texels
+        .meshes()
+        .iter()
+        .zip(&scene.meshes)
+        .find(|(record, mesh)| record.flags & MESH_HAS_LIGHTMAP_UVS != 0 && !mesh.has_lightmap_uvs);
+    if let (true, Some((_, mesh))) = (uvs_read, without_uvs) {
+        return Err(BakeError::Mismatch(format!(
+            "{}: mesh '{}' has texels in {}, but no lightmap UVs (TEXCOORD_1) in this scene, \
+             through which series bounces are read: bake the scene `prepare --write-gltf` \
+             wrote, or use --transport path",
+            scene.path.display(),
+            mesh.name,
+            texels.path().display()
         )));
     }
     Ok(())

@@ -66,6 +66,9 @@ pub struct Header {
     pub reserved: [u8; 8],
 }
 
+/// [`MeshRecord::flags`] bit: the mesh has lightmap UVs, and texels.
+pub const MESH_HAS_LIGHTMAP_UVS: u32 = 1;
+
 /// One atlas page, 8 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
@@ -89,7 +92,8 @@ pub struct MeshRecord {
     pub triangle_count: u32,
     /// Atlas page.
     pub page: u32,
-    /// Bit 0: the mesh has lightmap UVs (otherwise it has no texels).
+    /// Bit 0 ([`MESH_HAS_LIGHTMAP_UVS`]): the mesh has lightmap UVs (otherwise it has no
+    /// texels).
     pub flags: u32,
     /// UV → pixel scale.
     pub uv_scale: [f32; 2],
