@@ -26,8 +26,7 @@ use glam::{Vec3, Vec3A};
 use guidebake::bvh::{Bvh, Preset};
 use guidebake_kernels::packet::{Hit8, LANES, Ray8};
 use guidebake_kernels::traverse::{
-    BvhRef, ChildOrder, Traversal, intersect_brute, intersect1, intersect8, intersect8_with,
-    occluded1, occluded8, occluded8_with,
+    Layout, Tree, intersect_brute, intersect1, intersect8, occluded1, occluded8,
 };
 use obvhs::cwbvh::{CwBvh, builder::build_cwbvh_from_tris};
 use obvhs::ray::{Ray as ORay, RayHit};
@@ -114,33 +113,11 @@ fn bounds(soup: &[[Vec3; 3]]) -> (Vec3, Vec3) {
 // ---------------------------------------------------------------------------------------------
 // Tracers. Each returns a checksum (hits, or the sum of prim ids) so the work is not elided.
 
-fn packet8(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
-    packet8_with(view, packets, &Traversal::DEFAULT)
-}
-
-/// The issue's traversal ideas, each measured against the default (docs/traverse.md).
-const IDEAS: [(&str, Traversal); 6] = [
-    ("packet8_fallback1", idea(1, ChildOrder::Vote, false)),
-    ("packet8_fallback2", idea(2, ChildOrder::Vote, false)),
-    ("packet8_fallback3", idea(3, ChildOrder::Vote, false)),
-    ("packet8_order_signs", idea(0, ChildOrder::Signs, false)),
-    ("packet8_order_lead", idea(0, ChildOrder::Lead, false)),
-    ("packet8_interval", idea(0, ChildOrder::Vote, true)),
-];
-
-const fn idea(fallback_lanes: u32, order: ChildOrder, interval: bool) -> Traversal {
-    Traversal {
-        fallback_lanes,
-        order,
-        interval,
-    }
-}
-
-fn packet8_with(view: &BvhRef<'_>, packets: &[Ray8], how: &Traversal) -> u64 {
+fn packet8(view: &impl Tree, packets: &[Ray8]) -> u64 {
     let mut sum = 0u64;
     for p in packets {
         let mut hits = Hit8::NONE;
-        intersect8_with(view, p, &mut hits, how);
+        intersect8(view, p, &mut hits);
         sum += hits
             .prim
             .to_array()
@@ -151,7 +128,7 @@ fn packet8_with(view: &BvhRef<'_>, packets: &[Ray8], how: &Traversal) -> u64 {
     sum
 }
 
-fn scalar(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+fn scalar(view: &impl Tree, packets: &[Ray8]) -> u64 {
     let mut sum = 0u64;
     for p in packets {
         for lane in 0..LANES {
@@ -162,14 +139,14 @@ fn scalar(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
     sum
 }
 
-fn occl8(view: &BvhRef<'_>, packets: &[Ray8], how: &Traversal) -> u64 {
+fn occl8(view: &impl Tree, packets: &[Ray8]) -> u64 {
     packets
         .iter()
-        .map(|p| u64::from(occluded8_with(view, p, how).count_ones()))
+        .map(|p| u64::from(occluded8(view, p).count_ones()))
         .sum()
 }
 
-fn occl1(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+fn occl1(view: &impl Tree, packets: &[Ray8]) -> u64 {
     packets
         .iter()
         .map(|p| (0..LANES).filter(|&l| occluded1(view, &p.lane(l))).count() as u64)
@@ -228,7 +205,7 @@ fn check_prims(what: &str, reference: &[u32], other: &[u32]) {
     );
 }
 
-fn prims_of(view: &BvhRef<'_>, packets: &[Ray8]) -> Vec<u32> {
+fn prims_of(view: &impl Tree, packets: &[Ray8]) -> Vec<u32> {
     packets
         .iter()
         .flat_map(|p| {
@@ -237,26 +214,30 @@ fn prims_of(view: &BvhRef<'_>, packets: &[Ray8]) -> Vec<u32> {
         .collect()
 }
 
-fn check_ours(s: &Scene, view: &BvhRef<'_>, packets: &[Ray8], reference: &[u32]) {
-    // Brute force on a sample (it is O(triangles) per ray), exact equality everywhere else.
-    for p in packets.iter().step_by(packets.len() / 16 + 1) {
-        for l in 0..LANES {
-            let r = p.lane(l);
-            assert_eq!(
-                intersect1(view, &r),
-                intersect_brute(view.tris(), &r),
-                "{}: scalar vs brute",
-                s.name
-            );
+/// Both layouts' packet and scalar traversals against the binary scalar reference.
+fn check_ours(s: &Scene, packets: &[Ray8], reference: &[u32]) {
+    for view in [Layout::Binary(s.bvh.view()), Layout::Wide(s.bvh.wide())] {
+        // Brute force on a sample (it is O(triangles) per ray), exact equality everywhere else.
+        for p in packets.iter().step_by(packets.len() / 16 + 1) {
+            for l in 0..LANES {
+                let r = p.lane(l);
+                assert_eq!(
+                    intersect1(&view, &r),
+                    intersect_brute(view.tris(), &r),
+                    "{}: scalar vs brute",
+                    s.name
+                );
+            }
         }
+        let mut got = Vec::with_capacity(reference.len());
+        for p in packets {
+            let mut hits = Hit8::NONE;
+            intersect8(&view, p, &mut hits);
+            got.extend(hits.prim.to_array());
+        }
+        assert_eq!(got, reference, "{}: packet8 vs scalar", s.name);
+        assert_eq!(prims_of(&view, packets), reference, "{}: scalar", s.name);
     }
-    let mut got = Vec::with_capacity(reference.len());
-    for p in packets {
-        let mut hits = Hit8::NONE;
-        intersect8(view, p, &mut hits);
-        got.extend(hits.prim.to_array());
-    }
-    assert_eq!(got, reference, "{}: packet8 vs scalar", s.name);
 }
 
 fn bench(c: &mut Criterion) {
@@ -265,11 +246,13 @@ fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("traverse");
     for s in scenes() {
         let view = s.bvh.view();
+        let wide = s.bvh.wide();
         println!(
-            "{}: {} triangles, {} nodes, {} leaf triangles, build {:?}",
+            "{}: {} triangles, {} binary nodes, {} wide nodes, {} leaf triangles, build {:?}",
             s.name,
             s.soup.len(),
             view.nodes().len(),
+            wide.nodes().len(),
             view.tris().len(),
             s.bvh.build_time()
         );
@@ -299,18 +282,23 @@ fn bench(c: &mut Criterion) {
                     .iter()
                     .flat_map(|p| (0..LANES).map(move |l| u32::from(occluded1(&view, &p.lane(l)))))
                     .collect();
-                let packet_blocked: Vec<u32> = packets
-                    .iter()
-                    .flat_map(|p| {
-                        let m = occluded8(&view, p);
-                        (0..LANES).map(move |l| u32::from(m >> l & 1))
-                    })
-                    .collect();
-                assert_eq!(
-                    blocked, packet_blocked,
-                    "{}: occluded8 vs occluded1",
-                    s.name
-                );
+                for layout in [Layout::Binary(view), Layout::Wide(wide)] {
+                    let packet_blocked: Vec<u32> = packets
+                        .iter()
+                        .flat_map(|p| {
+                            let m = occluded8(&layout, p);
+                            (0..LANES).map(move |l| u32::from(m >> l & 1))
+                        })
+                        .collect();
+                    assert_eq!(blocked, packet_blocked, "{}: occluded8", s.name);
+                    let single: Vec<u32> = packets
+                        .iter()
+                        .flat_map(|p| {
+                            (0..LANES).map(move |l| u32::from(occluded1(&layout, &p.lane(l))))
+                        })
+                        .collect();
+                    assert_eq!(blocked, single, "{}: occluded1", s.name);
+                }
                 let ob: Vec<u32> = packets
                     .iter()
                     .flat_map(|p| {
@@ -329,16 +317,16 @@ fn bench(c: &mut Criterion) {
                     &em.occluded8_all(packets, true),
                 );
                 group.bench_function(id("occluded8"), |b| {
-                    b.iter(|| occl8(&view, black_box(packets), &Traversal::DEFAULT))
+                    b.iter(|| occl8(&view, black_box(packets)))
                 });
-                for (name, how) in &IDEAS[..3] {
-                    let name = name.replace("packet8", "occluded8");
-                    group.bench_function(id(&name), |b| {
-                        b.iter(|| occl8(&view, black_box(packets), how))
-                    });
-                }
+                group.bench_function(id("wide_occluded8"), |b| {
+                    b.iter(|| occl8(&wide, black_box(packets)))
+                });
                 group.bench_function(id("scalar"), |b| {
                     b.iter(|| occl1(&view, black_box(packets)))
+                });
+                group.bench_function(id("wide_scalar"), |b| {
+                    b.iter(|| occl1(&wide, black_box(packets)))
                 });
                 group.bench_function(id("obvhs"), |b| {
                     b.iter(|| obvhs_occluded(&s, black_box(packets)))
@@ -356,7 +344,7 @@ fn bench(c: &mut Criterion) {
                 }
                 continue;
             }
-            check_ours(&s, &view, packets, &reference);
+            check_ours(&s, packets, &reference);
             let ob: Vec<u32> = packets
                 .iter()
                 .flat_map(|p| {
@@ -389,13 +377,14 @@ fn bench(c: &mut Criterion) {
             group.bench_function(id("packet8"), |b| {
                 b.iter(|| packet8(&view, black_box(packets)))
             });
-            for (name, how) in &IDEAS {
-                group.bench_function(id(name), |b| {
-                    b.iter(|| packet8_with(&view, black_box(packets), how))
-                });
-            }
+            group.bench_function(id("wide_packet8"), |b| {
+                b.iter(|| packet8(&wide, black_box(packets)))
+            });
             group.bench_function(id("scalar"), |b| {
                 b.iter(|| scalar(&view, black_box(packets)))
+            });
+            group.bench_function(id("wide_scalar"), |b| {
+                b.iter(|| scalar(&wide, black_box(packets)))
             });
             group.bench_function(id("obvhs_cwbvh"), |b| {
                 b.iter(|| obvhs_closest(&s, black_box(packets)))
@@ -424,9 +413,12 @@ fn bench(c: &mut Criterion) {
         group.throughput(Throughput::Elements(rays));
         let id = |what: &str| format!("{}/gather_resorted_{what}", s.name);
         let reference = prims_of(&view, &resorted);
-        check_ours(&s, &view, &resorted, &reference);
+        check_ours(&s, &resorted, &reference);
         group.bench_function(id("packet8"), |b| {
             b.iter(|| packet8(&view, black_box(&resorted)))
+        });
+        group.bench_function(id("wide_packet8"), |b| {
+            b.iter(|| packet8(&wide, black_box(&resorted)))
         });
         #[cfg(feature = "embree")]
         {
@@ -457,28 +449,36 @@ fn bench(c: &mut Criterion) {
                     Box::new(|| packet8(&view, gather)),
                 ),
                 (
+                    "wide_packet8".into(),
+                    gather.len(),
+                    Box::new(|| packet8(&wide, gather)),
+                ),
+                (
                     "scalar".into(),
                     gather.len(),
                     Box::new(|| scalar(&view, gather)),
+                ),
+                (
+                    "wide_scalar".into(),
+                    gather.len(),
+                    Box::new(|| scalar(&wide, gather)),
                 ),
                 (
                     "obvhs_cwbvh".into(),
                     gather.len(),
                     Box::new(|| obvhs_closest(&s, gather)),
                 ),
+                (
+                    "resorted_packet8".into(),
+                    resorted.len(),
+                    Box::new(|| packet8(&view, &resorted)),
+                ),
+                (
+                    "resorted_wide_packet8".into(),
+                    resorted.len(),
+                    Box::new(|| packet8(&wide, &resorted)),
+                ),
             ];
-            for (name, how) in &IDEAS {
-                entries.push((
-                    (*name).into(),
-                    gather.len(),
-                    Box::new(move || packet8_with(&view, gather, how)),
-                ));
-            }
-            entries.push((
-                "resorted_packet8".into(),
-                resorted.len(),
-                Box::new(|| packet8(&view, &resorted)),
-            ));
             #[cfg(feature = "embree")]
             for coherent in [true, false] {
                 let tag = if coherent { "coherent" } else { "incoherent" };
@@ -505,7 +505,61 @@ fn bench(c: &mut Criterion) {
                     Box::new(move || em.intersect8_sum(resorted, coherent)),
                 ));
             }
-            duel(s.name, &entries, rounds);
+            duel(
+                s.name,
+                "gather",
+                &entries,
+                rounds,
+                &[
+                    "embree_intersect8_coherent",
+                    "embree_intersect8_incoherent",
+                ],
+            );
+            let shadow = &sets[1].1;
+            let mut entries: Vec<DuelEntry<'_>> = vec![
+                (
+                    "occluded8".into(),
+                    shadow.len(),
+                    Box::new(|| occl8(&view, shadow)),
+                ),
+                (
+                    "wide_occluded8".into(),
+                    shadow.len(),
+                    Box::new(|| occl8(&wide, shadow)),
+                ),
+                (
+                    "scalar".into(),
+                    shadow.len(),
+                    Box::new(|| occl1(&view, shadow)),
+                ),
+                (
+                    "wide_scalar".into(),
+                    shadow.len(),
+                    Box::new(|| occl1(&wide, shadow)),
+                ),
+                (
+                    "obvhs_cwbvh".into(),
+                    shadow.len(),
+                    Box::new(|| obvhs_occluded(&s, shadow)),
+                ),
+            ];
+            #[cfg(feature = "embree")]
+            for coherent in [true, false] {
+                let tag = if coherent { "coherent" } else { "incoherent" };
+                let em = &em;
+                entries.push((
+                    format!("embree_occluded8_{tag}"),
+                    shadow.len(),
+                    Box::new(move || em.occluded8_count(shadow, coherent)),
+                ));
+            }
+            duel(
+                s.name,
+                "shadow",
+                &entries,
+                rounds,
+                &["embree_occluded8_coherent", "embree_occluded8_incoherent"],
+            );
         }
         if std::env::var_os("TRAVERSE_PRESETS").is_some() {
             presets(&s, &sets[0].1);
@@ -517,11 +571,12 @@ fn bench(c: &mut Criterion) {
 /// A duel contestant: name, packets per pass, one pass over its ray set (returns a checksum).
 type DuelEntry<'a> = (String, usize, Box<dyn Fn() -> u64 + 'a>);
 
-/// Round-robin timing of the gather tracers: each round runs every entry once over its ray
+/// Round-robin timing of one ray set's tracers: each round runs every entry once over its ray
 /// set (the start rotating from round to round), so all entries see the same machine load
 /// within a few tens of milliseconds. Prints per entry the median Mrays/s and the median over
-/// rounds of its per-round ratio to `obvhs_cwbvh` and to the faster Embree `intersect8`.
-fn duel(scene: &str, entries: &[DuelEntry<'_>], rounds: usize) {
+/// rounds of its per-round ratio to `obvhs_cwbvh`, to the first entry (our binary packet
+/// traversal) and to the faster of the `embree` entries (per round).
+fn duel(scene: &str, set: &str, entries: &[DuelEntry<'_>], rounds: usize, embree: &[&str]) {
     let n = entries.len();
     let mut rates = vec![Vec::with_capacity(rounds); n];
     for round in 0..rounds {
@@ -539,13 +594,12 @@ fn duel(scene: &str, entries: &[DuelEntry<'_>], rounds: usize) {
         v[v.len() / 2]
     };
     let obvhs = index("obvhs_cwbvh").expect("obvhs entry");
-    let embree8: Vec<usize> = ["embree_intersect8_coherent", "embree_intersect8_incoherent"]
-        .iter()
-        .filter_map(|e| index(e))
-        .collect();
+    let embree8: Vec<usize> = embree.iter().filter_map(|e| index(e)).collect();
     println!(
-        "duel {scene} gather: {rounds} rounds; median Mrays/s, median per-round ratio to obvhs \
-         CwBvh and to Embree's faster intersect8 (per round)"
+        "duel {scene} {set}: {rounds} rounds; median Mrays/s, median per-round ratio to obvhs \
+         CwBvh, to {} and to Embree's faster {} (per round)",
+        entries[0].0,
+        embree.first().map_or("-", |e| e.trim_end_matches("_coherent"))
     );
     for (k, (name, _, _)) in entries.iter().enumerate() {
         let ratio_to = |other: &[usize]| {
@@ -562,9 +616,10 @@ fn duel(scene: &str, entries: &[DuelEntry<'_>], rounds: usize) {
             )
         };
         println!(
-            "duel {scene} {name:<36} {:>7.2} Mrays/s  x{:.2} obvhs  x{:.2} embree8",
+            "duel {scene} {set} {name:<36} {:>7.2} Mrays/s  x{:.2} obvhs  x{:.2} binary  x{:.2} embree8",
             median(rates[k].clone()),
             ratio_to(&[obvhs]),
+            ratio_to(&[0]),
             ratio_to(&embree8)
         );
     }

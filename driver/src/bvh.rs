@@ -20,7 +20,9 @@
 use std::time::{Duration, Instant};
 
 use glam::{Vec3, Vec3A};
-use guidebake_kernels::traverse::{BvhRef, LEAF, LayoutError, Node, Tri};
+use guidebake_kernels::traverse::{
+    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse,
+};
 use obvhs::{
     BvhBuildParams,
     bvh2::{Bvh2, builder::build_bvh2_from_tris},
@@ -114,6 +116,7 @@ pub enum BvhError {
 #[derive(Clone, Debug)]
 pub struct Bvh {
     nodes: Vec<Node>,
+    wide: Vec<WideNode>,
     tris: Vec<Tri>,
     build_time: Duration,
     preset: Preset,
@@ -148,20 +151,34 @@ impl Bvh {
             None => (vec![Node::EMPTY], Vec::new()),
             Some(bvh2) => flatten(bvh2, soup),
         };
-        BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
+        let binary = BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
+        let wide = collapse(&binary);
+        WideRef::new(&wide, &tris).map_err(BvhError::Layout)?;
         Ok(Self {
             nodes,
+            wide,
             tris,
             build_time: start.elapsed(),
             preset,
         })
     }
 
-    /// The kernels' view for [`guidebake_kernels::traverse`]'s functions. Validates the layout
-    /// again (linear in the node count): take it once, not per ray.
+    /// The binary view for [`guidebake_kernels::traverse`]'s functions (two child boxes per
+    /// node). Cheap: `build` validated the layout.
     pub fn view(&self) -> BvhRef<'_> {
         // `build` validated this exact layout and nothing mutates it since.
         BvhRef::new_trusted(&self.nodes, &self.tris)
+    }
+
+    /// The wide view (eight child boxes per node, collapsed from the binary tree, same
+    /// triangles). Same results as [`Bvh::view`], bit for bit. Cheap: `build` validated it.
+    pub fn wide(&self) -> WideRef<'_> {
+        WideRef::new_trusted(&self.wide, &self.tris)
+    }
+
+    /// Wide nodes, root first.
+    pub fn wide_nodes(&self) -> &[WideNode] {
+        &self.wide
     }
 
     /// Nodes, root first.
@@ -174,7 +191,7 @@ impl Bvh {
         &self.tris
     }
 
-    /// Wall time of [`Bvh::build`] (obvhs build plus flattening).
+    /// Wall time of [`Bvh::build`] (obvhs build, flattening and collapsing).
     pub fn build_time(&self) -> Duration {
         self.build_time
     }
@@ -292,7 +309,9 @@ mod tests {
         let ray = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
         let empty = Bvh::build(&[], Preset::DEFAULT).unwrap();
         assert_eq!(intersect1(&empty.view(), &ray), None);
+        assert_eq!(intersect1(&empty.wide(), &ray), None);
         let one = Bvh::build(&quad()[..1], Preset::DEFAULT).unwrap();
+        assert_eq!(intersect1(&one.wide(), &ray), intersect1(&one.view(), &ray));
         let hit = intersect1(&one.view(), &ray).unwrap();
         assert_eq!((hit.prim, hit.t), (0, 1.0));
     }
@@ -312,6 +331,7 @@ mod tests {
                 intersect_brute(bvh.tris(), &ray)
             );
             assert_eq!(intersect1(&bvh.view(), &ray).unwrap().prim, 1);
+            assert_eq!(intersect1(&bvh.wide(), &ray), intersect1(&bvh.view(), &ray));
         }
     }
 }

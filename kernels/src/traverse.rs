@@ -77,6 +77,11 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use wide::{f32x8, u32x8};
 
+mod bvh8;
+#[cfg(any(feature = "alloc", test))]
+pub use bvh8::collapse;
+pub use bvh8::{WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
+
 /// `meta` bit marking a leaf child (the low bits count its triangles).
 pub const LEAF: u32 = 1 << 31;
 
@@ -272,6 +277,67 @@ impl<'a> BvhRef<'a> {
     }
 }
 
+/// A validated BVH in one of the kernels' layouts: what the traversals walk.
+#[derive(Clone, Copy, Debug)]
+pub enum Layout<'a> {
+    /// Two child boxes per node ([`Node`]).
+    Binary(BvhRef<'a>),
+    /// Eight child boxes per node ([`WideNode`]).
+    Wide(WideRef<'a>),
+}
+
+impl<'a> Layout<'a> {
+    /// The triangles, in leaf order.
+    pub fn tris(&self) -> &'a [Tri] {
+        match self {
+            Layout::Binary(b) => b.tris,
+            Layout::Wide(w) => w.tris(),
+        }
+    }
+
+    /// Every leaf: its box and its triangles.
+    fn leaves(&self) -> impl Iterator<Item = (([f32; 3], [f32; 3]), &'a [Tri])> {
+        let (binary, wide) = match *self {
+            Layout::Binary(b) => (Some(b), None),
+            Layout::Wide(w) => (None, Some(w)),
+        };
+        let binary = binary.into_iter().flat_map(|b| {
+            b.nodes.iter().flat_map(move |node| {
+                (0..2).filter(move |&s| node.meta[s] != 0).map(move |s| {
+                    let lo = [0, 1, 2].map(|a| node.lo[a][s]);
+                    let hi = [0, 1, 2].map(|a| node.hi[a][s]);
+                    ((lo, hi), b.leaf(node.child[s], node.meta[s]))
+                })
+            })
+        });
+        binary.chain(wide.into_iter().flat_map(|w| w.leaves()))
+    }
+}
+
+/// A BVH view the traversals accept: [`BvhRef`], [`WideRef`] or a [`Layout`].
+pub trait Tree {
+    /// The layout to walk.
+    fn layout(&self) -> Layout<'_>;
+}
+
+impl Tree for BvhRef<'_> {
+    fn layout(&self) -> Layout<'_> {
+        Layout::Binary(*self)
+    }
+}
+
+impl Tree for WideRef<'_> {
+    fn layout(&self) -> Layout<'_> {
+        Layout::Wide(*self)
+    }
+}
+
+impl Tree for Layout<'_> {
+    fn layout(&self) -> Layout<'_> {
+        *self
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Single ray: precomputation, box and triangle tests (the reference arithmetic).
 
@@ -319,10 +385,17 @@ impl Pre {
 /// interval, so rays along a box face are kept. `if t > near` keeps `near` for NaN `t`, as
 /// `_mm256_max_ps(t, near)` does in [`Pre8::box8`].
 fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
+    let lo = [0, 1, 2].map(|axis| node.lo[axis][slot]);
+    let hi = [0, 1, 2].map(|axis| node.hi[axis][slot]);
+    box1_at((lo, hi), pre, tmax)
+}
+
+/// [`box1`] for the box `(lo, hi)`.
+fn box1_at((lo, hi): ([f32; 3], [f32; 3]), pre: &Pre, tmax: f32) -> Option<f32> {
     let mut near = pre.tmin * NEAR_DOWN;
     let mut far = tmax;
     for axis in 0..3 {
-        let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
+        let (lo, hi) = (lo[axis], hi[axis]);
         let (pn, pf) = if pre.inv[axis].is_sign_negative() {
             (hi, lo)
         } else {
@@ -446,7 +519,8 @@ pub fn intersect_brute(tris: &[Tri], ray: &Ray) -> Option<Hit> {
 /// a hit the tie rule prefers. Where every hit lies inside its leaf's box interval this
 /// holds exactly for the closest hit over the BVH's triangles, brute force. The test oracle
 /// for the traversals where they differ from brute force.
-pub fn closest_hit_allowed(bvh: &BvhRef<'_>, ray: &Ray, got: Option<Hit>) -> bool {
+pub fn closest_hit_allowed(bvh: &impl Tree, ray: &Ray, got: Option<Hit>) -> bool {
+    let bvh = bvh.layout();
     if !traceable(ray) {
         return got.is_none();
     }
@@ -460,13 +534,13 @@ pub fn closest_hit_allowed(bvh: &BvhRef<'_>, ray: &Ray, got: Option<Hit>) -> boo
                 closest1(&pre, tri, &mut own);
                 bits(&own) == bits(&h)
             };
-            if !bvh.tris.iter().any(|tri| tri.prim == h.prim && own(tri)) {
+            if !bvh.tris().iter().any(|tri| tri.prim == h.prim && own(tri)) {
                 return false;
             }
             h
         }
     };
-    !leaves_met(bvh, &pre, best.t)
+    !leaves_met(&bvh, &pre, best.t)
         .any(|tri| tri1(&pre, tri).is_some_and(|(t, _, _)| accept(t, tri.prim, pre.tmin, &best)))
 }
 
@@ -474,30 +548,28 @@ pub fn closest_hit_allowed(bvh: &BvhRef<'_>, ray: &Ray, got: Option<Hit>) -> boo
 /// triangle of `bvh` occludes the ray, `false` only when no triangle of a leaf whose box
 /// the slab test lets the ray meet on `[tmin, tmax]` does (module docs, "Hits outside their
 /// own box").
-pub fn occlusion_allowed(bvh: &BvhRef<'_>, ray: &Ray, got: bool) -> bool {
+pub fn occlusion_allowed(bvh: &impl Tree, ray: &Ray, got: bool) -> bool {
+    let bvh = bvh.layout();
     if !traceable(ray) {
         return !got;
     }
     let pre = Pre::new(ray);
     let tmax = ray.tmax.min(f32::MAX);
     if got {
-        bvh.tris.iter().any(|tri| occludes1(&pre, tri, tmax))
+        bvh.tris().iter().any(|tri| occludes1(&pre, tri, tmax))
     } else {
-        !leaves_met(bvh, &pre, tmax).any(|tri| occludes1(&pre, tri, tmax))
+        !leaves_met(&bvh, &pre, tmax).any(|tri| occludes1(&pre, tri, tmax))
     }
 }
 
 /// The triangles of every leaf whose box the ray's conservative slab interval on
 /// `[tmin, tmax]` meets: what a traversal whose closest hit is at `tmax` must have tested
 /// (a parent's box contains its children's, and the slab test is monotone in the box).
-fn leaves_met<'a>(bvh: &BvhRef<'a>, pre: &Pre, tmax: f32) -> impl Iterator<Item = &'a Tri> {
-    let (nodes, view) = (bvh.nodes, *bvh);
+fn leaves_met<'a>(bvh: &Layout<'a>, pre: &Pre, tmax: f32) -> impl Iterator<Item = &'a Tri> {
     let pre = *pre;
-    nodes.iter().flat_map(move |node| {
-        (0..2)
-            .filter(move |&slot| node.meta[slot] != 0 && box1(node, slot, &pre, tmax).is_some())
-            .flat_map(move |slot| view.leaf(node.child[slot], node.meta[slot]))
-    })
+    bvh.leaves()
+        .filter(move |(aabb, _)| box1_at(*aabb, &pre, tmax).is_some())
+        .flat_map(|(_, leaf)| leaf)
 }
 
 /// Whether any triangle blocks the ray on `[tmin, tmax]`, testing every triangle: the oracle.
@@ -522,47 +594,51 @@ fn traceable(ray: &Ray) -> bool {
 ///
 /// Returns `None` for a miss and for rays that are not traced (inactive, non-finite, zero
 /// direction, `tmin < 0`).
-pub fn intersect1(bvh: &BvhRef<'_>, ray: &Ray) -> Option<Hit> {
+pub fn intersect1(bvh: &impl Tree, ray: &Ray) -> Option<Hit> {
     if !traceable(ray) {
         return None;
     }
     let pre = Pre::new(ray);
     let mut best = no_hit(ray.tmax);
-    walk1(bvh, &pre, (0, 0), |leaf| {
+    let visit = |leaf: &[Tri]| {
         for tri in leaf {
             closest1(&pre, tri, &mut best);
         }
         best.t
-    });
+    };
+    match bvh.layout() {
+        Layout::Binary(b) => walk1(&b, &pre, visit),
+        Layout::Wide(w) => bvh8::walk1(&w, &pre, visit),
+    };
     (best.prim != NO_HIT).then_some(best)
 }
 
 /// Whether anything blocks one ray on `[tmin, tmax]`: the scalar reference, with early exit.
-pub fn occluded1(bvh: &BvhRef<'_>, ray: &Ray) -> bool {
+pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
     if !traceable(ray) {
         return false;
     }
     let pre = Pre::new(ray);
     let tmax = ray.tmax.min(f32::MAX);
-    let mut hit = false;
-    walk1(bvh, &pre, (0, 0), |leaf| {
-        hit = leaf.iter().any(|tri| occludes1(&pre, tri, tmax));
-        if hit { f32::NEG_INFINITY } else { tmax }
-    });
-    hit
+    let visit = |leaf: &[Tri]| {
+        if leaf.iter().any(|tri| occludes1(&pre, tri, tmax)) {
+            f32::NEG_INFINITY
+        } else {
+            tmax
+        }
+    };
+    let end = match bvh.layout() {
+        Layout::Binary(b) => walk1(&b, &pre, visit),
+        Layout::Wide(w) => bvh8::walk1(&w, &pre, visit),
+    };
+    end == f32::NEG_INFINITY
 }
 
-/// Depth-first walk of one ray from `start` (a `(child, meta)` entry). `visit` tests a leaf's
-/// triangles and returns the ray's new `tmax` (−∞ stops the walk).
-fn walk1<'a>(
-    bvh: &BvhRef<'a>,
-    pre: &Pre,
-    start: (u32, u32),
-    mut visit: impl FnMut(&'a [Tri]) -> f32,
-) -> f32 {
+/// Depth-first walk of one ray through the binary tree, nearer child first. `visit` tests a
+/// leaf's triangles and returns the ray's new `tmax` (−∞ stops the walk).
+fn walk1<'a>(bvh: &BvhRef<'a>, pre: &Pre, mut visit: impl FnMut(&'a [Tri]) -> f32) -> f32 {
     let mut tmax = visit(&[]);
     let mut stack = [(0u32, 0u32); STACK];
-    stack[0] = start;
     let mut sp = 1;
     while sp > 0 {
         sp -= 1;
@@ -623,71 +699,6 @@ struct Pre8 {
     rays: Ray8,
     /// Bit mask of traced lanes.
     traced: u8,
-    /// The packet's direction interval when its traced lanes share origin and octant.
-    interval: Option<Interval>,
-}
-
-/// A shared-origin packet in one octant as one "interval ray": per axis the range of the
-/// lanes' `1/d`, for a conservative whole-packet box test (the issue's interval culling).
-#[derive(Clone, Copy, Debug)]
-struct Interval {
-    org: [f32; 3],
-    inv_lo: [f32; 3],
-    inv_hi: [f32; 3],
-    neg: [bool; 3],
-    tmin: f32,
-}
-
-impl Interval {
-    /// The interval of the traced lanes, if they share one origin.
-    fn of(
-        org: &[f32x8; 3],
-        inv: &[f32x8; 3],
-        tmin: f32x8,
-        traced: u8,
-        neg: [bool; 3],
-    ) -> Option<Self> {
-        let lead = traced.trailing_zeros().min(7) as usize;
-        let o = org.map(|v| v.as_array()[lead]);
-        let shared = (0..3)
-            .all(|a| org[a].simd_eq(f32x8::splat(o[a])).to_bitmask() as u8 & traced == traced);
-        let fold = |v: &f32x8, start: f32, f: fn(f32, f32) -> f32| {
-            (0..LANES)
-                .filter(|&i| traced >> i & 1 == 1)
-                .fold(start, |acc, i| f(acc, v.as_array()[i]))
-        };
-        shared.then(|| Self {
-            org: o,
-            inv_lo: [0, 1, 2].map(|a| fold(&inv[a], f32::INFINITY, f32::min)),
-            inv_hi: [0, 1, 2].map(|a| fold(&inv[a], f32::NEG_INFINITY, f32::max)),
-            neg,
-            tmin: fold(&tmin, f32::INFINITY, f32::min) * NEAR_DOWN,
-        })
-    }
-
-    /// Whether no lane's interval can meet slot `slot`'s box: [`box1`] with every product
-    /// replaced by its lower (near) or upper (far) bound over the lanes' `1/d` (rounding is
-    /// monotone, so the bounds hold after rounding). A plane whose bound is NaN (`0 · ∞`)
-    /// constrains nothing, as in [`box1`].
-    #[inline(always)]
-    fn misses(&self, node: &Node, slot: usize) -> bool {
-        let mut near = self.tmin;
-        let mut far = f32::INFINITY;
-        for axis in 0..3 {
-            let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
-            let (pn, pf) = if self.neg[axis] { (hi, lo) } else { (lo, hi) };
-            let (dn, df) = (pn - self.org[axis], pf - self.org[axis]);
-            let (n0, n1) = (dn * self.inv_lo[axis], dn * self.inv_hi[axis]);
-            let (f0, f1) = (df * self.inv_lo[axis], df * self.inv_hi[axis]);
-            if !(n0.is_nan() || n1.is_nan()) {
-                near = near.max(n0.min(n1));
-            }
-            if !(f0.is_nan() || f1.is_nan()) {
-                far = far.min(f0.max(f1));
-            }
-        }
-        near > widened(far)
-    }
 }
 
 fn mask_of(bits: u8) -> f32x8 {
@@ -703,9 +714,8 @@ fn mask_of(bits: u8) -> f32x8 {
 impl Pre8 {
     /// The packet's constants, computed 8-wide with the same IEEE operations as [`Pre::new`]
     /// per lane (so every lane's values equal its scalar [`Pre`]'s bit for bit); untraced
-    /// lanes get the stub ray (origin 0, direction +x, `tmin = +∞`). `interval`: also derive
-    /// the packet's [`Interval`] (only [`Traversal::interval`] uses it).
-    fn new(rays: &Ray8, interval: bool) -> Self {
+    /// lanes get the stub ray (origin 0, direction +x, `tmin = +∞`).
+    fn new(rays: &Ray8) -> Self {
         let (zero, one) = (f32x8::ZERO, f32x8::ONE);
         let live = rays.traceable() & rays.tmin.simd_ge(zero);
         let traced = live.to_bitmask() as u8;
@@ -753,10 +763,6 @@ impl Pre8 {
             let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
             if bit(sw) { [ky, kx, kz] } else { [kx, ky, kz] }
         });
-        let interval = match octant {
-            Some(neg) if interval => Interval::of(&org, &inv, tmin, traced, neg),
-            _ => None,
-        };
         Self {
             porg: [pick(&org, 0), pick(&org, 1), pick(&org, 2)],
             s: [dx / dz, dy / dz, one / dz],
@@ -770,7 +776,6 @@ impl Pre8 {
             tmin_down: tmin * f32x8::splat(NEAR_DOWN),
             rays: *rays,
             traced,
-            interval,
         }
     }
 
@@ -779,28 +784,23 @@ impl Pre8 {
         Pre::new(&self.rays.lane(i))
     }
 
-    /// [`Pre8::box8`], after the packet's [`Interval`] test when `interval` is set and the
-    /// packet has one (a miss there is a miss for every lane).
-    #[inline(always)]
-    fn box8_culled(&self, node: &Node, slot: usize, tmax: f32x8, interval: bool) -> (f32x8, f32x8) {
-        if interval
-            && let Some(iv) = &self.interval
-            && iv.misses(node, slot)
-        {
-            return (f32x8::ZERO, f32x8::ZERO);
-        }
-        self.box8(node, slot, tmax)
-    }
-
     /// Lanes whose interval meets slot `slot`'s box, and their entry distances: [`box1`] for
     /// eight lanes, near planes picked once per packet when all lanes share the direction
     /// signs (a coherent packet), per lane otherwise.
     #[inline(always)]
     fn box8(&self, node: &Node, slot: usize, tmax: f32x8) -> (f32x8, f32x8) {
+        let lo = [0, 1, 2].map(|axis| node.lo[axis][slot]);
+        let hi = [0, 1, 2].map(|axis| node.hi[axis][slot]);
+        self.box8_at(lo, hi, tmax)
+    }
+
+    /// [`Pre8::box8`] for the box `lo`, `hi`.
+    #[inline(always)]
+    fn box8_at(&self, lo: [f32; 3], hi: [f32; 3], tmax: f32x8) -> (f32x8, f32x8) {
         let mut near = self.tmin_down;
         let mut far = tmax;
         for axis in 0..3 {
-            let (lo, hi) = (node.lo[axis][slot], node.hi[axis][slot]);
+            let (lo, hi) = (lo[axis], hi[axis]);
             let (pn, pf) = match self.octant {
                 Some(neg) if neg[axis] => (f32x8::splat(hi), f32x8::splat(lo)),
                 Some(_) => (f32x8::splat(lo), f32x8::splat(hi)),
@@ -970,59 +970,10 @@ fn occludes8_rare(pre: &Pre8, tri: &Tri, tmax: f32x8, zero: u8) -> u8 {
     })
 }
 
-/// How the packet walk orders children and when it hands lanes to the scalar walk.
-///
-/// [`Traversal::DEFAULT`] is what [`intersect8`] and [`occluded8`] use; the other settings
-/// exist so that `benches/traverse.rs` can measure the issue's ideas side by side
-/// (docs/traverse.md, "Ideas"). Every setting gives the same results, bit for bit: the
-/// closest hit under the tie rule does not depend on the visiting order, and the scalar
-/// walk performs the same arithmetic as the packet's lanes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Traversal {
-    /// Finish an inner subtree with the scalar walk, lane by lane, when at most this many
-    /// lanes still reach it (0: never).
-    pub fallback_lanes: u32,
-    /// Which of two hit children is visited first.
-    pub order: ChildOrder,
-    /// Before the 8-wide box test, test the box once against the packet's interval of
-    /// directions (shared origin, one octant); skip the 8-wide test when that misses.
-    pub interval: bool,
-}
-
-/// The order in which a packet visits two children that its lanes both hit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ChildOrder {
-    /// The lanes hitting both boxes vote with their entry distances.
-    Vote,
-    /// The box centres are compared along the packet's direction sign vector (the classic
-    /// ordered traversal by octant); falls back to [`ChildOrder::Vote`] across octants.
-    Signs,
-    /// The first traced lane's entry distances decide.
-    Lead,
-}
-
-impl Traversal {
-    /// The measured choice (docs/traverse.md).
-    pub const DEFAULT: Self = Self {
-        fallback_lanes: 0,
-        order: ChildOrder::Vote,
-        interval: false,
-    };
-}
-
-impl Default for Traversal {
-    fn default() -> Self {
-        Self::DEFAULT
-    }
-}
-
-/// What a packet walk does at a leaf (eight lanes) and in a subtree handed to the scalar walk
-/// (one lane).
+/// What a packet walk does at a leaf.
 trait Visitor<'a> {
     /// Tests a leaf for the packet; returns the packet's new `tmax` (−∞ in finished lanes).
     fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8;
-    /// Walks the subtree `entry` for lane `lane` alone; returns the packet's new `tmax`.
-    fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8;
 }
 
 /// Closest-hit visitor.
@@ -1037,19 +988,6 @@ impl<'a> Visitor<'a> for Closest<'_> {
         for tri in leaf {
             closest8(self.pre, tri, &mut self.best);
         }
-        self.best.t
-    }
-
-    fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8 {
-        let pre = &self.pre.lane(lane);
-        let mut hit = self.best.lane(lane);
-        walk1(bvh, pre, entry, |leaf| {
-            for tri in leaf {
-                closest1(pre, tri, &mut hit);
-            }
-            hit.t
-        });
-        set_lane(&mut self.best, lane, &hit);
         self.best.t
     }
 }
@@ -1076,32 +1014,13 @@ impl<'a> Visitor<'a> for Occlusion<'_> {
         }
         self.tmax
     }
-
-    fn walk1(&mut self, bvh: &BvhRef<'a>, lane: usize, entry: (u32, u32)) -> f32x8 {
-        let pre = &self.pre.lane(lane);
-        let tmax = self.tmax.as_array()[lane];
-        let mut hit = false;
-        walk1(bvh, pre, entry, |leaf| {
-            hit = hit || leaf.iter().any(|tri| occludes1(pre, tri, tmax));
-            if hit { f32::NEG_INFINITY } else { tmax }
-        });
-        if hit {
-            self.blocked |= 1 << lane;
-            self.tmax.as_mut_array()[lane] = f32::NEG_INFINITY;
-        }
-        self.tmax
-    }
 }
 
-/// Depth-first walk of a packet: a shared stack of `(child, meta)` entries with `lanes`,
-/// the bit mask of lanes whose interval met the entry's box when it was pushed.
-fn walk8<'a>(
-    bvh: &BvhRef<'a>,
-    pre: &Pre8,
-    mut tmax: f32x8,
-    how: &Traversal,
-    visitor: &mut impl Visitor<'a>,
-) {
+/// Depth-first walk of a packet through the binary tree: a shared stack of `(child, meta)`
+/// entries with `lanes`, the bit mask of lanes whose interval met the entry's box when it was
+/// pushed. When both children are met, the lanes meeting both vote with their entry
+/// distances for the one visited first.
+fn walk8<'a>(bvh: &BvhRef<'a>, pre: &Pre8, mut tmax: f32x8, visitor: &mut impl Visitor<'a>) {
     // Entries as `child | meta << 32` and lane masks in two plain arrays: zeroing them is a
     // short memset (a tuple array with padding cost ~10% of the walk in stores).
     let mut stack = [0u64; STACK];
@@ -1120,51 +1039,22 @@ fn walk8<'a>(
             }
             continue;
         }
-        let live = lanes & alive;
-        if live == 0 {
-            continue;
-        }
-        if live.count_ones() <= how.fallback_lanes {
-            for lane in 0..LANES {
-                if live >> lane & 1 == 1 {
-                    tmax = visitor.walk1(bvh, lane, (child, meta));
-                }
-            }
-            alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
-            if alive == 0 {
-                return;
-            }
+        if lanes & alive == 0 {
             continue;
         }
         let node = &bvh.nodes[child as usize];
-        let (m0, n0) = pre.box8_culled(node, 0, tmax, how.interval);
-        let (m1, n1) = pre.box8_culled(node, 1, tmax, how.interval);
+        let (m0, n0) = pre.box8(node, 0, tmax);
+        let (m1, n1) = pre.box8(node, 1, tmax);
         let (b0, b1) = (m0.to_bitmask() as u8, m1.to_bitmask() as u8);
         let entry = |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
         match (b0 != 0, b1 != 0) {
             (true, true) => {
-                let first1 = match (how.order, pre.octant) {
-                    (ChildOrder::Signs, Some(neg)) => {
-                        // Centre along the sign vector, doubled: lo + hi per axis.
-                        let along = |slot: usize| {
-                            (0..3).fold(0.0, |acc, axis| {
-                                let c = node.lo[axis][slot] + node.hi[axis][slot];
-                                if neg[axis] { acc - c } else { acc + c }
-                            })
-                        };
-                        along(1) < along(0)
-                    }
-                    (ChildOrder::Lead, _) if b0 & b1 != 0 => {
-                        let lead = (b0 & b1).trailing_zeros() as usize;
-                        n1.as_array()[lead] < n0.as_array()[lead]
-                    }
-                    _ => {
-                        // The lanes hitting both boxes vote for the nearer one.
-                        let closer1 = (n1.simd_lt(n0) & m0 & m1).to_bitmask().count_ones();
-                        2 * closer1 > (b0 & b1).count_ones()
-                    }
+                let closer1 = (n1.simd_lt(n0) & m0 & m1).to_bitmask().count_ones();
+                let (near, far) = if 2 * closer1 > (b0 & b1).count_ones() {
+                    (1, 0)
+                } else {
+                    (0, 1)
                 };
-                let (near, far) = if first1 { (1, 0) } else { (0, 1) };
                 let bits = [b0, b1];
                 stack[sp] = entry(far);
                 lanes_of[sp] = bits[far];
@@ -1187,26 +1077,29 @@ fn walk8<'a>(
     }
 }
 
+/// A packet's constants and its starting `tmax` (`min(tmax, f32::MAX)`, −∞ in lanes not
+/// traced), or `None` when no lane is traced.
+fn start8(rays: &Ray8) -> Option<(Pre8, f32x8)> {
+    let pre = Pre8::new(rays);
+    if pre.traced == 0 {
+        return None;
+    }
+    let tmax = mask_of(pre.traced).bitselect(
+        rays.tmax.fast_min(f32x8::splat(f32::MAX)),
+        f32x8::splat(f32::NEG_INFINITY),
+    );
+    Some((pre, tmax))
+}
+
 /// Closest hits of eight rays: the packet traversal.
 ///
 /// Lanes that are not traced (inactive, non-finite, zero direction, `tmin < 0`) and lanes that
 /// miss leave their `hits` lane untouched. Returns the bit mask of lanes that hit. Each hit
-/// equals [`intersect1`]'s for that lane, bit for bit.
-pub fn intersect8(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8) -> u8 {
-    intersect8_with(bvh, rays, hits, &Traversal::DEFAULT)
-}
-
-/// [`intersect8`] with a chosen [`Traversal`] (same results, different speed).
-pub fn intersect8_with(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8, how: &Traversal) -> u8 {
-    let pre = Pre8::new(rays, how.interval);
-    if pre.traced == 0 {
+/// equals [`intersect1`]'s for that lane, bit for bit, whatever the layout.
+pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
+    let Some((pre, tmax)) = start8(rays) else {
         return 0;
-    }
-    let traced = mask_of(pre.traced);
-    let tmax = traced.bitselect(
-        rays.tmax.fast_min(f32x8::splat(f32::MAX)),
-        f32x8::splat(f32::NEG_INFINITY),
-    );
+    };
     let mut closest = Closest {
         pre: &pre,
         best: Best8 {
@@ -1216,7 +1109,10 @@ pub fn intersect8_with(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8, how: &Tra
             prim: u32x8::splat(NO_HIT),
         },
     };
-    walk8(bvh, &pre, tmax, how, &mut closest);
+    match bvh.layout() {
+        Layout::Binary(b) => walk8(&b, &pre, tmax, &mut closest),
+        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut closest),
+    }
     let best = closest.best;
     let hit_mask = best.prim.simd_ne(u32x8::splat(NO_HIT));
     let f: f32x8 = bytemuck::cast(hit_mask);
@@ -1230,27 +1126,19 @@ pub fn intersect8_with(bvh: &BvhRef<'_>, rays: &Ray8, hits: &mut Hit8, how: &Tra
 /// Which of eight rays are blocked on `[tmin, tmax]`: packet traversal with early exit (a lane
 /// drops out when blocked, the walk ends when all have). Returns the bit mask of blocked lanes;
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
-pub fn occluded8(bvh: &BvhRef<'_>, rays: &Ray8) -> u8 {
-    occluded8_with(bvh, rays, &Traversal::DEFAULT)
-}
-
-/// [`occluded8`] with a chosen [`Traversal`] (same results, different speed).
-pub fn occluded8_with(bvh: &BvhRef<'_>, rays: &Ray8, how: &Traversal) -> u8 {
-    let pre = Pre8::new(rays, how.interval);
-    if pre.traced == 0 {
+pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
+    let Some((pre, tmax)) = start8(rays) else {
         return 0;
-    }
-    let traced = mask_of(pre.traced);
-    let tmax = traced.bitselect(
-        rays.tmax.fast_min(f32x8::splat(f32::MAX)),
-        f32x8::splat(f32::NEG_INFINITY),
-    );
+    };
     let mut occlusion = Occlusion {
         pre: &pre,
         tmax,
         blocked: 0,
     };
-    walk8(bvh, &pre, tmax, how, &mut occlusion);
+    match bvh.layout() {
+        Layout::Binary(b) => walk8(&b, &pre, tmax, &mut occlusion),
+        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion),
+    }
     occlusion.blocked
 }
 
@@ -1404,21 +1292,12 @@ mod tests {
         Ray::new(org, d, 0.0, tmax)
     }
 
-    /// Every [`Traversal`] setting worth measuring: each must give the same bits.
-    fn variants() -> Vec<Traversal> {
-        let mut out = Vec::new();
-        for order in [ChildOrder::Vote, ChildOrder::Signs, ChildOrder::Lead] {
-            for fallback_lanes in [0, 1, 2, 8] {
-                for interval in [false, true] {
-                    out.push(Traversal {
-                        fallback_lanes,
-                        order,
-                        interval,
-                    });
-                }
-            }
-        }
-        out
+    /// The binary view of `nodes`/`tris` and the wide view of its collapse (`wide`).
+    fn layouts<'a>(bvh: BvhRef<'a>, wide: &'a [WideNode]) -> [Layout<'a>; 2] {
+        [
+            Layout::Binary(bvh),
+            Layout::Wide(WideRef::new(wide, bvh.tris()).expect("collapse is valid")),
+        ]
     }
 
     #[test]
@@ -1426,7 +1305,9 @@ mod tests {
         let mut rng = Pcg32::new(41, 2);
         let soup = soup(&mut rng, 150);
         let (nodes, tris) = build(&soup);
-        let bvh = BvhRef::new(&nodes, &tris).unwrap();
+        let binary = BvhRef::new(&nodes, &tris).unwrap();
+        let wide = collapse(&binary);
+        assert!(wide.len() * 3 < nodes.len(), "{} wide nodes", wide.len());
         for trial in 0..300 {
             let lanes = trial % LANES + 1;
             let shared = v3(&mut rng, 4.5);
@@ -1441,31 +1322,21 @@ mod tests {
                 })
                 .collect();
             let packet = Ray8::from_rays(&rays);
-            let mut hits = Hit8::NONE;
-            let mask = intersect8(&bvh, &packet, &mut hits);
-            let blocked = occluded8(&bvh, &packet);
-            for how in variants() {
-                let mut other = Hit8::NONE;
-                let m = intersect8_with(&bvh, &packet, &mut other, &how);
-                let lanes =
-                    |h: &Hit8| -> [Option<Hit>; LANES] { core::array::from_fn(|i| h.lane(i)) };
-                assert_eq!(
-                    (m, lanes(&other)),
-                    (mask, lanes(&hits)),
-                    "{how:?}: {rays:?}"
-                );
-                assert_eq!(occluded8_with(&bvh, &packet, &how), blocked, "{how:?}");
-            }
-            for lane in 0..LANES {
-                let r = packet.lane(lane);
-                let oracle = intersect_brute(&tris, &r);
-                assert_eq!(intersect1(&bvh, &r), oracle, "{r:?}");
-                assert_eq!(hits.lane(lane), oracle, "lane {lane} of {lanes}: {r:?}");
-                assert_eq!(mask >> lane & 1 == 1, oracle.is_some());
-                assert_eq!(occluded1(&bvh, &r), occluded_brute(&tris, &r));
-                assert_eq!(blocked >> lane & 1 == 1, occluded_brute(&tris, &r));
-                if lane >= lanes {
-                    assert_eq!(hits.lane(lane), None, "inactive lane written");
+            for bvh in layouts(binary, &wide) {
+                let mut hits = Hit8::NONE;
+                let mask = intersect8(&bvh, &packet, &mut hits);
+                let blocked = occluded8(&bvh, &packet);
+                for lane in 0..LANES {
+                    let r = packet.lane(lane);
+                    let oracle = intersect_brute(&tris, &r);
+                    assert_eq!(intersect1(&bvh, &r), oracle, "{r:?}");
+                    assert_eq!(hits.lane(lane), oracle, "lane {lane} of {lanes}: {r:?}");
+                    assert_eq!(mask >> lane & 1 == 1, oracle.is_some());
+                    assert_eq!(occluded1(&bvh, &r), occluded_brute(&tris, &r));
+                    assert_eq!(blocked >> lane & 1 == 1, occluded_brute(&tris, &r));
+                    if lane >= lanes {
+                        assert_eq!(hits.lane(lane), None, "inactive lane written");
+                    }
                 }
             }
         }
@@ -1495,7 +1366,8 @@ mod tests {
         ];
         let (nodes, tris) = build(&soup);
         assert_eq!(nodes[0].hi[0][0], 0.0, "the left leaf's box ends at x = 0");
-        let bvh = BvhRef::new(&nodes, &tris).unwrap();
+        let binary = BvhRef::new(&nodes, &tris).unwrap();
+        let wide = collapse(&binary);
         let rays = [
             // The issue's ray: origin (8.8e-44, −6.7e-9, 9.2e-41), direction (0, 0, 56.06).
             Ray::new(
@@ -1524,7 +1396,10 @@ mod tests {
                 2.0,
             ),
         ];
-        for r in &rays {
+        for (r, bvh) in rays
+            .iter()
+            .flat_map(|r| layouts(binary, &wide).map(|b| (r, b)))
+        {
             let oracle = intersect_brute(&tris, r);
             assert_eq!(intersect1(&bvh, r), oracle, "{r:?}");
             assert_eq!(occluded1(&bvh, r), occluded_brute(&tris, r), "{r:?}");
@@ -1560,7 +1435,8 @@ mod tests {
             ],
         ];
         let (nodes, tris) = build(&soup);
-        let bvh = BvhRef::new(&nodes, &tris).unwrap();
+        let binary = BvhRef::new(&nodes, &tris).unwrap();
+        let wide = collapse(&binary);
         let org = Vec3::new(3.762_040_7e-37, 1.504_563_9e-36, 3.761_926_3e-37);
         let r = Ray::new(org, Vec3::new(-6400.0, 3.0, -1280.0), 0.0, f32::INFINITY);
         let brute = intersect_brute(&tris, &r);
@@ -1573,10 +1449,13 @@ mod tests {
         let others: Vec<Tri> = tris.iter().filter(|t| t.prim != 0).copied().collect();
         let boxed = intersect_brute(&others, &r);
         let allowed = [brute, boxed];
-        assert!(allowed.contains(&intersect1(&bvh, &r)));
-        let mut hits = Hit8::NONE;
-        let mask = intersect8(&bvh, &Ray8::from_rays(&[r; LANES]), &mut hits);
-        assert!(allowed.contains(&(mask & 1 == 1).then(|| hits.lane(0)).flatten()));
+        for bvh in layouts(binary, &wide) {
+            assert!(allowed.contains(&intersect1(&bvh, &r)));
+            let mut hits = Hit8::NONE;
+            let mask = intersect8(&bvh, &Ray8::from_rays(&[r; LANES]), &mut hits);
+            assert!(allowed.contains(&(mask & 1 == 1).then(|| hits.lane(0)).flatten()));
+            traversals_keep_to_the_contract(&bvh, &r);
+        }
     }
 
     /// A triangle of the `traverse` fuzz target's grid: i16 coordinates times 2⁻²⁰.
@@ -1609,7 +1488,12 @@ mod tests {
     }
 
     /// Both traversals' answers, which the contract must allow.
-    fn traversals_keep_to_the_contract(bvh: &BvhRef<'_>, r: &Ray) {
+    fn traversals_keep_to_the_contract(bvh: &impl Tree, r: &Ray) {
+        if let Layout::Binary(binary) = bvh.layout() {
+            let wide = collapse(&binary);
+            let wide = WideRef::new(&wide, binary.tris()).unwrap();
+            traversals_keep_to_the_contract(&wide, r);
+        }
         assert!(closest_hit_allowed(bvh, r, intersect1(bvh, r)));
         let mut hits = Hit8::NONE;
         let mask = intersect8(bvh, &Ray8::from_rays(&[*r; LANES]), &mut hits);
@@ -1778,7 +1662,7 @@ mod tests {
                     f32::INFINITY,
                 )
             });
-            let pre = Pre8::new(&Ray8::from_rays(&rays), false);
+            let pre = Pre8::new(&Ray8::from_rays(&rays));
             let r = pre.tri8(&t);
             for (i, ray) in rays.iter().enumerate() {
                 let want = tri1(&Pre::new(ray), &t);
@@ -1813,7 +1697,7 @@ mod tests {
                 })
                 .collect();
             let packet = Ray8::from_rays(&rays);
-            let pre = Pre8::new(&packet, true);
+            let pre = Pre8::new(&packet);
             let mut perms = Vec::new();
             for (i, r) in rays.iter().enumerate() {
                 if !traceable(r) {
