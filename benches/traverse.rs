@@ -45,8 +45,17 @@ struct Scene {
     light: Vec3,
 }
 
+/// The preset named by `TRAVERSE_PRESET` (a [`Preset::name`]), else [`Preset::DEFAULT`].
+fn preset() -> Preset {
+    let name = std::env::var("TRAVERSE_PRESET").unwrap_or_default();
+    Preset::ALL
+        .into_iter()
+        .find(|p| p.name() == name)
+        .unwrap_or(Preset::DEFAULT)
+}
+
 fn scene(name: &'static str, soup: Vec<[Vec3; 3]>, light: Vec3) -> Scene {
-    let bvh = Bvh::build(&soup, Preset::DEFAULT).expect("scene BVH");
+    let bvh = Bvh::build(&soup, preset()).expect("scene BVH");
     let cw_tris: Vec<Triangle> = soup
         .iter()
         .map(|t| Triangle {
@@ -56,7 +65,7 @@ fn scene(name: &'static str, soup: Vec<[Vec3; 3]>, light: Vec3) -> Scene {
         })
         .collect();
     let mut core = std::time::Duration::ZERO;
-    let cw = build_cwbvh_from_tris(&cw_tris, Preset::DEFAULT.params(), &mut core);
+    let cw = build_cwbvh_from_tris(&cw_tris, preset().params(), &mut core);
     // obvhs traversal indexes primitives in BVH order: lay the triangles out in that order.
     let cw_tris = cw
         .primitive_indices
@@ -566,6 +575,7 @@ fn bench(c: &mut Criterion) {
         }
     }
     group.finish();
+    sizes();
 }
 
 /// A duel contestant: name, packets per pass, one pass over its ray set (returns a checksum).
@@ -577,6 +587,18 @@ type DuelEntry<'a> = (String, usize, Box<dyn Fn() -> u64 + 'a>);
 /// rounds of its per-round ratio to `obvhs_cwbvh`, to the first entry (our binary packet
 /// traversal) and to the faster of the `embree` entries (per round).
 fn duel(scene: &str, set: &str, entries: &[DuelEntry<'_>], rounds: usize, embree: &[&str]) {
+    // `TRAVERSE_ONLY=name,...` times only those entries (for a profiler); no ratios.
+    if let Ok(only) = std::env::var("TRAVERSE_ONLY") {
+        for (name, packets, run) in entries.iter().filter(|e| only.split(',').any(|o| o == e.0)) {
+            let start = Instant::now();
+            for _ in 0..rounds {
+                black_box(run());
+            }
+            let rate = (packets * LANES * rounds) as f64 / start.elapsed().as_secs_f64() / 1e6;
+            println!("only {scene} {set} {name}: {rate:.2} Mrays/s");
+        }
+        return;
+    }
     let n = entries.len();
     let mut rates = vec![Vec::with_capacity(rounds); n];
     for round in 0..rounds {
@@ -627,33 +649,77 @@ fn duel(scene: &str, set: &str, entries: &[DuelEntry<'_>], rounds: usize, embree
 
 /// Build time vs gather trace time of every obvhs preset (printed; not a criterion
 /// measurement: a build is seconds long on the 1M scene). The traces run round-robin, one
-/// pass per preset per round, so every preset sees the same load; medians over the rounds.
+/// pass per preset and layout per round, so every preset sees the same load; medians over
+/// the rounds.
 fn presets(s: &Scene, packets: &[Ray8]) {
     let built: Vec<(Preset, Bvh)> = Preset::ALL
         .iter()
         .map(|&p| (p, Bvh::build(&s.soup, p).expect("preset BVH")))
         .collect();
-    let rounds = 15;
-    let mut rates = vec![Vec::with_capacity(rounds); built.len()];
+    report_builds(s.name, &built, packets, 15);
+}
+
+/// Traces `packets` through each of `built` (binary and wide packets, round-robin, `rounds`
+/// rounds) and prints build seconds and median Mrays/s.
+fn report_builds(name: &str, built: &[(Preset, Bvh)], packets: &[Ray8], rounds: usize) {
+    let mut rates = vec![[Vec::with_capacity(rounds), Vec::with_capacity(rounds)]; built.len()];
     for round in 0..rounds {
         for k in 0..built.len() {
             let i = (round + k) % built.len();
-            let view = built[i].1.view();
-            let start = Instant::now();
-            black_box(packet8(&view, packets));
-            rates[i].push((packets.len() * LANES) as f64 / start.elapsed().as_secs_f64() / 1e6);
+            let bvh = &built[i].1;
+            for (layout, rate) in rates[i].iter_mut().enumerate() {
+                let start = Instant::now();
+                if layout == 0 {
+                    black_box(packet8(&bvh.view(), packets));
+                } else {
+                    black_box(packet8(&bvh.wide(), packets));
+                }
+                rate.push((packets.len() * LANES) as f64 / start.elapsed().as_secs_f64() / 1e6);
+            }
         }
     }
-    for ((preset, bvh), mut r) in built.iter().zip(rates) {
-        r.sort_by(f64::total_cmp);
+    for ((preset, bvh), r) in built.iter().zip(rates) {
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let [binary, wide] = r;
         println!(
-            "preset {} {:>10}: build {:>8.1} ms, {} nodes, gather packet8 {:.2} Mrays/s (median of {rounds})",
-            s.name,
+            "preset {name} {:>10}: {} triangles, build {:>9.3} s, {} nodes, gather packet8 {:.2} \
+             Mrays/s, wide {:.2} Mrays/s (median of {rounds})",
             preset.name(),
-            bvh.build_time().as_secs_f64() * 1e3,
+            bvh.tris().len(),
+            bvh.build_time().as_secs_f64(),
             bvh.view().nodes().len(),
-            r[rounds / 2]
+            median(binary),
+            median(wide),
         );
+    }
+}
+
+/// `TRAVERSE_SIZES=1e5,1e6,...`: procedural cities of about these many triangles, built with
+/// each preset of `TRAVERSE_SIZE_PRESETS` (names, comma-separated; default `medium,very_slow`):
+/// build seconds and gather Mrays/s (256 texels × 64 directions).
+fn sizes() {
+    let Ok(list) = std::env::var("TRAVERSE_SIZES") else {
+        return;
+    };
+    let names = std::env::var("TRAVERSE_SIZE_PRESETS").unwrap_or("medium,very_slow".into());
+    let wanted: Vec<Preset> = Preset::ALL
+        .into_iter()
+        .filter(|p| names.split(',').any(|n| n == p.name()))
+        .collect();
+    for size in list.split(',') {
+        let triangles: f64 = size.parse().expect("TRAVERSE_SIZES: numbers like 1e6");
+        // About side² · 90 triangles with 3 × 3 quads per box face.
+        let side = (triangles / 90.0).sqrt().round().max(2.0) as usize;
+        let soup = scenes::city(side, 3, 4);
+        let packets = scenes::gather_packets(&soup, TEXELS, 64, 1);
+        let built: Vec<(Preset, Bvh)> = wanted
+            .iter()
+            .map(|&p| (p, Bvh::build(&soup, p).expect("city BVH")))
+            .collect();
+        report_builds(&format!("city{size}"), &built, &packets, 5);
     }
 }
 
