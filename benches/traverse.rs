@@ -451,6 +451,7 @@ fn bench(c: &mut Criterion) {
             .and_then(|v| v.parse::<usize>().ok())
         {
             let gather = &sets[0].1;
+            #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
             let mut entries: Vec<DuelEntry<'_>> = vec![
                 (
                     "packet8".into(),
@@ -519,12 +520,10 @@ fn bench(c: &mut Criterion) {
                 "gather",
                 &entries,
                 rounds,
-                &[
-                    "embree_intersect8_coherent",
-                    "embree_intersect8_incoherent",
-                ],
+                &["embree_intersect8_coherent", "embree_intersect8_incoherent"],
             );
             let shadow = &sets[1].1;
+            #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
             let mut entries: Vec<DuelEntry<'_>> = vec![
                 (
                     "occluded8".into(),
@@ -621,7 +620,9 @@ fn duel(scene: &str, set: &str, entries: &[DuelEntry<'_>], rounds: usize, embree
         "duel {scene} {set}: {rounds} rounds; median Mrays/s, median per-round ratio to obvhs \
          CwBvh, to {} and to Embree's faster {} (per round)",
         entries[0].0,
-        embree.first().map_or("-", |e| e.trim_end_matches("_coherent"))
+        embree
+            .first()
+            .map_or("-", |e| e.trim_end_matches("_coherent"))
     );
     for (k, (name, _, _)) in entries.iter().enumerate() {
         let ratio_to = |other: &[usize]| {

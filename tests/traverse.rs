@@ -9,11 +9,10 @@ mod scenes;
 
 use glam::Vec3;
 use guidebake::bvh::{Bvh, Preset};
-use guidebake_kernels::packet::{Hit, Hit8, LANES, Ray, Ray8};
+use guidebake_kernels::packet::{Hit, Hit8, LANES, Ray, Ray8, offset_origin, triangle_extent};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::{
     Layout, intersect_brute, intersect1, intersect8, occluded_brute, occluded1, occluded8,
-    offset_origin, triangle_extent,
 };
 
 /// The binary and the wide view of `bvh`: every check runs on both.

@@ -15,7 +15,7 @@
 //! not depend on the scene loader.
 //!
 //! Ray origins leaving a surface should be offset with
-//! [`guidebake_kernels::traverse::offset_origin`] (Wächter & Binder, Ray Tracing Gems ch. 6).
+//! [`guidebake_kernels::packet::offset_origin`] (Wächter & Binder, Ray Tracing Gems ch. 6).
 
 use std::time::{Duration, Instant};
 
