@@ -4,8 +4,11 @@
 //! 2019 §2.4). Building a good tree is obvhs's job: PLOC (Meister & Bittner 2018) plus
 //! reinsertion and leaf collapsing ([`obvhs::bvh2::builder::build_bvh2_from_tris`]). This module
 //! picks the build parameters ([`Preset`]), then flattens obvhs's binary tree into
-//! [`Node`]s (two child boxes per 64-byte node) and copies the triangles into leaf order as
-//! [`Tri`]s for the watertight test.
+//! [`Node`]s (two child boxes per 64-byte node), copies the triangles into leaf order as
+//! [`Tri`]s for the watertight test, and collapses the binary tree into [`WideNode`]s (eight
+//! child boxes per node, same leaves and triangles). [`Bvh::layout`] picks the one a bake
+//! traces by the world's size. obvhs builds on every core (its `parallel` feature: PLOC and
+//! reinsertion through rayon).
 //!
 //! Deviations: obvhs's own traversals ignore `tmin` in the node test; ours honour it. With the
 //! spatial-split presets a triangle can sit in several leaves; it is then copied once per leaf
@@ -21,8 +24,14 @@ use std::time::{Duration, Instant};
 
 use glam::{Vec3, Vec3A};
 use guidebake_kernels::traverse::{
-    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse,
+    BvhRef, LEAF, Layout, LayoutError, Node, Tri, WideNode, WideRef, collapse,
 };
+
+/// Triangle count from which [`Bvh::layout`] picks the wide layout. Measured in
+/// docs/traverse.md ("Wide BVH"): the wide packet walk is 0.88–0.96× the binary one on the
+/// Veach room (4.5 k triangles, in cache) and 1.0–1.3× on cities of 10⁵–10⁶, 1.2–1.9× on
+/// 10⁷ triangles, where the binary tree's extra node visits miss the cache.
+pub const WIDE_FROM_TRIANGLES: usize = 1 << 17;
 use obvhs::{
     BvhBuildParams,
     bvh2::{Bvh2, builder::build_bvh2_from_tris},
@@ -57,11 +66,13 @@ impl Preset {
         Preset::VerySlowBuild,
     ];
 
-    /// The bake's choice. Measured in docs/traverse.md ("Build presets", round-robin): on the
-    /// Veach room every preset from `FastBuild` up traces alike; on a 1M-triangle city
-    /// `VerySlowBuild` traces 1.66× faster for ~9× the build time, which pays after ~40 M
-    /// rays. Switching the default to it is recommended there, not yet done.
-    pub const DEFAULT: Preset = Preset::MediumBuild;
+    /// The bake's choice. Measured in docs/traverse.md ("Build presets and sizes",
+    /// round-robin): on cities of 10⁵, 10⁶ and 10⁷ triangles `VerySlowBuild` traces 1.3×,
+    /// 1.3–1.6× and 1.3–2.0× faster than `MediumBuild` for 5–7× its build time (0.14 s,
+    /// 2.6 s and 128 s on one core), which pays back after at most ~0.7·10⁹ rays on 10⁷
+    /// triangles and ~60·10⁶ on 10⁶ — less than one bake of such a world traces. On the Veach
+    /// room every preset from `FastBuild` up traces alike and builds in milliseconds.
+    pub const DEFAULT: Preset = Preset::VerySlowBuild;
 
     /// obvhs's parameters for this preset.
     pub fn params(self) -> BvhBuildParams {
@@ -174,6 +185,16 @@ impl Bvh {
     /// triangles). Same results as [`Bvh::view`], bit for bit. Cheap: `build` validated it.
     pub fn wide(&self) -> WideRef<'_> {
         WideRef::new_trusted(&self.wide, &self.tris)
+    }
+
+    /// The layout the bake traces: [`Bvh::wide`] from [`WIDE_FROM_TRIANGLES`] triangles on,
+    /// [`Bvh::view`] below (the results are the same bit for bit; only the speed differs).
+    pub fn layout(&self) -> Layout<'_> {
+        if self.tris.len() >= WIDE_FROM_TRIANGLES {
+            Layout::Wide(self.wide())
+        } else {
+            Layout::Binary(self.view())
+        }
     }
 
     /// Wide nodes, root first.
@@ -314,6 +335,29 @@ mod tests {
         assert_eq!(intersect1(&one.wide(), &ray), intersect1(&one.view(), &ray));
         let hit = intersect1(&one.view(), &ray).unwrap();
         assert_eq!((hit.prim, hit.t), (0, 1.0));
+    }
+
+    #[test]
+    fn large_worlds_trace_the_wide_layout_with_the_same_results() {
+        let grid = |n: usize| -> Vec<[Vec3; 3]> {
+            (0..n)
+                .map(|i| {
+                    let p = Vec3::new((i % 512) as f32, (i / 512) as f32, (i % 7) as f32 * 0.1);
+                    [p, p + Vec3::X, p + Vec3::Y]
+                })
+                .collect()
+        };
+        let small = Bvh::build(&grid(1000), Preset::FastBuild).unwrap();
+        assert!(matches!(small.layout(), Layout::Binary(_)));
+        let large = Bvh::build(&grid(WIDE_FROM_TRIANGLES), Preset::FastBuild).unwrap();
+        assert!(matches!(large.layout(), Layout::Wide(_)));
+        for i in 0..200 {
+            let o = Vec3::new(i as f32 * 2.3 % 512.0, i as f32 * 1.7 % 256.0, 5.0);
+            let ray = Ray::new(o, Vec3::new(0.3, -0.2, -1.0), 0.0, f32::INFINITY);
+            let want = intersect1(&large.view(), &ray);
+            assert_eq!(intersect1(&large.layout(), &ray), want);
+            assert_eq!(want, intersect_brute(large.tris(), &ray));
+        }
     }
 
     #[test]
