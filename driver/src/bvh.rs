@@ -6,9 +6,10 @@
 //! picks the build parameters ([`Preset`]), then flattens obvhs's binary tree into
 //! [`Node`]s (two child boxes per 64-byte node), copies the triangles into leaf order as
 //! [`Tri`]s for the watertight test, and collapses the binary tree into [`WideNode`]s (eight
-//! child boxes per node, same leaves and triangles). [`Bvh::layout`] picks the one a bake
-//! traces by the world's size. obvhs builds on every core (its `parallel` feature: PLOC and
-//! reinsertion through rayon).
+//! child boxes per node, same leaves and triangles; [`Bvh::wide`]). The bake traces the
+//! binary view ([`Bvh::view`]): on the round-robin duel the wide packet walk is slower on
+//! coherent gather packets (docs/traverse.md, "Wide BVH"). obvhs builds on every core (its
+//! `parallel` feature: PLOC and reinsertion through rayon).
 //!
 //! Deviations: obvhs's own traversals ignore `tmin` in the node test; ours honour it. With the
 //! spatial-split presets a triangle can sit in several leaves; it is then copied once per leaf
@@ -24,14 +25,8 @@ use std::time::{Duration, Instant};
 
 use glam::{Vec3, Vec3A};
 use guidebake_kernels::traverse::{
-    BvhRef, LEAF, Layout, LayoutError, Node, Tri, WideNode, WideRef, collapse,
+    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse,
 };
-
-/// Triangle count from which [`Bvh::layout`] picks the wide layout. Measured in
-/// docs/traverse.md ("Wide BVH"): the wide packet walk is 0.88–0.96× the binary one on the
-/// Veach room (4.5 k triangles, in cache) and 1.0–1.3× on cities of 10⁵–10⁶, 1.2–1.9× on
-/// 10⁷ triangles, where the binary tree's extra node visits miss the cache.
-pub const WIDE_FROM_TRIANGLES: usize = 1 << 17;
 use obvhs::{
     BvhBuildParams,
     bvh2::{Bvh2, builder::build_bvh2_from_tris},
@@ -187,16 +182,6 @@ impl Bvh {
         WideRef::new_trusted(&self.wide, &self.tris)
     }
 
-    /// The layout the bake traces: [`Bvh::wide`] from [`WIDE_FROM_TRIANGLES`] triangles on,
-    /// [`Bvh::view`] below (the results are the same bit for bit; only the speed differs).
-    pub fn layout(&self) -> Layout<'_> {
-        if self.tris.len() >= WIDE_FROM_TRIANGLES {
-            Layout::Wide(self.wide())
-        } else {
-            Layout::Binary(self.view())
-        }
-    }
-
     /// Wide nodes, root first.
     pub fn wide_nodes(&self) -> &[WideNode] {
         &self.wide
@@ -338,25 +323,21 @@ mod tests {
     }
 
     #[test]
-    fn large_worlds_trace_the_wide_layout_with_the_same_results() {
-        let grid = |n: usize| -> Vec<[Vec3; 3]> {
-            (0..n)
-                .map(|i| {
-                    let p = Vec3::new((i % 512) as f32, (i / 512) as f32, (i % 7) as f32 * 0.1);
-                    [p, p + Vec3::X, p + Vec3::Y]
-                })
-                .collect()
-        };
-        let small = Bvh::build(&grid(1000), Preset::FastBuild).unwrap();
-        assert!(matches!(small.layout(), Layout::Binary(_)));
-        let large = Bvh::build(&grid(WIDE_FROM_TRIANGLES), Preset::FastBuild).unwrap();
-        assert!(matches!(large.layout(), Layout::Wide(_)));
+    fn a_large_world_traces_the_same_through_both_layouts() {
+        let grid: Vec<[Vec3; 3]> = (0..1 << 17)
+            .map(|i| {
+                let p = Vec3::new((i % 512) as f32, (i / 512) as f32, (i % 7) as f32 * 0.1);
+                [p, p + Vec3::X, p + Vec3::Y]
+            })
+            .collect();
+        let bvh = Bvh::build(&grid, Preset::FastBuild).unwrap();
+        assert!(bvh.wide_nodes().len() * 3 < bvh.nodes().len());
         for i in 0..200 {
             let o = Vec3::new(i as f32 * 2.3 % 512.0, i as f32 * 1.7 % 256.0, 5.0);
             let ray = Ray::new(o, Vec3::new(0.3, -0.2, -1.0), 0.0, f32::INFINITY);
-            let want = intersect1(&large.view(), &ray);
-            assert_eq!(intersect1(&large.layout(), &ray), want);
-            assert_eq!(want, intersect_brute(large.tris(), &ray));
+            let want = intersect1(&bvh.view(), &ray);
+            assert_eq!(intersect1(&bvh.wide(), &ray), want);
+            assert_eq!(want, intersect_brute(bvh.tris(), &ray));
         }
     }
 

@@ -10,7 +10,7 @@
 
 use glam::Vec3;
 use guidebake_kernels::packet::{offset_origin, triangle_extent};
-use guidebake_kernels::traverse::Layout;
+use guidebake_kernels::traverse::BvhRef;
 
 use super::settings::{EmitterSampling, Transport};
 
@@ -171,9 +171,9 @@ impl World {
         }
     }
 
-    /// The BVH, for tracing (binary or wide by the world's size: [`Bvh::layout`]).
-    pub fn bvh(&self) -> Layout<'_> {
-        self.bvh.layout()
+    /// The BVH, for tracing.
+    pub fn bvh(&self) -> BvhRef<'_> {
+        self.bvh.view()
     }
 
     /// The BVH's build statistics source.

@@ -168,7 +168,7 @@ impl World {
 /// Traces `packet`'s live lanes for occlusion: the mask of visible lanes (the unoccluded
 /// traced lanes and every lane of `unshadowed`) and the lanes traced.
 fn visible_lanes(
-    bvh: &guidebake_kernels::traverse::Layout<'_>,
+    bvh: &guidebake_kernels::traverse::BvhRef<'_>,
     packet: &Ray8,
     unshadowed: u8,
 ) -> (u8, u32) {
