@@ -202,10 +202,9 @@ pub fn collapse(bvh: &BvhRef<'_>) -> alloc::vec::Vec<WideNode> {
     // (binary node, wide node built from its children)
     let mut work = alloc::vec![(0u32, 0usize)];
     while let Some((from, ours)) = work.pop() {
-        let mut slots: Vec<Slot> = slots_of(from).into_iter().filter(|s| s.3 != LEAF).collect();
         // Grandchildren first: every wide level spans two binary levels at least.
-        let first: Vec<Slot> = slots.drain(..).collect();
-        for s in first {
+        let mut slots: Vec<Slot> = Vec::with_capacity(WIDTH);
+        for s in slots_of(from).into_iter().filter(|s| s.3 != LEAF) {
             if s.3 == 0 {
                 slots.extend(slots_of(s.2).into_iter().filter(|s| s.3 != LEAF));
             } else {
