@@ -1,19 +1,26 @@
-//! Group `traverse`: rays/s of the 8-wide packet traversal against the scalar reference,
-//! obvhs's own CwBvh traversal and (feature `embree`) Embree 3, on the same ray sets:
-//! coherent gather packets, shadow rays towards a light, incoherent random rays; scenes: the
-//! Veach ajar room (if `../shared/scenes` is present) and a procedural ~1M-triangle city.
+//! Group `traverse`: rays/s of the 8-wide packet traversal on both layouts (binary, two child
+//! boxes per node; wide, eight) against the single-ray walks, obvhs's own CwBvh traversal and
+//! (feature `embree`) Embree 3, on the same ray sets: coherent gather packets, shadow rays
+//! towards a light, incoherent random rays; scenes: the Veach ajar room (if
+//! `../shared/scenes` is present) and a procedural ~1M-triangle city.
 //!
-//! Every comparator's results are checked against the scalar reference once before timing.
+//! Every comparator's results are checked against the scalar reference once before timing;
+//! both layouts' packet and single-ray results must equal it exactly.
 //!
 //! `cargo bench --bench traverse -- --warm-up-time 1 --measurement-time 5`
 //! `cargo bench --bench traverse --features embree -- --warm-up-time 1 --measurement-time 5`
-//! Set `TRAVERSE_PRESETS=1` to also time every obvhs build preset (build time vs trace time),
-//! `TRAVERSE_SCENES=ajar` (or `city1m`) to run one scene, `TRAVERSE_DUEL=N` to also time the
-//! gather tracers round-robin for N rounds (ratios per round: robust on a loaded machine).
+//! Environment:
+//! - `TRAVERSE_DUEL=N`: also time the gather and the shadow tracers round-robin for N rounds
+//!   (ratios per round: robust on a loaded machine); `-- no_such_bench` skips criterion.
+//! - `TRAVERSE_ONLY=name,...`: in the duel, time only those entries (for a profiler).
+//! - `TRAVERSE_SCENES=ajar` (or `city1m`, or `none`): the scenes to run.
+//! - `TRAVERSE_PRESET=very_slow` (a `Preset::name`): the build preset of our trees and CwBvh.
+//! - `TRAVERSE_PRESETS=1`: build every obvhs preset and time it (build time vs trace time).
+//! - `TRAVERSE_SIZES=1e5,1e6,1e7` (`TRAVERSE_SIZE_PRESETS=medium,very_slow`): cities of about
+//!   that many triangles: build seconds and gather Mrays/s per preset and layout.
 //!
-//! Besides the default traversal, the ideas tried are measured as `*_packet8_<idea>` (and
-//! `shadow_occluded8_<idea>`), and a `gather_resorted` set (each texel's rotated points fully
-//! re-sorted) feeds Embree's `rtcIntersect16` two of our packets at a time.
+//! A `gather_resorted` set (each texel's rotated points fully re-sorted) feeds Embree's
+//! `rtcIntersect16` two of our packets at a time.
 
 #[path = "common/traverse_scenes.rs"]
 mod scenes;

@@ -331,7 +331,7 @@ mod tests {
             })
             .collect();
         let bvh = Bvh::build(&grid, Preset::FastBuild).unwrap();
-        assert!(bvh.wide_nodes().len() * 3 < bvh.nodes().len());
+        assert!(bvh.wide_nodes().len() * 2 < bvh.nodes().len());
         for i in 0..200 {
             let o = Vec3::new(i as f32 * 2.3 % 512.0, i as f32 * 1.7 % 256.0, 5.0);
             let ray = Ray::new(o, Vec3::new(0.3, -0.2, -1.0), 0.0, f32::INFINITY);

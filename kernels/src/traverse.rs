@@ -2,37 +2,47 @@
 //!
 //! Silvennoinen & Sloan 2019, §2.4: a texel's final-gather packet shares one origin and, once
 //! the Sobol points are presorted, its eight directions are coherent; tracing the eight rays
-//! together turns that coherence into speed. This module traces [`Ray8`] packets through a
-//! kernel-owned, flat, binary BVH ([`Node`], [`Tri`]) that the driver fills from the tree obvhs
-//! builds.
+//! together turns that coherence into speed. This module traces [`Ray8`] packets (and single
+//! rays) through kernel-owned, flat BVHs that the driver fills from the tree obvhs builds, in
+//! one of two layouts; every traversal takes any [`Tree`] ([`BvhRef`], [`WideRef`] or a
+//! [`Layout`] holding either) and gives the same results on both.
 //!
-//! - **Layout.** A [`Node`] is one 64-byte cache line holding the boxes of its *two children*
-//!   (so one node visit tests two boxes for all eight lanes), their indices and their leaf
-//!   counts. A [`Tri`] stores its three vertices (not edges: the watertight test needs the
-//!   vertices themselves) and its primitive id, in leaf order.
+//! - **Layouts.** Binary ([`Node`]): one 64-byte cache line holds the
+//!   boxes of a node's *two children* (so one node visit tests two boxes for all eight
+//!   lanes), their indices and their leaf counts. Wide ([`WideNode`], collapsed from the binary
+//!   tree by [`collapse`]): eight child boxes per 256-byte node, structure of arrays, so one
+//!   `f32x8` slab test per axis covers a node's children for one ray. Both share the leaves:
+//!   ranges of [`Tri`]s, three vertices each (not edges: the watertight test needs the
+//!   vertices themselves) and the primitive id, in leaf order.
 //! - **Ray/triangle test.** Woop, Benthin & Wald, *Watertight Ray/Triangle Intersection*,
 //!   JCGT 2(1), 2013: shear into the ray's space (`kz` = largest direction axis, `kx`/`ky`
 //!   swapped when `d[kz] < 0`), 2D edge functions `U, V, W`, recomputed in `f64` when one is
-//!   exactly zero (their exact signs decide inside or outside), no backface culling. Rays through a closed mesh's shared edges and
-//!   vertices never slip through.
+//!   exactly zero (their exact signs decide inside or outside), no backface culling. Rays
+//!   through a closed mesh's shared edges and vertices never slip through.
 //! - **Box test.** Slabs with `(b − o) · (1/d)`; the interval is widened by 32 ulps (pbrt-v4
 //!   §6.8.2's `1 + 2γ₃` plus room for the triangle test's rounding of `t`, see `SLACK`) so
 //!   that rounding never culls a box holding a hit the oracle accepts. Planes are taken near
 //!   first by the direction's sign bits and a NaN plane distance (`0 · ∞`, a ray running inside
 //!   a box face) leaves the interval unconstrained, so rays along faces are kept.
 //! - **Packet traversal** ([`intersect8`], [`occluded8`]): one shared stack; a child is
-//!   visited when any lane's interval meets its box; when both children are hit the lanes
-//!   vote on which is nearer and that one is visited first. Triangles are tested for all eight
-//!   lanes at once; when every lane of the packet has the same shear permutation (the usual
-//!   case for a coherent packet) the vertices are permuted once per triangle as scalars,
-//!   otherwise per lane with blends.
-//! - **Scalar reference** ([`intersect1`], [`occluded1`]) walks the same nodes with the same
-//!   box and triangle arithmetic, and [`intersect_brute`] / [`occluded_brute`] test every
-//!   triangle: the test oracle.
+//!   visited when any lane's interval meets its box; in the binary tree, when both children
+//!   are hit the lanes vote on which is nearer and that one is visited first; in the wide
+//!   tree each live lane tests the node's eight boxes at once and the children met are visited
+//!   nearest first. Triangles are tested for all eight lanes at once; when every lane of the
+//!   packet has the same shear permutation (the usual case for a coherent packet) the
+//!   vertices are permuted once per triangle as scalars, otherwise per lane with blends.
+//! - **Single rays** ([`intersect1`], [`occluded1`]) walk the same nodes with the same box and
+//!   triangle arithmetic (the binary walk is the scalar reference), and [`intersect_brute`] /
+//!   [`occluded_brute`] test every triangle: the test oracle.
+//! - **Sections**, as Embree keeps `bvh_node_*`, `*_intersector*` and `bvh_traverser*` apart:
+//!   `node` (binary layout), `triangle` (per-ray constants, the watertight test for one and
+//!   eight rays), `scalar` (slab test, single-ray walk), `packet` (8-lane slab test, packet
+//!   walk), `bvh8` (wide layout, collapse, both wide walks); this file holds the public API
+//!   and the oracle. Measured speeds: docs/traverse.md.
 //!
 //! **Results are exact, not approximate.** The scalar and 8-wide triangle tests perform the
 //! same IEEE operations in the same order (no FMA contraction), so `t`, `u`, `v` agree bit for
-//! bit across [`intersect_brute`], [`intersect1`] and [`intersect8`]. Equal `t` from several
+//! bit across [`intersect_brute`], [`intersect1`] and [`intersect8`], on either layout. Equal `t` from several
 //! triangles is resolved by the **tie rule**: the smallest primitive id wins. Hits are accepted
 //! on `[tmin, tmax]`, both ends included (`tmax` is clamped to `f32::MAX`, so `t = ∞` is never
 //! reported).
@@ -40,7 +50,8 @@
 //! Deviations and limits:
 //! - Rays with `tmin < 0` are not traced (they never hit): the conservative box bound assumes
 //!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
-//! - The tree depth is capped at [`MAX_DEPTH`]; [`BvhRef::new`] rejects deeper trees.
+//! - The tree depth is capped at [`MAX_DEPTH`] ([`WIDE_MAX_DEPTH`] for the wide layout, which
+//!   [`collapse`] always meets); [`BvhRef::new`] and [`WideRef::new`] reject deeper trees.
 //! - **Hits outside their own box.** At extreme magnitudes the triangle test can report a hit
 //!   that lies outside the slab interval of the box of the leaf holding the triangle (its
 //!   own bounding box, or with spatial splits the box of the part clipped to the leaf):

@@ -2,8 +2,8 @@
 //!
 //! The wide layout of the traversal ([`WideNode`], [`WideRef`]): each node holds the boxes of
 //! up to eight children as structure-of-arrays `lo[axis][child]`, `hi[axis][child]`, so a
-//! single ray tests all eight with one `f32x8` slab test per axis, and a packet tests each
-//! child for its eight lanes with [`Pre8::box8_at`]. The leaves are the binary tree's leaves,
+//! single ray tests all eight with one `f32x8` slab test per axis, and a packet does so for
+//! each live lane ([`boxes8`]). The leaves are the binary tree's leaves,
 //! unchanged: ranges of the same leaf-ordered [`Tri`]s (Woop's watertight form), so a binary
 //! view and its wide view share one triangle array. After Wald, Benthin & Boulos, *Getting
 //! Rid of Packets* (2008) and Embree's BVH8 (Wald et al., *Embree*, ACM TOG 33(4), 2014).
@@ -432,6 +432,7 @@ pub(super) fn walk8<'a>(
     let mut alive = pre.traced;
     let mut index = 0usize;
     let mut live = alive;
+    let mut far = widened_largest(tmax, alive);
     loop {
         let node = &bvh.nodes[index];
         let (met, nearest) = boxes8(node, &lanes, live, tmax.as_array());
@@ -465,7 +466,9 @@ pub(super) fn walk8<'a>(
             sp -= 1;
             let entry = stack[sp];
             live = (entry >> 32) as u8 & alive;
-            if live == 0 {
+            // The stored distance (its bits truncated, so no larger than the lanes' nearest)
+            // beyond every live lane's widened `tmax`: the slab test repeated would fail.
+            if live == 0 || f32::from_bits(((entry >> 40) as u32) << 8) > far {
                 continue;
             }
             let (parent, slot) = ((entry as u32 as usize) / WIDTH, entry as usize % WIDTH);
@@ -480,8 +483,19 @@ pub(super) fn walk8<'a>(
             if alive == 0 {
                 return;
             }
+            far = widened_largest(tmax, alive);
         }
     }
+}
+
+/// The widened far bound of the largest `tmax` among the lanes of `alive`.
+#[inline(always)]
+fn widened_largest(tmax: f32x8, alive: u8) -> f32 {
+    let t = tmax.as_array();
+    let largest = (0..LANES)
+        .filter(|&i| alive >> i & 1 == 1)
+        .fold(f32::NEG_INFINITY, |m, i| m.max(t[i]));
+    super::widened(largest)
 }
 
 #[cfg(test)]
