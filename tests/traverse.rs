@@ -1,8 +1,8 @@
 //! Per-ray checks of the packet traversal, on the binary and on the wide layout of every
 //! tree: every ray's result from `intersect8`, `intersect1` and the brute-force oracle must
-//! be equal — hit or not, primitive id, and `t`,
-//! `u`, `v` bit for bit (the scalar and 8-wide arithmetic are the same IEEE operations; equal
-//! `t` goes to the smallest primitive id). Occlusion likewise.
+//! be equal — hit or not, primitive id, and `t`, `u`, `v` bit for bit (the scalar and 8-wide
+//! arithmetic are the same IEEE operations; equal `t` goes to the smallest primitive id).
+//! Occlusion likewise.
 
 #[path = "../benches/common/traverse_scenes.rs"]
 mod scenes;
