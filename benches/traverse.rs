@@ -1,19 +1,26 @@
-//! Group `traverse`: rays/s of the 8-wide packet traversal against the scalar reference,
-//! obvhs's own CwBvh traversal and (feature `embree`) Embree 3, on the same ray sets:
-//! coherent gather packets, shadow rays towards a light, incoherent random rays; scenes: the
-//! Veach ajar room (if `../shared/scenes` is present) and a procedural ~1M-triangle city.
+//! Group `traverse`: rays/s of the 8-wide packet traversal on both layouts (binary, two child
+//! boxes per node; wide, eight) against the single-ray walks, obvhs's own CwBvh traversal and
+//! (feature `embree`) Embree 3, on the same ray sets: coherent gather packets, shadow rays
+//! towards a light, incoherent random rays; scenes: the Veach ajar room (if
+//! `../shared/scenes` is present) and a procedural ~1M-triangle city.
 //!
-//! Every comparator's results are checked against the scalar reference once before timing.
+//! Every comparator's results are checked against the scalar reference once before timing;
+//! both layouts' packet and single-ray results must equal it exactly.
 //!
 //! `cargo bench --bench traverse -- --warm-up-time 1 --measurement-time 5`
 //! `cargo bench --bench traverse --features embree -- --warm-up-time 1 --measurement-time 5`
-//! Set `TRAVERSE_PRESETS=1` to also time every obvhs build preset (build time vs trace time),
-//! `TRAVERSE_SCENES=ajar` (or `city1m`) to run one scene, `TRAVERSE_DUEL=N` to also time the
-//! gather tracers round-robin for N rounds (ratios per round: robust on a loaded machine).
+//! Environment:
+//! - `TRAVERSE_DUEL=N`: also time the gather and the shadow tracers round-robin for N rounds
+//!   (ratios per round: robust on a loaded machine); `-- no_such_bench` skips criterion.
+//! - `TRAVERSE_ONLY=name,...`: in the duel, time only those entries (for a profiler).
+//! - `TRAVERSE_SCENES=ajar` (or `city1m`, or `none`): the scenes to run.
+//! - `TRAVERSE_PRESET=very_slow` (a `Preset::name`): the build preset of our trees and CwBvh.
+//! - `TRAVERSE_PRESETS=1`: build every obvhs preset and time it (build time vs trace time).
+//! - `TRAVERSE_SIZES=1e5,1e6,1e7` (`TRAVERSE_SIZE_PRESETS=medium,very_slow`): cities of about
+//!   that many triangles: build seconds and gather Mrays/s per preset and layout.
 //!
-//! Besides the default traversal, the ideas tried are measured as `*_packet8_<idea>` (and
-//! `shadow_occluded8_<idea>`), and a `gather_resorted` set (each texel's rotated points fully
-//! re-sorted) feeds Embree's `rtcIntersect16` two of our packets at a time.
+//! A `gather_resorted` set (each texel's rotated points fully re-sorted) feeds Embree's
+//! `rtcIntersect16` two of our packets at a time.
 
 #[path = "common/traverse_scenes.rs"]
 mod scenes;
@@ -26,8 +33,7 @@ use glam::{Vec3, Vec3A};
 use guidebake::bvh::{Bvh, Preset};
 use guidebake_kernels::packet::{Hit8, LANES, Ray8};
 use guidebake_kernels::traverse::{
-    BvhRef, ChildOrder, Traversal, intersect_brute, intersect1, intersect8, intersect8_with,
-    occluded1, occluded8, occluded8_with,
+    Layout, Tree, intersect_brute, intersect1, intersect8, occluded1, occluded8,
 };
 use obvhs::cwbvh::{CwBvh, builder::build_cwbvh_from_tris};
 use obvhs::ray::{Ray as ORay, RayHit};
@@ -46,8 +52,17 @@ struct Scene {
     light: Vec3,
 }
 
+/// The preset named by `TRAVERSE_PRESET` (a [`Preset::name`]), else [`Preset::DEFAULT`].
+fn preset() -> Preset {
+    let name = std::env::var("TRAVERSE_PRESET").unwrap_or_default();
+    Preset::ALL
+        .into_iter()
+        .find(|p| p.name() == name)
+        .unwrap_or(Preset::DEFAULT)
+}
+
 fn scene(name: &'static str, soup: Vec<[Vec3; 3]>, light: Vec3) -> Scene {
-    let bvh = Bvh::build(&soup, Preset::DEFAULT).expect("scene BVH");
+    let bvh = Bvh::build(&soup, preset()).expect("scene BVH");
     let cw_tris: Vec<Triangle> = soup
         .iter()
         .map(|t| Triangle {
@@ -57,7 +72,7 @@ fn scene(name: &'static str, soup: Vec<[Vec3; 3]>, light: Vec3) -> Scene {
         })
         .collect();
     let mut core = std::time::Duration::ZERO;
-    let cw = build_cwbvh_from_tris(&cw_tris, Preset::DEFAULT.params(), &mut core);
+    let cw = build_cwbvh_from_tris(&cw_tris, preset().params(), &mut core);
     // obvhs traversal indexes primitives in BVH order: lay the triangles out in that order.
     let cw_tris = cw
         .primitive_indices
@@ -114,33 +129,11 @@ fn bounds(soup: &[[Vec3; 3]]) -> (Vec3, Vec3) {
 // ---------------------------------------------------------------------------------------------
 // Tracers. Each returns a checksum (hits, or the sum of prim ids) so the work is not elided.
 
-fn packet8(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
-    packet8_with(view, packets, &Traversal::DEFAULT)
-}
-
-/// The issue's traversal ideas, each measured against the default (docs/traverse.md).
-const IDEAS: [(&str, Traversal); 6] = [
-    ("packet8_fallback1", idea(1, ChildOrder::Vote, false)),
-    ("packet8_fallback2", idea(2, ChildOrder::Vote, false)),
-    ("packet8_fallback3", idea(3, ChildOrder::Vote, false)),
-    ("packet8_order_signs", idea(0, ChildOrder::Signs, false)),
-    ("packet8_order_lead", idea(0, ChildOrder::Lead, false)),
-    ("packet8_interval", idea(0, ChildOrder::Vote, true)),
-];
-
-const fn idea(fallback_lanes: u32, order: ChildOrder, interval: bool) -> Traversal {
-    Traversal {
-        fallback_lanes,
-        order,
-        interval,
-    }
-}
-
-fn packet8_with(view: &BvhRef<'_>, packets: &[Ray8], how: &Traversal) -> u64 {
+fn packet8(view: &impl Tree, packets: &[Ray8]) -> u64 {
     let mut sum = 0u64;
     for p in packets {
         let mut hits = Hit8::NONE;
-        intersect8_with(view, p, &mut hits, how);
+        intersect8(view, p, &mut hits);
         sum += hits
             .prim
             .to_array()
@@ -151,7 +144,7 @@ fn packet8_with(view: &BvhRef<'_>, packets: &[Ray8], how: &Traversal) -> u64 {
     sum
 }
 
-fn scalar(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+fn scalar(view: &impl Tree, packets: &[Ray8]) -> u64 {
     let mut sum = 0u64;
     for p in packets {
         for lane in 0..LANES {
@@ -162,14 +155,14 @@ fn scalar(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
     sum
 }
 
-fn occl8(view: &BvhRef<'_>, packets: &[Ray8], how: &Traversal) -> u64 {
+fn occl8(view: &impl Tree, packets: &[Ray8]) -> u64 {
     packets
         .iter()
-        .map(|p| u64::from(occluded8_with(view, p, how).count_ones()))
+        .map(|p| u64::from(occluded8(view, p).count_ones()))
         .sum()
 }
 
-fn occl1(view: &BvhRef<'_>, packets: &[Ray8]) -> u64 {
+fn occl1(view: &impl Tree, packets: &[Ray8]) -> u64 {
     packets
         .iter()
         .map(|p| (0..LANES).filter(|&l| occluded1(view, &p.lane(l))).count() as u64)
@@ -228,7 +221,7 @@ fn check_prims(what: &str, reference: &[u32], other: &[u32]) {
     );
 }
 
-fn prims_of(view: &BvhRef<'_>, packets: &[Ray8]) -> Vec<u32> {
+fn prims_of(view: &impl Tree, packets: &[Ray8]) -> Vec<u32> {
     packets
         .iter()
         .flat_map(|p| {
@@ -237,26 +230,30 @@ fn prims_of(view: &BvhRef<'_>, packets: &[Ray8]) -> Vec<u32> {
         .collect()
 }
 
-fn check_ours(s: &Scene, view: &BvhRef<'_>, packets: &[Ray8], reference: &[u32]) {
-    // Brute force on a sample (it is O(triangles) per ray), exact equality everywhere else.
-    for p in packets.iter().step_by(packets.len() / 16 + 1) {
-        for l in 0..LANES {
-            let r = p.lane(l);
-            assert_eq!(
-                intersect1(view, &r),
-                intersect_brute(view.tris(), &r),
-                "{}: scalar vs brute",
-                s.name
-            );
+/// Both layouts' packet and scalar traversals against the binary scalar reference.
+fn check_ours(s: &Scene, packets: &[Ray8], reference: &[u32]) {
+    for view in [Layout::Binary(s.bvh.view()), Layout::Wide(s.bvh.wide())] {
+        // Brute force on a sample (it is O(triangles) per ray), exact equality everywhere else.
+        for p in packets.iter().step_by(packets.len() / 16 + 1) {
+            for l in 0..LANES {
+                let r = p.lane(l);
+                assert_eq!(
+                    intersect1(&view, &r),
+                    intersect_brute(view.tris(), &r),
+                    "{}: scalar vs brute",
+                    s.name
+                );
+            }
         }
+        let mut got = Vec::with_capacity(reference.len());
+        for p in packets {
+            let mut hits = Hit8::NONE;
+            intersect8(&view, p, &mut hits);
+            got.extend(hits.prim.to_array());
+        }
+        assert_eq!(got, reference, "{}: packet8 vs scalar", s.name);
+        assert_eq!(prims_of(&view, packets), reference, "{}: scalar", s.name);
     }
-    let mut got = Vec::with_capacity(reference.len());
-    for p in packets {
-        let mut hits = Hit8::NONE;
-        intersect8(view, p, &mut hits);
-        got.extend(hits.prim.to_array());
-    }
-    assert_eq!(got, reference, "{}: packet8 vs scalar", s.name);
 }
 
 fn bench(c: &mut Criterion) {
@@ -265,11 +262,13 @@ fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("traverse");
     for s in scenes() {
         let view = s.bvh.view();
+        let wide = s.bvh.wide();
         println!(
-            "{}: {} triangles, {} nodes, {} leaf triangles, build {:?}",
+            "{}: {} triangles, {} binary nodes, {} wide nodes, {} leaf triangles, build {:?}",
             s.name,
             s.soup.len(),
             view.nodes().len(),
+            wide.nodes().len(),
             view.tris().len(),
             s.bvh.build_time()
         );
@@ -299,18 +298,23 @@ fn bench(c: &mut Criterion) {
                     .iter()
                     .flat_map(|p| (0..LANES).map(move |l| u32::from(occluded1(&view, &p.lane(l)))))
                     .collect();
-                let packet_blocked: Vec<u32> = packets
-                    .iter()
-                    .flat_map(|p| {
-                        let m = occluded8(&view, p);
-                        (0..LANES).map(move |l| u32::from(m >> l & 1))
-                    })
-                    .collect();
-                assert_eq!(
-                    blocked, packet_blocked,
-                    "{}: occluded8 vs occluded1",
-                    s.name
-                );
+                for layout in [Layout::Binary(view), Layout::Wide(wide)] {
+                    let packet_blocked: Vec<u32> = packets
+                        .iter()
+                        .flat_map(|p| {
+                            let m = occluded8(&layout, p);
+                            (0..LANES).map(move |l| u32::from(m >> l & 1))
+                        })
+                        .collect();
+                    assert_eq!(blocked, packet_blocked, "{}: occluded8", s.name);
+                    let single: Vec<u32> = packets
+                        .iter()
+                        .flat_map(|p| {
+                            (0..LANES).map(move |l| u32::from(occluded1(&layout, &p.lane(l))))
+                        })
+                        .collect();
+                    assert_eq!(blocked, single, "{}: occluded1", s.name);
+                }
                 let ob: Vec<u32> = packets
                     .iter()
                     .flat_map(|p| {
@@ -329,16 +333,16 @@ fn bench(c: &mut Criterion) {
                     &em.occluded8_all(packets, true),
                 );
                 group.bench_function(id("occluded8"), |b| {
-                    b.iter(|| occl8(&view, black_box(packets), &Traversal::DEFAULT))
+                    b.iter(|| occl8(&view, black_box(packets)))
                 });
-                for (name, how) in &IDEAS[..3] {
-                    let name = name.replace("packet8", "occluded8");
-                    group.bench_function(id(&name), |b| {
-                        b.iter(|| occl8(&view, black_box(packets), how))
-                    });
-                }
+                group.bench_function(id("wide_occluded8"), |b| {
+                    b.iter(|| occl8(&wide, black_box(packets)))
+                });
                 group.bench_function(id("scalar"), |b| {
                     b.iter(|| occl1(&view, black_box(packets)))
+                });
+                group.bench_function(id("wide_scalar"), |b| {
+                    b.iter(|| occl1(&wide, black_box(packets)))
                 });
                 group.bench_function(id("obvhs"), |b| {
                     b.iter(|| obvhs_occluded(&s, black_box(packets)))
@@ -356,7 +360,7 @@ fn bench(c: &mut Criterion) {
                 }
                 continue;
             }
-            check_ours(&s, &view, packets, &reference);
+            check_ours(&s, packets, &reference);
             let ob: Vec<u32> = packets
                 .iter()
                 .flat_map(|p| {
@@ -389,13 +393,14 @@ fn bench(c: &mut Criterion) {
             group.bench_function(id("packet8"), |b| {
                 b.iter(|| packet8(&view, black_box(packets)))
             });
-            for (name, how) in &IDEAS {
-                group.bench_function(id(name), |b| {
-                    b.iter(|| packet8_with(&view, black_box(packets), how))
-                });
-            }
+            group.bench_function(id("wide_packet8"), |b| {
+                b.iter(|| packet8(&wide, black_box(packets)))
+            });
             group.bench_function(id("scalar"), |b| {
                 b.iter(|| scalar(&view, black_box(packets)))
+            });
+            group.bench_function(id("wide_scalar"), |b| {
+                b.iter(|| scalar(&wide, black_box(packets)))
             });
             group.bench_function(id("obvhs_cwbvh"), |b| {
                 b.iter(|| obvhs_closest(&s, black_box(packets)))
@@ -424,9 +429,12 @@ fn bench(c: &mut Criterion) {
         group.throughput(Throughput::Elements(rays));
         let id = |what: &str| format!("{}/gather_resorted_{what}", s.name);
         let reference = prims_of(&view, &resorted);
-        check_ours(&s, &view, &resorted, &reference);
+        check_ours(&s, &resorted, &reference);
         group.bench_function(id("packet8"), |b| {
             b.iter(|| packet8(&view, black_box(&resorted)))
+        });
+        group.bench_function(id("wide_packet8"), |b| {
+            b.iter(|| packet8(&wide, black_box(&resorted)))
         });
         #[cfg(feature = "embree")]
         {
@@ -450,6 +458,7 @@ fn bench(c: &mut Criterion) {
             .and_then(|v| v.parse::<usize>().ok())
         {
             let gather = &sets[0].1;
+            #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
             let mut entries: Vec<DuelEntry<'_>> = vec![
                 (
                     "packet8".into(),
@@ -457,28 +466,36 @@ fn bench(c: &mut Criterion) {
                     Box::new(|| packet8(&view, gather)),
                 ),
                 (
+                    "wide_packet8".into(),
+                    gather.len(),
+                    Box::new(|| packet8(&wide, gather)),
+                ),
+                (
                     "scalar".into(),
                     gather.len(),
                     Box::new(|| scalar(&view, gather)),
+                ),
+                (
+                    "wide_scalar".into(),
+                    gather.len(),
+                    Box::new(|| scalar(&wide, gather)),
                 ),
                 (
                     "obvhs_cwbvh".into(),
                     gather.len(),
                     Box::new(|| obvhs_closest(&s, gather)),
                 ),
+                (
+                    "resorted_packet8".into(),
+                    resorted.len(),
+                    Box::new(|| packet8(&view, &resorted)),
+                ),
+                (
+                    "resorted_wide_packet8".into(),
+                    resorted.len(),
+                    Box::new(|| packet8(&wide, &resorted)),
+                ),
             ];
-            for (name, how) in &IDEAS {
-                entries.push((
-                    (*name).into(),
-                    gather.len(),
-                    Box::new(move || packet8_with(&view, gather, how)),
-                ));
-            }
-            entries.push((
-                "resorted_packet8".into(),
-                resorted.len(),
-                Box::new(|| packet8(&view, &resorted)),
-            ));
             #[cfg(feature = "embree")]
             for coherent in [true, false] {
                 let tag = if coherent { "coherent" } else { "incoherent" };
@@ -505,23 +522,89 @@ fn bench(c: &mut Criterion) {
                     Box::new(move || em.intersect8_sum(resorted, coherent)),
                 ));
             }
-            duel(s.name, &entries, rounds);
+            duel(
+                s.name,
+                "gather",
+                &entries,
+                rounds,
+                &["embree_intersect8_coherent", "embree_intersect8_incoherent"],
+            );
+            let shadow = &sets[1].1;
+            #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
+            let mut entries: Vec<DuelEntry<'_>> = vec![
+                (
+                    "occluded8".into(),
+                    shadow.len(),
+                    Box::new(|| occl8(&view, shadow)),
+                ),
+                (
+                    "wide_occluded8".into(),
+                    shadow.len(),
+                    Box::new(|| occl8(&wide, shadow)),
+                ),
+                (
+                    "scalar".into(),
+                    shadow.len(),
+                    Box::new(|| occl1(&view, shadow)),
+                ),
+                (
+                    "wide_scalar".into(),
+                    shadow.len(),
+                    Box::new(|| occl1(&wide, shadow)),
+                ),
+                (
+                    "obvhs_cwbvh".into(),
+                    shadow.len(),
+                    Box::new(|| obvhs_occluded(&s, shadow)),
+                ),
+            ];
+            #[cfg(feature = "embree")]
+            for coherent in [true, false] {
+                let tag = if coherent { "coherent" } else { "incoherent" };
+                let em = &em;
+                entries.push((
+                    format!("embree_occluded8_{tag}"),
+                    shadow.len(),
+                    Box::new(move || em.occluded8_count(shadow, coherent)),
+                ));
+            }
+            duel(
+                s.name,
+                "shadow",
+                &entries,
+                rounds,
+                &["embree_occluded8_coherent", "embree_occluded8_incoherent"],
+            );
         }
         if std::env::var_os("TRAVERSE_PRESETS").is_some() {
             presets(&s, &sets[0].1);
         }
     }
     group.finish();
+    sizes();
 }
 
 /// A duel contestant: name, packets per pass, one pass over its ray set (returns a checksum).
 type DuelEntry<'a> = (String, usize, Box<dyn Fn() -> u64 + 'a>);
 
-/// Round-robin timing of the gather tracers: each round runs every entry once over its ray
+/// Round-robin timing of one ray set's tracers: each round runs every entry once over its ray
 /// set (the start rotating from round to round), so all entries see the same machine load
 /// within a few tens of milliseconds. Prints per entry the median Mrays/s and the median over
-/// rounds of its per-round ratio to `obvhs_cwbvh` and to the faster Embree `intersect8`.
-fn duel(scene: &str, entries: &[DuelEntry<'_>], rounds: usize) {
+/// rounds of its per-round ratio to `obvhs_cwbvh`, to the first entry (our binary packet
+/// traversal) and to the faster of the `embree` entries (per round).
+fn duel(scene: &str, set: &str, entries: &[DuelEntry<'_>], rounds: usize, embree: &[&str]) {
+    // `TRAVERSE_ONLY=name,...` times only those entries (for a profiler); no ratios.
+    if let Ok(only) = std::env::var("TRAVERSE_ONLY") {
+        for (name, packets, run) in entries.iter().filter(|e| only.split(',').any(|o| o == e.0)) {
+            let start = Instant::now();
+            for _ in 0..rounds {
+                black_box(run());
+            }
+            let rate = (packets * LANES * rounds) as f64 / start.elapsed().as_secs_f64() / 1e6;
+            println!("only {scene} {set} {name}: {rate:.2} Mrays/s");
+        }
+        return;
+    }
     let n = entries.len();
     let mut rates = vec![Vec::with_capacity(rounds); n];
     for round in 0..rounds {
@@ -539,13 +622,14 @@ fn duel(scene: &str, entries: &[DuelEntry<'_>], rounds: usize) {
         v[v.len() / 2]
     };
     let obvhs = index("obvhs_cwbvh").expect("obvhs entry");
-    let embree8: Vec<usize> = ["embree_intersect8_coherent", "embree_intersect8_incoherent"]
-        .iter()
-        .filter_map(|e| index(e))
-        .collect();
+    let embree8: Vec<usize> = embree.iter().filter_map(|e| index(e)).collect();
     println!(
-        "duel {scene} gather: {rounds} rounds; median Mrays/s, median per-round ratio to obvhs \
-         CwBvh and to Embree's faster intersect8 (per round)"
+        "duel {scene} {set}: {rounds} rounds; median Mrays/s, median per-round ratio to obvhs \
+         CwBvh, to {} and to Embree's faster {} (per round)",
+        entries[0].0,
+        embree
+            .first()
+            .map_or("-", |e| e.trim_end_matches("_coherent"))
     );
     for (k, (name, _, _)) in entries.iter().enumerate() {
         let ratio_to = |other: &[usize]| {
@@ -562,9 +646,10 @@ fn duel(scene: &str, entries: &[DuelEntry<'_>], rounds: usize) {
             )
         };
         println!(
-            "duel {scene} {name:<36} {:>7.2} Mrays/s  x{:.2} obvhs  x{:.2} embree8",
+            "duel {scene} {set} {name:<36} {:>7.2} Mrays/s  x{:.2} obvhs  x{:.2} binary  x{:.2} embree8",
             median(rates[k].clone()),
             ratio_to(&[obvhs]),
+            ratio_to(&[0]),
             ratio_to(&embree8)
         );
     }
@@ -572,33 +657,77 @@ fn duel(scene: &str, entries: &[DuelEntry<'_>], rounds: usize) {
 
 /// Build time vs gather trace time of every obvhs preset (printed; not a criterion
 /// measurement: a build is seconds long on the 1M scene). The traces run round-robin, one
-/// pass per preset per round, so every preset sees the same load; medians over the rounds.
+/// pass per preset and layout per round, so every preset sees the same load; medians over
+/// the rounds.
 fn presets(s: &Scene, packets: &[Ray8]) {
     let built: Vec<(Preset, Bvh)> = Preset::ALL
         .iter()
         .map(|&p| (p, Bvh::build(&s.soup, p).expect("preset BVH")))
         .collect();
-    let rounds = 15;
-    let mut rates = vec![Vec::with_capacity(rounds); built.len()];
+    report_builds(s.name, &built, packets, 15);
+}
+
+/// Traces `packets` through each of `built` (binary and wide packets, round-robin, `rounds`
+/// rounds) and prints build seconds and median Mrays/s.
+fn report_builds(name: &str, built: &[(Preset, Bvh)], packets: &[Ray8], rounds: usize) {
+    let mut rates = vec![[Vec::with_capacity(rounds), Vec::with_capacity(rounds)]; built.len()];
     for round in 0..rounds {
         for k in 0..built.len() {
             let i = (round + k) % built.len();
-            let view = built[i].1.view();
-            let start = Instant::now();
-            black_box(packet8(&view, packets));
-            rates[i].push((packets.len() * LANES) as f64 / start.elapsed().as_secs_f64() / 1e6);
+            let bvh = &built[i].1;
+            for (layout, rate) in rates[i].iter_mut().enumerate() {
+                let start = Instant::now();
+                if layout == 0 {
+                    black_box(packet8(&bvh.view(), packets));
+                } else {
+                    black_box(packet8(&bvh.wide(), packets));
+                }
+                rate.push((packets.len() * LANES) as f64 / start.elapsed().as_secs_f64() / 1e6);
+            }
         }
     }
-    for ((preset, bvh), mut r) in built.iter().zip(rates) {
-        r.sort_by(f64::total_cmp);
+    for ((preset, bvh), r) in built.iter().zip(rates) {
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let [binary, wide] = r;
         println!(
-            "preset {} {:>10}: build {:>8.1} ms, {} nodes, gather packet8 {:.2} Mrays/s (median of {rounds})",
-            s.name,
+            "preset {name} {:>10}: {} triangles, build {:>9.3} s, {} nodes, gather packet8 {:.2} \
+             Mrays/s, wide {:.2} Mrays/s (median of {rounds})",
             preset.name(),
-            bvh.build_time().as_secs_f64() * 1e3,
+            bvh.tris().len(),
+            bvh.build_time().as_secs_f64(),
             bvh.view().nodes().len(),
-            r[rounds / 2]
+            median(binary),
+            median(wide),
         );
+    }
+}
+
+/// `TRAVERSE_SIZES=1e5,1e6,...`: procedural cities of about these many triangles, built with
+/// each preset of `TRAVERSE_SIZE_PRESETS` (names, comma-separated; default `medium,very_slow`):
+/// build seconds and gather Mrays/s (256 texels × 64 directions).
+fn sizes() {
+    let Ok(list) = std::env::var("TRAVERSE_SIZES") else {
+        return;
+    };
+    let names = std::env::var("TRAVERSE_SIZE_PRESETS").unwrap_or("medium,very_slow".into());
+    let wanted: Vec<Preset> = Preset::ALL
+        .into_iter()
+        .filter(|p| names.split(',').any(|n| n == p.name()))
+        .collect();
+    for size in list.split(',') {
+        let triangles: f64 = size.parse().expect("TRAVERSE_SIZES: numbers like 1e6");
+        // About side² · 90 triangles with 3 × 3 quads per box face.
+        let side = (triangles / 90.0).sqrt().round().max(2.0) as usize;
+        let soup = scenes::city(side, 3, 4);
+        let packets = scenes::gather_packets(&soup, TEXELS, 64, 1);
+        let built: Vec<(Preset, Bvh)> = wanted
+            .iter()
+            .map(|&p| (p, Bvh::build(&soup, p).expect("city BVH")))
+            .collect();
+        report_builds(&format!("city{size}"), &built, &packets, 5);
     }
 }
 

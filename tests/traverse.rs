@@ -1,62 +1,40 @@
-//! Per-ray checks of the packet traversal: every ray's result from `intersect8`,
-//! `intersect1` and the brute-force oracle must be equal — hit or not, primitive id, and `t`,
-//! `u`, `v` bit for bit (the scalar and 8-wide arithmetic are the same IEEE operations; equal
-//! `t` goes to the smallest primitive id). Occlusion likewise.
+//! Per-ray checks of the packet traversal, on the binary and on the wide layout of every
+//! tree: every ray's result from `intersect8`, `intersect1` and the brute-force oracle must
+//! be equal — hit or not, primitive id, and `t`, `u`, `v` bit for bit (the scalar and 8-wide
+//! arithmetic are the same IEEE operations; equal `t` goes to the smallest primitive id).
+//! Occlusion likewise.
 
 #[path = "../benches/common/traverse_scenes.rs"]
 mod scenes;
 
 use glam::Vec3;
 use guidebake::bvh::{Bvh, Preset};
-use guidebake_kernels::packet::{Hit, Hit8, LANES, Ray, Ray8};
+use guidebake_kernels::packet::{Hit, Hit8, LANES, Ray, Ray8, offset_origin, triangle_extent};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::{
-    BvhRef, ChildOrder, Traversal, intersect_brute, intersect1, intersect8, intersect8_with,
-    occluded_brute, occluded1, occluded8, occluded8_with, offset_origin, triangle_extent,
+    Layout, intersect_brute, intersect1, intersect8, occluded_brute, occluded1, occluded8,
 };
 
-/// The traversal settings `benches/traverse.rs` measures, besides the default.
-fn variants() -> Vec<Traversal> {
-    let mut out = Vec::new();
-    for order in [ChildOrder::Vote, ChildOrder::Signs, ChildOrder::Lead] {
-        for fallback_lanes in [0, 2, 8] {
-            for interval in [false, true] {
-                out.push(Traversal {
-                    fallback_lanes,
-                    order,
-                    interval,
-                });
-            }
-        }
-    }
-    out
+/// The binary and the wide view of `bvh`: every check runs on both.
+fn layouts(bvh: &Bvh) -> [Layout<'_>; 2] {
+    [Layout::Binary(bvh.view()), Layout::Wide(bvh.wide())]
+}
+
+/// [`check_layout`] on both layouts of `bvh`; the rays that hit.
+fn check_packets(bvh: &Bvh, packets: &[Ray8], what: &str) -> usize {
+    let [binary, wide] = layouts(bvh);
+    let hits = check_layout(&binary, packets, &format!("{what}, binary"));
+    assert_eq!(check_layout(&wide, packets, &format!("{what}, wide")), hits);
+    hits
 }
 
 /// Compares every lane of every packet with the scalar traversal and the oracle.
-fn check_packets(bvh: &BvhRef<'_>, packets: &[Ray8], what: &str) -> usize {
+fn check_layout(bvh: &Layout<'_>, packets: &[Ray8], what: &str) -> usize {
     let mut hits_seen = 0;
     for (p, packet) in packets.iter().enumerate() {
         let mut hits = Hit8::NONE;
         let mask = intersect8(bvh, packet, &mut hits);
         let blocked = occluded8(bvh, packet);
-        // Every traversal setting the bench measures gives the same bits.
-        for how in variants() {
-            let mut other = Hit8::NONE;
-            let m = intersect8_with(bvh, packet, &mut other, &how);
-            for lane in 0..LANES {
-                assert_eq!(
-                    other.lane(lane),
-                    hits.lane(lane),
-                    "{what}: {how:?} packet {p}"
-                );
-            }
-            assert_eq!(m, mask, "{what}: {how:?} mask, packet {p}");
-            assert_eq!(
-                occluded8_with(bvh, packet, &how),
-                blocked,
-                "{what}: {how:?} occluded"
-            );
-        }
         for lane in 0..LANES {
             let ray = packet.lane(lane);
             let oracle = intersect_brute(bvh.tris(), &ray);
@@ -157,7 +135,7 @@ fn random_soups_every_preset_match_the_oracle() {
         let packets = random_packets(&mut rng, 60, scale, Vec3::ZERO);
         for preset in Preset::ALL {
             let bvh = Bvh::build(&soup, preset).unwrap();
-            let hits = check_packets(&bvh.view(), &packets, &format!("{count} tris, {preset:?}"));
+            let hits = check_packets(&bvh, &packets, &format!("{count} tris, {preset:?}"));
             if count >= 300 {
                 assert!(hits > 20, "the ray set must exercise hits ({hits})");
             }
@@ -172,7 +150,7 @@ fn origins_at_1e6_match_the_oracle() {
     let soup = random_soup(&mut rng, 500, 20.0, offset);
     let packets = random_packets(&mut rng, 80, 20.0, offset);
     let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
-    assert!(check_packets(&bvh.view(), &packets, "1e6") > 20);
+    assert!(check_packets(&bvh, &packets, "1e6") > 20);
 }
 
 #[test]
@@ -180,59 +158,60 @@ fn non_finite_zero_and_negative_tmin_rays_never_hit_and_leave_lanes_untouched() 
     let mut rng = Pcg32::new(9, 3);
     let soup = random_soup(&mut rng, 200, 1.0, Vec3::ZERO);
     let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
-    let view = bvh.view();
-    let good = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, 0.0, f32::INFINITY);
-    let bad = [
-        Ray::new(Vec3::new(f32::NAN, 0.5, -1.0), Vec3::Z, 0.0, f32::INFINITY),
-        Ray::new(
-            Vec3::new(0.5, f32::INFINITY, -1.0),
-            Vec3::Z,
-            0.0,
-            f32::INFINITY,
-        ),
-        Ray::new(good.org, Vec3::new(0.0, f32::NAN, 1.0), 0.0, f32::INFINITY),
-        Ray::new(
-            good.org,
-            Vec3::new(f32::NEG_INFINITY, 0.0, 1.0),
-            0.0,
-            f32::INFINITY,
-        ),
-        Ray::new(good.org, Vec3::ZERO, 0.0, f32::INFINITY),
-        Ray::new(good.org, Vec3::splat(1e-39), 0.0, f32::INFINITY),
-        Ray::new(good.org, Vec3::Z, f32::NAN, f32::INFINITY),
-        Ray::new(good.org, Vec3::Z, -1.0, f32::INFINITY),
-    ];
-    let sentinel = Hit {
-        t: -7.0,
-        u: 3.0,
-        v: 4.0,
-        prim: 12345,
-    };
-    for (i, ray) in bad.iter().enumerate() {
-        assert_eq!(intersect1(&view, ray), None, "{ray:?}");
-        assert!(!occluded1(&view, ray), "{ray:?}");
-        // The bad ray in lane i, good rays elsewhere.
-        let mut rays = [good; LANES];
-        rays[i % LANES] = *ray;
-        let packet = Ray8::from_rays(&rays);
-        let mut hits = Hit8::NONE;
-        for lane in 0..LANES {
-            hits.set_lane(lane, &sentinel);
+    for view in layouts(&bvh) {
+        let good = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, 0.0, f32::INFINITY);
+        let bad = [
+            Ray::new(Vec3::new(f32::NAN, 0.5, -1.0), Vec3::Z, 0.0, f32::INFINITY),
+            Ray::new(
+                Vec3::new(0.5, f32::INFINITY, -1.0),
+                Vec3::Z,
+                0.0,
+                f32::INFINITY,
+            ),
+            Ray::new(good.org, Vec3::new(0.0, f32::NAN, 1.0), 0.0, f32::INFINITY),
+            Ray::new(
+                good.org,
+                Vec3::new(f32::NEG_INFINITY, 0.0, 1.0),
+                0.0,
+                f32::INFINITY,
+            ),
+            Ray::new(good.org, Vec3::ZERO, 0.0, f32::INFINITY),
+            Ray::new(good.org, Vec3::splat(1e-39), 0.0, f32::INFINITY),
+            Ray::new(good.org, Vec3::Z, f32::NAN, f32::INFINITY),
+            Ray::new(good.org, Vec3::Z, -1.0, f32::INFINITY),
+        ];
+        let sentinel = Hit {
+            t: -7.0,
+            u: 3.0,
+            v: 4.0,
+            prim: 12345,
+        };
+        for (i, ray) in bad.iter().enumerate() {
+            assert_eq!(intersect1(&view, ray), None, "{ray:?}");
+            assert!(!occluded1(&view, ray), "{ray:?}");
+            // The bad ray in lane i, good rays elsewhere.
+            let mut rays = [good; LANES];
+            rays[i % LANES] = *ray;
+            let packet = Ray8::from_rays(&rays);
+            let mut hits = Hit8::NONE;
+            for lane in 0..LANES {
+                hits.set_lane(lane, &sentinel);
+            }
+            let mask = intersect8(&view, &packet, &mut hits);
+            assert_eq!(mask >> (i % LANES) & 1, 0);
+            assert_eq!(hits.lane(i % LANES), Some(sentinel), "{ray:?}");
+            assert_eq!(occluded8(&view, &packet) >> (i % LANES) & 1, 0);
+            for lane in (0..LANES).filter(|&l| l != i % LANES) {
+                assert_eq!(
+                    hits.lane(lane),
+                    intersect_brute(view.tris(), &good).or(Some(sentinel))
+                );
+            }
         }
-        let mask = intersect8(&view, &packet, &mut hits);
-        assert_eq!(mask >> (i % LANES) & 1, 0);
-        assert_eq!(hits.lane(i % LANES), Some(sentinel), "{ray:?}");
-        assert_eq!(occluded8(&view, &packet) >> (i % LANES) & 1, 0);
-        for lane in (0..LANES).filter(|&l| l != i % LANES) {
-            assert_eq!(
-                hits.lane(lane),
-                intersect_brute(view.tris(), &good).or(Some(sentinel))
-            );
-        }
+        // Huge but finite directions are traced normally.
+        let huge = Ray::new(good.org, Vec3::new(1e-30, 3e-30, 1e30), 0.0, f32::INFINITY);
+        check_layout(&view, &[Ray8::from_rays(&[huge, good])], "huge direction");
     }
-    // Huge but finite directions are traced normally.
-    let huge = Ray::new(good.org, Vec3::new(1e-30, 3e-30, 1e30), 0.0, f32::INFINITY);
-    check_packets(&view, &[Ray8::from_rays(&[huge, good])], "huge direction");
 }
 
 #[test]
@@ -240,57 +219,58 @@ fn inactive_lanes_with_1_to_8_active_come_back_untouched() {
     let mut rng = Pcg32::new(12, 4);
     let soup = random_soup(&mut rng, 400, 4.0, Vec3::ZERO);
     let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
-    let view = bvh.view();
-    let sentinel = Hit {
-        t: 99.0,
-        u: -1.0,
-        v: -2.0,
-        prim: 777,
-    };
-    for active in 1..=LANES {
-        for trial in 0..20 {
-            let mut packet = random_packets(&mut rng, 1, 4.0, Vec3::ZERO)[0];
-            // A random subset of `active` lanes stays active.
-            let mut lanes: Vec<usize> = (0..LANES).collect();
-            for k in (1..LANES).rev() {
-                lanes.swap(k, rng.next_u32() as usize % (k + 1));
-            }
-            for &lane in &lanes[active..] {
-                packet.set_lane(lane, &Ray::INACTIVE);
-            }
-            let before = packet;
-            let mut hits = Hit8::NONE;
-            for lane in 0..LANES {
-                hits.set_lane(lane, &sentinel);
-            }
-            let mask = intersect8(&view, &packet, &mut hits);
-            let blocked = occluded8(&view, &packet);
-            assert_eq!(packet, before, "rays must not change");
-            for lane in 0..LANES {
-                let ray = packet.lane(lane);
-                let oracle = intersect_brute(view.tris(), &ray);
-                if lanes[active..].contains(&lane) {
-                    assert_eq!(
-                        hits.lane(lane),
-                        Some(sentinel),
-                        "inactive lane {lane}, trial {trial}"
-                    );
-                    assert_eq!((mask | blocked) >> lane & 1, 0);
-                } else {
-                    assert_eq!(
-                        hits.lane(lane),
-                        oracle.or(Some(sentinel)),
-                        "active lane {lane}"
-                    );
-                    assert_eq!(blocked >> lane & 1 == 1, oracle.is_some());
+    for view in layouts(&bvh) {
+        let sentinel = Hit {
+            t: 99.0,
+            u: -1.0,
+            v: -2.0,
+            prim: 777,
+        };
+        for active in 1..=LANES {
+            for trial in 0..20 {
+                let mut packet = random_packets(&mut rng, 1, 4.0, Vec3::ZERO)[0];
+                // A random subset of `active` lanes stays active.
+                let mut lanes: Vec<usize> = (0..LANES).collect();
+                for k in (1..LANES).rev() {
+                    lanes.swap(k, rng.next_u32() as usize % (k + 1));
+                }
+                for &lane in &lanes[active..] {
+                    packet.set_lane(lane, &Ray::INACTIVE);
+                }
+                let before = packet;
+                let mut hits = Hit8::NONE;
+                for lane in 0..LANES {
+                    hits.set_lane(lane, &sentinel);
+                }
+                let mask = intersect8(&view, &packet, &mut hits);
+                let blocked = occluded8(&view, &packet);
+                assert_eq!(packet, before, "rays must not change");
+                for lane in 0..LANES {
+                    let ray = packet.lane(lane);
+                    let oracle = intersect_brute(view.tris(), &ray);
+                    if lanes[active..].contains(&lane) {
+                        assert_eq!(
+                            hits.lane(lane),
+                            Some(sentinel),
+                            "inactive lane {lane}, trial {trial}"
+                        );
+                        assert_eq!((mask | blocked) >> lane & 1, 0);
+                    } else {
+                        assert_eq!(
+                            hits.lane(lane),
+                            oracle.or(Some(sentinel)),
+                            "active lane {lane}"
+                        );
+                        assert_eq!(blocked >> lane & 1 == 1, oracle.is_some());
+                    }
                 }
             }
         }
+        let mut none = Hit8::NONE;
+        assert_eq!(intersect8(&view, &Ray8::INACTIVE, &mut none), 0);
+        assert_eq!(none, Hit8::NONE);
+        assert_eq!(occluded8(&view, &Ray8::INACTIVE), 0);
     }
-    let mut none = Hit8::NONE;
-    assert_eq!(intersect8(&view, &Ray8::INACTIVE, &mut none), 0);
-    assert_eq!(none, Hit8::NONE);
-    assert_eq!(occluded8(&view, &Ray8::INACTIVE), 0);
 }
 
 /// A closed, star-shaped mesh: a subdivided octahedron with jittered radii.
@@ -338,37 +318,38 @@ fn rays_through_shared_edges_and_vertices_of_a_closed_mesh_never_miss() {
     ] {
         let mesh = closed_mesh(&mut rng, 3, center, radius);
         let bvh = Bvh::build(&mesh, Preset::DEFAULT).unwrap();
-        let view = bvh.view();
-        let mut misses = 0;
-        let mut rays = Vec::new();
-        for t in &mesh {
-            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                // Through a point on the shared edge and through the shared vertex, along the
-                // line through the centre: the mesh is star-shaped about it, so the line crosses
-                // the surface there, from inside and from outside alike. (A ray from an
-                // arbitrary outside point may only graze a ridge, and may rightly miss.)
-                for target in [a + (b - a) * rng.next_f32(), a] {
-                    rays.push(Ray::new(center, target - center, 0.0, f32::INFINITY));
-                    let from = target + (target - center) * 3.0;
-                    rays.push(Ray::new(from, center - from, 0.0, f32::INFINITY));
+        for view in layouts(&bvh) {
+            let mut misses = 0;
+            let mut rays = Vec::new();
+            for t in &mesh {
+                for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                    // Through a point on the shared edge and through the shared vertex, along the
+                    // line through the centre: the mesh is star-shaped about it, so the line crosses
+                    // the surface there, from inside and from outside alike. (A ray from an
+                    // arbitrary outside point may only graze a ridge, and may rightly miss.)
+                    for target in [a + (b - a) * rng.next_f32(), a] {
+                        rays.push(Ray::new(center, target - center, 0.0, f32::INFINITY));
+                        let from = target + (target - center) * 3.0;
+                        rays.push(Ray::new(from, center - from, 0.0, f32::INFINITY));
+                    }
                 }
             }
-        }
-        for chunk in rays.chunks(LANES) {
-            let packet = Ray8::from_rays(chunk);
-            let mut hits = Hit8::NONE;
-            let mask = intersect8(&view, &packet, &mut hits);
-            let blocked = occluded8(&view, &packet);
-            for (lane, ray) in chunk.iter().enumerate() {
-                let one = intersect1(&view, ray);
-                misses += usize::from(one.is_none());
-                assert_eq!(one, intersect_brute(view.tris(), ray));
-                assert_eq!(hits.lane(lane), one);
-                assert_eq!(mask >> lane & 1 == 1, one.is_some());
-                assert_eq!(blocked >> lane & 1 == 1, one.is_some());
+            for chunk in rays.chunks(LANES) {
+                let packet = Ray8::from_rays(chunk);
+                let mut hits = Hit8::NONE;
+                let mask = intersect8(&view, &packet, &mut hits);
+                let blocked = occluded8(&view, &packet);
+                for (lane, ray) in chunk.iter().enumerate() {
+                    let one = intersect1(&view, ray);
+                    misses += usize::from(one.is_none());
+                    assert_eq!(one, intersect_brute(view.tris(), ray));
+                    assert_eq!(hits.lane(lane), one);
+                    assert_eq!(mask >> lane & 1 == 1, one.is_some());
+                    assert_eq!(blocked >> lane & 1 == 1, one.is_some());
+                }
             }
+            assert_eq!(misses, 0, "rays slipped through shared edges at {center}");
         }
-        assert_eq!(misses, 0, "rays slipped through shared edges at {center}");
     }
 }
 
@@ -399,7 +380,7 @@ fn grazing_rays_match_the_oracle() {
                 Ray8::from_rays(&rays)
             })
             .collect();
-        let hits = check_packets(&bvh.view(), &packets, &format!("grazing, tilt {tilt}"));
+        let hits = check_packets(&bvh, &packets, &format!("grazing, tilt {tilt}"));
         assert!(hits > 0, "some grazing rays must hit");
     }
 }
@@ -422,14 +403,13 @@ fn converted_scenes_match_the_oracle() {
         let random = scenes::incoherent_packets(&soup, 24, 3);
         for preset in Preset::ALL {
             let bvh = Bvh::build(&soup, preset).unwrap();
-            let view = bvh.view();
             let what = format!("{name} {preset:?}");
-            let hits = check_packets(&view, &gather, &format!("{what} gather"));
+            let hits = check_packets(&bvh, &gather, &format!("{what} gather"));
             // Surfaces are two-sided and origins face a random side, so rays leaving the
             // outer side of a wall miss: ask only that a fair share hit.
             assert!(hits > gather.len(), "{what}: only {hits} gather rays hit");
-            check_packets(&view, &shadow, &format!("{what} shadow"));
-            check_packets(&view, &random, &format!("{what} random"));
+            check_packets(&bvh, &shadow, &format!("{what} shadow"));
+            check_packets(&bvh, &random, &format!("{what} random"));
         }
     }
 }
@@ -444,21 +424,24 @@ fn offset_origins_avoid_self_intersection_at_1e6() {
     ] {
         let soup = random_soup(&mut rng, 300, 8.0, offset);
         let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
-        let view = bvh.view();
-        let (mut self_hits, mut raw_self_hits) = (0, 0);
-        for s in scenes::surface_points(&soup, 20000, 8) {
-            let n = if rng.next_u32() & 1 == 0 { s.n } else { -s.n };
-            let d = scenes::cosine_dir(n, [rng.next_f32(), rng.next_f32()]);
-            let origin = offset_origin(s.p, n, triangle_extent(s.p, &soup[s.prim as usize]));
-            let safe = Ray::new(origin, d, 0.0, f32::INFINITY);
-            self_hits += usize::from(intersect1(&view, &safe).is_some_and(|h| h.prim == s.prim));
-            let raw = Ray::new(s.p, d, 0.0, f32::INFINITY);
-            raw_self_hits += usize::from(intersect1(&view, &raw).is_some_and(|h| h.prim == s.prim));
-        }
-        assert_eq!(self_hits, 0, "self-intersections at offset {offset}");
-        if offset.x.abs() >= 1.0e6 {
-            // Without the offset the same rays do hit their own triangle: the check can fail.
-            assert!(raw_self_hits > 0, "expected raw self-hits at {offset}");
+        for view in layouts(&bvh) {
+            let (mut self_hits, mut raw_self_hits) = (0, 0);
+            for s in scenes::surface_points(&soup, 20000, 8) {
+                let n = if rng.next_u32() & 1 == 0 { s.n } else { -s.n };
+                let d = scenes::cosine_dir(n, [rng.next_f32(), rng.next_f32()]);
+                let origin = offset_origin(s.p, n, triangle_extent(s.p, &soup[s.prim as usize]));
+                let safe = Ray::new(origin, d, 0.0, f32::INFINITY);
+                self_hits +=
+                    usize::from(intersect1(&view, &safe).is_some_and(|h| h.prim == s.prim));
+                let raw = Ray::new(s.p, d, 0.0, f32::INFINITY);
+                raw_self_hits +=
+                    usize::from(intersect1(&view, &raw).is_some_and(|h| h.prim == s.prim));
+            }
+            assert_eq!(self_hits, 0, "self-intersections at offset {offset}");
+            if offset.x.abs() >= 1.0e6 {
+                // Without the offset the same rays do hit their own triangle: the check can fail.
+                assert!(raw_self_hits > 0, "expected raw self-hits at {offset}");
+            }
         }
     }
 }

@@ -8,7 +8,7 @@ use glam::Vec3;
 use guidebake_kernels::mapping::{
     orthonormal_basis, sample_cosine_hemisphere, sample_cosine_hemisphere_x8,
 };
-use guidebake_kernels::packet::{LANES, Ray8};
+use guidebake_kernels::packet::{LANES, Ray8, offset_origin, triangle_extent};
 use guidebake_kernels::presort::{
     CurveOrder, presorted, quadtree_sort_by, reorder_after_rotation_into,
 };
@@ -16,7 +16,6 @@ use guidebake_kernels::sobol::{
     rotate, rotate_x8, rotation, sobol_2d, sobol_2d_x8, to_unit, to_unit_x8,
 };
 use guidebake_kernels::testing::Pcg32;
-use guidebake_kernels::traverse::{offset_origin, triangle_extent};
 use wide::u32x8;
 
 /// `converted/` of the shared scenes ([`guidebake::test_support::shared_scenes_dir`]), if present.

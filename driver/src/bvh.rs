@@ -4,8 +4,12 @@
 //! 2019 §2.4). Building a good tree is obvhs's job: PLOC (Meister & Bittner 2018) plus
 //! reinsertion and leaf collapsing ([`obvhs::bvh2::builder::build_bvh2_from_tris`]). This module
 //! picks the build parameters ([`Preset`]), then flattens obvhs's binary tree into
-//! [`Node`]s (two child boxes per 64-byte node) and copies the triangles into leaf order as
-//! [`Tri`]s for the watertight test.
+//! [`Node`]s (two child boxes per 64-byte node), copies the triangles into leaf order as
+//! [`Tri`]s for the watertight test, and collapses the binary tree into [`WideNode`]s (eight
+//! child boxes per node, same leaves and triangles; [`Bvh::wide`]). The bake traces the
+//! binary view ([`Bvh::view`]): on the round-robin duel the wide packet walk is slower on
+//! coherent gather packets (docs/traverse.md, "Wide BVH"). obvhs builds on every core (its
+//! `parallel` feature: PLOC and reinsertion through rayon).
 //!
 //! Deviations: obvhs's own traversals ignore `tmin` in the node test; ours honour it. With the
 //! spatial-split presets a triangle can sit in several leaves; it is then copied once per leaf
@@ -15,12 +19,14 @@
 //! not depend on the scene loader.
 //!
 //! Ray origins leaving a surface should be offset with
-//! [`guidebake_kernels::traverse::offset_origin`] (Wächter & Binder, Ray Tracing Gems ch. 6).
+//! [`guidebake_kernels::packet::offset_origin`] (Wächter & Binder, Ray Tracing Gems ch. 6).
 
 use std::time::{Duration, Instant};
 
 use glam::{Vec3, Vec3A};
-use guidebake_kernels::traverse::{BvhRef, LEAF, LayoutError, Node, Tri};
+use guidebake_kernels::traverse::{
+    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse,
+};
 use obvhs::{
     BvhBuildParams,
     bvh2::{Bvh2, builder::build_bvh2_from_tris},
@@ -55,11 +61,13 @@ impl Preset {
         Preset::VerySlowBuild,
     ];
 
-    /// The bake's choice. Measured in docs/traverse.md ("Build presets", round-robin): on the
-    /// Veach room every preset from `FastBuild` up traces alike; on a 1M-triangle city
-    /// `VerySlowBuild` traces 1.66× faster for ~9× the build time, which pays after ~40 M
-    /// rays. Switching the default to it is recommended there, not yet done.
-    pub const DEFAULT: Preset = Preset::MediumBuild;
+    /// The bake's choice. Measured in docs/traverse.md ("Build presets and sizes",
+    /// round-robin): on cities of 10⁵, 10⁶ and 10⁷ triangles `VerySlowBuild` traces 1.3×,
+    /// 1.3–1.6× and 1.3–2.0× faster than `MediumBuild` for 5–7× its build time (0.14 s,
+    /// 2.6 s and 128 s on one core), which pays back after at most ~0.7·10⁹ rays on 10⁷
+    /// triangles and ~60·10⁶ on 10⁶ — less than one bake of such a world traces. On the Veach
+    /// room every preset from `FastBuild` up traces alike and builds in milliseconds.
+    pub const DEFAULT: Preset = Preset::VerySlowBuild;
 
     /// obvhs's parameters for this preset.
     pub fn params(self) -> BvhBuildParams {
@@ -114,6 +122,7 @@ pub enum BvhError {
 #[derive(Clone, Debug)]
 pub struct Bvh {
     nodes: Vec<Node>,
+    wide: Vec<WideNode>,
     tris: Vec<Tri>,
     build_time: Duration,
     preset: Preset,
@@ -148,20 +157,34 @@ impl Bvh {
             None => (vec![Node::EMPTY], Vec::new()),
             Some(bvh2) => flatten(bvh2, soup),
         };
-        BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
+        let binary = BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
+        let wide = collapse(&binary);
+        WideRef::new(&wide, &tris).map_err(BvhError::Layout)?;
         Ok(Self {
             nodes,
+            wide,
             tris,
             build_time: start.elapsed(),
             preset,
         })
     }
 
-    /// The kernels' view for [`guidebake_kernels::traverse`]'s functions. Validates the layout
-    /// again (linear in the node count): take it once, not per ray.
+    /// The binary view for [`guidebake_kernels::traverse`]'s functions (two child boxes per
+    /// node). Cheap: `build` validated the layout.
     pub fn view(&self) -> BvhRef<'_> {
         // `build` validated this exact layout and nothing mutates it since.
         BvhRef::new_trusted(&self.nodes, &self.tris)
+    }
+
+    /// The wide view (eight child boxes per node, collapsed from the binary tree, same
+    /// triangles). Same results as [`Bvh::view`], bit for bit. Cheap: `build` validated it.
+    pub fn wide(&self) -> WideRef<'_> {
+        WideRef::new_trusted(&self.wide, &self.tris)
+    }
+
+    /// Wide nodes, root first.
+    pub fn wide_nodes(&self) -> &[WideNode] {
+        &self.wide
     }
 
     /// Nodes, root first.
@@ -174,7 +197,7 @@ impl Bvh {
         &self.tris
     }
 
-    /// Wall time of [`Bvh::build`] (obvhs build plus flattening).
+    /// Wall time of [`Bvh::build`] (obvhs build, flattening and collapsing).
     pub fn build_time(&self) -> Duration {
         self.build_time
     }
@@ -292,9 +315,30 @@ mod tests {
         let ray = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
         let empty = Bvh::build(&[], Preset::DEFAULT).unwrap();
         assert_eq!(intersect1(&empty.view(), &ray), None);
+        assert_eq!(intersect1(&empty.wide(), &ray), None);
         let one = Bvh::build(&quad()[..1], Preset::DEFAULT).unwrap();
+        assert_eq!(intersect1(&one.wide(), &ray), intersect1(&one.view(), &ray));
         let hit = intersect1(&one.view(), &ray).unwrap();
         assert_eq!((hit.prim, hit.t), (0, 1.0));
+    }
+
+    #[test]
+    fn a_large_world_traces_the_same_through_both_layouts() {
+        let grid: Vec<[Vec3; 3]> = (0..1 << 17)
+            .map(|i| {
+                let p = Vec3::new((i % 512) as f32, (i / 512) as f32, (i % 7) as f32 * 0.1);
+                [p, p + Vec3::X, p + Vec3::Y]
+            })
+            .collect();
+        let bvh = Bvh::build(&grid, Preset::FastBuild).unwrap();
+        assert!(bvh.wide_nodes().len() * 2 < bvh.nodes().len());
+        for i in 0..200 {
+            let o = Vec3::new(i as f32 * 2.3 % 512.0, i as f32 * 1.7 % 256.0, 5.0);
+            let ray = Ray::new(o, Vec3::new(0.3, -0.2, -1.0), 0.0, f32::INFINITY);
+            let want = intersect1(&bvh.view(), &ray);
+            assert_eq!(intersect1(&bvh.wide(), &ray), want);
+            assert_eq!(want, intersect_brute(bvh.tris(), &ray));
+        }
     }
 
     #[test]
@@ -312,6 +356,7 @@ mod tests {
                 intersect_brute(bvh.tris(), &ray)
             );
             assert_eq!(intersect1(&bvh.view(), &ray).unwrap().prim, 1);
+            assert_eq!(intersect1(&bvh.wide(), &ray), intersect1(&bvh.view(), &ray));
         }
     }
 }

@@ -12,8 +12,8 @@
 
 use glam::Vec3;
 use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere};
-use guidebake_kernels::packet::Ray;
-use guidebake_kernels::traverse::{BvhRef, intersect1, offset_origin, triangle_extent};
+use guidebake_kernels::packet::{Ray, offset_origin, triangle_extent};
+use guidebake_kernels::traverse::{BvhRef, intersect1};
 
 use crate::bvh::{Bvh, BvhError, Preset};
 use crate::scene::Scene;

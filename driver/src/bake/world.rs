@@ -9,7 +9,8 @@
 //! surface, no continuation.
 
 use glam::Vec3;
-use guidebake_kernels::traverse::{BvhRef, offset_origin, triangle_extent};
+use guidebake_kernels::packet::{offset_origin, triangle_extent};
+use guidebake_kernels::traverse::BvhRef;
 
 use super::settings::{EmitterSampling, Transport};
 

@@ -1,0 +1,613 @@
+//! # traverse::bvh8: eight child boxes per node, tested with one 8-lane slab test
+//!
+//! The wide layout of the traversal ([`WideNode`], [`WideRef`]): each node holds the boxes of
+//! up to eight children as structure-of-arrays `lo[axis][child]`, `hi[axis][child]`, so a
+//! single ray tests all eight with one `f32x8` slab test per axis, and a packet does so for
+//! each live lane ([`boxes8`]). The leaves are the binary tree's leaves,
+//! unchanged: ranges of the same leaf-ordered [`Tri`]s (Woop's watertight form), so a binary
+//! view and its wide view share one triangle array. After Wald, Benthin & Boulos, *Getting
+//! Rid of Packets* (2008) and Embree's BVH8 (Wald et al., *Embree*, ACM TOG 33(4), 2014).
+//!
+//! [`collapse`] builds a wide tree from a binary [`BvhRef`]: every wide node takes its binary
+//! node's grandchildren (so a wide level spans at least two binary levels and the depth stays
+//! within [`WIDE_MAX_DEPTH`]), then opens the inner child of largest surface area until
+//! eight slots are filled (Embree's collapse order).
+//!
+//! The boxes, the slab arithmetic and the triangle test are the binary traversal's, operation
+//! for operation; the wide walks only visit children in another order and with another
+//! stack, so their results equal the binary traversal's and brute force bit for bit.
+
+#[cfg(any(feature = "alloc", test))]
+use super::BvhRef;
+use super::{FAR_FLOOR, FAR_UP, LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor};
+use crate::packet::LANES;
+use bytemuck::{Pod, Zeroable};
+use wide::{f32x8, u32x8};
+
+/// Children per wide node.
+pub const WIDTH: usize = 8;
+
+/// Deepest wide tree [`WideRef::new`] accepts (root at depth 0). [`collapse`] halves the
+/// binary depth at least, so every valid binary tree collapses within it.
+pub const WIDE_MAX_DEPTH: usize = super::MAX_DEPTH / 2;
+
+/// Stack entries a walk needs: at most `WIDTH − 1` pending siblings per level, plus one
+/// node's children.
+const STACK: usize = (WIDTH - 1) * (WIDE_MAX_DEPTH + 1) + WIDTH + 1;
+
+/// One wide node: the boxes of up to eight children, four 64-byte cache lines.
+///
+/// Slot `c` is an inner child when `meta[c] == 0` (node `child[c]`), a leaf of
+/// `meta[c] & !LEAF` triangles starting at `child[c]` otherwise. Used slots come first; an
+/// empty slot has `meta == LEAF` and the inverted box `lo = +∞`, `hi = −∞`, which every slab
+/// test misses. Node 0 is the root.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[repr(C, align(64))]
+pub struct WideNode {
+    /// Box minima, `lo[axis][child]`.
+    pub lo: [[f32; WIDTH]; 3],
+    /// Box maxima, `hi[axis][child]`.
+    pub hi: [[f32; WIDTH]; 3],
+    /// Node index (inner child) or first triangle (leaf child).
+    pub child: [u32; WIDTH],
+    /// `0` for an inner child, `LEAF | count` for a leaf.
+    pub meta: [u32; WIDTH],
+}
+
+const _: () = assert!(core::mem::size_of::<WideNode>() == 256);
+
+impl WideNode {
+    /// A node whose slots are all empty (the root of an empty tree).
+    pub const EMPTY: Self = Self {
+        lo: [[f32::INFINITY; WIDTH]; 3],
+        hi: [[f32::NEG_INFINITY; WIDTH]; 3],
+        child: [0; WIDTH],
+        meta: [LEAF; WIDTH],
+    };
+
+    /// Sets slot `slot`'s box, child and meta.
+    pub fn set_slot(&mut self, slot: usize, lo: [f32; 3], hi: [f32; 3], child: u32, meta: u32) {
+        for axis in 0..3 {
+            self.lo[axis][slot] = lo[axis];
+            self.hi[axis][slot] = hi[axis];
+        }
+        self.child[slot] = child;
+        self.meta[slot] = meta;
+    }
+
+    /// The box of slot `slot`.
+    fn slot_box(&self, slot: usize) -> ([f32; 3], [f32; 3]) {
+        (
+            [0, 1, 2].map(|a| self.lo[a][slot]),
+            [0, 1, 2].map(|a| self.hi[a][slot]),
+        )
+    }
+}
+
+/// A validated view of a wide BVH: nodes (root first) and triangles in leaf order.
+#[derive(Clone, Copy, Debug)]
+pub struct WideRef<'a> {
+    nodes: &'a [WideNode],
+    tris: &'a [Tri],
+}
+
+impl<'a> WideRef<'a> {
+    /// Checks every child index, leaf range, that used slots come first, and the depth, once,
+    /// so traversal can trust them.
+    ///
+    /// # Errors
+    /// The first [`LayoutError`] found, walking depth first from the root (slots `0..8`).
+    pub fn new(nodes: &'a [WideNode], tris: &'a [Tri]) -> Result<Self, LayoutError> {
+        if nodes.is_empty() {
+            return Err(LayoutError::NoNodes);
+        }
+        if nodes.len() > (u32::MAX / WIDTH as u32) as usize {
+            return Err(LayoutError::BadChild { node: 0, slot: 0 });
+        }
+        let mut stack = [(0u32, 0usize); STACK];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let (index, depth) = stack[sp];
+            if depth > WIDE_MAX_DEPTH {
+                return Err(LayoutError::TooDeep { node: index });
+            }
+            let node = &nodes[index as usize];
+            let mut ended = false;
+            for slot in 0..WIDTH {
+                let (child, meta) = (node.child[slot], node.meta[slot]);
+                let bad_leaf = LayoutError::BadLeaf {
+                    node: index,
+                    slot: slot as u8,
+                };
+                if meta == LEAF {
+                    ended = true;
+                } else if ended {
+                    return Err(bad_leaf);
+                } else if meta == 0 {
+                    if child <= index || child as usize >= nodes.len() {
+                        return Err(LayoutError::BadChild {
+                            node: index,
+                            slot: slot as u8,
+                        });
+                    }
+                    stack[sp] = (child, depth + 1);
+                    sp += 1;
+                } else if child as u64 + u64::from(meta & !LEAF) > tris.len() as u64 {
+                    return Err(bad_leaf);
+                }
+            }
+        }
+        Ok(Self { nodes, tris })
+    }
+
+    /// A view of a layout that already passed [`WideRef::new`] and has not changed since
+    /// (see [`BvhRef::new_trusted`]; debug builds check the layout anyway).
+    pub fn new_trusted(nodes: &'a [WideNode], tris: &'a [Tri]) -> Self {
+        debug_assert!(Self::new(nodes, tris).is_ok(), "layout never validated");
+        Self { nodes, tris }
+    }
+
+    /// The nodes, root first.
+    pub fn nodes(&self) -> &'a [WideNode] {
+        self.nodes
+    }
+
+    /// The triangles, in leaf order.
+    pub fn tris(&self) -> &'a [Tri] {
+        self.tris
+    }
+
+    fn leaf(&self, first: u32, meta: u32) -> &'a [Tri] {
+        let first = first as usize;
+        &self.tris[first..first + (meta & !LEAF) as usize]
+    }
+
+    /// Every leaf slot: its box and its triangles (for the contract oracle).
+    pub(super) fn leaves(self) -> impl Iterator<Item = (([f32; 3], [f32; 3]), &'a [Tri])> {
+        let view = self;
+        self.nodes.iter().flat_map(move |node| {
+            (0..WIDTH)
+                .filter(move |&s| node.meta[s] != 0 && node.meta[s] != LEAF)
+                .map(move |s| (node.slot_box(s), view.leaf(node.child[s], node.meta[s])))
+        })
+    }
+}
+
+/// Collapses a binary tree into the wide layout, depth first; the leaves keep their triangle
+/// ranges, so the result is valid with the same triangle slice.
+#[cfg(any(feature = "alloc", test))]
+pub fn collapse(bvh: &BvhRef<'_>) -> alloc::vec::Vec<WideNode> {
+    extern crate alloc;
+    use alloc::vec::Vec;
+    let bin = bvh.nodes();
+    // (box lo, box hi, child, meta) of a binary slot.
+    type Slot = ([f32; 3], [f32; 3], u32, u32);
+    let slots_of = |index: u32| -> [Slot; 2] {
+        let n = &bin[index as usize];
+        [0, 1].map(|s| {
+            (
+                [0, 1, 2].map(|a| n.lo[a][s]),
+                [0, 1, 2].map(|a| n.hi[a][s]),
+                n.child[s],
+                n.meta[s],
+            )
+        })
+    };
+    let area = |s: &Slot| {
+        let e = [0, 1, 2].map(|a| s.1[a] - s.0[a]);
+        e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+    };
+    let mut out = alloc::vec![WideNode::EMPTY];
+    // (binary node, wide node built from its children)
+    let mut work = alloc::vec![(0u32, 0usize)];
+    while let Some((from, ours)) = work.pop() {
+        // Grandchildren first: every wide level spans two binary levels at least.
+        let mut slots: Vec<Slot> = Vec::with_capacity(WIDTH);
+        for s in slots_of(from).into_iter().filter(|s| s.3 != LEAF) {
+            if s.3 == 0 {
+                slots.extend(slots_of(s.2).into_iter().filter(|s| s.3 != LEAF));
+            } else {
+                slots.push(s);
+            }
+        }
+        // Then the inner child of largest surface area, while there is room.
+        while slots.len() < WIDTH {
+            let Some(open) = (0..slots.len())
+                .filter(|&i| slots[i].3 == 0)
+                .max_by(|&a, &b| area(&slots[a]).total_cmp(&area(&slots[b])))
+            else {
+                break;
+            };
+            let s = slots.remove(open);
+            for (k, c) in slots_of(s.2)
+                .into_iter()
+                .filter(|s| s.3 != LEAF)
+                .enumerate()
+            {
+                slots.insert(open + k, c);
+            }
+        }
+        for (slot, (lo, hi, child, meta)) in slots.into_iter().enumerate() {
+            if meta == 0 {
+                let index = out.len();
+                out.push(WideNode::EMPTY);
+                out[ours].set_slot(slot, lo, hi, index as u32, 0);
+                work.push((child, index));
+            } else {
+                out[ours].set_slot(slot, lo, hi, child, meta);
+            }
+        }
+    }
+    out
+}
+
+// ---------------------------------------------------------------------------------------------
+// Single ray.
+
+/// One ray's box-test constants splatted over the eight children of a node.
+struct Ray1x8 {
+    org: [f32x8; 3],
+    inv: [f32x8; 3],
+    /// Axes whose near plane is `hi` (direction sign bit set).
+    neg: [bool; 3],
+    tmin_down: f32x8,
+}
+
+impl Ray1x8 {
+    fn new(pre: &Pre) -> Self {
+        Self {
+            org: pre.org.map(f32x8::splat),
+            inv: pre.inv.map(f32x8::splat),
+            neg: pre.inv.map(f32::is_sign_negative),
+            tmin_down: f32x8::splat(pre.tmin * NEAR_DOWN),
+        }
+    }
+
+    /// [`super::box1`] for the eight slots of `node` at once, the same operations per lane
+    /// (far bound widened unfused, like [`super::widened`]): the mask of slots met and their
+    /// entry distances.
+    #[inline(always)]
+    fn boxes(&self, node: &WideNode, tmax: f32) -> (u8, f32x8) {
+        let mut near = self.tmin_down;
+        let mut far = f32x8::splat(tmax);
+        for axis in 0..3 {
+            let (lo, hi) = (f32x8::from(node.lo[axis]), f32x8::from(node.hi[axis]));
+            let (pn, pf) = if self.neg[axis] { (hi, lo) } else { (lo, hi) };
+            let tn = (pn - self.org[axis]) * self.inv[axis];
+            let tf = (pf - self.org[axis]) * self.inv[axis];
+            near = tn.fast_max(near);
+            far = tf.fast_min(far);
+        }
+        let widened = far * f32x8::splat(FAR_UP) + f32x8::splat(FAR_FLOOR);
+        (near.simd_le(widened).to_bitmask() as u8, near)
+    }
+}
+
+/// Pushes the slots of node `index` in `bits`, farthest first, as `near bits << 32 | index·8 +
+/// slot` (entry distances are ≥ 0, so their bits order like the values).
+#[inline(always)]
+fn push_sorted(
+    stack: &mut [u64; STACK],
+    sp: &mut usize,
+    bits: u8,
+    near: &[f32; WIDTH],
+    index: usize,
+) {
+    let key = |slot: usize| u64::from(near[slot].to_bits()) << 32 | (index * WIDTH + slot) as u64;
+    let mut keys = [0u64; WIDTH];
+    let mut n = 0;
+    let mut rest = bits;
+    while rest != 0 {
+        let slot = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        // Insertion, descending.
+        let k = key(slot);
+        let mut i = n;
+        while i > 0 && keys[i - 1] < k {
+            keys[i] = keys[i - 1];
+            i -= 1;
+        }
+        keys[i] = k;
+        n += 1;
+    }
+    stack[*sp..*sp + n].copy_from_slice(&keys[..n]);
+    *sp += n;
+}
+
+/// Depth-first walk of one ray, nearest child first. `visit` tests a leaf's triangles and
+/// returns the ray's new `tmax` (−∞ stops the walk). A popped entry whose entry distance lies
+/// beyond the widened `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
+pub(super) fn walk1<'a>(
+    bvh: &WideRef<'a>,
+    pre: &Pre,
+    mut visit: impl FnMut(&'a [Tri]) -> f32,
+) -> f32 {
+    let mut tmax = visit(&[]);
+    let ray = Ray1x8::new(pre);
+    let mut stack = [0u64; STACK];
+    let mut sp = 0;
+    let mut index = 0usize;
+    loop {
+        let node = &bvh.nodes[index];
+        let (bits, near) = ray.boxes(node, tmax);
+        push_sorted(&mut stack, &mut sp, bits, near.as_array(), index);
+        loop {
+            if sp == 0 {
+                return tmax;
+            }
+            sp -= 1;
+            let entry = stack[sp];
+            if f32::from_bits((entry >> 32) as u32) > super::widened(tmax) {
+                continue;
+            }
+            let (parent, slot) = ((entry as u32 as usize) / WIDTH, entry as usize % WIDTH);
+            let node = &bvh.nodes[parent];
+            let (child, meta) = (node.child[slot], node.meta[slot]);
+            if meta == 0 {
+                index = child as usize;
+                break;
+            }
+            tmax = visit(bvh.leaf(child, meta));
+            if tmax == f32::NEG_INFINITY {
+                return tmax;
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Eight rays.
+
+/// One lane's box-test constants, read from a packet's [`Pre8`].
+#[derive(Clone, Copy)]
+struct Lane {
+    org: [f32; 3],
+    inv: [f32; 3],
+    neg: [bool; 3],
+    tmin_down: f32,
+}
+
+/// The box-test constants of each lane of `pre`.
+fn lanes(pre: &Pre8) -> [Lane; LANES] {
+    let neg = pre.neg.map(|m| m.to_bitmask());
+    core::array::from_fn(|i| Lane {
+        org: [0, 1, 2].map(|a| pre.org[a].as_array()[i]),
+        inv: [0, 1, 2].map(|a| pre.inv[a].as_array()[i]),
+        neg: neg.map(|m| m >> i & 1 == 1),
+        tmin_down: pre.tmin_down.as_array()[i],
+    })
+}
+
+/// The slab test of `node`'s eight slots for each lane of `live`, lane by lane (one `f32x8`
+/// test per lane, [`Ray1x8::boxes`]' operations): per slot, the mask of lanes that meet it
+/// (`u32` lanes) and the nearest of their entry distances (+∞ where none does).
+#[inline(always)]
+fn boxes8(node: &WideNode, lanes: &[Lane; LANES], live: u8, tmax: &[f32; LANES]) -> (u32x8, f32x8) {
+    let lo = node.lo.map(f32x8::from);
+    let hi = node.hi.map(f32x8::from);
+    let inf = f32x8::splat(f32::INFINITY);
+    let mut met = u32x8::ZERO;
+    let mut nearest = inf;
+    let mut rest = live;
+    while rest != 0 {
+        let i = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        let lane = &lanes[i];
+        let mut near = f32x8::splat(lane.tmin_down);
+        let mut far = f32x8::splat(tmax[i]);
+        for axis in 0..3 {
+            let (pn, pf) = if lane.neg[axis] {
+                (hi[axis], lo[axis])
+            } else {
+                (lo[axis], hi[axis])
+            };
+            let (o, inv) = (f32x8::splat(lane.org[axis]), f32x8::splat(lane.inv[axis]));
+            near = ((pn - o) * inv).fast_max(near);
+            far = ((pf - o) * inv).fast_min(far);
+        }
+        let m = near.simd_le(far * f32x8::splat(FAR_UP) + f32x8::splat(FAR_FLOOR));
+        nearest = m.bitselect(near, inf).fast_min(nearest);
+        met |= bytemuck::cast::<f32x8, u32x8>(m) & u32x8::splat(1 << i);
+    }
+    (met, nearest)
+}
+
+/// Depth-first walk of a packet: a shared stack of `index·8 + slot | lanes << 32` entries,
+/// `lanes` the lanes whose interval met the slot's box when it was pushed; the children a
+/// node's live lanes meet are pushed farthest first, by the nearest entry distance among
+/// their lanes. A node is tested lane by lane, eight slots at a time ([`boxes8`]): only the
+/// live lanes are tested, and a packet's lanes drift apart deeper in the tree. (Measured
+/// against testing slot by slot, eight lanes at a time, and against one frustum test for a
+/// shared-origin packet: docs/traverse.md, "Wide BVH".)
+pub(super) fn walk8<'a>(
+    bvh: &WideRef<'a>,
+    pre: &Pre8,
+    mut tmax: f32x8,
+    visitor: &mut impl Visitor<'a>,
+) {
+    let lanes = lanes(pre);
+    let mut stack = [0u64; STACK];
+    let mut sp = 0;
+    let mut alive = pre.traced;
+    let mut index = 0usize;
+    let mut live = alive;
+    let mut far = widened_largest(tmax, alive);
+    loop {
+        let node = &bvh.nodes[index];
+        let (met, nearest) = boxes8(node, &lanes, live, tmax.as_array());
+        let met = met.to_array();
+        let nearest = nearest.as_array();
+        let mut keys = [0u64; WIDTH];
+        let mut n = 0;
+        for slot in 0..WIDTH {
+            if met[slot] == 0 {
+                continue;
+            }
+            // The nearest entry by its top 24 bits (entry distances are ≥ 0, so their bits
+            // order like the values).
+            let k = u64::from(nearest[slot].to_bits() >> 8) << 40
+                | u64::from(met[slot]) << 32
+                | (index * WIDTH + slot) as u64;
+            let mut i = n;
+            while i > 0 && keys[i - 1] < k {
+                keys[i] = keys[i - 1];
+                i -= 1;
+            }
+            keys[i] = k;
+            n += 1;
+        }
+        stack[sp..sp + n].copy_from_slice(&keys[..n]);
+        sp += n;
+        loop {
+            if sp == 0 {
+                return;
+            }
+            sp -= 1;
+            let entry = stack[sp];
+            live = (entry >> 32) as u8 & alive;
+            // The stored distance (its bits truncated, so no larger than the lanes' nearest)
+            // beyond every live lane's widened `tmax`: the slab test repeated would fail.
+            if live == 0 || f32::from_bits(((entry >> 40) as u32) << 8) > far {
+                continue;
+            }
+            let (parent, slot) = ((entry as u32 as usize) / WIDTH, entry as usize % WIDTH);
+            let node = &bvh.nodes[parent];
+            let (child, meta) = (node.child[slot], node.meta[slot]);
+            if meta == 0 {
+                index = child as usize;
+                break;
+            }
+            tmax = visitor.leaf8(bvh.leaf(child, meta));
+            alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
+            if alive == 0 {
+                return;
+            }
+            far = widened_largest(tmax, alive);
+        }
+    }
+}
+
+/// The widened far bound of the largest `tmax` among the lanes of `alive`.
+#[inline(always)]
+fn widened_largest(tmax: f32x8, alive: u8) -> f32 {
+    let t = tmax.as_array();
+    let largest = (0..LANES)
+        .filter(|&i| alive >> i & 1 == 1)
+        .fold(f32::NEG_INFINITY, |m, i| m.max(t[i]));
+    super::widened(largest)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::packet::Ray;
+    use crate::traverse::{Node, intersect1, occluded1};
+    use glam::Vec3;
+    use std::vec::Vec;
+
+    /// A binary chain as deep as [`super::super::MAX_DEPTH`] allows: every node a leaf of one
+    /// triangle beside the next node.
+    fn chain(depth: usize) -> (Vec<Node>, Vec<Tri>) {
+        let tris: Vec<Tri> = (0..=depth as u32)
+            .map(|i| {
+                let x = i as f32;
+                Tri::new(
+                    [
+                        Vec3::new(x, 0.0, 0.0),
+                        Vec3::new(x + 0.5, 0.0, 0.0),
+                        Vec3::new(x, 1.0, 0.0),
+                    ],
+                    i,
+                )
+            })
+            .collect();
+        let mut nodes: Vec<Node> = (0..depth as u32)
+            .map(|i| {
+                let mut n = Node::EMPTY;
+                n.set_box(
+                    0,
+                    Vec3::new(i as f32, 0.0, 0.0),
+                    Vec3::new(i as f32 + 0.5, 1.0, 0.0),
+                );
+                n.child[0] = i;
+                n.meta[0] = LEAF | 1;
+                n.set_box(
+                    1,
+                    Vec3::new(i as f32 + 1.0, 0.0, 0.0),
+                    Vec3::new(depth as f32 + 0.5, 1.0, 0.0),
+                );
+                n.child[1] = i + 1;
+                n.meta[1] = 0;
+                n
+            })
+            .collect();
+        let last = depth - 1;
+        nodes[last].child[1] = depth as u32;
+        nodes[last].meta[1] = LEAF | 1;
+        (nodes, tris)
+    }
+
+    #[test]
+    fn the_deepest_binary_chain_collapses_within_the_wide_depth() {
+        let (nodes, tris) = chain(super::super::MAX_DEPTH + 1);
+        let binary = BvhRef::new(&nodes, &tris).unwrap();
+        let wide = collapse(&binary);
+        let view = WideRef::new(&wide, &tris).expect("valid wide layout");
+        assert!(wide.len() <= WIDE_MAX_DEPTH + 1, "{} nodes", wide.len());
+        for i in 0..tris.len() {
+            let r = Ray::new(
+                Vec3::new(i as f32 + 0.1, 0.1, 1.0),
+                -Vec3::Z,
+                0.0,
+                f32::INFINITY,
+            );
+            assert_eq!(intersect1(&view, &r).map(|h| h.prim), Some(i as u32));
+            assert_eq!(intersect1(&view, &r), intersect1(&binary, &r));
+            assert!(occluded1(&view, &r));
+        }
+    }
+
+    #[test]
+    fn wide_layout_errors_are_reported() {
+        let tris = [Tri::new([Vec3::ZERO, Vec3::X, Vec3::Y], 0)];
+        assert_eq!(WideRef::new(&[], &tris).unwrap_err(), LayoutError::NoNodes);
+        let mut bad = WideNode::EMPTY;
+        bad.meta[0] = 0;
+        assert_eq!(
+            WideRef::new(&[bad], &tris).unwrap_err(),
+            LayoutError::BadChild { node: 0, slot: 0 }
+        );
+        bad.meta[0] = LEAF | 2;
+        assert_eq!(
+            WideRef::new(&[bad], &tris).unwrap_err(),
+            LayoutError::BadLeaf { node: 0, slot: 0 }
+        );
+        // A used slot after an empty one.
+        let mut gap = WideNode::EMPTY;
+        gap.meta[3] = LEAF | 1;
+        assert_eq!(
+            WideRef::new(&[gap], &tris).unwrap_err(),
+            LayoutError::BadLeaf { node: 0, slot: 3 }
+        );
+        let chain: Vec<WideNode> = (0..WIDE_MAX_DEPTH as u32 + 2)
+            .map(|i| {
+                let mut n = WideNode::EMPTY;
+                n.child[0] = i + 1;
+                n.meta[0] = 0;
+                n
+            })
+            .chain([WideNode::EMPTY])
+            .collect();
+        assert!(matches!(
+            WideRef::new(&chain, &tris),
+            Err(LayoutError::TooDeep { .. })
+        ));
+        // The empty tree: every ray misses.
+        let empty = [WideNode::EMPTY];
+        let view = WideRef::new(&empty, &[]).unwrap();
+        let r = Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY);
+        assert_eq!(intersect1(&view, &r), None);
+        assert!(!occluded1(&view, &r));
+    }
+}

@@ -1,0 +1,101 @@
+//! # traverse::scalar: the conservative slab test and the single-ray walk of the binary tree
+//!
+//! [`box1`] is the reference slab test every walk reproduces (8-wide in [`super::packet`]
+//! and [`super::bvh8`]); [`walk1`] is the scalar reference traversal of the binary layout.
+
+use super::triangle::Pre;
+use super::{BvhRef, Node, STACK, Tri};
+
+/// Slack of the conservative slab test: the box interval is widened to
+/// `[tmin · (1 − 2⁻¹⁸), min(far, tmax) · (1 + 2⁻¹⁸)]`. pbrt-v4's `1 + 2γ₃` (§6.8.2, about 3 ulps)
+/// covers the slab arithmetic; the triangle test's own rounding of `t` can put a hit that the
+/// oracle accepts at `t = tmax` (or `tmin`) a few ulps beyond a box face, so we keep 32 ulps.
+pub(super) const SLACK: f32 = 1.0 / (1u32 << 18) as f32;
+pub(super) const FAR_UP: f32 = 1.0 + SLACK;
+pub(super) const NEAR_DOWN: f32 = 1.0 - SLACK;
+/// Absolute slack added to the widened far bound: a relative one is nothing at `far = ±0`,
+/// where a box entered at a subnormal distance (an origin of 10⁻⁴³ against a box face at 0)
+/// was culled although its triangle's test rounds the hit to `t = 0` (found by the
+/// `traverse` fuzz target: a closest hit at `t = −0` hid another at `t = +0` with a smaller
+/// primitive id, which the tie rule prefers).
+pub(super) const FAR_FLOOR: f32 = f32::MIN_POSITIVE;
+
+/// The far end of the conservative slab interval: `far · (1 + 2⁻¹⁸) + 2⁻¹²⁶`.
+#[inline(always)]
+pub(super) fn widened(far: f32) -> f32 {
+    far * FAR_UP + FAR_FLOOR
+}
+
+/// Entry distance of slot `slot` if the ray's `[tmin, tmax]` meets its box.
+///
+/// Slab planes are taken in the order of the direction's sign bits (near plane first) and a
+/// plane whose distance is NaN (`0 · ∞`: the ray runs inside that plane) does not constrain the
+/// interval, so rays along a box face are kept. `if t > near` keeps `near` for NaN `t`, as
+/// `_mm256_max_ps(t, near)` does in [`Pre8::box8`].
+pub(super) fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
+    let lo = [0, 1, 2].map(|axis| node.lo[axis][slot]);
+    let hi = [0, 1, 2].map(|axis| node.hi[axis][slot]);
+    box1_at((lo, hi), pre, tmax)
+}
+
+/// [`box1`] for the box `(lo, hi)`.
+pub(super) fn box1_at((lo, hi): ([f32; 3], [f32; 3]), pre: &Pre, tmax: f32) -> Option<f32> {
+    let mut near = pre.tmin * NEAR_DOWN;
+    let mut far = tmax;
+    for axis in 0..3 {
+        let (lo, hi) = (lo[axis], hi[axis]);
+        let (pn, pf) = if pre.inv[axis].is_sign_negative() {
+            (hi, lo)
+        } else {
+            (lo, hi)
+        };
+        let tn = (pn - pre.org[axis]) * pre.inv[axis];
+        let tf = (pf - pre.org[axis]) * pre.inv[axis];
+        near = if tn > near { tn } else { near };
+        far = if tf < far { tf } else { far };
+    }
+    (near <= widened(far)).then_some(near)
+}
+
+/// Depth-first walk of one ray through the binary tree, nearer child first. `visit` tests a
+/// leaf's triangles and returns the ray's new `tmax` (−∞ stops the walk).
+pub(super) fn walk1<'a>(
+    bvh: &BvhRef<'a>,
+    pre: &Pre,
+    mut visit: impl FnMut(&'a [Tri]) -> f32,
+) -> f32 {
+    let mut tmax = visit(&[]);
+    let mut stack = [(0u32, 0u32); STACK];
+    let mut sp = 1;
+    while sp > 0 {
+        sp -= 1;
+        let (child, meta) = stack[sp];
+        if meta != 0 {
+            tmax = visit(bvh.leaf(child, meta));
+            if tmax == f32::NEG_INFINITY {
+                break;
+            }
+            continue;
+        }
+        let node = &bvh.nodes[child as usize];
+        let entry = |slot: usize| (node.child[slot], node.meta[slot]);
+        match (box1(node, 0, pre, tmax), box1(node, 1, pre, tmax)) {
+            (Some(n0), Some(n1)) => {
+                let (near, far) = if n1 < n0 { (1, 0) } else { (0, 1) };
+                stack[sp] = entry(far);
+                stack[sp + 1] = entry(near);
+                sp += 2;
+            }
+            (Some(_), None) => {
+                stack[sp] = entry(0);
+                sp += 1;
+            }
+            (None, Some(_)) => {
+                stack[sp] = entry(1);
+                sp += 1;
+            }
+            (None, None) => {}
+        }
+    }
+    tmax
+}

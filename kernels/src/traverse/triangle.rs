@@ -1,0 +1,390 @@
+//! # traverse::triangle: per-ray constants and the watertight triangle test
+//!
+//! Woop, Benthin & Wald, *Watertight Ray/Triangle Intersection*, JCGT 2(1), 2013, for one ray
+//! ([`tri1`], the reference) and for eight ([`Pre8::tri8`], the same IEEE operations lane for
+//! lane), with the closest-hit acceptance (tie rule) and occlusion tests built on them.
+
+use super::Tri;
+use super::scalar::NEAR_DOWN;
+use crate::packet::{Hit, LANES, NO_HIT, Ray, Ray8};
+use wide::{f32x8, u32x8};
+
+/// Per-ray constants of the box and watertight tests.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Pre {
+    pub(super) org: [f32; 3],
+    pub(super) inv: [f32; 3],
+    /// Shear permutation `[kx, ky, kz]`.
+    pub(super) k: [usize; 3],
+    /// Shear `[d[kx]/d[kz], d[ky]/d[kz], 1/d[kz]]`.
+    pub(super) s: [f32; 3],
+    pub(super) tmin: f32,
+}
+
+impl Pre {
+    pub(super) fn new(ray: &Ray) -> Self {
+        let d = ray.dir.to_array();
+        let a = ray.dir.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if d[kz] < 0.0 {
+            core::mem::swap(&mut kx, &mut ky);
+        }
+        Self {
+            org: ray.org.to_array(),
+            inv: d.map(|d| 1.0 / d),
+            k: [kx, ky, kz],
+            s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
+            tmin: ray.tmin,
+        }
+    }
+}
+
+/// Edge functions in `f64`, Woop et al. 2013's fallback when one is exactly zero.
+///
+/// The products of two `f32`s are exact in `f64` and their difference is rounded once, so the
+/// signs are exact. The `f64` values are returned as they are: rounded to `f32`, a nonzero
+/// value below 2⁻¹⁵⁰ becomes ±0, and a point a subnormal distance outside an edge would pass
+/// the inside test (found by the `traverse` fuzz target: origins 10⁻⁴³ beyond a box face
+/// at 0 hit a triangle the box test had culled, so the BVH missed hits brute force found).
+pub(super) fn uvw_f64(a: [f32; 2], b: [f32; 2], c: [f32; 2]) -> [f64; 3] {
+    let d = |p: f32| f64::from(p);
+    [
+        d(c[0]) * d(b[1]) - d(c[1]) * d(b[0]),
+        d(a[0]) * d(c[1]) - d(a[1]) * d(c[0]),
+        d(b[0]) * d(a[1]) - d(b[1]) * d(a[0]),
+    ]
+}
+
+/// Whether edge functions of mixed signs put the point outside the triangle (zeros are on
+/// an edge, inside).
+#[inline(always)]
+pub(super) fn outside<T: PartialOrd + Default>(u: T, v: T, w: T) -> bool {
+    let zero = T::default();
+    (u < zero || v < zero || w < zero) && (u > zero || v > zero || w > zero)
+}
+
+/// Watertight ray/triangle test (Woop, Benthin & Wald 2013, two-sided): `(t, u, v)` of the
+/// hit, before any comparison with the ray's interval. `u`, `v` weight vertices 1 and 2.
+///
+/// This is the reference the 8-wide [`tri8`] reproduces operation for operation.
+pub(super) fn tri1(pre: &Pre, tri: &Tri) -> Option<(f32, f32, f32)> {
+    let [kx, ky, kz] = pre.k;
+    let rel = |v: &[f32; 3]| {
+        [
+            v[kx] - pre.org[kx],
+            v[ky] - pre.org[ky],
+            v[kz] - pre.org[kz],
+        ]
+    };
+    let (a, b, c) = (rel(&tri.v[0]), rel(&tri.v[1]), rel(&tri.v[2]));
+    let shear = |p: [f32; 3]| [p[0] - pre.s[0] * p[2], p[1] - pre.s[1] * p[2]];
+    let (a2, b2, c2) = (shear(a), shear(b), shear(c));
+    let mut u = c2[0] * b2[1] - c2[1] * b2[0];
+    let mut v = a2[0] * c2[1] - a2[1] * c2[0];
+    let mut w = b2[0] * a2[1] - b2[1] * a2[0];
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        // The inside test on the exact signs, then the values rounded for `t`, `u`, `v`.
+        let exact = uvw_f64(a2, b2, c2);
+        if outside(exact[0], exact[1], exact[2]) {
+            return None;
+        }
+        [u, v, w] = exact.map(|e| e as f32);
+    } else if outside(u, v, w) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+    let tt = u * (pre.s[2] * a[2]) + v * (pre.s[2] * b[2]) + w * (pre.s[2] * c[2]);
+    Some((tt / det, v / det, w / det))
+}
+
+/// Closest-hit acceptance with the tie rule (equal `t`: smaller primitive id wins).
+pub(super) fn accept(t: f32, prim: u32, tmin: f32, best: &Hit) -> bool {
+    t >= tmin && t <= best.t && (t < best.t || prim < best.prim)
+}
+
+/// Intersects `tri` and keeps the hit if [`accept`] says so.
+pub(super) fn closest1(pre: &Pre, tri: &Tri, best: &mut Hit) {
+    if let Some((t, u, v)) = tri1(pre, tri)
+        && accept(t, tri.prim, pre.tmin, best)
+    {
+        *best = Hit {
+            t,
+            u,
+            v,
+            prim: tri.prim,
+        };
+    }
+}
+
+/// The start of a closest-hit search: `t = min(tmax, f32::MAX)`, no primitive.
+pub(super) fn no_hit(tmax: f32) -> Hit {
+    Hit {
+        t: tmax.min(f32::MAX),
+        u: 0.0,
+        v: 0.0,
+        prim: NO_HIT,
+    }
+}
+
+pub(super) fn occludes1(pre: &Pre, tri: &Tri, tmax: f32) -> bool {
+    tri1(pre, tri).is_some_and(|(t, _, _)| t >= pre.tmin && t <= tmax)
+}
+
+/// [`Ray::is_traceable`] plus `tmin ≥ 0` (see the module docs).
+pub(super) fn traceable(ray: &Ray) -> bool {
+    ray.is_traceable() && ray.tmin >= 0.0
+}
+
+/// Per-packet constants. Lanes that are not traced carry `tmin = +∞` and harmless finite
+/// values everywhere else.
+pub(super) struct Pre8 {
+    pub(super) org: [f32x8; 3],
+    pub(super) inv: [f32x8; 3],
+    /// Permuted origin `o[kx], o[ky], o[kz]` per lane.
+    pub(super) porg: [f32x8; 3],
+    pub(super) s: [f32x8; 3],
+    /// `sel[i][j]`: lanes whose `k[i] == j` (for `j` in 0..2; else 2).
+    pub(super) sel: [[f32x8; 2]; 3],
+    /// Lanes whose direction has the sign bit set, per axis.
+    pub(super) neg: [f32x8; 3],
+    /// The shared direction sign bits when all traced lanes have the same ones.
+    pub(super) octant: Option<[bool; 3]>,
+    /// The shared permutation when all traced lanes have the same one.
+    pub(super) uniform: Option<[usize; 3]>,
+    pub(super) tmin: f32x8,
+    /// `tmin · (1 − 2⁻¹⁸)` for the box test.
+    pub(super) tmin_down: f32x8,
+    /// The rays, for [`Pre8::lane`].
+    pub(super) rays: Ray8,
+    /// Bit mask of traced lanes.
+    pub(super) traced: u8,
+}
+
+impl Pre8 {
+    /// The packet's constants, computed 8-wide with the same IEEE operations as [`Pre::new`]
+    /// per lane (so every lane's values equal its scalar [`Pre`]'s bit for bit); untraced
+    /// lanes get the stub ray (origin 0, direction +x, `tmin = +∞`).
+    pub(super) fn new(rays: &Ray8) -> Self {
+        let (zero, one) = (f32x8::ZERO, f32x8::ONE);
+        let live = rays.traceable() & rays.tmin.simd_ge(zero);
+        let traced = live.to_bitmask() as u8;
+        let org = rays.org.map(|o| live.bitselect(o, zero));
+        let d = [
+            live.bitselect(rays.dir[0], one),
+            live.bitselect(rays.dir[1], zero),
+            live.bitselect(rays.dir[2], zero),
+        ];
+        let tmin = live.bitselect(rays.tmin, f32x8::splat(f32::INFINITY));
+        let inv = d.map(|x| one / x);
+        // Shear axes as in `Pre::new`: kz the largest |d| (ties to the lower axis), kx/ky the
+        // next two cyclically, swapped when d[kz] < 0.
+        let a = d.map(f32x8::abs);
+        let kz0 = a[0].simd_ge(a[1]) & a[0].simd_ge(a[2]);
+        let kz1 = !kz0 & a[1].simd_ge(a[2]);
+        let kz2 = !(kz0 | kz1);
+        let dkz = kz0.bitselect(d[0], kz1.bitselect(d[1], d[2]));
+        let sw = dkz.simd_lt(zero);
+        let sel = [
+            [(kz2 & !sw) | (kz1 & sw), (kz0 & !sw) | (kz2 & sw)],
+            [(kz1 & !sw) | (kz2 & sw), (kz2 & !sw) | (kz0 & sw)],
+            [kz0, kz1],
+        ];
+        let pick =
+            |v: &[f32x8; 3], i: usize| sel[i][0].bitselect(v[0], sel[i][1].bitselect(v[1], v[2]));
+        let (dx, dy, dz) = (pick(&d, 0), pick(&d, 1), pick(&d, 2));
+        let neg = inv.map(f32x8::is_sign_negative);
+        // Lanes agree when a mask is all-traced or none-traced.
+        let same = |m: f32x8| {
+            let bits = m.to_bitmask() as u8 & traced;
+            bits == 0 || bits == traced
+        };
+        let lead = traced.trailing_zeros().min(7);
+        let bit = |m: f32x8| m.to_bitmask() >> lead & 1 == 1;
+        let octant = neg.iter().all(|&m| same(m)).then(|| neg.map(bit));
+        let uniform = (same(kz0) && same(kz1) && same(sw)).then(|| {
+            let kz = if bit(kz0) {
+                0
+            } else if bit(kz1) {
+                1
+            } else {
+                2
+            };
+            let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
+            if bit(sw) { [ky, kx, kz] } else { [kx, ky, kz] }
+        });
+        Self {
+            porg: [pick(&org, 0), pick(&org, 1), pick(&org, 2)],
+            s: [dx / dz, dy / dz, one / dz],
+            org,
+            inv,
+            sel: [sel[0], sel[1], sel[2]],
+            neg,
+            octant,
+            uniform,
+            tmin,
+            tmin_down: tmin * f32x8::splat(NEAR_DOWN),
+            rays: *rays,
+            traced,
+        }
+    }
+
+    /// Lane `i`'s scalar constants (for the rare per-lane paths); `i` must be traced.
+    pub(super) fn lane(&self, i: usize) -> Pre {
+        Pre::new(&self.rays.lane(i))
+    }
+
+    /// Vertex `v` relative to the origin in each lane's permuted axes.
+    #[inline(always)]
+    pub(super) fn rel(&self, v: &[f32; 3]) -> [f32x8; 3] {
+        match self.uniform {
+            Some(k) => [0, 1, 2].map(|i| f32x8::splat(v[k[i]]) - self.porg[i]),
+            None => {
+                let c = v.map(f32x8::splat);
+                [0, 1, 2].map(|i| {
+                    let pick = self.sel[i][0].bitselect(c[0], self.sel[i][1].bitselect(c[1], c[2]));
+                    pick - self.porg[i]
+                })
+            }
+        }
+    }
+
+    /// [`tri1`] for eight lanes: `(t, U, V, W, det, ok)` where `ok` marks lanes with a hit
+    /// computed in `f32`, and `zero` lanes that need the scalar `f64` fallback.
+    #[inline(always)]
+    pub(super) fn tri8(&self, tri: &Tri) -> Tri8 {
+        let a = self.rel(&tri.v[0]);
+        let b = self.rel(&tri.v[1]);
+        let c = self.rel(&tri.v[2]);
+        let shear = |p: &[f32x8; 3]| [p[0] - self.s[0] * p[2], p[1] - self.s[1] * p[2]];
+        let (a2, b2, c2) = (shear(&a), shear(&b), shear(&c));
+        let u = c2[0] * b2[1] - c2[1] * b2[0];
+        let v = a2[0] * c2[1] - a2[1] * c2[0];
+        let w = b2[0] * a2[1] - b2[1] * a2[0];
+        let zero = f32x8::ZERO;
+        let any_zero = u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero);
+        let neg = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
+        let pos = u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero);
+        let det = u + v + w;
+        let sz = self.s[2];
+        let tt = u * (sz * a[2]) + v * (sz * b[2]) + w * (sz * c[2]);
+        let ok = !(neg & pos) & det.simd_ne(zero) & !any_zero;
+        Tri8 {
+            tt,
+            v,
+            w,
+            det,
+            ok,
+            any_zero,
+        }
+    }
+}
+
+/// [`Pre8::tri8`]'s result; `t = tt / det` is divided only when some lane may hit.
+pub(super) struct Tri8 {
+    pub(super) tt: f32x8,
+    pub(super) v: f32x8,
+    pub(super) w: f32x8,
+    pub(super) det: f32x8,
+    pub(super) ok: f32x8,
+    pub(super) any_zero: f32x8,
+}
+
+/// Closest-hit state of a packet.
+pub(super) struct Best8 {
+    pub(super) t: f32x8,
+    pub(super) u: f32x8,
+    pub(super) v: f32x8,
+    pub(super) prim: u32x8,
+}
+
+impl Best8 {
+    pub(super) fn lane(&self, i: usize) -> Hit {
+        Hit {
+            t: self.t.as_array()[i],
+            u: self.u.as_array()[i],
+            v: self.v.as_array()[i],
+            prim: self.prim.as_array()[i],
+        }
+    }
+}
+
+#[inline(always)]
+pub(super) fn closest8(pre: &Pre8, tri: &Tri, best: &mut Best8) {
+    let r = pre.tri8(tri);
+    let live = pre.tmin.simd_le(best.t);
+    if !((r.ok | r.any_zero) & live).any() {
+        return;
+    }
+    let t = r.tt / r.det;
+    let cand = r.ok & t.simd_ge(pre.tmin) & t.simd_le(best.t);
+    let strict = cand & t.simd_lt(best.t);
+    if strict.any() {
+        let m: u32x8 = bytemuck::cast(strict);
+        best.t = strict.bitselect(t, best.t);
+        best.u = strict.bitselect(r.v / r.det, best.u);
+        best.v = strict.bitselect(r.w / r.det, best.v);
+        best.prim = m.bitselect(u32x8::splat(tri.prim), best.prim);
+    }
+    // Rare lanes: exact ties on t (tie rule) and zero edge functions (f64 fallback).
+    let rare = ((cand & !strict) | (r.any_zero & live)).to_bitmask();
+    if rare != 0 {
+        closest8_rare(pre, tri, best, rare as u8);
+    }
+}
+
+/// The scalar path of [`closest8`]'s rare lanes (kept out of the inlined hot loop).
+#[cold]
+#[inline(never)]
+pub(super) fn closest8_rare(pre: &Pre8, tri: &Tri, best: &mut Best8, rare: u8) {
+    for i in 0..LANES {
+        if rare >> i & 1 == 1 {
+            let mut hit = best.lane(i);
+            closest1(&pre.lane(i), tri, &mut hit);
+            set_lane(best, i, &hit);
+        }
+    }
+}
+
+pub(super) fn set_lane(best: &mut Best8, i: usize, hit: &Hit) {
+    best.t.as_mut_array()[i] = hit.t;
+    best.u.as_mut_array()[i] = hit.u;
+    best.v.as_mut_array()[i] = hit.v;
+    best.prim.as_mut_array()[i] = hit.prim;
+}
+
+/// Lanes `tri` blocks on `[tmin, tmax]`, as a bit mask.
+#[inline(always)]
+pub(super) fn occludes8(pre: &Pre8, tri: &Tri, tmax: f32x8) -> u8 {
+    let r = pre.tri8(tri);
+    if !(r.ok | r.any_zero).any() {
+        return 0;
+    }
+    let t = r.tt / r.det;
+    let hit = r.ok & t.simd_ge(pre.tmin) & t.simd_le(tmax);
+    let mut bits = hit.to_bitmask() as u8;
+    let zero = (r.any_zero & pre.tmin.simd_le(tmax)).to_bitmask() as u8;
+    if zero != 0 {
+        bits |= occludes8_rare(pre, tri, tmax, zero);
+    }
+    bits
+}
+
+/// The scalar `f64` fallback of [`occludes8`]'s lanes with a zero edge function.
+#[cold]
+#[inline(never)]
+pub(super) fn occludes8_rare(pre: &Pre8, tri: &Tri, tmax: f32x8, zero: u8) -> u8 {
+    (0..LANES).fold(0, |bits, i| {
+        let blocked = zero >> i & 1 == 1 && occludes1(&pre.lane(i), tri, tmax.as_array()[i]);
+        bits | u8::from(blocked) << i
+    })
+}
