@@ -22,8 +22,7 @@
 //! A `gather_resorted` set (each texel's rotated points fully re-sorted) feeds Embree's
 //! `rtcIntersect16` two of our packets at a time.
 
-#[path = "common/traverse_scenes.rs"]
-mod scenes;
+use guidebake_suite::traverse_scenes as scenes;
 
 use std::hint::black_box;
 use std::time::Instant;

@@ -4,8 +4,7 @@
 //! arithmetic are the same IEEE operations; equal `t` goes to the smallest primitive id).
 //! Occlusion likewise.
 
-#[path = "../benches/common/traverse_scenes.rs"]
-mod scenes;
+use guidebake_suite::traverse_scenes as scenes;
 
 use glam::Vec3;
 use guidebake::bvh::{Bvh, Preset};

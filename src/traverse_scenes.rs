@@ -1,6 +1,6 @@
-//! Scenes and ray sets shared by `tests/traverse.rs` and `benches/traverse.rs` (included with
-//! `#[path]`).
-#![allow(dead_code)]
+//! Scenes and ray sets of the traversal checks and benchmarks (`tests/traverse.rs`,
+//! `benches/traverse.rs`): the converted scenes' triangles, a procedural city, surface points
+//! and the gather and shadow packets a bake would trace from them.
 
 use std::path::{Path, PathBuf};
 
