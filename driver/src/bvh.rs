@@ -69,6 +69,22 @@ impl Preset {
     /// room every preset from `FastBuild` up traces alike and builds in milliseconds.
     pub const DEFAULT: Preset = Preset::VerySlowBuild;
 
+    /// Rays per triangle from which [`Preset::DEFAULT`]'s better tree repays its longer
+    /// build (the payback above: ~60 rays per triangle on 10⁶ triangles, ~70 on 10⁷).
+    pub const PAYBACK_RAYS_PER_TRIANGLE: f64 = 70.0;
+
+    /// The preset for a run that traces about `rays` rays through `triangles` triangles:
+    /// [`Preset::DEFAULT`] when its tree repays its build, else `MediumBuild` — a farm's
+    /// small shard of a huge world (10⁶ texels at 16 spp of a 3.1 M-triangle city traces
+    /// ~3·10⁷ rays, 10 per triangle) would spend longer building than the better tree saves.
+    pub fn for_rays(triangles: usize, rays: f64) -> Preset {
+        if rays >= Self::PAYBACK_RAYS_PER_TRIANGLE * triangles as f64 {
+            Self::DEFAULT
+        } else {
+            Preset::MediumBuild
+        }
+    }
+
     /// obvhs's parameters for this preset.
     pub fn params(self) -> BvhBuildParams {
         match self {
@@ -282,8 +298,27 @@ fn fill_slot(
 #[cfg(test)]
 mod tests {
     use super::*;
+
     use guidebake_kernels::packet::Ray;
     use guidebake_kernels::traverse::{intersect_brute, intersect1};
+
+    #[test]
+    fn the_better_tree_only_where_it_repays_its_build() {
+        // The 10⁸-texel city (3.1 M triangles): a 1 % shard at 16 spp traces ~3·10⁷ rays.
+        assert_eq!(Preset::for_rays(3_124_992, 3.2e7), Preset::MediumBuild);
+        // The whole city, or the shard at 256 spp.
+        assert_eq!(Preset::for_rays(3_124_992, 3.2e9), Preset::DEFAULT);
+        assert_eq!(Preset::for_rays(3_124_992, 5.1e8), Preset::DEFAULT);
+        // The ajar room, 128² texels at 256 spp; a 4-spp test bake of it builds fast.
+        assert_eq!(
+            Preset::for_rays(4_546, 128.0 * 128.0 * 256.0 * 2.0),
+            Preset::DEFAULT
+        );
+        assert_eq!(
+            Preset::for_rays(4_546, 4_000.0 * 4.0 * 2.0),
+            Preset::MediumBuild
+        );
+    }
 
     fn quad() -> Vec<[Vec3; 3]> {
         vec![

@@ -231,7 +231,7 @@ pub fn bake_pass_with_progress(
     check_scene_matches(&texels, scene, job.settings.passes() > 1)?;
 
     let clock = Instant::now();
-    let mut world = World::new(scene, Preset::DEFAULT)?;
+    let mut world = World::new(scene, run_preset(job, &texels, scene, &run_passes))?;
     world.set_transport(job.settings.transport, job.settings.bounces);
     world.set_emitters(job.settings.emitters, job.settings.emitter_selection);
     report.seconds.build_bvh = clock.elapsed().as_secs_f64();
@@ -510,6 +510,23 @@ impl Drop for CountedBaker<'_, '_> {
         }
     }
 }
+
+/// The BVH preset for this run: by the rays it will trace (its texels × samples × passes ×
+/// [`RAYS_PER_SAMPLE`]) against the world's triangles ([`Preset::for_rays`]).
+fn run_preset(
+    job: &BakeJob,
+    texels: &TexelFile,
+    scene: &Scene,
+    passes: &std::ops::RangeInclusive<u32>,
+) -> Preset {
+    let samples = shard_texels(texels, job.shard) as f64 * f64::from(job.settings.spp);
+    let passes = f64::from(passes.end() + 1 - passes.start());
+    Preset::for_rays(scene.triangles.len(), samples * passes * RAYS_PER_SAMPLE)
+}
+
+/// Rays a gather sample traces, about: its gather ray and a shadow ray (series and path
+/// transport both trace at least these two; path tracing traces more).
+const RAYS_PER_SAMPLE: f64 = 2.0;
 
 /// The texel file must have been prepared from `scene`: the same triangles and, when a
 /// series pass reads the previous one through the scene's lightmap UVs (`uvs_read`), lightmap
