@@ -15,6 +15,7 @@ use std::path::PathBuf;
 
 use glam::{Vec2, Vec3};
 
+use crate::render::Camera;
 use crate::scene::{Material, Mesh, Scene, Sky, Sun, Triangle};
 
 /// Lightmap density the charts are laid out for (texels per metre).
@@ -89,6 +90,17 @@ pub fn ajar_room() -> Scene {
         }),
         sky: Sky::Constant(Vec3::new(0.6, 0.75, 1.0)),
         degenerate_triangles: 0,
+    }
+}
+
+/// The demo's view: from the corner of the room opposite the door, at eye height, looking at
+/// the door ajar (70° vertical field of view, the image's `aspect` = width / height).
+pub fn demo_camera(aspect: f32) -> Camera {
+    let eye = Vec3::new(0.35, 1.6, 0.35);
+    let target = Vec3::new((DOOR_X0 + DOOR_X1) / 2.0 + 0.4, 0.9, D);
+    Camera {
+        aspect: Some(aspect),
+        ..Camera::look_at(eye, target, Vec3::Y, 70f32.to_radians())
     }
 }
 
