@@ -25,7 +25,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::finish::finish;
+use super::finish::{Denoise, finish_with};
 use super::gather::{GatherCounters, TileBaker};
 use super::pipeline::{self, PipelineConfig, PipelineError, TileBuffer, TileFiles};
 use super::settings::{BakeSettings, Combine, SettingsError};
@@ -60,6 +60,8 @@ pub struct BakeJob {
     pub resume: bool,
     /// Write auxiliary channels (sample count, relative standard error, validity).
     pub aux: bool,
+    /// Denoise the pages as they are written ([`Denoise`]).
+    pub denoise: Denoise,
 }
 
 /// What a bake did: the stats JSON.
@@ -300,7 +302,7 @@ pub fn bake_pass_with_progress(
     drop(world);
     if !report.interrupted && job.shard.count == 1 && only_pass.is_none() {
         let clock = Instant::now();
-        let written = finish(&texels, std::slice::from_ref(&dir), &job.out)?;
+        let written = finish_with(&texels, std::slice::from_ref(&dir), &job.out, job.denoise)?;
         report.seconds.write_pages = clock.elapsed().as_secs_f64();
         report.rho = written.rho;
         report.pages = written.pages;

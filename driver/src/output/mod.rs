@@ -20,6 +20,7 @@ use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 pub mod atomic;
+pub mod denoise;
 pub mod exr_pages;
 pub mod journal;
 pub mod result_file;
