@@ -534,7 +534,7 @@ mod tests {
     use glam::Vec2;
 
     use super::*;
-    use crate::bake::finish::Denoise;
+    use crate::bake::finish::FinishOptions;
     use crate::bake::run::{BakeJob, bake};
     use crate::bake::settings::{BakeSettings, Guiding};
     use crate::bake::shard::Shard;
@@ -596,7 +596,7 @@ mod tests {
             shard: Shard::WHOLE,
             resume: false,
             aux: false,
-            denoise: Denoise::Off,
+            finish: FinishOptions::default(),
         };
         bake(&job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
         (scene, TexelFile::open(&texels).unwrap(), out)

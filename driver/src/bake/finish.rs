@@ -13,6 +13,7 @@ use crate::output::denoise::{ATrous, Denoiser, NoisyTexel, Window};
 use crate::output::exr_pages::{PageStream, page_path};
 use crate::output::journal::{Journal, RhoSums, TileRecord, dedup_tiles};
 use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
+use crate::output::seams::{BorderTexel, border_texels, mean_relative_jump, seam_pairs, stitch};
 use crate::texels::TexelFile;
 use guidebake_kernels::estimator::{
     IterationVariance, RhoAccumulator, TexelEstimate, Welford, combine_weighted, luminance_f32,
@@ -33,6 +34,10 @@ pub struct Written {
     pub previews: Vec<PathBuf>,
     /// Non-finite pixels replaced by zero.
     pub non_finite_pixels: u64,
+    /// Seam pairs found (with `--seams stitch`).
+    pub seam_pairs: u64,
+    /// Mean relative jump across the seam pairs before and after stitching.
+    pub seam_jump: Option<[f64; 2]>,
 }
 
 /// How the pages are finished.
@@ -46,6 +51,25 @@ pub enum Denoise {
     On,
 }
 
+/// Whether seams are stitched ([`crate::output::seams`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Seams {
+    /// Each chart keeps its own estimates (the default, as for [`Denoise`]).
+    #[default]
+    Off,
+    /// Seam texels are fitted to agree by least squares.
+    Stitch,
+}
+
+/// What [`finish_with`] does to the pages beyond writing the estimates.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FinishOptions {
+    /// Denoise.
+    pub denoise: Denoise,
+    /// Stitch seams (after denoising).
+    pub seams: Seams,
+}
+
 /// The final streaming pass: reduces ρ over every tile of the work directories (one per
 /// shard; together they must cover every tile exactly once), then writes each page — results
 /// times ρ, dilated — as EXR. Used by an unsharded bake and by `guidebake merge`.
@@ -54,11 +78,12 @@ pub enum Denoise {
 /// A [`BakeError`] naming the work directory or page: a shard missing, shards of different
 /// bakes, a tile not baked, a page that cannot be written.
 pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Written, BakeError> {
-    finish_with(texels, dirs, out, Denoise::Off)
+    finish_with(texels, dirs, out, FinishOptions::default())
 }
 
-/// [`finish`], denoising the pages with [`ATrous`] when `denoise` is on. The filter runs on
-/// the merged results, tile by tile with a halo, so n shards still give the bytes of one
+/// [`finish`], denoising the pages with [`ATrous`] and stitching their seams as `options`
+/// ask. Both run on the merged results (the filter tile by tile with a halo, the stitch on
+/// the border texels once every tile is written), so n shards still give the bytes of one
 /// bake.
 ///
 /// # Errors
@@ -67,7 +92,7 @@ pub fn finish_with(
     texels: &TexelFile,
     dirs: &[PathBuf],
     out: &Path,
-    denoise: Denoise,
+    options: FinishOptions,
 ) -> Result<Written, BakeError> {
     let shards = open_shards(texels, dirs, None)?;
     let first = &shards[0].manifest;
@@ -94,7 +119,9 @@ pub fn finish_with(
         rho,
         k: first.iterations as usize,
     };
-    let filter = (denoise == Denoise::On).then_some(&ATrous as &dyn Denoiser);
+    let filter = (options.denoise == Denoise::On).then_some(&ATrous as &dyn Denoiser);
+    let mut seams = (options.seams == Seams::Stitch).then(|| SeamWork::find(texels));
+    let mut pending = Vec::new();
     let page_count = texels.pages().len() as u32;
     for (page, size) in texels.pages().iter().enumerate() {
         let path = page_path(out, page as u32, page_count);
@@ -124,6 +151,9 @@ pub fn finish_with(
                 };
                 let [x, y] = texel.pixel.map(u32::from);
                 let rgb = denoised.as_ref().and_then(|d| d[i]).unwrap_or(*rgb);
+                if let Some(seams) = &mut seams {
+                    seams.record(tile.first_texel + i as u64, rgb);
+                }
                 let [px, py, pz] = texel.position;
                 let [nx, ny, nz] = texel.normal;
                 // In AUX_CHANNELS' order; unused without --aux.
@@ -143,13 +173,100 @@ pub fn finish_with(
             image.put_rect(&rect)?;
             texels.release_tile(t);
         }
+        pending.push((image, path));
+        if seams.is_none() {
+            finish_pages(&mut pending, &mut written)?;
+        }
+    }
+    if let Some(seams) = seams {
+        let (before, after) = seams.stitch(&mut pending)?;
+        written.seam_pairs = seams.pairs.len() as u64;
+        written.seam_jump = Some([before, after]);
+    }
+    finish_pages(&mut pending, &mut written)?;
+    Ok(written)
+}
+
+/// Dilates and writes the `pending` pages (in order) and their previews.
+fn finish_pages(
+    pending: &mut Vec<(PageStream, PathBuf)>,
+    written: &mut Written,
+) -> Result<(), BakeError> {
+    for (image, path) in pending.drain(..) {
         written.non_finite_pixels += image.non_finite_pixels();
         let preview = path.with_extension("png");
         image.finish(DILATION_PIXELS, &path, &preview)?;
         written.pages.push(path);
         written.previews.push(preview);
     }
-    Ok(written)
+    Ok(())
+}
+
+/// The seam pairs of a texel file and, as the pages are written, their texels' values.
+struct SeamWork {
+    /// The border texels that belong to a pair.
+    texels: Vec<BorderTexel>,
+    /// Pairs of indices into `texels`.
+    pairs: Vec<(u32, u32)>,
+    /// Index into `texels` by global texel id.
+    index: std::collections::HashMap<u64, u32>,
+    /// The values written, by index (NaN until recorded).
+    values: Vec<[f32; 3]>,
+}
+
+impl SeamWork {
+    fn find(texels: &TexelFile) -> Self {
+        let border = border_texels(texels);
+        let pairs = seam_pairs(&border);
+        // Keep the paired texels only, renumbered in border order.
+        let mut keep: Vec<u32> = pairs.iter().flat_map(|&(a, b)| [a, b]).collect();
+        keep.sort_unstable();
+        keep.dedup();
+        let renumber: std::collections::HashMap<u32, u32> = keep
+            .iter()
+            .enumerate()
+            .map(|(new, &old)| (old, new as u32))
+            .collect();
+        let pairs = pairs
+            .iter()
+            .map(|(a, b)| (renumber[a], renumber[b]))
+            .collect();
+        let texels: Vec<BorderTexel> = keep.iter().map(|&i| border[i as usize]).collect();
+        let index = texels
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (t.id, i as u32))
+            .collect();
+        let values = vec![[f32::NAN; 3]; texels.len()];
+        Self {
+            texels,
+            pairs,
+            index,
+            values,
+        }
+    }
+
+    fn record(&mut self, id: u64, rgb: [f32; 3]) {
+        if let Some(&i) = self.index.get(&id) {
+            self.values[i as usize] = rgb;
+        }
+    }
+
+    /// Stitches the recorded values and writes them into the pages; returns the mean
+    /// relative jump before and after.
+    fn stitch(&self, pages: &mut [(PageStream, PathBuf)]) -> Result<(f64, f64), BakeError> {
+        let mut values = self.values.clone();
+        let before = mean_relative_jump(&values, &self.pairs);
+        stitch(&mut values, &self.pairs);
+        let after = mean_relative_jump(&values, &self.pairs);
+        for (t, (rgb, old)) in self.texels.iter().zip(values.iter().zip(&self.values)) {
+            if rgb != old && rgb.iter().all(|c| c.is_finite()) {
+                let [x, y] = t.pixel.map(u32::from);
+                pages[t.page as usize].0.set_rgb(x, y, *rgb)?;
+            }
+        }
+        Ok((before, after))
+    }
 }
 
 /// Where the pages' values come from: the shards' results (or batches, with global weights),
@@ -557,13 +674,22 @@ mod tests {
     use crate::prepare::{Layout, PrepareOptions, Resolution, prepare};
     use crate::scene::{Material, Scene};
 
+    const DENOISE: FinishOptions = FinishOptions {
+        denoise: Denoise::On,
+        seams: Seams::Off,
+    };
+    const BOTH: FinishOptions = FinishOptions {
+        denoise: Denoise::On,
+        seams: Seams::Stitch,
+    };
+
     /// The wall between the rooms: x ∈ [WALL, WALL + THICK].
     const WALL: f32 = 2.0;
     const THICK: f32 = 0.05;
 
     /// Two closed rooms side by side, x ∈ [0, 2] lit by its emissive ceiling and
-    /// x ∈ [2.05, 4.05] dark, parted by a thin wall; the floor is one face that runs on
-    /// beneath the wall from one room into the other.
+    /// x ∈ [2.05, 4.05] dark, parted by a thin wall; the floor is two faces (two charts, a
+    /// seam at x = 1), the second of which runs on beneath the wall into the dark room.
     fn two_rooms() -> Scene {
         let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
         let end = 2.0 * WALL + THICK;
@@ -575,12 +701,13 @@ mod tests {
             material,
         };
         let faces = vec![
-            face(Vec3::ZERO, z * 2.0, x * end, 0), // floor, +y
+            face(Vec3::ZERO, z * 2.0, x, 0),            // floor, +y, x < 1
+            face(Vec3::X, z * 2.0, x * (end - 1.0), 0), // floor, x > 1
             face(Vec3::new(0.0, 2.0, 0.0), x * WALL, z * 2.0, 1), // lit ceiling, −y
             face(Vec3::new(dark, 2.0, 0.0), x * WALL, z * 2.0, 0), // dark ceiling
-            face(Vec3::ZERO, y * 2.0, z * 2.0, 0), // x = 0, +x
+            face(Vec3::ZERO, y * 2.0, z * 2.0, 0),      // x = 0, +x
             face(Vec3::new(end, 0.0, 0.0), z * 2.0, y * 2.0, 0), // x = end, −x
-            face(Vec3::ZERO, x * WALL, y * 2.0, 0), // z = 0, lit
+            face(Vec3::ZERO, x * WALL, y * 2.0, 0),     // z = 0, lit
             face(Vec3::new(dark, 0.0, 0.0), x * WALL, y * 2.0, 0), // z = 0, dark
             face(Vec3::new(0.0, 0.0, 2.0), y * 2.0, x * WALL, 0), // z = 2, lit
             face(Vec3::new(dark, 0.0, 2.0), y * 2.0, x * WALL, 0), // z = 2, dark
@@ -621,7 +748,7 @@ mod tests {
             Self { dir, scene, texels }
         }
 
-        fn job(&self, out: &str, shard: Shard, denoise: Denoise) -> BakeJob {
+        fn job(&self, out: &str, shard: Shard, finish: FinishOptions) -> BakeJob {
             BakeJob {
                 texels: self.texels.clone(),
                 out: self.dir.path().join(out),
@@ -634,32 +761,32 @@ mod tests {
                 shard,
                 resume: false,
                 aux: true,
-                denoise,
+                finish,
             }
         }
 
-        fn bake(&self, job: &BakeJob) {
-            bake(job, &self.scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+        fn bake(&self, job: &BakeJob) -> crate::bake::run::BakeReport {
+            bake(job, &self.scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap()
         }
     }
 
     #[test]
-    fn denoised_shards_merge_to_the_bytes_of_one_denoised_bake() {
+    fn denoised_and_stitched_shards_merge_to_the_bytes_of_one_bake() {
         let rooms = Rooms::new();
-        let whole = rooms.job("whole.exr", Shard::WHOLE, Denoise::On);
+        let whole = rooms.job("whole.exr", Shard::WHOLE, BOTH);
         rooms.bake(&whole);
         let mut dirs = Vec::new();
         for index in [1, 0] {
-            let job = rooms.job("sharded.exr", Shard { index, count: 2 }, Denoise::On);
+            let job = rooms.job("sharded.exr", Shard { index, count: 2 }, BOTH);
             rooms.bake(&job);
             dirs.push(work_dir(&job.out, job.shard));
         }
         let texels = TexelFile::open(&rooms.texels).unwrap();
         let merged = rooms.dir.path().join("merged.exr");
-        finish_with(&texels, &dirs, &merged, Denoise::On).unwrap();
+        finish_with(&texels, &dirs, &merged, BOTH).unwrap();
         assert!(std::fs::read(&whole.out).unwrap() == std::fs::read(&merged).unwrap());
         let raw = rooms.dir.path().join("raw.exr");
-        finish_with(&texels, &dirs, &raw, Denoise::Off).unwrap();
+        finish_with(&texels, &dirs, &raw, FinishOptions::default()).unwrap();
         assert!(std::fs::read(&raw).unwrap() != std::fs::read(&merged).unwrap());
     }
 
@@ -667,8 +794,8 @@ mod tests {
     fn a_thin_wall_keeps_the_dark_room_dark_after_denoising() {
         let rooms = Rooms::new();
         let (raw, denoised) = (
-            rooms.job("raw.exr", Shard::WHOLE, Denoise::Off),
-            rooms.job("denoised.exr", Shard::WHOLE, Denoise::On),
+            rooms.job("raw.exr", Shard::WHOLE, FinishOptions::default()),
+            rooms.job("denoised.exr", Shard::WHOLE, DENOISE),
         );
         rooms.bake(&raw);
         rooms.bake(&denoised);
@@ -700,5 +827,33 @@ mod tests {
             (mean - mean_raw).abs() < 0.03 * mean_raw,
             "the filter keeps the lit room's mean: {mean_raw} → {mean}"
         );
+    }
+
+    #[test]
+    fn stitching_closes_the_floor_seam() {
+        let rooms = Rooms::new();
+        let stitched = FinishOptions {
+            denoise: Denoise::Off,
+            seams: Seams::Stitch,
+        };
+        let report = rooms.bake(&rooms.job("stitched.exr", Shard::WHOLE, stitched));
+        let [before, after] = report.seam_jump.expect("seams were stitched");
+        assert!(before > 0.02, "the raw seam jumps: {before}");
+        assert!(
+            after < before / 4.0,
+            "mean relative jump {before} → {after}"
+        );
+        let texels = TexelFile::open(&rooms.texels).unwrap();
+        let border = border_texels(&texels);
+        let pairs = seam_pairs(&border);
+        assert!(pairs.len() >= 20, "{} pairs", pairs.len());
+        for &(a, b) in &pairs {
+            // Only the floor's cut at x = 1 is a seam (faces meet at right angles elsewhere).
+            let (a, b) = (border[a as usize].position, border[b as usize].position);
+            assert!(
+                (a.x - 1.0).abs() < 0.2 && (b.x - 1.0).abs() < 0.2,
+                "{a} {b}"
+            );
+        }
     }
 }

@@ -17,7 +17,7 @@ use super::BenchError;
 use super::method::{Method, serialize_value_name, value_name};
 use super::metrics::{ErrorStats, compare};
 use super::readback::read_lightmap;
-use crate::bake::finish::Denoise;
+use crate::bake::finish::FinishOptions;
 use crate::bake::run::{BakeJob, BakeReport, bake};
 use crate::bake::settings::{BakeSettings, EmitterSampling, Guiding, Transport};
 use crate::bake::shard::Shard;
@@ -86,7 +86,7 @@ impl Bench<'_> {
             shard: Shard::WHOLE,
             resume: false,
             aux: false,
-            denoise: Denoise::Off,
+            finish: FinishOptions::default(),
         };
         let clock = Instant::now();
         let cpu = process_cpu_s();

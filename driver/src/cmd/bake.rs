@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::bake::finish::Denoise;
+use crate::bake::finish::{Denoise, FinishOptions, Seams};
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress};
 use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Schedule, Transport};
 use crate::bake::shard::Shard;
@@ -86,6 +86,10 @@ pub struct BakeArgs {
     /// lightmap is then the estimator's output, unbiased and unblurred, as the bench measures.
     #[arg(long, value_enum, default_value_t = Denoise::Off)]
     pub denoise: Denoise,
+    /// Make the texels on the two sides of a UV seam agree (least-squares stitching after
+    /// denoising; docs/lightmaps.md). Off by default, as --denoise.
+    #[arg(long, value_enum, default_value_t = Seams::Off)]
+    pub seams: Seams,
     /// Continue an interrupted bake from its journal.
     #[arg(long)]
     pub resume: bool,
@@ -142,7 +146,10 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         shard: args.shard,
         resume: args.resume,
         aux: args.aux,
-        denoise: args.denoise,
+        finish: FinishOptions {
+            denoise: args.denoise,
+            seams: args.seams,
+        },
     };
     let report = run_with_progress(&job, args.pass, &scene)?;
     if let Some(path) = &args.stats {

@@ -7,7 +7,7 @@
 
 use std::path::PathBuf;
 
-use crate::bake::finish::Denoise;
+use crate::bake::finish::FinishOptions;
 use crate::bake::run::BakeJob;
 use crate::bake::settings::{BakeSettings, Guiding};
 use crate::bake::shard::Shard;
@@ -76,7 +76,7 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
             shard: Shard::WHOLE,
             resume: false,
             aux: true,
-            denoise: Denoise::Off,
+            finish: FinishOptions::default(),
         };
         let report = super::bake::run_with_progress(&job, None, &scene)?;
         if report.interrupted {

@@ -24,6 +24,7 @@ pub mod denoise;
 pub mod exr_pages;
 pub mod journal;
 pub mod result_file;
+pub mod seams;
 
 /// A 64-bit FNV-1a hash: checksums of journal records and identities of bake settings.
 /// Not cryptographic; it detects torn writes and mismatched resumes.
