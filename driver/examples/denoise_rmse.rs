@@ -1,24 +1,31 @@
-//! RMSE of raw and denoised lightmaps against a 16× reference (docs/lightmaps.md,
-//! "Denoising"). For each scene: prepare at a `--size`-like page of 192², bake the reference
-//! (the unbiased baseline at 16 × 256 = 4096 spp, series transport, `bench`'s reference
-//! settings), then bake the default settings at 64 and 256 spp with `--denoise off` and `on`
-//! (the same seed, so the denoised run filters exactly the raw run's estimates) and print a
-//! Markdown table of the RMSE of each against the reference.
+//! Lightmap quality on real scenes (docs/lightmaps.md): RMSE of raw and denoised lightmaps
+//! against a 16× reference, and the mean relative jump across seams before and after
+//! stitching.
+//!
+//! For each scene: prepare at a page of 192², bake (or reuse from `--cache DIR`) the
+//! reference — `bench`'s unbiased baseline at 16 × 256 = 4096 spp with the series transport,
+//! so the bake's own transport is compared and only the estimator's noise and the filter
+//! differ — then bake the default settings at 64 and 256 spp once each (pass by pass, keeping
+//! the work) and finish that one bake several ways: raw, denoised with the default
+//! [`ATrous`] and with the variants of the sweep, and seam-stitched. Prints Markdown tables.
 //!
 //! ```sh
-//! cargo run --release -p guidebake --example denoise_rmse -- ../shared/scenes/converted/*.glb
+//! cargo run --release -p guidebake --example denoise_rmse -- --cache target/denoise-ref \
+//!     ../shared/scenes/converted/*.glb
 //! ```
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
-use guidebake::bake::finish::FinishOptions;
-use guidebake::bake::run::{BakeJob, bake};
+use guidebake::bake::finish::{FinishOptions, Seams, finish_filtered, merge_pass};
+use guidebake::bake::run::{BakeJob, bake, bake_pass_with_progress};
 use guidebake::bake::settings::{BakeSettings, Transport};
 use guidebake::bake::shard::Shard;
+use guidebake::bake::workdir::work_dir;
 use guidebake::bench::metrics::compare;
 use guidebake::bench::readback::read_lightmap;
 use guidebake::bench::reference::reference_settings;
+use guidebake::output::denoise::{ATrous, Denoiser};
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
 use guidebake::scene::Scene;
 use guidebake::texels::TexelFile;
@@ -29,44 +36,51 @@ type Error = Box<dyn std::error::Error>;
 const PAGE: u32 = 192;
 /// Samples of the measured runs; the reference has 16 × the largest.
 const SPP: [u32; 2] = [64, 256];
+/// The filter variants of the sweep: (levels, luminance σ).
+const SWEEP: [(u32, f32); 5] = [(3, 4.0), (3, 2.0), (3, 1.0), (2, 2.0), (4, 2.0)];
 
 fn main() -> Result<(), Error> {
-    let scenes: Vec<PathBuf> = std::env::args_os().skip(1).map(PathBuf::from).collect();
-    if scenes.is_empty() {
-        return Err("usage: denoise_rmse SCENE... (e.g. ../shared/scenes/converted/*.glb)".into());
-    }
+    let mut args: Vec<PathBuf> = std::env::args_os().skip(1).map(PathBuf::from).collect();
     let work = tempfile::tempdir()?;
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    println!("| scene | texels | spp | RMSE raw | RMSE denoised | denoised / raw |");
-    println!("|---|---|---|---|---|---|");
-    for path in &scenes {
+    let cache = match args.iter().position(|a| a.as_os_str() == "--cache") {
+        Some(i) if i + 1 < args.len() => {
+            let dir = args.remove(i + 1);
+            args.remove(i);
+            dir
+        }
+        _ => work.path().to_owned(),
+    };
+    if args.is_empty() {
+        return Err(
+            "usage: denoise_rmse [--cache DIR] SCENE... (e.g. ../shared/scenes/converted/*.glb)"
+                .into(),
+        );
+    }
+    std::fs::create_dir_all(&cache)?;
+    let mut rmse = Vec::new();
+    let mut sweep = Vec::new();
+    let mut seams = Vec::new();
+    for path in &args {
         let scene = Scene::load(path)?;
         let name = path
             .file_stem()
-            .map_or("scene".into(), |s| s.to_string_lossy());
+            .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
         let texels = work.path().join(format!("{name}.texels"));
         let options = PrepareOptions {
             resolution: Resolution::Size(PAGE, PAGE),
             layout: Layout::Auto,
         };
-        let prepared = prepare(&scene, &texels, options)?;
+        let count = prepare(&scene, &texels, options)?.texels;
         let file = TexelFile::open(&texels)?;
-        let bake_to = |settings: BakeSettings, out: &Path, denoise: Denoise| -> Result<_, Error> {
-            let job = BakeJob {
-                texels: texels.clone(),
-                out: out.to_owned(),
-                settings,
-                threads,
-                shard: Shard::WHOLE,
-                resume: false,
-                aux: false,
-                finish: FinishOptions {
-                    denoise,
-                    ..Default::default()
-                },
-            };
-            bake(&job, &scene, &AtomicBool::new(false), &mut |_, _| {})?;
-            Ok(read_lightmap(&file, out)?)
+        let job = |settings: BakeSettings, out: PathBuf| BakeJob {
+            texels: texels.clone(),
+            out,
+            settings,
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            shard: Shard::WHOLE,
+            resume: false,
+            aux: false,
+            finish: FinishOptions::default(),
         };
         let defaults = BakeSettings::default();
         let reference = reference_settings(
@@ -75,30 +89,93 @@ fn main() -> Result<(), Error> {
             Transport::Series,
             defaults.bounces,
         );
-        let clock = std::time::Instant::now();
-        let truth = bake_to(reference, &work.path().join("ref.exr"), Denoise::Off)?;
-        eprintln!(
-            "{name}: reference of {} texels in {:.0} s",
-            prepared.texels,
-            clock.elapsed().as_secs_f64()
-        );
+        let ref_out = cache.join(format!("ref-{name}-{PAGE}-{}.exr", reference.spp));
+        let truth = match read_lightmap(&file, &ref_out) {
+            Ok(values) => values,
+            Err(_) => {
+                let clock = std::time::Instant::now();
+                bake(
+                    &job(reference, ref_out.clone()),
+                    &scene,
+                    &AtomicBool::new(false),
+                    &mut |_, _| {},
+                )?;
+                eprintln!(
+                    "{name}: reference of {count} texels in {:.0} s",
+                    clock.elapsed().as_secs_f64()
+                );
+                read_lightmap(&file, &ref_out)?
+            }
+        };
         for spp in SPP {
             let settings = BakeSettings {
                 spp,
                 seed: 1,
                 ..defaults
             };
-            let raw = bake_to(settings, &work.path().join("raw.exr"), Denoise::Off)?;
-            let denoised = bake_to(settings, &work.path().join("dn.exr"), Denoise::On)?;
-            let (a, b) = (compare(&raw, &truth)?, compare(&denoised, &truth)?);
-            println!(
-                "| {name} | {} | {spp} | {:.5} | {:.5} | {:.2} |",
-                prepared.texels,
-                a.rmse,
-                b.rmse,
-                b.rmse / a.rmse
-            );
+            let out = work.path().join(format!("{name}-{spp}.exr"));
+            let dir = bake_passes(&job(settings, out.clone()), &scene, &file)?;
+            let finish = |filter: Option<&dyn Denoiser>, stitch: Seams| -> Result<_, Error> {
+                let written =
+                    finish_filtered(&file, std::slice::from_ref(&dir), &out, filter, stitch)?;
+                Ok((read_lightmap(&file, &out)?, written))
+            };
+            let (raw, _) = finish(None, Seams::Off)?;
+            let raw_rmse = compare(&raw, &truth)?.rmse;
+            let (denoised, _) = finish(Some(&ATrous::default()), Seams::Off)?;
+            let dn_rmse = compare(&denoised, &truth)?.rmse;
+            rmse.push(format!(
+                "| {name} | {count} | {spp} | {raw_rmse:.5} | {dn_rmse:.5} | {:.2} |",
+                dn_rmse / raw_rmse
+            ));
+            let mut row = format!("| {name} | {spp} |");
+            for (levels, luminance_sigma) in SWEEP {
+                let filter = ATrous {
+                    levels,
+                    luminance_sigma,
+                };
+                let (values, _) = finish(Some(&filter), Seams::Off)?;
+                row += &format!(" {:.2} |", compare(&values, &truth)?.rmse / raw_rmse);
+            }
+            sweep.push(row);
+            let (stitched, written) = finish(None, Seams::Stitch)?;
+            let [before, after] = written.seam_jump.unwrap_or([0.0; 2]);
+            seams.push(format!(
+                "| {name} | {spp} | {} | {before:.4} | {after:.4} | {:.5} | {:.5} |",
+                written.seam_pairs,
+                raw_rmse,
+                compare(&stitched, &truth)?.rmse
+            ));
+            std::fs::remove_dir_all(&dir)?;
         }
     }
+    println!("| scene | texels | spp | RMSE raw | RMSE denoised | denoised / raw |");
+    println!("|---|---|---|---|---|---|");
+    rmse.iter().for_each(|r| println!("{r}"));
+    println!();
+    let head: Vec<String> = SWEEP
+        .iter()
+        .map(|(l, s)| format!("{l} levels, σ {s}"))
+        .collect();
+    println!("| scene | spp | {} |", head.join(" | "));
+    println!("|---|---|{}", "---|".repeat(SWEEP.len()));
+    sweep.iter().for_each(|r| println!("{r}"));
+    println!();
+    println!("| scene | spp | seam pairs | jump raw | jump stitched | RMSE raw | RMSE stitched |");
+    println!("|---|---|---|---|---|---|---|");
+    seams.iter().for_each(|r| println!("{r}"));
     Ok(())
+}
+
+/// Bakes every series pass of `job`, merging between passes, and returns the work directory
+/// of the last pass, kept for any number of finishes.
+fn bake_passes(job: &BakeJob, scene: &Scene, file: &TexelFile) -> Result<PathBuf, Error> {
+    let passes = job.settings.passes();
+    for pass in 1..=passes {
+        bake_pass_with_progress(job, Some(pass), scene, &AtomicBool::new(false), &mut |_| {})?;
+        if pass < passes {
+            merge_pass(file, &[work_dir(&job.out, job.shard)], &job.out, pass)?;
+        }
+    }
+    Ok(work_dir(&job.out, job.shard))
 }

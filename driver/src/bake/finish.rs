@@ -94,6 +94,22 @@ pub fn finish_with(
     out: &Path,
     options: FinishOptions,
 ) -> Result<Written, BakeError> {
+    let filter = ATrous::default();
+    let denoiser = (options.denoise == Denoise::On).then_some(&filter as &dyn Denoiser);
+    finish_filtered(texels, dirs, out, denoiser, options.seams)
+}
+
+/// [`finish_with`] with any [`Denoiser`] (or none): where another filter plugs in.
+///
+/// # Errors
+/// As [`finish`].
+pub fn finish_filtered(
+    texels: &TexelFile,
+    dirs: &[PathBuf],
+    out: &Path,
+    filter: Option<&dyn Denoiser>,
+    seams: Seams,
+) -> Result<Written, BakeError> {
     let shards = open_shards(texels, dirs, None)?;
     let first = &shards[0].manifest;
     let all = every_tile(texels, &shards)?;
@@ -119,8 +135,7 @@ pub fn finish_with(
         rho,
         k: first.iterations as usize,
     };
-    let filter = (options.denoise == Denoise::On).then_some(&ATrous as &dyn Denoiser);
-    let mut seams = (options.seams == Seams::Stitch).then(|| SeamWork::find(texels));
+    let mut seams = (seams == Seams::Stitch).then(|| SeamWork::find(texels));
     let mut pending = Vec::new();
     let page_count = texels.pages().len() as u32;
     for (page, size) in texels.pages().iter().enumerate() {

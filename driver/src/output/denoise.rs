@@ -29,11 +29,11 @@
 use glam::Vec3;
 use guidebake_kernels::estimator::luminance_f32;
 
-/// À-Trous passes (taps 1, 2, 4 pixels apart).
+/// À-Trous passes of [`ATrous::default`] (taps 1, 2, 4 pixels apart).
 pub const LEVELS: u32 = 3;
 /// Exponent of the normal weight.
 pub const NORMAL_POWER: i32 = 32;
-/// Luminance edge-stopping width in standard errors.
+/// Luminance edge-stopping width of [`ATrous::default`], in standard errors.
 pub const LUMINANCE_SIGMA: f32 = 4.0;
 /// The B3-spline kernel of each pass.
 const KERNEL: [f32; 5] = [1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];
@@ -76,13 +76,27 @@ pub trait Denoiser: Sync {
 }
 
 /// The edge-aware À-Trous filter of the module docs.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct ATrous;
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ATrous {
+    /// Passes (taps 1, 2, …, 2^(levels−1) pixels apart), 1 to 8.
+    pub levels: u32,
+    /// Luminance edge-stopping width in standard errors.
+    pub luminance_sigma: f32,
+}
+
+impl Default for ATrous {
+    fn default() -> Self {
+        Self {
+            levels: LEVELS,
+            luminance_sigma: LUMINANCE_SIGMA,
+        }
+    }
+}
 
 impl Denoiser for ATrous {
     fn halo(&self) -> u32 {
-        // Each pass reaches 2 taps of its step: 2 (1 + 2 + 4).
-        2 * ((1 << LEVELS) - 1)
+        // Each pass reaches 2 taps of its step: 2 (1 + 2 + 4 + …).
+        2 * ((1 << self.levels.clamp(1, 8)) - 1)
     }
 
     fn denoise(&self, window: &Window) -> Vec<Option<[f32; 3]>> {
@@ -91,8 +105,8 @@ impl Denoiser for ATrous {
             .iter()
             .map(|t| t.map(|t| (t.rgb, t.variance.max(0.0))))
             .collect();
-        for level in 0..LEVELS {
-            current = a_trous_pass(window, &current, 1 << level);
+        for level in 0..self.levels.clamp(1, 8) {
+            current = a_trous_pass(window, &current, 1 << level, self.luminance_sigma);
         }
         current.into_iter().map(|c| c.map(|(rgb, _)| rgb)).collect()
     }
@@ -103,6 +117,7 @@ fn a_trous_pass(
     window: &Window,
     values: &[Option<([f32; 3], f32)>],
     step: usize,
+    luminance_sigma: f32,
 ) -> Vec<Option<([f32; 3], f32)>> {
     let (w, h) = (window.width as i64, window.height as i64);
     let mut out = vec![None; values.len()];
@@ -113,7 +128,7 @@ fn a_trous_pass(
                 continue;
             };
             let l_p = luminance_f32(rgb_p);
-            let sigma = LUMINANCE_SIGMA * var_p.sqrt();
+            let sigma = luminance_sigma * var_p.sqrt();
             let (mut sum, mut var_sum, mut weight) = ([0.0f64; 3], 0.0f64, 0.0f64);
             for (j, ky) in KERNEL.iter().enumerate() {
                 let qy = y + (j as i64 - 2) * step as i64;
@@ -226,8 +241,8 @@ mod tests {
             height: n,
             texels,
         };
-        let out = ATrous.denoise(&window);
-        let halo = ATrous.halo() as usize;
+        let out = ATrous::default().denoise(&window);
+        let halo = ATrous::default().halo() as usize;
         let inner = |v: &dyn Fn(usize) -> f32| -> Vec<f32> {
             (halo..n - halo)
                 .flat_map(|y| (halo..n - halo).map(move |x| y * n + x))
@@ -277,7 +292,7 @@ mod tests {
             height: h,
             texels,
         };
-        let out = ATrous.denoise(&window);
+        let out = ATrous::default().denoise(&window);
         for y in 0..h {
             for x in w / 2..w {
                 let v = out[y * w + x].unwrap();
@@ -311,7 +326,7 @@ mod tests {
                 };
             }
         }
-        let out = ATrous.denoise(&Window {
+        let out = ATrous::default().denoise(&Window {
             width: w,
             height: h,
             texels,

@@ -137,7 +137,7 @@ pub fn seam_pairs(border: &[BorderTexel]) -> Vec<(u32, u32)> {
     }
     let mut pairs = Vec::new();
     for (i, a) in border.iter().enumerate() {
-        if !a.position.is_finite() || !(a.spacing > 0.0) {
+        if !a.position.is_finite() || a.spacing.is_nan() || a.spacing <= 0.0 {
             continue;
         }
         let reach = a.spacing.max(cell / PAIR_DISTANCE) * PAIR_DISTANCE;
