@@ -37,7 +37,7 @@ const PAGE: u32 = 192;
 /// Samples of the measured runs; the reference has 16 × the largest.
 const SPP: [u32; 2] = [64, 256];
 /// The filter variants of the sweep: (levels, luminance σ).
-const SWEEP: [(u32, f32); 5] = [(3, 4.0), (3, 2.0), (3, 1.0), (2, 2.0), (4, 2.0)];
+const SWEEP: [(u32, f32); 5] = [(2, 2.0), (3, 4.0), (3, 2.0), (2, 1.0), (1, 2.0)];
 
 fn main() -> Result<(), Error> {
     let mut args: Vec<PathBuf> = std::env::args_os().skip(1).map(PathBuf::from).collect();

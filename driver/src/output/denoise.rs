@@ -3,7 +3,7 @@
 //!
 //! The filter is Dammertz et al.'s edge-avoiding À-Trous wavelet transform (HPG 2010) with
 //! the variance guidance of SVGF (Schied et al., HPG 2017), applied in atlas space: [`LEVELS`]
-//! passes of a 5 × 5 B3-spline kernel whose taps lie 1, 2, 4 pixels apart. Each tap's weight
+//! passes of a 5 × 5 B3-spline kernel whose taps lie 1, 2, … pixels apart. Each tap's weight
 //! is the kernel weight times edge-stopping functions that use world space, never UV
 //! adjacency alone:
 //! - **normal**: `max(0, n_p · n_q)^`[`NORMAL_POWER`] — the two sides of a wall, or the
@@ -29,12 +29,14 @@
 use glam::Vec3;
 use guidebake_kernels::estimator::luminance_f32;
 
-/// À-Trous passes of [`ATrous::default`] (taps 1, 2, 4 pixels apart).
-pub const LEVELS: u32 = 3;
+/// À-Trous passes of [`ATrous::default`] (taps 1 and 2 pixels apart; chosen by the sweep
+/// of docs/lightmaps.md).
+pub const LEVELS: u32 = 2;
 /// Exponent of the normal weight.
 pub const NORMAL_POWER: i32 = 32;
-/// Luminance edge-stopping width of [`ATrous::default`], in standard errors.
-pub const LUMINANCE_SIGMA: f32 = 4.0;
+/// Luminance edge-stopping width of [`ATrous::default`], in standard errors (the sweep of
+/// docs/lightmaps.md).
+pub const LUMINANCE_SIGMA: f32 = 2.0;
 /// The B3-spline kernel of each pass.
 const KERNEL: [f32; 5] = [1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];
 

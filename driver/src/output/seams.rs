@@ -7,7 +7,8 @@
 //! so it needs no UV topology and works for any atlas: a **seam pair** is two *border* texels
 //! (a texel with an uncovered 4-neighbour in the atlas) that lie within
 //! [`PAIR_DISTANCE`] texel spacings of each other in world space, on the same tangent plane
-//! and side (normals within [`PAIR_COS`]), but are not atlas neighbours (another page, or more
+//! (within [`PAIR_PLANE`] spacings) and side (normals within [`PAIR_COS`]), but are not atlas
+//! neighbours (another page, or more
 //! than [`ATLAS_NEIGHBOUR`] pixels apart). Faces meeting at an angle, the two sides of a thin
 //! wall and texels of one chart are never paired.
 //!
@@ -34,7 +35,9 @@ use crate::texels::{TexelFile, TexelRecord};
 /// edge lie about one spacing apart; diagonal neighbours up to √2).
 pub const PAIR_DISTANCE: f32 = 1.5;
 /// Smallest cosine between the normals of a seam pair.
-pub const PAIR_COS: f32 = 0.9;
+pub const PAIR_COS: f32 = 0.99;
+/// Largest distance of a pair's texels from each other's tangent plane, in texel spacings.
+pub const PAIR_PLANE: f32 = 0.05;
 /// Pixels (Chebyshev) within which two texels of a page count as atlas neighbours.
 pub const ATLAS_NEIGHBOUR: u32 = 2;
 /// The seam term's weight λ against the data term.
@@ -171,7 +174,8 @@ fn is_seam_pair(a: &BorderTexel, b: &BorderTexel) -> bool {
     !atlas_neighbours
         && d.length() <= PAIR_DISTANCE * spacing
         && a.normal.dot(b.normal) >= PAIR_COS
-        && a.normal.dot(d).abs() <= 0.5 * spacing
+        && a.normal.dot(d).abs() <= PAIR_PLANE * spacing
+        && b.normal.dot(d).abs() <= PAIR_PLANE * spacing
 }
 
 /// The mean relative luminance jump across `pairs` of `values` (indexed as the border), 0
