@@ -71,6 +71,7 @@ fn main() -> Result<(), Error> {
             layout: Layout::Auto,
         };
         let count = prepare(&scene, &texels, options)?.texels;
+        guidebake::output::seams::prepare_seams(&scene, &texels)?;
         let file = TexelFile::open(&texels)?;
         let job = |settings: BakeSettings, out: PathBuf| BakeJob {
             texels: texels.clone(),

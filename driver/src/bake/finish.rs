@@ -13,7 +13,7 @@ use crate::output::denoise::{ATrous, Denoiser, NoisyTexel, Window};
 use crate::output::exr_pages::{PageStream, page_path};
 use crate::output::journal::{Journal, RhoSums, TileRecord, dedup_tiles};
 use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
-use crate::output::seams::{BorderTexel, border_texels, mean_relative_jump, seam_pairs, stitch};
+use crate::output::seams::{Pixel, mean_relative_jump, read_seam_file, seam_file_path, stitch};
 use crate::texels::TexelFile;
 use guidebake_kernels::estimator::{
     IterationVariance, RhoAccumulator, TexelEstimate, Welford, combine_weighted, luminance_f32,
@@ -135,7 +135,10 @@ pub fn finish_filtered(
         rho,
         k: first.iterations as usize,
     };
-    let mut seams = (seams == Seams::Stitch).then(|| SeamWork::find(texels));
+    let mut seams = match seams {
+        Seams::Stitch => Some(SeamWork::load(texels)?),
+        Seams::Off => None,
+    };
     let mut pending = Vec::new();
     let page_count = texels.pages().len() as u32;
     for (page, size) in texels.pages().iter().enumerate() {
@@ -167,7 +170,7 @@ pub fn finish_filtered(
                 let [x, y] = texel.pixel.map(u32::from);
                 let rgb = denoised.as_ref().and_then(|d| d[i]).unwrap_or(*rgb);
                 if let Some(seams) = &mut seams {
-                    seams.record(tile.first_texel + i as u64, rgb);
+                    seams.record([page as u32, x, y], rgb);
                 }
                 let [px, py, pz] = texel.position;
                 let [nx, ny, nz] = texel.normal;
@@ -217,52 +220,43 @@ fn finish_pages(
     Ok(())
 }
 
-/// The seam pairs of a texel file and, as the pages are written, their texels' values.
+/// The seam pairs of a texel file and, as the pages are written, their pixels' values.
 struct SeamWork {
-    /// The border texels that belong to a pair.
-    texels: Vec<BorderTexel>,
-    /// Pairs of indices into `texels`.
+    /// The seam pixels, in first-seen order of the pairs.
+    pixels: Vec<Pixel>,
+    /// Pairs of indices into `pixels`.
     pairs: Vec<(u32, u32)>,
-    /// Index into `texels` by global texel id.
-    index: std::collections::HashMap<u64, u32>,
-    /// The values written, by index (NaN until recorded).
+    /// Index into `pixels` by pixel.
+    index: std::collections::HashMap<Pixel, u32>,
+    /// The values written, by index (NaN until recorded: a pixel without a baked texel).
     values: Vec<[f32; 3]>,
 }
 
 impl SeamWork {
-    fn find(texels: &TexelFile) -> Self {
-        let border = border_texels(texels);
-        let pairs = seam_pairs(&border);
-        // Keep the paired texels only, renumbered in border order.
-        let mut keep: Vec<u32> = pairs.iter().flat_map(|&(a, b)| [a, b]).collect();
-        keep.sort_unstable();
-        keep.dedup();
-        let renumber: std::collections::HashMap<u32, u32> = keep
-            .iter()
-            .enumerate()
-            .map(|(new, &old)| (old, new as u32))
-            .collect();
-        let pairs = pairs
-            .iter()
-            .map(|(a, b)| (renumber[a], renumber[b]))
-            .collect();
-        let texels: Vec<BorderTexel> = keep.iter().map(|&i| border[i as usize]).collect();
-        let index = texels
-            .iter()
-            .enumerate()
-            .map(|(i, t)| (t.id, i as u32))
-            .collect();
-        let values = vec![[f32::NAN; 3]; texels.len()];
-        Self {
-            texels,
+    /// The pairs of the seam file beside the texel file.
+    fn load(texels: &TexelFile) -> Result<Self, BakeError> {
+        let path = seam_file_path(texels.path());
+        let pixel_pairs = read_seam_file(&path).map_err(|what| file_error(&path, what))?;
+        let mut index = std::collections::HashMap::new();
+        let mut pixels = Vec::new();
+        let mut id = |p: Pixel| {
+            *index.entry(p).or_insert_with(|| {
+                pixels.push(p);
+                pixels.len() as u32 - 1
+            })
+        };
+        let pairs = pixel_pairs.iter().map(|&(a, b)| (id(a), id(b))).collect();
+        let values = vec![[f32::NAN; 3]; pixels.len()];
+        Ok(Self {
+            pixels,
             pairs,
             index,
             values,
-        }
+        })
     }
 
-    fn record(&mut self, id: u64, rgb: [f32; 3]) {
-        if let Some(&i) = self.index.get(&id) {
+    fn record(&mut self, pixel: Pixel, rgb: [f32; 3]) {
+        if let Some(&i) = self.index.get(&pixel) {
             self.values[i as usize] = rgb;
         }
     }
@@ -274,10 +268,10 @@ impl SeamWork {
         let before = mean_relative_jump(&values, &self.pairs);
         stitch(&mut values, &self.pairs);
         let after = mean_relative_jump(&values, &self.pairs);
-        for (t, (rgb, old)) in self.texels.iter().zip(values.iter().zip(&self.values)) {
+        let updates = self.pixels.iter().zip(values.iter().zip(&self.values));
+        for (&[page, x, y], (rgb, old)) in updates {
             if rgb != old && rgb.iter().all(|c| c.is_finite()) {
-                let [x, y] = t.pixel.map(u32::from);
-                pages[t.page as usize].0.set_rgb(x, y, *rgb)?;
+                pages[page as usize].0.set_rgb(x, y, *rgb)?;
             }
         }
         Ok((before, after))
@@ -686,6 +680,7 @@ mod tests {
     use crate::bake::shard::Shard;
     use crate::bake::workdir::work_dir;
     use crate::demo::{Face, scene_of_faces};
+    use crate::output::seams::prepare_seams;
     use crate::prepare::{Layout, PrepareOptions, Resolution, prepare};
     use crate::scene::{Material, Scene};
 
@@ -760,6 +755,7 @@ mod tests {
                 layout: Layout::Shared,
             };
             prepare(&scene, &texels, options).unwrap();
+            prepare_seams(&scene, &texels).unwrap();
             Self { dir, scene, texels }
         }
 
@@ -858,16 +854,30 @@ mod tests {
             after < before / 4.0,
             "mean relative jump {before} → {after}"
         );
-        let texels = TexelFile::open(&rooms.texels).unwrap();
-        let border = border_texels(&texels);
-        let pairs = seam_pairs(&border);
+        let pairs = read_seam_file(&seam_file_path(&rooms.texels)).unwrap();
         assert!(pairs.len() >= 20, "{} pairs", pairs.len());
-        for &(a, b) in &pairs {
-            // Only the floor's cut at x = 1 is a seam (faces meet at right angles elsewhere).
-            let (a, b) = (border[a as usize].position, border[b as usize].position);
+        // Only the floor's cut at x = 1 is a seam (faces meet at right angles elsewhere): the
+        // pairs' texels lie on it.
+        let texels = TexelFile::open(&rooms.texels).unwrap();
+        let at: std::collections::HashMap<Pixel, Vec3> = texels
+            .texels()
+            .iter()
+            .map(|t| {
+                (
+                    [t.page, u32::from(t.pixel[0]), u32::from(t.pixel[1])],
+                    t.position(),
+                )
+            })
+            .collect();
+        for (a, b) in &pairs {
+            let (a, b) = (at[a], at[b]);
             assert!(
                 (a.x - 1.0).abs() < 0.2 && (b.x - 1.0).abs() < 0.2,
                 "{a} {b}"
+            );
+            assert!(
+                a.y.abs() < 1e-3 && b.y.abs() < 1e-3,
+                "on the floor: {a} {b}"
             );
         }
     }

@@ -51,6 +51,7 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
         layout: Layout::Shared,
     };
     let prepared = prepare(&scene, &texels, options)?;
+    crate::output::seams::prepare_seams(&scene, &texels)?;
     eprintln!(
         "prepared {} texels in {} tiles: {}",
         prepared.texels,

@@ -66,6 +66,8 @@ pub fn run(args: &PrepareArgs) -> Result<(), super::CmdError> {
             layout: args.layout,
         },
     )?;
+    // The seams beside the texel file, for `bake --seams stitch` (docs/lightmaps.md).
+    crate::output::seams::prepare_seams(&scene, &args.output)?;
     for m in &report.meshes_without_lightmap_uvs {
         eprintln!(
             "guidebake: warning: mesh '{m}' has no lightmap UVs (TEXCOORD_1); it gets no texels"
