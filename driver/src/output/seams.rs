@@ -73,6 +73,7 @@ pub fn seam_pixel_pairs(scene: &Scene, texels: &TexelFile) -> Vec<(Pixel, Pixel)
     }
     let mut keys: Vec<&Key> = edges.keys().collect();
     keys.sort_unstable();
+    let normals = texel_normals(texels);
     let mut pairs = Vec::new();
     for key in keys {
         let sides = &edges[key];
@@ -82,9 +83,28 @@ pub fn seam_pixel_pairs(scene: &Scene, texels: &TexelFile) -> Vec<(Pixel, Pixel)
             }
         }
     }
+    // Both pixels must hold a texel, and the texels face the same side (the two faces of a
+    // thin sheet share its rim but not their light).
+    pairs.retain(|(a, b)| match (normals.get(a), normals.get(b)) {
+        (Some(na), Some(nb)) => na.dot(*nb) >= PAIR_COS,
+        _ => false,
+    });
     pairs.sort_unstable();
     pairs.dedup();
     pairs
+}
+
+/// The normal of every texel, by its pixel.
+fn texel_normals(texels: &TexelFile) -> HashMap<Pixel, glam::Vec3> {
+    let mut normals = HashMap::new();
+    for t in 0..texels.tiles().len() {
+        for texel in texels.tile_texels(t) {
+            let [x, y] = texel.pixel.map(u32::from);
+            normals.insert([texel.page, x, y], texel.normal());
+        }
+        texels.release_tile(t);
+    }
+    normals
 }
 
 /// Where triangle `t`'s lightmap lies: its page and its corners in pixel coordinates.
@@ -214,26 +234,27 @@ pub fn read_seam_file(path: &Path) -> Result<Vec<(Pixel, Pixel)>, String> {
         .collect())
 }
 
-/// The mean relative luminance jump across `pairs` of `values`, 0 without pairs.
+/// The mean relative luminance jump across `pairs` of `values` (pairs with a non-finite
+/// side left out), 0 without pairs.
 pub fn mean_relative_jump(values: &[[f32; 3]], pairs: &[(u32, u32)]) -> f64 {
     if pairs.is_empty() {
         return 0.0;
     }
     let lum = |i: u32| f64::from(luminance_f32(values[i as usize]));
-    let mean = values
+    let finite: Vec<f64> = values
         .iter()
         .map(|v| f64::from(luminance_f32(*v)))
-        .sum::<f64>()
-        / values.len() as f64;
+        .filter(|l| l.is_finite())
+        .collect();
+    let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
     let eps = 1e-2 * mean.abs().max(f64::MIN_POSITIVE);
-    pairs
+    let jumps: Vec<f64> = pairs
         .iter()
-        .map(|&(a, b)| {
-            let (la, lb) = (lum(a), lum(b));
-            (la - lb).abs() / ((la + lb) / 2.0 + eps)
-        })
-        .sum::<f64>()
-        / pairs.len() as f64
+        .map(|&(a, b)| (lum(a), lum(b)))
+        .filter(|(la, lb)| la.is_finite() && lb.is_finite())
+        .map(|(la, lb)| (la - lb).abs() / ((la + lb) / 2.0 + eps))
+        .collect();
+    jumps.iter().sum::<f64>() / jumps.len().max(1) as f64
 }
 
 /// Stitches `values` along `pairs` (indices into `values`) in place: the least-squares fit of
