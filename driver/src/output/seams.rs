@@ -22,6 +22,9 @@
 //! a fixed order — a small sparse solve, deterministic, run on the merged results, so shards
 //! still give one bake's bytes. Other pixels are untouched.
 //!
+//! Memory: detection holds one entry per triangle edge and the seams' pixel pairs (with their
+//! texels' normals), never the atlas; stitching holds the seam pixels' values.
+//!
 //! The measure ([`mean_relative_jump`]): the mean over seam pairs of `|l_a − l_b| / (l̄ + ε)`,
 //! `l` the luminance, `l̄` the pair's mean and `ε` a hundredth of the seam pixels' mean
 //! luminance.
@@ -73,7 +76,6 @@ pub fn seam_pixel_pairs(scene: &Scene, texels: &TexelFile) -> Vec<(Pixel, Pixel)
     }
     let mut keys: Vec<&Key> = edges.keys().collect();
     keys.sort_unstable();
-    let normals = texel_normals(texels);
     let mut pairs = Vec::new();
     for key in keys {
         let sides = &edges[key];
@@ -85,6 +87,7 @@ pub fn seam_pixel_pairs(scene: &Scene, texels: &TexelFile) -> Vec<(Pixel, Pixel)
     }
     // Both pixels must hold a texel, and the texels face the same side (the two faces of a
     // thin sheet share its rim but not their light).
+    let normals = texel_normals(texels, &pairs);
     pairs.retain(|(a, b)| match (normals.get(a), normals.get(b)) {
         (Some(na), Some(nb)) => na.dot(*nb) >= PAIR_COS,
         _ => false,
@@ -94,16 +97,26 @@ pub fn seam_pixel_pairs(scene: &Scene, texels: &TexelFile) -> Vec<(Pixel, Pixel)
     pairs
 }
 
-/// The normal of every texel, by its pixel.
-fn texel_normals(texels: &TexelFile) -> HashMap<Pixel, glam::Vec3> {
-    let mut normals = HashMap::new();
+/// The normal of the texel at each pixel of `pairs` (pixels without a texel are absent):
+/// memory for the seams' pixels only, not the atlas.
+fn texel_normals(texels: &TexelFile, pairs: &[(Pixel, Pixel)]) -> HashMap<Pixel, glam::Vec3> {
+    let mut normals: HashMap<Pixel, glam::Vec3> = pairs
+        .iter()
+        .flat_map(|&(a, b)| [(a, glam::Vec3::ZERO), (b, glam::Vec3::ZERO)])
+        .collect();
+    let mut found = std::collections::HashSet::new();
     for t in 0..texels.tiles().len() {
         for texel in texels.tile_texels(t) {
             let [x, y] = texel.pixel.map(u32::from);
-            normals.insert([texel.page, x, y], texel.normal());
+            let pixel = [texel.page, x, y];
+            if let Some(n) = normals.get_mut(&pixel) {
+                *n = texel.normal();
+                found.insert(pixel);
+            }
         }
         texels.release_tile(t);
     }
+    normals.retain(|p, _| found.contains(p));
     normals
 }
 
