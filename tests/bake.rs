@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
-use guidebake::bake::finish::{finish, merge_pass};
+use guidebake::bake::finish::{FinishOptions, finish, merge_pass};
 use guidebake::bake::run::{BakeError, BakeJob, bake, bake_pass_with_progress};
 use guidebake::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Transport};
 use guidebake::bake::shard::Shard;
@@ -139,6 +139,7 @@ impl Fixture {
             shard,
             resume: false,
             aux: true,
+            finish: FinishOptions::default(),
         }
     }
 
@@ -321,6 +322,7 @@ fn series_passes_sharded_pass_by_pass_merge_to_the_same_bits() {
             shard: Shard::WHOLE,
             resume: false,
             aux: true,
+            finish: FinishOptions::default(),
         };
         let whole = job(&format!("{name}-whole.exr"));
         let report = bake(&whole, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
@@ -598,6 +600,7 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
             shard: Shard::WHOLE,
             resume: false,
             aux: false,
+            finish: FinishOptions::default(),
         };
         let report = bake(&job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
         let values = red_channel(&out);
@@ -663,6 +666,7 @@ fn global_weights_bake_the_closed_form_and_merge_shards_to_the_same_bits() {
         shard,
         resume: false,
         aux: true,
+        finish: FinishOptions::default(),
     };
     let whole = job("whole.exr", Shard::WHOLE);
     let report = bake(&whole, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();

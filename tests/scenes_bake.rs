@@ -17,6 +17,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
+use guidebake::bake::finish::FinishOptions;
 use guidebake::bake::run::{BakeJob, bake};
 use guidebake::bake::settings::{BakeSettings, Guiding, Transport};
 use guidebake::bake::shard::Shard;
@@ -67,6 +68,7 @@ fn bake_scene(scene: &Scene, texels: &Path, out: PathBuf, settings: BakeSettings
         shard: Shard::WHOLE,
         resume: false,
         aux: true,
+        finish: FinishOptions::default(),
     };
     let report = bake(&job, scene, &AtomicBool::new(false), &mut |_, _| {})
         .unwrap_or_else(|e| panic!("{}: {e}", scene.path.display()));

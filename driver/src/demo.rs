@@ -15,6 +15,7 @@ use std::path::PathBuf;
 
 use glam::{Vec2, Vec3};
 
+use crate::render::Camera;
 use crate::scene::{Material, Mesh, Scene, Sky, Sun, Triangle};
 
 /// Lightmap density the charts are laid out for (texels per metre).
@@ -36,11 +37,11 @@ const DOOR_THICKNESS: f32 = 0.04;
 
 /// A planar rectangle `origin + s·u + t·v`, s, t ∈ [0, 1], facing `u × v`.
 #[derive(Clone, Copy, Debug)]
-struct Face {
-    origin: Vec3,
-    u: Vec3,
-    v: Vec3,
-    material: u32,
+pub(crate) struct Face {
+    pub(crate) origin: Vec3,
+    pub(crate) u: Vec3,
+    pub(crate) v: Vec3,
+    pub(crate) material: u32,
 }
 
 /// The demo scene: materials, geometry with lightmap UVs, sky and sun.
@@ -59,6 +60,20 @@ pub fn ajar_room() -> Scene {
             box_faces(Vec3::new(2.6, 0.0, 1.0), table_axes(), 3, false),
         ),
     ];
+    let mut scene = scene_of_faces(&groups, materials);
+    scene.path = PathBuf::from("<demo: room with a door ajar>");
+    scene.sky = Sky::Constant(Vec3::new(0.6, 0.75, 1.0));
+    scene.sun = Some(Sun {
+        direction: Vec3::new(0.25, 0.35, 1.0).normalize(),
+        angular_radius: 0.00465,
+        irradiance: Vec3::new(6.0, 5.6, 5.0),
+    });
+    scene
+}
+
+/// A scene of named groups of planar faces (one mesh each), every face one chart packed by
+/// [`pack_charts`]; no lights, black sky. The demo's room, and test rooms elsewhere.
+pub(crate) fn scene_of_faces(groups: &[(&str, Vec<Face>)], materials: Vec<Material>) -> Scene {
     let all: Vec<Face> = groups.iter().flat_map(|(_, f)| f.iter().copied()).collect();
     let charts = pack_charts(&all);
     let (mut meshes, mut triangles) = (Vec::new(), Vec::new());
@@ -77,18 +92,25 @@ pub fn ajar_room() -> Scene {
         });
     }
     Scene {
-        path: PathBuf::from("<demo: room with a door ajar>"),
+        path: PathBuf::from("<faces>"),
         meshes,
         triangles,
         materials,
         lights: Vec::new(),
-        sun: Some(Sun {
-            direction: Vec3::new(0.25, 0.35, 1.0).normalize(),
-            angular_radius: 0.00465,
-            irradiance: Vec3::new(6.0, 5.6, 5.0),
-        }),
-        sky: Sky::Constant(Vec3::new(0.6, 0.75, 1.0)),
+        sun: None,
+        sky: Sky::None,
         degenerate_triangles: 0,
+    }
+}
+
+/// The demo's view: from the corner of the room opposite the door, at eye height, looking at
+/// the door ajar (70° vertical field of view, the image's `aspect` = width / height).
+pub fn demo_camera(aspect: f32) -> Camera {
+    let eye = Vec3::new(0.35, 1.6, 0.35);
+    let target = Vec3::new((DOOR_X0 + DOOR_X1) / 2.0 + 0.4, 0.9, D);
+    Camera {
+        aspect: Some(aspect),
+        ..Camera::look_at(eye, target, Vec3::Y, 70f32.to_radians())
     }
 }
 

@@ -16,6 +16,7 @@
 //! | [`synth`] | procedural worlds of any size, streamed |
 //! | [`output`] | result file, journal of finished tiles, ρ, EXR pages |
 //! | [`preview`] | PNG figures and tone-mapped previews |
+//! | [`render`] | a picture of the lit scene: eye rays shaded from the baked lightmap |
 //! | [`transport`] | light transport: next-event estimation, series lookups, path sampling |
 //! | [`bench`] | the run-time-against-error harness and the Figure-5 overhead |
 //! | [`cmd`] | the `guidebake` subcommands |
@@ -30,6 +31,7 @@ pub mod facing;
 pub mod output;
 pub mod prepare;
 pub mod preview;
+pub mod render;
 pub mod scene;
 pub mod synth;
 #[doc(hidden)]

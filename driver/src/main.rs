@@ -29,6 +29,8 @@ enum Command {
     Merge(cmd::merge::MergeArgs),
     /// Run time against error of every method, and the guiding overhead (paper Figure 5).
     Bench(cmd::bench::BenchArgs),
+    /// Render a picture of the lit scene from its glTF camera or an automatic view.
+    Render(cmd::render::RenderArgs),
     /// Print a texel file's header and counts; dump chosen texels as JSON.
     Inspect(cmd::inspect::InspectArgs),
 }
@@ -44,6 +46,7 @@ fn main() -> ExitCode {
         Command::Bake(a) => cmd::bake::run(a),
         Command::Merge(a) => cmd::merge::run(a),
         Command::Bench(a) => cmd::bench::run_bench(a),
+        Command::Render(a) => cmd::render::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

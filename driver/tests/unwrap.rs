@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use glam::{Vec2, Vec3};
+use guidebake::bake::finish::FinishOptions;
 use guidebake::bake::run::{BakeJob, bake};
 use guidebake::bake::settings::{BakeSettings, EmitterSampling, Guiding, Transport};
 use guidebake::bake::shard::Shard;
@@ -316,6 +317,7 @@ fn a_room_without_lightmap_uvs_unwraps_bakes_and_round_trips() {
         shard: Shard::WHOLE,
         resume: false,
         aux: false,
+        finish: FinishOptions::default(),
     };
     // The original scene has no lightmap UVs to read bounces through: refused, naming the
     // mesh, with nothing left behind.

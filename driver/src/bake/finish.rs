@@ -9,12 +9,15 @@ use super::run::{BakeError, file_error};
 use super::settings::{MAX_ITERATIONS, SettingsError};
 use super::workdir::{Manifest, merged_dir, merged_results, pass_files, read_manifest};
 use crate::output::atomic::temporary_name;
+use crate::output::denoise::{ATrous, Denoiser, NoisyTexel, Window};
 use crate::output::exr_pages::{PageStream, page_path};
 use crate::output::journal::{Journal, TileRecord, dedup_tiles, rho_sums};
 use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
+use crate::output::seams::{Pixel, mean_relative_jump, read_seam_file, seam_file_path, stitch};
 use crate::texels::TexelFile;
 use guidebake_kernels::estimator::{
-    IterationVariance, RhoAccumulator, TexelEstimate, Welford, combine_weighted, plain_average,
+    IterationVariance, RhoAccumulator, TexelEstimate, Welford, combine_weighted, luminance_f32,
+    plain_average,
 };
 
 /// Pixels of padding around every chart in the written pages.
@@ -31,6 +34,40 @@ pub struct Written {
     pub previews: Vec<PathBuf>,
     /// Non-finite pixels replaced by zero.
     pub non_finite_pixels: u64,
+    /// Seam pairs found (with `--seams stitch`).
+    pub seam_pairs: u64,
+    /// Mean relative jump across the seam pairs before and after stitching.
+    pub seam_jump: Option<[f64; 2]>,
+}
+
+/// How the pages are finished.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Denoise {
+    /// The estimates as baked (the default: the lightmap is the estimator's output, whose
+    /// error `guidebake bench` measures, with no filter bias and nothing blurred).
+    #[default]
+    Off,
+    /// The edge-aware À-Trous filter of [`crate::output::denoise`], per tile with a halo.
+    On,
+}
+
+/// Whether seams are stitched ([`crate::output::seams`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Seams {
+    /// Each chart keeps its own estimates (the default, as for [`Denoise`]).
+    #[default]
+    Off,
+    /// Seam texels are fitted to agree by least squares.
+    Stitch,
+}
+
+/// What [`finish_with`] does to the pages beyond writing the estimates.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FinishOptions {
+    /// Denoise.
+    pub denoise: Denoise,
+    /// Stitch seams (after denoising).
+    pub seams: Seams,
 }
 
 /// The final streaming pass: reduces ρ over every tile of the work directories (one per
@@ -41,6 +78,38 @@ pub struct Written {
 /// A [`BakeError`] naming the work directory or page: a shard missing, shards of different
 /// bakes, a tile not baked, a page that cannot be written.
 pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Written, BakeError> {
+    finish_with(texels, dirs, out, FinishOptions::default())
+}
+
+/// [`finish`], denoising the pages with [`ATrous`] and stitching their seams as `options`
+/// ask. Both run on the merged results (the filter tile by tile with a halo, the stitch on
+/// the border texels once every tile is written), so n shards still give the bytes of one
+/// bake.
+///
+/// # Errors
+/// As [`finish`].
+pub fn finish_with(
+    texels: &TexelFile,
+    dirs: &[PathBuf],
+    out: &Path,
+    options: FinishOptions,
+) -> Result<Written, BakeError> {
+    let filter = ATrous::default();
+    let denoiser = (options.denoise == Denoise::On).then_some(&filter as &dyn Denoiser);
+    finish_filtered(texels, dirs, out, denoiser, options.seams)
+}
+
+/// [`finish_with`] with any [`Denoiser`] (or none): where another filter plugs in.
+///
+/// # Errors
+/// As [`finish`].
+pub fn finish_filtered(
+    texels: &TexelFile,
+    dirs: &[PathBuf],
+    out: &Path,
+    filter: Option<&dyn Denoiser>,
+    seams: Seams,
+) -> Result<Written, BakeError> {
     let shards = open_shards(texels, dirs, None)?;
     let first = &shards[0].manifest;
     let all = every_tile(texels, &shards)?;
@@ -58,8 +127,19 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
         rho,
         ..Default::default()
     };
-    let k = first.iterations as usize;
-    let mut texel_batches = Vec::new();
+    let source = TileSource {
+        texels,
+        shards: &shards,
+        batches: batches.as_deref(),
+        global: global.as_ref(),
+        rho,
+        k: first.iterations as usize,
+    };
+    let mut seams = match seams {
+        Seams::Stitch => Some(SeamWork::load(texels)?),
+        Seams::Off => None,
+    };
+    let mut pending = Vec::new();
     let page_count = texels.pages().len() as u32;
     for (page, size) in texels.pages().iter().enumerate() {
         let path = page_path(out, page as u32, page_count);
@@ -70,31 +150,28 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
             size.height,
             aux,
         )?;
-        let mut buffer = Vec::new();
+        let grid = filter.map(|_| TileGrid::new(texels, page as u32));
         for (t, tile) in texels
             .tiles()
             .iter()
             .enumerate()
             .filter(|(_, t)| t.page as usize == page)
         {
-            let results = &shards[t % shards.len()].results;
-            buffer.resize(tile.texel_count as usize, TexelResult::default());
-            results.read(tile.first_texel, &mut buffer)?;
-            if let (Some(files), Some(_)) = (&batches, &global) {
-                texel_batches.resize(buffer.len() * k, Welford::new());
-                files[t % files.len()].read(tile.first_texel, &mut texel_batches)?;
-            }
+            let values = source.values(t)?;
+            let denoised = match (filter, &grid) {
+                (Some(f), Some(grid)) => Some(denoise_tile(&source, grid, f, t, &values)?),
+                _ => None,
+            };
             let mut rect = image.rect(tile.x, tile.y, tile.width, tile.height)?;
-            for (i, (texel, r)) in texels.tile_texels(t).iter().zip(&buffer).enumerate() {
-                if r.flags & FLAG_BAKED == 0 {
+            for (i, (texel, v)) in texels.tile_texels(t).iter().zip(&values).enumerate() {
+                let Some((rgb, r)) = v else {
                     continue;
-                }
-                let [x, y] = texel.pixel.map(u32::from);
-                let irradiance = match &global {
-                    Some(g) => g.combine(&texel_batches[i * k..(i + 1) * k]),
-                    None => r.irradiance.map(f64::from),
                 };
-                let rgb = irradiance.map(|c| (c * rho) as f32);
+                let [x, y] = texel.pixel.map(u32::from);
+                let rgb = denoised.as_ref().and_then(|d| d[i]).unwrap_or(*rgb);
+                if let Some(seams) = &mut seams {
+                    seams.record([page as u32, x, y], rgb);
+                }
                 let [px, py, pz] = texel.position;
                 let [nx, ny, nz] = texel.normal;
                 // In AUX_CHANNELS' order; unused without --aux.
@@ -114,13 +191,256 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
             image.put_rect(&rect)?;
             texels.release_tile(t);
         }
+        pending.push((image, path));
+        if seams.is_none() {
+            finish_pages(&mut pending, &mut written)?;
+        }
+    }
+    if let Some(seams) = seams {
+        let (before, after) = seams.stitch(&mut pending)?;
+        written.seam_pairs = seams.pairs.len() as u64;
+        written.seam_jump = Some([before, after]);
+    }
+    finish_pages(&mut pending, &mut written)?;
+    Ok(written)
+}
+
+/// Dilates and writes the `pending` pages (in order) and their previews.
+fn finish_pages(
+    pending: &mut Vec<(PageStream, PathBuf)>,
+    written: &mut Written,
+) -> Result<(), BakeError> {
+    for (image, path) in pending.drain(..) {
         written.non_finite_pixels += image.non_finite_pixels();
         let preview = path.with_extension("png");
         image.finish(DILATION_PIXELS, &path, &preview)?;
         written.pages.push(path);
         written.previews.push(preview);
     }
-    Ok(written)
+    Ok(())
+}
+
+/// The seam pairs of a texel file and, as the pages are written, their pixels' values.
+struct SeamWork {
+    /// The seam pixels, in first-seen order of the pairs.
+    pixels: Vec<Pixel>,
+    /// Pairs of indices into `pixels`.
+    pairs: Vec<(u32, u32)>,
+    /// Index into `pixels` by pixel.
+    index: std::collections::HashMap<Pixel, u32>,
+    /// The values written, by index (NaN until recorded: a pixel without a baked texel).
+    values: Vec<[f32; 3]>,
+}
+
+impl SeamWork {
+    /// The pairs of the seam file beside the texel file.
+    fn load(texels: &TexelFile) -> Result<Self, BakeError> {
+        let path = seam_file_path(texels.path());
+        let pixel_pairs = read_seam_file(&path).map_err(|what| file_error(&path, what))?;
+        let mut index = std::collections::HashMap::new();
+        let mut pixels = Vec::new();
+        let mut id = |p: Pixel| {
+            *index.entry(p).or_insert_with(|| {
+                pixels.push(p);
+                pixels.len() as u32 - 1
+            })
+        };
+        let pairs = pixel_pairs.iter().map(|&(a, b)| (id(a), id(b))).collect();
+        let values = vec![[f32::NAN; 3]; pixels.len()];
+        Ok(Self {
+            pixels,
+            pairs,
+            index,
+            values,
+        })
+    }
+
+    fn record(&mut self, pixel: Pixel, rgb: [f32; 3]) {
+        if let Some(&i) = self.index.get(&pixel) {
+            self.values[i as usize] = rgb;
+        }
+    }
+
+    /// Stitches the recorded values and writes them into the pages; returns the mean
+    /// relative jump before and after.
+    fn stitch(&self, pages: &mut [(PageStream, PathBuf)]) -> Result<(f64, f64), BakeError> {
+        let mut values = self.values.clone();
+        let before = mean_relative_jump(&values, &self.pairs);
+        stitch(&mut values, &self.pairs);
+        let after = mean_relative_jump(&values, &self.pairs);
+        let updates = self.pixels.iter().zip(values.iter().zip(&self.values));
+        for (&[page, x, y], (rgb, old)) in updates {
+            if rgb != old && rgb.iter().all(|c| c.is_finite()) {
+                pages[page as usize].0.set_rgb(x, y, *rgb)?;
+            }
+        }
+        Ok((before, after))
+    }
+}
+
+/// Where the pages' values come from: the shards' results (or batches, with global weights),
+/// times ρ.
+struct TileSource<'a> {
+    texels: &'a TexelFile,
+    shards: &'a [ShardWork],
+    batches: Option<&'a [BatchFile]>,
+    global: Option<&'a GlobalWeights>,
+    rho: f64,
+    k: usize,
+}
+
+/// A baked texel's irradiance as the page shows it, and its result record.
+type TexelValue = Option<([f32; 3], TexelResult)>;
+
+impl TileSource<'_> {
+    /// Tile `t`'s texels in file order: irradiance × ρ and the result, `None` if not baked.
+    fn values(&self, t: usize) -> Result<Vec<TexelValue>, BakeError> {
+        let tile = &self.texels.tiles()[t];
+        let mut results = vec![TexelResult::default(); tile.texel_count as usize];
+        self.shards[t % self.shards.len()]
+            .results
+            .read(tile.first_texel, &mut results)?;
+        let mut batches = Vec::new();
+        if let (Some(files), Some(_)) = (self.batches, self.global) {
+            batches.resize(results.len() * self.k, Welford::new());
+            files[t % files.len()].read(tile.first_texel, &mut batches)?;
+        }
+        let k = self.k;
+        Ok(results
+            .into_iter()
+            .enumerate()
+            .map(|(i, r)| {
+                if r.flags & FLAG_BAKED == 0 {
+                    return None;
+                }
+                let irradiance = match self.global {
+                    Some(g) => g.combine(&batches[i * k..(i + 1) * k]),
+                    None => r.irradiance.map(f64::from),
+                };
+                Some((irradiance.map(|c| (c * self.rho) as f32), r))
+            })
+            .collect())
+    }
+}
+
+/// The tiles of one page by the grid cells (of the texel file's tile size) they overlap, to
+/// find the tiles under a window.
+struct TileGrid {
+    cell: u32,
+    cells: std::collections::HashMap<(u32, u32), Vec<usize>>,
+}
+
+impl TileGrid {
+    fn new(texels: &TexelFile, page: u32) -> Self {
+        let cell = texels.header().tile_size.max(1);
+        let mut cells: std::collections::HashMap<(u32, u32), Vec<usize>> = Default::default();
+        for (t, tile) in texels.tiles().iter().enumerate() {
+            if tile.page != page || tile.width == 0 || tile.height == 0 {
+                continue;
+            }
+            for cy in tile.y / cell..=(tile.y + tile.height - 1) / cell {
+                for cx in tile.x / cell..=(tile.x + tile.width - 1) / cell {
+                    cells.entry((cx, cy)).or_default().push(t);
+                }
+            }
+        }
+        Self { cell, cells }
+    }
+
+    /// The tiles overlapping pixels [x0, x1) × [y0, y1), each once, in file order.
+    fn overlapping(&self, x0: u32, y0: u32, x1: u32, y1: u32) -> Vec<usize> {
+        let mut found: Vec<usize> = (y0 / self.cell..=(y1 - 1) / self.cell)
+            .flat_map(|cy| (x0 / self.cell..=(x1 - 1) / self.cell).map(move |cx| (cx, cy)))
+            .filter_map(|c| self.cells.get(&c))
+            .flatten()
+            .copied()
+            .collect();
+        found.sort_unstable();
+        found.dedup();
+        found
+    }
+}
+
+/// Denoises tile `t` (its `values`): builds the window of the tile and its halo from the
+/// tiles around it, filters it, and returns the filtered irradiance per texel of the tile.
+fn denoise_tile(
+    source: &TileSource<'_>,
+    grid: &TileGrid,
+    filter: &dyn Denoiser,
+    t: usize,
+    values: &[TexelValue],
+) -> Result<Vec<Option<[f32; 3]>>, BakeError> {
+    let texels = source.texels;
+    let tile = texels.tiles()[t];
+    let page = texels.pages()[tile.page as usize];
+    let halo = filter.halo();
+    let x0 = tile.x.saturating_sub(halo);
+    let y0 = tile.y.saturating_sub(halo);
+    let x1 = (tile.x + tile.width + halo).min(page.width);
+    let y1 = (tile.y + tile.height + halo).min(page.height);
+    let (w, h) = ((x1 - x0) as usize, (y1 - y0) as usize);
+    let mut window = Window {
+        width: w,
+        height: h,
+        texels: vec![None; w * h],
+    };
+    let mut place = |records: &[crate::texels::TexelRecord], values: &[TexelValue]| {
+        for (texel, v) in records.iter().zip(values) {
+            let [x, y] = texel.pixel.map(u32::from);
+            if !(x0..x1).contains(&x) || !(y0..y1).contains(&y) {
+                continue;
+            }
+            if let Some(noisy) = v.as_ref().and_then(|(rgb, r)| noisy_texel(texel, *rgb, r)) {
+                window.texels[(y - y0) as usize * w + (x - x0) as usize] = Some(noisy);
+            }
+        }
+    };
+    for n in grid.overlapping(x0, y0, x1, y1) {
+        if n == t {
+            place(texels.tile_texels(t), values);
+        } else {
+            let neighbour = source.values(n)?;
+            place(texels.tile_texels(n), &neighbour);
+            texels.release_tile(n);
+        }
+    }
+    let filtered = filter.denoise(&window);
+    Ok(texels
+        .tile_texels(t)
+        .iter()
+        .map(|texel| {
+            let [x, y] = texel.pixel.map(u32::from);
+            filtered[(y - y0) as usize * w + (x - x0) as usize]
+        })
+        .collect())
+}
+
+/// A baked texel with its guides, or `None` when its value is not finite (it is then
+/// written as the page writer treats it, and takes no part in the filter).
+fn noisy_texel(
+    texel: &crate::texels::TexelRecord,
+    rgb: [f32; 3],
+    r: &TexelResult,
+) -> Option<NoisyTexel> {
+    if !rgb.iter().all(|c| c.is_finite()) {
+        return None;
+    }
+    let sd = r.rel_std_error * luminance_f32(rgb);
+    let variance = if sd.is_finite() { sd * sd } else { 0.0 };
+    let spacing = texel
+        .dpdu
+        .map(|c| c * c)
+        .iter()
+        .sum::<f32>()
+        .max(texel.dpdv.map(|c| c * c).iter().sum::<f32>())
+        .sqrt();
+    Some(NoisyTexel {
+        rgb,
+        variance,
+        position: texel.position(),
+        normal: texel.normal(),
+        spacing,
+    })
 }
 
 /// The journal records of every tile from the shards' work (each tile once), or an error
@@ -346,4 +666,219 @@ fn open_shards(
         )));
     }
     Ok(shards)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::atomic::AtomicBool;
+
+    use glam::Vec3;
+
+    use super::*;
+    use crate::bake::run::{BakeJob, bake};
+    use crate::bake::settings::{BakeSettings, Transport};
+    use crate::bake::shard::Shard;
+    use crate::bake::workdir::work_dir;
+    use crate::demo::{Face, scene_of_faces};
+    use crate::output::seams::prepare_seams;
+    use crate::prepare::{Layout, PrepareOptions, Resolution, prepare};
+    use crate::scene::{Material, Scene};
+
+    const DENOISE: FinishOptions = FinishOptions {
+        denoise: Denoise::On,
+        seams: Seams::Off,
+    };
+    const BOTH: FinishOptions = FinishOptions {
+        denoise: Denoise::On,
+        seams: Seams::Stitch,
+    };
+
+    /// The wall between the rooms: x ∈ [WALL, WALL + THICK].
+    const WALL: f32 = 2.0;
+    const THICK: f32 = 0.05;
+
+    /// Two closed rooms side by side, x ∈ [0, 2] lit by its emissive ceiling and
+    /// x ∈ [2.05, 4.05] dark, parted by a thin wall; the floor is two faces (two charts, a
+    /// seam at x = 1), the second of which runs on beneath the wall into the dark room.
+    fn two_rooms() -> Scene {
+        let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
+        let end = 2.0 * WALL + THICK;
+        let dark = WALL + THICK;
+        let face = |origin: Vec3, u: Vec3, v: Vec3, material: u32| Face {
+            origin,
+            u,
+            v,
+            material,
+        };
+        let faces = vec![
+            face(Vec3::ZERO, z * 2.0, x, 0),            // floor, +y, x < 1
+            face(Vec3::X, z * 2.0, x * (end - 1.0), 0), // floor, x > 1
+            face(Vec3::new(0.0, 2.0, 0.0), x * WALL, z * 2.0, 1), // lit ceiling, −y
+            face(Vec3::new(dark, 2.0, 0.0), x * WALL, z * 2.0, 0), // dark ceiling
+            face(Vec3::ZERO, y * 2.0, z * 2.0, 0),      // x = 0, +x
+            face(Vec3::new(end, 0.0, 0.0), z * 2.0, y * 2.0, 0), // x = end, −x
+            face(Vec3::ZERO, x * WALL, y * 2.0, 0),     // z = 0, lit
+            face(Vec3::new(dark, 0.0, 0.0), x * WALL, y * 2.0, 0), // z = 0, dark
+            face(Vec3::new(0.0, 0.0, 2.0), y * 2.0, x * WALL, 0), // z = 2, lit
+            face(Vec3::new(dark, 0.0, 2.0), y * 2.0, x * WALL, 0), // z = 2, dark
+            face(Vec3::new(WALL, 0.0, 0.0), z * 2.0, y * 2.0, 0), // the wall, lit side
+            face(Vec3::new(dark, 0.0, 0.0), y * 2.0, z * 2.0, 0), // the wall, dark side
+        ];
+        let materials = vec![
+            Material {
+                name: "walls".into(),
+                albedo: Vec3::splat(0.6),
+                emission: Vec3::ZERO,
+            },
+            Material {
+                name: "light".into(),
+                albedo: Vec3::splat(0.5),
+                emission: Vec3::splat(2.0),
+            },
+        ];
+        scene_of_faces(&[("rooms", faces)], materials)
+    }
+
+    struct Rooms {
+        dir: tempfile::TempDir,
+        scene: Scene,
+        texels: PathBuf,
+    }
+
+    impl Rooms {
+        fn new() -> Self {
+            let dir = tempfile::tempdir().unwrap();
+            let scene = two_rooms();
+            let texels = dir.path().join("rooms.texels");
+            let options = PrepareOptions {
+                resolution: Resolution::TexelsPerUnit(10.0),
+                layout: Layout::Shared,
+            };
+            prepare(&scene, &texels, options).unwrap();
+            prepare_seams(&scene, &texels).unwrap();
+            Self { dir, scene, texels }
+        }
+
+        fn job(&self, out: &str, shard: Shard, finish: FinishOptions) -> BakeJob {
+            BakeJob {
+                texels: self.texels.clone(),
+                out: self.dir.path().join(out),
+                settings: BakeSettings {
+                    spp: 32,
+                    transport: Transport::Path,
+                    ..Default::default()
+                },
+                threads: 2,
+                shard,
+                resume: false,
+                aux: true,
+                finish,
+            }
+        }
+
+        fn bake(&self, job: &BakeJob) -> crate::bake::run::BakeReport {
+            bake(job, &self.scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap()
+        }
+    }
+
+    #[test]
+    fn denoised_and_stitched_shards_merge_to_the_bytes_of_one_bake() {
+        let rooms = Rooms::new();
+        let whole = rooms.job("whole.exr", Shard::WHOLE, BOTH);
+        rooms.bake(&whole);
+        let mut dirs = Vec::new();
+        for index in [1, 0] {
+            let job = rooms.job("sharded.exr", Shard { index, count: 2 }, BOTH);
+            rooms.bake(&job);
+            dirs.push(work_dir(&job.out, job.shard));
+        }
+        let texels = TexelFile::open(&rooms.texels).unwrap();
+        let merged = rooms.dir.path().join("merged.exr");
+        finish_with(&texels, &dirs, &merged, BOTH).unwrap();
+        assert!(std::fs::read(&whole.out).unwrap() == std::fs::read(&merged).unwrap());
+        let raw = rooms.dir.path().join("raw.exr");
+        finish_with(&texels, &dirs, &raw, FinishOptions::default()).unwrap();
+        assert!(std::fs::read(&raw).unwrap() != std::fs::read(&merged).unwrap());
+    }
+
+    #[test]
+    fn a_thin_wall_keeps_the_dark_room_dark_after_denoising() {
+        let rooms = Rooms::new();
+        let (raw, denoised) = (
+            rooms.job("raw.exr", Shard::WHOLE, FinishOptions::default()),
+            rooms.job("denoised.exr", Shard::WHOLE, DENOISE),
+        );
+        rooms.bake(&raw);
+        rooms.bake(&denoised);
+        let texels = TexelFile::open(&rooms.texels).unwrap();
+        let read = |out: &Path| crate::output::readback::read_lightmap(&texels, out).unwrap();
+        let (before, after) = (read(&raw.out), read(&denoised.out));
+        let spacing = 0.1;
+        let (mut dark, mut lit_sum, mut lit_sum_raw, mut lit) = (0, 0.0f64, 0.0f64, 0);
+        for (i, texel) in texels.texels().iter().enumerate() {
+            let (Some(b), Some(a)) = (before[i], after[i]) else {
+                continue;
+            };
+            let p = texel.position();
+            if p.x > WALL + THICK + 2.0 * spacing {
+                // The dark room, two texels or more from the wall: no light reaches it.
+                dark += 1;
+                assert_eq!(b, [0.0; 3], "raw dark texel {i} at {p}");
+                assert_eq!(a, [0.0; 3], "denoised dark texel {i} at {p} took light");
+            } else if p.x < WALL - 2.0 * spacing {
+                lit += 1;
+                lit_sum += f64::from(a[0]);
+                lit_sum_raw += f64::from(b[0]);
+            }
+        }
+        assert!(dark > 500 && lit > 500, "{dark} dark, {lit} lit texels");
+        let (mean, mean_raw) = (lit_sum / lit as f64, lit_sum_raw / lit as f64);
+        assert!(mean_raw > 0.5, "the lit room is lit: {mean_raw}");
+        assert!(
+            (mean - mean_raw).abs() < 0.03 * mean_raw,
+            "the filter keeps the lit room's mean: {mean_raw} → {mean}"
+        );
+    }
+
+    #[test]
+    fn stitching_closes_the_floor_seam() {
+        let rooms = Rooms::new();
+        let stitched = FinishOptions {
+            denoise: Denoise::Off,
+            seams: Seams::Stitch,
+        };
+        let report = rooms.bake(&rooms.job("stitched.exr", Shard::WHOLE, stitched));
+        let [before, after] = report.seam_jump.expect("seams were stitched");
+        assert!(before > 0.02, "the raw seam jumps: {before}");
+        assert!(
+            after < before / 4.0,
+            "mean relative jump {before} → {after}"
+        );
+        let pairs = read_seam_file(&seam_file_path(&rooms.texels)).unwrap();
+        assert!(pairs.len() >= 20, "{} pairs", pairs.len());
+        // Only the floor's cut at x = 1 is a seam (faces meet at right angles elsewhere): the
+        // pairs' texels lie on it.
+        let texels = TexelFile::open(&rooms.texels).unwrap();
+        let at: std::collections::HashMap<Pixel, Vec3> = texels
+            .texels()
+            .iter()
+            .map(|t| {
+                (
+                    [t.page, u32::from(t.pixel[0]), u32::from(t.pixel[1])],
+                    t.position(),
+                )
+            })
+            .collect();
+        for (a, b) in &pairs {
+            let (a, b) = (at[a], at[b]);
+            assert!(
+                (a.x - 1.0).abs() < 0.2 && (b.x - 1.0).abs() < 0.2,
+                "{a} {b}"
+            );
+            assert!(
+                a.y.abs() < 1e-3 && b.y.abs() < 1e-3,
+                "on the floor: {a} {b}"
+            );
+        }
+    }
 }

@@ -25,7 +25,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::finish::finish;
+use super::finish::{FinishOptions, finish_with};
 use super::gather::{GatherCounters, TileBaker};
 use super::pipeline::{self, PipelineConfig, PipelineError, TileBuffer, TileFiles};
 use super::settings::{BakeSettings, Combine, SettingsError};
@@ -61,6 +61,8 @@ pub struct BakeJob {
     pub resume: bool,
     /// Write auxiliary channels (sample count, relative standard error, validity).
     pub aux: bool,
+    /// Denoising and seam stitching as the pages are written.
+    pub finish: FinishOptions,
 }
 
 /// What a bake did: the stats JSON.
@@ -91,6 +93,8 @@ pub struct BakeReport {
     pub pages: Vec<PathBuf>,
     /// Pixels with non-finite results replaced by zero when writing (should be 0).
     pub non_finite_pixels: u64,
+    /// Mean relative jump across seams before and after stitching (`--seams stitch`).
+    pub seam_jump: Option<[f64; 2]>,
 }
 
 /// Wall-clock seconds of each phase.
@@ -305,11 +309,12 @@ pub fn bake_pass_with_progress(
     drop(world);
     if !report.interrupted && job.shard.count == 1 && only_pass.is_none() {
         let clock = Instant::now();
-        let written = finish(&texels, std::slice::from_ref(&dir), &job.out)?;
+        let written = finish_with(&texels, std::slice::from_ref(&dir), &job.out, job.finish)?;
         report.seconds.write_pages = clock.elapsed().as_secs_f64();
         report.rho = written.rho;
         report.pages = written.pages;
         report.non_finite_pixels = written.non_finite_pixels;
+        report.seam_jump = written.seam_jump;
         retire_work(&dir)?;
     }
     Ok(report)

@@ -16,6 +16,7 @@ use serde::Serialize;
 use super::BenchError;
 use super::method::{Method, serialize_value_name, value_name};
 use super::metrics::{ErrorStats, compare};
+use crate::bake::finish::FinishOptions;
 use crate::bake::run::{BakeJob, BakeReport, bake};
 use crate::bake::settings::{BakeSettings, EmitterSampling, Guiding, Transport};
 use crate::bake::shard::Shard;
@@ -85,6 +86,7 @@ impl Bench<'_> {
             shard: Shard::WHOLE,
             resume: false,
             aux: false,
+            finish: FinishOptions::default(),
         };
         let clock = Instant::now();
         let cpu = process_cpu_s();

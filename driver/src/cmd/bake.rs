@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use crate::bake::finish::{Denoise, FinishOptions, Seams};
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress};
 use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Schedule, Transport};
 use crate::bake::shard::Shard;
@@ -80,6 +81,15 @@ pub struct BakeArgs {
     /// Extra EXR channels: sample count, relative standard error, validity.
     #[arg(long)]
     pub aux: bool,
+    /// Denoise the lightmap as its pages are written: an edge-aware À-Trous filter guided by
+    /// each texel's position, normal and variance (docs/lightmaps.md). Off by default: the
+    /// lightmap is then the estimator's output, unbiased and unblurred, as the bench measures.
+    #[arg(long, value_enum, default_value_t = Denoise::Off)]
+    pub denoise: Denoise,
+    /// Make the texels on the two sides of a UV seam agree (least-squares stitching after
+    /// denoising; docs/lightmaps.md). Off by default, as --denoise.
+    #[arg(long, value_enum, default_value_t = Seams::Off)]
+    pub seams: Seams,
     /// Continue an interrupted bake from its journal.
     #[arg(long)]
     pub resume: bool,
@@ -136,6 +146,10 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         shard: args.shard,
         resume: args.resume,
         aux: args.aux,
+        finish: FinishOptions {
+            denoise: args.denoise,
+            seams: args.seams,
+        },
     };
     let report = run_with_progress(&job, args.pass, &scene)?;
     if let Some(path) = &args.stats {

@@ -1,15 +1,27 @@
 //! `guidebake demo [-o DIR]`: the bundled default. Builds the generated room lit through a
 //! door ajar ([`crate::demo`]), prepares its texels, and bakes it twice at equal sample
 //! counts — unguided baseline and coherent guiding — writing both lightmaps (EXR) and their
-//! previews (PNG), and each bake's stats JSON.
+//! previews (PNG), each bake's stats JSON, and the room seen through [`demo_camera`] lit by
+//! each lightmap ([`crate::render`]): `baseline.view.png`, `guided.view.png` and the two side
+//! by side at one exposure, `views.png`.
 
 use std::path::PathBuf;
 
+use crate::bake::finish::FinishOptions;
 use crate::bake::run::BakeJob;
 use crate::bake::settings::{BakeSettings, Guiding};
 use crate::bake::shard::Shard;
-use crate::demo::{DEMO_TEXELS_PER_METRE, ajar_room};
+use crate::demo::{DEMO_TEXELS_PER_METRE, ajar_room, demo_camera};
 use crate::prepare::{Layout, PrepareOptions, Resolution, prepare};
+use crate::render::{Lightmap, Stage, View, ViewOptions, render, side_by_side};
+use crate::texels::TexelFile;
+
+/// Size of each rendered view of the demo.
+const VIEW: ViewOptions = ViewOptions {
+    width: 640,
+    height: 400,
+    cutaway: false,
+};
 
 /// Arguments of `guidebake demo`.
 #[derive(Debug, clap::Args)]
@@ -39,6 +51,7 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
         layout: Layout::Shared,
     };
     let prepared = prepare(&scene, &texels, options)?;
+    crate::output::seams::prepare_seams(&scene, &texels)?;
     eprintln!(
         "prepared {} texels in {} tiles: {}",
         prepared.texels,
@@ -64,6 +77,7 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
             shard: Shard::WHOLE,
             resume: false,
             aux: true,
+            finish: FinishOptions::default(),
         };
         let report = super::bake::run_with_progress(&job, None, &scene)?;
         if report.interrupted {
@@ -79,5 +93,32 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
             out.display()
         );
     }
+    write_views(&args.out, &scene, &texels)
+}
+
+/// Renders the room lit by each lightmap; writes each view and both side by side, at the
+/// guided view's automatic exposure.
+fn write_views(
+    dir: &std::path::Path,
+    scene: &crate::scene::Scene,
+    texels: &std::path::Path,
+) -> Result<(), super::CmdError> {
+    let texels = TexelFile::open(texels)?;
+    let stage = Stage::new(scene)?;
+    let camera = demo_camera(VIEW.width as f32 / VIEW.height as f32);
+    let mut views: Vec<View> = Vec::new();
+    for name in ["baseline", "guided"] {
+        let lightmap = Lightmap::load(&texels, scene, &dir.join(format!("{name}.exr")))?;
+        views.push(render(&stage, &lightmap, &camera, VIEW));
+    }
+    let exposure = views[1].auto_exposure();
+    for (name, view) in ["baseline", "guided"].iter().zip(&views) {
+        let path = dir.join(format!("{name}.view.png"));
+        crate::preview::write_png_rgb8(&path, view.width, view.height, &view.to_rgb8(exposure))?;
+    }
+    let (w, h, rows) = side_by_side(&[&views[0], &views[1]], exposure, 8);
+    let path = dir.join("views.png");
+    crate::preview::write_png_rgb8(&path, w, h, &rows)?;
+    eprintln!("  views: {} (baseline | guided)", path.display());
     Ok(())
 }

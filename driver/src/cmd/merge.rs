@@ -5,7 +5,7 @@
 
 use std::path::PathBuf;
 
-use crate::bake::finish::{finish, merge_pass};
+use crate::bake::finish::{Denoise, FinishOptions, Seams, finish_with, merge_pass};
 use crate::bake::workdir::read_manifest;
 use crate::texels::TexelFile;
 
@@ -24,6 +24,12 @@ pub struct MergeArgs {
     /// pass writes the pages, as without `--pass`.
     #[arg(long)]
     pub pass: Option<u32>,
+    /// Denoise the lightmap as its pages are written (as `bake --denoise`; off by default).
+    #[arg(long, value_enum, default_value_t = Denoise::Off)]
+    pub denoise: Denoise,
+    /// Stitch seams (as `bake --seams`; off by default).
+    #[arg(long, value_enum, default_value_t = Seams::Off)]
+    pub seams: Seams,
 }
 
 /// Runs `guidebake merge`.
@@ -40,7 +46,17 @@ pub fn run(args: &MergeArgs) -> Result<(), super::CmdError> {
             return Ok(());
         }
     }
-    let written = finish(&texels, &args.shards, &args.out)?;
+    let options = FinishOptions {
+        denoise: args.denoise,
+        seams: args.seams,
+    };
+    let written = finish_with(&texels, &args.shards, &args.out, options)?;
+    if let Some([before, after]) = written.seam_jump {
+        eprintln!(
+            "seams: {} pairs, mean relative jump {before:.4} → {after:.4}",
+            written.seam_pairs
+        );
+    }
     for page in &written.pages {
         println!("{}", page.display());
     }

@@ -7,6 +7,7 @@ pub mod demo;
 pub mod inspect;
 pub mod merge;
 pub mod prepare;
+pub mod render;
 pub mod samples;
 pub mod synth;
 

@@ -446,6 +446,29 @@ impl PageStream {
         }
     }
 
+    /// Replaces the irradiance of the covered pixel (`x`, `y`) (a seam stitched after its tile
+    /// was written). A non-finite value is stored as zero and counted.
+    ///
+    /// # Errors
+    /// [`PageWriteError`] when the scratch file cannot be read or written.
+    ///
+    /// # Panics
+    /// If the pixel lies outside the page.
+    pub fn set_rgb(&mut self, x: u32, y: u32, rgb: [f32; 3]) -> Result<(), PageWriteError> {
+        let (x, y) = (x as usize, y as usize);
+        assert!(x < self.width && y < self.height, "pixel off the page");
+        let mut record = vec![0.0f32; self.stride()];
+        self.read_records(y * self.width + x, &mut record)?;
+        let finite = rgb.iter().all(|c| c.is_finite());
+        for (slot, c) in self.rgb.iter().zip(rgb) {
+            record[*slot] = if finite { c } else { 0.0 };
+        }
+        if !finite {
+            self.non_finite += 1;
+        }
+        self.write_records(y * self.width + x, &record)
+    }
+
     /// Pixels with non-finite values replaced by zero so far.
     pub fn non_finite_pixels(&self) -> u64 {
         self.non_finite

@@ -20,10 +20,12 @@ use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 pub mod atomic;
+pub mod denoise;
 pub mod exr_pages;
 pub mod journal;
 pub mod readback;
 pub mod result_file;
+pub mod seams;
 
 /// A 64-bit FNV-1a hash: checksums of journal records and identities of bake settings.
 /// Not cryptographic; it detects torn writes and mismatched resumes.

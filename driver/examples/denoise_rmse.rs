@@ -1,0 +1,182 @@
+//! Lightmap quality on real scenes (docs/lightmaps.md): RMSE of raw and denoised lightmaps
+//! against a 16× reference, and the mean relative jump across seams before and after
+//! stitching.
+//!
+//! For each scene: prepare at a page of 192², bake (or reuse from `--cache DIR`) the
+//! reference — `bench`'s unbiased baseline at 16 × 256 = 4096 spp with the series transport,
+//! so the bake's own transport is compared and only the estimator's noise and the filter
+//! differ — then bake the default settings at 64 and 256 spp once each (pass by pass, keeping
+//! the work) and finish that one bake several ways: raw, denoised with the default
+//! [`ATrous`] and with the variants of the sweep, and seam-stitched. Prints Markdown tables.
+//!
+//! ```sh
+//! cargo run --release -p guidebake --example denoise_rmse -- --cache target/denoise-ref \
+//!     ../shared/scenes/converted/*.glb
+//! ```
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+use guidebake::bake::finish::{FinishOptions, Seams, finish_filtered, merge_pass};
+use guidebake::bake::run::{BakeJob, bake, bake_pass_with_progress};
+use guidebake::bake::settings::{BakeSettings, Transport};
+use guidebake::bake::shard::Shard;
+use guidebake::bake::workdir::work_dir;
+use guidebake::bench::metrics::compare;
+use guidebake::bench::reference::reference_settings;
+use guidebake::output::denoise::{ATrous, Denoiser};
+use guidebake::output::readback::read_lightmap;
+use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
+use guidebake::scene::Scene;
+use guidebake::texels::TexelFile;
+
+type Error = Box<dyn std::error::Error>;
+
+/// Page edge of the measurement's texel files.
+const PAGE: u32 = 192;
+/// Samples of the measured runs; the reference has 16 × the largest.
+const SPP: [u32; 2] = [64, 256];
+/// The filter variants of the sweep: (levels, luminance σ).
+const SWEEP: [(u32, f32); 5] = [(2, 2.0), (3, 4.0), (3, 2.0), (2, 1.0), (1, 2.0)];
+
+fn main() -> Result<(), Error> {
+    let mut args: Vec<PathBuf> = std::env::args_os().skip(1).map(PathBuf::from).collect();
+    let work = tempfile::tempdir()?;
+    let cache = match args.iter().position(|a| a.as_os_str() == "--cache") {
+        Some(i) if i + 1 < args.len() => {
+            let dir = args.remove(i + 1);
+            args.remove(i);
+            dir
+        }
+        _ => work.path().to_owned(),
+    };
+    if args.is_empty() {
+        return Err(
+            "usage: denoise_rmse [--cache DIR] SCENE... (e.g. ../shared/scenes/converted/*.glb)"
+                .into(),
+        );
+    }
+    std::fs::create_dir_all(&cache)?;
+    let mut rmse = Vec::new();
+    let mut sweep = Vec::new();
+    let mut seams = Vec::new();
+    for path in &args {
+        let scene = Scene::load(path)?;
+        let name = path
+            .file_stem()
+            .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+        let texels = work.path().join(format!("{name}.texels"));
+        let options = PrepareOptions {
+            resolution: Resolution::Size(PAGE, PAGE),
+            layout: Layout::Auto,
+        };
+        let count = prepare(&scene, &texels, options)?.texels;
+        guidebake::output::seams::prepare_seams(&scene, &texels)?;
+        let file = TexelFile::open(&texels)?;
+        let job = |settings: BakeSettings, out: PathBuf| BakeJob {
+            texels: texels.clone(),
+            out,
+            settings,
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            shard: Shard::WHOLE,
+            resume: false,
+            aux: false,
+            finish: FinishOptions::default(),
+        };
+        let defaults = BakeSettings::default();
+        let reference = reference_settings(
+            16 * SPP[1],
+            defaults.iterations,
+            Transport::Series,
+            defaults.bounces,
+        );
+        let ref_out = cache.join(format!("ref-{name}-{PAGE}-{}.exr", reference.spp));
+        let truth = match read_lightmap(&file, &ref_out) {
+            Ok(values) => values,
+            Err(_) => {
+                let clock = std::time::Instant::now();
+                bake(
+                    &job(reference, ref_out.clone()),
+                    &scene,
+                    &AtomicBool::new(false),
+                    &mut |_, _| {},
+                )?;
+                eprintln!(
+                    "{name}: reference of {count} texels in {:.0} s",
+                    clock.elapsed().as_secs_f64()
+                );
+                read_lightmap(&file, &ref_out)?
+            }
+        };
+        for spp in SPP {
+            let settings = BakeSettings {
+                spp,
+                seed: 1,
+                ..defaults
+            };
+            let out = work.path().join(format!("{name}-{spp}.exr"));
+            let dir = bake_passes(&job(settings, out.clone()), &scene, &file)?;
+            let finish = |filter: Option<&dyn Denoiser>, stitch: Seams| -> Result<_, Error> {
+                let written =
+                    finish_filtered(&file, std::slice::from_ref(&dir), &out, filter, stitch)?;
+                Ok((read_lightmap(&file, &out)?, written))
+            };
+            let (raw, _) = finish(None, Seams::Off)?;
+            let raw_rmse = compare(&raw, &truth)?.rmse;
+            let (denoised, _) = finish(Some(&ATrous::default()), Seams::Off)?;
+            let dn_rmse = compare(&denoised, &truth)?.rmse;
+            rmse.push(format!(
+                "| {name} | {count} | {spp} | {raw_rmse:.5} | {dn_rmse:.5} | {:.2} |",
+                dn_rmse / raw_rmse
+            ));
+            let mut row = format!("| {name} | {spp} |");
+            for (levels, luminance_sigma) in SWEEP {
+                let filter = ATrous {
+                    levels,
+                    luminance_sigma,
+                };
+                let (values, _) = finish(Some(&filter), Seams::Off)?;
+                row += &format!(" {:.2} |", compare(&values, &truth)?.rmse / raw_rmse);
+            }
+            sweep.push(row);
+            let (stitched, written) = finish(None, Seams::Stitch)?;
+            let [before, after] = written.seam_jump.unwrap_or([0.0; 2]);
+            seams.push(format!(
+                "| {name} | {spp} | {} | {before:.4} | {after:.4} | {:.5} | {:.5} |",
+                written.seam_pairs,
+                raw_rmse,
+                compare(&stitched, &truth)?.rmse
+            ));
+            std::fs::remove_dir_all(&dir)?;
+        }
+    }
+    println!("| scene | texels | spp | RMSE raw | RMSE denoised | denoised / raw |");
+    println!("|---|---|---|---|---|---|");
+    rmse.iter().for_each(|r| println!("{r}"));
+    println!();
+    let head: Vec<String> = SWEEP
+        .iter()
+        .map(|(l, s)| format!("{l} levels, σ {s}"))
+        .collect();
+    println!("| scene | spp | {} |", head.join(" | "));
+    println!("|---|---|{}", "---|".repeat(SWEEP.len()));
+    sweep.iter().for_each(|r| println!("{r}"));
+    println!();
+    println!("| scene | spp | seam pairs | jump raw | jump stitched | RMSE raw | RMSE stitched |");
+    println!("|---|---|---|---|---|---|---|");
+    seams.iter().for_each(|r| println!("{r}"));
+    Ok(())
+}
+
+/// Bakes every series pass of `job`, merging between passes, and returns the work directory
+/// of the last pass, kept for any number of finishes.
+fn bake_passes(job: &BakeJob, scene: &Scene, file: &TexelFile) -> Result<PathBuf, Error> {
+    let passes = job.settings.passes();
+    for pass in 1..=passes {
+        bake_pass_with_progress(job, Some(pass), scene, &AtomicBool::new(false), &mut |_| {})?;
+        if pass < passes {
+            merge_pass(file, &[work_dir(&job.out, job.shard)], &job.out, pass)?;
+        }
+    }
+    Ok(work_dir(&job.out, job.shard))
+}

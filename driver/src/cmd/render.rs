@@ -1,0 +1,114 @@
+//! `guidebake render SCENE --texels T --lightmap OUT.exr -o view.png`: a picture of the lit
+//! scene ([`crate::render`]), from the glTF file's camera or an automatic view.
+
+use std::path::PathBuf;
+
+use crate::render::{Camera, Lightmap, Stage, ViewOptions, render};
+use crate::scene::Scene;
+use crate::texels::TexelFile;
+
+use super::bake::OnOff;
+
+/// Arguments of `guidebake render`.
+#[derive(Debug, clap::Args)]
+pub struct RenderArgs {
+    /// The scene (.gltf, .glb, .obj or a .toml scene file) the lightmap was baked for.
+    pub scene: PathBuf,
+    /// The texel file the lightmap was baked from.
+    #[arg(long)]
+    pub texels: PathBuf,
+    /// The lightmap (`bake -o`; several pages are read as OUT.pageN.exr).
+    #[arg(long)]
+    pub lightmap: PathBuf,
+    /// The PNG to write.
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Width in pixels.
+    #[arg(long, default_value_t = 960)]
+    pub width: u32,
+    /// Height in pixels (default: from the glTF camera's aspect ratio, else 540).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// `gltf`: the file's first camera (an error if it has none); `auto`: frame the scene's
+    /// bounds from above a corner. Default: the glTF camera where there is one, else auto.
+    #[arg(long, value_enum)]
+    pub camera: Option<CameraChoice>,
+    /// Pass through lightmapped surfaces seen from their unlit side (a dollhouse view of a
+    /// closed room). Default: on for the automatic view, off for a glTF camera.
+    #[arg(long, value_enum)]
+    pub cutaway: Option<OnOff>,
+    /// Exposure before tone mapping (default: the mean surface luminance maps to ½).
+    #[arg(long)]
+    pub exposure: Option<f32>,
+}
+
+/// Which camera `render` looks through.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum CameraChoice {
+    /// The glTF file's first camera.
+    Gltf,
+    /// An automatic view framing the bounds.
+    Auto,
+}
+
+/// Runs `guidebake render`.
+///
+/// # Errors
+/// An unreadable scene, texel file or lightmap, a scene that does not match them, a missing
+/// glTF camera when `--camera gltf` asks for one, an unwritable PNG: each named.
+pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
+    if args.width == 0 || args.height == Some(0) || args.width > 16384 || args.height > Some(16384)
+    {
+        return Err("--width and --height must be between 1 and 16384 pixels".into());
+    }
+    if let Some(e) = args.exposure.filter(|e| !(e.is_finite() && *e > 0.0)) {
+        return Err(format!("--exposure {e}: a positive, finite factor").into());
+    }
+    let scene = Scene::load(&args.scene)?;
+    let texels = TexelFile::open(&args.texels)?;
+    let lightmap = Lightmap::load(&texels, &scene, &args.lightmap)?;
+    let from_file = match args.camera {
+        Some(CameraChoice::Auto) => None,
+        Some(CameraChoice::Gltf) => {
+            Some(crate::render::gltf_camera(&args.scene)?.ok_or_else(|| {
+                format!(
+                    "{}: has no glTF camera (use --camera auto)",
+                    args.scene.display()
+                )
+            })?)
+        }
+        None => crate::render::gltf_camera(&args.scene)?,
+    };
+    let height = args.height.unwrap_or_else(|| {
+        let aspect = from_file.and_then(|c| c.aspect).unwrap_or(16.0 / 9.0);
+        ((args.width as f32 / aspect).round() as u32).clamp(1, 16384)
+    });
+    let aspect = args.width as f32 / height as f32;
+    let camera = from_file.unwrap_or_else(|| Camera::framing(scene.bounds(), aspect));
+    let cutaway = args.cutaway.map_or(from_file.is_none(), |c| c == OnOff::On);
+    let stage = Stage::new(&scene)?;
+    let view = render(
+        &stage,
+        &lightmap,
+        &camera,
+        ViewOptions {
+            width: args.width,
+            height,
+            cutaway,
+        },
+    );
+    let exposure = args.exposure.unwrap_or_else(|| view.auto_exposure());
+    crate::preview::write_png_rgb8(&args.out, view.width, view.height, &view.to_rgb8(exposure))?;
+    eprintln!(
+        "{}: {}×{} from {}, exposure {exposure:.4}",
+        args.out.display(),
+        view.width,
+        view.height,
+        if from_file.is_some() {
+            "the glTF camera"
+        } else {
+            "the automatic view"
+        }
+    );
+    Ok(())
+}

@@ -1,0 +1,745 @@
+//! `render`: a picture of the lit scene — what a user sees when the lightmap lands in a game.
+//!
+//! One eye ray per sub-pixel (2 × 2 stratified per pixel) is traced with the project's own
+//! traversal ([`guidebake_kernels::traverse::intersect1`] over [`crate::bvh::Bvh`]). A hit on
+//! a lightmapped triangle is shaded as a diffuse game surface shades a baked lightmap:
+//! outgoing radiance `albedo × E / π` with the irradiance `E` looked up bilinearly through
+//! the triangle's lightmap UVs (the lookup of [`crate::transport::series::PreviousPass`]:
+//! covered pixels only, weights renormalised, so chart borders do not fetch the empty
+//! atlas), plus the material's emission seen from its front face. A ray that leaves the scene
+//! sees the sky ([`crate::transport::sky::sky_radiance`]; the sun's disc is not drawn).
+//! Triangles without lightmap UVs show their emission only (they have no baked light).
+//!
+//! The camera is the glTF file's first camera node (perspective or orthographic; glTF
+//! cameras look along their local −Z with +Y up), or an automatic view that frames the
+//! scene's bounds from above one corner. A closed room seen from outside would show only its
+//! outer walls, so the automatic view is a *cutaway*: a lightmapped surface seen from the side
+//! its texels do not face ([`crate::facing`]) is passed through, as a dollhouse view
+//! (on by default for the automatic view, off for a glTF camera; `--cutaway`).
+//!
+//! Tone mapping: exposure, then Reinhard's `x / (1 + x)` and the sRGB curve
+//! ([`crate::preview::tonemap_reinhard`]); the automatic exposure maps the mean luminance of
+//! the surface pixels to ½, as the lightmap previews do. Views compared side by side (the
+//! demo's baseline and guided) share one exposure.
+
+use std::path::{Path, PathBuf};
+
+use glam::{Mat4, Vec3};
+use guidebake_kernels::estimator::luminance_f32;
+use guidebake_kernels::packet::Ray;
+use guidebake_kernels::traverse::intersect1;
+use rayon::prelude::*;
+
+use crate::bvh::{Bvh, BvhError, Preset};
+use crate::facing::facing_sides;
+use crate::output::exr_pages::page_path;
+use crate::scene::Scene;
+use crate::texels::TexelFile;
+use crate::transport::series::PreviousPass;
+use crate::transport::sky::sky_radiance;
+
+/// Sub-pixels per pixel along each axis (stratified, at the sub-pixel centres).
+pub const SUBPIXELS: u32 = 2;
+/// Vertical field of view of the automatic view, radians.
+pub const AUTO_FOV: f32 = 0.75;
+/// Surfaces a cutaway ray may pass through before it is taken to see the sky.
+const MAX_PASS_THROUGH: u32 = 64;
+
+/// Why a view could not be rendered; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// A lightmap page could not be read or does not fit the texel file.
+    #[error("{path}: {what}")]
+    Lightmap {
+        /// The EXR page.
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
+    /// The scene does not match the texel file, or its camera is unusable.
+    #[error("{path}: {what}")]
+    Scene {
+        /// The scene or texel file.
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
+    /// The scene's BVH could not be built.
+    #[error(transparent)]
+    Bvh(#[from] BvhError),
+}
+
+/// How the camera projects.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Projection {
+    /// Perspective with `tan(yfov / 2)`.
+    Perspective {
+        /// Tangent of half the vertical field of view.
+        tan_half_fov: f32,
+    },
+    /// Orthographic with half the view's height in world units.
+    Orthographic {
+        /// Half the view's height (glTF `ymag`).
+        half_height: f32,
+    },
+}
+
+/// A pinhole or orthographic camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Eye position.
+    pub eye: Vec3,
+    /// Unit view direction.
+    pub forward: Vec3,
+    /// Unit right vector.
+    pub right: Vec3,
+    /// Unit up vector (orthogonal to `forward` and `right`).
+    pub up: Vec3,
+    /// Projection.
+    pub projection: Projection,
+    /// Width / height the camera asks for (glTF `aspectRatio`), if it does.
+    pub aspect: Option<f32>,
+}
+
+impl Camera {
+    /// A perspective camera at `eye` looking at `target`, `up_hint` up, vertical field of view
+    /// `fov` radians. Falls back to +Z as the up hint when `up_hint` is along the view.
+    pub fn look_at(eye: Vec3, target: Vec3, up_hint: Vec3, fov: f32) -> Self {
+        let forward = (target - eye).normalize_or(-Vec3::Z);
+        let mut right = forward.cross(up_hint);
+        if right.length_squared() < 1e-12 {
+            right = forward.cross(Vec3::Z);
+        }
+        let right = right.normalize();
+        Self {
+            eye,
+            forward,
+            right,
+            up: right.cross(forward),
+            projection: Projection::Perspective {
+                tan_half_fov: (fov / 2.0).tan(),
+            },
+            aspect: None,
+        }
+    }
+
+    /// The automatic view: from above the (+x, +z) corner of the bounds, looking at their
+    /// centre, far enough that the bounding sphere fits the narrower field of view of an
+    /// image of `aspect` (width / height).
+    pub fn framing(bounds: (Vec3, Vec3), aspect: f32) -> Self {
+        let (lo, hi) = bounds;
+        let centre = (lo + hi) / 2.0;
+        let radius = ((hi - lo).length() / 2.0).max(1e-3);
+        let narrow = if aspect < 1.0 {
+            2.0 * ((AUTO_FOV / 2.0).tan() * aspect).atan()
+        } else {
+            AUTO_FOV
+        };
+        let distance = radius / (narrow / 2.0).sin();
+        let direction = Vec3::new(0.55, 0.75, 1.0).normalize();
+        Self::look_at(centre + direction * distance, centre, Vec3::Y, AUTO_FOV)
+    }
+
+    /// The ray through normalised image coordinates `sx`, `sy` ∈ [−1, 1] (right, up) of an
+    /// image of `aspect` (width / height): (origin, unit direction).
+    pub fn ray(&self, sx: f32, sy: f32, aspect: f32) -> (Vec3, Vec3) {
+        match self.projection {
+            Projection::Perspective { tan_half_fov } => {
+                let d = self.forward
+                    + self.right * (sx * tan_half_fov * aspect)
+                    + self.up * (sy * tan_half_fov);
+                (self.eye, d.normalize())
+            }
+            Projection::Orthographic { half_height } => {
+                let o = self.eye
+                    + self.right * (sx * half_height * aspect)
+                    + self.up * (sy * half_height);
+                (o, self.forward)
+            }
+        }
+    }
+}
+
+/// The first camera of a glTF file's default scene (depth first, in node order), in world
+/// space; `None` for other formats or a file without cameras.
+///
+/// # Errors
+/// [`RenderError::Scene`] naming the file when it cannot be read as glTF, or the camera's
+/// transform is degenerate.
+pub fn gltf_camera(path: &Path) -> Result<Option<Camera>, RenderError> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if !matches!(ext.as_deref(), Some("gltf" | "glb")) {
+        return Ok(None);
+    }
+    let fail = |what: String| RenderError::Scene {
+        path: path.to_owned(),
+        what,
+    };
+    let gltf = gltf::Gltf::open(path).map_err(|e| fail(format!("cannot read glTF: {e}")))?;
+    let doc = &gltf.document;
+    let Some(scene) = doc.default_scene().or_else(|| doc.scenes().next()) else {
+        return Ok(None);
+    };
+    let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    stack.reverse();
+    while let Some((node, parent)) = stack.pop() {
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        if let Some(camera) = node.camera() {
+            return camera_from_node(&camera, world).map(Some).ok_or_else(|| {
+                fail(format!(
+                    "camera node {} has a degenerate transform",
+                    node.index()
+                ))
+            });
+        }
+        let children: Vec<_> = node.children().collect();
+        stack.extend(children.into_iter().rev().map(|c| (c, world)));
+    }
+    Ok(None)
+}
+
+fn camera_from_node(camera: &gltf::Camera, world: Mat4) -> Option<Camera> {
+    let eye = world.transform_point3(Vec3::ZERO);
+    let forward = world.transform_vector3(-Vec3::Z).try_normalize()?;
+    let up_hint = world.transform_vector3(Vec3::Y);
+    let right = forward.cross(up_hint).try_normalize()?;
+    let (projection, aspect) = match camera.projection() {
+        gltf::camera::Projection::Perspective(p) => (
+            Projection::Perspective {
+                tan_half_fov: (p.yfov() / 2.0).tan(),
+            },
+            p.aspect_ratio(),
+        ),
+        gltf::camera::Projection::Orthographic(o) => (
+            Projection::Orthographic {
+                half_height: o.ymag(),
+            },
+            Some(o.xmag() / o.ymag()),
+        ),
+    };
+    let valid = match projection {
+        Projection::Perspective { tan_half_fov } => tan_half_fov.is_finite() && tan_half_fov > 0.0,
+        Projection::Orthographic { half_height } => half_height.is_finite() && half_height > 0.0,
+    };
+    (valid && eye.is_finite()).then_some(Camera {
+        eye,
+        forward,
+        right,
+        up: right.cross(forward),
+        projection,
+        aspect: aspect.filter(|a| a.is_finite() && *a > 0.0),
+    })
+}
+
+/// A baked lightmap, looked up by triangle and barycentrics.
+pub struct Lightmap {
+    lookup: PreviousPass,
+}
+
+impl Lightmap {
+    /// Reads the lightmap pages `out` (`OUT.exr`, or `OUT.pageN.exr` for several pages) that
+    /// a bake of `texels` over `scene` wrote. The texels' pixels are the covered ones.
+    ///
+    /// # Errors
+    /// [`RenderError`] naming the file: the scene is not the texel file's, a page is missing,
+    /// unreadable, of another size or without R, G, B channels.
+    pub fn load(texels: &TexelFile, scene: &Scene, out: &Path) -> Result<Self, RenderError> {
+        let expected = texels.header().triangle_count as usize;
+        if expected != scene.triangles.len() {
+            return Err(RenderError::Scene {
+                path: scene.path.clone(),
+                what: format!(
+                    "has {} triangles, but the texel file {} was prepared from a scene of {expected}",
+                    scene.triangles.len(),
+                    texels.path().display()
+                ),
+            });
+        }
+        let pages = texels.pages();
+        let mut covered: Vec<Vec<bool>> = pages
+            .iter()
+            .map(|p| vec![false; p.width as usize * p.height as usize])
+            .collect();
+        for t in 0..texels.tiles().len() {
+            for texel in texels.tile_texels(t) {
+                let page = &mut covered[texel.page as usize];
+                let width = pages[texel.page as usize].width as usize;
+                let [x, y] = texel.pixel.map(usize::from);
+                page[y * width + x] = true;
+            }
+            texels.release_tile(t);
+        }
+        let mut images = Vec::with_capacity(pages.len());
+        for (p, (size, covered)) in pages.iter().zip(covered).enumerate() {
+            let path = page_path(out, p as u32, pages.len() as u32);
+            let rgb = read_rgb(&path, size.width as usize, size.height as usize)?;
+            images.push(
+                rgb.into_iter()
+                    .zip(covered)
+                    .map(|(c, k)| k.then_some(c))
+                    .collect::<Vec<_>>(),
+            );
+        }
+        Ok(Self {
+            lookup: PreviousPass::from_pixels(scene, texels.meshes(), pages, &images),
+        })
+    }
+
+    /// The irradiance at barycentrics (`b1`, `b2`) of triangle `prim`; zero without UVs.
+    pub fn irradiance(&self, prim: u32, b1: f32, b2: f32) -> Vec3 {
+        self.lookup.irradiance(prim, b1, b2)
+    }
+}
+
+/// The R, G, B channels of an EXR page of `width` × `height`, checked.
+fn read_rgb(path: &Path, width: usize, height: usize) -> Result<Vec<Vec3>, RenderError> {
+    let fail = |what: String| RenderError::Lightmap {
+        path: path.to_owned(),
+        what,
+    };
+    if !path.is_file() {
+        return Err(fail(
+            "no such lightmap page (the bake's -o, with the texel file it baked)".into(),
+        ));
+    }
+    let image = exr::prelude::read_all_flat_layers_from_file(path)
+        .map_err(|e| fail(format!("cannot read the EXR: {e}")))?;
+    let layer = image
+        .layer_data
+        .first()
+        .ok_or_else(|| fail("the EXR has no layer".into()))?;
+    if (layer.size.0, layer.size.1) != (width, height) {
+        return Err(fail(format!(
+            "the page is {}×{}, the texel file's page {width}×{height}",
+            layer.size.0, layer.size.1
+        )));
+    }
+    let channel = |name: &str| -> Result<Vec<f32>, RenderError> {
+        let c = layer
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name == *name)
+            .ok_or_else(|| fail(format!("the EXR has no channel {name}")))?;
+        Ok(c.sample_data.values_as_f32().collect())
+    };
+    let (r, g, b) = (channel("R")?, channel("G")?, channel("B")?);
+    Ok(r.into_iter()
+        .zip(g)
+        .zip(b)
+        .map(|((r, g), b)| {
+            let c = Vec3::new(r, g, b);
+            if c.is_finite() { c } else { Vec3::ZERO }
+        })
+        .collect())
+}
+
+/// The scene prepared for eye rays: its BVH and the side each triangle's texels face.
+pub struct Stage<'s> {
+    scene: &'s Scene,
+    bvh: Bvh,
+    /// Per triangle: the unit normal of the side its lightmap describes (geometric normal,
+    /// flipped where [`facing_sides`] says so); zero for triangles without lightmap UVs.
+    lit_side: Vec<Vec3>,
+}
+
+impl<'s> Stage<'s> {
+    /// Builds the BVH and decides every triangle's lit side.
+    ///
+    /// # Errors
+    /// [`RenderError::Bvh`] for a non-finite vertex.
+    pub fn new(scene: &'s Scene) -> Result<Self, RenderError> {
+        let bvh = Bvh::build(&scene.triangle_positions(), Preset::DEFAULT)?;
+        let flips = facing_sides(scene)?;
+        let lit_side = scene
+            .triangles
+            .iter()
+            .zip(flips)
+            .map(|(t, flip)| match (t.lightmap_uv, flip) {
+                (None, _) => Vec3::ZERO,
+                (Some(_), false) => t.geometric_normal(),
+                (Some(_), true) => -t.geometric_normal(),
+            })
+            .collect();
+        Ok(Self {
+            scene,
+            bvh,
+            lit_side,
+        })
+    }
+}
+
+/// How to render a view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewOptions {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Pass through lightmapped surfaces seen from their unlit side.
+    pub cutaway: bool,
+}
+
+/// A rendered view: linear radiance per pixel, and how many of its sub-pixels hit a surface.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear RGB radiance, row-major from the top left.
+    pub radiance: Vec<Vec3>,
+    /// Sub-pixels (of [`SUBPIXELS`]²) that saw a surface rather than the sky.
+    pub surface: Vec<u8>,
+}
+
+/// Renders `camera`'s view of `stage` lit by `lightmap`.
+pub fn render(
+    stage: &Stage<'_>,
+    lightmap: &Lightmap,
+    camera: &Camera,
+    options: ViewOptions,
+) -> View {
+    let (w, h) = (options.width.max(1), options.height.max(1));
+    let aspect = w as f32 / h as f32;
+    let pixels: Vec<(Vec3, u8)> = (0..w as usize * h as usize)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = ((i % w as usize) as f32, (i / w as usize) as f32);
+            let (mut sum, mut surface) = (Vec3::ZERO, 0u8);
+            for s in 0..SUBPIXELS * SUBPIXELS {
+                let ox = ((s % SUBPIXELS) as f32 + 0.5) / SUBPIXELS as f32;
+                let oy = ((s / SUBPIXELS) as f32 + 0.5) / SUBPIXELS as f32;
+                let sx = 2.0 * (x + ox) / w as f32 - 1.0;
+                let sy = 1.0 - 2.0 * (y + oy) / h as f32;
+                let (org, dir) = camera.ray(sx, sy, aspect);
+                let (radiance, hit) = shade(stage, lightmap, org, dir, options.cutaway);
+                sum += radiance;
+                surface += u8::from(hit);
+            }
+            (sum / (SUBPIXELS * SUBPIXELS) as f32, surface)
+        })
+        .collect();
+    let (radiance, surface) = pixels.into_iter().unzip();
+    View {
+        width: w,
+        height: h,
+        radiance,
+        surface,
+    }
+}
+
+/// The radiance seen along one eye ray, and whether it saw a surface.
+fn shade(
+    stage: &Stage<'_>,
+    lightmap: &Lightmap,
+    org: Vec3,
+    dir: Vec3,
+    cutaway: bool,
+) -> (Vec3, bool) {
+    let view = stage.bvh.view();
+    let mut tmin = 0.0f32;
+    for _ in 0..MAX_PASS_THROUGH {
+        let Some(hit) = intersect1(&view, &Ray::new(org, dir, tmin, f32::INFINITY)) else {
+            break;
+        };
+        let prim = hit.prim as usize;
+        let lit = stage.lit_side[prim];
+        if cutaway && lit.dot(dir) > 0.0 {
+            // Seen from the side its texels do not face: a cutaway passes through.
+            tmin = hit.t + hit.t.abs().max(1.0) * 1e-5;
+            continue;
+        }
+        let triangle = &stage.scene.triangles[prim];
+        let material = stage.scene.triangle_material(prim);
+        let mut radiance = Vec3::ZERO;
+        if triangle.geometric_normal().dot(dir) < 0.0 {
+            radiance += material.emission;
+        }
+        if triangle.lightmap_uv.is_some() {
+            let e = lightmap.irradiance(hit.prim, hit.u, hit.v);
+            radiance += material.albedo * e / std::f32::consts::PI;
+        }
+        let finite = if radiance.is_finite() {
+            radiance
+        } else {
+            Vec3::ZERO
+        };
+        return (finite, true);
+    }
+    (sky_radiance(&stage.scene.sky, dir), false)
+}
+
+impl View {
+    /// The exposure that maps the mean luminance of the pixels that see only surfaces to ½
+    /// after Reinhard
+    /// (1 when no surface is seen or the mean is not positive).
+    pub fn auto_exposure(&self) -> f32 {
+        let (sum, n) = self
+            .radiance
+            .iter()
+            .zip(&self.surface)
+            .filter(|(_, s)| u32::from(**s) == SUBPIXELS * SUBPIXELS)
+            .fold((0.0f64, 0u64), |(sum, n), (c, _)| {
+                (sum + f64::from(luminance_f32(c.to_array())), n + 1)
+            });
+        let mean = (sum / n.max(1) as f64) as f32;
+        if mean > 0.0 && mean.is_finite() {
+            1.0 / mean
+        } else {
+            1.0
+        }
+    }
+
+    /// Tone-mapped 8-bit sRGB rows.
+    pub fn to_rgb8(&self, exposure: f32) -> Vec<u8> {
+        self.radiance
+            .iter()
+            .flat_map(|c| crate::preview::tonemap_reinhard(c.to_array(), exposure))
+            .collect()
+    }
+}
+
+/// Views of equal size side by side, left to right, with a `gap`-pixel black margin, as one
+/// 8-bit image: (width, height, rows).
+///
+/// # Panics
+/// If `views` is empty or the views differ in size.
+pub fn side_by_side(views: &[&View], exposure: f32, gap: u32) -> (u32, u32, Vec<u8>) {
+    let (w, h) = (views[0].width, views[0].height);
+    assert!(
+        views.iter().all(|v| (v.width, v.height) == (w, h)),
+        "views of one size"
+    );
+    let total = w * views.len() as u32 + gap * (views.len() as u32 - 1);
+    let mut rows = vec![0u8; total as usize * h as usize * 3];
+    for (k, view) in views.iter().enumerate() {
+        let bytes = view.to_rgb8(exposure);
+        let x0 = k * (w + gap) as usize;
+        for y in 0..h as usize {
+            let src = &bytes[y * w as usize * 3..(y + 1) * w as usize * 3];
+            let at = (y * total as usize + x0) * 3;
+            rows[at..at + src.len()].copy_from_slice(src);
+        }
+    }
+    (total, h, rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::atomic::AtomicBool;
+
+    use glam::Vec2;
+
+    use super::*;
+    use crate::bake::finish::FinishOptions;
+    use crate::bake::run::{BakeJob, bake};
+    use crate::bake::settings::{BakeSettings, Guiding};
+    use crate::bake::shard::Shard;
+    use crate::prepare::{Layout, PrepareOptions, Resolution, prepare};
+    use crate::preview::tonemap_reinhard;
+    use crate::scene::{Material, Sky, Triangle};
+
+    const ALBEDO: f32 = 0.5;
+    const SKY: Vec3 = Vec3::new(0.2, 0.4, 0.8);
+
+    /// A 4 m square ground plane (y = 0, facing +y) under a constant sky, its lightmap UVs
+    /// the unit square.
+    fn plane() -> Scene {
+        let p = |u: Vec2| Vec3::new(u.x * 4.0 - 2.0, 0.0, 2.0 - u.y * 4.0);
+        let tri = |uv: [Vec2; 3]| Triangle {
+            positions: uv.map(p),
+            normals: [Vec3::Y; 3],
+            lightmap_uv: Some(uv),
+            mesh: 0,
+            material: 0,
+        };
+        let (o, x, y, xy) = (Vec2::ZERO, Vec2::X, Vec2::Y, Vec2::ONE);
+        let material = Material {
+            name: "grey".into(),
+            albedo: Vec3::splat(ALBEDO),
+            emission: Vec3::ZERO,
+        };
+        let mut scene = Scene::of_triangles(
+            "plane",
+            vec![tri([o, x, xy]), tri([o, xy, y])],
+            vec![material],
+        );
+        scene.sky = Sky::Constant(SKY);
+        scene
+    }
+
+    /// The plane prepared at 16 × 16 texels and baked (unguided: every gather ray sees the
+    /// sky, so every texel's estimate is exactly πL up to rounding).
+    fn baked_plane(dir: &Path) -> (Scene, TexelFile, PathBuf) {
+        let scene = plane();
+        assert!(scene.triangles[0].geometric_normal().dot(Vec3::Y) > 0.99);
+        let texels = dir.join("plane.texels");
+        let options = PrepareOptions {
+            resolution: Resolution::Size(16, 16),
+            layout: Layout::Shared,
+        };
+        prepare(&scene, &texels, options).unwrap();
+        let out = dir.join("plane.exr");
+        let job = BakeJob {
+            texels: texels.clone(),
+            out: out.clone(),
+            settings: BakeSettings {
+                spp: 16,
+                iterations: 1,
+                guiding: Guiding::Off,
+                ..Default::default()
+            },
+            threads: 1,
+            shard: Shard::WHOLE,
+            resume: false,
+            aux: false,
+            finish: FinishOptions::default(),
+        };
+        bake(&job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+        (scene, TexelFile::open(&texels).unwrap(), out)
+    }
+
+    fn close(a: [u8; 3], b: [u8; 3]) -> bool {
+        a.iter().zip(&b).all(|(x, y)| x.abs_diff(*y) <= 1)
+    }
+
+    #[test]
+    fn a_plane_under_a_constant_sky_renders_albedo_times_sky_and_the_sky_around_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let (scene, texels, out) = baked_plane(dir.path());
+        let lightmap = Lightmap::load(&texels, &scene, &out).unwrap();
+        let stage = Stage::new(&scene).unwrap();
+        let options = ViewOptions {
+            width: 64,
+            height: 48,
+            cutaway: true,
+        };
+        let camera = Camera::framing(scene.bounds(), 64.0 / 48.0);
+        let view = render(&stage, &lightmap, &camera, options);
+        // Radiance of a lit plane: albedo × E / π with E = πL.
+        let surface = SKY * ALBEDO;
+        let exposure = 2.0;
+        let (want_surface, want_sky) = (
+            tonemap_reinhard(surface.to_array(), exposure),
+            tonemap_reinhard(SKY.to_array(), exposure),
+        );
+        let bytes = view.to_rgb8(exposure);
+        let (mut plane_pixels, mut sky_pixels) = (0, 0);
+        for (i, s) in view.surface.iter().enumerate() {
+            let px = [bytes[3 * i], bytes[3 * i + 1], bytes[3 * i + 2]];
+            match *s {
+                4 => {
+                    plane_pixels += 1;
+                    assert!(
+                        close(px, want_surface),
+                        "pixel {i}: {px:?}, want {want_surface:?}"
+                    );
+                    let rel =
+                        (view.radiance[i] - surface).abs().max_element() / surface.max_element();
+                    assert!(
+                        rel < 1e-3,
+                        "pixel {i}: radiance {} want {surface}",
+                        view.radiance[i]
+                    );
+                }
+                0 => {
+                    sky_pixels += 1;
+                    assert_eq!(px, want_sky, "sky pixel {i}");
+                }
+                _ => {}
+            }
+        }
+        let n = view.surface.len();
+        assert!(
+            plane_pixels > n / 8 && sky_pixels > n / 8,
+            "{plane_pixels} plane, {sky_pixels} sky of {n}"
+        );
+        // The automatic exposure maps the surface's mean luminance to ½.
+        let mean = luminance_f32(surface.to_array());
+        assert!((view.auto_exposure() * mean - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn a_cutaway_passes_through_the_unlit_side_and_a_plain_view_shades_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let (scene, texels, out) = baked_plane(dir.path());
+        let lightmap = Lightmap::load(&texels, &scene, &out).unwrap();
+        let stage = Stage::new(&scene).unwrap();
+        // From below, looking straight up at the plane's unlit side.
+        let camera = Camera::look_at(Vec3::new(0.0, -1.0, 0.0), Vec3::ZERO, Vec3::Z, 0.5);
+        let mut options = ViewOptions {
+            width: 8,
+            height: 8,
+            cutaway: true,
+        };
+        let through = render(&stage, &lightmap, &camera, options);
+        assert!(through.surface.iter().all(|&s| s == 0));
+        assert!(through.radiance.iter().all(|&c| c == SKY));
+        options.cutaway = false;
+        let shaded = render(&stage, &lightmap, &camera, options);
+        assert!(shaded.surface.iter().all(|&s| s == 4));
+        for c in shaded.radiance {
+            assert!((c - SKY * ALBEDO).abs().max_element() < 1e-3, "{c}");
+        }
+    }
+
+    #[test]
+    fn lightmaps_that_do_not_fit_are_errors_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let (scene, texels, out) = baked_plane(dir.path());
+        let missing = dir.path().join("other.exr");
+        let err = Lightmap::load(&texels, &scene, &missing).err().unwrap();
+        assert!(err.to_string().contains("other.exr"), "{err}");
+        let mut bigger = crate::output::exr_pages::PageImage::new(8, 8);
+        bigger.set(0, 0, [1.0; 3]);
+        let small = dir.path().join("small.exr");
+        bigger.write_exr(&small).unwrap();
+        let err = Lightmap::load(&texels, &scene, &small).err().unwrap();
+        assert!(err.to_string().contains("8×8"), "{err}");
+        let mut two = scene.clone();
+        two.triangles.pop();
+        let err = Lightmap::load(&texels, &two, &out).err().unwrap();
+        assert!(err.to_string().contains("1 triangles"), "{err}");
+    }
+
+    #[test]
+    fn a_gltf_camera_is_read_in_world_space() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cam.gltf");
+        // A parent translated by (0, 1, 0) holding a camera at (0, 0, 5), turned 90° about
+        // +Y (so it looks along −X).
+        let json = r#"{
+          "asset": {"version": "2.0"},
+          "scene": 0,
+          "scenes": [{"nodes": [0]}],
+          "nodes": [
+            {"translation": [0, 1, 0], "children": [1]},
+            {"translation": [0, 0, 5], "rotation": [0, 0.7071068, 0, 0.7071068], "camera": 0}
+          ],
+          "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "aspectRatio": 1.5, "znear": 0.1}}]
+        }"#;
+        std::fs::write(&path, json).unwrap();
+        let camera = gltf_camera(&path).unwrap().unwrap();
+        assert!((camera.eye - Vec3::new(0.0, 1.0, 5.0)).length() < 1e-5);
+        assert!(
+            (camera.forward - -Vec3::X).length() < 1e-5,
+            "{}",
+            camera.forward
+        );
+        assert!((camera.up - Vec3::Y).length() < 1e-5);
+        assert_eq!(camera.aspect, Some(1.5));
+        assert_eq!(
+            camera.projection,
+            Projection::Perspective {
+                tan_half_fov: 0.4f32.tan()
+            }
+        );
+        assert_eq!(gltf_camera(&dir.path().join("x.obj")).unwrap(), None);
+        std::fs::write(&path, "{ not json").unwrap();
+        let err = gltf_camera(&path).unwrap_err();
+        assert!(err.to_string().contains("cam.gltf"), "{err}");
+    }
+}
