@@ -10,6 +10,21 @@ pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
 
     let mut b = SceneBuilder::new(path);
     let mut lights = Vec::new();
+    for (node, world) in nodes_in_load_order(&doc) {
+        if let Some(mesh) = node.mesh() {
+            read_mesh(&mut b, &node, &mesh, &buffers, world, default_material)?;
+        }
+        if let Some(light) = node.light() {
+            lights.push(read_light(&light, world));
+        }
+    }
+    Ok(b.finish(materials, lights))
+}
+
+/// The nodes of the document's scene (the default one, else the first) with their world
+/// transforms, in the order the loader reads them: depth first, children in order. Mesh
+/// instances become [`Scene::meshes`] in this order, which the glTF writer relies on.
+pub(super) fn nodes_in_load_order(doc: &::gltf::Document) -> Vec<(::gltf::Node<'_>, Mat4)> {
     let roots: Vec<::gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
         Some(s) => s.nodes().collect(),
         None => Vec::new(),
@@ -19,19 +34,15 @@ pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
         .rev()
         .map(|n| (n, Mat4::IDENTITY))
         .collect();
+    let mut order = Vec::new();
     while let Some((node, parent)) = stack.pop() {
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
-        if let Some(mesh) = node.mesh() {
-            read_mesh(&mut b, &node, &mesh, &buffers, world, default_material)?;
-        }
-        if let Some(light) = node.light() {
-            lights.push(read_light(&light, world));
-        }
         for child in node.children().collect::<Vec<_>>().into_iter().rev() {
             stack.push((child, world));
         }
+        order.push((node, world));
     }
-    Ok(b.finish(materials, lights))
+    order
 }
 
 /// `::gltf::import` with checks of ours where the crate panics instead of erring (each

@@ -180,19 +180,9 @@ impl Writer<'_> {
         doc: &::gltf::Document,
         buffers: &[::gltf::buffer::Data],
     ) -> Result<(), WriteError> {
-        let roots: Vec<::gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
-            Some(s) => s.nodes().collect(),
-            None => Vec::new(),
-        };
-        let mut stack: Vec<(::gltf::Node, Mat4)> = roots
-            .into_iter()
-            .rev()
-            .map(|n| (n, Mat4::IDENTITY))
-            .collect();
         let mut next_mesh = 0u32;
         let mut rewritten = vec![false; self.root.meshes.len()];
-        while let Some((node, parent)) = stack.pop() {
-            let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        for (node, world) in super::gltf::nodes_in_load_order(doc) {
             if let Some(mesh) = node.mesh() {
                 let id = next_mesh;
                 next_mesh += 1;
@@ -201,7 +191,6 @@ impl Writer<'_> {
                 }
                 if self.without_texels(id) {
                     // No lightmap place: the mesh stays as the source has it.
-                    continue_children(&mut stack, &node, world);
                     continue;
                 }
                 let primitives = self.mesh_corners(id, &mesh, buffers, world)?;
@@ -223,7 +212,6 @@ impl Writer<'_> {
                     serde_json::json!({ "page": page, "width": width, "height": height }),
                 );
             }
-            continue_children(&mut stack, &node, world);
         }
         if next_mesh as usize != self.scene.meshes.len() {
             return Err(self.changed(next_mesh));
@@ -477,17 +465,6 @@ impl Writer<'_> {
         };
         let bytes = glb.to_vec().map_err(|e| write_error(e.to_string()))?;
         crate::output::atomic::write(out, bytes).map_err(|e| write_error(e.to_string()))
-    }
-}
-
-/// Pushes `node`'s children, in the loader's order, onto the walk's stack.
-fn continue_children<'a>(
-    stack: &mut Vec<(::gltf::Node<'a>, Mat4)>,
-    node: &::gltf::Node<'a>,
-    world: Mat4,
-) {
-    for child in node.children().collect::<Vec<_>>().into_iter().rev() {
-        stack.push((child, world));
     }
 }
 
