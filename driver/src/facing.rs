@@ -31,7 +31,9 @@ const POINTS: [[f32; 2]; 4] = [[1.0 / 3.0, 1.0 / 3.0], [0.6, 0.2], [0.2, 0.6], [
 /// [`BvhError`] when the scene's BVH cannot be built (a non-finite vertex).
 pub fn facing_sides(scene: &Scene) -> Result<Vec<bool>, BvhError> {
     let corners = scene.triangle_positions();
-    let bvh = Bvh::build(&corners, Preset::DEFAULT)?;
+    // Rays per triangle: 8 from each point, on both sides.
+    let rays = (POINTS.len() * 8 * 2 * corners.len()) as f64;
+    let bvh = Bvh::build(&corners, Preset::for_rays(corners.len(), rays))?;
     let view = bvh.view();
     Ok(scene
         .triangles

@@ -33,6 +33,7 @@ use rayon::prelude::*;
 use crate::bvh::{Bvh, BvhError, Preset};
 use crate::facing::facing_sides;
 use crate::output::exr_pages::page_path;
+use crate::output::readback::read_page;
 use crate::scene::Scene;
 use crate::texels::TexelFile;
 use crate::transport::series::PreviousPass;
@@ -304,33 +305,18 @@ fn read_rgb(path: &Path, width: usize, height: usize) -> Result<Vec<Vec3>, Rende
             "no such lightmap page (the bake's -o, with the texel file it baked)".into(),
         ));
     }
-    let image = exr::prelude::read_all_flat_layers_from_file(path)
-        .map_err(|e| fail(format!("cannot read the EXR: {e}")))?;
-    let layer = image
-        .layer_data
-        .first()
-        .ok_or_else(|| fail("the EXR has no layer".into()))?;
-    if (layer.size.0, layer.size.1) != (width, height) {
+    let page = read_page(path).map_err(|e| fail(e.what))?;
+    if (page.width, page.height) != (width, height) {
         return Err(fail(format!(
             "the page is {}×{}, the texel file's page {width}×{height}",
-            layer.size.0, layer.size.1
+            page.width, page.height
         )));
     }
-    let channel = |name: &str| -> Result<Vec<f32>, RenderError> {
-        let c = layer
-            .channel_data
-            .list
-            .iter()
-            .find(|c| c.name == *name)
-            .ok_or_else(|| fail(format!("the EXR has no channel {name}")))?;
-        Ok(c.sample_data.values_as_f32().collect())
-    };
-    let (r, g, b) = (channel("R")?, channel("G")?, channel("B")?);
-    Ok(r.into_iter()
-        .zip(g)
-        .zip(b)
-        .map(|((r, g), b)| {
-            let c = Vec3::new(r, g, b);
+    Ok(page
+        .rgb
+        .into_iter()
+        .map(|c| {
+            let c = Vec3::from(c);
             if c.is_finite() { c } else { Vec3::ZERO }
         })
         .collect())
@@ -351,7 +337,12 @@ impl<'s> Stage<'s> {
     /// # Errors
     /// [`RenderError::Bvh`] for a non-finite vertex.
     pub fn new(scene: &'s Scene) -> Result<Self, RenderError> {
-        let bvh = Bvh::build(&scene.triangle_positions(), Preset::DEFAULT)?;
+        // The tree for the rays of a full-HD view or two ([`Preset::for_rays`]).
+        let rays = 2.0 * 1920.0 * 1080.0 * (SUBPIXELS * SUBPIXELS) as f64;
+        let bvh = Bvh::build(
+            &scene.triangle_positions(),
+            Preset::for_rays(scene.triangles.len(), rays),
+        )?;
         let flips = facing_sides(scene)?;
         let lit_side = scene
             .triangles

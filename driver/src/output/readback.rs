@@ -19,13 +19,21 @@ pub struct ReadbackError {
 }
 
 /// One RGB page as read from its EXR.
-struct Page {
-    width: usize,
-    height: usize,
-    rgb: Vec<[f32; 3]>,
+#[derive(Clone, Debug, PartialEq)]
+pub struct Page {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// The pixels' R, G, B, row by row.
+    pub rgb: Vec<[f32; 3]>,
 }
 
-fn read_page(path: &Path) -> Result<Page, ReadbackError> {
+/// The R, G, B channels of the EXR page at `path` (its first layer).
+///
+/// # Errors
+/// [`ReadbackError`] when the file cannot be read or is not an RGB image.
+pub fn read_page(path: &Path) -> Result<Page, ReadbackError> {
     let image = exr::prelude::read_first_rgba_layer_from_file(
         path,
         |size, _| Page {
