@@ -150,9 +150,8 @@ impl World {
             let others = self.other_densities8(at, &samples, live);
             for lane in lanes_of(live) {
                 if let Some(s) = &samples[lane] {
-                    let cos = at.normal.dot(s.direction);
                     let w = others[lane].map_or(1.0, |other| power_heuristic(s.pdf, other));
-                    out[lane] += s.radiance * (cos / s.pdf * w);
+                    out[lane] += emitter_irradiance(at.normal, s, w);
                 }
             }
             rays += traced;
@@ -185,8 +184,7 @@ impl World {
 
     /// `L cosθ / p · w_nee`: the emitter sample's irradiance if unoccluded.
     fn emitter_weight(&self, at: &Receiver<'_>, s: &EmitterSample) -> Vec3 {
-        let cos = at.normal.dot(s.direction);
-        s.radiance * (cos / s.pdf * self.nee_weight(at, s.direction, s.pdf))
+        emitter_irradiance(at.normal, s, self.nee_weight(at, s.direction, s.pdf))
     }
 
     /// The shadow ray from `p` to an emitter sample. It stops short of the sampled point by
@@ -202,6 +200,13 @@ impl World {
         let tmax = (d * SHADOW_SHORTEN - rounding).max(0.5 * d);
         Ray::new(p, s.direction, 0.0, tmax)
     }
+}
+
+/// `L cosθ / p · w`: an emitter sample's irradiance at a receiver of unit normal `normal`
+/// if unoccluded, with MIS weight `w`.
+fn emitter_irradiance(normal: Vec3, s: &EmitterSample, w: f32) -> Vec3 {
+    let cos = normal.dot(s.direction);
+    s.radiance * (cos / s.pdf * w)
 }
 
 /// Traces `packet`'s live lanes for occlusion: the mask of visible lanes (the unoccluded
