@@ -461,7 +461,10 @@ impl<'w> TileBaker<'w> {
                 rel_std_error: relative_std_error(batches),
                 samples: samples.min(u64::from(u32::MAX)) as u32,
                 flags,
-                reserved: [0; 3],
+                total: match average {
+                    TexelEstimate::Value(e) => e.rgb.map(|c| c as f32),
+                    TexelEstimate::NoSamples { .. } => [0.0; 3],
+                },
             };
         }
         record

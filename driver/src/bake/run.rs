@@ -461,8 +461,9 @@ fn bake_pass(
     })
 }
 
-/// Writes the image (at `image_path`) of the gather-only irradiance in a pass's result file
-/// `results_path` and maps it for the next pass (series transport).
+/// Writes the image (at `image_path`) of the gather-only and total irradiance in a pass's
+/// result file `results_path`, and which side of each triangle its texels bake, and maps it
+/// for the next pass (series transport).
 fn previous_pass(
     texels: &TexelFile,
     scene: &Scene,
@@ -485,12 +486,12 @@ fn previous_pass(
         results.read(tile.first_texel, &mut buffer)?;
         for (texel, r) in texels.tile_texels(t).iter().zip(&buffer) {
             if r.flags & FLAG_BAKED != 0 {
-                image.set(
-                    texel.page,
-                    u32::from(texel.pixel[0]),
-                    u32::from(texel.pixel[1]),
-                    r.gathered,
-                );
+                let [x, y] = texel.pixel.map(u32::from);
+                image.set(texel.page, x, y, r.gathered, r.total);
+                if let Some(tri) = scene.triangles.get(texel.triangle as usize) {
+                    let front = tri.geometric_normal().dot(texel.normal()) > 0.0;
+                    image.set_side(texel.triangle, front);
+                }
             }
         }
         texels.release_tile(t);

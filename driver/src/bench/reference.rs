@@ -99,8 +99,10 @@ pub fn reference(
     cache: &Path,
     settings: BakeSettings,
 ) -> Result<Reference, BenchError> {
+    // The version changes with what a bake computes for the same settings (v3: series
+    // passes read the previous pass's total irradiance on the side its texels bake).
     let key = format!(
-        "guidebake bench reference v2; scene {:016x}; texels {:016x}; settings {settings:?}",
+        "guidebake bench reference v3; scene {:016x}; texels {:016x}; settings {settings:?}",
         scene_id(bench.scene),
         texel_file_id(bench.texels)
     );

@@ -26,7 +26,7 @@ use super::{OutputFileError, create_with_header, io_error, open_with_header};
 /// Magic bytes at the start of a result file.
 pub const RESULT_MAGIC: [u8; 8] = *b"GBRESULT";
 /// The result-file version this build writes and reads.
-pub const RESULT_VERSION: u32 = 2;
+pub const RESULT_VERSION: u32 = 3;
 /// Bytes before the first record.
 pub const RESULT_HEADER_BYTES: u64 = 64;
 
@@ -45,8 +45,9 @@ pub const FLAG_UNGUIDED: u32 = 1 << 3;
 pub struct TexelResult {
     /// Irradiance, RGB, the per-texel combination of the iterations' estimates.
     pub irradiance: [f32; 3],
-    /// The final gather's share of it (without the texel's next-event estimate), the plain
-    /// average over all iterations: the indirect irradiance a next series pass looks up.
+    /// The final gather's share of it (without the texel's next-event estimate and the
+    /// emission its rays hit), the plain average over all iterations: what a next series
+    /// pass looks up where its hit's direct light is connected there (a surface's unbaked side).
     pub gathered: [f32; 3],
     /// Relative standard error of the luminance estimate (0 when unknown).
     pub rel_std_error: f32,
@@ -54,8 +55,10 @@ pub struct TexelResult {
     pub samples: u32,
     /// `FLAG_*` bits.
     pub flags: u32,
-    /// Reserved, zero.
-    pub reserved: [u32; 3],
+    /// The whole irradiance (direct and gathered), the plain average over all iterations,
+    /// unbiased whatever the combination: what a next series pass looks up on the side the
+    /// texel bakes, in place of next-event estimation there.
+    pub total: [f32; 3],
 }
 
 /// Bytes of one [`TexelResult`] in the file.
@@ -334,7 +337,7 @@ mod tests {
             samples: i,
             flags: FLAG_BAKED | FLAG_VALID,
             gathered: [0.25, 0.0, 1.0],
-            reserved: [0; 3],
+            total: [0.5, 0.25, 1.0],
         }
     }
 

@@ -1,17 +1,19 @@
 //! What leaves a gather ray's hit, by the bake's transport (docs/bake.md):
 //! the hit's emission, weighted by multiple importance sampling against the next-event
 //! estimate of the point the ray left ([`super::direct`]), plus its albedo/π times the
-//! irradiance arriving there — direct light by next-event estimation, and indirect light
-//! from the previous pass's lightmap (`series`, [`super::series`]) or from a path continued
-//! with cosine-weighted directions, next-event estimation and MIS at every vertex, and
-//! Russian roulette from the third vertex (`path`). A ray that leaves the scene sees the sky.
+//! irradiance arriving there: under `series` ([`super::series`]), from pass 2 on, the
+//! previous pass's total irradiance where the hit is on the side its texels bake, else
+//! direct light by next-event estimation plus the previous pass's gather-only irradiance;
+//! under `path`, direct light by next-event estimation plus a path continued with
+//! cosine-weighted directions, next-event estimation and MIS at every vertex, and Russian
+//! roulette from the third vertex. A ray that leaves the scene sees the sky.
 //!
 //! What a final-gather sample therefore contains, and the guide learns from (paper §2.2):
 //! the emission its ray hits, times the MIS weight of the gather's density against
 //! next-event estimation from the texel — so light an emitter sends straight to the texel
 //! is found mostly by next-event estimation and weighs little in the records, except where
 //! the gather samples it better (large emitters close by) — plus everything the hit
-//! reflects, in which every emitter is connected explicitly. Records are therefore no
+//! reflects, in which every emitter is connected explicitly or read from the previous pass. Records are therefore no
 //! longer zero-or-huge under small emitters: the guide learns the indirect light, which
 //! next-event estimation cannot find.
 
@@ -94,13 +96,23 @@ impl World {
                 other: continues.then_some(&cosine_pdf as &dyn Fn(Vec3) -> f32),
             };
             let mut irradiance = Vec3::ZERO;
-            if self.has_direct_light() {
-                let (direct, rays) = self.direct_irradiance(&at, rng.pair(), rng.unit());
-                irradiance += direct;
-                out.shadow_rays += rays;
-            }
-            if let (Transport::Series, Some(previous)) = (self.transport(), self.previous_pass()) {
-                irradiance += previous.irradiance(hit.prim, hit.u, hit.v);
+            let previous = match self.transport() {
+                Transport::Series => self.previous_pass(),
+                Transport::Path => None,
+            };
+            // Series: on the side a texel bakes, its total irradiance holds the direct light.
+            let baked = previous.filter(|p| p.bakes_side(hit.prim, front));
+            if let Some(previous) = baked {
+                irradiance += previous.lookup(hit.prim, hit.u, hit.v).total;
+            } else {
+                if self.has_direct_light() {
+                    let (direct, rays) = self.direct_irradiance(&at, rng.pair(), rng.unit());
+                    irradiance += direct;
+                    out.shadow_rays += rays;
+                }
+                if let Some(previous) = previous {
+                    irradiance += previous.lookup(hit.prim, hit.u, hit.v).gathered;
+                }
             }
             out.reflected += reflect * core::f32::consts::FRAC_1_PI * irradiance;
             if !continues {

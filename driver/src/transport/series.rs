@@ -1,13 +1,18 @@
 //! Series transport's memory of the previous pass (docs/bake.md, the `series` transport; the
 //! paper's production setting, §1 and §3): pass b's gather rays, where they hit a surface,
-//! bring back albedo/π × the *indirect* irradiance pass b−1 baked there, looked up in pass
-//! b−1's lightmap through the hit triangle's lightmap UVs.
+//! bring back albedo/π × the irradiance pass b−1 baked there, looked up in pass b−1's
+//! lightmap through the hit triangle's lightmap UVs.
 //!
-//! What is stored per texel is the gather-only irradiance (the final gather's samples
-//! `L π / q` without the texel's own next-event estimate), averaged over all iterations with
-//! equal weights: every iteration's estimator is unbiased, so their plain average is too, and
-//! no ρ is needed. Direct light at the hit is connected explicitly by the caller, so it is
-//! never counted twice.
+//! Two layers are stored per texel, each the plain average over all iterations (every
+//! iteration's estimator is unbiased, so their plain average is too, and no ρ is needed):
+//! - the **total** irradiance, direct and gathered: read where a ray hits the side of a
+//!   surface its texels bake ([`PreviousPass::bakes_side`]), in place of next-event
+//!   estimation there — no shadow ray at the hit, and the direct light it brings is the
+//!   average of the texel's whole bake rather than one sample;
+//! - the **gather-only** irradiance (the final gather's samples `L π / q` without the
+//!   texel's own next-event estimate and the emission its rays hit): read on the other side,
+//!   where the caller connects the hit's direct light explicitly, so it is never counted
+//!   twice and a wall lit on one side does not pass that light to the other.
 //!
 //! [`PreviousPass`] holds one dense RGB image per atlas page, in a file of the work directory
 //! that is memory-mapped (file-backed pages, not anonymous memory), written by
@@ -17,7 +22,8 @@
 //! by the empty atlas around it.
 //!
 //! Deviations and limits: a lightmap stores one side of a surface, so a two-sided wall hit
-//! from its back reads its front's irradiance; detail finer than a texel is averaged (the
+//! from its back reads its front's *indirect* irradiance; detail finer than a texel —
+//! including, since the total is read, the edges of shadows at hits — is averaged (the
 //! lightmap's resolution error, which the `path` transport does not have).
 
 use std::fs::{File, OpenOptions};
@@ -32,9 +38,26 @@ use crate::texels::{MeshRecord, PageRecord};
 /// Rings of pixels filled around every chart from their covered neighbours.
 pub const DILATION: u32 = 4;
 
-/// One pixel of a pass image: gather-only irradiance and its generation (0: empty, 1: a
-/// baked texel, g + 1: filled by dilation ring g).
-type Pixel = [f32; 4];
+/// One pixel of a pass image: gather-only irradiance (0..3), its generation (3; 0: empty,
+/// 1: a baked texel, g + 1: filled by dilation ring g), total irradiance (4..7), padding.
+type Pixel = [f32; 8];
+
+/// Index of the generation in a [`Pixel`].
+const GENERATION: usize = 3;
+
+/// What a lookup brings back: both layers at one point.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Lookup {
+    /// Gather-only irradiance: what arrives at the point without its direct light.
+    pub gathered: Vec3,
+    /// Total irradiance: direct and gathered.
+    pub total: Vec3,
+}
+
+/// Which side of a triangle its texels bake: none known, the winding's front, the back, or
+/// both (texels of one triangle that disagree; treated as unknown).
+const SIDE_FRONT: u8 = 1;
+const SIDE_BACK: u8 = 2;
 
 /// Where a triangle's lightmap lies: its page and its corners in pixel coordinates.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -50,7 +73,7 @@ enum Storage {
     Owned(Vec<Pixel>),
 }
 
-/// The previous pass's gather-only irradiance, looked up by triangle and barycentrics.
+/// The previous pass's irradiance, looked up by triangle and barycentrics.
 #[derive(Debug)]
 pub struct PreviousPass {
     storage: Storage,
@@ -58,6 +81,8 @@ pub struct PreviousPass {
     /// First pixel of each page in the storage.
     offsets: Vec<usize>,
     triangles: Vec<Option<TriangleUv>>,
+    /// Per triangle: `SIDE_*` bits of the sides its texels bake.
+    sides: Vec<u8>,
 }
 
 /// Why a pass image could not be written or mapped.
@@ -99,8 +124,9 @@ fn triangle_uvs(scene: &Scene, meshes: &[MeshRecord]) -> Vec<Option<TriangleUv>>
 }
 
 impl PreviousPass {
-    /// A pass image held in memory: `images[p]` is page `p`'s pixels, row-major, RGB, `None`
-    /// for a pixel no texel covers. For tests and small worlds.
+    /// A lightmap held in memory: `images[p]` is page `p`'s pixels, row-major, RGB, `None`
+    /// for a pixel no texel covers; both layers hold it, and no side is known (so a series
+    /// lookup connects direct light at every hit). For rendering a baked lightmap, and tests.
     pub fn from_pixels(
         scene: &Scene,
         meshes: &[MeshRecord],
@@ -108,11 +134,11 @@ impl PreviousPass {
         images: &[Vec<Option<Vec3>>],
     ) -> Self {
         let (offsets, total) = page_offsets(pages);
-        let mut pixels = vec![[0.0; 4]; total];
+        let mut pixels = vec![[0.0; 8]; total];
         for (p, image) in images.iter().enumerate() {
             for (i, px) in image.iter().enumerate() {
                 if let Some(c) = px {
-                    pixels[offsets[p] + i] = [c.x, c.y, c.z, 1.0];
+                    pixels[offsets[p] + i] = [c.x, c.y, c.z, 1.0, c.x, c.y, c.z, 0.0];
                 }
             }
         }
@@ -121,6 +147,7 @@ impl PreviousPass {
             pages: pages.to_vec(),
             offsets,
             triangles: triangle_uvs(scene, meshes),
+            sides: Vec::new(),
         };
         for (p, size) in pages.iter().enumerate() {
             let o = pass.offsets[p];
@@ -138,32 +165,45 @@ impl PreviousPass {
         }
     }
 
-    /// The previous pass's indirect irradiance at barycentrics (`b1`, `b2`) of triangle
-    /// `prim` (weights of its second and third vertices); zero off the atlas.
-    pub fn irradiance(&self, prim: u32, b1: f32, b2: f32) -> Vec3 {
+    /// Both layers of the previous pass at barycentrics (`b1`, `b2`) of triangle `prim`
+    /// (weights of its second and third vertices); zero off the atlas.
+    pub fn lookup(&self, prim: u32, b1: f32, b2: f32) -> Lookup {
         let Some(Some(t)) = self.triangles.get(prim as usize) else {
-            return Vec3::ZERO;
+            return Lookup::default();
         };
         let [a, b, c] = t.corners;
         let uv = a * (1.0 - b1 - b2) + b * b1 + c * b2;
         self.bilinear(t.page, uv)
     }
 
+    /// The total irradiance at barycentrics (`b1`, `b2`) of triangle `prim`: the lightmap's
+    /// value there.
+    pub fn irradiance(&self, prim: u32, b1: f32, b2: f32) -> Vec3 {
+        self.lookup(prim, b1, b2).total
+    }
+
+    /// Whether triangle `prim`'s texels bake its winding's `front` side (or its back, when
+    /// `front` is false): then its total irradiance holds the direct light arriving there.
+    pub fn bakes_side(&self, prim: u32, front: bool) -> bool {
+        let want = if front { SIDE_FRONT } else { SIDE_BACK };
+        self.sides.get(prim as usize) == Some(&want)
+    }
+
     /// Bilinear filter over the covered pixels around `uv` (pixel centres at +0.5).
-    fn bilinear(&self, page: u32, uv: Vec2) -> Vec3 {
+    fn bilinear(&self, page: u32, uv: Vec2) -> Lookup {
         let Some(size) = self.pages.get(page as usize) else {
-            return Vec3::ZERO;
+            return Lookup::default();
         };
         let pixels = self.pixels();
         let base = self.offsets[page as usize];
         let (w, h) = (size.width as i64, size.height as i64);
         let p = uv - Vec2::splat(0.5);
         if !p.is_finite() {
-            return Vec3::ZERO;
+            return Lookup::default();
         }
         let (x0, y0) = (p.x.floor(), p.y.floor());
         let (fx, fy) = (p.x - x0, p.y - y0);
-        let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
+        let (mut gathered, mut total, mut weight) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
         for (dx, dy, wgt) in [
             (0, 0, (1.0 - fx) * (1.0 - fy)),
             (1, 0, fx * (1.0 - fy)),
@@ -173,15 +213,19 @@ impl PreviousPass {
             let x = (x0 as i64 + dx).clamp(0, w - 1);
             let y = (y0 as i64 + dy).clamp(0, h - 1);
             let px = pixels[base + (y * w + x) as usize];
-            if px[3] > 0.0 && wgt > 0.0 {
-                sum += Vec3::new(px[0], px[1], px[2]) * wgt;
+            if px[GENERATION] > 0.0 && wgt > 0.0 {
+                gathered += Vec3::new(px[0], px[1], px[2]) * wgt;
+                total += Vec3::new(px[4], px[5], px[6]) * wgt;
                 weight += wgt;
             }
         }
         if weight > 0.0 {
-            sum / weight
+            Lookup {
+                gathered: gathered / weight,
+                total: total / weight,
+            }
         } else {
-            Vec3::ZERO
+            Lookup::default()
         }
     }
 }
@@ -194,21 +238,25 @@ fn dilate(pixels: &mut [Pixel], size: PageRecord) {
         let generation = ring as f32;
         for y in 0..h {
             for x in 0..w {
-                if pixels[y * w + x][3] != 0.0 {
+                if pixels[y * w + x][GENERATION] != 0.0 {
                     continue;
                 }
-                let (mut sum, mut n) = ([0.0f32; 3], 0.0f32);
+                let (mut sum, mut n) = ([0.0f32; 8], 0.0f32);
                 for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
                     for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
                         let q = pixels[ny * w + nx];
-                        if q[3] > 0.0 && q[3] <= generation {
-                            sum = [sum[0] + q[0], sum[1] + q[1], sum[2] + q[2]];
+                        if q[GENERATION] > 0.0 && q[GENERATION] <= generation {
+                            for (s, v) in sum.iter_mut().zip(q) {
+                                *s += v;
+                            }
                             n += 1.0;
                         }
                     }
                 }
                 if n > 0.0 {
-                    pixels[y * w + x] = [sum[0] / n, sum[1] / n, sum[2] / n, generation + 1.0];
+                    let mut filled = sum.map(|v| v / n);
+                    filled[GENERATION] = generation + 1.0;
+                    pixels[y * w + x] = filled;
                 }
             }
         }
@@ -221,6 +269,7 @@ pub struct PreviousPassWriter {
     map: MmapMut,
     pages: Vec<PageRecord>,
     offsets: Vec<usize>,
+    sides: Vec<u8>,
 }
 
 impl PreviousPassWriter {
@@ -254,21 +303,33 @@ impl PreviousPassWriter {
             map,
             pages: pages.to_vec(),
             offsets,
+            sides: Vec::new(),
         })
     }
 
-    /// Records texel (`x`, `y`) of page `page`: its gather-only irradiance. Non-finite values
-    /// and pixels off the page are ignored.
-    pub fn set(&mut self, page: u32, x: u32, y: u32, rgb: [f32; 3]) {
+    /// Records texel (`x`, `y`) of page `page`: its gather-only and total irradiance.
+    /// Non-finite values and pixels off the page are ignored.
+    pub fn set(&mut self, page: u32, x: u32, y: u32, gathered: [f32; 3], total: [f32; 3]) {
         let Some(size) = self.pages.get(page as usize) else {
             return;
         };
-        if x >= size.width || y >= size.height || !rgb.iter().all(|c| c.is_finite()) {
+        let finite = gathered.iter().chain(&total).all(|c| c.is_finite());
+        if x >= size.width || y >= size.height || !finite {
             return;
         }
         let i = self.offsets[page as usize] + (y * size.width + x) as usize;
         let pixels: &mut [Pixel] = bytemuck::cast_slice_mut(&mut self.map[..]);
-        pixels[i] = [rgb[0], rgb[1], rgb[2], 1.0];
+        let [g, t] = [gathered, total];
+        pixels[i] = [g[0], g[1], g[2], 1.0, t[0], t[1], t[2], 0.0];
+    }
+
+    /// Records that a texel of `triangle` bakes its winding's `front` side (or its back).
+    pub fn set_side(&mut self, triangle: u32, front: bool) {
+        let i = triangle as usize;
+        if self.sides.len() <= i {
+            self.sides.resize(i + 1, 0);
+        }
+        self.sides[i] |= if front { SIDE_FRONT } else { SIDE_BACK };
     }
 
     /// Dilates every page, flushes, and maps the image for lookups.
@@ -305,6 +366,7 @@ impl PreviousPassWriter {
             pages: self.pages,
             offsets: self.offsets,
             triangles: triangle_uvs(scene, meshes),
+            sides: self.sides,
         })
     }
 }
@@ -384,20 +446,34 @@ mod tests {
         let image: Vec<Option<Vec3>> = (0..16).map(|i| Some(Vec3::splat((i % 4) as f32))).collect();
         let mem = PreviousPass::from_pixels(&scene, &meshes, &pages, std::slice::from_ref(&image));
         // Halfway between pixel centres 1 and 2 of a row: the mean of 1 and 2.
-        let e = mem.bilinear(0, Vec2::new(2.0, 1.5));
+        let e = mem.bilinear(0, Vec2::new(2.0, 1.5)).total;
         assert!((e.x - 1.5).abs() < 1e-6, "{e}");
         let dir = tempfile::tempdir().unwrap();
         let mut w = PreviousPassWriter::create(&dir.path().join("pass.bin"), &pages).unwrap();
+        // The file's total layer is twice its gather-only layer, which is the memory image.
         for (i, px) in image.iter().enumerate() {
-            w.set(0, (i % 4) as u32, (i / 4) as u32, px.unwrap().to_array());
+            let g = px.unwrap();
+            w.set(
+                0,
+                (i % 4) as u32,
+                (i / 4) as u32,
+                g.to_array(),
+                (g * 2.0).to_array(),
+            );
         }
-        w.set(0, 9, 9, [1.0; 3]);
-        w.set(0, 0, 0, [f32::NAN; 3]);
+        w.set(0, 9, 9, [1.0; 3], [1.0; 3]);
+        w.set(0, 0, 0, [f32::NAN; 3], [1.0; 3]);
+        w.set(0, 1, 0, [1.0; 3], [f32::INFINITY; 3]);
         let file = w.finish(&scene, &meshes).unwrap();
         for (b1, b2) in [(0.1, 0.2), (0.6, 0.3), (0.0, 0.0)] {
-            let (a, b) = (mem.irradiance(0, b1, b2), file.irradiance(0, b1, b2));
-            assert!((a - b).abs().max_element() < 1e-6 || (b1, b2) == (0.0, 0.0));
-            assert!(b.is_finite());
+            let (a, b) = (mem.irradiance(0, b1, b2), file.lookup(0, b1, b2));
+            let near = |x: Vec3, y: Vec3| (x - y).abs().max_element() < 1e-6;
+            assert!(near(a, b.gathered) || (b1, b2) == (0.0, 0.0), "{a} {b:?}");
+            assert!(
+                near(a * 2.0, b.total) || (b1, b2) == (0.0, 0.0),
+                "{a} {b:?}"
+            );
+            assert!(b.gathered.is_finite() && b.total.is_finite());
         }
     }
 
@@ -407,16 +483,43 @@ mod tests {
             width: 12,
             height: 1,
         };
-        let mut px = vec![[0.0; 4]; 12];
-        px[0] = [2.0, 2.0, 2.0, 1.0];
+        let mut px = vec![[0.0; 8]; 12];
+        px[0] = [2.0, 2.0, 2.0, 1.0, 3.0, 3.0, 3.0, 0.0];
         dilate(&mut px, size);
         for (x, p) in px.iter().enumerate() {
             if x as u32 <= DILATION {
-                assert_eq!(p[0], 2.0, "pixel {x}");
-                assert_eq!(p[3], x as f32 + 1.0, "pixel {x} filled by ring {x}");
+                assert_eq!((p[0], p[4]), (2.0, 3.0), "pixel {x}: both layers");
+                assert_eq!(
+                    p[GENERATION],
+                    x as f32 + 1.0,
+                    "pixel {x} filled by ring {x}"
+                );
             } else {
-                assert_eq!(p[3], 0.0, "pixel {x} is beyond the dilation");
+                assert_eq!(p[GENERATION], 0.0, "pixel {x} is beyond the dilation");
             }
         }
+    }
+
+    #[test]
+    fn a_triangle_bakes_the_side_its_texels_face_and_only_one() {
+        let (scene, meshes, pages) = scene();
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = PreviousPassWriter::create(&dir.path().join("pass.bin"), &pages).unwrap();
+        w.set_side(0, true);
+        w.set_side(2, false);
+        w.set_side(3, true);
+        w.set_side(3, false);
+        let pass = w.finish(&scene, &meshes).unwrap();
+        assert!(pass.bakes_side(0, true) && !pass.bakes_side(0, false));
+        assert!(pass.bakes_side(2, false) && !pass.bakes_side(2, true));
+        // No texel (1, 4) or texels on both sides (3): no side is known.
+        for prim in [1, 3, 4] {
+            assert!(
+                !pass.bakes_side(prim, true) && !pass.bakes_side(prim, false),
+                "{prim}"
+            );
+        }
+        let lightmap = PreviousPass::from_pixels(&scene, &meshes, &pages, &[vec![None; 16]]);
+        assert!(!lightmap.bakes_side(0, true) && !lightmap.bakes_side(0, false));
     }
 }
