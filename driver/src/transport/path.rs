@@ -2,8 +2,9 @@
 //! the hit's emission, weighted by multiple importance sampling against the next-event
 //! estimate of the point the ray left ([`super::direct`]), plus its albedo/π times the
 //! irradiance arriving there: under `series` ([`super::series`]), from pass 2 on, the
-//! previous pass's total irradiance where the hit is on the side its texels bake, else
-//! direct light by next-event estimation plus the previous pass's gather-only irradiance;
+//! previous pass's total irradiance where the hit is on the side its texels bake and not
+//! within `NEAR_FIELD_TEXELS` of its texels of the ray's origin, else direct light by next-event
+//! estimation plus the previous pass's gather-only irradiance;
 //! under `path`, direct light by next-event estimation plus a path continued with
 //! cosine-weighted directions, next-event estimation and MIS at every vertex, and Russian
 //! roulette from the third vertex. A ray that leaves the scene sees the sky.
@@ -100,8 +101,9 @@ impl World {
                 Transport::Series => self.previous_pass(),
                 Transport::Path => None,
             };
-            // Series: on the side a texel bakes, its total irradiance holds the direct light.
-            let baked = previous.filter(|p| p.bakes_side(hit.prim, front));
+            // Series: on the side a texel bakes, its total irradiance holds the direct light;
+            // read it where the hit is far enough for the texel's blur to average out.
+            let baked = previous.filter(|p| p.reads_total(hit.prim, front, hit.t));
             if let Some(previous) = baked {
                 irradiance += previous.lookup(hit.prim, hit.u, hit.v).total;
             } else {
@@ -170,5 +172,120 @@ impl World {
                 power_heuristic(from.pdf, nee)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::PathBuf;
+
+    use glam::Vec2;
+
+    use super::*;
+    use crate::bvh::Preset;
+    use crate::scene::{Material, Mesh, Scene, Sky, Sun, Triangle};
+    use crate::texels::{MeshRecord, PageRecord};
+    use crate::transport::series::{NEAR_FIELD_TEXELS, PreviousPassWriter};
+
+    /// A 4 m right triangle on z = 0 facing +z, albedo 0.5, under a sun of irradiance 2 from
+    /// +z; its lightmap is a 4×4 page, so one texel is 1 m. The previous pass read 1 (gather
+    /// only) and 5 (total) everywhere, and baked the front side.
+    fn lit_triangle(dir: &std::path::Path) -> World {
+        let tri = Triangle {
+            positions: [Vec3::ZERO, Vec3::X * 4.0, Vec3::Y * 4.0],
+            normals: [Vec3::Z; 3],
+            lightmap_uv: Some([Vec2::ZERO, Vec2::X, Vec2::Y]),
+            mesh: 0,
+            material: 0,
+        };
+        let scene = Scene {
+            path: PathBuf::from("<test>"),
+            meshes: vec![Mesh {
+                name: "m".into(),
+                first_triangle: 0,
+                triangle_count: 1,
+                has_lightmap_uvs: true,
+            }],
+            triangles: vec![tri],
+            materials: vec![Material {
+                name: "m".into(),
+                albedo: Vec3::splat(0.5),
+                emission: Vec3::ZERO,
+            }],
+            lights: Vec::new(),
+            sun: Some(Sun {
+                direction: Vec3::Z,
+                angular_radius: 0.0,
+                irradiance: Vec3::splat(2.0),
+            }),
+            sky: Sky::None,
+            degenerate_triangles: 0,
+        };
+        let meshes = [MeshRecord {
+            first_triangle: 0,
+            triangle_count: 1,
+            page: 0,
+            flags: 1,
+            uv_scale: [4.0, 4.0],
+            uv_offset: [0.0, 0.0],
+        }];
+        let pages = [PageRecord {
+            width: 4,
+            height: 4,
+        }];
+        let mut image = PreviousPassWriter::create(&dir.join("pass.bin"), &pages).unwrap();
+        for i in 0..16 {
+            image.set(0, i % 4, i / 4, [1.0; 3], [5.0; 3]);
+        }
+        image.set_side(0, true);
+        let mut world = World::new(&scene, Preset::DEFAULT).unwrap();
+        world.set_transport(Transport::Series, 3);
+        world.set_previous_pass(Some(image.finish(&scene, &meshes).unwrap()));
+        world
+    }
+
+    /// What leaves the triangle at (1, 1, 0) towards a ray that left from `height` above
+    /// (or below, when negative) it.
+    fn leaving(world: &World, height: f32) -> Leaving {
+        let from = Departure {
+            point: Vec3::new(1.0, 1.0, height),
+            normal: -Vec3::Z * height.signum(),
+            pdf: 1.0,
+        };
+        let hit = SurfaceHit {
+            prim: 0,
+            t: height.abs(),
+            u: 0.25,
+            v: 0.25,
+        };
+        let dir = -Vec3::Z * height.signum();
+        world.radiance_from_hit(&from, dir, hit, &mut SampleRng::new(1, 0, 0, 0))
+    }
+
+    /// Series from pass 2: a far hit on the baked side reads the total (no shadow ray); a
+    /// near one, within [`NEAR_FIELD_TEXELS`] texels, and one on the other side connect the
+    /// sun and read the gather-only layer.
+    #[test]
+    fn a_series_hit_reads_the_total_only_far_away_on_the_baked_side() {
+        let dir = tempfile::tempdir().unwrap();
+        let world = lit_triangle(dir.path());
+        let albedo_over_pi = 0.5 * core::f32::consts::FRAC_1_PI;
+        let far = leaving(&world, 3.0 * NEAR_FIELD_TEXELS);
+        assert_eq!(far.shadow_rays, 0);
+        assert!(
+            (far.reflected - Vec3::splat(5.0 * albedo_over_pi)).length() < 1e-5,
+            "{far:?}"
+        );
+        let near = leaving(&world, 0.5 * NEAR_FIELD_TEXELS);
+        assert_eq!(near.shadow_rays, 1);
+        let want = Vec3::splat((2.0 + 1.0) * albedo_over_pi);
+        assert!((near.reflected - want).length() < 1e-5, "{near:?}");
+        // From below: the back, which no texel bakes and the sun does not reach.
+        let back = leaving(&world, -3.0 * NEAR_FIELD_TEXELS);
+        assert!(
+            (back.reflected - Vec3::splat(albedo_over_pi)).length() < 1e-5,
+            "{back:?}"
+        );
+        assert_eq!(far.emitted + near.emitted + back.emitted, Vec3::ZERO);
     }
 }

@@ -6,13 +6,15 @@
 //! Two layers are stored per texel, each the plain average over all iterations (every
 //! iteration's estimator is unbiased, so their plain average is too, and no ρ is needed):
 //! - the **total** irradiance, direct and gathered: read where a ray hits the side of a
-//!   surface its texels bake ([`PreviousPass::bakes_side`]), in place of next-event
-//!   estimation there — no shadow ray at the hit, and the direct light it brings is the
-//!   average of the texel's whole bake rather than one sample;
+//!   surface its texels bake, farther than [`NEAR_FIELD_TEXELS`] of them
+//!   ([`PreviousPass::reads_total`]), in place of next-event estimation there — no shadow
+//!   ray at the hit, and the direct light it brings is the average of the texel's whole
+//!   bake rather than one sample;
 //! - the **gather-only** irradiance (the final gather's samples `L π / q` without the
-//!   texel's own next-event estimate and the emission its rays hit): read on the other side,
-//!   where the caller connects the hit's direct light explicitly, so it is never counted
-//!   twice and a wall lit on one side does not pass that light to the other.
+//!   texel's own next-event estimate and the emission its rays hit): read everywhere else —
+//!   on the other side, so a wall lit on one side does not pass that light to the other, and
+//!   near the ray's origin, where a texel's blur of direct light would show — while the
+//!   caller connects the hit's direct light explicitly, so it is never counted twice.
 //!
 //! [`PreviousPass`] holds one dense RGB image per atlas page, in a file of the work directory
 //! that is memory-mapped (file-backed pages, not anonymous memory), written by
@@ -38,6 +40,14 @@ use crate::texels::{MeshRecord, PageRecord};
 /// Rings of pixels filled around every chart from their covered neighbours.
 pub const DILATION: u32 = 4;
 
+/// Texels of the hit's lightmap within which a hit connects its direct light rather than
+/// reading the total ([`PreviousPass::reads_total`]): so near, one texel's blur is a large
+/// part of what the gathering point sees (corners, where the neighbouring wall's direct
+/// light changes within a texel). Chosen by the RMSE against a path reference of the three
+/// converted scenes (docs/BENCHMARKS.md, "Series reads the total"): at 4 it is within 0.4 %
+/// of connecting every hit; at 0 up to 7.7 % above it.
+pub const NEAR_FIELD_TEXELS: f32 = 4.0;
+
 /// One pixel of a pass image: gather-only irradiance (0..3), its generation (3; 0: empty,
 /// 1: a baked texel, g + 1: filled by dilation ring g), total irradiance (4..7), padding.
 type Pixel = [f32; 8];
@@ -59,11 +69,13 @@ pub struct Lookup {
 const SIDE_FRONT: u8 = 1;
 const SIDE_BACK: u8 = 2;
 
-/// Where a triangle's lightmap lies: its page and its corners in pixel coordinates.
+/// Where a triangle's lightmap lies: its page, its corners in pixel coordinates, and the
+/// world length of one of its texels.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct TriangleUv {
     page: u32,
     corners: [Vec2; 3],
+    texel: f32,
 }
 
 /// The pixel images' bytes: a memory-mapped file, or a buffer (tests).
@@ -115,9 +127,18 @@ fn triangle_uvs(scene: &Scene, meshes: &[MeshRecord]) -> Vec<Option<TriangleUv>>
             let m = meshes.get(t.mesh as usize)?;
             let (s, o) = (Vec2::from(m.uv_scale), Vec2::from(m.uv_offset));
             let uv = t.lightmap_uv?;
+            let corners = uv.map(|v| v * s + o);
+            let [a, b, c] = corners;
+            let pixels = 0.5 * (b - a).perp_dot(c - a).abs();
+            let texel = (t.area() / pixels).sqrt();
             Some(TriangleUv {
                 page: m.page,
-                corners: uv.map(|v| v * s + o),
+                corners,
+                texel: if texel.is_finite() {
+                    texel
+                } else {
+                    f32::INFINITY
+                },
             })
         })
         .collect()
@@ -187,6 +208,16 @@ impl PreviousPass {
     pub fn bakes_side(&self, prim: u32, front: bool) -> bool {
         let want = if front { SIDE_FRONT } else { SIDE_BACK };
         self.sides.get(prim as usize) == Some(&want)
+    }
+
+    /// Whether a ray that hit triangle `prim` on its `front` (or back) side after travelling
+    /// `t` reads the total irradiance there: the side its texels bake, and farther than
+    /// [`NEAR_FIELD_TEXELS`] of its texels.
+    pub fn reads_total(&self, prim: u32, front: bool, t: f32) -> bool {
+        let Some(Some(tri)) = self.triangles.get(prim as usize) else {
+            return false;
+        };
+        self.bakes_side(prim, front) && t > NEAR_FIELD_TEXELS * tri.texel
     }
 
     /// Bilinear filter over the covered pixels around `uv` (pixel centres at +0.5).
