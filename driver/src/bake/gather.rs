@@ -1431,29 +1431,27 @@ mod tests {
     /// estimator's noise. In every guiding mode and mixture share the plain average agrees
     /// with the unguided mean (the mixture is unbiased). With the default levers, the guided
     /// iterations of the quadtree modes must have less variance per sample than the cosine
-    /// iteration 0 and the whole bake (default combination) less per-texel variance than the
-    /// unguided bake with the same samples, by the factors below.
+    /// iteration 0, and the whole bake (default combination) less per-texel variance than
+    /// the unguided bake with the same samples, by the issue's factors: ≥ 10× per guided
+    /// sample (a perfect guide with a 50 % mixture gives ~21×) and ≥ 4× for the bake.
     ///
-    /// Issue 14 asked for ≥ 10× per guided sample (a perfect guide with a 50 % mixture gives
-    /// ~21×) and ≥ 4× for the whole bake. Measured with the defaults (128 spp in iterations
-    /// of 32, 32 and 64, 25 % mixture, 64-record splits, α = 10 %; docs/guide.md): naive
-    /// 19.4× and 20.6× per guided sample, coherent 19.5× and 7.7×; whole bake 19.9× (naive)
-    /// and 7.5× (coherent) with the default combination, Müller's global weights (here the
-    /// 64 texels are the world; 2.5× and 2.0× with the plain average, which gives the cosine
-    /// iteration 0 a quarter of the weight). The 10× target
-    /// is **missed** by coherent's second guided iteration, so the per-sample floor asserted
-    /// is 5×; the whole bake's 4× holds.
+    /// The variances are pooled over [`SEEDS`] seeds: one seed's per-sample variance is ruled
+    /// by a few cosine samples that hit the panel where the guide is low (heavy tails), and
+    /// moved between 7× and 20× from seed to seed in both modes (the single-seed 7.7× once
+    /// recorded for coherent's second guided iteration was such a seed). Pooled over 32
+    /// seeds (2026-11-24): naive 11.0× and 12.8×, coherent 12.6× and 13.7× per guided
+    /// sample.
     #[test]
     fn guiding_cuts_the_variance_under_a_small_emitter() {
-        const PER_SAMPLE: f64 = 5.0;
+        const SEEDS: u32 = 32;
+        const PER_SAMPLE: f64 = 10.0;
         const WHOLE_BAKE: f32 = 4.0;
         let base = BakeSettings {
             combine: Combine::Average,
             bias_correction: false,
             ..settings(Guiding::Off)
         };
-        let (off_mean, off_sd, off_iter, _) = emitter_bake(base);
-        eprintln!("off: mean {off_mean} sd {off_sd} per-iteration {off_iter:?}");
+        let (off_mean, off_sd, _, _) = emitter_bake(base);
         for mix in [0, 25, 50, 100] {
             for mode in [Guiding::Naive, Guiding::Coherent, Guiding::Grid] {
                 let mixed = BakeSettings {
@@ -1461,49 +1459,49 @@ mod tests {
                     mix,
                     ..base
                 };
-                let (mean, sd, iter, counters) = emitter_bake(mixed);
-                eprintln!(
-                    "{mode} mix {mix}: mean {mean} sd {sd} (bake {:.1}×) per-iteration {:?}",
-                    (off_sd / sd).powi(2),
-                    iter.iter().map(|v| iter[0] / v).collect::<Vec<_>>()
-                );
+                let (mean, sd, _, counters) = emitter_bake(mixed);
                 assert_eq!(counters.iterations_guided, 2, "{mode}: {counters:?}");
                 let tol = 3.0 * (off_sd * off_sd + sd * sd).sqrt() / 8.0;
                 assert!(
                     (mean - off_mean).abs() <= tol,
                     "{mode} mix {mix}: {mean} vs {off_mean} ± {tol}"
                 );
-                if mode == Guiding::Grid || mix != BakeSettings::default().mix {
-                    continue;
+            }
+        }
+        for mode in [Guiding::Naive, Guiding::Coherent] {
+            let mut per_iteration = [0.0f64; 3];
+            let (mut off_var, mut default_var) = (0.0f32, 0.0f32);
+            for seed in 1..=SEEDS {
+                let seeded = BakeSettings { seed, ..base };
+                let (_, _, iter, _) = emitter_bake(BakeSettings {
+                    guiding: mode,
+                    ..seeded
+                });
+                for (sum, v) in per_iteration.iter_mut().zip(&iter) {
+                    *sum += v;
                 }
-                for (k, v) in iter.iter().enumerate().skip(1) {
-                    assert!(
-                        *v * PER_SAMPLE <= iter[0],
-                        "{mode}: iteration {k} per-sample variance {v}, cosine {}",
-                        iter[0]
-                    );
-                }
+                off_var += emitter_bake(seeded).1.powi(2);
                 let default = BakeSettings {
                     guiding: mode,
+                    seed,
                     ..settings(Guiding::Off)
                 };
-                let (mean, sd, _, _) = emitter_bake(default);
-                eprintln!(
-                    "{mode} default combination: mean {mean} sd {sd} (bake {:.1}×)",
-                    (off_sd / sd).powi(2)
-                );
-                let tol = 3.0 * (off_sd * off_sd + sd * sd).sqrt() / 8.0;
-                assert!(
-                    (mean - off_mean).abs() <= tol,
-                    "{mode} default: {mean} vs {off_mean} ± {tol}"
-                );
-                assert!(
-                    sd * sd * WHOLE_BAKE <= off_sd * off_sd,
-                    "{mode}: per-texel variance {} not {WHOLE_BAKE}× below unguided {}",
-                    sd * sd,
-                    off_sd * off_sd
-                );
+                default_var += emitter_bake(default).1.powi(2);
             }
+            let ratios = per_iteration.map(|v| per_iteration[0] / v);
+            eprintln!(
+                "{mode}: per guided sample {:.1}× {:.1}×, whole bake {:.1}×",
+                ratios[1],
+                ratios[2],
+                off_var / default_var
+            );
+            for (k, r) in ratios.iter().enumerate().skip(1) {
+                assert!(*r >= PER_SAMPLE, "{mode}: iteration {k} only {r:.2}× below cosine");
+            }
+            assert!(
+                default_var * WHOLE_BAKE <= off_var,
+                "{mode}: per-texel variance {default_var} not {WHOLE_BAKE}× below unguided {off_var}"
+            );
         }
     }
 
