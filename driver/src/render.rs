@@ -3,7 +3,8 @@
 //! One eye ray per sub-pixel (2 × 2 stratified per pixel) is traced with the project's own
 //! traversal ([`guidebake_kernels::traverse::intersect1`] over [`crate::bvh::Bvh`]). A hit on
 //! a lightmapped triangle is shaded as a diffuse game surface shades a baked lightmap:
-//! outgoing radiance `albedo × E / π` with the irradiance `E` looked up bilinearly through
+//! outgoing radiance `albedo × E / π` (the albedo at the hit, textured where the material
+//! is: [`crate::scene::texture::HitAlbedo`]) with the irradiance `E` looked up bilinearly through
 //! the triangle's lightmap UVs (the lookup of [`crate::transport::series::PreviousPass`]:
 //! covered pixels only, weights renormalised, so chart borders do not fetch the empty
 //! atlas), plus the material's emission seen from its front face. A ray that leaves the scene
@@ -451,7 +452,8 @@ fn shade(
         }
         if triangle.lightmap_uv.is_some() {
             let e = lightmap.irradiance(hit.prim, hit.u, hit.v);
-            radiance += material.albedo * e / std::f32::consts::PI;
+            let albedo = stage.scene.hit_albedo(prim).at(hit.u, hit.v);
+            radiance += albedo * e / std::f32::consts::PI;
         }
         let finite = if radiance.is_finite() {
             radiance
@@ -544,12 +546,15 @@ mod tests {
             positions: uv.map(p),
             normals: [Vec3::Y; 3],
             lightmap_uv: Some(uv),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         };
         let (o, x, y, xy) = (Vec2::ZERO, Vec2::X, Vec2::Y, Vec2::ONE);
         let material = Material {
             name: "grey".into(),
+            base_color_texture: None,
             albedo: Vec3::splat(ALBEDO),
             emission: Vec3::ZERO,
         };

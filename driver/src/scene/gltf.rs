@@ -1,9 +1,12 @@
 //! glTF 2.0 through the `gltf` crate.
+use std::sync::Arc;
+
+use super::texture::{self, BaseColorTexture, TextureOptions};
 use super::*;
 
-pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
+pub(super) fn load(path: &Path, textures: TextureOptions) -> Result<Scene, SceneError> {
     let (doc, buffers, images) = import(path)?;
-    let materials = read_materials(&doc, &images);
+    let materials = read_materials(path, &doc, &images, textures)?;
     let default_material = materials.len() as u32;
     let mut materials = materials;
     materials.push(Material::default_grey());
@@ -113,8 +116,14 @@ pub(super) fn import(
                 check_view(view, &buffers).map_err(|m| resource(item.clone(), m))?;
             }
         }
+        let named = match &source {
+            ::gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
+                format!("\"{uri}\": ")
+            }
+            _ => String::new(),
+        };
         let data = ::gltf::image::Data::from_source(source, Some(base), &buffers)
-            .map_err(|e| resource(item, describe(&e)))?;
+            .map_err(|e| resource(item, format!("{named}{}", describe(&e))))?;
         images.push(data);
     }
     Ok((doc, buffers, images))
@@ -244,57 +253,140 @@ fn check_position_accessors(json: &::gltf::json::Root) -> ::gltf::Result<()> {
     }
 }
 
-fn read_materials(doc: &::gltf::Document, images: &[::gltf::image::Data]) -> Vec<Material> {
-    doc.materials()
-        .enumerate()
-        .map(|(i, m)| {
-            let pbr = m.pbr_metallic_roughness();
-            let f = pbr.base_color_factor();
-            let mut albedo = Vec3::new(f[0], f[1], f[2]);
-            if let Some(info) = pbr.base_color_texture() {
-                let img = &images[info.texture().source().index()];
-                if let Some(avg) = average_image(img) {
-                    albedo *= avg;
-                }
+/// The materials, their base-colour textures decoded once per image (as
+/// [`texture::Image`]s, capped as `options` says) and shared.
+fn read_materials(
+    path: &Path,
+    doc: &::gltf::Document,
+    images: &[::gltf::image::Data],
+    options: TextureOptions,
+) -> Result<Vec<Material>, SceneError> {
+    let mut decoded: Vec<Option<Arc<texture::Image>>> = vec![None; images.len()];
+    let mut image = |t: ::gltf::Texture| -> Result<Arc<texture::Image>, SceneError> {
+        let index = t.source().index();
+        if let Some(done) = &decoded[index] {
+            return Ok(Arc::clone(done));
+        }
+        let item = format!("images[{index}]");
+        let source = match t.source().source() {
+            ::gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
+                format!("{item} ({uri})")
             }
-            // An emissive texture is averaged like the base colour: emitters are sampled
-            // as lights of uniform radiance (transport::emitters).
-            let mut e = Vec3::from(m.emissive_factor());
-            if let Some(info) = m.emissive_texture() {
-                let img = &images[info.texture().source().index()];
-                if let Some(avg) = average_image(img) {
-                    e *= avg;
-                }
+            _ => item.clone(),
+        };
+        let img = decode_image(&images[index], source, options).map_err(|message| {
+            SceneError::GltfResource {
+                path: path.to_owned(),
+                item,
+                message,
             }
-            let strength = m.emissive_strength().unwrap_or(1.0);
-            Material {
-                name: m
-                    .name()
-                    .map_or_else(|| format!("material#{i}"), str::to_owned),
-                albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE),
-                emission: (e * strength).max(Vec3::ZERO),
+        })?;
+        let img = Arc::new(img);
+        decoded[index] = Some(Arc::clone(&img));
+        Ok(img)
+    };
+    let mut materials = Vec::with_capacity(doc.materials().len());
+    for (i, m) in doc.materials().enumerate() {
+        let pbr = m.pbr_metallic_roughness();
+        let f = pbr.base_color_factor();
+        let factor = Vec3::new(f[0], f[1], f[2]).clamp(Vec3::ZERO, Vec3::ONE);
+        let base_color_texture = match pbr.base_color_texture() {
+            Some(info) => {
+                let sampler = info.texture().sampler();
+                Some(BaseColorTexture {
+                    image: image(info.texture())?,
+                    wrap: [sampler.wrap_s(), sampler.wrap_t()].map(wrap),
+                    factor,
+                })
             }
-        })
-        .collect()
+            None => None,
+        };
+        let albedo = base_color_texture
+            .as_ref()
+            .map_or(factor, |t| factor * t.image.average());
+        // An emissive texture is averaged: emitters are sampled as lights of uniform
+        // radiance (transport::emitters).
+        let mut e = Vec3::from(m.emissive_factor());
+        if let Some(info) = m.emissive_texture() {
+            e *= image(info.texture())?.average();
+        }
+        let strength = m.emissive_strength().unwrap_or(1.0);
+        materials.push(Material {
+            name: m
+                .name()
+                .map_or_else(|| format!("material#{i}"), str::to_owned),
+            albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE),
+            emission: (e * strength).max(Vec3::ZERO),
+            base_color_texture,
+        });
+    }
+    Ok(materials)
 }
 
-/// Linear average of a base-colour image (8-bit sRGB; 16-bit and float images are taken
-/// as linear already, which is what the glTF importers produce for them).
-fn average_image(img: &::gltf::image::Data) -> Option<Vec3> {
-    use ::gltf::image::Format;
-    match img.format {
-        Format::R8G8B8 => average_srgb8(&img.pixels, 3),
-        Format::R8G8B8A8 => average_srgb8(&img.pixels, 4),
-        Format::R8 | Format::R8G8 => {
-            let ch = if img.format == Format::R8 { 1 } else { 2 };
-            let grey: Vec<u8> = img
-                .pixels
-                .chunks_exact(ch)
-                .flat_map(|p| [p[0], p[0], p[0]])
-                .collect();
-            average_srgb8(&grey, 3)
+/// A glTF sampler's wrap mode.
+fn wrap(mode: ::gltf::texture::WrappingMode) -> texture::Wrap {
+    use ::gltf::texture::WrappingMode as M;
+    match mode {
+        M::Repeat => texture::Wrap::Repeat,
+        M::ClampToEdge => texture::Wrap::ClampToEdge,
+        M::MirroredRepeat => texture::Wrap::MirroredRepeat,
+    }
+}
+
+/// An imported image as the baker keeps it. Colour textures are sRGB-encoded whatever their
+/// depth (glTF 2.0, 3.9.2): 8- and 16-bit texels are decoded as sRGB; float texels (which
+/// glTF does not list, but the importer produces from other formats) are taken as linear.
+fn decode_image(
+    img: &::gltf::image::Data,
+    source: String,
+    options: TextureOptions,
+) -> Result<texture::Image, String> {
+    use ::gltf::image::Format as F;
+    let (w, h) = (img.width, img.height);
+    let eight =
+        |channels| texture::Image::from_srgb8(source.clone(), w, h, channels, &img.pixels, options);
+    let wide = |channels: usize, bytes: usize, value: &dyn Fn(&[u8]) -> f32| {
+        let count = w as usize * h as usize;
+        if count == 0 || img.pixels.len() != count * channels * bytes {
+            return Err(format!(
+                "{w}×{h} texels of {channels} channels do not match its {} bytes",
+                img.pixels.len()
+            ));
         }
-        _ => None,
+        let linear: Vec<Vec3> = img
+            .pixels
+            .chunks_exact(channels * bytes)
+            .map(|px| {
+                let c = |k: usize| value(&px[k * bytes..(k + 1) * bytes]);
+                if channels < 3 {
+                    Vec3::splat(c(0))
+                } else {
+                    Vec3::new(c(0), c(1), c(2))
+                }
+            })
+            .collect();
+        Ok(texture::Image::from_linear(
+            source.clone(),
+            w,
+            h,
+            &linear,
+            options,
+        ))
+    };
+    let srgb16 =
+        |b: &[u8]| texture::srgb_to_linear(f32::from(u16::from_ne_bytes([b[0], b[1]])) / 65535.0);
+    let float = |b: &[u8]| f32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
+    match img.format {
+        F::R8 => eight(1),
+        F::R8G8 => eight(2),
+        F::R8G8B8 => eight(3),
+        F::R8G8B8A8 => eight(4),
+        F::R16 => wide(1, 2, &srgb16),
+        F::R16G16 => wide(2, 2, &srgb16),
+        F::R16G16B16 => wide(3, 2, &srgb16),
+        F::R16G16B16A16 => wide(4, 2, &srgb16),
+        F::R32G32B32FLOAT => wide(3, 4, &float),
+        F::R32G32B32A32FLOAT => wide(4, 4, &float),
     }
 }
 
@@ -318,6 +410,10 @@ fn check_accessors(b: &SceneBuilder, id: u32, prim: &::gltf::Primitive) -> Resul
         let allowed = match semantic {
             Semantic::Positions | Semantic::Normals => fits(&a, D::Vec3, &[T::F32]),
             Semantic::TexCoords(_) => fits(&a, D::Vec2, &[T::F32, T::U8, T::U16]),
+            Semantic::Colors(_) => {
+                let types = &[T::F32, T::U8, T::U16];
+                fits(&a, D::Vec3, types) || fits(&a, D::Vec4, types)
+            }
             _ => true,
         };
         (format!("{semantic:?}"), a, allowed)
@@ -409,9 +505,30 @@ fn read_mesh(
         let uvs: Option<Vec<Vec2>> = reader
             .read_tex_coords(1)
             .map(|t| t.into_f32().map(Vec2::from).collect());
+        // The texture's UV set, read only when the material has a base-colour texture.
+        let texture_set = prim
+            .material()
+            .pbr_metallic_roughness()
+            .base_color_texture()
+            .map(|info| info.tex_coord());
+        let texture_uvs: Option<Vec<Vec2>> = texture_set
+            .and_then(|set| reader.read_tex_coords(set))
+            .map(|t| t.into_f32().map(Vec2::from).collect());
+        let colours: Option<Vec<Vec3>> = reader
+            .read_colors(0)
+            .map(|c| c.into_rgb_f32().map(Vec3::from).collect());
         let count = positions.len();
         check_len(b, id, "NORMAL", normals.as_ref().map(Vec::len), count)?;
         check_len(b, id, "TEXCOORD_1", uvs.as_ref().map(Vec::len), count)?;
+        let texture_uv_name = format!("TEXCOORD_{}", texture_set.unwrap_or(0));
+        check_len(
+            b,
+            id,
+            &texture_uv_name,
+            texture_uvs.as_ref().map(Vec::len),
+            count,
+        )?;
+        check_len(b, id, "COLOR_0", colours.as_ref().map(Vec::len), count)?;
         let indices: Vec<u32> = match reader.read_indices() {
             Some(i) => i.into_u32().collect(),
             None => (0..count as u32).collect(),
@@ -444,6 +561,8 @@ fn read_mesh(
                     .as_ref()
                     .map_or([Vec3::ZERO; 3], |n| v.map(|i| n[i])),
                 lightmap_uv: uvs.as_ref().map(|u| v.map(|i| u[i])),
+                texture_uv: texture_uvs.as_ref().map(|u| v.map(|i| u[i])),
+                colour: colours.as_ref().map(|c| v.map(|i| c[i])),
                 mesh: id,
                 material,
             });
