@@ -828,4 +828,108 @@ mod tests {
             )
         );
     }
+
+    /// A one-triangle glTF beside a 2×2 PNG (`image` names it; `None`: no PNG is written):
+    /// TEXCOORD_0 and TEXCOORD_1 (0,0), (1,0), (0,1); COLOR_0 (VEC4 float) white, half
+    /// grey, white; the base-colour texture clamps along u and mirrors along v, factor
+    /// (0.5, 1, 1).
+    fn textured_triangle(dir: &Path, image: &str, write_png: bool) -> PathBuf {
+        let floats: [f32; 9 + 6 + 6 + 12] = [
+            0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, // POSITION
+            0.0, 0.0, 1.0, 0.0, 0.0, 1.0, // TEXCOORD_0
+            0.0, 0.0, 1.0, 0.0, 0.0, 1.0, // TEXCOORD_1
+            1.0, 1.0, 1.0, 1.0, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, // COLOR_0
+        ];
+        let bytes: Vec<u8> = floats.iter().flat_map(|f| f.to_le_bytes()).collect();
+        std::fs::write(dir.join("tri.bin"), &bytes).unwrap();
+        if write_png {
+            let texels = [255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255];
+            image::RgbImage::from_raw(2, 2, texels.to_vec())
+                .unwrap()
+                .save(dir.join(image))
+                .unwrap();
+        }
+        let view = |offset: usize, length: usize| serde_json::json!({ "buffer": 0, "byteOffset": offset, "byteLength": length });
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "scene": 0, "scenes": [{ "nodes": [0] }], "nodes": [{ "mesh": 0 }],
+            "meshes": [{ "name": "tri", "primitives": [{
+                "attributes": { "POSITION": 0, "TEXCOORD_0": 1, "TEXCOORD_1": 2, "COLOR_0": 3 },
+                "material": 0 }] }],
+            "materials": [{ "name": "tex", "pbrMetallicRoughness": {
+                "baseColorFactor": [0.5, 1.0, 1.0, 1.0],
+                "baseColorTexture": { "index": 0, "texCoord": 0 } } }],
+            "textures": [{ "source": 0, "sampler": 0 }],
+            "samplers": [{ "wrapS": 33071, "wrapT": 33648 }],
+            "images": [{ "uri": image }],
+            "accessors": [
+                { "bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0] },
+                { "bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2" },
+                { "bufferView": 2, "componentType": 5126, "count": 3, "type": "VEC2" },
+                { "bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC4" },
+            ],
+            "bufferViews": [view(0, 36), view(36, 24), view(60, 24), view(84, 48)],
+            "buffers": [{ "byteLength": bytes.len(), "uri": "tri.bin" }],
+        });
+        let path = dir.join("tri.gltf");
+        std::fs::write(&path, json.to_string()).unwrap();
+        path
+    }
+
+    #[test]
+    fn base_colour_textures_load_with_their_uv_set_sampler_and_vertex_colours() {
+        use super::super::texture::{HitAlbedo, Wrap, srgb_to_linear};
+        let dir = tempfile::tempdir().unwrap();
+        let s = Scene::load(&textured_triangle(dir.path(), "checker.png", true)).unwrap();
+        let t = &s.triangles[0];
+        assert_eq!(t.texture_uv, Some([Vec2::ZERO, Vec2::X, Vec2::Y]));
+        assert_eq!(t.colour, Some([Vec3::ONE, Vec3::splat(0.5), Vec3::ONE]));
+        let m = &s.materials[0];
+        let tex = m.base_color_texture.as_ref().unwrap();
+        assert_eq!(tex.wrap, [Wrap::ClampToEdge, Wrap::MirroredRepeat]);
+        assert_eq!(tex.factor, Vec3::new(0.5, 1.0, 1.0));
+        assert_eq!(tex.image.size(), (2, 2));
+        assert_eq!(s.texture_bytes(), 12);
+        // The material's albedo: the factor × the linear average (red, green, blue, white).
+        assert!((m.albedo - Vec3::new(0.25, 0.5, 0.5)).abs().max_element() < 1e-6);
+        // At vertex 0 (uv 0,0, clamped to the red texel) and vertex 1 (uv 1,0: green, colour
+        // ½), and between texel centres: the linear mean of red and green at uv (½, ¼).
+        let a = s.hit_albedo(0);
+        assert!(matches!(a, HitAlbedo::Varying(_)));
+        assert!((a.at(0.0, 0.0) - Vec3::new(0.5, 0.0, 0.0)).length() < 1e-6);
+        assert!((a.at(1.0, 0.0) - Vec3::new(0.0, 0.5, 0.0)).length() < 1e-6);
+        // uv (½, ¼) is halfway between the red and green texel centres of row 0: their
+        // linear mean (½, ½, 0) × factor (½, 1, 1) × colour (¼ + ½·½ + ¼ = ¾).
+        let mid = a.at(0.5, 0.25);
+        assert!(
+            (mid - Vec3::new(0.1875, 0.375, 0.0)).length() < 1e-6,
+            "{mid}"
+        );
+        // The sRGB code 128 would decode to 0.216, not ½: filtering is in linear light.
+        assert!((srgb_to_linear(128.0 / 255.0) - 0.2158605).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_missing_or_undecodable_texture_image_is_an_error_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = textured_triangle(dir.path(), "missing.png", false);
+        let e = Scene::load(&path).expect_err("a missing image is an error");
+        let message = e.to_string();
+        assert!(
+            message.starts_with(&format!(
+                "{}: images[0]: \"missing.png\": cannot read",
+                path.display()
+            )),
+            "{message}"
+        );
+        std::fs::write(dir.path().join("broken.png"), b"not a png").unwrap();
+        let path = textured_triangle(dir.path(), "broken.png", false);
+        let message = Scene::load(&path)
+            .expect_err("a broken image is an error")
+            .to_string();
+        assert!(
+            message.starts_with(&format!("{}: images[0]: \"broken.png\": ", path.display())),
+            "{message}"
+        );
+    }
 }

@@ -103,7 +103,8 @@ fn check_element_indices(path: &Path) -> Result<(), SceneError> {
     Ok(())
 }
 
-/// A material; its `map_Kd` is a texture sampled at the OBJ's one UV set (repeating), and
+/// A material; its `map_Kd` is a texture sampled at the OBJ's one UV set (repeating; v
+/// flipped, as OBJ's v runs up the image), and
 /// an image that is missing or cannot be decoded is an error naming it.
 fn read_material(
     path: &Path,
@@ -212,7 +213,10 @@ fn read_model(
                 [Vec3::ZERO; 3]
             },
             lightmap_uv: uv,
-            texture_uv: uv.filter(|_| textured),
+            // OBJ's v runs up the image, glTF's (and the sampler's) down.
+            texture_uv: uv
+                .filter(|_| textured)
+                .map(|uv| uv.map(|t| Vec2::new(t.x, 1.0 - t.y))),
             colour: None,
             mesh: id,
             material,
@@ -252,5 +256,51 @@ mod tests {
         // 0 and a relative index to just before the first element mean "none", as in tobj.
         std::fs::write(&path, format!("{head}f 1/0/-1 2/-2/1 3/1/1\n")).unwrap();
         assert_eq!(Scene::load(&path).unwrap().triangles.len(), 1);
+    }
+
+    #[test]
+    fn obj_map_kd_is_sampled_and_a_missing_one_is_an_error_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let obj = dir.path().join("quad.obj");
+        std::fs::write(
+            &obj,
+            "mtllib quad.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl wood\nf 1/1 2/2 3/3\n",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.path().join("quad.mtl"),
+            "newmtl wood\nKd 0.5 0.5 0.5\nmap_Kd wood.png\n",
+        )
+        .unwrap();
+        let e = Scene::load(&obj).expect_err("a missing map_Kd is an error");
+        let message = e.to_string();
+        assert!(
+            message.starts_with(&format!("{}: texture wood.png: ", obj.display()))
+                && message.contains("wood.png"),
+            "{message}"
+        );
+        // A 1×2 image: black over white (rows top to bottom; v = 0 is the top row).
+        image::RgbImage::from_raw(1, 2, vec![0, 0, 0, 255, 255, 255])
+            .unwrap()
+            .save(dir.path().join("wood.png"))
+            .unwrap();
+        let s = Scene::load(&obj).unwrap();
+        let t = &s.triangles[0];
+        // OBJ's v runs up the image: the texture UVs are the lightmap UVs with v flipped.
+        let flip = |uv: [Vec2; 3]| uv.map(|t| Vec2::new(t.x, 1.0 - t.y));
+        assert_eq!(t.texture_uv, t.lightmap_uv.map(flip));
+        assert!(
+            (s.materials[0].albedo - Vec3::splat(0.25))
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        let a = s.hit_albedo(0);
+        // OBJ v = 0 is the image's bottom edge, between the white bottom row and the black
+        // top row (repeating): halfway, ½ × Kd.
+        assert!((a.at(0.0, 0.0) - Vec3::splat(0.25)).abs().max_element() < 1e-6);
+        // OBJ v = ¼ is the centre of the bottom (white) row; v = ¾ of the top (black) one.
+        assert!((a.at(0.0, 0.25) - Vec3::splat(0.5)).abs().max_element() < 1e-6);
+        assert!(a.at(0.0, 0.75).abs().max_element() < 1e-6);
     }
 }
