@@ -257,7 +257,14 @@ fn bake_wall(dir: &Path, scene: &Scene, name: &str) -> Vec<f64> {
         aux: false,
         finish: FinishOptions::default(),
     };
-    bake(&job, scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+    let report = bake(&job, scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+    // The stats count the checker's texels once: 64 × 64 × 3 bytes of 8-bit sRGB.
+    let bytes = if scene.materials[1].base_color_texture.is_some() {
+        64 * 64 * 3
+    } else {
+        0
+    };
+    assert_eq!(report.texture_bytes, bytes);
     let values: Vec<f64> = ["R", "G", "B"]
         .iter()
         .flat_map(|c| read_channel(&out, c).unwrap())
