@@ -659,6 +659,61 @@ mod tests {
     }
 
     #[test]
+    fn a_textured_plane_renders_its_texture_times_the_irradiance() {
+        use crate::scene::BaseColorTexture;
+        use crate::scene::texture::{Image, TextureOptions, Wrap};
+        let dir = tempfile::tempdir().unwrap();
+        let (mut scene, texels, out) = baked_plane(dir.path());
+        // A 2×1 texture, black then white, clamped, across the plane's u (x from −2 to 2):
+        // black where x < −1, white where x > 1, a linear ramp between the texel centres.
+        let image = Image::from_srgb8("ramp".into(), 2, 1, 1, &[0, 255], TextureOptions::default());
+        scene.materials[0].base_color_texture = Some(BaseColorTexture {
+            image: std::sync::Arc::new(image.unwrap()),
+            wrap: [Wrap::ClampToEdge; 2],
+            factor: Vec3::ONE,
+        });
+        for t in &mut scene.triangles {
+            t.texture_uv = t.lightmap_uv;
+        }
+        let lightmap = Lightmap::load(&texels, &scene, &out).unwrap();
+        let stage = Stage::new(&scene).unwrap();
+        // Straight down from above the centre, the plane filling the middle of the view.
+        let camera = Camera::look_at(Vec3::new(0.0, 6.0, 0.0), Vec3::ZERO, -Vec3::Z, 0.9);
+        let options = ViewOptions {
+            width: 48,
+            height: 48,
+            cutaway: false,
+        };
+        let view = render(&stage, &lightmap, &camera, options);
+        let (mut black, mut white, mut plane) = (0, 0, 0);
+        for (i, s) in view.surface.iter().enumerate() {
+            if *s != 4 {
+                continue;
+            }
+            plane += 1;
+            let c = view.radiance[i];
+            assert!(
+                c.is_finite() && c.cmple(SKY * 1.001).all(),
+                "pixel {i}: {c}"
+            );
+            // Grey: the texture is grey, times the sky's colour.
+            assert!((c / SKY - Vec3::splat(c.x / SKY.x)).abs().max_element() < 1e-3);
+            black += usize::from(c.max_element() < 1e-4);
+            white += usize::from((c - SKY).abs().max_element() < 1e-3 * SKY.max_element());
+        }
+        // A quarter of the plane is black and a quarter white (a constant albedo would give
+        // ½ L everywhere), up to the columns of pixels the quarter lines cross.
+        assert!(plane > 400, "{plane}");
+        let quarter = plane as f64 / 4.0;
+        for (what, n) in [("black", black), ("white", white)] {
+            assert!(
+                (n as f64 - quarter).abs() < 0.15 * quarter,
+                "{what}: {n} of {plane} pixels"
+            );
+        }
+    }
+
+    #[test]
     fn a_cutaway_passes_through_the_unlit_side_and_a_plain_view_shades_it() {
         let dir = tempfile::tempdir().unwrap();
         let (scene, texels, out) = baked_plane(dir.path());
