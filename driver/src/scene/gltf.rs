@@ -618,6 +618,9 @@ mod tests {
                 .all(|m| (m.emission.max_element() - 1000.0).abs() < 1e-2)
         );
         assert_eq!(s.triangle_positions().len(), s.triangles.len());
+        // The conversion averaged the original's textures: none, and no texture UVs.
+        assert_eq!(s.texture_bytes(), 0);
+        assert!(s.triangles.iter().all(|t| t.texture_uv.is_none()));
     }
 
     #[test]
@@ -682,6 +685,25 @@ mod tests {
             s.triangle_material(lamp.first_triangle as usize).emission,
             Vec3::ONE
         );
+        // Two base-colour textures, sampled at TEXCOORD_0: the block's checkerBJS.png
+        // (1024², RGBA) and the ground's checker-meter.png (256²), kept as 8-bit RGB.
+        let sizes: Vec<_> = s
+            .materials
+            .iter()
+            .filter_map(|m| m.base_color_texture.as_ref().map(|t| t.image.size()))
+            .collect();
+        assert_eq!(sizes, [(1024, 1024), (256, 256)]);
+        assert_eq!(s.texture_bytes(), (1024 * 1024 + 256 * 256) * 3);
+        let bloc = s.meshes.iter().find(|m| m.name == "bloc.000").unwrap();
+        let first = bloc.first_triangle as usize;
+        assert!(s.triangles[first].texture_uv.is_some());
+        assert!(matches!(
+            s.hit_albedo(first),
+            super::super::texture::HitAlbedo::Varying(_)
+        ));
+        // Capped at 300: the 1024² image is box-filtered by 4 to 256², the 256² one kept.
+        let capped = Scene::load_with(&p, TextureOptions { max_size: 300 }).unwrap();
+        assert_eq!(capped.texture_bytes(), 2 * 256 * 256 * 3);
     }
 
     /// A glTF of one buffer (4 bytes long) and one image with these URIs, loaded.
