@@ -58,18 +58,32 @@ pub enum Wrap {
 }
 
 impl Wrap {
-    /// Texel index `i` of a row (or column) of `n` texels brought into `0..n`.
+    /// The two texels of a row (or column) of `n` texels whose centres bracket coordinate `t`,
+    /// and the weight of the second. The coordinate is first brought into one period in
+    /// floating point (`[0, 1)` repeating; `[0, 1]` mirrored or clamped), so the indices need
+    /// only a fix-up at the ends, and no integer division (the glTF definitions, index by
+    /// index, are the tests' reference: `tests::reference_index`).
     #[inline]
-    fn index(self, i: i64, n: i64) -> usize {
-        let j = match self {
-            Wrap::Repeat => i.rem_euclid(n),
-            Wrap::ClampToEdge => i.clamp(0, n - 1),
+    fn taps(self, t: f32, n: u32) -> (usize, usize, f32) {
+        let t = match self {
+            Wrap::Repeat => t - t.floor(),
+            Wrap::ClampToEdge => t.clamp(0.0, 1.0),
             Wrap::MirroredRepeat => {
-                let m = i.rem_euclid(2 * n);
-                if m >= n { 2 * n - 1 - m } else { m }
+                let m = t - 2.0 * (0.5 * t).floor();
+                if m > 1.0 { 2.0 - m } else { m }
             }
         };
-        j as usize
+        let x = t * n as f32 - 0.5;
+        let x0 = x.floor();
+        let (i, last) = (x0 as i64, i64::from(n) - 1);
+        let (a, b) = match self {
+            Wrap::Repeat => (
+                if i < 0 { last } else { i },
+                if i >= last { 0 } else { i + 1 },
+            ),
+            Wrap::ClampToEdge | Wrap::MirroredRepeat => (i, i + 1),
+        };
+        (a.clamp(0, last) as usize, b.clamp(0, last) as usize, x - x0)
     }
 }
 
@@ -236,14 +250,8 @@ impl Image {
     /// Linear RGB at `uv` (texel centres at `(i + ½) / width`), bilinear between the four
     /// nearest texels, each decoded from sRGB first; `wrap` for u and v.
     pub fn bilinear(&self, uv: Vec2, wrap: [Wrap; 2]) -> Vec3 {
-        let (w, h) = (i64::from(self.width), i64::from(self.height));
-        let x = uv.x * self.width as f32 - 0.5;
-        let y = uv.y * self.height as f32 - 0.5;
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let (xa, xb) = (wrap[0].index(x0, w), wrap[0].index(x0.saturating_add(1), w));
-        let (ya, yb) = (wrap[1].index(y0, h), wrap[1].index(y0.saturating_add(1), h));
+        let (xa, xb, fx) = wrap[0].taps(uv.x, self.width);
+        let (ya, yb, fy) = wrap[1].taps(uv.y, self.height);
         let lut = &*SRGB8_TO_LINEAR;
         let texel = |x: usize, y: usize| {
             let t = self.srgb[y * self.width as usize + x];
@@ -411,10 +419,79 @@ mod tests {
         assert!((img.bilinear(Vec2::new(0.375, 0.5), clamp).x - 0.25).abs() < 1e-6);
     }
 
+    /// The glTF sampler definitions, texel index by texel index: index `i` of a row of `n`
+    /// texels brought into `0..n`.
+    fn reference_index(wrap: Wrap, i: i64, n: i64) -> usize {
+        let j = match wrap {
+            Wrap::Repeat => i.rem_euclid(n),
+            Wrap::ClampToEdge => i.clamp(0, n - 1),
+            Wrap::MirroredRepeat => {
+                let m = i.rem_euclid(2 * n);
+                if m >= n { 2 * n - 1 - m } else { m }
+            }
+        };
+        j as usize
+    }
+
+    /// Bilinear filtering by [`reference_index`]: texel centres at `(i + ½) / n`.
+    fn reference_bilinear(img: &Image, uv: Vec2, wrap: [Wrap; 2]) -> Vec3 {
+        let (w, h) = (i64::from(img.width), i64::from(img.height));
+        let x = f64::from(uv.x) * w as f64 - 0.5;
+        let y = f64::from(uv.y) * h as f64 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let lut = &*SRGB8_TO_LINEAR;
+        let texel = |i: i64, j: i64| {
+            let (i, j) = (
+                reference_index(wrap[0], i, w),
+                reference_index(wrap[1], j, h),
+            );
+            let t = img.srgb[j * img.width as usize + i];
+            Vec3::new(lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize])
+        };
+        let top = texel(x0, y0).lerp(texel(x0 + 1, y0), fx);
+        let bottom = texel(x0, y0 + 1).lerp(texel(x0 + 1, y0 + 1), fx);
+        top.lerp(bottom, fy)
+    }
+
+    #[test]
+    fn bilinear_taps_match_the_reference_wrap_definitions() {
+        // A 5×3 image of distinct texels, every pair of modes, UVs over several periods
+        // either side of [0, 1] and exactly on texel centres and edges.
+        let mut rng = guidebake_kernels::testing::Pcg32::new(3, 0);
+        let srgb: Vec<[u8; 3]> = (0..15u8).map(|i| [i * 17, 255 - i * 17, i * 5]).collect();
+        let img = image(5, 3, &srgb);
+        let modes = [Wrap::Repeat, Wrap::ClampToEdge, Wrap::MirroredRepeat];
+        let mut uvs: Vec<Vec2> = (0..4000)
+            .map(|_| Vec2::new(rng.next_f32() * 8.0 - 4.0, rng.next_f32() * 8.0 - 4.0))
+            .collect();
+        for k in -12..=12 {
+            let (u, v) = (k as f32 / 10.0, k as f32 / 6.0);
+            uvs.push(Vec2::new(u, v));
+        }
+        for wx in modes {
+            for wy in modes {
+                for &uv in &uvs {
+                    let fast = img.bilinear(uv, [wx, wy]);
+                    let want = reference_bilinear(&img, uv, [wx, wy]);
+                    assert!(
+                        (fast - want).abs().max_element() < 1e-4,
+                        "{wx:?} {wy:?} at {uv}: {fast} against {want}"
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn wrap_modes_follow_the_gltf_sampler_definitions() {
         let n = 4;
-        let at = |w: Wrap| (-6..10).map(|i| w.index(i, n)).collect::<Vec<_>>();
+        let at = |w: Wrap| {
+            (-6..10)
+                .map(|i| reference_index(w, i, n))
+                .collect::<Vec<_>>()
+        };
         assert_eq!(
             at(Wrap::Repeat),
             [2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1]
