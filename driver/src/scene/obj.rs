@@ -104,18 +104,21 @@ fn check_element_indices(path: &Path) -> Result<(), SceneError> {
 }
 
 /// A material; its `map_Kd` is a texture sampled at the OBJ's one UV set (repeating; v
-/// flipped, as OBJ's v runs up the image), and
-/// an image that is missing or cannot be decoded is an error naming it.
+/// flipped, as OBJ's v runs up the image), × `Kd`. An image that is missing or cannot be
+/// decoded is an error naming it. `map_Kd` options (`-s`, `-o`, ...) are not read: the
+/// rest of the line is taken as the file name.
 fn read_material(
     path: &Path,
     m: &tobj::Material,
     dir: &Path,
     options: TextureOptions,
 ) -> Result<Material, SceneError> {
+    // Not clamped before the texture multiplies it (a Kd above 1 brightening a dark map is
+    // kept, as when the texture was averaged); the albedo at a hit is clamped to [0, 1].
     let kd = m
         .diffuse
         .map_or(Vec3::splat(0.8), Vec3::from)
-        .clamp(Vec3::ZERO, Vec3::ONE);
+        .max(Vec3::ZERO);
     let base_color_texture = match &m.diffuse_texture {
         Some(name) => Some(BaseColorTexture {
             image: Arc::new(read_image(path, dir, name, options)?),
