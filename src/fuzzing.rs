@@ -707,6 +707,12 @@ pub fn scene(data: &[u8]) {
             "triangle {i}"
         );
         assert!((t.mesh as usize) < scene.meshes.len(), "triangle {i}");
+        // The albedo a hit reads (textured or not) is a finite reflectance.
+        let albedo = scene.hit_albedo(i).at(0.25, 0.25).to_array();
+        assert!(
+            albedo.iter().all(|a| (0.0..=1.0).contains(a)),
+            "triangle {i}: albedo {albedo:?}"
+        );
     }
     let mut next = 0u32;
     for m in &scene.meshes {

@@ -33,6 +33,8 @@ fn plane_scene() -> Scene {
         positions: [p(a.x, a.y), p(b.x, b.y), p(c.x, c.y)],
         normals: [n; 3],
         lightmap_uv: Some([a, b, c]),
+        texture_uv: None,
+        colour: None,
         mesh: 0,
         material: 0,
     };
@@ -48,6 +50,7 @@ fn plane_scene() -> Scene {
         triangles: vec![tri(o, x, xy), tri(o, xy, y)],
         materials: vec![Material {
             name: "grey".into(),
+            base_color_texture: None,
             albedo: Vec3::splat(0.5),
             emission: Vec3::ZERO,
         }],
@@ -459,6 +462,8 @@ fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
             positions: p,
             normals: [n; 3],
             lightmap_uv: Some(q),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         };
@@ -524,6 +529,7 @@ fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
         triangles,
         materials: vec![Material {
             name: "glow".into(),
+            base_color_texture: None,
             albedo: Vec3::splat(albedo),
             emission: Vec3::splat(le),
         }],

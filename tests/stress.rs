@@ -52,6 +52,7 @@ fn on_pad(p: Vec3, centre: Vec3, half: f32, first: u32) -> u32 {
 fn material(albedo: f32, emission: f32) -> Material {
     Material {
         name: format!("albedo {albedo}, emission {emission}"),
+        base_color_texture: None,
         albedo: Vec3::splat(albedo),
         emission: Vec3::splat(emission),
     }
@@ -639,6 +640,8 @@ fn slivers_and_sub_texel_triangles_stay_finite_and_do_not_self_shadow() {
             positions: [centre, p(a0), p(a1)],
             normals: [Vec3::Z; 3],
             lightmap_uv: Some([Vec2::ZERO; 3]),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         });
@@ -653,6 +656,8 @@ fn slivers_and_sub_texel_triangles_stay_finite_and_do_not_self_shadow() {
             positions: [c, c + Vec3::X * 1e-3, c + Vec3::Y * 1e-3],
             normals: [Vec3::NEG_Z; 3],
             lightmap_uv: Some([Vec2::ZERO; 3]),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         });

@@ -117,6 +117,7 @@ pub fn demo_camera(aspect: f32) -> Camera {
 fn material(name: &str, albedo: Vec3) -> Material {
     Material {
         name: name.to_owned(),
+        base_color_texture: None,
         albedo,
         emission: Vec3::ZERO,
     }
@@ -241,6 +242,8 @@ fn face_triangles(face: &Face, [uv_min, uv_size]: [Vec2; 2], mesh: u32) -> [Tria
         positions: [p(a.0, a.1), p(b.0, b.1), p(c.0, c.1)],
         normals: [n; 3],
         lightmap_uv: Some([uv(a.0, a.1), uv(b.0, b.1), uv(c.0, c.1)]),
+        texture_uv: None,
+        colour: None,
         mesh,
         material: face.material,
     };

@@ -92,6 +92,8 @@ mod tests {
             positions: p,
             normals: [Vec3::ZERO; 3],
             lightmap_uv: Some([Vec2::ZERO, Vec2::X, Vec2::Y]),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         };
@@ -106,6 +108,7 @@ mod tests {
                 triangles,
                 vec![Material {
                     name: "m".into(),
+                    base_color_texture: None,
                     albedo: Vec3::splat(0.5),
                     emission: Vec3::ZERO,
                 }],

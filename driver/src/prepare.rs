@@ -1094,6 +1094,8 @@ mod tests {
                         positions: p,
                         normals: [n; 3],
                         lightmap_uv: None,
+                        texture_uv: None,
+                        colour: None,
                         mesh,
                         material: 0,
                     });

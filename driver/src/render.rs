@@ -3,7 +3,8 @@
 //! One eye ray per sub-pixel (2 × 2 stratified per pixel) is traced with the project's own
 //! traversal ([`guidebake_kernels::traverse::intersect1`] over [`crate::bvh::Bvh`]). A hit on
 //! a lightmapped triangle is shaded as a diffuse game surface shades a baked lightmap:
-//! outgoing radiance `albedo × E / π` with the irradiance `E` looked up bilinearly through
+//! outgoing radiance `albedo × E / π` (the albedo at the hit, textured where the material
+//! is: [`crate::scene::texture::HitAlbedo`]) with the irradiance `E` looked up bilinearly through
 //! the triangle's lightmap UVs (the lookup of [`crate::transport::series::PreviousPass`]:
 //! covered pixels only, weights renormalised, so chart borders do not fetch the empty
 //! atlas), plus the material's emission seen from its front face. A ray that leaves the scene
@@ -451,7 +452,8 @@ fn shade(
         }
         if triangle.lightmap_uv.is_some() {
             let e = lightmap.irradiance(hit.prim, hit.u, hit.v);
-            radiance += material.albedo * e / std::f32::consts::PI;
+            let albedo = stage.scene.hit_albedo(prim).at(hit.u, hit.v);
+            radiance += albedo * e / std::f32::consts::PI;
         }
         let finite = if radiance.is_finite() {
             radiance
@@ -544,12 +546,15 @@ mod tests {
             positions: uv.map(p),
             normals: [Vec3::Y; 3],
             lightmap_uv: Some(uv),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         };
         let (o, x, y, xy) = (Vec2::ZERO, Vec2::X, Vec2::Y, Vec2::ONE);
         let material = Material {
             name: "grey".into(),
+            base_color_texture: None,
             albedo: Vec3::splat(ALBEDO),
             emission: Vec3::ZERO,
         };
@@ -651,6 +656,61 @@ mod tests {
         // The automatic exposure maps the surface's mean luminance to ½.
         let mean = luminance_f32(surface.to_array());
         assert!((view.auto_exposure() * mean - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn a_textured_plane_renders_its_texture_times_the_irradiance() {
+        use crate::scene::BaseColorTexture;
+        use crate::scene::texture::{Image, TextureOptions, Wrap};
+        let dir = tempfile::tempdir().unwrap();
+        let (mut scene, texels, out) = baked_plane(dir.path());
+        // A 2×1 texture, black then white, clamped, across the plane's u (x from −2 to 2):
+        // black where x < −1, white where x > 1, a linear ramp between the texel centres.
+        let image = Image::from_srgb8("ramp".into(), 2, 1, 1, &[0, 255], TextureOptions::default());
+        scene.materials[0].base_color_texture = Some(BaseColorTexture {
+            image: std::sync::Arc::new(image.unwrap()),
+            wrap: [Wrap::ClampToEdge; 2],
+            factor: Vec3::ONE,
+        });
+        for t in &mut scene.triangles {
+            t.texture_uv = t.lightmap_uv;
+        }
+        let lightmap = Lightmap::load(&texels, &scene, &out).unwrap();
+        let stage = Stage::new(&scene).unwrap();
+        // Straight down from above the centre, the plane filling the middle of the view.
+        let camera = Camera::look_at(Vec3::new(0.0, 6.0, 0.0), Vec3::ZERO, -Vec3::Z, 0.9);
+        let options = ViewOptions {
+            width: 48,
+            height: 48,
+            cutaway: false,
+        };
+        let view = render(&stage, &lightmap, &camera, options);
+        let (mut black, mut white, mut plane) = (0, 0, 0);
+        for (i, s) in view.surface.iter().enumerate() {
+            if *s != 4 {
+                continue;
+            }
+            plane += 1;
+            let c = view.radiance[i];
+            assert!(
+                c.is_finite() && c.cmple(SKY * 1.001).all(),
+                "pixel {i}: {c}"
+            );
+            // Grey: the texture is grey, times the sky's colour.
+            assert!((c / SKY - Vec3::splat(c.x / SKY.x)).abs().max_element() < 1e-3);
+            black += usize::from(c.max_element() < 1e-4);
+            white += usize::from((c - SKY).abs().max_element() < 1e-3 * SKY.max_element());
+        }
+        // A quarter of the plane is black and a quarter white (a constant albedo would give
+        // ½ L everywhere), up to the columns of pixels the quarter lines cross.
+        assert!(plane > 400, "{plane}");
+        let quarter = plane as f64 / 4.0;
+        for (what, n) in [("black", black), ("white", white)] {
+            assert!(
+                (n as f64 - quarter).abs() < 0.15 * quarter,
+                "{what}: {n} of {plane} pixels"
+            );
+        }
     }
 
     #[test]

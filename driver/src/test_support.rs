@@ -54,6 +54,8 @@ pub fn quad(origin: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {
         positions: [a, b, c],
         normals: [n; 3],
         lightmap_uv: Some([Vec2::ZERO; 3]),
+        texture_uv: None,
+        colour: None,
         mesh: 0,
         material,
     };

@@ -499,6 +499,22 @@ fn bad_bake_arguments_are_clear_errors() {
     ]);
     assert!(err.contains("nothing.texels"), "{err}");
     assert_no_output(d, "lm.");
+
+    // A texture image that is missing is named with the scene, before any output; a
+    // texture cap of 0 is refused.
+    let obj = d.join("textured.obj");
+    std::fs::write(
+        &obj,
+        "mtllib textured.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl m\nf 1/1 2/2 3/3\n",
+    )
+    .unwrap();
+    std::fs::write(d.join("textured.mtl"), "newmtl m\nmap_Kd gone.png\n").unwrap();
+    let obj = obj.to_str().unwrap();
+    let (_, err) = cli_fails(&["bake", texels, "--scene", obj, "-o", out_s, "--spp", "32"]);
+    assert!(err.contains(&format!("{obj}: texture gone.png: ")), "{err}");
+    let (_, err) = fails(bake(&["--spp", "32", "--max-texture-size", "0"]));
+    assert!(err.contains("--max-texture-size"), "{err}");
+    assert_no_output(d, "lm.");
 }
 
 /// A texel file prepared from another scene is refused, naming both files.

@@ -727,11 +727,13 @@ mod tests {
         let materials = vec![
             Material {
                 name: "walls".into(),
+                base_color_texture: None,
                 albedo: Vec3::splat(0.6),
                 emission: Vec3::ZERO,
             },
             Material {
                 name: "light".into(),
+                base_color_texture: None,
                 albedo: Vec3::splat(0.5),
                 emission: Vec3::splat(2.0),
             },

@@ -1111,6 +1111,7 @@ mod tests {
     fn grey(albedo: f32, emission: f32) -> Material {
         Material {
             name: "m".into(),
+            base_color_texture: None,
             albedo: Vec3::splat(albedo),
             emission: Vec3::splat(emission),
         }

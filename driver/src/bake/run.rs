@@ -89,6 +89,9 @@ pub struct BakeReport {
     /// Emissive triangles sampled by next-event estimation (0: no emitter table, no shadow
     /// rays to emitters; with `lights` also 0, no shadow rays at all).
     pub emitters: usize,
+    /// Bytes of base-colour texture texels held in memory (each image once, after the
+    /// `--max-texture-size` cap; `scene::texture`).
+    pub texture_bytes: usize,
     /// The pages written (empty for a shard).
     pub pages: Vec<PathBuf>,
     /// Pixels with non-finite results replaced by zero when writing (should be 0).
@@ -241,6 +244,7 @@ pub fn bake_pass_with_progress(
     report.seconds.build_bvh = clock.elapsed().as_secs_f64();
     report.lights = world.lights().len();
     report.emitters = world.emitters().map_or(0, |e| e.len());
+    report.texture_bytes = scene.texture_bytes();
 
     let passes = job.settings.passes();
     let bake_id = job.settings.bake_id(texel_file_id(&texels));

@@ -15,6 +15,7 @@ use guidebake_kernels::traverse::BvhRef;
 use super::settings::{EmitterSampling, Transport};
 
 use crate::bvh::{Bvh, BvhError, Preset};
+use crate::scene::texture::{HitAlbedo, VaryingAlbedo};
 use crate::scene::{Scene, Sky};
 use crate::transport::emitters::{EmitterSelection, Emitters};
 use crate::transport::lights::{AnalyticLight, analytic_lights};
@@ -26,11 +27,17 @@ use crate::transport::sky::{sky_is_black, sky_radiance};
 pub struct Surface {
     /// Unit geometric normal (winding order), the front side.
     pub normal: Vec3,
-    /// Diffuse albedo.
+    /// Diffuse albedo where it is constant; the material's average where it varies (zero
+    /// only where it is zero everywhere on the triangle).
     pub albedo: Vec3,
     /// Radiance emitted from the front side.
     pub emission: Vec3,
+    /// Index of its varying albedo ([`World::albedo_at`]), or [`CONSTANT_ALBEDO`].
+    pub varying: u32,
 }
+
+/// [`Surface::varying`] of a triangle whose albedo is constant.
+pub const CONSTANT_ALBEDO: u32 = u32::MAX;
 
 /// The scene as the bake sees it.
 #[derive(Debug)]
@@ -38,6 +45,7 @@ pub struct World {
     bvh: Bvh,
     corners: Vec<[Vec3; 3]>,
     surfaces: Vec<Surface>,
+    varying: Vec<VaryingAlbedo>,
     lights: Vec<AnalyticLight>,
     emitters: Option<Emitters>,
     emitter_sampling: EmitterSampling,
@@ -71,15 +79,25 @@ impl World {
     pub fn new(scene: &Scene, preset: Preset) -> Result<Self, BvhError> {
         let corners = scene.triangle_positions();
         let bvh = Bvh::build(&corners, preset)?;
+        let mut varying = Vec::new();
         let surfaces: Vec<Surface> = scene
             .triangles
             .iter()
-            .map(|t| {
+            .enumerate()
+            .map(|(i, t)| {
                 let m = &scene.materials[t.material as usize];
+                let index = match scene.hit_albedo(i) {
+                    HitAlbedo::Constant(_) => CONSTANT_ALBEDO,
+                    HitAlbedo::Varying(a) => {
+                        varying.push(a);
+                        (varying.len() - 1) as u32
+                    }
+                };
                 Surface {
                     normal: t.geometric_normal(),
                     albedo: m.albedo,
                     emission: m.emission,
+                    varying: index,
                 }
             })
             .collect();
@@ -87,6 +105,7 @@ impl World {
             bvh,
             corners,
             surfaces,
+            varying,
             lights: analytic_lights(scene),
             emitters: None,
             emitter_sampling: EmitterSampling::default(),
@@ -203,6 +222,16 @@ impl World {
     /// Whether next-event estimation has any light to sample (else it traces nothing).
     pub fn has_direct_light(&self) -> bool {
         !self.lights.is_empty() || self.emitters.is_some()
+    }
+
+    /// The albedo of `surface` at `hit` on it: its constant albedo, or its texture × factor ×
+    /// vertex colour at the hit's barycentrics ([`HitAlbedo`]).
+    #[inline]
+    pub fn albedo_at(&self, surface: &Surface, hit: &SurfaceHit) -> Vec3 {
+        match self.varying.get(surface.varying as usize) {
+            None => surface.albedo,
+            Some(a) => a.at(hit.u, hit.v),
+        }
     }
 
     /// Per-triangle shading data, by primitive id.

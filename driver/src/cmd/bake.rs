@@ -10,7 +10,7 @@ use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress};
 use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Schedule, Transport};
 use crate::bake::shard::Shard;
 use crate::bake::workdir::work_dir;
-use crate::scene::Scene;
+use crate::scene::{Scene, TextureOptions};
 use crate::transport::emitters::EmitterSelection;
 
 /// Arguments of `guidebake bake`.
@@ -75,6 +75,10 @@ pub struct BakeArgs {
     /// Seed of every random number.
     #[arg(long, default_value_t = 0)]
     pub seed: u32,
+    /// Largest width or height a base-colour texture is kept at; larger images are
+    /// box-filtered down (3 bytes a texel: 3 MiB an image at the default).
+    #[arg(long, default_value_t = TextureOptions::DEFAULT_MAX_SIZE, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    pub max_texture_size: u32,
     /// Write the bake's statistics as JSON here.
     #[arg(long)]
     pub stats: Option<PathBuf>,
@@ -135,7 +139,10 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
     };
     settings.validate()?;
     check_output(&args.out)?;
-    let scene = Scene::load(&args.scene)?;
+    let textures = TextureOptions {
+        max_size: args.max_texture_size,
+    };
+    let scene = Scene::load_with(&args.scene, textures)?;
     let job = BakeJob {
         texels: args.texels.clone(),
         out: args.out.clone(),

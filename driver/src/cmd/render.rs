@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use crate::render::{Camera, Lightmap, Stage, ViewOptions, render};
-use crate::scene::Scene;
+use crate::scene::{Scene, TextureOptions};
 use crate::texels::TexelFile;
 
 use super::bake::OnOff;
@@ -40,6 +40,9 @@ pub struct RenderArgs {
     /// Exposure before tone mapping (default: the mean surface luminance maps to ½).
     #[arg(long)]
     pub exposure: Option<f32>,
+    /// Largest width or height a base-colour texture is kept at (as `bake`'s).
+    #[arg(long, default_value_t = TextureOptions::DEFAULT_MAX_SIZE, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    pub max_texture_size: u32,
 }
 
 /// Which camera `render` looks through.
@@ -64,7 +67,10 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
     if let Some(e) = args.exposure.filter(|e| !(e.is_finite() && *e > 0.0)) {
         return Err(format!("--exposure {e}: a positive, finite factor").into());
     }
-    let scene = Scene::load(&args.scene)?;
+    let textures = TextureOptions {
+        max_size: args.max_texture_size,
+    };
+    let scene = Scene::load_with(&args.scene, textures)?;
     let texels = TexelFile::open(&args.texels)?;
     let lightmap = Lightmap::load(&texels, &scene, &args.lightmap)?;
     let from_file = match args.camera {

@@ -313,6 +313,8 @@ mod tests {
             positions: p,
             normals: [Vec3::Y; 3],
             lightmap_uv: Some(uv),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         };

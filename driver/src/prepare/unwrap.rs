@@ -254,6 +254,8 @@ mod tests {
             positions: p,
             normals: [Vec3::Z; 3],
             lightmap_uv: None,
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         };

@@ -1,9 +1,12 @@
 //! glTF 2.0 through the `gltf` crate.
+use std::sync::Arc;
+
+use super::texture::{self, BaseColorTexture, TextureOptions};
 use super::*;
 
-pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
+pub(super) fn load(path: &Path, textures: TextureOptions) -> Result<Scene, SceneError> {
     let (doc, buffers, images) = import(path)?;
-    let materials = read_materials(&doc, &images);
+    let materials = read_materials(path, &doc, &images, textures)?;
     let default_material = materials.len() as u32;
     let mut materials = materials;
     materials.push(Material::default_grey());
@@ -113,8 +116,14 @@ pub(super) fn import(
                 check_view(view, &buffers).map_err(|m| resource(item.clone(), m))?;
             }
         }
+        let named = match &source {
+            ::gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
+                format!("\"{uri}\": ")
+            }
+            _ => String::new(),
+        };
         let data = ::gltf::image::Data::from_source(source, Some(base), &buffers)
-            .map_err(|e| resource(item, describe(&e)))?;
+            .map_err(|e| resource(item, format!("{named}{}", describe(&e))))?;
         images.push(data);
     }
     Ok((doc, buffers, images))
@@ -244,57 +253,140 @@ fn check_position_accessors(json: &::gltf::json::Root) -> ::gltf::Result<()> {
     }
 }
 
-fn read_materials(doc: &::gltf::Document, images: &[::gltf::image::Data]) -> Vec<Material> {
-    doc.materials()
-        .enumerate()
-        .map(|(i, m)| {
-            let pbr = m.pbr_metallic_roughness();
-            let f = pbr.base_color_factor();
-            let mut albedo = Vec3::new(f[0], f[1], f[2]);
-            if let Some(info) = pbr.base_color_texture() {
-                let img = &images[info.texture().source().index()];
-                if let Some(avg) = average_image(img) {
-                    albedo *= avg;
-                }
+/// The materials, their base-colour textures decoded once per image (as
+/// [`texture::Image`]s, capped as `options` says) and shared.
+fn read_materials(
+    path: &Path,
+    doc: &::gltf::Document,
+    images: &[::gltf::image::Data],
+    options: TextureOptions,
+) -> Result<Vec<Material>, SceneError> {
+    let mut decoded: Vec<Option<Arc<texture::Image>>> = vec![None; images.len()];
+    let mut image = |t: ::gltf::Texture| -> Result<Arc<texture::Image>, SceneError> {
+        let index = t.source().index();
+        if let Some(done) = &decoded[index] {
+            return Ok(Arc::clone(done));
+        }
+        let item = format!("images[{index}]");
+        let source = match t.source().source() {
+            ::gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
+                format!("{item} ({uri})")
             }
-            // An emissive texture is averaged like the base colour: emitters are sampled
-            // as lights of uniform radiance (transport::emitters).
-            let mut e = Vec3::from(m.emissive_factor());
-            if let Some(info) = m.emissive_texture() {
-                let img = &images[info.texture().source().index()];
-                if let Some(avg) = average_image(img) {
-                    e *= avg;
-                }
+            _ => item.clone(),
+        };
+        let img = decode_image(&images[index], source, options).map_err(|message| {
+            SceneError::GltfResource {
+                path: path.to_owned(),
+                item,
+                message,
             }
-            let strength = m.emissive_strength().unwrap_or(1.0);
-            Material {
-                name: m
-                    .name()
-                    .map_or_else(|| format!("material#{i}"), str::to_owned),
-                albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE),
-                emission: (e * strength).max(Vec3::ZERO),
+        })?;
+        let img = Arc::new(img);
+        decoded[index] = Some(Arc::clone(&img));
+        Ok(img)
+    };
+    let mut materials = Vec::with_capacity(doc.materials().len());
+    for (i, m) in doc.materials().enumerate() {
+        let pbr = m.pbr_metallic_roughness();
+        let f = pbr.base_color_factor();
+        let factor = Vec3::new(f[0], f[1], f[2]).clamp(Vec3::ZERO, Vec3::ONE);
+        let base_color_texture = match pbr.base_color_texture() {
+            Some(info) => {
+                let sampler = info.texture().sampler();
+                Some(BaseColorTexture {
+                    image: image(info.texture())?,
+                    wrap: [sampler.wrap_s(), sampler.wrap_t()].map(wrap),
+                    factor,
+                })
             }
-        })
-        .collect()
+            None => None,
+        };
+        let albedo = base_color_texture
+            .as_ref()
+            .map_or(factor, |t| factor * t.image.average());
+        // An emissive texture is averaged: emitters are sampled as lights of uniform
+        // radiance (transport::emitters).
+        let mut e = Vec3::from(m.emissive_factor());
+        if let Some(info) = m.emissive_texture() {
+            e *= image(info.texture())?.average();
+        }
+        let strength = m.emissive_strength().unwrap_or(1.0);
+        materials.push(Material {
+            name: m
+                .name()
+                .map_or_else(|| format!("material#{i}"), str::to_owned),
+            albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE),
+            emission: (e * strength).max(Vec3::ZERO),
+            base_color_texture,
+        });
+    }
+    Ok(materials)
 }
 
-/// Linear average of a base-colour image (8-bit sRGB; 16-bit and float images are taken
-/// as linear already, which is what the glTF importers produce for them).
-fn average_image(img: &::gltf::image::Data) -> Option<Vec3> {
-    use ::gltf::image::Format;
-    match img.format {
-        Format::R8G8B8 => average_srgb8(&img.pixels, 3),
-        Format::R8G8B8A8 => average_srgb8(&img.pixels, 4),
-        Format::R8 | Format::R8G8 => {
-            let ch = if img.format == Format::R8 { 1 } else { 2 };
-            let grey: Vec<u8> = img
-                .pixels
-                .chunks_exact(ch)
-                .flat_map(|p| [p[0], p[0], p[0]])
-                .collect();
-            average_srgb8(&grey, 3)
+/// A glTF sampler's wrap mode.
+fn wrap(mode: ::gltf::texture::WrappingMode) -> texture::Wrap {
+    use ::gltf::texture::WrappingMode as M;
+    match mode {
+        M::Repeat => texture::Wrap::Repeat,
+        M::ClampToEdge => texture::Wrap::ClampToEdge,
+        M::MirroredRepeat => texture::Wrap::MirroredRepeat,
+    }
+}
+
+/// An imported image as the baker keeps it. Colour textures are sRGB-encoded whatever their
+/// depth (glTF 2.0, 3.9.2): 8- and 16-bit texels are decoded as sRGB; float texels (which
+/// glTF does not list, but the importer produces from other formats) are taken as linear.
+fn decode_image(
+    img: &::gltf::image::Data,
+    source: String,
+    options: TextureOptions,
+) -> Result<texture::Image, String> {
+    use ::gltf::image::Format as F;
+    let (w, h) = (img.width, img.height);
+    let eight =
+        |channels| texture::Image::from_srgb8(source.clone(), w, h, channels, &img.pixels, options);
+    let wide = |channels: usize, bytes: usize, value: &dyn Fn(&[u8]) -> f32| {
+        let count = w as usize * h as usize;
+        if count == 0 || img.pixels.len() != count * channels * bytes {
+            return Err(format!(
+                "{w}×{h} texels of {channels} channels do not match its {} bytes",
+                img.pixels.len()
+            ));
         }
-        _ => None,
+        let linear: Vec<Vec3> = img
+            .pixels
+            .chunks_exact(channels * bytes)
+            .map(|px| {
+                let c = |k: usize| value(&px[k * bytes..(k + 1) * bytes]);
+                if channels < 3 {
+                    Vec3::splat(c(0))
+                } else {
+                    Vec3::new(c(0), c(1), c(2))
+                }
+            })
+            .collect();
+        Ok(texture::Image::from_linear(
+            source.clone(),
+            w,
+            h,
+            &linear,
+            options,
+        ))
+    };
+    let srgb16 =
+        |b: &[u8]| texture::srgb_to_linear(f32::from(u16::from_ne_bytes([b[0], b[1]])) / 65535.0);
+    let float = |b: &[u8]| f32::from_ne_bytes([b[0], b[1], b[2], b[3]]);
+    match img.format {
+        F::R8 => eight(1),
+        F::R8G8 => eight(2),
+        F::R8G8B8 => eight(3),
+        F::R8G8B8A8 => eight(4),
+        F::R16 => wide(1, 2, &srgb16),
+        F::R16G16 => wide(2, 2, &srgb16),
+        F::R16G16B16 => wide(3, 2, &srgb16),
+        F::R16G16B16A16 => wide(4, 2, &srgb16),
+        F::R32G32B32FLOAT => wide(3, 4, &float),
+        F::R32G32B32A32FLOAT => wide(4, 4, &float),
     }
 }
 
@@ -318,6 +410,10 @@ fn check_accessors(b: &SceneBuilder, id: u32, prim: &::gltf::Primitive) -> Resul
         let allowed = match semantic {
             Semantic::Positions | Semantic::Normals => fits(&a, D::Vec3, &[T::F32]),
             Semantic::TexCoords(_) => fits(&a, D::Vec2, &[T::F32, T::U8, T::U16]),
+            Semantic::Colors(_) => {
+                let types = &[T::F32, T::U8, T::U16];
+                fits(&a, D::Vec3, types) || fits(&a, D::Vec4, types)
+            }
             _ => true,
         };
         (format!("{semantic:?}"), a, allowed)
@@ -409,9 +505,30 @@ fn read_mesh(
         let uvs: Option<Vec<Vec2>> = reader
             .read_tex_coords(1)
             .map(|t| t.into_f32().map(Vec2::from).collect());
+        // The texture's UV set, read only when the material has a base-colour texture.
+        let texture_set = prim
+            .material()
+            .pbr_metallic_roughness()
+            .base_color_texture()
+            .map(|info| info.tex_coord());
+        let texture_uvs: Option<Vec<Vec2>> = texture_set
+            .and_then(|set| reader.read_tex_coords(set))
+            .map(|t| t.into_f32().map(Vec2::from).collect());
+        let colours: Option<Vec<Vec3>> = reader
+            .read_colors(0)
+            .map(|c| c.into_rgb_f32().map(Vec3::from).collect());
         let count = positions.len();
         check_len(b, id, "NORMAL", normals.as_ref().map(Vec::len), count)?;
         check_len(b, id, "TEXCOORD_1", uvs.as_ref().map(Vec::len), count)?;
+        let texture_uv_name = format!("TEXCOORD_{}", texture_set.unwrap_or(0));
+        check_len(
+            b,
+            id,
+            &texture_uv_name,
+            texture_uvs.as_ref().map(Vec::len),
+            count,
+        )?;
+        check_len(b, id, "COLOR_0", colours.as_ref().map(Vec::len), count)?;
         let indices: Vec<u32> = match reader.read_indices() {
             Some(i) => i.into_u32().collect(),
             None => (0..count as u32).collect(),
@@ -444,6 +561,8 @@ fn read_mesh(
                     .as_ref()
                     .map_or([Vec3::ZERO; 3], |n| v.map(|i| n[i])),
                 lightmap_uv: uvs.as_ref().map(|u| v.map(|i| u[i])),
+                texture_uv: texture_uvs.as_ref().map(|u| v.map(|i| u[i])),
+                colour: colours.as_ref().map(|c| v.map(|i| c[i])),
                 mesh: id,
                 material,
             });
@@ -499,6 +618,9 @@ mod tests {
                 .all(|m| (m.emission.max_element() - 1000.0).abs() < 1e-2)
         );
         assert_eq!(s.triangle_positions().len(), s.triangles.len());
+        // The conversion averaged the original's textures: none, and no texture UVs.
+        assert_eq!(s.texture_bytes(), 0);
+        assert!(s.triangles.iter().all(|t| t.texture_uv.is_none()));
     }
 
     #[test]
@@ -563,6 +685,25 @@ mod tests {
             s.triangle_material(lamp.first_triangle as usize).emission,
             Vec3::ONE
         );
+        // Two base-colour textures, sampled at TEXCOORD_0: the block's checkerBJS.png
+        // (1024², RGBA) and the ground's checker-meter.png (256²), kept as 8-bit RGB.
+        let sizes: Vec<_> = s
+            .materials
+            .iter()
+            .filter_map(|m| m.base_color_texture.as_ref().map(|t| t.image.size()))
+            .collect();
+        assert_eq!(sizes, [(1024, 1024), (256, 256)]);
+        assert_eq!(s.texture_bytes(), (1024 * 1024 + 256 * 256) * 3);
+        let bloc = s.meshes.iter().find(|m| m.name == "bloc.000").unwrap();
+        let first = bloc.first_triangle as usize;
+        assert!(s.triangles[first].texture_uv.is_some());
+        assert!(matches!(
+            s.hit_albedo(first),
+            super::super::texture::HitAlbedo::Varying(_)
+        ));
+        // Capped at 300: the 1024² image is box-filtered by 4 to 256², the 256² one kept.
+        let capped = Scene::load_with(&p, TextureOptions { max_size: 300 }).unwrap();
+        assert_eq!(capped.texture_bytes(), 2 * 256 * 256 * 3);
     }
 
     /// A glTF of one buffer (4 bytes long) and one image with these URIs, loaded.
@@ -707,6 +848,110 @@ mod tests {
                 "{}: mesh 'tri': indices accessor 1 has a count of 0 (the glTF spec's minimum is 1)",
                 path.display()
             )
+        );
+    }
+
+    /// A one-triangle glTF beside a 2×2 PNG (`image` names it; `None`: no PNG is written):
+    /// TEXCOORD_0 and TEXCOORD_1 (0,0), (1,0), (0,1); COLOR_0 (VEC4 float) white, half
+    /// grey, white; the base-colour texture clamps along u and mirrors along v, factor
+    /// (0.5, 1, 1).
+    fn textured_triangle(dir: &Path, image: &str, write_png: bool) -> PathBuf {
+        let floats: [f32; 9 + 6 + 6 + 12] = [
+            0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, // POSITION
+            0.0, 0.0, 1.0, 0.0, 0.0, 1.0, // TEXCOORD_0
+            0.0, 0.0, 1.0, 0.0, 0.0, 1.0, // TEXCOORD_1
+            1.0, 1.0, 1.0, 1.0, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, // COLOR_0
+        ];
+        let bytes: Vec<u8> = floats.iter().flat_map(|f| f.to_le_bytes()).collect();
+        std::fs::write(dir.join("tri.bin"), &bytes).unwrap();
+        if write_png {
+            let texels = [255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255];
+            image::RgbImage::from_raw(2, 2, texels.to_vec())
+                .unwrap()
+                .save(dir.join(image))
+                .unwrap();
+        }
+        let view = |offset: usize, length: usize| serde_json::json!({ "buffer": 0, "byteOffset": offset, "byteLength": length });
+        let json = serde_json::json!({
+            "asset": { "version": "2.0" },
+            "scene": 0, "scenes": [{ "nodes": [0] }], "nodes": [{ "mesh": 0 }],
+            "meshes": [{ "name": "tri", "primitives": [{
+                "attributes": { "POSITION": 0, "TEXCOORD_0": 1, "TEXCOORD_1": 2, "COLOR_0": 3 },
+                "material": 0 }] }],
+            "materials": [{ "name": "tex", "pbrMetallicRoughness": {
+                "baseColorFactor": [0.5, 1.0, 1.0, 1.0],
+                "baseColorTexture": { "index": 0, "texCoord": 0 } } }],
+            "textures": [{ "source": 0, "sampler": 0 }],
+            "samplers": [{ "wrapS": 33071, "wrapT": 33648 }],
+            "images": [{ "uri": image }],
+            "accessors": [
+                { "bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0] },
+                { "bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2" },
+                { "bufferView": 2, "componentType": 5126, "count": 3, "type": "VEC2" },
+                { "bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC4" },
+            ],
+            "bufferViews": [view(0, 36), view(36, 24), view(60, 24), view(84, 48)],
+            "buffers": [{ "byteLength": bytes.len(), "uri": "tri.bin" }],
+        });
+        let path = dir.join("tri.gltf");
+        std::fs::write(&path, json.to_string()).unwrap();
+        path
+    }
+
+    #[test]
+    fn base_colour_textures_load_with_their_uv_set_sampler_and_vertex_colours() {
+        use super::super::texture::{HitAlbedo, Wrap, srgb_to_linear};
+        let dir = tempfile::tempdir().unwrap();
+        let s = Scene::load(&textured_triangle(dir.path(), "checker.png", true)).unwrap();
+        let t = &s.triangles[0];
+        assert_eq!(t.texture_uv, Some([Vec2::ZERO, Vec2::X, Vec2::Y]));
+        assert_eq!(t.colour, Some([Vec3::ONE, Vec3::splat(0.5), Vec3::ONE]));
+        let m = &s.materials[0];
+        let tex = m.base_color_texture.as_ref().unwrap();
+        assert_eq!(tex.wrap, [Wrap::ClampToEdge, Wrap::MirroredRepeat]);
+        assert_eq!(tex.factor, Vec3::new(0.5, 1.0, 1.0));
+        assert_eq!(tex.image.size(), (2, 2));
+        assert_eq!(s.texture_bytes(), 12);
+        // The material's albedo: the factor × the linear average (red, green, blue, white).
+        assert!((m.albedo - Vec3::new(0.25, 0.5, 0.5)).abs().max_element() < 1e-6);
+        // At vertex 0 (uv 0,0, clamped to the red texel) and vertex 1 (uv 1,0: green, colour
+        // ½), and between texel centres: the linear mean of red and green at uv (½, ¼).
+        let a = s.hit_albedo(0);
+        assert!(matches!(a, HitAlbedo::Varying(_)));
+        assert!((a.at(0.0, 0.0) - Vec3::new(0.5, 0.0, 0.0)).length() < 1e-6);
+        assert!((a.at(1.0, 0.0) - Vec3::new(0.0, 0.5, 0.0)).length() < 1e-6);
+        // uv (½, ¼) is halfway between the red and green texel centres of row 0: their
+        // linear mean (½, ½, 0) × factor (½, 1, 1) × colour (¼ + ½·½ + ¼ = ¾).
+        let mid = a.at(0.5, 0.25);
+        assert!(
+            (mid - Vec3::new(0.1875, 0.375, 0.0)).length() < 1e-6,
+            "{mid}"
+        );
+        // The sRGB code 128 would decode to 0.216, not ½: filtering is in linear light.
+        assert!((srgb_to_linear(128.0 / 255.0) - 0.2158605).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_missing_or_undecodable_texture_image_is_an_error_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = textured_triangle(dir.path(), "missing.png", false);
+        let e = Scene::load(&path).expect_err("a missing image is an error");
+        let message = e.to_string();
+        assert!(
+            message.starts_with(&format!(
+                "{}: images[0]: \"missing.png\": cannot read",
+                path.display()
+            )),
+            "{message}"
+        );
+        std::fs::write(dir.path().join("broken.png"), b"not a png").unwrap();
+        let path = textured_triangle(dir.path(), "broken.png", false);
+        let message = Scene::load(&path)
+            .expect_err("a broken image is an error")
+            .to_string();
+        assert!(
+            message.starts_with(&format!("{}: images[0]: \"broken.png\": ", path.display())),
+            "{message}"
         );
     }
 }

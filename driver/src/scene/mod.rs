@@ -8,9 +8,12 @@
 //!
 //! What the paper (Silvennoinen & Sloan 2019) assumes and we keep: diffuse (Lambertian,
 //! two-sided) surfaces whose lightmap texels receive irradiance. Deviations and choices:
-//! - Only the diffuse albedo of a material is kept: `baseColorFactor` × the average of the
-//!   base-colour texture (texels converted sRGB → linear before averaging). Metallic,
-//!   roughness and transmission are ignored.
+//! - Only the diffuse albedo of a material is kept: `baseColorFactor` × the base-colour
+//!   texture sampled at the hit's `TEXCOORD_n` (its `texCoord` set) × the vertex colour
+//!   `COLOR_0`; OBJ `Kd` × `map_Kd` ([`texture`]). [`Material::albedo`] is the factor × the
+//!   texture's average, used where the albedo does not vary. Metallic, roughness, alpha and
+//!   transmission are ignored. A texture image that is missing or cannot be decoded is an
+//!   error naming it.
 //! - Emission is `emissiveFactor` × `KHR_materials_emissive_strength` (radiance, front face).
 //! - All geometry is flattened into one triangle soup in world space (node transforms
 //!   applied; normals by the inverse transpose; a mirroring transform swaps two vertices so
@@ -108,6 +111,17 @@ pub enum SceneError {
         /// How many degenerate triangles were dropped.
         degenerate: usize,
     },
+    /// A texture image (OBJ `map_Kd`) is missing or cannot be decoded. glTF images are
+    /// [`SceneError::GltfResource`].
+    #[error("{path}: texture {image}: {message}")]
+    Texture {
+        /// The scene (or MTL) file naming it.
+        path: PathBuf,
+        /// The image file as named.
+        image: String,
+        /// What is wrong.
+        message: String,
+    },
     /// The equirectangular sky image could not be read.
     #[error("{path}: cannot read sky image: {message}")]
     Sky {
@@ -123,10 +137,14 @@ pub enum SceneError {
 pub struct Material {
     /// Name from the source file (may be empty).
     pub name: String,
-    /// Diffuse albedo, linear RGB in [0, 1].
+    /// Diffuse albedo, linear RGB in [0, 1]: the base colour factor × the average of the
+    /// base-colour texture (the albedo everywhere when there is no texture; where a
+    /// triangle has no texture UVs; and for whatever wants one colour per material).
     pub albedo: Vec3,
     /// Emitted radiance, linear RGB (front face only).
     pub emission: Vec3,
+    /// The base-colour texture, sampled at hits ([`texture::HitAlbedo`]).
+    pub base_color_texture: Option<BaseColorTexture>,
 }
 
 impl Material {
@@ -138,6 +156,7 @@ impl Material {
             name: "default".into(),
             albedo: Vec3::splat(0.8),
             emission: Vec3::ZERO,
+            base_color_texture: None,
         }
     }
 }
@@ -237,6 +256,11 @@ pub struct Triangle {
     pub normals: [Vec3; 3],
     /// Lightmap UVs (glTF `TEXCOORD_1`), or `None` when the mesh has none.
     pub lightmap_uv: Option<[Vec2; 3]>,
+    /// The UVs its material's base-colour texture is sampled at (glTF `TEXCOORD_n` of the
+    /// texture's `texCoord` set; OBJ's one UV set), or `None` without a texture.
+    pub texture_uv: Option<[Vec2; 3]>,
+    /// Vertex colours (glTF `COLOR_0`, linear RGB), multiplied into the albedo, if any.
+    pub colour: Option<[Vec3; 3]>,
     /// Index into [`Scene::meshes`].
     pub mesh: u32,
     /// Index into [`Scene::materials`].
@@ -302,20 +326,29 @@ impl Scene {
         }
     }
 
-    /// Loads a scene from `.gltf`, `.glb`, `.obj` or a `.toml` scene file.
+    /// Loads a scene from `.gltf`, `.glb`, `.obj` or a `.toml` scene file, its textures
+    /// capped at the default size ([`TextureOptions::default`]).
     ///
     /// # Errors
     /// A [`SceneError`] naming the file and what is wrong; [`SceneError::Empty`] when no
     /// triangle survives.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        Self::load_with(path, TextureOptions::default())
+    }
+
+    /// [`Scene::load`] with the textures kept as `textures` says.
+    ///
+    /// # Errors
+    /// As [`Scene::load`].
+    pub fn load_with(path: &Path, textures: TextureOptions) -> Result<Scene, SceneError> {
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
         let scene = match ext.as_deref() {
-            Some("gltf" | "glb") => gltf::load(path)?,
-            Some("obj") => obj::load(path)?,
-            Some("toml") => SceneFile::load(path)?,
+            Some("gltf" | "glb") => gltf::load(path, textures)?,
+            Some("obj") => obj::load(path, textures)?,
+            Some("toml") => SceneFile::load(path, textures)?,
             _ => {
                 return Err(SceneError::UnknownFormat {
                     path: path.to_owned(),
@@ -354,6 +387,22 @@ impl Scene {
     #[must_use]
     pub fn triangle_material(&self, triangle: usize) -> &Material {
         &self.materials[self.triangles[triangle].material as usize]
+    }
+
+    /// How triangle `triangle` is coloured ([`texture::HitAlbedo`]: constant, or varying
+    /// with a texture and vertex colours).
+    ///
+    /// # Panics
+    /// If `triangle` is out of range.
+    #[must_use]
+    pub fn hit_albedo(&self, triangle: usize) -> texture::HitAlbedo {
+        texture::HitAlbedo::of(&self.triangles[triangle], self.triangle_material(triangle))
+    }
+
+    /// Bytes of texture texels the scene keeps in memory (each image once).
+    #[must_use]
+    pub fn texture_bytes(&self) -> usize {
+        texture::texture_bytes(&self.materials)
     }
 
     /// Names of meshes that lack lightmap UVs (reported by `prepare`).
@@ -430,6 +479,16 @@ impl SceneBuilder {
         {
             t.lightmap_uv = None;
         }
+        if let Some(uv) = t.texture_uv
+            && !uv.iter().all(|v| v.is_finite())
+        {
+            t.texture_uv = None;
+        }
+        if let Some(c) = t.colour
+            && !c.iter().all(|v| v.is_finite())
+        {
+            t.colour = None;
+        }
         let mesh = &mut self.meshes[t.mesh as usize];
         mesh.triangle_count += 1;
         if t.lightmap_uv.is_none() {
@@ -460,36 +519,14 @@ impl SceneBuilder {
     }
 }
 
-/// sRGB 8-bit transfer function → linear.
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// Average linear RGB of an 8-bit sRGB image given as interleaved channels.
-fn average_srgb8(pixels: &[u8], channels: usize) -> Option<Vec3> {
-    if channels < 3 || pixels.len() < channels {
-        return None;
-    }
-    let mut sum = glam::DVec3::ZERO;
-    let mut n = 0u64;
-    for px in pixels.chunks_exact(channels) {
-        let lin = |i: usize| f64::from(srgb_to_linear(f32::from(px[i]) / 255.0));
-        sum += glam::DVec3::new(lin(0), lin(1), lin(2));
-        n += 1;
-    }
-    Some((sum / n as f64).as_vec3())
-}
-
 mod gltf;
 pub mod gltf_write;
 mod obj;
 mod scene_file;
+pub mod texture;
 
 pub use scene_file::{SceneFile, SkySpec, SphereSpec, SunSpec, load_equirect};
+pub use texture::{BaseColorTexture, TextureOptions};
 
 #[cfg(test)]
 mod tests {
@@ -503,6 +540,8 @@ mod tests {
             positions: p,
             normals: [Vec3::ZERO; 3],
             lightmap_uv: None,
+            texture_uv: None,
+            colour: None,
             mesh: id,
             material: 0,
         };

@@ -1,7 +1,10 @@
 //! Wavefront OBJ + MTL through `tobj`.
+use std::sync::Arc;
+
+use super::texture::{self, BaseColorTexture, TextureOptions};
 use super::*;
 
-pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
+pub(super) fn load(path: &Path, textures: TextureOptions) -> Result<Scene, SceneError> {
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
@@ -18,10 +21,16 @@ pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
         source,
     })?;
     let dir = path.parent().unwrap_or(Path::new("."));
-    let mut materials: Vec<Material> = mtl.iter().map(|m| read_material(m, dir)).collect();
+    let mut materials: Vec<Material> = mtl
+        .iter()
+        .map(|m| read_material(path, m, dir, textures))
+        .collect::<Result<_, _>>()?;
     let default_material = materials.len() as u32;
     materials.push(Material::default_grey());
 
+    let textured: Vec<u32> = (0..materials.len() as u32)
+        .filter(|&m| materials[m as usize].base_color_texture.is_some())
+        .collect();
     let mut b = SceneBuilder::new(path);
     for (k, model) in models.iter().enumerate() {
         let name = if model.name.is_empty() {
@@ -30,7 +39,7 @@ pub(super) fn load(path: &Path) -> Result<Scene, SceneError> {
             model.name.clone()
         };
         let id = b.begin_mesh(name);
-        read_model(&mut b, id, &model.mesh, default_material)?;
+        read_model(&mut b, id, &model.mesh, default_material, &textured)?;
     }
     Ok(b.finish(materials, Vec::new()))
 }
@@ -94,24 +103,72 @@ fn check_element_indices(path: &Path) -> Result<(), SceneError> {
     Ok(())
 }
 
-fn read_material(m: &tobj::Material, dir: &Path) -> Material {
-    let kd = m.diffuse.map_or(Vec3::splat(0.8), Vec3::from);
-    let tex = m
-        .diffuse_texture
+/// A material; its `map_Kd` is a texture sampled at the OBJ's one UV set (repeating; v
+/// flipped, as OBJ's v runs up the image), × `Kd`. An image that is missing or cannot be
+/// decoded is an error naming it. `map_Kd` options (`-s`, `-o`, ...) are not read: the
+/// rest of the line is taken as the file name.
+fn read_material(
+    path: &Path,
+    m: &tobj::Material,
+    dir: &Path,
+    options: TextureOptions,
+) -> Result<Material, SceneError> {
+    // Not clamped before the texture multiplies it (a Kd above 1 brightening a dark map is
+    // kept, as when the texture was averaged); the albedo at a hit is clamped to [0, 1].
+    let kd = m
+        .diffuse
+        .map_or(Vec3::splat(0.8), Vec3::from)
+        .max(Vec3::ZERO);
+    let base_color_texture = match &m.diffuse_texture {
+        Some(name) => Some(BaseColorTexture {
+            image: Arc::new(read_image(path, dir, name, options)?),
+            wrap: [texture::Wrap::Repeat; 2],
+            factor: kd,
+        }),
+        None => None,
+    };
+    let albedo = base_color_texture
         .as_ref()
-        .and_then(|t| image::open(dir.join(t)).ok())
-        .and_then(|img| average_srgb8(img.to_rgb8().as_raw(), 3));
+        .map_or(kd, |t| kd * t.image.average());
     // tobj parses `Ke` into `emissive`; older files spell it as an unknown parameter.
     let ke = m
         .emissive
         .map(Vec3::from)
         .or_else(|| m.unknown_param.get("Ke").and_then(|s| parse_vec3(s)))
         .unwrap_or(Vec3::ZERO);
-    Material {
+    Ok(Material {
         name: m.name.clone(),
-        albedo: (kd * tex.unwrap_or(Vec3::ONE)).clamp(Vec3::ZERO, Vec3::ONE),
+        albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE),
         emission: ke.max(Vec3::ZERO),
-    }
+        base_color_texture,
+    })
+}
+
+/// A `map_Kd` image, relative to the OBJ's directory, as 8-bit sRGB (16-bit files keep
+/// their high byte).
+fn read_image(
+    path: &Path,
+    dir: &Path,
+    name: &str,
+    options: TextureOptions,
+) -> Result<texture::Image, SceneError> {
+    let fail = |message: String| SceneError::Texture {
+        path: path.to_owned(),
+        image: name.to_owned(),
+        message,
+    };
+    let file = dir.join(name);
+    let img = image::open(&file).map_err(|e| fail(format!("{}: {e}", file.display())))?;
+    let rgb = img.to_rgb8();
+    texture::Image::from_srgb8(
+        file.display().to_string(),
+        rgb.width(),
+        rgb.height(),
+        3,
+        rgb.as_raw(),
+        options,
+    )
+    .map_err(fail)
 }
 
 fn parse_vec3(s: &str) -> Option<Vec3> {
@@ -132,6 +189,7 @@ fn read_model(
     id: u32,
     mesh: &tobj::Mesh,
     default_material: u32,
+    textured: &[u32],
 ) -> Result<(), SceneError> {
     let count = mesh.positions.len() / 3;
     let at3 = |v: &[f32], i: usize| Vec3::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
@@ -144,8 +202,12 @@ fn read_model(
         ));
     }
     let material = mesh.material_id.map_or(default_material, |m| m as u32);
+    // OBJ has one UV set: the lightmap's and the texture's.
+    let textured = textured.contains(&material);
     for tri in mesh.indices.chunks_exact(3) {
         let v = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
+        let uv =
+            has_uv.then(|| v.map(|i| Vec2::new(mesh.texcoords[2 * i], mesh.texcoords[2 * i + 1])));
         b.push(Triangle {
             positions: v.map(|i| at3(&mesh.positions, i)),
             normals: if has_n {
@@ -153,8 +215,12 @@ fn read_model(
             } else {
                 [Vec3::ZERO; 3]
             },
-            lightmap_uv: has_uv
-                .then(|| v.map(|i| Vec2::new(mesh.texcoords[2 * i], mesh.texcoords[2 * i + 1]))),
+            lightmap_uv: uv,
+            // OBJ's v runs up the image, glTF's (and the sampler's) down.
+            texture_uv: uv
+                .filter(|_| textured)
+                .map(|uv| uv.map(|t| Vec2::new(t.x, 1.0 - t.y))),
+            colour: None,
             mesh: id,
             material,
         });
@@ -193,5 +259,51 @@ mod tests {
         // 0 and a relative index to just before the first element mean "none", as in tobj.
         std::fs::write(&path, format!("{head}f 1/0/-1 2/-2/1 3/1/1\n")).unwrap();
         assert_eq!(Scene::load(&path).unwrap().triangles.len(), 1);
+    }
+
+    #[test]
+    fn obj_map_kd_is_sampled_and_a_missing_one_is_an_error_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let obj = dir.path().join("quad.obj");
+        std::fs::write(
+            &obj,
+            "mtllib quad.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl wood\nf 1/1 2/2 3/3\n",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.path().join("quad.mtl"),
+            "newmtl wood\nKd 0.5 0.5 0.5\nmap_Kd wood.png\n",
+        )
+        .unwrap();
+        let e = Scene::load(&obj).expect_err("a missing map_Kd is an error");
+        let message = e.to_string();
+        assert!(
+            message.starts_with(&format!("{}: texture wood.png: ", obj.display()))
+                && message.contains("wood.png"),
+            "{message}"
+        );
+        // A 1×2 image: black over white (rows top to bottom; v = 0 is the top row).
+        image::RgbImage::from_raw(1, 2, vec![0, 0, 0, 255, 255, 255])
+            .unwrap()
+            .save(dir.path().join("wood.png"))
+            .unwrap();
+        let s = Scene::load(&obj).unwrap();
+        let t = &s.triangles[0];
+        // OBJ's v runs up the image: the texture UVs are the lightmap UVs with v flipped.
+        let flip = |uv: [Vec2; 3]| uv.map(|t| Vec2::new(t.x, 1.0 - t.y));
+        assert_eq!(t.texture_uv, t.lightmap_uv.map(flip));
+        assert!(
+            (s.materials[0].albedo - Vec3::splat(0.25))
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        let a = s.hit_albedo(0);
+        // OBJ v = 0 is the image's bottom edge, between the white bottom row and the black
+        // top row (repeating): halfway, ½ × Kd.
+        assert!((a.at(0.0, 0.0) - Vec3::splat(0.25)).abs().max_element() < 1e-6);
+        // OBJ v = ¼ is the centre of the bottom (white) row; v = ¾ of the top (black) one.
+        assert!((a.at(0.0, 0.25) - Vec3::splat(0.5)).abs().max_element() < 1e-6);
+        assert!(a.at(0.0, 0.75).abs().max_element() < 1e-6);
     }
 }

@@ -126,12 +126,13 @@ impl SunSpec {
 }
 
 impl SceneFile {
-    /// Loads a TOML scene file and the geometry it names.
+    /// Loads a TOML scene file and the geometry it names (its textures kept as `textures`
+    /// says).
     ///
     /// # Errors
     /// [`SceneError::SceneFile`] for a malformed file, otherwise whatever loading the
     /// geometry or the sky returns.
-    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    pub fn load(path: &Path, textures: super::TextureOptions) -> Result<Scene, SceneError> {
         let bad = |message: String| SceneError::SceneFile {
             path: path.to_owned(),
             message,
@@ -151,7 +152,7 @@ impl SceneFile {
                 "geometry must be .gltf, .glb or .obj, not another scene file".into(),
             ));
         }
-        let mut scene = Scene::load(&geometry)?;
+        let mut scene = Scene::load_with(&geometry, textures)?;
         if let Some(sun) = &file.sun {
             scene.sun = Some(sun.to_sun().map_err(bad)?);
         }

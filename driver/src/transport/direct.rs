@@ -303,11 +303,14 @@ mod tests {
             positions,
             normals: [(b - a).cross(c - a).normalize(); 3],
             lightmap_uv: Some([Vec2::ZERO; 3]),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         };
         let material = Material {
             name: "lamp".into(),
+            base_color_texture: None,
             albedo: Vec3::ZERO,
             emission: Vec3::splat(l),
         };
@@ -484,11 +487,14 @@ mod tests {
                 positions: [c, c + e1, c + e2],
                 normals: [n; 3],
                 lightmap_uv: Some([Vec2::ZERO; 3]),
+                texture_uv: None,
+                colour: None,
                 mesh: 0,
                 material: i,
             });
             materials.push(Material {
                 name: format!("e{i}"),
+                base_color_texture: None,
                 albedo: Vec3::ZERO,
                 emission: Vec3::splat(10f32.powf(rng.next_f32() * 3.0 - 1.0)),
             });

@@ -83,12 +83,13 @@ impl World {
                     out.reflected += emitted;
                 }
             }
-            if s.albedo == Vec3::ZERO {
+            let albedo = self.albedo_at(s, &hit);
+            if albedo == Vec3::ZERO {
                 break;
             }
             let facing = if front { s.normal } else { -s.normal };
             let p = self.leave_surface(hit.prim, from.point + dir * hit.t, facing, hit.t);
-            let reflect = throughput * s.albedo;
+            let reflect = throughput * albedo;
             let continues = self.transport() == Transport::Path && vertex < self.bounces();
             let cosine_pdf = |d: Vec3| facing.dot(d).max(0.0) * core::f32::consts::FRAC_1_PI;
             let at = Receiver {

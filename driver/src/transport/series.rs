@@ -415,6 +415,8 @@ mod tests {
             positions: [Vec3::ZERO, Vec3::X, Vec3::Y],
             normals: [Vec3::Z; 3],
             lightmap_uv: Some([Vec2::ZERO, Vec2::X, Vec2::Y]),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         };
@@ -429,6 +431,7 @@ mod tests {
             triangles: vec![tri],
             materials: vec![Material {
                 name: "m".into(),
+                base_color_texture: None,
                 albedo: Vec3::ONE,
                 emission: Vec3::ZERO,
             }],
