@@ -196,6 +196,8 @@ mod tests {
             positions: [Vec3::ZERO, Vec3::X * 4.0, Vec3::Y * 4.0],
             normals: [Vec3::Z; 3],
             lightmap_uv: Some([Vec2::ZERO, Vec2::X, Vec2::Y]),
+            texture_uv: None,
+            colour: None,
             mesh: 0,
             material: 0,
         };
@@ -212,6 +214,7 @@ mod tests {
                 name: "m".into(),
                 albedo: Vec3::splat(0.5),
                 emission: Vec3::ZERO,
+                base_color_texture: None,
             }],
             lights: Vec::new(),
             sun: Some(Sun {
