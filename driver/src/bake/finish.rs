@@ -5,19 +5,22 @@
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
+use super::directional::{self, SH_CHANNELS, ShL1};
 use super::run::{BakeError, file_error};
 use super::settings::{MAX_ITERATIONS, SettingsError};
-use super::workdir::{Manifest, merged_dir, merged_results, pass_files, read_manifest};
+use super::workdir::{
+    Manifest, directional_file, merged_dir, merged_results, pass_files, read_manifest,
+};
 use crate::output::atomic::temporary_name;
 use crate::output::denoise::{ATrous, Denoiser, NoisyTexel, Window};
 use crate::output::exr_pages::{PageStream, page_path};
 use crate::output::journal::{Journal, TileRecord, dedup_tiles, rho_sums};
-use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
+use crate::output::result_file::{BatchFile, DirectionalFile, FLAG_BAKED, ResultFile, TexelResult};
 use crate::output::seams::{Pixel, mean_relative_jump, read_seam_file, seam_file_path, stitch};
 use crate::texels::TexelFile;
 use guidebake_kernels::estimator::{
-    IterationVariance, RhoAccumulator, TexelEstimate, Welford, combine_weighted, luminance_f32,
-    plain_average,
+    IterationVariance, RhoAccumulator, TexelEstimate, Weighted, Welford, combine_weighted,
+    luminance_f32, plain_average,
 };
 
 /// Pixels of padding around every chart in the written pages.
@@ -127,10 +130,12 @@ pub fn finish_filtered(
         rho,
         ..Default::default()
     };
+    let directional = open_directional_files(texels, &shards)?;
     let source = TileSource {
         texels,
         shards: &shards,
         batches: batches.as_deref(),
+        directional: directional.as_deref(),
         global: global.as_ref(),
         rho,
         k: first.iterations as usize,
@@ -143,12 +148,18 @@ pub fn finish_filtered(
     let page_count = texels.pages().len() as u32;
     for (page, size) in texels.pages().iter().enumerate() {
         let path = page_path(out, page as u32, page_count);
-        let aux: &[&str] = if first.aux { &AUX_CHANNELS } else { &[] };
+        let mut aux: Vec<&str> = Vec::new();
+        if first.aux {
+            aux.extend(AUX_CHANNELS);
+        }
+        if first.directional {
+            aux.extend(SH_CHANNELS);
+        }
         let mut image = PageStream::create(
             &temporary_name(&path.with_extension("pixels")),
             size.width,
             size.height,
-            aux,
+            &aux,
         )?;
         let grid = filter.map(|_| TileGrid::new(texels, page as u32));
         for (t, tile) in texels
@@ -158,6 +169,7 @@ pub fn finish_filtered(
             .filter(|(_, t)| t.page as usize == page)
         {
             let values = source.values(t)?;
+            let sh = source.directional(t)?;
             let denoised = match (filter, &grid) {
                 (Some(f), Some(grid)) => Some(denoise_tile(&source, grid, f, t, &values)?),
                 _ => None,
@@ -174,18 +186,24 @@ pub fn finish_filtered(
                 }
                 let [px, py, pz] = texel.position;
                 let [nx, ny, nz] = texel.normal;
-                // In AUX_CHANNELS' order; unused without --aux.
-                let aux = [
-                    r.samples as f32,
-                    r.rel_std_error,
-                    1.0,
-                    px,
-                    py,
-                    pz,
-                    nx,
-                    ny,
-                    nz,
-                ];
+                // In AUX_CHANNELS' order (with --aux), then SH_CHANNELS' (with --directional).
+                let mut aux = Vec::with_capacity(AUX_CHANNELS.len() + SH_CHANNELS.len());
+                if first.aux {
+                    aux.extend([
+                        r.samples as f32,
+                        r.rel_std_error,
+                        1.0,
+                        px,
+                        py,
+                        pz,
+                        nx,
+                        ny,
+                        nz,
+                    ]);
+                }
+                if let Some(sh) = sh.get(i) {
+                    aux.extend(sh);
+                }
                 image.set(&mut rect, x, y, rgb, &aux);
             }
             image.put_rect(&rect)?;
@@ -285,6 +303,8 @@ struct TileSource<'a> {
     shards: &'a [ShardWork],
     batches: Option<&'a [BatchFile]>,
     global: Option<&'a GlobalWeights>,
+    /// The shards' directional files, if the bake kept them.
+    directional: Option<&'a [DirectionalFile]>,
     rho: f64,
     k: usize,
 }
@@ -321,6 +341,69 @@ impl TileSource<'_> {
             })
             .collect())
     }
+}
+
+impl TileSource<'_> {
+    /// Tile `t`'s directional coefficients in file order, times ρ (zero for texels not baked);
+    /// empty when the bake kept none. With global weights the iterations' means are combined
+    /// with the weights the irradiance gets, from the batch file.
+    fn directional(&self, t: usize) -> Result<Vec<[f32; 12]>, BakeError> {
+        let Some(files) = self.directional else {
+            return Ok(Vec::new());
+        };
+        let tile = &self.texels.tiles()[t];
+        let n = tile.texel_count as usize;
+        let file = &files[t % files.len()];
+        let combined: Vec<ShL1> = match (self.batches, self.global) {
+            (Some(batches), Some(g)) => {
+                let k = self.k;
+                let mut means = vec![ShL1::default(); n * k];
+                file.read(tile.first_texel, &mut means)?;
+                let mut b = vec![Welford::new(); n * k];
+                batches[t % batches.len()].read(tile.first_texel, &mut b)?;
+                let weights = Weighted(&g.weights);
+                (0..n)
+                    .map(|i| {
+                        let range = i * k..(i + 1) * k;
+                        directional::combine(&means[range.clone()], &b[range], &weights)
+                    })
+                    .collect()
+            }
+            _ => {
+                let mut out = vec![ShL1::default(); n];
+                file.read(tile.first_texel, &mut out)?;
+                out
+            }
+        };
+        Ok(combined.iter().map(|sh| sh.scaled(self.rho)).collect())
+    }
+}
+
+/// The shards' directional files when the bake kept them (in shard order).
+fn open_directional_files(
+    texels: &TexelFile,
+    shards: &[ShardWork],
+) -> Result<Option<Vec<DirectionalFile>>, BakeError> {
+    let first = &shards[0].manifest;
+    if !first.directional {
+        return Ok(None);
+    }
+    let per_texel = if first.combine_global {
+        first.iterations
+    } else {
+        1
+    };
+    let mut files = Vec::new();
+    for shard in shards {
+        let (file, _) = DirectionalFile::open_with(
+            &directional_file(&shard.dir),
+            false,
+            per_texel,
+            Some((texels.header().texel_count, shard.manifest.bake_id)),
+        )?;
+        files.push(file);
+    }
+    Ok(Some(files))
 }
 
 /// The tiles of one page by the grid cells (of the texel file's tile size) they overlap, to
