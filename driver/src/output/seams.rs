@@ -429,7 +429,7 @@ fn seam_weights(values: &SeamValues<'_>, pairs: &[StitchPair]) -> Vec<Vec<(u32, 
             return 0.0;
         };
         let d = f64::from(position(own).distance(position(inner)));
-        if !finite(inner) || !(d > 0.0 && d.is_finite()) {
+        if !(finite(inner) && d > 0.0 && d.is_finite()) {
             return 0.0;
         }
         let step = lum(own) - lum(inner);
@@ -584,7 +584,13 @@ mod tests {
         // neighbours equal to them, every value with standard error 1 (the jump is within
         // the noise); and an untouched value.
         let pairs = pairs_with_neighbours(10);
-        let side = |i: usize| if i % 2 == 0 { [1.0; 3] } else { [2.0; 3] };
+        let side = |i: usize| {
+            if i.is_multiple_of(2) {
+                [1.0; 3]
+            } else {
+                [2.0; 3]
+            }
+        };
         let mut rgb: Vec<[f32; 3]> = (0..40).map(side).collect();
         rgb.push([7.0; 3]);
         let variance = vec![1.0; rgb.len()];
