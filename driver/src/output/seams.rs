@@ -31,16 +31,16 @@
 //! `g² = max(0, (x̂ − x̂_in)² − σ² − σ_in²) / |P − P_in|²`), and from the jumps themselves,
 //! `τ² = mean(δ² − s²)` over the pair and the [`POOL`] pairs on either side of it along the
 //! seam (`δ` a pair's luminance jump; what the jumps exceed their noise by is the light's).
-//! For one pair the jump shrinks by `1 + 2 w`, i.e. to `τ² / (τ² + s²)` of itself (the
-//! Gaussian posterior mean of the true difference), and by `1 + 2Λ` = 17, Λ =
-//! [`STITCH_STRENGTH`], where the jumps are all noise (τ = 0: as the unweighted stitch). The unweighted stitch
-//! (`w = 8` for every pair) raised the RMSE against the reference on the Veach bidir room
-//! 2.5×, a slope-only τ 1.8× (307 of its 481 pairs have no inward texel to measure a slope
-//! with: the lamp shade's charts are thin), and weighting the data term by 1/σ² made it worse
-//! still (a texel that missed the lamp has a small σ and pinned its brighter partner); this
-//! one lowers it (docs/lightmaps.md). Solved by [`SWEEPS`] Gauss–Seidel sweeps in a fixed
-//! order — a small sparse solve, deterministic, run on the merged results, so shards still
-//! give one bake's bytes. Other pixels are untouched.
+//! For one pair the jump shrinks by `1 + 2 w`: below the cap to `τ² / (τ² + s²)` of itself
+//! (the Gaussian posterior mean of the true difference), and by `1 + 2Λ` = 17, Λ =
+//! [`STITCH_STRENGTH`], where the jumps are all noise (τ = 0: as the unweighted stitch).
+//! The unweighted stitch (`w = 8` for every pair) raised the RMSE against the reference on
+//! the Veach bidir room 2.5×, a slope-only τ 1.8× (307 of its 481 pairs have no inward
+//! texel to measure a slope with), and weighting the data term by 1/σ² as well made it
+//! worse still (a texel that missed the lamp, with its small σ, would pin its brighter
+//! partner); this one lowers it (docs/lightmaps.md). Solved by [`SWEEPS`] Gauss–Seidel
+//! sweeps in a fixed order — a small sparse solve, deterministic, run on the merged
+//! results, so shards still give one bake's bytes. Other pixels are untouched.
 //!
 //! Memory: detection holds one entry per triangle edge and the seams' pixel pairs (with their
 //! texels' normals), never the atlas; stitching holds the seam pixels' values.
