@@ -8,11 +8,16 @@
 //! (every valid texel baked, finite, non-negative) before timing. Throughput: gather samples
 //! (valid texels × spp).
 //!
+//! Group `bake_tile_directional`: the same tile at the default settings, without and with
+//! `--directional sh-l1` (docs/lightmaps.md, "Directional lightmaps"): what keeping the L1
+//! coefficients costs the gather.
+//!
 //! `cargo bench --bench bake -- --warm-up-time 1 --measurement-time 3`
 
 use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use guidebake::bake::directional::Directional;
 use guidebake::bake::gather::TileBaker;
 use guidebake::bake::pipeline::TileBuffer;
 use guidebake::bake::settings::BakeSettings;
@@ -83,6 +88,32 @@ fn bake_tile(c: &mut Criterion) {
         }
         let id = format!("{}/{}", value_name(&guiding), value_name(&combine));
         group.bench_function(BenchmarkId::from_parameter(id), |b| {
+            b.iter(|| {
+                baker.bake_tile(tile as u32, first, black_box(records), &mut out);
+                black_box(&out);
+            });
+        });
+    }
+    group.finish();
+    let mut group = c.benchmark_group("bake_tile_directional");
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(valid(tile) as u64 * u64::from(SPP)));
+    for directional in [Directional::None, Directional::ShL1] {
+        let settings = BakeSettings {
+            spp: SPP,
+            directional,
+            ..Default::default()
+        };
+        let mut baker = TileBaker::new(&world, settings).keep_directional(true);
+        let mut out = TileBuffer::default();
+        baker.bake_tile(tile as u32, first, records, &mut out);
+        assert!(
+            out.directional
+                .iter()
+                .all(|s| s.coefficients.iter().all(|c| c.is_finite()))
+        );
+        let id = BenchmarkId::from_parameter(directional);
+        group.bench_function(id, |b| {
             b.iter(|| {
                 baker.bake_tile(tile as u32, first, black_box(records), &mut out);
                 black_box(&out);

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
+use guidebake::bake::directional::Directional;
 use guidebake::bake::finish::{FinishOptions, finish, merge_pass};
 use guidebake::bake::run::{BakeError, BakeJob, bake, bake_pass_with_progress};
 use guidebake::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Transport};
@@ -209,30 +210,32 @@ fn one_or_two_threads_write_the_same_bits() {
 #[test]
 fn three_shards_merged_equal_one_bake() {
     let f = Fixture::new();
-    let path = |mut job: BakeJob| {
-        job.settings.transport = Transport::Path;
-        job
-    };
-    f.run(&path(f.job("whole.exr", 2, Shard::WHOLE)), None)
-        .unwrap();
-    let mut dirs = Vec::new();
-    for index in [1, 2, 0] {
-        let job = path(f.job("sharded.exr", 1, Shard { index, count: 3 }));
-        let report = f.run(&job, None).unwrap();
-        assert_eq!(report.tiles_baked, 3);
-        dirs.push(work_dir(&job.out, job.shard));
+    for directional in [Directional::None, Directional::ShL1] {
+        let path = |mut job: BakeJob| {
+            job.settings.transport = Transport::Path;
+            job.settings.directional = directional;
+            job
+        };
+        let whole = f.dir.path().join(format!("whole-{directional}.exr"));
+        let name = |what: &str| format!("{what}-{directional}.exr");
+        f.run(&path(f.job(&name("whole"), 2, Shard::WHOLE)), None)
+            .unwrap();
+        let mut dirs = Vec::new();
+        for index in [1, 2, 0] {
+            let job = path(f.job(&name("sharded"), 1, Shard { index, count: 3 }));
+            let report = f.run(&job, None).unwrap();
+            assert_eq!(report.tiles_baked, 3);
+            dirs.push(work_dir(&job.out, job.shard));
+        }
+        let texels = TexelFile::open(&f.dir.path().join("plane.texels")).unwrap();
+        let merged = f.dir.path().join(name("sharded"));
+        let err = finish(&texels, &dirs[..2], &merged)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("shards") && err.contains("0..3"), "{err}");
+        finish(&texels, &dirs, &merged).unwrap();
+        assert_eq!(exr_bytes(&whole), exr_bytes(&merged), "{directional}");
     }
-    let texels = TexelFile::open(&f.dir.path().join("plane.texels")).unwrap();
-    let merged = f.dir.path().join("sharded.exr");
-    let err = finish(&texels, &dirs[..2], &merged)
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("shards") && err.contains("0..3"), "{err}");
-    finish(&texels, &dirs, &merged).unwrap();
-    assert_eq!(
-        exr_bytes(&f.dir.path().join("whole.exr")),
-        exr_bytes(&merged)
-    );
 }
 
 #[test]
@@ -389,12 +392,18 @@ fn a_pass_run_resumes_and_continues_its_work_directory() {
 #[test]
 fn an_interrupted_bake_resumes_to_the_same_bits_and_is_never_clobbered() {
     let f = Fixture::new();
-    f.run(&f.job("whole.exr", 2, Shard::WHOLE), None).unwrap();
+    // With directional coefficients: their file resumes with the results.
+    let directional = |mut job: BakeJob| {
+        job.settings.directional = Directional::ShL1;
+        job
+    };
+    f.run(&directional(f.job("whole.exr", 2, Shard::WHOLE)), None)
+        .unwrap();
     let pass_texels = u64::from(SIDE * SIDE);
     // One worker and a window of 4 tiles: cancelling after the first tile of a pass leaves
     // most of that pass undone. Cut in the first pass, then in the second.
     for (name, cut_after) in [("first.exr", 64), ("second.exr", pass_texels + 64)] {
-        let mut job = f.job(name, 1, Shard::WHOLE);
+        let mut job = directional(f.job(name, 1, Shard::WHOLE));
         let cut = f.run(&job, Some(cut_after)).unwrap();
         assert!(
             cut.interrupted && cut.tiles_baked < TILES * PASSES,
@@ -680,6 +689,7 @@ fn global_weights_bake_the_closed_form_and_merge_shards_to_the_same_bits() {
             combine: Combine::Global,
             transport: Transport::Path,
             bounces: 3,
+            directional: Directional::ShL1,
             ..Default::default()
         },
         threads: 2,
@@ -700,6 +710,19 @@ fn global_weights_bake_the_closed_form_and_merge_shards_to_the_same_bits() {
     let mean = values.iter().sum::<f64>() / n;
     let se = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
     assert!((mean - want).abs() < 3.0 * se, "{mean} ± {se}, want {want}");
+    // The same radiance E/π from every direction of a texel's hemisphere: L0 = E/√π, and
+    // the L1 reconstruction at the texel's normal gives E back (docs/lightmaps.md).
+    let sh0: Vec<f64> = channel(&whole.out, "SH0.R")
+        .into_iter()
+        .map(f64::from)
+        .collect();
+    let mean0 = sh0.iter().sum::<f64>() / n;
+    let se0 = (sh0.iter().map(|v| (v - mean0).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    let want0 = want / std::f64::consts::PI.sqrt();
+    assert!(
+        (mean0 - want0).abs() < 3.0 * se0 + 1e-3 * want0,
+        "L0 {mean0} ± {se0}, want {want0}"
+    );
     let mut dirs = Vec::new();
     for index in [2, 0, 1] {
         let shard = job("sharded.exr", Shard { index, count: 3 });

@@ -13,6 +13,8 @@
 //! cargo run --release -p guidebake --example denoise_rmse -- --cache target/denoise-ref \
 //!     ../shared/scenes/converted/*.glb
 //! ```
+//!
+//! `--seams-only` skips the denoising and its sweep: raw and stitched only.
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
@@ -56,6 +58,8 @@ fn main() -> Result<(), Error> {
                 .into(),
         );
     }
+    let seams_only = args.iter().any(|a| a.as_os_str() == "--seams-only");
+    args.retain(|a| a.as_os_str() != "--seams-only");
     std::fs::create_dir_all(&cache)?;
     let mut rmse = Vec::new();
     let mut sweep = Vec::new();
@@ -123,6 +127,18 @@ fn main() -> Result<(), Error> {
             };
             let (raw, _) = finish(None, Seams::Off)?;
             let raw_rmse = compare(&raw, &truth)?.rmse;
+            let (stitched, written) = finish(None, Seams::Stitch)?;
+            let [before, after] = written.seam_jump.unwrap_or([0.0; 2]);
+            seams.push(format!(
+                "| {name} | {spp} | {} | {before:.4} | {after:.4} | {:.5} | {:.5} |",
+                written.seam_pairs,
+                raw_rmse,
+                compare(&stitched, &truth)?.rmse
+            ));
+            if seams_only {
+                std::fs::remove_dir_all(&dir)?;
+                continue;
+            }
             let (denoised, _) = finish(Some(&ATrous::default()), Seams::Off)?;
             let dn_rmse = compare(&denoised, &truth)?.rmse;
             rmse.push(format!(
@@ -139,29 +155,23 @@ fn main() -> Result<(), Error> {
                 row += &format!(" {:.2} |", compare(&values, &truth)?.rmse / raw_rmse);
             }
             sweep.push(row);
-            let (stitched, written) = finish(None, Seams::Stitch)?;
-            let [before, after] = written.seam_jump.unwrap_or([0.0; 2]);
-            seams.push(format!(
-                "| {name} | {spp} | {} | {before:.4} | {after:.4} | {:.5} | {:.5} |",
-                written.seam_pairs,
-                raw_rmse,
-                compare(&stitched, &truth)?.rmse
-            ));
             std::fs::remove_dir_all(&dir)?;
         }
     }
-    println!("| scene | texels | spp | RMSE raw | RMSE denoised | denoised / raw |");
-    println!("|---|---|---|---|---|---|");
-    rmse.iter().for_each(|r| println!("{r}"));
-    println!();
-    let head: Vec<String> = SWEEP
-        .iter()
-        .map(|(l, s)| format!("{l} levels, σ {s}"))
-        .collect();
-    println!("| scene | spp | {} |", head.join(" | "));
-    println!("|---|---|{}", "---|".repeat(SWEEP.len()));
-    sweep.iter().for_each(|r| println!("{r}"));
-    println!();
+    if !seams_only {
+        println!("| scene | texels | spp | RMSE raw | RMSE denoised | denoised / raw |");
+        println!("|---|---|---|---|---|---|");
+        rmse.iter().for_each(|r| println!("{r}"));
+        println!();
+        let head: Vec<String> = SWEEP
+            .iter()
+            .map(|(l, s)| format!("{l} levels, σ {s}"))
+            .collect();
+        println!("| scene | spp | {} |", head.join(" | "));
+        println!("|---|---|{}", "---|".repeat(SWEEP.len()));
+        sweep.iter().for_each(|r| println!("{r}"));
+        println!();
+    }
     println!("| scene | spp | seam pairs | jump raw | jump stitched | RMSE raw | RMSE stitched |");
     println!("|---|---|---|---|---|---|---|");
     seams.iter().for_each(|r| println!("{r}"));

@@ -26,6 +26,8 @@
 //!   or per-shard accumulators), pass 2 calls [`IterationVariance::weights`] once and
 //!   [`combine_weighted`] per texel. The weights do not depend on a texel's own samples, so
 //!   this combination is unbiased and needs no ρ.
+//! - [`CombinationWeights`] ([`PlainAverage`], [`GraybillDeal`], [`Weighted`]): the normalised
+//!   per-batch weights each combination applies, for other per-batch means of the same samples.
 //! - [`RhoAccumulator`]: the global sums for ρ.
 //! - [`ExactSum`]: the exact fixed-point accumulator behind every global reduction here.
 //!
@@ -300,6 +302,66 @@ fn pooled(batches: &[Welford]) -> Welford {
     all
 }
 
+/// The normalised weights `weighted_mean` gives each batch, written to `out` (at least as long
+/// as `batches`): `w_k / Σ w` for batches with samples and 0 for the others, or the pooled
+/// count weights `n_k / N` when every weight is zero. Returns `false` (and leaves `out`
+/// untouched) when no batch has a sample.
+fn normalised_weights(
+    batches: &[Welford],
+    pooled: &Welford,
+    mut weight: impl FnMut(usize, &Welford) -> f64,
+    out: &mut [f64],
+) -> bool {
+    debug_assert!(out.len() >= batches.len(), "output shorter than batches");
+    if pooled.count == 0 {
+        return false;
+    }
+    let mut total = 0.0f64;
+    for ((k, b), o) in batches.iter().enumerate().zip(out.iter_mut()) {
+        *o = if b.count == 0 { 0.0 } else { weight(k, b) };
+        total += *o;
+    }
+    if total > 0.0 && total.is_finite() {
+        let inv = 1.0 / total;
+        out.iter_mut().take(batches.len()).for_each(|w| *w *= inv);
+    } else {
+        let inv = 1.0 / pooled.count as f64;
+        for (b, o) in batches.iter().zip(out.iter_mut()) {
+            *o = b.count as f64 * inv;
+        }
+    }
+    true
+}
+
+/// The weights a combination gives a texel's batches, so that another per-batch mean (a
+/// directional lightmap's coefficients, accumulated from the same samples) combines exactly
+/// as the irradiance does: `Σ_k out[k] · m_k` is the combined value. `out` must be at least as
+/// long as `batches`; `false` when no batch has a sample.
+pub trait CombinationWeights {
+    /// Writes the normalised weights of `batches` to `out`.
+    fn weights(&self, batches: &[Welford], out: &mut [f64]) -> bool;
+}
+
+/// [`plain_average`]'s weights: `n_k / N`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PlainAverage;
+
+impl CombinationWeights for PlainAverage {
+    fn weights(&self, batches: &[Welford], out: &mut [f64]) -> bool {
+        normalised_weights(batches, &pooled(batches), |_, _| 0.0, out)
+    }
+}
+
+/// [`combine_weighted`]'s weights for the given per-iteration weights.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Weighted<'a>(pub &'a [f64]);
+
+impl CombinationWeights for Weighted<'_> {
+    fn weights(&self, batches: &[Welford], out: &mut [f64]) -> bool {
+        normalised_weights(batches, &pooled(batches), iteration_weight(self.0), out)
+    }
+}
+
 /// Σ w_k μ_k / Σ w_k over batches with samples, `weight(k, batch)` giving w_k ≥ 0; falls back
 /// to the pooled mean when every weight is zero.
 fn weighted_mean(
@@ -403,9 +465,15 @@ impl GraybillDeal {
                 rejected: all.rejected,
             };
         }
-        let floor = self.floor(&all);
+        weighted_mean(batches, &all, self.batch_weight(batches, &all))
+    }
+
+    /// The weight of a batch: `n_k / max(σ̂²_k, floor)`, normalised by the smallest floored
+    /// variance of `batches` (whose pooled statistics are `all`).
+    fn batch_weight(&self, batches: &[Welford], all: &Welford) -> impl Fn(usize, &Welford) -> f64 {
+        let floor = self.floor(all);
         let pooled_var = all.luminance_variance().unwrap_or(0.0).max(floor);
-        let var = |b: &Welford| match b.count {
+        let var = move |b: &Welford| match b.count {
             1 => pooled_var,
             _ => b.luminance_variance().unwrap_or(0.0).max(floor),
         };
@@ -414,7 +482,17 @@ impl GraybillDeal {
             .filter(|b| b.count > 0)
             .map(var)
             .fold(f64::INFINITY, f64::min);
-        weighted_mean(batches, &all, |_, b| b.count as f64 * (min_var / var(b)))
+        move |_, b| b.count as f64 * (min_var / var(b))
+    }
+}
+
+impl CombinationWeights for GraybillDeal {
+    fn weights(&self, batches: &[Welford], out: &mut [f64]) -> bool {
+        let all = pooled(batches);
+        if all.count == 0 {
+            return false;
+        }
+        normalised_weights(batches, &all, self.batch_weight(batches, &all), out)
     }
 }
 
@@ -424,10 +502,15 @@ impl GraybillDeal {
 /// is returned.
 pub fn combine_weighted(batches: &[Welford], weights: &[f64]) -> TexelEstimate {
     let all = pooled(batches);
-    weighted_mean(batches, &all, |k, _| {
+    weighted_mean(batches, &all, iteration_weight(weights))
+}
+
+/// Batch k's weight under per-iteration `weights`: `weights[k]` if finite and positive, else 0.
+fn iteration_weight(weights: &[f64]) -> impl Fn(usize, &Welford) -> f64 + '_ {
+    |k, _| {
         let w = weights.get(k).copied().unwrap_or(0.0);
         if w.is_finite() && w > 0.0 { w } else { 0.0 }
-    })
+    }
 }
 
 /// The global statistics of Müller's scheme for up to `K` iterations: per iteration, the sum

@@ -6,8 +6,9 @@
 //! Figures printed with `--nocapture` go into docs/estimator.md:
 //! `cargo test --test estimator -- --nocapture`.
 use guidebake_kernels::estimator::{
-    DEFAULT_REL_STD_FLOOR, ExactSum, GraybillDeal, IterationVariance, RhoAccumulator,
-    TexelEstimate, Welford, combine_weighted, luminance, plain_average,
+    CombinationWeights, DEFAULT_REL_STD_FLOOR, ExactSum, GraybillDeal, IterationVariance,
+    PlainAverage, RhoAccumulator, TexelEstimate, Weighted, Welford, combine_weighted, luminance,
+    plain_average,
 };
 use guidebake_kernels::testing::Pcg32;
 
@@ -483,4 +484,37 @@ fn graybill_deal_with_rho_wins_when_guiding_lowers_variance() {
     // fixes the global mean).
     assert!(e_gd_rho < 0.9 * e_avg, "GD·ρ {e_gd_rho} vs average {e_avg}");
     assert!((corrected / truth - 1.0).abs() < 0.01);
+}
+
+/// The weights each combination reports, applied to the batch means, give the combination's
+/// own estimate: another per-batch mean of the same samples (a directional lightmap's
+/// coefficients) combines exactly as the irradiance does.
+#[test]
+fn combination_weights_reproduce_each_combination() {
+    let mut rng = Pcg32::new(17, 3);
+    let batches = normal_batches(&mut rng, 3.0, &[8, 16, 32, 64], &[4.0, 2.0, 1.0, 0.5]);
+    let global = [0.1, 0.2, 0.0, 0.7];
+    let gd = GraybillDeal::default();
+    let cases: [(&dyn CombinationWeights, TexelEstimate); 3] = [
+        (&PlainAverage, plain_average(&batches)),
+        (&gd, gd.combine(&batches)),
+        (&Weighted(&global), combine_weighted(&batches, &global)),
+    ];
+    for (weights, estimate) in cases {
+        let mut w = [f64::NAN; 4];
+        assert!(weights.weights(&batches, &mut w));
+        assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12, "{w:?}");
+        let mean: f64 = batches
+            .iter()
+            .zip(&w)
+            .map(|(b, w)| w * b.mean_rgb().unwrap()[0])
+            .sum();
+        let want = estimate.value().unwrap().rgb[0];
+        assert!((mean - want).abs() < 1e-12 * want.abs(), "{mean} vs {want}");
+    }
+    // Iteration 2 has weight 0 under the global weights; without samples, no weights.
+    let mut w = [0.0; 4];
+    Weighted(&global).weights(&batches, &mut w);
+    assert_eq!(w[2], 0.0);
+    assert!(!PlainAverage.weights(&[Welford::new(); 3], &mut w));
 }

@@ -26,7 +26,8 @@ use std::time::Instant;
 use glam::Vec3;
 use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
 use guidebake_kernels::estimator::{
-    GraybillDeal, TexelEstimate, Welford, combine_weighted, luminance_f32, plain_average,
+    CombinationWeights, GraybillDeal, PlainAverage, TexelEstimate, Weighted, Welford,
+    combine_weighted, luminance_f32, plain_average,
 };
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::mapping::{
@@ -42,6 +43,7 @@ use guidebake_kernels::traverse::{intersect1, intersect8};
 use guidebake_kernels::warp;
 use wide::{f32x8, u32x8};
 
+use super::directional::{self, Directional, ShL1, ShSample, ShSums};
 use super::grid::{self as grid_guide, GridGuide};
 use super::pipeline::{TileBaked, TileBuffer};
 use super::settings::{BakeSettings, Combine, Guiding};
@@ -142,6 +144,10 @@ pub struct TileBaker<'w> {
     /// Per valid texel: its gather-only samples `L π / q` (all iterations), the series
     /// transport's indirect irradiance for the next pass.
     gathered: Vec<Welford>,
+    /// Per valid texel and iteration: its samples' spherical-harmonic projections, when the
+    /// bake keeps directional coefficients ([`Self::keep_directional`]).
+    sh: Vec<ShSums>,
+    keep_directional: bool,
     valid: Vec<u32>,
     positions: Vec<[f32; 3]>,
     normals: Vec<[f32; 3]>,
@@ -203,6 +209,8 @@ impl<'w> TileBaker<'w> {
             weights: Vec::new(),
             batches: Vec::new(),
             gathered: Vec::new(),
+            sh: Vec::new(),
+            keep_directional: false,
             valid: Vec::new(),
             positions: Vec::new(),
             normals: Vec::new(),
@@ -211,6 +219,13 @@ impl<'w> TileBaker<'w> {
             unguided: Vec::new(),
             counters: GatherCounters::default(),
         }
+    }
+
+    /// Keeps each texel's directional coefficients in this baker's tiles (`--directional
+    /// sh-l1`, the last pass: earlier series passes feed only the irradiance forward).
+    pub fn keep_directional(mut self, keep: bool) -> Self {
+        self.keep_directional = keep && self.settings.directional == Directional::ShL1;
+        self
     }
 
     /// Bakes tile `tile` whose texels (`texels`, global ids from `first_texel`) are given;
@@ -226,9 +241,19 @@ impl<'w> TileBaker<'w> {
         out.results.clear();
         out.results.resize(texels.len(), TexelResult::default());
         out.batches.clear();
+        out.directional.clear();
+        let k = self.settings.iterations as usize;
         if self.settings.combine == Combine::Global {
-            let k = self.settings.iterations as usize;
             out.batches.resize(texels.len() * k, Welford::new());
+        }
+        if self.keep_directional {
+            let per_texel = if self.settings.combine == Combine::Global {
+                k
+            } else {
+                1
+            };
+            out.directional
+                .resize(texels.len() * per_texel, ShL1::default());
         }
         self.collect_valid(texels);
         let clusters = if self.settings.guiding == Guiding::Grid {
@@ -236,13 +261,16 @@ impl<'w> TileBaker<'w> {
         } else {
             self.cluster()
         };
-        let k = self.settings.iterations as usize;
         self.batches.clear();
         self.batches.resize(self.valid.len() * k, Welford::new());
         self.weights.clear();
         self.weights.resize(self.valid.len() * k, 1.0);
         self.gathered.clear();
         self.gathered.resize(self.valid.len(), Welford::new());
+        self.sh.clear();
+        if self.keep_directional {
+            self.sh.resize(self.valid.len() * k, ShSums::default());
+        }
         self.unguided.clear();
         self.unguided.resize(self.valid.len(), true);
         let rays_before = self.counters.rays();
@@ -345,6 +373,7 @@ impl<'w> TileBaker<'w> {
             batches,
             weights,
             gathered,
+            sh,
             valid,
             unguided,
             counters,
@@ -382,9 +411,11 @@ impl<'w> TileBaker<'w> {
                 if learned.is_some() {
                     unguided[m as usize] = false;
                 }
+                let at = m as usize * iterations as usize + k as usize;
                 let mut sinks = Sinks {
-                    batch: &mut batches[m as usize * iterations as usize + k as usize],
+                    batch: &mut batches[at],
                     gathered: &mut gathered[m as usize],
+                    sh: sh.get_mut(at),
                     records,
                 };
                 let ctx = IterationCtx::new(world, settings, k, learned);
@@ -446,6 +477,9 @@ impl<'w> TileBaker<'w> {
                     ([0.0; 3], 0, rejected)
                 }
             };
+            if self.keep_directional {
+                self.finish_directional(m, i as usize, out);
+            }
             self.counters.samples_rejected += rejected;
             self.counters.texels_baked += 1;
             if let (Some(u), Some(w)) = (average.luminance(), combined.luminance()) {
@@ -468,6 +502,31 @@ impl<'w> TileBaker<'w> {
             };
         }
         record
+    }
+
+    /// Valid texel `m` (index `i` in the tile)'s directional coefficients into `out`: its
+    /// iterations' means for `--combine global` (combined in the final pass), else combined
+    /// with the weights its irradiance was combined with.
+    fn finish_directional(&self, m: usize, i: usize, out: &mut TileBuffer) {
+        let k = self.settings.iterations as usize;
+        let batches = &self.batches[m * k..(m + 1) * k];
+        let means: Vec<ShL1> = self.sh[m * k..(m + 1) * k]
+            .iter()
+            .zip(batches)
+            .map(|(s, b)| s.mean(b.count()))
+            .collect();
+        let gd = GraybillDeal::default();
+        let cluster = Weighted(&self.weights[m * k..(m + 1) * k]);
+        let weights: &dyn CombinationWeights = match self.settings.combine {
+            Combine::Global => {
+                out.directional[i * k..(i + 1) * k].copy_from_slice(&means);
+                return;
+            }
+            Combine::Average => &PlainAverage,
+            Combine::Texel => &gd,
+            Combine::Cluster => &cluster,
+        };
+        out.directional[i] = directional::combine(&means, batches, weights);
     }
 }
 
@@ -626,6 +685,8 @@ enum Learned<'a> {
 struct Sinks<'a> {
     /// The texel's estimator of this iteration (gathered + direct irradiance).
     batch: &'a mut Welford,
+    /// Its samples' spherical-harmonic projections in this iteration, if kept.
+    sh: Option<&'a mut ShSums>,
     /// The texel's gather-only samples over all iterations.
     gathered: &'a mut Welford,
     /// The cluster's learning records.
@@ -853,7 +914,9 @@ impl<'a> IterationCtx<'a> {
             let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
             let light_u: [[f32; 2]; LANES] = core::array::from_fn(|i| [lx[i], ly[i]]);
             let samples: [u32; LANES] = core::array::from_fn(|i| chunk[i] + first);
-            let direct = self.direct8(t, origin, &samples, &light_u, counters);
+            let mut direct_sh = [ShSample::default(); LANES];
+            let sh = sinks.sh.is_some().then_some(&mut direct_sh);
+            let direct = self.direct8(t, origin, &samples, &light_u, sh, counters);
             for lane in 0..LANES {
                 let hit = (hprim[lane] != NO_HIT).then(|| SurfaceHit {
                     prim: hprim[lane],
@@ -867,7 +930,9 @@ impl<'a> IterationCtx<'a> {
                     pdf: q[lane] * dz[lane] * core::f32::consts::FRAC_1_PI,
                 };
                 let l = self.incoming(t.id, chunk[lane] + first, &from, dirs[lane], hit, counters);
-                self.record(l, [wx[lane], wy[lane]], q[lane], direct[lane], sinks);
+                let direct = (direct[lane], &direct_sh[lane]);
+                let dir = (dirs[lane], dz[lane]);
+                self.record(l, [wx[lane], wy[lane]], q[lane], dir, direct, sinks);
             }
         }
     }
@@ -882,6 +947,7 @@ impl<'a> IterationCtx<'a> {
             let origin = self.origin(t, j);
             let mut light_u = [[0.0; 2]; LANES];
             let mut samples = [(Leaving::default(), [0.0f32; 2], 1.0f32); LANES];
+            let mut dirs = [(Vec3::Z, 1.0f32); LANES];
             // The packet's eight scalar warps first, timed together (the stats' warp time).
             let clock = self.warp_clock(j);
             let cosine = self.is_cosine_packet(j);
@@ -922,12 +988,16 @@ impl<'a> IterationCtx<'a> {
                 let lp = rotate(sobol_2d(index), light_rot);
                 light_u[lane] = [to_unit(lp[0]), to_unit(lp[1])];
                 samples[lane] = (l, w, q);
+                dirs[lane] = (dir, local.z);
             }
             let indices: [u32; LANES] = core::array::from_fn(|lane| j * LANES as u32 + lane as u32);
-            let direct = self.direct8(t, origin, &indices, &light_u, counters);
+            let mut direct_sh = [ShSample::default(); LANES];
+            let sh = sinks.sh.is_some().then_some(&mut direct_sh);
+            let direct = self.direct8(t, origin, &indices, &light_u, sh, counters);
             for lane in 0..LANES {
                 let (l, w, q) = samples[lane];
-                self.record(l, w, q, direct[lane], sinks);
+                let direct = (direct[lane], &direct_sh[lane]);
+                self.record(l, w, q, dirs[lane], direct, sinks);
             }
         }
     }
@@ -941,6 +1011,7 @@ impl<'a> IterationCtx<'a> {
         origin: Vec3,
         samples: &[u32],
         light_u: &[[f32; 2]; LANES],
+        sh: Option<&mut [ShSample; LANES]>,
         counters: &mut GatherCounters,
     ) -> [Vec3; LANES] {
         let mut direct = [Vec3::ZERO; LANES];
@@ -959,7 +1030,7 @@ impl<'a> IterationCtx<'a> {
         };
         let rays = self
             .world
-            .direct_irradiance8(&at, light_u, &pick, &mut direct);
+            .direct_irradiance8_projected(&at, light_u, &pick, &mut direct, sh);
         counters.shadow_rays += u64::from(rays);
         direct
     }
@@ -1049,8 +1120,18 @@ impl<'a> IterationCtx<'a> {
     /// One sample into the texel's estimator (irradiance `L π / q` + direct light), its
     /// gather-only channel (what series passes look up: the light the hit sends, without the
     /// direct light of emitters that next-event estimation connects at the hits) and the
-    /// cluster's learning records (point and flux `lum(L) / q`).
-    fn record(&self, l: Leaving, w: [f32; 2], q: f32, direct: Vec3, sinks: &mut Sinks<'_>) {
+    /// cluster's learning records (point and flux `lum(L) / q`). `(dir, cos)`: the gather
+    /// direction and its cosine to the texel's normal; `direct`: the next-event estimate and
+    /// its projection, for the directional coefficients (only of a sample the batch accepts).
+    fn record(
+        &self,
+        l: Leaving,
+        w: [f32; 2],
+        q: f32,
+        (dir, cos): (Vec3, f32),
+        (direct, direct_sh): (Vec3, &ShSample),
+        sinks: &mut Sinks<'_>,
+    ) {
         let scale = core::f32::consts::PI / q;
         let indirect = if self.world.emitters().is_some() {
             l.reflected
@@ -1059,7 +1140,15 @@ impl<'a> IterationCtx<'a> {
         };
         sinks.gathered.push((indirect * scale).to_array());
         let radiance = l.emitted + l.reflected;
-        sinks.batch.push((radiance * scale + direct).to_array());
+        let sample = radiance * scale + direct;
+        sinks.batch.push(sample.to_array());
+        if let Some(sh) = sinks.sh.as_deref_mut()
+            && sample.is_finite()
+        {
+            let mut projected = *direct_sh;
+            directional::add_irradiance_sample(&mut projected, radiance * scale, dir, cos);
+            sh.add(&projected);
+        }
         let flux = luminance_f32(radiance.to_array()) / q;
         if flux.is_finite() {
             sinks.records.push(Record { u: w, flux });
@@ -1264,6 +1353,163 @@ mod tests {
                 Vec3::splat(le * core::f32::consts::PI),
             );
         }
+    }
+
+    /// An equirectangular sky of `h` rows × `4h` columns whose radiance depends on the
+    /// latitude only: row j (θ from the +y zenith in [jπ/h, (j+1)π/h]) holds
+    /// `colour · (a + b cos θ_mid)` — a sky brighter towards +y, a gradient across the
+    /// ground's normal +z.
+    fn gradient_sky(h: u32, colour: Vec3, a: f32, b: f32) -> (Sky, Vec<Vec3>) {
+        let rows: Vec<Vec3> = (0..h)
+            .map(|j| {
+                let mid = (j as f32 + 0.5) * core::f32::consts::PI / h as f32;
+                colour * (a + b * mid.cos())
+            })
+            .collect();
+        let pixels = rows
+            .iter()
+            .flat_map(|&l| std::iter::repeat_n(l, 4 * h as usize))
+            .collect();
+        let sky = Sky::Equirect {
+            path: "gradient.exr".into(),
+            width: 4 * h,
+            height: h,
+            pixels,
+        };
+        (sky, rows)
+    }
+
+    /// The exact L1 coefficients of [`gradient_sky`]'s rows over the hemisphere z > 0 (the
+    /// ground's), cell by cell in closed form (docs/lightmaps.md derives them): with the sky's
+    /// φ = atan2(x, −z), the hemisphere is the columns with |φ| > π/2, a whole number of them,
+    /// and per row `∫dω = π (cos θ0 − cos θ1)`, `∫ω_y dω = (π/2)(sin²θ1 − sin²θ0)`,
+    /// `∫ω_z dω = 2 ∫sin²θ dθ`, `∫ω_x dω = 0` (odd in φ over the hemisphere).
+    fn gradient_sky_coefficients(rows: &[Vec3]) -> [Vec3; 4] {
+        use std::f64::consts::PI;
+        let h = rows.len() as f64;
+        let mut c = [glam::DVec3::ZERO; 4];
+        for (j, l) in rows.iter().enumerate() {
+            let (t0, t1) = (j as f64 * PI / h, (j + 1) as f64 * PI / h);
+            let sin2 = |t: f64| t / 2.0 - (2.0 * t).sin() / 4.0;
+            let l = l.as_dvec3();
+            c[0] += l * (PI * (t0.cos() - t1.cos()));
+            c[2] += l * (PI / 2.0 * (t1.sin().powi(2) - t0.sin().powi(2)));
+            c[3] += l * (2.0 * (sin2(t1) - sin2(t0)));
+        }
+        let (y0, y1) = (f64::from(directional::Y0), f64::from(directional::Y1));
+        [c[0] * y0, c[1] * y1, c[2] * y1, c[3] * y1].map(|v| v.as_vec3())
+    }
+
+    /// The texels' directional coefficients (after ρ, as the final pass applies it): mean
+    /// and standard error over the texels, per coefficient.
+    fn bake_sh_mean(
+        world: &World,
+        settings: BakeSettings,
+        texels: &[TexelRecord],
+    ) -> ([Vec3; 4], [Vec3; 4]) {
+        let mut baker = TileBaker::new(world, settings).keep_directional(true);
+        let mut out = TileBuffer::default();
+        let baked = baker.bake_tile(0, 1000, texels, &mut out);
+        let rho = crate::output::journal::rho_sums(&[baked.record]).rho();
+        assert_eq!(out.directional.len(), texels.len());
+        let values: Vec<[f32; 12]> = out.directional.iter().map(|s| s.scaled(rho)).collect();
+        let n = values.len() as f64;
+        let (mut mean, mut se) = ([Vec3::ZERO; 4], [Vec3::ZERO; 4]);
+        for i in 0..12 {
+            let m = values.iter().map(|v| f64::from(v[i])).sum::<f64>() / n;
+            let var = values
+                .iter()
+                .map(|v| (f64::from(v[i]) - m).powi(2))
+                .sum::<f64>()
+                / (n - 1.0);
+            mean[i / 3][i % 3] = m as f32;
+            se[i / 3][i % 3] = (var / n).sqrt() as f32;
+        }
+        (mean, se)
+    }
+
+    #[test]
+    fn a_sun_and_a_gradient_sky_give_the_analytic_sh_coefficients() {
+        let (sky, rows) = gradient_sky(32, Vec3::new(0.5, 1.0, 2.0), 1.0, 0.8);
+        let to_sun = Vec3::new(0.3, 0.1, 1.0).normalize();
+        let alpha = 0.05f32;
+        let sun = Sun {
+            direction: to_sun,
+            angular_radius: alpha,
+            irradiance: Vec3::new(3.0, 2.0, 1.0),
+        };
+        let world = World::new(
+            &scene(ground(), vec![grey(0.0, 0.0)], sky, Some(sun.clone())),
+            Preset::DEFAULT,
+        )
+        .unwrap();
+        // The sun: a disc of radiance E/(π sin²α): ∫L dω = E · 2/(1 + cos α), ∫L ω dω = E s.
+        let mut want = gradient_sky_coefficients(&rows);
+        want[0] += sun.irradiance * (directional::Y0 * 2.0 / (1.0 + alpha.cos()));
+        for (a, s) in [to_sun.x, to_sun.y, to_sun.z].into_iter().enumerate() {
+            want[1 + a] += sun.irradiance * (directional::Y1 * s);
+        }
+        // L1x: the sun's alone (the sky's is 0 by symmetry), L1y the sky's gradient.
+        assert!(want[2].x > 0.1 && want[1].x > 0.1, "{want:?}");
+        for (mode, combine) in [
+            (Guiding::Off, Combine::Average),
+            (Guiding::Naive, Combine::Texel),
+            (Guiding::Coherent, Combine::Texel),
+            (Guiding::Coherent, Combine::Cluster),
+            (Guiding::Grid, Combine::Average),
+        ] {
+            let settings = BakeSettings {
+                combine,
+                bias_correction: combine == Combine::Texel,
+                directional: Directional::ShL1,
+                ..settings(mode)
+            };
+            let (mean, se) = bake_sh_mean(&world, settings, &texels_on_plane(64, 0.0));
+            // Printed for docs/lightmaps.md (`-- --nocapture`).
+            eprintln!("{mode} {combine}: L = {mean:?} ± {se:?}, analytic {want:?}");
+            for i in 0..4 {
+                assert_within_3_sigma(&format!("{mode} {combine} L{i}"), (mean[i], se[i]), want[i]);
+            }
+        }
+    }
+
+    #[test]
+    fn directional_coefficients_reconstruct_the_irradiance_and_leave_it_unchanged() {
+        let sky = Vec3::new(0.5, 1.0, 2.0);
+        let world = world(ground(), grey(0.5, 0.0), sky, None);
+        let texels = texels_on_plane(64, 0.0);
+        let plain = settings(Guiding::Coherent);
+        let with = BakeSettings {
+            directional: Directional::ShL1,
+            ..plain
+        };
+        let (mut a, mut b) = (TileBuffer::default(), TileBuffer::default());
+        TileBaker::new(&world, plain).bake_tile(0, 0, &texels, &mut a);
+        let mut baker = TileBaker::new(&world, with).keep_directional(true);
+        baker.bake_tile(0, 0, &texels, &mut b);
+        assert_eq!(a.results, b.results, "the irradiance does not change");
+        assert!(a.directional.is_empty());
+        // Global weights: K means per texel, combined in the final pass.
+        let k = with.iterations as usize;
+        assert_eq!(b.directional.len(), texels.len() * k);
+        let e: Vec<Vec3> = (0..texels.len())
+            .map(|i| {
+                let sh = directional::combine(
+                    &b.directional[i * k..(i + 1) * k],
+                    &b.batches[i * k..(i + 1) * k],
+                    &PlainAverage,
+                );
+                assert!(sh.coefficients.iter().all(|c| c.is_finite()));
+                sh.irradiance(Vec3::Z)
+            })
+            .collect();
+        // (√π/2) L0 + √(π/3) L1·n estimates the irradiance: per sample it is
+        // `E (1/(4 cosθ) + 1/2)`, whose mean under the cosine density is E.
+        let n = e.len() as f32;
+        let mean = e.iter().copied().sum::<Vec3>() / n;
+        let var = e.iter().map(|v| (*v - mean) * (*v - mean)).sum::<Vec3>() / (n - 1.0);
+        let want = sky * core::f32::consts::PI;
+        assert_within_3_sigma("E(n) from SH", (mean, (var / n).powf(0.5)), want);
     }
 
     /// A black ground under a black sky lit by `lights` only.

@@ -23,9 +23,10 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use crossbeam::channel;
 
+use super::directional::ShL1;
 use crate::output::OutputFileError;
 use crate::output::journal::{Journal, TileRecord};
-use crate::output::result_file::{BatchFile, ResultFile, TexelResult};
+use crate::output::result_file::{BatchFile, DirectionalFile, ResultFile, TexelResult};
 use guidebake_kernels::estimator::Welford;
 
 /// One tile's output, in a buffer of the pool.
@@ -35,12 +36,16 @@ pub struct TileBuffer {
     pub results: Vec<TexelResult>,
     /// Every texel's per-iteration batches (K per texel), when a batch file is written.
     pub batches: Vec<Welford>,
+    /// Every texel's directional coefficients (K per texel with a batch file, else one),
+    /// when a directional file is written.
+    pub directional: Vec<ShL1>,
 }
 
 impl TileBuffer {
     fn clear(&mut self) {
         self.results.clear();
         self.batches.clear();
+        self.directional.clear();
     }
 }
 
@@ -51,6 +56,8 @@ pub struct TileFiles<'a> {
     pub results: &'a ResultFile,
     /// The per-iteration batches, if kept.
     pub batches: Option<&'a BatchFile>,
+    /// The directional coefficients, if kept.
+    pub directional: Option<&'a DirectionalFile>,
 }
 
 /// What a worker produced for one tile.
@@ -235,6 +242,9 @@ impl Writer<'_> {
         if let Some(batches) = self.files.batches {
             batches.write(first_texel, &buffer.batches)?;
         }
+        if let Some(directional) = self.files.directional {
+            directional.write(first_texel, &buffer.directional)?;
+        }
         Ok(())
     }
 
@@ -250,6 +260,9 @@ impl Writer<'_> {
         self.files.results.sync()?;
         if let Some(batches) = self.files.batches {
             batches.sync()?;
+        }
+        if let Some(directional) = self.files.directional {
+            directional.sync()?;
         }
         self.journal.append(pending)?;
         report.tiles_committed += pending.len();
@@ -337,6 +350,7 @@ mod tests {
                 TileFiles {
                     results: &results,
                     batches: None,
+                    directional: None,
                 },
                 &mut journal,
                 &cancel,
@@ -419,6 +433,7 @@ mod tests {
             TileFiles {
                 results: &read_only,
                 batches: None,
+                directional: None,
             },
             &mut journal,
             &cancel,

@@ -25,14 +25,15 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use super::directional::Directional;
 use super::finish::{FinishOptions, finish_with};
 use super::gather::{GatherCounters, TileBaker};
 use super::pipeline::{self, PipelineConfig, PipelineError, TileBuffer, TileFiles};
 use super::settings::{BakeSettings, Combine, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::workdir::{
-    Manifest, merged_results, open_batches, open_pass, open_work, pass_files, pass_image,
-    retire_work, work_dir,
+    Manifest, merged_results, open_batches, open_directional, open_pass, open_work, pass_files,
+    pass_image, retire_work, work_dir,
 };
 use super::world::World;
 use crate::bvh::{BvhError, Preset};
@@ -259,6 +260,7 @@ pub fn bake_pass_with_progress(
         passes,
         combine_global: job.settings.combine == Combine::Global,
         iterations: job.settings.iterations,
+        directional: job.settings.directional == Directional::ShL1,
         settings: format!("{:?}", job.settings),
     };
     open_work(&dir, &manifest, job.resume, only_pass)?;
@@ -408,6 +410,25 @@ fn bake_pass(
             )
         })
         .transpose()?;
+    // So do the directional coefficients, when kept (one per texel, or the K iterations'
+    // means for global weights).
+    let last = pass == job.settings.passes();
+    let directional = (job.settings.directional == Directional::ShL1 && last)
+        .then(|| {
+            let per_texel = if job.settings.combine == Combine::Global {
+                job.settings.iterations
+            } else {
+                1
+            };
+            open_directional(
+                dir,
+                bake_id,
+                texels.header().texel_count,
+                per_texel,
+                !done.is_empty(),
+            )
+        })
+        .transpose()?;
     let todo = tiles_to_bake(
         tile_count,
         job.shard,
@@ -426,7 +447,7 @@ fn bake_pass(
         commit_every: 64,
     };
     let make_worker = || CountedBaker {
-        baker: TileBaker::new(world, job.settings),
+        baker: TileBaker::new(world, job.settings).keep_directional(last),
         sink: &counters,
     };
     let bake_tile = |w: &mut CountedBaker<'_, '_>, tile: u32, out: &mut TileBuffer| {
@@ -446,6 +467,7 @@ fn bake_pass(
         TileFiles {
             results: &results,
             batches: batches.as_ref(),
+            directional: directional.as_ref(),
         },
         &mut journal,
         cancel,

@@ -3,6 +3,7 @@
 
 use std::fmt;
 
+use super::directional::Directional;
 use crate::output::fnv1a64;
 use crate::transport::emitters::EmitterSelection;
 
@@ -109,6 +110,8 @@ pub struct BakeSettings {
     pub emitters: EmitterSampling,
     /// How next-event estimation picks an emitter.
     pub emitter_selection: EmitterSelection,
+    /// Directional coefficients kept beside the irradiance (`--directional`).
+    pub directional: Directional,
 }
 
 /// Most learning iterations a bake may ask for.
@@ -134,6 +137,7 @@ impl Default for BakeSettings {
             smooth: 10,
             emitters: EmitterSampling::default(),
             emitter_selection: EmitterSelection::default(),
+            directional: Directional::None,
         }
     }
 }

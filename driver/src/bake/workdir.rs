@@ -10,7 +10,7 @@ use super::run::{BakeError, file_error};
 use super::shard::Shard;
 use crate::output::atomic::temporary_name;
 use crate::output::journal::{Journal, TileRecord, dedup_tiles};
-use crate::output::result_file::{BatchFile, ResultFile};
+use crate::output::result_file::{BatchFile, DirectionalFile, ResultFile};
 
 /// The work directory's manifest: what `--resume` and `merge` check before trusting it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -34,6 +34,10 @@ pub struct Manifest {
     pub combine_global: bool,
     /// Learning iterations (batches per texel in the batch file).
     pub iterations: u32,
+    /// Whether the last pass kept directional coefficients (`--directional sh-l1`,
+    /// [`directional_file`]).
+    #[serde(default)]
+    pub directional: bool,
     /// The settings, for people.
     pub settings: String,
 }
@@ -164,6 +168,34 @@ pub(super) fn open_batches(
         &path,
         texel_count,
         iterations,
+        bake_id,
+    )?)
+}
+
+/// The directional coefficients of the last pass in a work directory.
+pub fn directional_file(dir: &Path) -> PathBuf {
+    dir.join("directional.bin")
+}
+
+/// Opens the directional file (`per_texel` records per texel; `resume`: the one a resumed
+/// pass wrote into), or creates it.
+pub(super) fn open_directional(
+    dir: &Path,
+    bake_id: u64,
+    texel_count: u64,
+    per_texel: u32,
+    resume: bool,
+) -> Result<DirectionalFile, BakeError> {
+    let path = directional_file(dir);
+    if resume && path.exists() {
+        let (file, _) =
+            DirectionalFile::open_with(&path, true, per_texel, Some((texel_count, bake_id)))?;
+        return Ok(file);
+    }
+    Ok(DirectionalFile::create_with(
+        &path,
+        texel_count,
+        per_texel,
         bake_id,
     )?)
 }

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use crate::bake::directional::Directional;
 use crate::bake::finish::{Denoise, FinishOptions, Seams};
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress};
 use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Schedule, Transport};
@@ -94,6 +95,11 @@ pub struct BakeArgs {
     /// denoising; docs/lightmaps.md). Off by default, as --denoise.
     #[arg(long, value_enum, default_value_t = Seams::Off)]
     pub seams: Seams,
+    /// Directional lightmaps: `sh-l1` adds per texel the L1 spherical harmonics of the
+    /// incident radiance, world space, as the EXR layers SH0, SH1x, SH1y, SH1z (RGB each;
+    /// docs/lightmaps.md has the convention and the conversions to Unity and Unreal).
+    #[arg(long, value_enum, default_value_t = Directional::None)]
+    pub directional: Directional,
     /// Continue an interrupted bake from its journal.
     #[arg(long)]
     pub resume: bool,
@@ -136,6 +142,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         smooth: args.smooth,
         emitters: args.emitters,
         emitter_selection: args.emitter_selection,
+        directional: args.directional,
     };
     settings.validate()?;
     check_output(&args.out)?;

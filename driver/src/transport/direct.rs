@@ -19,6 +19,7 @@ use guidebake_kernels::packet::{LANES, Ray, Ray8};
 use guidebake_kernels::traverse::{occluded1, occluded8};
 
 use super::emitters::EmitterSample;
+use crate::bake::directional::{ShSample, add_irradiance_sample, hemisphere};
 use crate::bake::settings::EmitterSampling;
 use crate::bake::world::World;
 
@@ -109,18 +110,34 @@ impl World {
         pick: &[f32; LANES],
         out: &mut [Vec3; LANES],
     ) -> u32 {
+        self.direct_irradiance8_projected(at, u, pick, out, None)
+    }
+
+    /// [`Self::direct_irradiance8`], also adding each visible sample's spherical-harmonic
+    /// projection (`L / p · Y_i(ω)`, [`crate::bake::directional`]) into `sh` when given:
+    /// the directional lightmap's share of next-event estimation, from the same samples.
+    pub fn direct_irradiance8_projected(
+        &self,
+        at: &Receiver8<'_>,
+        u: &[[f32; 2]; LANES],
+        pick: &[f32; LANES],
+        out: &mut [Vec3; LANES],
+        mut sh: Option<&mut [ShSample; LANES]>,
+    ) -> u32 {
         let bvh = self.bvh();
         let (p, n) = (at.point, at.normal);
         let mut rays = 0;
         for light in self.lights() {
             let mut packet = Ray8::INACTIVE;
             let mut weights = [Vec3::ZERO; LANES];
+            let mut directions = [Vec3::ZERO; LANES];
             let mut unshadowed = 0u8;
             for lane in 0..LANES {
                 let Some(s) = light.sample(p, n, u[lane]) else {
                     continue;
                 };
                 weights[lane] = s.weight;
+                directions[lane] = s.direction;
                 if s.distance == 0.0 {
                     unshadowed |= 1 << lane;
                 } else {
@@ -130,6 +147,17 @@ impl World {
             let (visible, traced) = visible_lanes(&bvh, &packet, unshadowed);
             for lane in lanes_of(visible) {
                 out[lane] += weights[lane];
+                if let Some(sh) = sh.as_deref_mut() {
+                    if unshadowed >> lane & 1 == 1 {
+                        // Inside a sphere light: radiance E/π from the whole hemisphere.
+                        let l = weights[lane] * core::f32::consts::FRAC_1_PI;
+                        let h = hemisphere(l, n);
+                        sh[lane].iter_mut().zip(h).for_each(|(s, v)| *s += v);
+                    } else {
+                        let cos = n.dot(directions[lane]);
+                        add_irradiance_sample(&mut sh[lane], weights[lane], directions[lane], cos);
+                    }
+                }
             }
             rays += traced;
         }
@@ -151,7 +179,12 @@ impl World {
             for lane in lanes_of(live) {
                 if let Some(s) = &samples[lane] {
                     let w = others[lane].map_or(1.0, |other| power_heuristic(s.pdf, other));
-                    out[lane] += emitter_irradiance(at.normal, s, w);
+                    let e = emitter_irradiance(at.normal, s, w);
+                    out[lane] += e;
+                    if let Some(sh) = sh.as_deref_mut() {
+                        let cos = at.normal.dot(s.direction);
+                        add_irradiance_sample(&mut sh[lane], e, s.direction, cos);
+                    }
                 }
             }
             rays += traced;
