@@ -1743,7 +1743,10 @@ mod tests {
                 off_var / default_var
             );
             for (k, r) in ratios.iter().enumerate().skip(1) {
-                assert!(*r >= PER_SAMPLE, "{mode}: iteration {k} only {r:.2}× below cosine");
+                assert!(
+                    *r >= PER_SAMPLE,
+                    "{mode}: iteration {k} only {r:.2}× below cosine"
+                );
             }
             assert!(
                 default_var * WHOLE_BAKE <= off_var,
