@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use glam::{Vec2, Vec3};
 
-use crate::scene::{Scene, Triangle};
-use crate::texels::{FLAG_VALID, TexelFile, TexelRecord};
+use crate::scene::{Material, Mesh, Scene, Sky, Triangle};
+use crate::texels::{FLAG_VALID, MeshRecord, PageRecord, TexelFile, TexelRecord};
 
 /// Where the tests and benches find the third-party scenes: `GUIDEBAKE_SCENES` if set, else
 /// `../shared/scenes` beside the workspace (or `../../shared/scenes`, for a workspace that is a
@@ -108,4 +108,52 @@ pub fn assert_texels_on_triangles(scene: &Scene, f: &TexelFile) {
         );
         assert!((Vec3::from(x.normal).length() - 1.0).abs() < 1e-3);
     }
+}
+
+/// One right triangle of legs `size` on z = 0 facing +z, of grey `albedo`, whose lightmap
+/// UVs span the lower-left half of a 4×4 page (one texel is `size` / 4): the scene, its mesh
+/// record and its page, as a texel file would lay them out.
+pub fn lightmapped_triangle(size: f32, albedo: f32) -> (Scene, Vec<MeshRecord>, Vec<PageRecord>) {
+    let tri = Triangle {
+        positions: [Vec3::ZERO, Vec3::X * size, Vec3::Y * size],
+        normals: [Vec3::Z; 3],
+        lightmap_uv: Some([Vec2::ZERO, Vec2::X, Vec2::Y]),
+        texture_uv: None,
+        colour: None,
+        mesh: 0,
+        material: 0,
+    };
+    let scene = Scene {
+        path: PathBuf::from("<test>"),
+        meshes: vec![Mesh {
+            name: "m".into(),
+            first_triangle: 0,
+            triangle_count: 1,
+            has_lightmap_uvs: true,
+        }],
+        triangles: vec![tri],
+        materials: vec![Material {
+            name: "m".into(),
+            base_color_texture: None,
+            albedo: Vec3::splat(albedo),
+            emission: Vec3::ZERO,
+        }],
+        lights: Vec::new(),
+        sun: None,
+        sky: Sky::None,
+        degenerate_triangles: 0,
+    };
+    let meshes = vec![MeshRecord {
+        first_triangle: 0,
+        triangle_count: 1,
+        page: 0,
+        flags: 1,
+        uv_scale: [4.0, 4.0],
+        uv_offset: [0.0, 0.0],
+    }];
+    let pages = vec![PageRecord {
+        width: 4,
+        height: 4,
+    }];
+    (scene, meshes, pages)
 }

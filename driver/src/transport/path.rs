@@ -178,65 +178,22 @@ impl World {
 
 #[cfg(test)]
 mod tests {
-    use std::path::PathBuf;
-
-    use glam::Vec2;
-
     use super::*;
     use crate::bvh::Preset;
-    use crate::scene::{Material, Mesh, Scene, Sky, Sun, Triangle};
-    use crate::texels::{MeshRecord, PageRecord};
+    use crate::scene::Sun;
+    use crate::test_support::lightmapped_triangle;
     use crate::transport::series::{NEAR_FIELD_TEXELS, PreviousPassWriter};
 
     /// A 4 m right triangle on z = 0 facing +z, albedo 0.5, under a sun of irradiance 2 from
     /// +z; its lightmap is a 4×4 page, so one texel is 1 m. The previous pass read 1 (gather
     /// only) and 5 (total) everywhere, and baked the front side.
     fn lit_triangle(dir: &std::path::Path) -> World {
-        let tri = Triangle {
-            positions: [Vec3::ZERO, Vec3::X * 4.0, Vec3::Y * 4.0],
-            normals: [Vec3::Z; 3],
-            lightmap_uv: Some([Vec2::ZERO, Vec2::X, Vec2::Y]),
-            texture_uv: None,
-            colour: None,
-            mesh: 0,
-            material: 0,
-        };
-        let scene = Scene {
-            path: PathBuf::from("<test>"),
-            meshes: vec![Mesh {
-                name: "m".into(),
-                first_triangle: 0,
-                triangle_count: 1,
-                has_lightmap_uvs: true,
-            }],
-            triangles: vec![tri],
-            materials: vec![Material {
-                name: "m".into(),
-                albedo: Vec3::splat(0.5),
-                emission: Vec3::ZERO,
-                base_color_texture: None,
-            }],
-            lights: Vec::new(),
-            sun: Some(Sun {
-                direction: Vec3::Z,
-                angular_radius: 0.0,
-                irradiance: Vec3::splat(2.0),
-            }),
-            sky: Sky::None,
-            degenerate_triangles: 0,
-        };
-        let meshes = [MeshRecord {
-            first_triangle: 0,
-            triangle_count: 1,
-            page: 0,
-            flags: 1,
-            uv_scale: [4.0, 4.0],
-            uv_offset: [0.0, 0.0],
-        }];
-        let pages = [PageRecord {
-            width: 4,
-            height: 4,
-        }];
+        let (mut scene, meshes, pages) = lightmapped_triangle(4.0, 0.5);
+        scene.sun = Some(Sun {
+            direction: Vec3::Z,
+            angular_radius: 0.0,
+            irradiance: Vec3::splat(2.0),
+        });
         let mut image = PreviousPassWriter::create(&dir.join("pass.bin"), &pages).unwrap();
         for i in 0..16 {
             image.set(0, i % 4, i / 4, [1.0; 3], [5.0; 3]);

@@ -404,58 +404,12 @@ impl PreviousPassWriter {
 
 #[cfg(test)]
 mod tests {
-    use std::path::PathBuf;
-
     use super::*;
-    use crate::scene::{Material, Mesh, Sky, Triangle};
+    use crate::test_support::lightmapped_triangle;
 
     /// One triangle whose UVs span the 4×4 page's lower-left half.
     fn scene() -> (Scene, Vec<MeshRecord>, Vec<PageRecord>) {
-        let tri = Triangle {
-            positions: [Vec3::ZERO, Vec3::X, Vec3::Y],
-            normals: [Vec3::Z; 3],
-            lightmap_uv: Some([Vec2::ZERO, Vec2::X, Vec2::Y]),
-            texture_uv: None,
-            colour: None,
-            mesh: 0,
-            material: 0,
-        };
-        let scene = Scene {
-            path: PathBuf::from("<test>"),
-            meshes: vec![Mesh {
-                name: "m".into(),
-                first_triangle: 0,
-                triangle_count: 1,
-                has_lightmap_uvs: true,
-            }],
-            triangles: vec![tri],
-            materials: vec![Material {
-                name: "m".into(),
-                base_color_texture: None,
-                albedo: Vec3::ONE,
-                emission: Vec3::ZERO,
-            }],
-            lights: Vec::new(),
-            sun: None,
-            sky: Sky::None,
-            degenerate_triangles: 0,
-        };
-        let meshes = vec![MeshRecord {
-            first_triangle: 0,
-            triangle_count: 1,
-            page: 0,
-            flags: 1,
-            uv_scale: [4.0, 4.0],
-            uv_offset: [0.0, 0.0],
-        }];
-        (
-            scene,
-            meshes,
-            vec![PageRecord {
-                width: 4,
-                height: 4,
-            }],
-        )
+        lightmapped_triangle(1.0, 1.0)
     }
 
     #[test]
