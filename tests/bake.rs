@@ -663,10 +663,14 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
             Transport::Series => {
                 assert_eq!(report.passes, bounces);
                 assert_eq!(report.counters.path_rays, 0);
+                // From pass 2 on, hits inside the box read the previous pass's total.
+                let reads = report.counters.series_totals_read;
+                assert_eq!(reads > 0, bounces > 1, "{what}: {reads} totals read");
             }
             Transport::Path => {
                 assert_eq!(report.passes, 1);
                 assert!(report.counters.path_rays > 0);
+                assert_eq!(report.counters.series_totals_read, 0);
             }
         }
     }

@@ -80,6 +80,9 @@ pub struct GatherCounters {
     pub shadow_rays: u64,
     /// Path continuation rays traced beyond the gather hits (`path` transport).
     pub path_rays: u64,
+    /// Gather hits that read the previous series pass's total irradiance, where next-event
+    /// estimation (a shadow ray where a light faces the hit) is skipped.
+    pub series_totals_read: u64,
     /// Valid texels baked.
     pub texels_baked: u64,
     /// Invalid texels skipped without tracing.
@@ -115,6 +118,7 @@ impl GatherCounters {
         self.gather_rays += o.gather_rays;
         self.shadow_rays += o.shadow_rays;
         self.path_rays += o.path_rays;
+        self.series_totals_read += o.series_totals_read;
         self.texels_baked += o.texels_baked;
         self.texels_invalid_skipped += o.texels_invalid_skipped;
         self.texels_without_finite_samples += o.texels_without_finite_samples;
@@ -1112,6 +1116,7 @@ impl<'a> IterationCtx<'a> {
                 let leaving = self.world.radiance_from_hit(from, dir, hit, &mut rng);
                 counters.shadow_rays += u64::from(leaving.shadow_rays);
                 counters.path_rays += u64::from(leaving.path_rays);
+                counters.series_totals_read += u64::from(leaving.totals_read);
                 leaving
             }
         }

@@ -55,6 +55,8 @@ pub struct Leaving {
     pub shadow_rays: u32,
     /// Path continuation rays traced (`path` transport).
     pub path_rays: u32,
+    /// Reads of the previous series pass's total irradiance (next-event estimation skipped).
+    pub totals_read: u32,
 }
 
 impl World {
@@ -107,6 +109,7 @@ impl World {
             let baked = previous.filter(|p| p.reads_total(hit.prim, front, hit.t));
             if let Some(previous) = baked {
                 irradiance += previous.lookup(hit.prim, hit.u, hit.v).total;
+                out.totals_read += 1;
             } else {
                 if self.has_direct_light() {
                     let (direct, rays) = self.direct_irradiance(&at, rng.pair(), rng.unit());
@@ -232,17 +235,18 @@ mod tests {
         let world = lit_triangle(dir.path());
         let albedo_over_pi = 0.5 * core::f32::consts::FRAC_1_PI;
         let far = leaving(&world, 3.0 * NEAR_FIELD_TEXELS);
-        assert_eq!(far.shadow_rays, 0);
+        assert_eq!((far.shadow_rays, far.totals_read), (0, 1));
         assert!(
             (far.reflected - Vec3::splat(5.0 * albedo_over_pi)).length() < 1e-5,
             "{far:?}"
         );
         let near = leaving(&world, 0.5 * NEAR_FIELD_TEXELS);
-        assert_eq!(near.shadow_rays, 1);
+        assert_eq!((near.shadow_rays, near.totals_read), (1, 0));
         let want = Vec3::splat((2.0 + 1.0) * albedo_over_pi);
         assert!((near.reflected - want).length() < 1e-5, "{near:?}");
         // From below: the back, which no texel bakes and the sun does not reach.
         let back = leaving(&world, -3.0 * NEAR_FIELD_TEXELS);
+        assert_eq!(back.totals_read, 0);
         assert!(
             (back.reflected - Vec3::splat(albedo_over_pi)).length() < 1e-5,
             "{back:?}"
