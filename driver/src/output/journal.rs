@@ -3,7 +3,8 @@
 //! Layout (little-endian): a 64-byte [`JournalHeader`] naming the bake, then 48-byte
 //! [`TileRecord`]s appended in the order tiles were committed. Each record carries an FNV-1a
 //! checksum of its other fields. Opening a journal reads records up to the first one that is
-//! short or fails its checksum — the torn tail of a crash — and truncates the file there:
+//! short, fails its checksum or holds what no bake writes (non-finite or negative sums, a
+//! set reserved word) — the torn tail of a crash — and truncates the file there:
 //! those tiles are simply baked again, which gives the same bits because every random number
 //! derives from (seed, texel, iteration, sample).
 //!
@@ -78,8 +79,15 @@ impl TileRecord {
         fnv1a64(&bytemuck::bytes_of(self)[..40])
     }
 
+    /// Its checksum holds and its fields are ones the bake writes: finite, non-negative
+    /// sums and a zero reserved word. A checksum alone is 64 bits a forged or corrupted
+    /// file can match (the fuzzer does); NaN sums would poison ρ.
     fn is_intact(&self) -> bool {
+        let sum_ok = |s: f64| s.is_finite() && s >= 0.0;
         self.checksum == self.computed_checksum()
+            && self.reserved == 0
+            && sum_ok(self.unweighted_luminance)
+            && sum_ok(self.weighted_luminance)
     }
 }
 
@@ -263,6 +271,32 @@ mod tests {
         reopened.append(&[record(5)]).unwrap();
         let (_, _, records) = Journal::open(&path, false, None).unwrap();
         assert_eq!(records, [record(0).sealed(), record(5).sealed()]);
+    }
+
+    #[test]
+    fn a_sealed_record_with_non_finite_sums_ends_the_intact_records() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("j.bin");
+        let nan = TileRecord {
+            unweighted_luminance: f64::NAN,
+            ..record(2)
+        };
+        let reserved = TileRecord {
+            reserved: 1 << 45,
+            ..record(3)
+        };
+        let negative = TileRecord {
+            weighted_luminance: -1.0,
+            ..record(4)
+        };
+        for bad in [nan, reserved, negative] {
+            let mut journal = Journal::create(&path, 8, 42).unwrap();
+            journal.append(&[record(1), bad, record(5)]).unwrap();
+            drop(journal);
+            let (_, _, records) = Journal::open(&path, true, Some((8, 42))).unwrap();
+            assert_eq!(records, [record(1).sealed()], "{bad:?}");
+            assert_eq!(std::fs::metadata(&path).unwrap().len(), 64 + 48);
+        }
     }
 
     #[test]
