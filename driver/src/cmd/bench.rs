@@ -65,7 +65,8 @@ pub struct BenchArgs {
     /// Bounces of every bake and of the reference (default: the bake's; --quick 1).
     #[arg(long)]
     pub bounces: Option<u32>,
-    /// Rays per texel of the reference (default 4096).
+    /// Rays per texel of the reference (default 4096; --quick 1024): at least 16× the largest
+    /// --spp.
     #[arg(long)]
     pub ref_spp: Option<u32>,
     /// Rays per texel of the overhead runs (default 256).
@@ -142,7 +143,7 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
         overhead_transport: args.overhead_transport,
         reference_transport: args.reference_transport,
         bounces: pick(args.bounces, BakeSettings::default().bounces, 1),
-        reference_spp: pick(args.ref_spp, 4096, 512),
+        reference_spp: pick(args.ref_spp, 4096, 1024),
         overhead_spp: pick(args.overhead_spp, 256, 32),
         repeats: pick(args.repeats, 5, 3),
         light: LightSampling {
