@@ -946,7 +946,7 @@ impl<'a> IterationCtx<'a> {
         let n = self.settings.samples_in_iteration(self.k);
         let rot = rotation(self.settings.seed, t.id, self.k);
         let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
-        let bvh = self.world.bvh();
+        let bvh = self.world.wide_bvh();
         for j in 0..n / LANES as u32 {
             let origin = self.origin(t, j);
             let mut light_u = [[0.0; 2]; LANES];

@@ -80,7 +80,7 @@ impl World {
     /// emitter (`pick` chooses it, `u` the point on it), each with a single shadow ray.
     /// Returns it and the shadow rays traced.
     pub fn direct_irradiance(&self, at: &Receiver<'_>, u: [f32; 2], pick: f32) -> (Vec3, u32) {
-        let bvh = self.bvh();
+        let bvh = self.wide_bvh();
         let (p, n) = (at.point, at.normal);
         let (mut e, mut rays) = (Vec3::ZERO, 0);
         for light in self.lights() {

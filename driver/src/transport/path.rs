@@ -137,7 +137,7 @@ impl World {
             let d = sample_cosine_hemisphere(rng.pair());
             let next = (tangent * d.x + bitangent * d.y + facing * d.z).normalize_or(facing);
             out.path_rays += 1;
-            match intersect1(&self.bvh(), &Ray::new(p, next, 0.0, f32::INFINITY)) {
+            match intersect1(&self.wide_bvh(), &Ray::new(p, next, 0.0, f32::INFINITY)) {
                 None => {
                     out.reflected += throughput * self.sky(next);
                     break;
