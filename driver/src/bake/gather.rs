@@ -1483,7 +1483,12 @@ mod tests {
         let sky = Vec3::new(0.5, 1.0, 2.0);
         let world = world(ground(), grey(0.5, 0.0), sky, None);
         let texels = texels_on_plane(64, 0.0);
-        let plain = settings(Guiding::Coherent);
+        // Global weights: the tile keeps K means per texel for the final pass.
+        let plain = BakeSettings {
+            combine: Combine::Global,
+            bias_correction: false,
+            ..settings(Guiding::Coherent)
+        };
         let with = BakeSettings {
             directional: Directional::ShL1,
             ..plain

@@ -37,8 +37,20 @@ pub enum Combine {
     /// texels of each texel's per-sample variance in the iteration over the sum of their
     /// squared means). The guide's quality is a property of the cluster, which 64 texels'
     /// samples estimate far better than one texel's; a firefly still lowers its own
-    /// iteration's weight, so use it with ρ.
+    /// iteration's weight, so use it with ρ. The default since session 8: level with
+    /// `global` by RMSE at equal CPU time and ahead by relative MSE on every converted scene
+    /// (docs/estimator.md, "The default since session 8"), and it needs no batch file.
     Cluster,
+}
+
+impl Combine {
+    /// Whether the combination's mean needs the world-wide correction ρ (paper §2.5): the
+    /// per-texel and per-cluster weights are estimated from the samples they weigh, which
+    /// biases the mean; the plain average and the global weights are unbiased (and ρ is 1
+    /// for the average). What `--bias-correction auto` picks.
+    pub fn wants_rho(self) -> bool {
+        matches!(self, Combine::Texel | Combine::Cluster)
+    }
 }
 
 /// How a bake's samples are split over its learning iterations.
@@ -126,8 +138,8 @@ impl Default for BakeSettings {
             spp: 256,
             iterations: 4,
             guiding: Guiding::Coherent,
-            combine: Combine::Global,
-            bias_correction: false,
+            combine: Combine::Cluster,
+            bias_correction: Combine::Cluster.wants_rho(),
             seed: 0,
             transport: Transport::Series,
             bounces: 3,

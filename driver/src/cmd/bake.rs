@@ -67,9 +67,10 @@ pub struct BakeArgs {
     /// prefers emitters that matter at the shading point).
     #[arg(long, value_enum, default_value_t = EmitterSelection::default())]
     pub emitter_selection: EmitterSelection,
-    /// The world-wide bias correction ρ (paper §2.5).
-    #[arg(long, value_enum, default_value_t = if BakeSettings::default().bias_correction { OnOff::On } else { OnOff::Off })]
-    pub bias_correction: OnOff,
+    /// The world-wide bias correction ρ (paper §2.5): `auto` applies it to the combinations
+    /// whose mean needs it (`texel`, `cluster`), not to `average` and `global`.
+    #[arg(long, value_enum, default_value_t = Rho::Auto)]
+    pub bias_correction: Rho,
     /// Worker threads (default: every core).
     #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
@@ -121,6 +122,17 @@ pub enum OnOff {
     Off,
 }
 
+/// `--bias-correction`: by the combination, or forced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Rho {
+    /// On for `texel` and `cluster`, off for `average` and `global`.
+    Auto,
+    /// Always.
+    On,
+    /// Never.
+    Off,
+}
+
 /// Runs `guidebake bake`.
 ///
 /// # Errors
@@ -132,7 +144,11 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         iterations: args.iterations,
         guiding: args.guiding,
         combine: args.combine,
-        bias_correction: args.bias_correction == OnOff::On,
+        bias_correction: match args.bias_correction {
+            Rho::Auto => args.combine.wants_rho(),
+            Rho::On => true,
+            Rho::Off => false,
+        },
         seed: args.seed,
         transport: args.transport,
         bounces: args.bounces,
