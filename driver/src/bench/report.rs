@@ -9,7 +9,7 @@ use serde::Serialize;
 use super::BenchError;
 use super::analysis::{Curve, EqualTime, EquivalentSamples, ErrorMetric, Interpolated, Overhead};
 use super::harness::{Ladder, OverheadRecord, RunRecord};
-use super::method::{serialize_value_name, value_name};
+use super::method::{Method, serialize_value_name, value_name};
 use super::reference::ReferenceInfo;
 use crate::bake::settings::Transport;
 use crate::output::atomic;
@@ -386,11 +386,13 @@ pub fn markdown(s: &Summary) -> String {
     );
     let _ = writeln!(
         md,
-        "Figure-5 overhead, {} spp, `{}` transport, {} interleaved repeats (medians; Graybill–Deal + ρ):\n\n\
+        "Figure-5 overhead, {} spp, `{}` transport, {} interleaved repeats (medians; every \
+         `--guiding` mode with the bake's defaults otherwise, `{}`):\n\n\
          | guiding | gather (s) | wall (s) | gather / off | wall / off | paired gather / off | guided |\n|---|---:|---:|---:|---:|---:|---:|",
         s.overhead.spp,
         value_name(&s.overhead.transport),
-        s.overhead.repeats
+        s.overhead.repeats,
+        Method::default_bake().label()
     );
     for o in &s.overhead.modes {
         let _ = writeln!(
