@@ -369,23 +369,21 @@ fn decode_image(
                 img.pixels.len()
             ));
         }
-        let linear: Vec<Vec3> = img
-            .pixels
-            .chunks_exact(channels * bytes)
-            .map(|px| {
-                let c = |k: usize| value(&px[k * bytes..(k + 1) * bytes]);
-                if channels < 3 {
-                    Vec3::splat(c(0))
-                } else {
-                    Vec3::new(c(0), c(1), c(2))
-                }
-            })
-            .collect();
-        Ok(texture::Image::from_linear(
+        let stride = channels * bytes;
+        let linear = |i: usize| {
+            let px = &img.pixels[i * stride..(i + 1) * stride];
+            let c = |k: usize| value(&px[k * bytes..(k + 1) * bytes]);
+            if channels < 3 {
+                Vec3::splat(c(0))
+            } else {
+                Vec3::new(c(0), c(1), c(2))
+            }
+        };
+        Ok(texture::Image::from_linear_fn(
             source.clone(),
             w,
             h,
-            &linear,
+            linear,
             options,
         ))
     };
