@@ -22,9 +22,7 @@ use std::sync::atomic::AtomicBool;
 
 use std::collections::HashMap;
 
-use guidebake::bake::finish::{
-    DILATION_PIXELS, FinishOptions, Seams, finish_filtered, merge_pass,
-};
+use guidebake::bake::finish::{DILATION_PIXELS, FinishOptions, Seams, finish_filtered, merge_pass};
 use guidebake::bake::run::{BakeJob, bake, bake_pass_with_progress};
 use guidebake::bake::settings::{BakeSettings, Transport};
 use guidebake::bake::shard::Shard;
@@ -139,12 +137,17 @@ fn main() -> Result<(), Error> {
             let (stitched, written) = finish(None, Seams::Stitch)?;
             let [before, after] = written.seam_jump.unwrap_or([0.0; 2]);
             let [edge_before, edge_after] = written.edge_jump.unwrap_or([0.0; 2]);
-            let [points, skipped] = written.edge_points;
+            let [points, skipped, held] = written.edge_points;
             let stitched_rmse = compare(&stitched, &truth)?.rmse;
+            let negative = stitched
+                .iter()
+                .flatten()
+                .filter(|v| v.iter().any(|c| *c < 0.0))
+                .count();
             seams.push(format!(
                 "| {name} | {spp} | {} | {before:.4} | {after:.4} | {ref_pairs:.4} \
-                 | {points} ({skipped} left out) | {edge_before:.4} | {edge_after:.4} \
-                 | {ref_edge:.4} | {raw_rmse:.5} | {stitched_rmse:.5} | {:.4} |",
+                 | {points} ({skipped} left out, {held} held ≥ 0) | {edge_before:.4} | {edge_after:.4} \
+                 | {ref_edge:.4} | {negative} | {raw_rmse:.5} | {stitched_rmse:.5} | {:.4} |",
                 written.seam_pairs,
                 stitched_rmse / raw_rmse
             ));
@@ -187,10 +190,10 @@ fn main() -> Result<(), Error> {
     }
     println!(
         "| scene | spp | seam pairs | pair jump raw | pair jump stitched | pair jump reference \
-         | edge points | edge jump raw | edge jump stitched | edge jump reference | RMSE raw \
-         | RMSE stitched | stitched / raw |"
+         | edge points | edge jump raw | edge jump stitched | edge jump reference \
+         | stitched texels < 0 | RMSE raw | RMSE stitched | stitched / raw |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     seams.iter().for_each(|r| println!("{r}"));
     Ok(())
 }
@@ -244,7 +247,13 @@ fn seam_jumps(
     let pair_jump = mean_relative_jump(&all, &pairs);
     let facts = Texels { file, at, values };
     let system = edge_system(&samples.points, &facts, DILATION_PIXELS);
-    let value = |p: &Pixel| facts.at.get(p).and_then(|&i| values[i]).unwrap_or([f32::NAN; 3]);
+    let value = |p: &Pixel| {
+        facts
+            .at
+            .get(p)
+            .and_then(|&i| values[i])
+            .unwrap_or([f32::NAN; 3])
+    };
     let read: Vec<[f32; 3]> = system.pixels.iter().map(value).collect();
     Ok([pair_jump, system.edge_jump(&read)])
 }

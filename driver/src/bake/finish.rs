@@ -17,8 +17,8 @@ use crate::output::exr_pages::{PageStream, page_path};
 use crate::output::journal::{Journal, TileRecord, dedup_tiles, rho_sums};
 use crate::output::result_file::{BatchFile, DirectionalFile, FLAG_BAKED, ResultFile, TexelResult};
 use crate::output::seams::{
-    EdgePoint, EdgeStitch, PageFacts, Pixel, Written as PixelWritten, edge_system,
-    mean_relative_jump, pixels_read, read_seam_file, seam_file_path,
+    EdgePoint, PageFacts, Pixel, Written as PixelWritten, edge_system, mean_relative_jump,
+    pixels_read, read_seam_file, seam_file_path, stitch_channels,
 };
 use crate::texels::TexelFile;
 use guidebake_kernels::estimator::{
@@ -44,9 +44,10 @@ pub struct Written {
     pub seam_pairs: u64,
     /// Mean relative jump across the seam texel pairs before and after stitching.
     pub seam_jump: Option<[f64; 2]>,
-    /// Seam edge points stitched, and those left out (a tap beyond the padding or on a
-    /// non-finite texel).
-    pub edge_points: [u64; 2],
+    /// Seam edge points stitched, those left out (a tap beyond the padding or on a
+    /// non-finite texel), and the texels held at their values to keep the irradiance
+    /// non-negative.
+    pub edge_points: [u64; 3],
     /// Mean relative jump between the two sides' bilinear values at the seam edge points,
     /// before and after stitching.
     pub edge_jump: Option<[f64; 2]>,
@@ -248,7 +249,7 @@ pub fn finish_filtered(
         let stitched = seams.stitch(&mut pending)?;
         written.seam_pairs = seams.pairs.len() as u64;
         written.seam_jump = Some(stitched.pair_jump);
-        written.edge_points = [stitched.points as u64, stitched.skipped as u64];
+        written.edge_points = [stitched.points, stitched.skipped, stitched.held].map(|n| n as u64);
         written.edge_jump = Some(stitched.edge_jump);
     }
     finish_pages(&mut pending, &mut written)?;
@@ -301,6 +302,7 @@ struct Stitched {
     edge_jump: [f64; 2],
     points: usize,
     skipped: usize,
+    held: usize,
 }
 
 impl SeamWork {
@@ -345,7 +347,10 @@ impl SeamWork {
             self.covered[i] = true;
             let v = &mut self.values[i * self.stride..(i + 1) * self.stride];
             v[..3].copy_from_slice(&rgb);
-            for (slot, e) in v[3..].iter_mut().zip(extra.iter().chain(std::iter::repeat(&0.0))) {
+            for (slot, e) in v[3..]
+                .iter_mut()
+                .zip(extra.iter().chain(std::iter::repeat(&0.0)))
+            {
                 *slot = *e;
             }
             self.variances[i] = variance;
@@ -368,27 +373,32 @@ impl SeamWork {
             .iter()
             .map(|p| self.index[p] as usize)
             .collect();
-        let rgb_of = |work: &Self| -> Vec<[f32; 3]> {
-            unknowns.iter().map(|&i| work.rgb(i)).collect()
-        };
+        let rgb_of =
+            |work: &Self| -> Vec<[f32; 3]> { unknowns.iter().map(|&i| work.rgb(i)).collect() };
         let edge_before = system.edge_jump(&rgb_of(self));
         let variance: Vec<f32> = unknowns.iter().map(|&i| self.variances[i]).collect();
-        let stitch = EdgeStitch::new(&system, &variance);
-        for channel in 0..self.stride {
-            let baked: Vec<f32> = unknowns
-                .iter()
-                .map(|&i| self.values[i * self.stride + channel])
-                .collect();
-            for (&i, v) in unknowns.iter().zip(stitch.solve(&baked)) {
-                self.values[i * self.stride + channel] = v;
+        let mut channels: Vec<Vec<f32>> = (0..self.stride)
+            .map(|c| {
+                let at = |i: &usize| self.values[i * self.stride + c];
+                unknowns.iter().map(at).collect()
+            })
+            .collect();
+        let held = stitch_channels(&system, &variance, &mut channels);
+        for (c, channel) in channels.iter().enumerate() {
+            for (&i, v) in unknowns.iter().zip(channel) {
+                self.values[i * self.stride + c] = *v;
             }
         }
         for &i in &unknowns {
             let [page, x, y] = self.pixels[i];
             let v = &self.values[i * self.stride..(i + 1) * self.stride];
-            pages[page as usize]
-                .0
-                .set_channels(x, y, [v[0], v[1], v[2]], self.extra_from, &v[3..])?;
+            pages[page as usize].0.set_channels(
+                x,
+                y,
+                [v[0], v[1], v[2]],
+                self.extra_from,
+                &v[3..],
+            )?;
         }
         let edge_after = system.edge_jump(&rgb_of(self));
         let all: Vec<[f32; 3]> = (0..self.pixels.len()).map(|i| self.rgb(i)).collect();
@@ -397,6 +407,7 @@ impl SeamWork {
             edge_jump: [edge_before, edge_after],
             points: system.points(),
             skipped: system.skipped,
+            held,
         })
     }
 }
@@ -602,23 +613,22 @@ fn denoise_tile(
     };
     let count = if sh.is_empty() { 0 } else { SH_CHANNELS.len() };
     let mut extra = vec![0.0f32; w * h * count];
-    let mut place = |records: &[crate::texels::TexelRecord],
-                     values: &[TexelValue],
-                     sh: &[[f32; 12]]| {
-        for (i, (texel, v)) in records.iter().zip(values).enumerate() {
-            let [x, y] = texel.pixel.map(u32::from);
-            if !(x0..x1).contains(&x) || !(y0..y1).contains(&y) {
-                continue;
-            }
-            let at = (y - y0) as usize * w + (x - x0) as usize;
-            if let Some(noisy) = v.as_ref().and_then(|(rgb, r)| noisy_texel(texel, *rgb, r)) {
-                window.texels[at] = Some(noisy);
-                if let Some(c) = sh.get(i) {
-                    extra[at * count..(at + 1) * count].copy_from_slice(c);
+    let mut place =
+        |records: &[crate::texels::TexelRecord], values: &[TexelValue], sh: &[[f32; 12]]| {
+            for (i, (texel, v)) in records.iter().zip(values).enumerate() {
+                let [x, y] = texel.pixel.map(u32::from);
+                if !(x0..x1).contains(&x) || !(y0..y1).contains(&y) {
+                    continue;
+                }
+                let at = (y - y0) as usize * w + (x - x0) as usize;
+                if let Some(noisy) = v.as_ref().and_then(|(rgb, r)| noisy_texel(texel, *rgb, r)) {
+                    window.texels[at] = Some(noisy);
+                    if let Some(c) = sh.get(i) {
+                        extra[at * count..(at + 1) * count].copy_from_slice(c);
+                    }
                 }
             }
-        }
-    };
+        };
     for n in grid.overlapping(x0, y0, x1, y1) {
         if n == t {
             place(texels.tile_texels(t), values, sh);
@@ -1092,17 +1102,28 @@ mod tests {
         let out = rooms.dir.path().join("merged.exr");
         let written = finish_with(&texels, &dirs, &out, stitched).unwrap();
         let [before, after] = written.edge_jump.expect("seams were stitched");
-        let [points, skipped] = written.edge_points;
-        assert!(points >= 40 && skipped == 0, "{points} points, {skipped} left out");
+        let [points, skipped, _] = written.edge_points;
+        assert!(
+            points >= 40 && skipped == 0,
+            "{points} points, {skipped} left out"
+        );
         assert!(before > 0.02, "the raw jumps at the edge: {before}");
-        assert!(after < before / 8.0, "mean relative edge jump {before} → {after}");
+        assert!(
+            after < before / 8.0,
+            "mean relative edge jump {before} → {after}"
+        );
         let [pairs_before, pairs_after] = written.seam_jump.expect("seams were stitched");
-        assert!(pairs_before > 0.02, "the raw texel-pair jumps: {pairs_before}");
+        assert!(
+            pairs_before > 0.02,
+            "the raw texel-pair jumps: {pairs_before}"
+        );
         assert!(
             pairs_after < pairs_before,
             "texel-pair jump {pairs_before} → {pairs_after}"
         );
-        let pairs = read_seam_file(&seam_file_path(&rooms.texels)).unwrap().pairs;
+        let pairs = read_seam_file(&seam_file_path(&rooms.texels))
+            .unwrap()
+            .pairs;
         assert!(pairs.len() >= 20, "{} pairs", pairs.len());
         // Only the floor's cut at x = 1 is a seam (faces meet at right angles elsewhere): the
         // pairs' texels lie on it.

@@ -135,13 +135,22 @@ impl Denoiser for ATrous {
             count,
         };
         for level in 0..self.levels.clamp(1, 8) {
-            (current, channels) =
-                a_trous_pass(window, &current, &channels, 1 << level, self.luminance_sigma);
+            (current, channels) = a_trous_pass(
+                window,
+                &current,
+                &channels,
+                1 << level,
+                self.luminance_sigma,
+            );
         }
         let rgb = current.into_iter().map(|c| c.map(|(rgb, _)| rgb)).collect();
         (rgb, channels.values)
     }
 }
+
+/// A pixel between passes: irradiance and the variance of its luminance, `None` without a
+/// texel.
+type Pixel = Option<([f32; 3], f32)>;
 
 /// Channels filtered beside the irradiance with its weights: `count` per pixel.
 struct Extra {
@@ -157,7 +166,7 @@ fn a_trous_pass(
     extra: &Extra,
     step: usize,
     luminance_sigma: f32,
-) -> (Vec<Option<([f32; 3], f32)>>, Extra) {
+) -> (Vec<Pixel>, Extra) {
     let (w, h) = (window.width as i64, window.height as i64);
     let mut out = vec![None; values.len()];
     let n = extra.count;
@@ -222,7 +231,10 @@ fn a_trous_pass(
             let rgb = sum.map(|s| (s / weight) as f32);
             let var = (var_sum / (weight * weight)) as f32;
             out[i] = Some((rgb, var));
-            for (o, e) in extra_out.values[i * n..(i + 1) * n].iter_mut().zip(&extra_sum) {
+            for (o, e) in extra_out.values[i * n..(i + 1) * n]
+                .iter_mut()
+                .zip(&extra_sum)
+            {
                 *o = (e / weight) as f32;
             }
         }
@@ -346,7 +358,10 @@ mod tests {
                 Some(v) => {
                     assert_eq!(filtered[2 * i].to_bits(), v[0].to_bits(), "pixel {i}");
                     let negative = filtered[2 * i + 1];
-                    assert!((negative + 3.0 * v[0]).abs() <= 1e-6 * v[0].abs(), "pixel {i}");
+                    assert!(
+                        (negative + 3.0 * v[0]).abs() <= 1e-6 * v[0].abs(),
+                        "pixel {i}"
+                    );
                     changed += usize::from(filtered[2 * i] != extra[2 * i]);
                 }
                 None => assert_eq!(filtered[2 * i..2 * i + 2], extra[2 * i..2 * i + 2]),

@@ -77,14 +77,16 @@ impl PageImage {
 
     /// Adds an auxiliary channel (zero everywhere) and returns its index for [`Self::set_aux`].
     pub fn add_aux_channel(&mut self, name: &str) -> usize {
-        self.aux.push((name.to_owned(), vec![0.0; self.rgb.len()], false));
+        self.aux
+            .push((name.to_owned(), vec![0.0; self.rgb.len()], false));
         self.aux.len() - 1
     }
 
     /// Adds an auxiliary channel that [`Self::dilate`] fills as it fills the irradiance (each
     /// padding pixel the mean of the same neighbours), e.g. directional coefficients.
     pub fn add_dilated_channel(&mut self, name: &str) -> usize {
-        self.aux.push((name.to_owned(), vec![0.0; self.rgb.len()], true));
+        self.aux
+            .push((name.to_owned(), vec![0.0; self.rgb.len()], true));
         self.aux.len() - 1
     }
 
@@ -959,7 +961,13 @@ mod tests {
         let mut page = PageImage::new(7, 6);
         let dilated = page.add_dilated_channel("SH0.R");
         let plain = page.add_aux_channel("samples");
-        let chart = [(2, 1, 0.5), (3, 1, 1.25), (2, 2, 3.0), (4, 3, 7.5), (3, 2, 0.125)];
+        let chart = [
+            (2, 1, 0.5),
+            (3, 1, 1.25),
+            (2, 2, 3.0),
+            (4, 3, 7.5),
+            (3, 2, 0.125),
+        ];
         for (x, y, v) in chart {
             page.set(x, y, [v, 2.0 * v, 0.0]);
             page.set_aux(dilated, x, y, v);
@@ -983,7 +991,10 @@ mod tests {
                 }
             }
         }
-        assert!(padding > 20 && empty > 0, "{padding} padding, {empty} empty");
+        assert!(
+            padding > 20 && empty > 0,
+            "{padding} padding, {empty} empty"
+        );
     }
 
     #[test]
@@ -1084,7 +1095,15 @@ mod tests {
 
     #[test]
     fn a_streamed_page_is_the_page_image_byte_for_byte() {
-        let aux = ["samples", "rel_std_error", "validity", "P.X", "N.Z", "SH0.R", "SH1z.B"];
+        let aux = [
+            "samples",
+            "rel_std_error",
+            "validity",
+            "P.X",
+            "N.Z",
+            "SH0.R",
+            "SH1z.B",
+        ];
         let sh = &aux[5..];
         for (seed, (w, h), aux, dilated) in [
             (1, (64, 48), &aux[..], sh),

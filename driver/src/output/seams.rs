@@ -87,6 +87,8 @@ pub const SAMPLES_PER_PIXEL: f32 = 2.0;
 pub const EDGE_STRENGTH: f64 = 30.0;
 /// R: a texel's variance counts up to R times the median's: `d_i = 1 / (1 + min(σ_i² / σ²_med, R))`.
 pub const NOISE_RANGE: f64 = 8.0;
+/// Most solves of [`stitch_channels`]: each holds the texels the last took below zero.
+pub const MAX_ROUNDS: usize = 8;
 /// Smallest weight at which some edge point must read a texel for the stitch to move it.
 pub const MIN_TAP: f64 = 0.25;
 /// The factor on a held texel's data weight.
@@ -538,7 +540,9 @@ pub fn pixels_read(points: &[EdgePoint], passes: u32) -> Vec<Pixel> {
             bilinear_taps(at).into_iter().flat_map(move |([x, y], _)| {
                 (y - reach..=y + reach)
                     .flat_map(move |ny| (x - reach..=x + reach).map(move |nx| (nx, ny)))
-                    .filter(|&(nx, ny)| nx >= 0 && ny >= 0 && nx <= u32::MAX as i64 && ny <= u32::MAX as i64)
+                    .filter(|&(nx, ny)| {
+                        nx >= 0 && ny >= 0 && nx <= u32::MAX as i64 && ny <= u32::MAX as i64
+                    })
                     .map(move |(nx, ny)| [page, nx as u32, ny as u32])
             })
         })
@@ -575,7 +579,10 @@ pub fn edge_system(points: &[EdgePoint], facts: &dyn PageFacts, passes: u32) -> 
                     skipped += 1;
                     continue 'points;
                 };
-                if texels.iter().any(|(p, _)| facts.written(*p) != Written::Texel) {
+                if texels
+                    .iter()
+                    .any(|(p, _)| facts.written(*p) != Written::Texel)
+                {
                     skipped += 1;
                     continue 'points;
                 }
@@ -591,7 +598,10 @@ pub fn edge_system(points: &[EdgePoint], facts: &dyn PageFacts, passes: u32) -> 
     let index = |p: &Pixel| pixels.binary_search(p).expect("a pixel read") as u32;
     let rows = sides
         .iter()
-        .map(|row| row.clone().map(|terms| terms.iter().map(|(p, w)| (index(p), *w)).collect()))
+        .map(|row| {
+            row.clone()
+                .map(|terms| terms.iter().map(|(p, w)| (index(p), *w)).collect())
+        })
         .collect();
     EdgeSystem {
         pixels,
@@ -649,8 +659,9 @@ pub struct EdgeStitch {
 
 impl EdgeStitch {
     /// The stitch of `system` for unknowns whose luminance has squared standard errors
-    /// `variance` (one per unknown; non-finite or negative taken as 0).
-    pub fn new(system: &EdgeSystem, variance: &[f32]) -> Self {
+    /// `variance` (one per unknown; non-finite or negative taken as 0), those marked in
+    /// `held` (missing: not held) kept at their values.
+    pub fn new(system: &EdgeSystem, variance: &[f32], held: &[bool]) -> Self {
         let n = system.pixels.len();
         let v: Vec<f64> = (0..n)
             .map(|i| f64::from(variance.get(i).copied().unwrap_or(0.0)))
@@ -673,8 +684,8 @@ impl EdgeStitch {
         for (i, w) in system.rows.iter().flatten().flatten() {
             reach[*i as usize] = reach[*i as usize].max(w.abs());
         }
-        for (d, r) in data.iter_mut().zip(&reach) {
-            if *r < MIN_TAP {
+        for (i, (d, r)) in data.iter_mut().zip(&reach).enumerate() {
+            if *r < MIN_TAP || held.get(i).copied().unwrap_or(false) {
                 *d *= HELD;
             }
         }
@@ -748,12 +759,12 @@ impl EdgeStitch {
         let mut ap = vec![0.0; n];
         for _ in 0..MAX_ITERATIONS {
             let r_norm = r.iter().map(|r| r * r).sum::<f64>().sqrt();
-            if !(r_norm > TOLERANCE * rhs_norm) {
+            if r_norm.is_nan() || r_norm <= TOLERANCE * rhs_norm {
                 break;
             }
             self.apply(&p, &mut ap);
             let pap: f64 = p.iter().zip(&ap).map(|(p, a)| p * a).sum();
-            if !(pap > 0.0) {
+            if pap.is_nan() || pap <= 0.0 {
                 break;
             }
             let alpha = rz / pap;
@@ -774,6 +785,36 @@ impl EdgeStitch {
             .map(|(&v, &b)| if v.is_finite() { v as f32 } else { b })
             .collect()
     }
+}
+
+/// Stitches `channels` (one value per unknown of `system` each; the first three are the
+/// irradiance, any more are stitched with the same operator) in place, `variance` the
+/// irradiance luminance's squared standard errors. Irradiance cannot be negative: a texel
+/// the solve takes below zero in an irradiance channel is held at its baked value and the
+/// solve repeated, at most [`MAX_ROUNDS`] times. Returns the texels so held.
+pub fn stitch_channels(system: &EdgeSystem, variance: &[f32], channels: &mut [Vec<f32>]) -> usize {
+    let n = system.pixels.len();
+    let mut held = vec![false; n];
+    let mut stitch = EdgeStitch::new(system, variance, &held);
+    for _ in 0..MAX_ROUNDS {
+        let mut more = false;
+        for channel in channels.iter().take(3) {
+            for (i, v) in stitch.solve(channel).into_iter().enumerate() {
+                if v < 0.0 && !held[i] {
+                    held[i] = true;
+                    more = true;
+                }
+            }
+        }
+        if !more {
+            break;
+        }
+        stitch = EdgeStitch::new(system, variance, &held);
+    }
+    for channel in channels.iter_mut() {
+        *channel = stitch.solve(channel);
+    }
+    held.iter().filter(|h| **h).count()
 }
 
 #[cfg(test)]
@@ -919,23 +960,22 @@ mod tests {
         (atlas, points)
     }
 
+    /// A test stitch: the system, the values before and after, the edge jumps.
+    type StitchedAtlas = (EdgeSystem, Vec<[f32; 3]>, Vec<[f32; 3]>, [f64; 2]);
+
     /// Stitches the texels of `atlas` along `points` with variance `variance(pixel)`; returns
     /// the system, the values before and after (per unknown), and the edge jumps.
     fn stitch_atlas(
         atlas: &Atlas,
         points: &[EdgePoint],
         variance: impl Fn(Pixel) -> f32,
-    ) -> (EdgeSystem, Vec<[f32; 3]>, Vec<[f32; 3]>, [f64; 2]) {
+    ) -> StitchedAtlas {
         let system = edge_system(points, atlas, 2);
-        let before: Vec<[f32; 3]> = system
-            .pixels
-            .iter()
-            .map(|p| [atlas.texels[p]; 3])
-            .collect();
+        let before: Vec<[f32; 3]> = system.pixels.iter().map(|p| [atlas.texels[p]; 3]).collect();
         let variances: Vec<f32> = system.pixels.iter().map(|p| variance(*p)).collect();
-        let stitch = EdgeStitch::new(&system, &variances);
-        let solved = stitch.solve(&before.iter().map(|v| v[0]).collect::<Vec<_>>());
-        let after: Vec<[f32; 3]> = solved.iter().map(|v| [*v; 3]).collect();
+        let mut channels = vec![before.iter().map(|v| v[0]).collect::<Vec<_>>(); 3];
+        stitch_channels(&system, &variances, &mut channels);
+        let after: Vec<[f32; 3]> = channels[0].iter().map(|v| [*v; 3]).collect();
         let jumps = [system.edge_jump(&before), system.edge_jump(&after)];
         (system, before, after, jumps)
     }
@@ -948,7 +988,16 @@ mod tests {
         let mut texels = HashMap::new();
         let mut page = crate::output::exr_pages::PageImage::new(9, 7);
         let mut seed = 7u32;
-        for (x, y) in [(3, 2), (4, 2), (5, 2), (3, 3), (4, 3), (4, 4), (5, 4), (2, 3)] {
+        for (x, y) in [
+            (3, 2),
+            (4, 2),
+            (5, 2),
+            (3, 3),
+            (4, 3),
+            (4, 4),
+            (5, 4),
+            (2, 3),
+        ] {
             seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             let v = (seed >> 8) as f32 / (1u32 << 24) as f32;
             texels.insert([0, x, y], v);
@@ -1016,7 +1065,10 @@ mod tests {
             // Away from the chart's corners the edge value is exact (beside a chart's first
             // and last rows the padding averages two rows: 1/256 off there).
             if (4..12).contains(&r) {
-                assert!((a - truth).abs() < 1e-3, "point {r}: {a}, the light {truth}");
+                assert!(
+                    (a - truth).abs() < 1e-3,
+                    "point {r}: {a}, the light {truth}"
+                );
             }
         }
         // Only the border column moves (by about the half-jump, 1/16). At the chart's two
@@ -1062,7 +1114,10 @@ mod tests {
         }
         let (_, before, after, [raw, stitched]) = stitch_atlas(&atlas, &points, |_| 0.01);
         let rmse = |v: &[[f32; 3]]| {
-            (v.iter().map(|v| (f64::from(v[0]) - 1.0).powi(2)).sum::<f64>() / v.len() as f64)
+            (v.iter()
+                .map(|v| (f64::from(v[0]) - 1.0).powi(2))
+                .sum::<f64>()
+                / v.len() as f64)
                 .sqrt()
         };
         let mean = |v: &[[f32; 3]]| v.iter().map(|v| f64::from(v[0])).sum::<f64>() / v.len() as f64;
@@ -1088,6 +1143,50 @@ mod tests {
         assert!(stitched < 0.01, "{stitched}");
         let edge = system.reconstruct(8, 0, &after)[0];
         assert!((edge - 1.0667).abs() < 0.005, "the edge at {edge}");
+    }
+
+    #[test]
+    fn irradiance_stays_non_negative() {
+        // Two edge points whose side a reads texels t1, t2 at ¾ + ¼ and ¼ + ¾, side b one
+        // texel each, u1 = 0 and u2 = 12; a is noisier than b. To meet b, a's two
+        // reconstructions must differ by much while its texels are read mixed: the free solve
+        // takes t1 below zero. Held at its baked value, nothing ends negative, and the
+        // second point (t2 alone can still move) closes most of its jump.
+        let system = EdgeSystem {
+            pixels: vec![
+                [0, 0, 0],
+                [0, 1, 0],
+                [0, 5, 0],
+                [0, 5, 1],
+                [0, 9, 0],
+                [0, 9, 1],
+            ],
+            rows: vec![
+                [vec![(0, 0.75), (1, 0.25)], vec![(2, 1.0)]],
+                [vec![(0, 0.25), (1, 0.75)], vec![(3, 1.0)]],
+            ],
+            skipped: 0,
+        };
+        // Two more texels, no point's, set the median variance low: a's weigh 1/9, b's ½.
+        let baked = vec![1.0, 1.0, 0.0, 12.0, 5.0, 5.0];
+        let variance = [1.0, 1.0, 1e-6, 1e-6, 1e-6, 1e-6];
+        let free = EdgeStitch::new(&system, &variance, &[]).solve(&baked);
+        assert!(free[0] < -0.5, "the free solve: {free:?}");
+        let mut channels = vec![baked.clone(); 3];
+        let held = stitch_channels(&system, &variance, &mut channels);
+        assert_eq!(held, 1);
+        let solved = &channels[0];
+        assert!(solved.iter().all(|v| *v >= 0.0), "{solved:?}");
+        assert!((solved[0] - 1.0).abs() < 1e-5, "t1 held: {solved:?}");
+        let rgb = |v: &[f32]| v.iter().map(|v| [*v; 3]).collect::<Vec<_>>();
+        let (raw, stitched) = (
+            system.edge_jump(&rgb(&baked)),
+            system.edge_jump(&rgb(solved)),
+        );
+        assert!(
+            stitched < raw / 2.0,
+            "edge jump {raw} → {stitched}: {solved:?}"
+        );
     }
 
     #[test]

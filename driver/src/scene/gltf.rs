@@ -284,13 +284,12 @@ fn read_materials(
             _ => item.clone(),
         };
         let full = load_image(path, doc, buffers, index)?;
-        let img = decode_image(&full, source, options).map_err(|message| {
-            SceneError::GltfResource {
+        let img =
+            decode_image(&full, source, options).map_err(|message| SceneError::GltfResource {
                 path: path.to_owned(),
                 item,
                 message,
-            }
-        })?;
+            })?;
         drop(full);
         let img = Arc::new(img);
         decoded[index] = Some(Arc::clone(&img));
