@@ -1,6 +1,7 @@
 //! Lightmap quality on real scenes (docs/lightmaps.md): RMSE of raw and denoised lightmaps
-//! against a 16× reference, and the mean relative jump across seams before and after
-//! stitching.
+//! against a 16× reference, and the mean relative jumps across seams before and after
+//! stitching: between the seam's texel pairs, and between the two sides' bilinear values at
+//! the seam's edge points (what a shader shows).
 //!
 //! For each scene: prepare at a page of 192², bake (or reuse from `--cache DIR`) the
 //! reference — `bench`'s unbiased baseline at 16 × 256 = 4096 spp with the series transport,
@@ -19,7 +20,9 @@
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
-use guidebake::bake::finish::{FinishOptions, Seams, finish_filtered, merge_pass};
+use std::collections::HashMap;
+
+use guidebake::bake::finish::{DILATION_PIXELS, FinishOptions, Seams, finish_filtered, merge_pass};
 use guidebake::bake::run::{BakeJob, bake, bake_pass_with_progress};
 use guidebake::bake::settings::{BakeSettings, Transport};
 use guidebake::bake::shard::Shard;
@@ -28,6 +31,9 @@ use guidebake::bench::metrics::compare;
 use guidebake::bench::reference::reference_settings;
 use guidebake::output::denoise::{ATrous, Denoiser};
 use guidebake::output::readback::read_lightmap;
+use guidebake::output::seams::{
+    PageFacts, Pixel, Written, edge_system, mean_relative_jump, read_seam_file, seam_file_path,
+};
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
 use guidebake::scene::Scene;
 use guidebake::texels::TexelFile;
@@ -112,6 +118,7 @@ fn main() -> Result<(), Error> {
                 read_lightmap(&file, &ref_out)?
             }
         };
+        let [ref_pairs, ref_edge] = seam_jumps(&file, &texels, &truth)?;
         for spp in SPP {
             let settings = BakeSettings {
                 spp,
@@ -129,11 +136,20 @@ fn main() -> Result<(), Error> {
             let raw_rmse = compare(&raw, &truth)?.rmse;
             let (stitched, written) = finish(None, Seams::Stitch)?;
             let [before, after] = written.seam_jump.unwrap_or([0.0; 2]);
+            let [edge_before, edge_after] = written.edge_jump.unwrap_or([0.0; 2]);
+            let [points, skipped, held] = written.edge_points;
+            let stitched_rmse = compare(&stitched, &truth)?.rmse;
+            let negative = stitched
+                .iter()
+                .flatten()
+                .filter(|v| v.iter().any(|c| *c < 0.0))
+                .count();
             seams.push(format!(
-                "| {name} | {spp} | {} | {before:.4} | {after:.4} | {:.5} | {:.5} |",
+                "| {name} | {spp} | {} | {before:.4} | {after:.4} | {ref_pairs:.4} \
+                 | {points} ({skipped} left out, {held} held ≥ 0) | {edge_before:.4} | {edge_after:.4} \
+                 | {ref_edge:.4} | {negative} | {raw_rmse:.5} | {stitched_rmse:.5} | {:.4} |",
                 written.seam_pairs,
-                raw_rmse,
-                compare(&stitched, &truth)?.rmse
+                stitched_rmse / raw_rmse
             ));
             if seams_only {
                 std::fs::remove_dir_all(&dir)?;
@@ -172,10 +188,74 @@ fn main() -> Result<(), Error> {
         sweep.iter().for_each(|r| println!("{r}"));
         println!();
     }
-    println!("| scene | spp | seam pairs | jump raw | jump stitched | RMSE raw | RMSE stitched |");
-    println!("|---|---|---|---|---|---|---|");
+    println!(
+        "| scene | spp | seam pairs | pair jump raw | pair jump stitched | pair jump reference \
+         | edge points | edge jump raw | edge jump stitched | edge jump reference \
+         | stitched texels < 0 | RMSE raw | RMSE stitched | stitched / raw |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     seams.iter().for_each(|r| println!("{r}"));
     Ok(())
+}
+
+/// The texels of a lightmap read back, as the seam measures see the page.
+struct Texels<'a> {
+    file: &'a TexelFile,
+    at: HashMap<Pixel, usize>,
+    values: &'a [Option<[f32; 3]>],
+}
+
+impl PageFacts for Texels<'_> {
+    fn size(&self, page: u32) -> Option<(u32, u32)> {
+        let size = self.file.pages().get(page as usize)?;
+        Some((size.width, size.height))
+    }
+
+    fn written(&self, p: Pixel) -> Written {
+        match self.at.get(&p).and_then(|&i| self.values[i]) {
+            Some(v) if v.iter().all(|c| c.is_finite()) => Written::Texel,
+            Some(_) => Written::NonFinite,
+            None => Written::Empty,
+        }
+    }
+}
+
+/// The seam jumps of `values` (a lightmap read back, e.g. the reference): between texel
+/// pairs and between the two sides' bilinear values at the edge points.
+fn seam_jumps(
+    file: &TexelFile,
+    texels: &std::path::Path,
+    values: &[Option<[f32; 3]>],
+) -> Result<[f64; 2], Error> {
+    let samples = read_seam_file(&seam_file_path(texels))?;
+    let at: HashMap<Pixel, usize> = file
+        .texels()
+        .iter()
+        .enumerate()
+        .map(|(i, t)| ([t.page, u32::from(t.pixel[0]), u32::from(t.pixel[1])], i))
+        .collect();
+    let value = |p: &Pixel| at.get(p).and_then(|&i| values[i]).unwrap_or([f32::NAN; 3]);
+    let mut all: Vec<[f32; 3]> = Vec::new();
+    let pairs: Vec<(u32, u32)> = samples
+        .pairs
+        .iter()
+        .map(|p| {
+            all.extend([value(&p.a), value(&p.b)]);
+            (all.len() as u32 - 2, all.len() as u32 - 1)
+        })
+        .collect();
+    let pair_jump = mean_relative_jump(&all, &pairs);
+    let facts = Texels { file, at, values };
+    let system = edge_system(&samples.points, &facts, DILATION_PIXELS);
+    let value = |p: &Pixel| {
+        facts
+            .at
+            .get(p)
+            .and_then(|&i| values[i])
+            .unwrap_or([f32::NAN; 3])
+    };
+    let read: Vec<[f32; 3]> = system.pixels.iter().map(value).collect();
+    Ok([pair_jump, system.edge_jump(&read)])
 }
 
 /// Bakes every series pass of `job`, merging between passes, and returns the work directory

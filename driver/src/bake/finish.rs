@@ -17,7 +17,8 @@ use crate::output::exr_pages::{PageStream, page_path};
 use crate::output::journal::{Journal, TileRecord, dedup_tiles, rho_sums};
 use crate::output::result_file::{BatchFile, DirectionalFile, FLAG_BAKED, ResultFile, TexelResult};
 use crate::output::seams::{
-    Pixel, SeamValues, StitchPair, mean_relative_jump, read_seam_file, seam_file_path, stitch,
+    EdgePoint, PageFacts, Pixel, Written as PixelWritten, edge_system, mean_relative_jump,
+    pixels_read, read_seam_file, seam_file_path, stitch_channels,
 };
 use crate::texels::TexelFile;
 use guidebake_kernels::estimator::{
@@ -39,10 +40,17 @@ pub struct Written {
     pub previews: Vec<PathBuf>,
     /// Non-finite pixels replaced by zero.
     pub non_finite_pixels: u64,
-    /// Seam pairs found (with `--seams stitch`).
+    /// Seam texel pairs found (with `--seams stitch`).
     pub seam_pairs: u64,
-    /// Mean relative jump across the seam pairs before and after stitching.
+    /// Mean relative jump across the seam texel pairs before and after stitching.
     pub seam_jump: Option<[f64; 2]>,
+    /// Seam edge points stitched, those left out (a tap beyond the padding or on a
+    /// non-finite texel), and the texels held at their values to keep the irradiance
+    /// non-negative.
+    pub edge_points: [u64; 3],
+    /// Mean relative jump between the two sides' bilinear values at the seam edge points,
+    /// before and after stitching.
+    pub edge_jump: Option<[f64; 2]>,
 }
 
 /// How the pages are finished.
@@ -142,8 +150,16 @@ pub fn finish_filtered(
         rho,
         k: first.iterations as usize,
     };
+    let extra = if first.directional {
+        SH_CHANNELS.len()
+    } else {
+        0
+    };
     let mut seams = match seams {
-        Seams::Stitch => Some(SeamWork::load(texels)?),
+        Seams::Stitch => {
+            let extra_from = if first.aux { AUX_CHANNELS.len() } else { 0 };
+            Some(SeamWork::load(texels, extra, extra_from)?)
+        }
         Seams::Off => None,
     };
     let mut pending = Vec::new();
@@ -157,11 +173,18 @@ pub fn finish_filtered(
         if first.directional {
             aux.extend(SH_CHANNELS);
         }
+        // The directional coefficients are padded as the irradiance is (the same sources).
+        let dilated = if first.directional {
+            &SH_CHANNELS[..]
+        } else {
+            &[][..]
+        };
         let mut image = PageStream::create(
             &temporary_name(&path.with_extension("pixels")),
             size.width,
             size.height,
             &aux,
+            dilated,
         )?;
         let grid = filter.map(|_| TileGrid::new(texels, page as u32));
         for (t, tile) in texels
@@ -171,9 +194,13 @@ pub fn finish_filtered(
             .filter(|(_, t)| t.page as usize == page)
         {
             let values = source.values(t)?;
-            let sh = source.directional(t)?;
+            let mut sh = source.directional(t)?;
             let denoised = match (filter, &grid) {
-                (Some(f), Some(grid)) => Some(denoise_tile(&source, grid, f, t, &values)?),
+                (Some(f), Some(grid)) => {
+                    let (rgb, coefficients) = denoise_tile(&source, grid, f, t, (&values, &sh))?;
+                    sh = coefficients;
+                    Some(rgb)
+                }
                 _ => None,
             };
             let mut rect = image.rect(tile.x, tile.y, tile.width, tile.height)?;
@@ -185,7 +212,8 @@ pub fn finish_filtered(
                 let rgb = denoised.as_ref().and_then(|d| d[i]).unwrap_or(*rgb);
                 if let Some(seams) = &mut seams {
                     let sd = r.rel_std_error * luminance_f32(rgb);
-                    seams.record([page as u32, x, y], rgb, sd * sd, texel.position());
+                    let extra = sh.get(i).map_or(&[][..], |c| &c[..]);
+                    seams.record([page as u32, x, y], rgb, sd * sd, extra);
                 }
                 let [px, py, pz] = texel.position;
                 let [nx, ny, nz] = texel.normal;
@@ -217,10 +245,12 @@ pub fn finish_filtered(
             finish_pages(&mut pending, &mut written)?;
         }
     }
-    if let Some(seams) = seams {
-        let (before, after) = seams.stitch(&mut pending)?;
+    if let Some(mut seams) = seams {
+        let stitched = seams.stitch(&mut pending)?;
         written.seam_pairs = seams.pairs.len() as u64;
-        written.seam_jump = Some([before, after]);
+        written.seam_jump = Some(stitched.pair_jump);
+        written.edge_points = [stitched.points, stitched.skipped, stitched.held].map(|n| n as u64);
+        written.edge_jump = Some(stitched.edge_jump);
     }
     finish_pages(&mut pending, &mut written)?;
     Ok(written)
@@ -241,28 +271,46 @@ fn finish_pages(
     Ok(())
 }
 
-/// The seam pairs of a texel file and, as the pages are written, their pixels' values (the
-/// pairs' pixels and their inward neighbours).
+/// The seam samples of a texel file and, as the pages are written, the values of the
+/// pixels their measures and the stitch read.
 struct SeamWork {
-    /// The seam pixels, in first-seen order of the pairs.
+    /// The pixels recorded: the pairs' and those the edge points read ([`pixels_read`]).
     pixels: Vec<Pixel>,
-    /// The pairs, as indices into `pixels`.
-    pairs: Vec<StitchPair>,
+    /// The texel pairs, as indices into `pixels`.
+    pairs: Vec<(u32, u32)>,
+    /// The edge points.
+    points: Vec<EdgePoint>,
     /// Index into `pixels` by pixel.
     index: std::collections::HashMap<Pixel, u32>,
-    /// The values written, by index (NaN until recorded: a pixel without a baked texel).
-    values: Vec<[f32; 3]>,
+    /// Per pixel, whether a texel was written there.
+    covered: Vec<bool>,
+    /// The channels written, `stride` per pixel: irradiance, then the directional ones
+    /// (NaN until recorded).
+    values: Vec<f32>,
+    stride: usize,
     /// Their luminance's squared standard errors.
     variances: Vec<f32>,
-    /// Their texels' world positions.
-    positions: Vec<glam::Vec3>,
+    /// Page sizes.
+    pages: Vec<(u32, u32)>,
+    /// The page's auxiliary channel where the extra channels begin.
+    extra_from: usize,
+}
+
+/// What [`SeamWork::stitch`] did.
+struct Stitched {
+    pair_jump: [f64; 2],
+    edge_jump: [f64; 2],
+    points: usize,
+    skipped: usize,
+    held: usize,
 }
 
 impl SeamWork {
-    /// The pairs of the seam file beside the texel file.
-    fn load(texels: &TexelFile) -> Result<Self, BakeError> {
+    /// The samples of the seam file beside the texel file, with `extra` channels per pixel
+    /// beside the irradiance (the directional ones, which are stitched alike).
+    fn load(texels: &TexelFile, extra: usize, extra_from: usize) -> Result<Self, BakeError> {
         let path = seam_file_path(texels.path());
-        let seam_pairs = read_seam_file(&path).map_err(|what| file_error(&path, what))?;
+        let samples = read_seam_file(&path).map_err(|what| file_error(&path, what))?;
         let mut index = std::collections::HashMap::new();
         let mut pixels = Vec::new();
         let mut id = |p: Pixel| {
@@ -271,60 +319,118 @@ impl SeamWork {
                 pixels.len() as u32 - 1
             })
         };
-        let pairs = seam_pairs
-            .iter()
-            .map(|p| StitchPair {
-                a: id(p.a),
-                b: id(p.b),
-                inward: p.inward.map(|i| i.map(&mut id)),
-            })
-            .collect();
-        let values = vec![[f32::NAN; 3]; pixels.len()];
-        let variances = vec![0.0; pixels.len()];
-        let positions = vec![glam::Vec3::NAN; pixels.len()];
+        let pairs = samples.pairs.iter().map(|p| (id(p.a), id(p.b))).collect();
+        for p in pixels_read(&samples.points, DILATION_PIXELS) {
+            id(p);
+        }
+        let stride = 3 + extra;
+        let n = pixels.len();
         Ok(Self {
             pixels,
             pairs,
+            points: samples.points,
             index,
-            values,
-            variances,
-            positions,
+            covered: vec![false; n],
+            values: vec![f32::NAN; n * stride],
+            stride,
+            variances: vec![0.0; n],
+            pages: texels.pages().iter().map(|p| (p.width, p.height)).collect(),
+            extra_from,
         })
     }
 
-    fn record(&mut self, pixel: Pixel, rgb: [f32; 3], variance: f32, position: glam::Vec3) {
+    /// Records what was written at `pixel`: irradiance, its luminance's variance and the
+    /// extra channels.
+    fn record(&mut self, pixel: Pixel, rgb: [f32; 3], variance: f32, extra: &[f32]) {
         if let Some(&i) = self.index.get(&pixel) {
-            self.values[i as usize] = rgb;
-            self.variances[i as usize] = variance;
-            self.positions[i as usize] = position;
+            let i = i as usize;
+            self.covered[i] = true;
+            let v = &mut self.values[i * self.stride..(i + 1) * self.stride];
+            v[..3].copy_from_slice(&rgb);
+            for (slot, e) in v[3..]
+                .iter_mut()
+                .zip(extra.iter().chain(std::iter::repeat(&0.0)))
+            {
+                *slot = *e;
+            }
+            self.variances[i] = variance;
         }
     }
 
-    /// The pairs as index pairs, for the jump measure.
-    fn jump_pairs(&self) -> Vec<(u32, u32)> {
-        self.pairs.iter().map(|p| (p.a, p.b)).collect()
+    fn rgb(&self, i: usize) -> [f32; 3] {
+        let v = &self.values[i * self.stride..];
+        [v[0], v[1], v[2]]
     }
 
-    /// Stitches the recorded values and writes them into the pages; returns the mean
-    /// relative jump before and after.
-    fn stitch(&self, pages: &mut [(PageStream, PathBuf)]) -> Result<(f64, f64), BakeError> {
-        let mut values = self.values.clone();
-        let jumps = self.jump_pairs();
-        let before = mean_relative_jump(&values, &jumps);
-        let seam = SeamValues {
-            rgb: &mut values,
-            variance: &self.variances,
-            position: &self.positions,
-        };
-        stitch(seam, &self.pairs);
-        let after = mean_relative_jump(&values, &jumps);
-        let updates = self.pixels.iter().zip(values.iter().zip(&self.values));
-        for (&[page, x, y], (rgb, old)) in updates {
-            if rgb != old && rgb.iter().all(|c| c.is_finite()) {
-                pages[page as usize].0.set_rgb(x, y, *rgb)?;
+    /// Stitches the recorded values along the edge points ([`EdgeStitch`]) and writes them
+    /// into the pages (before they are dilated); returns the jumps before and after.
+    fn stitch(&mut self, pages: &mut [(PageStream, PathBuf)]) -> Result<Stitched, BakeError> {
+        let all: Vec<[f32; 3]> = (0..self.pixels.len()).map(|i| self.rgb(i)).collect();
+        let pair_before = mean_relative_jump(&all, &self.pairs);
+        let system = edge_system(&self.points, &*self, DILATION_PIXELS);
+        let unknowns: Vec<usize> = system
+            .pixels
+            .iter()
+            .map(|p| self.index[p] as usize)
+            .collect();
+        let rgb_of =
+            |work: &Self| -> Vec<[f32; 3]> { unknowns.iter().map(|&i| work.rgb(i)).collect() };
+        let edge_before = system.edge_jump(&rgb_of(self));
+        let variance: Vec<f32> = unknowns.iter().map(|&i| self.variances[i]).collect();
+        let mut channels: Vec<Vec<f32>> = (0..self.stride)
+            .map(|c| {
+                let at = |i: &usize| self.values[i * self.stride + c];
+                unknowns.iter().map(at).collect()
+            })
+            .collect();
+        let held = stitch_channels(&system, &variance, &mut channels);
+        for (c, channel) in channels.iter().enumerate() {
+            for (&i, v) in unknowns.iter().zip(channel) {
+                self.values[i * self.stride + c] = *v;
             }
         }
-        Ok((before, after))
+        for &i in &unknowns {
+            let [page, x, y] = self.pixels[i];
+            let v = &self.values[i * self.stride..(i + 1) * self.stride];
+            pages[page as usize].0.set_channels(
+                x,
+                y,
+                [v[0], v[1], v[2]],
+                self.extra_from,
+                &v[3..],
+            )?;
+        }
+        let edge_after = system.edge_jump(&rgb_of(self));
+        let all: Vec<[f32; 3]> = (0..self.pixels.len()).map(|i| self.rgb(i)).collect();
+        Ok(Stitched {
+            pair_jump: [pair_before, mean_relative_jump(&all, &self.pairs)],
+            edge_jump: [edge_before, edge_after],
+            points: system.points(),
+            skipped: system.skipped,
+            held,
+        })
+    }
+}
+
+impl PageFacts for SeamWork {
+    fn size(&self, page: u32) -> Option<(u32, u32)> {
+        self.pages.get(page as usize).copied()
+    }
+
+    fn written(&self, p: Pixel) -> PixelWritten {
+        match self.index.get(&p).map(|&i| i as usize) {
+            Some(i) if self.covered[i] => {
+                if self.values[i * self.stride..(i + 1) * self.stride]
+                    .iter()
+                    .all(|v| v.is_finite())
+                {
+                    PixelWritten::Texel
+                } else {
+                    PixelWritten::NonFinite
+                }
+            }
+            _ => PixelWritten::Empty,
+        }
     }
 }
 
@@ -476,15 +582,21 @@ impl TileGrid {
     }
 }
 
-/// Denoises tile `t` (its `values`): builds the window of the tile and its halo from the
-/// tiles around it, filters it, and returns the filtered irradiance per texel of the tile.
+/// Filtered irradiance per texel of a tile, and its directional coefficients (empty when the
+/// bake kept none).
+type Denoised = (Vec<Option<[f32; 3]>>, Vec<[f32; 12]>);
+
+/// Denoises tile `t` (its `values` and directional coefficients `sh`, empty if none): builds
+/// the window of the tile and its halo from the tiles around it, filters it — the
+/// coefficients with the irradiance's weights ([`Denoiser::denoise_with`]) — and returns the
+/// filtered values per texel of the tile.
 fn denoise_tile(
     source: &TileSource<'_>,
     grid: &TileGrid,
     filter: &dyn Denoiser,
     t: usize,
-    values: &[TexelValue],
-) -> Result<Vec<Option<[f32; 3]>>, BakeError> {
+    (values, sh): (&[TexelValue], &[[f32; 12]]),
+) -> Result<Denoised, BakeError> {
     let texels = source.texels;
     let tile = texels.tiles()[t];
     let page = texels.pages()[tile.page as usize];
@@ -499,35 +611,50 @@ fn denoise_tile(
         height: h,
         texels: vec![None; w * h],
     };
-    let mut place = |records: &[crate::texels::TexelRecord], values: &[TexelValue]| {
-        for (texel, v) in records.iter().zip(values) {
-            let [x, y] = texel.pixel.map(u32::from);
-            if !(x0..x1).contains(&x) || !(y0..y1).contains(&y) {
-                continue;
+    let count = if sh.is_empty() { 0 } else { SH_CHANNELS.len() };
+    let mut extra = vec![0.0f32; w * h * count];
+    let mut place =
+        |records: &[crate::texels::TexelRecord], values: &[TexelValue], sh: &[[f32; 12]]| {
+            for (i, (texel, v)) in records.iter().zip(values).enumerate() {
+                let [x, y] = texel.pixel.map(u32::from);
+                if !(x0..x1).contains(&x) || !(y0..y1).contains(&y) {
+                    continue;
+                }
+                let at = (y - y0) as usize * w + (x - x0) as usize;
+                if let Some(noisy) = v.as_ref().and_then(|(rgb, r)| noisy_texel(texel, *rgb, r)) {
+                    window.texels[at] = Some(noisy);
+                    if let Some(c) = sh.get(i) {
+                        extra[at * count..(at + 1) * count].copy_from_slice(c);
+                    }
+                }
             }
-            if let Some(noisy) = v.as_ref().and_then(|(rgb, r)| noisy_texel(texel, *rgb, r)) {
-                window.texels[(y - y0) as usize * w + (x - x0) as usize] = Some(noisy);
-            }
-        }
-    };
+        };
     for n in grid.overlapping(x0, y0, x1, y1) {
         if n == t {
-            place(texels.tile_texels(t), values);
+            place(texels.tile_texels(t), values, sh);
         } else {
             let neighbour = source.values(n)?;
-            place(texels.tile_texels(n), &neighbour);
+            let neighbour_sh = source.directional(n)?;
+            place(texels.tile_texels(n), &neighbour, &neighbour_sh);
             texels.release_tile(n);
         }
     }
-    let filtered = filter.denoise(&window);
-    Ok(texels
-        .tile_texels(t)
-        .iter()
-        .map(|texel| {
-            let [x, y] = texel.pixel.map(u32::from);
-            filtered[(y - y0) as usize * w + (x - x0) as usize]
-        })
-        .collect())
+    let (filtered, extra) = filter.denoise_with(&window, &extra, count);
+    let mut rgb = Vec::with_capacity(values.len());
+    let mut coefficients = Vec::with_capacity(sh.len());
+    for (i, texel) in texels.tile_texels(t).iter().enumerate() {
+        let [x, y] = texel.pixel.map(u32::from);
+        let at = (y - y0) as usize * w + (x - x0) as usize;
+        rgb.push(filtered[at]);
+        if i < sh.len() {
+            let mut c = sh[i];
+            if filtered[at].is_some() {
+                c.copy_from_slice(&extra[at * count..(at + 1) * count]);
+            }
+            coefficients.push(c);
+        }
+    }
+    Ok((rgb, coefficients))
 }
 
 /// A baked texel with its guides, or `None` when its value is not finite (it is then
@@ -964,20 +1091,42 @@ mod tests {
             denoise: Denoise::Off,
             seams: Seams::Stitch,
         };
-        let report = rooms.bake(&rooms.job("stitched.exr", Shard::WHOLE, stitched));
-        let [before, after] = report.seam_jump.expect("seams were stitched");
-        assert!(before > 0.02, "the raw seam jumps: {before}");
-        // The stitch closes the share of the jump that is noise (the floor's light is smooth
-        // across the cut); pairs whose jumps exceed their noise keep part of them.
+        // Baked in two shards (whose work stays) and merged, to read what the stitch did.
+        let mut dirs = Vec::new();
+        for index in [0, 1] {
+            let job = rooms.job("stitched.exr", Shard { index, count: 2 }, stitched);
+            rooms.bake(&job);
+            dirs.push(work_dir(&job.out, job.shard));
+        }
+        let texels = TexelFile::open(&rooms.texels).unwrap();
+        let out = rooms.dir.path().join("merged.exr");
+        let written = finish_with(&texels, &dirs, &out, stitched).unwrap();
+        let [before, after] = written.edge_jump.expect("seams were stitched");
+        let [points, skipped, _] = written.edge_points;
         assert!(
-            after < before / 2.0,
-            "mean relative jump {before} → {after}"
+            points >= 40 && skipped == 0,
+            "{points} points, {skipped} left out"
         );
-        let pairs = read_seam_file(&seam_file_path(&rooms.texels)).unwrap();
+        assert!(before > 0.02, "the raw jumps at the edge: {before}");
+        assert!(
+            after < before / 8.0,
+            "mean relative edge jump {before} → {after}"
+        );
+        let [pairs_before, pairs_after] = written.seam_jump.expect("seams were stitched");
+        assert!(
+            pairs_before > 0.02,
+            "the raw texel-pair jumps: {pairs_before}"
+        );
+        assert!(
+            pairs_after < pairs_before,
+            "texel-pair jump {pairs_before} → {pairs_after}"
+        );
+        let pairs = read_seam_file(&seam_file_path(&rooms.texels))
+            .unwrap()
+            .pairs;
         assert!(pairs.len() >= 20, "{} pairs", pairs.len());
         // Only the floor's cut at x = 1 is a seam (faces meet at right angles elsewhere): the
         // pairs' texels lie on it.
-        let texels = TexelFile::open(&rooms.texels).unwrap();
         let at: std::collections::HashMap<Pixel, Vec3> = texels
             .texels()
             .iter()

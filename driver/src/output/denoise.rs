@@ -75,6 +75,20 @@ pub trait Denoiser: Sync {
     /// The filtered irradiance of every pixel of `window` (`None` where it has no texel).
     /// Only pixels at least `halo()` pixels inside the window need be exact.
     fn denoise(&self, window: &Window) -> Vec<Option<[f32; 3]>>;
+
+    /// [`Self::denoise`], and `extra` channels — `count` per pixel of the window, row-major
+    /// (e.g. the directional coefficients) — filtered alike, with the weights the irradiance
+    /// gets. The default leaves them as they are: a filter that cannot apply its weights to
+    /// other channels (an external denoiser) changes the irradiance only.
+    fn denoise_with(
+        &self,
+        window: &Window,
+        extra: &[f32],
+        count: usize,
+    ) -> (Vec<Option<[f32; 3]>>, Vec<f32>) {
+        let _ = count;
+        (self.denoise(window), extra.to_vec())
+    }
 }
 
 /// The edge-aware À-Trous filter of the module docs.
@@ -102,27 +116,65 @@ impl Denoiser for ATrous {
     }
 
     fn denoise(&self, window: &Window) -> Vec<Option<[f32; 3]>> {
+        self.denoise_with(window, &[], 0).0
+    }
+
+    fn denoise_with(
+        &self,
+        window: &Window,
+        extra: &[f32],
+        count: usize,
+    ) -> (Vec<Option<[f32; 3]>>, Vec<f32>) {
         let mut current: Vec<Option<([f32; 3], f32)>> = window
             .texels
             .iter()
             .map(|t| t.map(|t| (t.rgb, t.variance.max(0.0))))
             .collect();
+        let mut channels = Extra {
+            values: extra.to_vec(),
+            count,
+        };
         for level in 0..self.levels.clamp(1, 8) {
-            current = a_trous_pass(window, &current, 1 << level, self.luminance_sigma);
+            (current, channels) = a_trous_pass(
+                window,
+                &current,
+                &channels,
+                1 << level,
+                self.luminance_sigma,
+            );
         }
-        current.into_iter().map(|c| c.map(|(rgb, _)| rgb)).collect()
+        let rgb = current.into_iter().map(|c| c.map(|(rgb, _)| rgb)).collect();
+        (rgb, channels.values)
     }
 }
 
-/// One À-Trous pass with taps `step` pixels apart: (irradiance, variance) per pixel.
+/// A pixel between passes: irradiance and the variance of its luminance, `None` without a
+/// texel.
+type Pixel = Option<([f32; 3], f32)>;
+
+/// Channels filtered beside the irradiance with its weights: `count` per pixel.
+struct Extra {
+    values: Vec<f32>,
+    count: usize,
+}
+
+/// One À-Trous pass with taps `step` pixels apart: (irradiance, variance) per pixel, and the
+/// `extra` channels with the irradiance's weights.
 fn a_trous_pass(
     window: &Window,
     values: &[Option<([f32; 3], f32)>],
+    extra: &Extra,
     step: usize,
     luminance_sigma: f32,
-) -> Vec<Option<([f32; 3], f32)>> {
+) -> (Vec<Pixel>, Extra) {
     let (w, h) = (window.width as i64, window.height as i64);
     let mut out = vec![None; values.len()];
+    let n = extra.count;
+    let mut extra_out = Extra {
+        values: extra.values.clone(),
+        count: n,
+    };
+    let mut extra_sum = vec![0.0f64; n];
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
@@ -132,6 +184,7 @@ fn a_trous_pass(
             let l_p = luminance_f32(rgb_p);
             let sigma = luminance_sigma * var_p.sqrt();
             let (mut sum, mut var_sum, mut weight) = ([0.0f64; 3], 0.0f64, 0.0f64);
+            extra_sum.fill(0.0);
             for (j, ky) in KERNEL.iter().enumerate() {
                 let qy = y + (j as i64 - 2) * step as i64;
                 if !(0..h).contains(&qy) {
@@ -168,15 +221,25 @@ fn a_trous_pass(
                     }
                     var_sum += wgt * wgt * f64::from(var_q);
                     weight += wgt;
+                    let q_extra = &extra.values[qi * n..(qi + 1) * n];
+                    for (e, v) in extra_sum.iter_mut().zip(q_extra) {
+                        *e += wgt * f64::from(*v);
+                    }
                 }
             }
             // The centre tap always has weight > 0, so `weight` > 0.
             let rgb = sum.map(|s| (s / weight) as f32);
             let var = (var_sum / (weight * weight)) as f32;
             out[i] = Some((rgb, var));
+            for (o, e) in extra_out.values[i * n..(i + 1) * n]
+                .iter_mut()
+                .zip(&extra_sum)
+            {
+                *o = (e / weight) as f32;
+            }
         }
     }
-    out
+    (out, extra_out)
 }
 
 /// Normal and position weights of neighbour `q`, `pixels` atlas pixels from `p`.
@@ -257,6 +320,54 @@ mod tests {
         assert!(after < before / 3.0, "RMSE {before} → {after}");
         let mean = filtered.iter().sum::<f32>() / filtered.len() as f32;
         assert!((mean - truth).abs() < 0.02, "mean {mean}");
+    }
+
+    #[test]
+    fn extra_channels_are_filtered_with_the_irradiance_weights() {
+        // Two extra channels per pixel: a copy of the red irradiance and its negative times
+        // 3 (as a directional coefficient may be). Filtered with the irradiance's weights,
+        // they come out as the filtered red (bit for bit: the same sums) and −3 × it (to
+        // rounding), and the irradiance is what `denoise` gives.
+        let (n, sd) = (24usize, 0.3f32);
+        let mut noise = Noise(11);
+        let texels: Vec<Option<NoisyTexel>> = (0..n * n)
+            .map(|i| {
+                let p = Vec3::new((i % n) as f32 * 0.1, 0.0, (i / n) as f32 * 0.1);
+                let value = 1.0 + (i % n) as f32 * 0.2 + noise.centred(sd);
+                (i % 7 != 3).then(|| texel(value, sd, p, Vec3::Y)).flatten()
+            })
+            .collect();
+        let extra: Vec<f32> = texels
+            .iter()
+            .flat_map(|t| {
+                let red = t.map_or(0.0, |t| t.rgb[0]);
+                [red, -3.0 * red]
+            })
+            .collect();
+        let window = Window {
+            width: n,
+            height: n,
+            texels,
+        };
+        let filter = ATrous::default();
+        let (rgb, filtered) = filter.denoise_with(&window, &extra, 2);
+        assert_eq!(rgb, filter.denoise(&window));
+        let mut changed = 0;
+        for (i, value) in rgb.iter().enumerate() {
+            match value {
+                Some(v) => {
+                    assert_eq!(filtered[2 * i].to_bits(), v[0].to_bits(), "pixel {i}");
+                    let negative = filtered[2 * i + 1];
+                    assert!(
+                        (negative + 3.0 * v[0]).abs() <= 1e-6 * v[0].abs(),
+                        "pixel {i}"
+                    );
+                    changed += usize::from(filtered[2 * i] != extra[2 * i]);
+                }
+                None => assert_eq!(filtered[2 * i..2 * i + 2], extra[2 * i..2 * i + 2]),
+            }
+        }
+        assert!(changed > n * n / 2, "{changed} pixels filtered");
     }
 
     /// The leak case: a floor that runs on beneath a thin wall (x = 1) from a lit room

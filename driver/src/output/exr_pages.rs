@@ -36,7 +36,8 @@ pub struct PageImage {
     height: usize,
     rgb: Vec<[f32; 3]>,
     covered: Vec<bool>,
-    aux: Vec<(String, Vec<f32>)>,
+    /// Auxiliary channels: name, values, whether dilation fills them as the irradiance.
+    aux: Vec<(String, Vec<f32>, bool)>,
 }
 
 /// What went wrong writing a page; names the file.
@@ -76,7 +77,16 @@ impl PageImage {
 
     /// Adds an auxiliary channel (zero everywhere) and returns its index for [`Self::set_aux`].
     pub fn add_aux_channel(&mut self, name: &str) -> usize {
-        self.aux.push((name.to_owned(), vec![0.0; self.rgb.len()]));
+        self.aux
+            .push((name.to_owned(), vec![0.0; self.rgb.len()], false));
+        self.aux.len() - 1
+    }
+
+    /// Adds an auxiliary channel that [`Self::dilate`] fills as it fills the irradiance (each
+    /// padding pixel the mean of the same neighbours), e.g. directional coefficients.
+    pub fn add_dilated_channel(&mut self, name: &str) -> usize {
+        self.aux
+            .push((name.to_owned(), vec![0.0; self.rgb.len()], true));
         self.aux.len() - 1
     }
 
@@ -124,8 +134,9 @@ impl PageImage {
     }
 
     /// Pads charts by `passes` pixels: in each pass every pixel that is neither covered nor
-    /// already filled takes the mean irradiance of its filled 8-neighbours. Returns how many
-    /// pixels were filled.
+    /// already filled takes the mean irradiance of its filled 8-neighbours (and the mean of
+    /// the same neighbours in each dilated auxiliary channel). Returns how many pixels were
+    /// filled.
     pub fn dilate(&mut self, passes: u32) -> usize {
         let mut filled = self.covered.clone();
         let mut total = 0;
@@ -144,26 +155,37 @@ impl PageImage {
                 break;
             }
             total += next.len();
-            for (i, rgb) in next {
-                self.rgb[i] = rgb;
+            for (i, values) in next {
+                self.rgb[i] = [values[0], values[1], values[2]];
+                let dilated = self.aux.iter_mut().filter(|a| a.2);
+                for (channel, v) in dilated.zip(&values[3..]) {
+                    channel.1[i] = *v;
+                }
                 filled[i] = true;
             }
         }
         total
     }
 
-    fn neighbour_mean(&self, filled: &[bool], x: usize, y: usize) -> Option<[f32; 3]> {
-        let (mut sum, mut n) = ([0.0f32; 3], 0u32);
+    /// The means of the irradiance, then of each dilated auxiliary channel, over the filled
+    /// 8-neighbours of (`x`, `y`); `None` without any.
+    fn neighbour_mean(&self, filled: &[bool], x: usize, y: usize) -> Option<Vec<f32>> {
+        let dilated: Vec<&Vec<f32>> = self.aux.iter().filter(|a| a.2).map(|a| &a.1).collect();
+        let mut sum = vec![0.0f32; 3 + dilated.len()];
+        let mut n = 0u32;
         for ny in y.saturating_sub(1)..=(y + 1).min(self.height - 1) {
             for nx in x.saturating_sub(1)..=(x + 1).min(self.width - 1) {
                 let i = ny * self.width + nx;
                 if filled[i] {
                     (0..3).for_each(|c| sum[c] += self.rgb[i][c]);
+                    for (s, channel) in sum[3..].iter_mut().zip(&dilated) {
+                        *s += channel[i];
+                    }
                     n += 1;
                 }
             }
         }
-        (n > 0).then(|| sum.map(|s| s / n as f32))
+        (n > 0).then(|| sum.into_iter().map(|s| s / n as f32).collect())
     }
 
     /// Writes the page as a 32-bit float EXR (channels R, G, B, then the auxiliary ones;
@@ -194,7 +216,7 @@ impl PageImage {
         channels.push(AnyChannel::new("R", plane(0)));
         channels.push(AnyChannel::new("G", plane(1)));
         channels.push(AnyChannel::new("B", plane(2)));
-        for (name, values) in &self.aux {
+        for (name, values, _) in &self.aux {
             channels.push(AnyChannel::new(
                 name.as_str(),
                 FlatSamples::F32(values.clone()),
@@ -262,6 +284,8 @@ pub struct PageStream {
     rgb: [usize; 3],
     /// Record index of each auxiliary channel, in the order they were given.
     aux: Vec<usize>,
+    /// Record indices dilation fills: R, G, B, then the dilated auxiliary channels.
+    dilated: Vec<usize>,
     /// Pixels whose values were not finite, replaced by zero.
     non_finite: u64,
 }
@@ -284,8 +308,9 @@ pub struct PageRect {
 
 impl PageStream {
     /// A black, uncovered page of `width` × `height` pixels with auxiliary channels `aux`
-    /// (zero everywhere), its scratch file at `scratch` (created sparse; removed by
-    /// [`Self::finish`] or on drop).
+    /// (zero everywhere), of which those named in `dilated` are dilated as the irradiance is
+    /// (as [`PageImage::add_dilated_channel`]), its scratch file at `scratch` (created sparse;
+    /// removed by [`Self::finish`] or on drop).
     ///
     /// # Errors
     /// [`PageWriteError`] naming the scratch file when it cannot be created.
@@ -297,6 +322,7 @@ impl PageStream {
         width: u32,
         height: u32,
         aux: &[&str],
+        dilated: &[&str],
     ) -> Result<Self, PageWriteError> {
         assert!(
             width > 0 && height > 0,
@@ -310,6 +336,10 @@ impl PageStream {
         names.sort_by(|a, b| a.as_bytes().cmp(b.as_bytes()));
         let slot = |name: &str| 1 + names.iter().position(|n| n == name).expect("a channel");
         let rgb = ["R", "G", "B"].map(slot);
+        let dilated = rgb
+            .into_iter()
+            .chain(aux.iter().filter(|a| dilated.contains(a)).map(|a| slot(a)))
+            .collect();
         let aux = aux.iter().map(|a| slot(a)).collect();
         let file = std::fs::OpenOptions::new()
             .read(true)
@@ -330,6 +360,7 @@ impl PageStream {
             height: height as usize,
             rgb,
             aux,
+            dilated,
             names,
             non_finite: 0,
         };
@@ -446,15 +477,24 @@ impl PageStream {
         }
     }
 
-    /// Replaces the irradiance of the covered pixel (`x`, `y`) (a seam stitched after its tile
-    /// was written). A non-finite value is stored as zero and counted.
+    /// Replaces the irradiance of the covered pixel (`x`, `y`) and its auxiliary channels
+    /// from the `aux_from`-th on (in [`Self::create`]'s order) with `aux` (a seam stitched
+    /// after its tile was written). Non-finite values are stored as zero; a pixel whose
+    /// irradiance is not finite is counted.
     ///
     /// # Errors
     /// [`PageWriteError`] when the scratch file cannot be read or written.
     ///
     /// # Panics
-    /// If the pixel lies outside the page.
-    pub fn set_rgb(&mut self, x: u32, y: u32, rgb: [f32; 3]) -> Result<(), PageWriteError> {
+    /// If the pixel lies outside the page or the channels beyond its auxiliary ones.
+    pub fn set_channels(
+        &mut self,
+        x: u32,
+        y: u32,
+        rgb: [f32; 3],
+        aux_from: usize,
+        aux: &[f32],
+    ) -> Result<(), PageWriteError> {
         let (x, y) = (x as usize, y as usize);
         assert!(x < self.width && y < self.height, "pixel off the page");
         let mut record = vec![0.0f32; self.stride()];
@@ -462,6 +502,9 @@ impl PageStream {
         let finite = rgb.iter().all(|c| c.is_finite());
         for (slot, c) in self.rgb.iter().zip(rgb) {
             record[*slot] = if finite { c } else { 0.0 };
+        }
+        for (slot, v) in self.aux[aux_from..aux_from + aux.len()].iter().zip(aux) {
+            record[*slot] = if v.is_finite() { *v } else { 0.0 };
         }
         if !finite {
             self.non_finite += 1;
@@ -500,7 +543,8 @@ impl PageStream {
     /// of the covered pixels' luminance (row-major, as [`PageImage::write_preview`] sums).
     fn dilate(&self, passes: u32) -> Result<(f32, usize), PageWriteError> {
         let stride = self.stride();
-        let mut window = DilationWindow::new(passes as usize, self.width, stride, self.rgb);
+        let mut window =
+            DilationWindow::new(passes as usize, self.width, stride, self.dilated.clone());
         let (mut sum, mut count) = (0.0f32, 0usize);
         let mut failure = None;
         let mut emit = |y: usize, row: &[f32], changed: bool| {
@@ -612,7 +656,8 @@ struct DilationWindow {
     passes: usize,
     width: usize,
     stride: usize,
-    rgb: [usize; 3],
+    /// Record indices filled: R, G, B, then the dilated auxiliary channels.
+    slots: Vec<usize>,
     /// Per level below the last: (row index, records, filled, changed) of its last two rows.
     levels: Vec<std::collections::VecDeque<WindowRow>>,
 }
@@ -625,12 +670,12 @@ struct WindowRow {
 }
 
 impl DilationWindow {
-    fn new(passes: usize, width: usize, stride: usize, rgb: [usize; 3]) -> Self {
+    fn new(passes: usize, width: usize, stride: usize, slots: Vec<usize>) -> Self {
         Self {
             passes,
             width,
             stride,
-            rgb,
+            slots,
             levels: (0..passes)
                 .map(|_| std::collections::VecDeque::new())
                 .collect(),
@@ -713,19 +758,23 @@ impl DilationWindow {
             if centre.filled[x] {
                 continue;
             }
-            let (mut sum, mut n) = ([0.0f32; 3], 0u32);
+            let (mut sum, mut n) = (vec![0.0f32; self.slots.len()], 0u32);
             for row in &rows {
                 for nx in x.saturating_sub(1)..=(x + 1).min(self.width - 1) {
                     if row.filled[nx] {
                         let record = &row.records[nx * self.stride..];
-                        (0..3).for_each(|c| sum[c] += record[self.rgb[c]]);
+                        for (s, slot) in sum.iter_mut().zip(&self.slots) {
+                            *s += record[*slot];
+                        }
                         n += 1;
                     }
                 }
             }
             if n > 0 {
                 let record = &mut next.records[x * self.stride..];
-                (0..3).for_each(|c| record[self.rgb[c]] = sum[c] / n as f32);
+                for (s, slot) in sum.iter().zip(&self.slots) {
+                    record[*slot] = s / n as f32;
+                }
                 next.filled[x] = true;
                 next.changed = true;
             }
@@ -905,6 +954,50 @@ mod tests {
     }
 
     #[test]
+    fn dilated_channels_take_the_irradiance_sources() {
+        // A ragged chart whose dilated channel holds each texel's red value and whose plain
+        // channel holds 1: after two passes every padding pixel's dilated value is its red
+        // (the same neighbours, the same sums), and the plain channel's padding stays 0.
+        let mut page = PageImage::new(7, 6);
+        let dilated = page.add_dilated_channel("SH0.R");
+        let plain = page.add_aux_channel("samples");
+        let chart = [
+            (2, 1, 0.5),
+            (3, 1, 1.25),
+            (2, 2, 3.0),
+            (4, 3, 7.5),
+            (3, 2, 0.125),
+        ];
+        for (x, y, v) in chart {
+            page.set(x, y, [v, 2.0 * v, 0.0]);
+            page.set_aux(dilated, x, y, v);
+            page.set_aux(plain, x, y, 1.0);
+        }
+        let filled = page.dilate(2);
+        assert!(filled > 20, "{filled} padding pixels");
+        let (mut padding, mut empty) = (0, 0);
+        for y in 0..6 {
+            for x in 0..7 {
+                let i = page.index(x, y);
+                let (sh, samples) = (page.aux[dilated].1[i], page.aux[plain].1[i]);
+                assert_eq!(sh.to_bits(), page.get(x, y)[0].to_bits(), "({x}, {y})");
+                if page.is_covered(x, y) {
+                    assert_eq!(samples, 1.0);
+                } else if page.get(x, y)[0] != 0.0 {
+                    padding += 1;
+                    assert_eq!(samples, 0.0, "({x}, {y}): a plain channel is not dilated");
+                } else {
+                    empty += 1;
+                }
+            }
+        }
+        assert!(
+            padding > 20 && empty > 0,
+            "{padding} padding, {empty} empty"
+        );
+    }
+
+    #[test]
     fn a_failed_write_names_the_file_and_leaves_nothing() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("missing-dir").join("lm.exr");
@@ -930,7 +1023,13 @@ mod tests {
     /// A page of `width` × `height` with charts of random rectangles (some values not finite),
     /// written both ways: as a [`PageImage`] and streamed through a [`PageStream`] in random
     /// rectangles. Returns the two EXRs' bytes and the two previews' pixels.
-    fn both_ways(width: u32, height: u32, aux: &[&str], seed: u64) -> [(Vec<u8>, Vec<u8>); 2] {
+    fn both_ways(
+        width: u32,
+        height: u32,
+        aux: &[&str],
+        dilated: &[&str],
+        seed: u64,
+    ) -> [(Vec<u8>, Vec<u8>); 2] {
         let dir = tempfile::tempdir().unwrap();
         let mut rng = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
         let mut next = |n: u32| {
@@ -940,9 +1039,18 @@ mod tests {
             (rng % u64::from(n)) as u32
         };
         let mut image = PageImage::new(width, height);
-        let channels: Vec<usize> = aux.iter().map(|a| image.add_aux_channel(a)).collect();
-        let mut stream =
-            PageStream::create(&dir.path().join("scratch"), width, height, aux).unwrap();
+        let channels: Vec<usize> = aux
+            .iter()
+            .map(|a| {
+                if dilated.contains(a) {
+                    image.add_dilated_channel(a)
+                } else {
+                    image.add_aux_channel(a)
+                }
+            })
+            .collect();
+        let scratch = dir.path().join("scratch");
+        let mut stream = PageStream::create(&scratch, width, height, aux, dilated).unwrap();
         let mut non_finite = 0;
         for _ in 0..12 {
             let (w, h) = (1 + next(width.min(40)), 1 + next(height.min(40)));
@@ -987,15 +1095,25 @@ mod tests {
 
     #[test]
     fn a_streamed_page_is_the_page_image_byte_for_byte() {
-        let aux = ["samples", "rel_std_error", "validity", "P.X", "N.Z"];
-        for (seed, (w, h), aux) in [
-            (1, (64, 48), &aux[..]),
-            (2, (300, 257), &aux[..2]),
-            (3, (1, 1), &[][..]),
-            (4, (5, 90), &[][..]),
-            (5, (513, 3), &aux[..]),
+        let aux = [
+            "samples",
+            "rel_std_error",
+            "validity",
+            "P.X",
+            "N.Z",
+            "SH0.R",
+            "SH1z.B",
+        ];
+        let sh = &aux[5..];
+        for (seed, (w, h), aux, dilated) in [
+            (1, (64, 48), &aux[..], sh),
+            (2, (300, 257), &aux[..2], &[][..]),
+            (3, (1, 1), &[][..], &[][..]),
+            (4, (5, 90), &[][..], &[][..]),
+            (5, (513, 3), &aux[..], sh),
+            (6, (37, 41), &aux[4..], &aux[4..]),
         ] {
-            let [(exr_a, png_a), (exr_b, png_b)] = both_ways(w, h, aux, seed);
+            let [(exr_a, png_a), (exr_b, png_b)] = both_ways(w, h, aux, dilated, seed);
             assert!(exr_a == exr_b, "EXR bytes differ: {w}x{h} seed {seed}");
             assert!(png_a == png_b, "preview pixels differ: {w}x{h} seed {seed}");
         }

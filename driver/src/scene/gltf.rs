@@ -5,8 +5,8 @@ use super::texture::{self, BaseColorTexture, TextureOptions};
 use super::*;
 
 pub(super) fn load(path: &Path, textures: TextureOptions) -> Result<Scene, SceneError> {
-    let (doc, buffers, images) = import(path)?;
-    let materials = read_materials(path, &doc, &images, textures)?;
+    let (doc, buffers) = import(path)?;
+    let materials = read_materials(path, &doc, &buffers, textures)?;
     let default_material = materials.len() as u32;
     let mut materials = materials;
     materials.push(Material::default_grey());
@@ -54,18 +54,12 @@ pub(super) fn nodes_in_load_order(doc: &::gltf::Document) -> Vec<(::gltf::Node<'
 /// (gltf-json 1.4.1 indexes it unchecked in `mesh.rs`, `primitive_validate_hook`;
 /// [`check_position_accessors`]) and that every image has a source
 /// ([`check_image_sources`]), and every buffer's and image's URI ([`check_uri`]) and
-/// image's buffer view ([`check_view`]). Buffers and images are loaded one by one, so an
-/// error names the one at fault.
+/// image's buffer view ([`check_view`]). Buffers are loaded one by one, so an error names
+/// the one at fault; images are not loaded here but one at a time by [`load_image`], so the
+/// loader never holds more than one image at full size.
 pub(super) fn import(
     path: &Path,
-) -> Result<
-    (
-        ::gltf::Document,
-        Vec<::gltf::buffer::Data>,
-        Vec<::gltf::image::Data>,
-    ),
-    SceneError,
-> {
+) -> Result<(::gltf::Document, Vec<::gltf::buffer::Data>), SceneError> {
     let whole = |source| SceneError::Gltf {
         path: path.to_owned(),
         source,
@@ -104,29 +98,41 @@ pub(super) fn import(
         }
         buffers.push(data);
     }
-    let mut images = Vec::with_capacity(doc.images().len());
-    for image in doc.images() {
-        let item = format!("images[{}]", image.index());
-        let source = image.source();
-        match &source {
-            ::gltf::image::Source::Uri { uri, .. } => {
-                check_uri(uri).map_err(|m| resource(item.clone(), m))?;
-            }
-            ::gltf::image::Source::View { view, .. } => {
-                check_view(view, &buffers).map_err(|m| resource(item.clone(), m))?;
-            }
-        }
-        let named = match &source {
-            ::gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
-                format!("\"{uri}\": ")
-            }
-            _ => String::new(),
-        };
-        let data = ::gltf::image::Data::from_source(source, Some(base), &buffers)
-            .map_err(|e| resource(item, format!("{named}{}", describe(&e))))?;
-        images.push(data);
+    Ok((doc, buffers))
+}
+
+/// Image `index` of the glTF at `path` (imported by [`import`]), decoded at full size, or
+/// an error naming it: its URI or buffer view checked first ([`check_uri`], [`check_view`]).
+fn load_image(
+    path: &Path,
+    doc: &::gltf::Document,
+    buffers: &[::gltf::buffer::Data],
+    index: usize,
+) -> Result<::gltf::image::Data, SceneError> {
+    let item = format!("images[{index}]");
+    let resource = |message: String| SceneError::GltfResource {
+        path: path.to_owned(),
+        item: item.clone(),
+        message,
+    };
+    let image = doc
+        .images()
+        .nth(index)
+        .ok_or_else(|| resource("no such image".into()))?;
+    let source = image.source();
+    match &source {
+        ::gltf::image::Source::Uri { uri, .. } => check_uri(uri).map_err(resource)?,
+        ::gltf::image::Source::View { view, .. } => check_view(view, buffers).map_err(resource)?,
     }
-    Ok((doc, buffers, images))
+    let named = match &source {
+        ::gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
+            format!("\"{uri}\": ")
+        }
+        _ => String::new(),
+    };
+    let base = path.parent().unwrap_or_else(|| Path::new("./"));
+    ::gltf::image::Data::from_source(source, Some(base), buffers)
+        .map_err(|e| resource(format!("{named}{}", describe(&e))))
 }
 
 /// A URI the importer can resolve without panicking: gltf 1.4.1 (`import.rs`,
@@ -254,14 +260,17 @@ fn check_position_accessors(json: &::gltf::json::Root) -> ::gltf::Result<()> {
 }
 
 /// The materials, their base-colour textures decoded once per image (as
-/// [`texture::Image`]s, capped as `options` says) and shared.
+/// [`texture::Image`]s, capped as `options` says) and shared. Images are decoded one at a
+/// time and capped at once, so the peak while loading is one image at full size beside the
+/// capped ones; an image no material uses is decoded too (one at a time, then dropped), so
+/// a broken one is still an error.
 fn read_materials(
     path: &Path,
     doc: &::gltf::Document,
-    images: &[::gltf::image::Data],
+    buffers: &[::gltf::buffer::Data],
     options: TextureOptions,
 ) -> Result<Vec<Material>, SceneError> {
-    let mut decoded: Vec<Option<Arc<texture::Image>>> = vec![None; images.len()];
+    let mut decoded: Vec<Option<Arc<texture::Image>>> = vec![None; doc.images().len()];
     let mut image = |t: ::gltf::Texture| -> Result<Arc<texture::Image>, SceneError> {
         let index = t.source().index();
         if let Some(done) = &decoded[index] {
@@ -274,13 +283,14 @@ fn read_materials(
             }
             _ => item.clone(),
         };
-        let img = decode_image(&images[index], source, options).map_err(|message| {
-            SceneError::GltfResource {
+        let full = load_image(path, doc, buffers, index)?;
+        let img =
+            decode_image(&full, source, options).map_err(|message| SceneError::GltfResource {
                 path: path.to_owned(),
                 item,
                 message,
-            }
-        })?;
+            })?;
+        drop(full);
         let img = Arc::new(img);
         decoded[index] = Some(Arc::clone(&img));
         Ok(img)
@@ -320,6 +330,11 @@ fn read_materials(
             base_color_texture,
         });
     }
+    for (index, done) in decoded.iter().enumerate() {
+        if done.is_none() {
+            load_image(path, doc, buffers, index)?;
+        }
+    }
     Ok(materials)
 }
 
@@ -353,23 +368,21 @@ fn decode_image(
                 img.pixels.len()
             ));
         }
-        let linear: Vec<Vec3> = img
-            .pixels
-            .chunks_exact(channels * bytes)
-            .map(|px| {
-                let c = |k: usize| value(&px[k * bytes..(k + 1) * bytes]);
-                if channels < 3 {
-                    Vec3::splat(c(0))
-                } else {
-                    Vec3::new(c(0), c(1), c(2))
-                }
-            })
-            .collect();
-        Ok(texture::Image::from_linear(
+        let stride = channels * bytes;
+        let linear = |i: usize| {
+            let px = &img.pixels[i * stride..(i + 1) * stride];
+            let c = |k: usize| value(&px[k * bytes..(k + 1) * bytes]);
+            if channels < 3 {
+                Vec3::splat(c(0))
+            } else {
+                Vec3::new(c(0), c(1), c(2))
+            }
+        };
+        Ok(texture::Image::from_linear_fn(
             source.clone(),
             w,
             h,
-            &linear,
+            linear,
             options,
         ))
     };

@@ -74,7 +74,7 @@ pub fn write_glb(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
     if !matches!(ext.as_deref(), Some("gltf" | "glb")) {
         return Err(WriteError::NotGltf { path: path.clone() });
     }
-    let (doc, buffers, _) = super::gltf::import(path)?;
+    let (doc, buffers) = super::gltf::import(path)?;
     let mut w = Writer {
         scene,
         lightmap,

@@ -168,17 +168,18 @@ impl Image {
                 [px[0], px[1], px[2]]
             }
         };
-        let texels: Vec<[u8; 3]> = pixels.chunks_exact(channels).map(rgb).collect();
         let factor = downsample_factor(width, height, options.max_size);
         if factor == 1 {
+            let texels: Vec<[u8; 3]> = pixels.chunks_exact(channels).map(rgb).collect();
             return Ok(Self::from_texels(source, width, height, texels));
         }
+        // Filtered straight from the bytes: no full-size copy beside the decoded image.
         let lut = &*SRGB8_TO_LINEAR;
-        let linear: Vec<Vec3> = texels
-            .iter()
-            .map(|t| Vec3::new(lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize]))
-            .collect();
-        Ok(Self::from_linear(source, width, height, &linear, options))
+        let linear = |i: usize| {
+            let t = rgb(&pixels[i * channels..(i + 1) * channels]);
+            Vec3::new(lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize])
+        };
+        Ok(Self::from_linear_fn(source, width, height, linear, options))
     }
 
     /// An image from linear RGB texels (16-bit and float sources), box-filtered down to
@@ -188,6 +189,18 @@ impl Image {
         width: u32,
         height: u32,
         linear: &[Vec3],
+        options: TextureOptions,
+    ) -> Image {
+        Self::from_linear_fn(source, width, height, |i| linear[i], options)
+    }
+
+    /// [`Self::from_linear`] with texel `i` (row-major) given by `linear(i)`, read once
+    /// each: the caller need not hold the image in linear light at full size.
+    pub fn from_linear_fn(
+        source: String,
+        width: u32,
+        height: u32,
+        linear: impl Fn(usize) -> Vec3,
         options: TextureOptions,
     ) -> Image {
         let factor = downsample_factor(width, height, options.max_size) as usize;
@@ -200,7 +213,7 @@ impl Image {
                 let mut n = 0u32;
                 for sy in y * factor..((y + 1) * factor).min(h) {
                     for sx in x * factor..((x + 1) * factor).min(w) {
-                        let c = linear[sy * w + sx];
+                        let c = linear(sy * w + sx);
                         sum += if c.is_finite() { c } else { Vec3::ZERO };
                         n += 1;
                     }
