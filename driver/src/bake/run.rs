@@ -97,8 +97,12 @@ pub struct BakeReport {
     pub pages: Vec<PathBuf>,
     /// Pixels with non-finite results replaced by zero when writing (should be 0).
     pub non_finite_pixels: u64,
-    /// Mean relative jump across seams before and after stitching (`--seams stitch`).
+    /// Mean relative jump between the two texels of each seam pair, before and after
+    /// stitching (`--seams stitch`).
     pub seam_jump: Option<[f64; 2]>,
+    /// Mean relative jump of the two sides' bilinear values at the seams' edge points —
+    /// what a shader shows, and what the stitch closes — before and after stitching.
+    pub edge_jump: Option<[f64; 2]>,
 }
 
 /// Wall-clock seconds of each phase.
@@ -321,6 +325,7 @@ pub fn bake_pass_with_progress(
         report.pages = written.pages;
         report.non_finite_pixels = written.non_finite_pixels;
         report.seam_jump = written.seam_jump;
+        report.edge_jump = written.edge_jump;
         retire_work(&dir)?;
     }
     Ok(report)

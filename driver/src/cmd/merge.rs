@@ -51,9 +51,13 @@ pub fn run(args: &MergeArgs) -> Result<(), super::CmdError> {
         seams: args.seams,
     };
     let written = finish_with(&texels, &args.shards, &args.out, options)?;
-    if let Some([before, after]) = written.seam_jump {
+    if let (Some([before, after]), Some([pairs_before, pairs_after])) =
+        (written.edge_jump, written.seam_jump)
+    {
+        let [points, skipped, _] = written.edge_points;
         eprintln!(
-            "seams: {} pairs, mean relative jump {before:.4} → {after:.4}",
+            "seams: mean relative jump at {points} edge points ({skipped} left out) \
+             {before:.4} → {after:.4}; between the {} texel pairs {pairs_before:.4} → {pairs_after:.4}",
             written.seam_pairs
         );
     }
