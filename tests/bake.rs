@@ -238,6 +238,36 @@ fn three_shards_merged_equal_one_bake() {
     }
 }
 
+/// Shards own contiguous runs of tiles (`bake/shard.rs`); a work directory that holds another
+/// shard's tiles — one split by an older guidebake, which split tiles modulo the shard count —
+/// is refused by the merge instead of merged from the wrong files.
+#[test]
+fn shards_split_another_way_are_refused() {
+    let f = Fixture::new();
+    let mut dirs = Vec::new();
+    for index in 0..3 {
+        let mut job = f.job("split.exr", 1, Shard { index, count: 3 });
+        job.settings.transport = Transport::Path;
+        let report = f.run(&job, None).unwrap();
+        assert_eq!(report.tiles_baked, 3);
+        dirs.push(work_dir(&job.out, job.shard));
+    }
+    let texels = TexelFile::open(&f.dir.path().join("plane.texels")).unwrap();
+    // Shards 0 and 1 swap their manifests: each now claims the other's tiles.
+    let (m0, m1) = (dirs[0].join("manifest.json"), dirs[1].join("manifest.json"));
+    let (b0, b1) = (std::fs::read(&m0).unwrap(), std::fs::read(&m1).unwrap());
+    std::fs::write(&m0, b1).unwrap();
+    std::fs::write(&m1, b0).unwrap();
+    let out = f.dir.path().join("split.exr");
+    let err = finish(&texels, &dirs, &out).unwrap_err().to_string();
+    assert!(
+        err.contains("split another way")
+            && err.contains("shard 0 of 3 holds tile 3, which shard 1 owns"),
+        "{err}"
+    );
+    assert!(!out.exists(), "no pages from a refused merge");
+}
+
 #[test]
 fn series_shards_must_name_their_pass() {
     let f = Fixture::new();

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use super::directional::{self, SH_CHANNELS, ShL1};
 use super::run::{BakeError, file_error};
 use super::settings::{MAX_ITERATIONS, SettingsError};
+use super::shard::Split;
 use super::workdir::{
     Manifest, directional_file, merged_dir, merged_results, pass_files, read_manifest,
 };
@@ -126,10 +127,11 @@ pub fn finish_filtered(
     let shards = open_shards(texels, dirs, None)?;
     let first = &shards[0].manifest;
     let all = every_tile(texels, &shards)?;
+    let split = split_of(texels, &shards)?;
     let batches = open_batch_files(texels, &shards)?;
     let global = batches
         .as_deref()
-        .map(|files| global_weights(texels, &shards, files))
+        .map(|files| global_weights(texels, &shards, &split, files))
         .transpose()?;
     let rho = match (first.bias_correction, &global) {
         (false, _) => 1.0,
@@ -144,6 +146,7 @@ pub fn finish_filtered(
     let source = TileSource {
         texels,
         shards: &shards,
+        split: &split,
         batches: batches.as_deref(),
         directional: directional.as_deref(),
         global: global.as_ref(),
@@ -439,6 +442,8 @@ impl PageFacts for SeamWork {
 struct TileSource<'a> {
     texels: &'a TexelFile,
     shards: &'a [ShardWork],
+    /// Which shard baked each tile.
+    split: &'a Split,
     batches: Option<&'a [BatchFile]>,
     global: Option<&'a GlobalWeights>,
     /// The shards' directional files, if the bake kept them.
@@ -455,13 +460,14 @@ impl TileSource<'_> {
     fn values(&self, t: usize) -> Result<Vec<TexelValue>, BakeError> {
         let tile = &self.texels.tiles()[t];
         let mut results = vec![TexelResult::default(); tile.texel_count as usize];
-        self.shards[t % self.shards.len()]
+        let owner = self.split.owner(t as u32);
+        self.shards[owner]
             .results
             .read(tile.first_texel, &mut results)?;
         let mut batches = Vec::new();
         if let (Some(files), Some(_)) = (self.batches, self.global) {
             batches.resize(results.len() * self.k, Welford::new());
-            files[t % files.len()].read(tile.first_texel, &mut batches)?;
+            files[owner].read(tile.first_texel, &mut batches)?;
         }
         let k = self.k;
         Ok(results
@@ -491,14 +497,15 @@ impl TileSource<'_> {
         };
         let tile = &self.texels.tiles()[t];
         let n = tile.texel_count as usize;
-        let file = &files[t % files.len()];
+        let owner = self.split.owner(t as u32);
+        let file = &files[owner];
         let combined: Vec<ShL1> = match (self.batches, self.global) {
             (Some(batches), Some(g)) => {
                 let k = self.k;
                 let mut means = vec![ShL1::default(); n * k];
                 file.read(tile.first_texel, &mut means)?;
                 let mut b = vec![Welford::new(); n * k];
-                batches[t % batches.len()].read(tile.first_texel, &mut b)?;
+                batches[owner].read(tile.first_texel, &mut b)?;
                 let weights = Weighted(&g.weights);
                 (0..n)
                     .map(|i| {
@@ -707,6 +714,29 @@ fn every_tile(texels: &TexelFile, shards: &[ShardWork]) -> Result<Vec<TileRecord
     Ok(all)
 }
 
+/// Which shard owns each tile ([`Split`]), checked against the shards' journals: a shard
+/// whose journal holds another shard's tile was split differently (by an older guidebake,
+/// which split tiles modulo the shard count) and is refused.
+fn split_of(texels: &TexelFile, shards: &[ShardWork]) -> Result<Split, BakeError> {
+    let split = Split::new(
+        texels.tiles().iter().map(|t| t.texel_count),
+        shards.len() as u32,
+    );
+    for (index, shard) in shards.iter().enumerate() {
+        if let Some(r) = shard.records.iter().find(|r| split.owner(r.tile) != index) {
+            return Err(BakeError::Mismatch(format!(
+                "{}: shard {index} of {} holds tile {}, which shard {} owns: the work directory \
+                 was split another way (by an older guidebake?); bake this shard again",
+                shard.dir.display(),
+                shards.len(),
+                r.tile,
+                split.owner(r.tile),
+            )));
+        }
+    }
+    Ok(split)
+}
+
 /// `guidebake merge --pass B` before the last pass: gathers pass `pass` of every shard
 /// (together they must cover every tile once) into one result file, [`merged_results`] of
 /// `out`, which the shards of pass `pass + 1` read. Each tile's records are copied from the
@@ -732,6 +762,7 @@ pub fn merge_pass(
         ))));
     }
     every_tile(texels, &shards)?;
+    let split = split_of(texels, &shards)?;
     let path = merged_results(out, pass);
     let dir = merged_dir(out);
     std::fs::create_dir_all(&dir)
@@ -742,7 +773,7 @@ pub fn merge_pass(
         let mut buffer = Vec::new();
         for (t, tile) in texels.tiles().iter().enumerate() {
             buffer.resize(tile.texel_count as usize, TexelResult::default());
-            shards[t % shards.len()]
+            shards[split.owner(t as u32)]
                 .results
                 .read(tile.first_texel, &mut buffer)?;
             merged.write(tile.first_texel, &buffer)?;
@@ -814,6 +845,7 @@ impl GlobalWeights {
 fn global_weights(
     texels: &TexelFile,
     shards: &[ShardWork],
+    split: &Split,
     files: &[BatchFile],
 ) -> Result<GlobalWeights, BakeError> {
     let k = shards[0].manifest.iterations as usize;
@@ -828,10 +860,9 @@ fn global_weights(
         for (t, tile) in texels.tiles().iter().enumerate() {
             results.resize(tile.texel_count as usize, TexelResult::default());
             batches.resize(tile.texel_count as usize * k, Welford::new());
-            shards[t % shards.len()]
-                .results
-                .read(tile.first_texel, &mut results)?;
-            files[t % files.len()].read(tile.first_texel, &mut batches)?;
+            let owner = split.owner(t as u32);
+            shards[owner].results.read(tile.first_texel, &mut results)?;
+            files[owner].read(tile.first_texel, &mut batches)?;
             for (i, r) in results.iter().enumerate() {
                 let texel = &batches[i * k..(i + 1) * k];
                 if r.flags & FLAG_BAKED == 0 {

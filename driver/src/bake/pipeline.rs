@@ -336,7 +336,11 @@ mod tests {
             let (mut journal, _, done) =
                 Journal::open(&self.dir.path().join("j"), true, None).unwrap();
             let done: HashSet<u32> = done.iter().map(|r| r.tile).collect();
-            let tiles = tiles_to_bake(TILES, shard, &done);
+            let tiles = tiles_to_bake(
+                std::iter::repeat_n(TILE_TEXELS as u32, TILES as usize),
+                shard,
+                &done,
+            );
             let cancel = AtomicBool::new(false);
             let mut seen = 0;
             let config = PipelineConfig {

@@ -371,9 +371,14 @@ fn not_merged_hint(e: BakeError, source: &Path, pass: u32) -> BakeError {
     )
 }
 
+/// Every tile's texel count, in file order: what [`tiles_to_bake`] splits the world by.
+fn texel_counts(texels: &TexelFile) -> impl Iterator<Item = u32> + Clone + '_ {
+    texels.tiles().iter().map(|t| t.texel_count)
+}
+
 /// Texels in the tiles of `shard`.
 fn shard_texels(texels: &TexelFile, shard: Shard) -> u64 {
-    tiles_to_bake(texels.tiles().len() as u32, shard, &HashSet::new())
+    tiles_to_bake(texel_counts(texels), shard, &HashSet::new())
         .iter()
         .map(|&t| u64::from(texels.tiles()[t as usize].texel_count))
         .sum()
@@ -435,7 +440,7 @@ fn bake_pass(
         })
         .transpose()?;
     let todo = tiles_to_bake(
-        tile_count,
+        texel_counts(texels),
         job.shard,
         &done.iter().map(|r| r.tile).collect::<HashSet<u32>>(),
     );
