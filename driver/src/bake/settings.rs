@@ -38,8 +38,9 @@ pub enum Combine {
     /// squared means). The guide's quality is a property of the cluster, which 64 texels'
     /// samples estimate far better than one texel's; a firefly still lowers its own
     /// iteration's weight, so use it with ρ. The default since session 8: level with
-    /// `global` by RMSE at equal CPU time and ahead by relative MSE on every converted scene
-    /// (docs/estimator.md, "The default since session 8"), and it needs no batch file.
+    /// `global` by RMSE at equal CPU time, ahead by relative MSE on four of the six runs and
+    /// level on the other two (docs/estimator.md, "The default since session 8"), and it
+    /// needs no batch file.
     Cluster,
 }
 
