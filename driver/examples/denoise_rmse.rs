@@ -261,8 +261,8 @@ fn seam_jumps(
 /// Bakes every series pass of `job`, merging between passes, and returns the work directory
 /// of the last pass, kept for any number of finishes.
 fn bake_passes(job: &BakeJob, scene: &Scene, file: &TexelFile) -> Result<PathBuf, Error> {
-    let passes = job.settings.passes();
-    for pass in 1..=passes {
+    let passes = job.settings.last_pass();
+    for pass in job.settings.first_pass()..=passes {
         bake_pass_with_progress(job, Some(pass), scene, &AtomicBool::new(false), &mut |_| {})?;
         if pass < passes {
             merge_pass(file, &[work_dir(&job.out, job.shard)], &job.out, pass)?;

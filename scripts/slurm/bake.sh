@@ -7,16 +7,17 @@
 # e.g. scripts/slurm/bake.sh city.texels city.toml city.exr 16 --spp 256 --bounces 3
 #
 # Every node must see TEXELS, SCENE and OUT's directory at the same paths (a shared file
-# system), and `guidebake` on its PATH (or set GUIDEBAKE=/path/to/guidebake). The chain for
-# B passes is
-#     pass 1: array 0..N-1 of `bake --pass 1 --shard I/N --resume`  -> `merge --pass 1`
-#     pass 2: array of `bake --pass 2 ...` (afterok: merge 1)       -> `merge --pass 2`
+# system), and `guidebake` on its PATH (or set GUIDEBAKE=/path/to/guidebake). The chain of
+# a series bake of B bounces is
+#     pass 0: array 0..N-1 of `bake --pass 0 --shard I/N --resume`  -> `merge --pass 0`
+#     pass 1: array of `bake --pass 1 ...` (afterok: merge 0)       -> `merge --pass 1`
 #     ...                                                            -> `merge --pass B`: OUT.exr
+# (pass 0 is the direct light alone, docs/bake.md).
 # A shard whose bake dies (killed, out of memory, node lost) is run again with --resume by
 # its job script (GUIDEBAKE_ATTEMPTS times, default 3) and requeued by Slurm on node
 # failure (--requeue); tiles already committed are not baked again, and the lightmap is the
-# same bytes as one `guidebake bake` with the same options. B is 1 for `--transport path`,
-# else --bounces (default 3).
+# same bytes as one `guidebake bake` with the same options. `--transport path` has the one
+# pass 1; series passes 0..B, B = --bounces (default 3).
 #
 # Environment: GUIDEBAKE (the binary), GUIDEBAKE_CPUS (cores per shard, default 1; the
 # shard's --threads), GUIDEBAKE_ATTEMPTS, GUIDEBAKE_SLURM_WAIT=1 (block until the final
@@ -56,13 +57,14 @@ for ((i = 0; i < ${#bake_args[@]}; i++)); do
         --transport=*) transport=${bake_args[i]#*=} ;;
     esac
 done
-[[ $transport == series ]] || passes=1
+first=0
+[[ $transport == series ]] || { first=1; passes=1; }
 
 logs="$(dirname "$out")/$(basename "$out").slurm"
 mkdir -p "$logs"
 name=$(basename "$out" .exr)
 previous=()
-for ((pass = 1; pass <= passes; pass++)); do
+for ((pass = first; pass <= passes; pass++)); do
     array=$(sbatch --parsable --requeue "${previous[@]}" \
         --job-name="$name-bake-$pass" --array="0-$((shards - 1))" --cpus-per-task="$cpus" \
         --output="$logs/bake-$pass-%a.log" \

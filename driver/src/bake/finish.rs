@@ -752,15 +752,20 @@ pub fn merge_pass(
     out: &Path,
     pass: u32,
 ) -> Result<PathBuf, BakeError> {
-    let shards = open_shards(texels, dirs, Some(pass.max(1)))?;
-    let first = &shards[0].manifest;
-    if pass == 0 || pass >= first.passes {
-        return Err(BakeError::Settings(SettingsError::new(format!(
-            "merge --pass {pass}: the bake has passes 1..={}; passes before the last are merged \
-             into a result file, the last into pages by `merge` with --pass {} or without --pass",
-            first.passes, first.passes
-        ))));
+    // The pass is checked against the first shard's manifest before any pass file is opened.
+    if let Some(dir) = dirs.first() {
+        let m = read_manifest(&dir.join("manifest.json"))?;
+        if pass < m.first_pass || pass >= m.passes {
+            return Err(BakeError::Settings(SettingsError::new(format!(
+                "merge --pass {pass}: the bake has passes {}..={}; passes before the last are \
+                 merged into a result file, the last into pages by `merge` with --pass {} or \
+                 without --pass",
+                m.first_pass, m.passes, m.passes
+            ))));
+        }
     }
+    let shards = open_shards(texels, dirs, Some(pass))?;
+    let first = &shards[0].manifest;
     every_tile(texels, &shards)?;
     let split = split_of(texels, &shards)?;
     let path = merged_results(out, pass);

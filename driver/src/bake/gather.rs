@@ -152,6 +152,8 @@ pub struct TileBaker<'w> {
     /// bake keeps directional coefficients ([`Self::keep_directional`]).
     sh: Vec<ShSums>,
     keep_directional: bool,
+    /// Series transport's direct pass ([`Self::direct_only`]).
+    direct_only: bool,
     valid: Vec<u32>,
     positions: Vec<[f32; 3]>,
     normals: Vec<[f32; 3]>,
@@ -215,6 +217,7 @@ impl<'w> TileBaker<'w> {
             gathered: Vec::new(),
             sh: Vec::new(),
             keep_directional: false,
+            direct_only: false,
             valid: Vec::new(),
             positions: Vec::new(),
             normals: Vec::new(),
@@ -229,6 +232,15 @@ impl<'w> TileBaker<'w> {
     /// sh-l1`, the last pass: earlier series passes feed only the irradiance forward).
     pub fn keep_directional(mut self, keep: bool) -> Self {
         self.keep_directional = keep && self.settings.directional == Directional::ShL1;
+        self
+    }
+
+    /// Bakes each texel's direct light alone (series transport's
+    /// [`DIRECT_PASS`](super::settings::DIRECT_PASS)): next-event estimation with the
+    /// iterations' sample counts, no gather rays, no clusters, no guide. Pass 1's gather hits
+    /// read it as the previous pass's total, where they would otherwise trace a shadow ray.
+    pub fn direct_only(mut self, direct_only: bool) -> Self {
+        self.direct_only = direct_only;
         self
     }
 
@@ -260,7 +272,9 @@ impl<'w> TileBaker<'w> {
                 .resize(texels.len() * per_texel, ShL1::default());
         }
         self.collect_valid(texels);
-        let clusters = if self.settings.guiding == Guiding::Grid {
+        let clusters = if self.direct_only {
+            0
+        } else if self.settings.guiding == Guiding::Grid {
             self.grid_squares(texels)
         } else {
             self.cluster()
@@ -283,6 +297,9 @@ impl<'w> TileBaker<'w> {
             let members: Vec<u32> =
                 self.permutation[range.start as usize..range.end as usize].to_vec();
             self.bake_cluster(&members, texels, first_texel);
+        }
+        if self.direct_only {
+            self.bake_direct(texels, first_texel);
         }
         let record = self.finish_tile(tile, out);
         let rays = self.counters.rays() - rays_before;
@@ -447,6 +464,25 @@ impl<'w> TileBaker<'w> {
         }
     }
 
+    /// The direct pass over the tile's valid texels ([`Self::direct_only`]): each iteration's
+    /// samples are next-event estimates alone, in the batch a gather's would fill.
+    fn bake_direct(&mut self, texels: &[TexelRecord], first_texel: u64) {
+        let iterations = self.settings.iterations;
+        for (m, &i) in self.valid.iter().enumerate() {
+            let record = &texels[i as usize];
+            let frame = cluster_frame(std::iter::once(Vec3::from(record.normal)));
+            let t = gather_texel(record, first_texel + u64::from(i), frame);
+            for k in 0..iterations {
+                let batch = &mut self.batches[m * iterations as usize + k as usize];
+                IterationCtx::new(self.world, &self.settings, k, None).direct_alone(
+                    &t,
+                    batch,
+                    &mut self.counters,
+                );
+            }
+        }
+    }
+
     /// Combines every valid texel's iterations and fills the tile's results and ρ sums.
     fn finish_tile(&mut self, tile: u32, out: &mut TileBuffer) -> TileRecord {
         let k = self.settings.iterations as usize;
@@ -470,7 +506,7 @@ impl<'w> TileBaker<'w> {
                 }
             };
             let mut flags = FLAG_BAKED | FLAG_VALID;
-            if self.unguided[m] && self.settings.guiding != Guiding::Off {
+            if self.unguided[m] && self.settings.guiding != Guiding::Off && !self.direct_only {
                 flags |= FLAG_UNGUIDED;
             }
             let (rgb, samples, rejected) = match combined {
@@ -920,7 +956,7 @@ impl<'a> IterationCtx<'a> {
             let samples: [u32; LANES] = core::array::from_fn(|i| chunk[i] + first);
             let mut direct_sh = [ShSample::default(); LANES];
             let sh = sinks.sh.is_some().then_some(&mut direct_sh);
-            let direct = self.direct8(t, origin, &samples, &light_u, sh, counters);
+            let direct = self.direct8(t, origin, &samples, &light_u, sh, true, counters);
             for lane in 0..LANES {
                 let hit = (hprim[lane] != NO_HIT).then(|| SurfaceHit {
                     prim: hprim[lane],
@@ -997,7 +1033,7 @@ impl<'a> IterationCtx<'a> {
             let indices: [u32; LANES] = core::array::from_fn(|lane| j * LANES as u32 + lane as u32);
             let mut direct_sh = [ShSample::default(); LANES];
             let sh = sinks.sh.is_some().then_some(&mut direct_sh);
-            let direct = self.direct8(t, origin, &indices, &light_u, sh, counters);
+            let direct = self.direct8(t, origin, &indices, &light_u, sh, true, counters);
             for lane in 0..LANES {
                 let (l, w, q) = samples[lane];
                 let direct = (direct[lane], &direct_sh[lane]);
@@ -1006,9 +1042,29 @@ impl<'a> IterationCtx<'a> {
         }
     }
 
+    /// The direct pass's samples of this iteration at texel `t` into `batch`: next-event
+    /// estimates alone, weighing 1 (no gather ray leaves the texel to weigh them against), from
+    /// the origins and light samples the gather's packet `j` would use, sample `i` of the
+    /// iteration taking the light sample of Sobol point `i`.
+    fn direct_alone(&self, t: &GatherTexel, batch: &mut Welford, counters: &mut GatherCounters) {
+        let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
+        for j in 0..self.packets {
+            let samples: [u32; LANES] = core::array::from_fn(|lane| j * LANES as u32 + lane as u32);
+            let lu = rotate_x8(sobol_2d_x8(u32x8::new(samples)), light_rot);
+            let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
+            let light_u: [[f32; 2]; LANES] = core::array::from_fn(|i| [lx[i], ly[i]]);
+            let origin = self.origin(t, j);
+            let direct = self.direct8(t, origin, &samples, &light_u, None, false, counters);
+            for d in direct {
+                batch.push(d.to_array());
+            }
+        }
+    }
+
     /// Next-event estimation at the texel for one packet's eight samples (shared origin,
-    /// sample indices `samples`), weighted against the gather's own density by MIS, counting
-    /// the shadow rays.
+    /// sample indices `samples`), weighted against the gather's own density by MIS when `mis`
+    /// (else weighing 1), counting the shadow rays.
+    #[allow(clippy::too_many_arguments)]
     fn direct8(
         &self,
         t: &GatherTexel,
@@ -1016,6 +1072,7 @@ impl<'a> IterationCtx<'a> {
         samples: &[u32],
         light_u: &[[f32; 2]; LANES],
         sh: Option<&mut [ShSample; LANES]>,
+        mis: bool,
         counters: &mut GatherCounters,
     ) -> [Vec3; LANES] {
         let mut direct = [Vec3::ZERO; LANES];
@@ -1030,7 +1087,7 @@ impl<'a> IterationCtx<'a> {
         let at = Receiver8 {
             point: origin,
             normal: t.normal,
-            other: Some(&gather_pdf8),
+            other: mis.then_some(&gather_pdf8 as _),
         };
         let rays = self
             .world
@@ -1258,7 +1315,14 @@ mod tests {
         settings: BakeSettings,
         texels: &[TexelRecord],
     ) -> (Vec3, Vec3, GatherCounters) {
-        let mut baker = TileBaker::new(world, settings);
+        bake_mean_of(TileBaker::new(world, settings), texels)
+    }
+
+    /// [`bake_mean`] of a given baker.
+    fn bake_mean_of(
+        mut baker: TileBaker<'_>,
+        texels: &[TexelRecord],
+    ) -> (Vec3, Vec3, GatherCounters) {
         let mut out = TileBuffer::default();
         let baked = baker.bake_tile(0, 1000, texels, &mut out);
         let out = out.results;
@@ -1342,6 +1406,39 @@ mod tests {
                 counters.iterations_unguided_no_energy > 0 || mode == Guiding::Off,
                 "{mode}: {counters:?}"
             );
+        }
+    }
+
+    /// Series transport's direct pass: next-event estimation alone, no gather ray. Under a
+    /// sun and a sky it bakes the sun's cosine law without the sky (which only gather rays
+    /// find); inside a closed emissive box, π Le from the emitters sampled as lights (weighing
+    /// 1: there is no gather to weigh them against) — in every guiding mode.
+    #[test]
+    fn the_direct_pass_bakes_the_direct_light_alone() {
+        let to_sun = Vec3::new(0.3, 0.1, 1.0).normalize();
+        let sun = Sun {
+            direction: to_sun,
+            angular_radius: 0.05,
+            irradiance: Vec3::new(3.0, 2.0, 1.0),
+        };
+        let open = world(
+            ground(),
+            grey(0.5, 0.0),
+            Vec3::splat(0.2),
+            Some(sun.clone()),
+        );
+        let le = 1.5;
+        let boxed = world(inward_cube(0), grey(0.5, le), Vec3::splat(100.0), None);
+        for mode in MODES {
+            let direct = |world| TileBaker::new(world, settings(mode)).direct_only(true);
+            let (mean, se, counters) = bake_mean_of(direct(&open), &texels_on_plane(64, 0.0));
+            assert_within_3_sigma(&format!("{mode}"), (mean, se), sun.irradiance * to_sun.z);
+            assert_eq!(counters.gather_rays, 0, "{mode}");
+            assert_eq!(counters.shadow_rays, 64 * 128, "{mode}: one per sample");
+            assert_eq!(counters.clusters, 0, "{mode}: nothing to learn");
+            let (mean, se, _) = bake_mean_of(direct(&boxed), &texels_on_plane(32, -0.999));
+            let want = Vec3::splat(le * core::f32::consts::PI);
+            assert_within_3_sigma(&format!("{mode}, box"), (mean, se), want);
         }
     }
 

@@ -29,7 +29,7 @@ use super::directional::Directional;
 use super::finish::{FinishOptions, finish_with};
 use super::gather::{GatherCounters, TileBaker};
 use super::pipeline::{self, PipelineConfig, PipelineError, TileBuffer, TileFiles};
-use super::settings::{BakeSettings, Combine, SettingsError};
+use super::settings::{BakeSettings, Combine, DIRECT_PASS, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::workdir::{
     Manifest, merged_results, open_batches, open_directional, open_pass, open_work, pass_files,
@@ -75,7 +75,8 @@ pub struct BakeReport {
     pub tiles_resumed: usize,
     /// Whether Ctrl-C cut the run short (the work directory is kept for `--resume`).
     pub interrupted: bool,
-    /// Passes over the world (series transport: one per bounce).
+    /// Passes over the world this run made (series transport: the direct pass and one per
+    /// bounce).
     pub passes: u32,
     /// What the gather counted over every pass: rays by kind, texels, clusters, skips.
     pub counters: GatherCounters,
@@ -240,7 +241,7 @@ pub fn bake_pass_with_progress(
     let clock = Instant::now();
     let texels = TexelFile::open(&job.texels)?;
     report.seconds.open_texels = clock.elapsed().as_secs_f64();
-    check_scene_matches(&texels, scene, job.settings.passes() > 1)?;
+    check_scene_matches(&texels, scene, job.settings.pass_count() > 1)?;
 
     let clock = Instant::now();
     let mut world = World::new(scene, run_preset(job, &texels, scene, &run_passes))?;
@@ -251,7 +252,7 @@ pub fn bake_pass_with_progress(
     report.emitters = world.emitters().map_or(0, |e| e.len());
     report.texture_bytes = scene.texture_bytes();
 
-    let passes = job.settings.passes();
+    let passes = job.settings.last_pass();
     let bake_id = job.settings.bake_id(texel_file_id(&texels));
     let dir = work_dir(&job.out, job.shard);
     let manifest = Manifest {
@@ -262,6 +263,7 @@ pub fn bake_pass_with_progress(
         bias_correction: job.settings.bias_correction,
         aux: job.aux,
         passes,
+        first_pass: job.settings.first_pass(),
         combine_global: job.settings.combine == Combine::Global,
         iterations: job.settings.iterations,
         directional: job.settings.directional == Directional::ShL1,
@@ -275,7 +277,7 @@ pub fn bake_pass_with_progress(
     };
     let clock = Instant::now();
     for pass in run_passes.clone() {
-        if pass > 1 {
+        if pass > job.settings.first_pass() {
             // A one-pass run reads the merged previous pass; a run of every pass its own.
             let source = match only_pass {
                 Some(_) => merged_results(&job.out, pass - 1),
@@ -284,7 +286,9 @@ pub fn bake_pass_with_progress(
             // The image of pass b − 2 goes first: memory holds one pass image, never two (each
             // is rebuilt from its result file, so a resumed run needs none of them).
             world.set_previous_pass(None);
-            let _ = std::fs::remove_file(pass_image(&dir, pass - 2));
+            if let Some(older) = pass.checked_sub(2) {
+                let _ = std::fs::remove_file(pass_image(&dir, older));
+            }
             let image = pass_image(&dir, pass - 1);
             let previous = previous_pass(&texels, scene, &source, &image, bake_id, &mut report)
                 .map_err(|e| not_merged_hint(e, &source, pass - 1))?;
@@ -337,23 +341,25 @@ fn passes_to_run(
     job: &BakeJob,
     only_pass: Option<u32>,
 ) -> Result<std::ops::RangeInclusive<u32>, BakeError> {
-    let passes = job.settings.passes();
+    let (first, passes) = (job.settings.first_pass(), job.settings.last_pass());
     match only_pass {
-        Some(b) if b == 0 || b > passes => Err(BakeError::Settings(SettingsError::new(format!(
-            "--pass {b}: this bake has passes 1..={passes} (--transport series makes one pass \
-             per bounce, other transports one pass)"
-        )))),
+        Some(b) if b < first || b > passes => {
+            Err(BakeError::Settings(SettingsError::new(format!(
+                "--pass {b}: this bake has passes {first}..={passes} (--transport series makes pass \
+             0 of the direct light and one pass per bounce, other transports one pass)"
+            ))))
+        }
         Some(b) => Ok(b..=b),
-        None if job.shard.count > 1 && passes > 1 => {
+        None if job.shard.count > 1 && passes > first => {
             Err(BakeError::Settings(SettingsError::new(format!(
                 "--shard {}/{} with --transport series --bounces {passes}: each series pass needs \
                  the whole previous pass, so shard the passes one by one: `bake --pass B --shard \
-                 {}/{}` for B = 1..={passes}, each pass followed by `merge --pass B` over its \
-                 shards (docs/farm.md)",
+                 {}/{}` for B = {first}..={passes}, each pass followed by `merge --pass B` over \
+                 its shards (docs/farm.md)",
                 job.shard.index, job.shard.count, job.shard.index, job.shard.count
             ))))
         }
-        None => Ok(1..=passes),
+        None => Ok(first..=passes),
     }
 }
 
@@ -409,7 +415,8 @@ fn bake_pass(
     let (results, mut journal, done) =
         open_pass(dir, pass, bake_id, texels.header().texel_count, tile_count)?;
     // Global weights combine the last pass's batches once the whole world is baked.
-    let batches = (job.settings.combine == Combine::Global && pass == job.settings.passes())
+    let last = pass == job.settings.last_pass();
+    let batches = (job.settings.combine == Combine::Global && last)
         .then(|| {
             open_batches(
                 dir,
@@ -422,7 +429,6 @@ fn bake_pass(
         .transpose()?;
     // So do the directional coefficients, when kept (one per texel, or the K iterations'
     // means for global weights).
-    let last = pass == job.settings.passes();
     let directional = (job.settings.directional == Directional::ShL1 && last)
         .then(|| {
             let per_texel = if job.settings.combine == Combine::Global {
@@ -457,7 +463,9 @@ fn bake_pass(
         commit_every: 64,
     };
     let make_worker = || CountedBaker {
-        baker: TileBaker::new(world, job.settings).keep_directional(last),
+        baker: TileBaker::new(world, job.settings)
+            .keep_directional(last)
+            .direct_only(pass == DIRECT_PASS),
         sink: &counters,
     };
     let bake_tile = |w: &mut CountedBaker<'_, '_>, tile: u32, out: &mut TileBuffer| {

@@ -64,13 +64,24 @@ pub enum Schedule {
     Doubling,
 }
 
+/// The series transport's pass 0: each texel's direct light alone, by next-event estimation
+/// (no gather rays), which pass 1's gather hits read as the previous pass's total instead of
+/// tracing a shadow ray each (docs/bake.md, "The direct pass").
+pub const DIRECT_PASS: u32 = 0;
+
+/// The work directory's layout and the passes' meaning; a new value makes older work
+/// directories another bake ([`BakeSettings::bake_id`]). 2: series bakes start with
+/// [`DIRECT_PASS`].
+const BAKE_FORMAT: u32 = 2;
+
 /// How the radiance a gather ray brings back from its hit is computed (docs/bake.md, light
 /// transport).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum Transport {
     /// The paper's production setting: pass b gathers, at each hit, emission + albedo/π ×
     /// (direct light connected explicitly + the indirect irradiance of pass b−1 looked up in
-    /// the previous pass's lightmap). `--bounces B` passes stream the world B times.
+    /// the previous pass's lightmap). Pass 0 ([`DIRECT_PASS`]) bakes the direct light alone, then
+    /// `--bounces B` gather passes stream the world.
     Series,
     /// Unidirectional path tracing from the gather hit, next-event estimation at every
     /// vertex and Russian roulette: the unbiased reference, one pass.
@@ -214,12 +225,27 @@ impl BakeSettings {
         Ok(())
     }
 
-    /// Passes over the world: `bounces` for series transport, one for path tracing.
-    pub fn passes(&self) -> u32 {
+    /// The bake's first pass: [`DIRECT_PASS`] for series transport, which starts with the
+    /// direct light alone, else 1. A bake runs passes `first_pass()..=last_pass()`.
+    pub fn first_pass(&self) -> u32 {
+        match self.transport {
+            Transport::Series => DIRECT_PASS,
+            Transport::Path => 1,
+        }
+    }
+
+    /// The bake's last pass, the lightmap: `bounces` for series transport (pass b carries
+    /// light through b reflections), 1 for path tracing.
+    pub fn last_pass(&self) -> u32 {
         match self.transport {
             Transport::Series => self.bounces,
             Transport::Path => 1,
         }
+    }
+
+    /// How many passes stream the world: [`Self::first_pass`]`..=`[`Self::last_pass`].
+    pub fn pass_count(&self) -> u32 {
+        self.last_pass() + 1 - self.first_pass()
     }
 
     /// Gather rays per texel in iteration `k`, in whole packets of 8.
@@ -258,9 +284,10 @@ impl BakeSettings {
         (packets * self.mix + 50) / 100
     }
 
-    /// Identity of a bake of `texel_file_id` with these settings.
+    /// Identity of a bake of `texel_file_id` with these settings (and [`BAKE_FORMAT`]: work
+    /// left by a bake of another layout is not resumed).
     pub fn bake_id(&self, texel_file_id: u64) -> u64 {
-        fnv1a64(format!("{self:?} {texel_file_id:016x}").as_bytes())
+        fnv1a64(format!("{self:?} {texel_file_id:016x} format {BAKE_FORMAT}").as_bytes())
     }
 }
 

@@ -27,8 +27,12 @@ pub struct Manifest {
     pub bias_correction: bool,
     /// Whether auxiliary channels are written.
     pub aux: bool,
-    /// Passes over the world (series transport's bounces); the last one is the lightmap.
+    /// The last pass (series transport's bounces), the lightmap.
     pub passes: u32,
+    /// The first pass: 0 for series transport's direct pass, 1 for path tracing
+    /// ([`BakeSettings::first_pass`](super::settings::BakeSettings::first_pass)).
+    #[serde(default = "one")]
+    pub first_pass: u32,
     /// Whether the final pass combines the kept batches with global weights
     /// (`--combine global`).
     pub combine_global: bool,
@@ -40,6 +44,11 @@ pub struct Manifest {
     pub directional: bool,
     /// The settings, for people.
     pub settings: String,
+}
+
+/// Manifests written before series bakes had a direct pass began at pass 1.
+fn one() -> u32 {
+    1
 }
 
 /// The work directory of `out` for `shard`.
@@ -200,13 +209,13 @@ pub(super) fn open_directional(
     )?)
 }
 
-/// The previous-pass image built from pass `pass` (1-based) for the next pass's gathers
+/// The previous-pass image built from pass `pass` for the next pass's gathers
 /// ([`crate::transport::series::PreviousPass`]); disposable, rebuilt from the result file.
 pub(super) fn pass_image(dir: &Path, pass: u32) -> PathBuf {
     dir.join(format!("indirect.{pass}.bin"))
 }
 
-/// The result file and journal of pass `pass` (1-based) in a work directory.
+/// The result file and journal of pass `pass` in a work directory.
 pub(super) fn pass_files(dir: &Path, pass: u32) -> (PathBuf, PathBuf) {
     (
         dir.join(format!("results.{pass}.bin")),

@@ -1,10 +1,10 @@
 //! What leaves a gather ray's hit, by the bake's transport (docs/bake.md):
 //! the hit's emission, weighted by multiple importance sampling against the next-event
 //! estimate of the point the ray left ([`super::direct`]), plus its albedo/π times the
-//! irradiance arriving there: under `series` ([`super::series`]), from pass 2 on, the
-//! previous pass's total irradiance where the hit is on the side its texels bake and not
-//! within `NEAR_FIELD_TEXELS` of its texels of the ray's origin, else direct light by next-event
-//! estimation plus the previous pass's gather-only irradiance;
+//! irradiance arriving there: under `series` ([`super::series`]), the previous pass's total
+//! irradiance (pass 1 reads the direct pass 0) where the hit is on the side its texels bake
+//! and not within `NEAR_FIELD_TEXELS` of its texels of the ray's origin, else direct light by
+//! next-event estimation plus the previous pass's gather-only irradiance;
 //! under `path`, direct light by next-event estimation plus a path continued with
 //! cosine-weighted directions, next-event estimation and MIS at every vertex, and Russian
 //! roulette from the third vertex. A ray that leaves the scene sees the sky.
@@ -226,7 +226,7 @@ mod tests {
         world.radiance_from_hit(&from, dir, hit, &mut SampleRng::new(1, 0, 0, 0))
     }
 
-    /// Series from pass 2: a far hit on the baked side reads the total (no shadow ray); a
+    /// Series from pass 1 (reading pass 0 or a later one): a far hit on the baked side reads the total (no shadow ray); a
     /// near one, within [`NEAR_FIELD_TEXELS`] texels, and one on the other side connect the
     /// sun and read the gather-only layer.
     #[test]

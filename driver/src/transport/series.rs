@@ -1,7 +1,9 @@
 //! Series transport's memory of the previous pass (docs/bake.md, the `series` transport; the
 //! paper's production setting, §1 and §3): pass b's gather rays, where they hit a surface,
 //! bring back albedo/π × the irradiance pass b−1 baked there, looked up in pass b−1's
-//! lightmap through the hit triangle's lightmap UVs.
+//! lightmap through the hit triangle's lightmap UVs. Pass 1 reads pass 0, the direct light
+//! alone ([`DIRECT_PASS`](crate::bake::settings::DIRECT_PASS)), so no gather pass traces a
+//! shadow ray at a far hit.
 //!
 //! Two layers are stored per texel, each the plain average over all iterations (every
 //! iteration's estimator is unbiased, so their plain average is too, and no ρ is needed):
