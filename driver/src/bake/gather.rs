@@ -154,6 +154,8 @@ pub struct TileBaker<'w> {
     keep_directional: bool,
     /// Series transport's direct pass ([`Self::direct_only`]).
     direct_only: bool,
+    /// Whether each sample includes the texel's next-event estimate ([`Self::texel_direct`]).
+    texel_direct: bool,
     valid: Vec<u32>,
     positions: Vec<[f32; 3]>,
     normals: Vec<[f32; 3]>,
@@ -218,6 +220,7 @@ impl<'w> TileBaker<'w> {
             sh: Vec::new(),
             keep_directional: false,
             direct_only: false,
+            texel_direct: true,
             valid: Vec::new(),
             positions: Vec::new(),
             normals: Vec::new(),
@@ -241,6 +244,15 @@ impl<'w> TileBaker<'w> {
     /// read it as the previous pass's total, where they would otherwise trace a shadow ray.
     pub fn direct_only(mut self, direct_only: bool) -> Self {
         self.direct_only = direct_only;
+        self
+    }
+
+    /// Whether the texels' samples include their own next-event estimate (the default). A
+    /// series pass that borrows the direct pass's
+    /// ([`BakeSettings::borrows_direct`](super::settings::BakeSettings::borrows_direct))
+    /// leaves it out: its samples are the gathered light alone, no shadow ray at the texel.
+    pub fn texel_direct(mut self, texel_direct: bool) -> Self {
+        self.texel_direct = texel_direct;
         self
     }
 
@@ -398,6 +410,7 @@ impl<'w> TileBaker<'w> {
             valid,
             unguided,
             counters,
+            texel_direct,
             ..
         } = self;
         counters.clusters += 1;
@@ -439,7 +452,10 @@ impl<'w> TileBaker<'w> {
                     sh: sh.get_mut(at),
                     records,
                 };
-                let ctx = IterationCtx::new(world, settings, k, learned);
+                let ctx = IterationCtx {
+                    texel_direct: *texel_direct,
+                    ..IterationCtx::new(world, settings, k, learned)
+                };
                 match settings.guiding {
                     Guiding::Naive => ctx.gather_naive(&t, &mut sinks, counters),
                     Guiding::Off | Guiding::Coherent | Guiding::Grid => {
@@ -743,6 +759,8 @@ struct IterationCtx<'a> {
     /// guide is sampled (the defensive mixture; 0 without a guide).
     packets: u32,
     cosine_packets: u32,
+    /// Whether samples include the texel's next-event estimate ([`TileBaker::texel_direct`]).
+    texel_direct: bool,
 }
 
 impl<'a> IterationCtx<'a> {
@@ -765,6 +783,7 @@ impl<'a> IterationCtx<'a> {
             guide,
             packets,
             cosine_packets,
+            texel_direct: true,
         }
     }
 
@@ -1076,7 +1095,7 @@ impl<'a> IterationCtx<'a> {
         counters: &mut GatherCounters,
     ) -> [Vec3; LANES] {
         let mut direct = [Vec3::ZERO; LANES];
-        if !self.world.has_direct_light() {
+        if !self.world.has_direct_light() || !self.texel_direct {
             return direct;
         }
         let pick: [f32; LANES] = core::array::from_fn(|lane| {
@@ -1202,7 +1221,13 @@ impl<'a> IterationCtx<'a> {
         };
         sinks.gathered.push((indirect * scale).to_array());
         let radiance = l.emitted + l.reflected;
-        let sample = radiance * scale + direct;
+        // Without the texel's next-event estimate, the emission its rays hit (weighted
+        // against it) is left out too: the sample is the gathered light alone.
+        let sample = if self.texel_direct {
+            radiance * scale + direct
+        } else {
+            indirect * scale
+        };
         sinks.batch.push(sample.to_array());
         if let Some(sh) = sinks.sh.as_deref_mut()
             && sample.is_finite()

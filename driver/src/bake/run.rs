@@ -279,10 +279,16 @@ pub fn bake_pass_with_progress(
     for pass in run_passes.clone() {
         if pass > job.settings.first_pass() {
             // A one-pass run reads the merged previous pass; a run of every pass its own.
-            let source = match only_pass {
-                Some(_) => merged_results(&job.out, pass - 1),
-                None => pass_files(&dir, pass - 1).0,
+            let results_of = |b: u32| match only_pass {
+                Some(_) => merged_results(&job.out, b),
+                None => pass_files(&dir, b).0,
             };
+            let source = results_of(pass - 1);
+            // A pass that borrowed the direct pass's light gets it back in its image.
+            let direct = job
+                .settings
+                .borrows_direct(pass - 1)
+                .then(|| results_of(DIRECT_PASS));
             // The image of pass b − 2 goes first: memory holds one pass image, never two (each
             // is rebuilt from its result file, so a resumed run needs none of them).
             world.set_previous_pass(None);
@@ -290,7 +296,11 @@ pub fn bake_pass_with_progress(
                 let _ = std::fs::remove_file(pass_image(&dir, older));
             }
             let image = pass_image(&dir, pass - 1);
-            let previous = previous_pass(&texels, scene, &source, &image, bake_id, &mut report)
+            let sources = PassSources {
+                results: &source,
+                direct: direct.as_deref(),
+            };
+            let previous = previous_pass(&texels, scene, sources, &image, bake_id, &mut report)
                 .map_err(|e| not_merged_hint(e, &source, pass - 1))?;
             world.set_previous_pass(Some(previous));
         }
@@ -465,7 +475,8 @@ fn bake_pass(
     let make_worker = || CountedBaker {
         baker: TileBaker::new(world, job.settings)
             .keep_directional(last)
-            .direct_only(pass == DIRECT_PASS),
+            .direct_only(pass == DIRECT_PASS)
+            .texel_direct(!job.settings.borrows_direct(pass)),
         sink: &counters,
     };
     let bake_tile = |w: &mut CountedBaker<'_, '_>, tile: u32, out: &mut TileBuffer| {
@@ -505,33 +516,47 @@ fn bake_pass(
     })
 }
 
+/// The result files a previous-pass image is built from: the pass's, and the direct pass's
+/// when the pass borrowed its direct light ([`BakeSettings::borrows_direct`]).
+struct PassSources<'p> {
+    results: &'p Path,
+    direct: Option<&'p Path>,
+}
+
 /// Writes the image (at `image_path`) of the gather-only and total irradiance in a pass's
-/// result file `results_path`, and which side of each triangle its texels bake, and maps it
-/// for the next pass (series transport).
+/// result file (plus the direct pass's total, when the pass borrowed it), and which side of
+/// each triangle its texels bake, and maps it for the next pass (series transport).
 fn previous_pass(
     texels: &TexelFile,
     scene: &Scene,
-    results_path: &Path,
+    sources: PassSources<'_>,
     image_path: &Path,
     bake_id: u64,
     report: &mut BakeReport,
 ) -> Result<PreviousPass, BakeError> {
     let clock = Instant::now();
-    let (results, _) = ResultFile::open(
-        results_path,
-        false,
-        Some((texels.header().texel_count, bake_id)),
-    )?;
+    let open = |path: &Path| {
+        ResultFile::open(path, false, Some((texels.header().texel_count, bake_id)))
+            .map(|(results, _)| results)
+    };
+    let results = open(sources.results)?;
+    let direct = sources.direct.map(open).transpose()?;
     let mut image = PreviousPassWriter::create(image_path, texels.pages())
         .map_err(|e| file_error(&e.path, e.what))?;
-    let mut buffer = Vec::new();
+    let (mut buffer, mut direct_buffer) = (Vec::new(), Vec::new());
     for (t, tile) in texels.tiles().iter().enumerate() {
         buffer.resize(tile.texel_count as usize, TexelResult::default());
         results.read(tile.first_texel, &mut buffer)?;
-        for (texel, r) in texels.tile_texels(t).iter().zip(&buffer) {
+        direct_buffer.resize(tile.texel_count as usize, TexelResult::default());
+        if let Some(direct) = &direct {
+            direct.read(tile.first_texel, &mut direct_buffer)?;
+        }
+        let texel_results = texels.tile_texels(t).iter().zip(&buffer);
+        for ((texel, r), d) in texel_results.zip(&direct_buffer) {
             if r.flags & FLAG_BAKED != 0 {
                 let [x, y] = texel.pixel.map(u32::from);
-                image.set(texel.page, x, y, r.gathered, r.total);
+                let total = core::array::from_fn(|c| r.total[c] + d.total[c]);
+                image.set(texel.page, x, y, r.gathered, total);
                 if let Some(tri) = scene.triangles.get(texel.triangle as usize) {
                     let front = tri.geometric_normal().dot(texel.normal()) > 0.0;
                     image.set_side(texel.triangle, front);

@@ -243,6 +243,15 @@ impl BakeSettings {
         }
     }
 
+    /// Whether pass `pass`'s texels leave out their own next-event estimate: series passes
+    /// between the direct pass and the last, whose results only feed the next pass. Their
+    /// total is the direct pass's plus their gathered light (added when the next pass's image
+    /// is built), so their gathers trace no shadow ray at the texel; the last pass, the
+    /// lightmap, keeps its texels' next-event estimates weighted against its gather (MIS).
+    pub fn borrows_direct(&self, pass: u32) -> bool {
+        self.transport == Transport::Series && pass > DIRECT_PASS && pass < self.last_pass()
+    }
+
     /// How many passes stream the world: [`Self::first_pass`]`..=`[`Self::last_pass`].
     pub fn pass_count(&self) -> u32 {
         self.last_pass() + 1 - self.first_pass()

@@ -100,9 +100,14 @@ pub fn reference(
     settings: BakeSettings,
 ) -> Result<Reference, BenchError> {
     // The version changes with what a bake computes for the same settings (v3: series
-    // passes read the previous pass's total irradiance on the side its texels bake).
+    // passes read the previous pass's total irradiance on the side its texels bake; v4,
+    // series only — path references stay valid: pass 1 reads a direct pass 0).
+    let version = match settings.transport {
+        Transport::Series => 4,
+        Transport::Path => 3,
+    };
     let key = format!(
-        "guidebake bench reference v3; scene {:016x}; texels {:016x}; settings {settings:?}",
+        "guidebake bench reference v{version}; scene {:016x}; texels {:016x}; settings {settings:?}",
         scene_id(bench.scene),
         texel_file_id(bench.texels)
     );
