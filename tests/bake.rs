@@ -605,30 +605,83 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
     let dir = tempfile::tempdir().unwrap();
     let texels = dir.path().join("box.texels");
     let scene = emissive_box(&texels, albedo, le);
-    for (transport, bounces, guiding, emitters) in [
-        (Transport::Series, 1, Guiding::Off, EmitterSampling::Hits),
-        (Transport::Series, 4, Guiding::Off, EmitterSampling::Hits),
-        (Transport::Series, 1, Guiding::Off, EmitterSampling::Mis),
-        (Transport::Series, 4, Guiding::Off, EmitterSampling::Mis),
+    use guidebake::bake::settings::GuidedPasses::{Every, Last};
+    // (transport, bounces, guiding, emitters, which series passes are guided)
+    for (transport, bounces, guiding, emitters, guided_passes) in [
+        (
+            Transport::Series,
+            1,
+            Guiding::Off,
+            EmitterSampling::Hits,
+            Last,
+        ),
+        (
+            Transport::Series,
+            4,
+            Guiding::Off,
+            EmitterSampling::Hits,
+            Last,
+        ),
+        (
+            Transport::Series,
+            1,
+            Guiding::Off,
+            EmitterSampling::Mis,
+            Last,
+        ),
+        (
+            Transport::Series,
+            4,
+            Guiding::Off,
+            EmitterSampling::Mis,
+            Last,
+        ),
         (
             Transport::Series,
             4,
             Guiding::Coherent,
             EmitterSampling::Mis,
+            Last,
+        ),
+        (
+            Transport::Series,
+            4,
+            Guiding::Coherent,
+            EmitterSampling::Mis,
+            Every,
         ),
         (
             Transport::Series,
             3,
             Guiding::Coherent,
             EmitterSampling::Nee,
+            Last,
         ),
-        (Transport::Path, 4, Guiding::Coherent, EmitterSampling::Mis),
-        (Transport::Path, 4, Guiding::Off, EmitterSampling::Hits),
-        (Transport::Path, 64, Guiding::Off, EmitterSampling::Mis),
+        (
+            Transport::Path,
+            4,
+            Guiding::Coherent,
+            EmitterSampling::Mis,
+            Last,
+        ),
+        (
+            Transport::Path,
+            4,
+            Guiding::Off,
+            EmitterSampling::Hits,
+            Last,
+        ),
+        (
+            Transport::Path,
+            64,
+            Guiding::Off,
+            EmitterSampling::Mis,
+            Last,
+        ),
     ] {
-        let out = dir
-            .path()
-            .join(format!("{transport}-{bounces}-{guiding}-{emitters}.exr"));
+        let out = dir.path().join(format!(
+            "{transport}-{bounces}-{guiding}-{emitters}-{guided_passes:?}.exr"
+        ));
         let job = BakeJob {
             texels: texels.clone(),
             out: out.clone(),
@@ -639,6 +692,7 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
                 bounces,
                 guiding,
                 emitters,
+                guided_passes,
                 ..Default::default()
             },
             threads: 2,
@@ -659,8 +713,10 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
         };
         let want = closed_box_irradiance(le, albedo, reflections);
         let se = (var / n).sqrt();
-        let what =
-            format!("{transport} B={bounces} {guiding} {emitters}: {mean} ± {se}, want {want}");
+        let what = format!(
+            "{transport} B={bounces} {guiding} {emitters} {guided_passes:?}: {mean} ± {se}, \
+             want {want}"
+        );
         if transport == Transport::Series
             && guiding == Guiding::Off
             && emitters == EmitterSampling::Hits
@@ -693,6 +749,18 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
             Transport::Series => {
                 assert_eq!(report.passes, bounces + 1, "the direct pass and B bounces");
                 assert_eq!(report.counters.path_rays, 0);
+                // Every gather pass clusters its texels; only the guided ones learn.
+                let c = &report.counters;
+                let learned = c.iterations_guided
+                    + c.iterations_unguided_no_energy
+                    + c.iterations_unguided_uniform_guide;
+                let guided_passes = match (guiding, guided_passes) {
+                    (Guiding::Off, _) => 0,
+                    (_, Last) => 1,
+                    (_, Every) => u64::from(bounces),
+                };
+                let clusters_per_pass = c.clusters / u64::from(bounces);
+                assert_eq!(learned, clusters_per_pass * guided_passes, "{what}");
                 // From pass 1 on, hits inside the box read the previous pass's total.
                 let reads = report.counters.series_totals_read;
                 assert!(reads > 0, "{what}: {reads} totals read");

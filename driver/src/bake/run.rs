@@ -473,7 +473,7 @@ fn bake_pass(
         commit_every: 64,
     };
     let make_worker = || CountedBaker {
-        baker: TileBaker::new(world, job.settings)
+        baker: TileBaker::new(world, job.settings.for_pass(pass))
             .keep_directional(last)
             .direct_only(pass == DIRECT_PASS)
             .texel_direct(!job.settings.borrows_direct(pass)),

@@ -212,18 +212,20 @@ impl RunRecord {
             gather_rays: c.gather_rays,
             shadow_rays: c.shadow_rays,
             rays_per_s: r.rays_per_second,
-            guided_fraction: guided_fraction(r, settings.iterations),
+            guided_fraction: guided_fraction(r),
             rho_value: r.rho,
             error,
         }
     }
 }
 
-/// Guided cluster-iterations over all cluster-iterations after the first (which is always
-/// unguided): how much of the bake the guide actually steered (0 for `--guiding off`).
-fn guided_fraction(report: &BakeReport, iterations: u32) -> f64 {
+/// Guided cluster-iterations over the cluster-iterations that learned a guide (those after
+/// the first, in the passes that guide: `--guided-passes`): how much of the guided passes the
+/// guide actually steered (0 for `--guiding off`).
+fn guided_fraction(report: &BakeReport) -> f64 {
     let c = &report.counters;
-    let learnable = c.clusters * u64::from(iterations.saturating_sub(1));
+    let learnable =
+        c.iterations_guided + c.iterations_unguided_no_energy + c.iterations_unguided_uniform_guide;
     if learnable == 0 {
         0.0
     } else {
@@ -350,7 +352,7 @@ pub fn run_overhead(
                 wall_s: baked.wall_s,
                 gather_s: baked.report.seconds.gather,
                 rays: c.gather_rays + c.shadow_rays,
-                guided_fraction: guided_fraction(&baked.report, iterations),
+                guided_fraction: guided_fraction(&baked.report),
                 cpu_s: baked.cpu_s,
                 guide_build_s: c.guide_build_ns as f64 * 1e-9,
                 warp_s: c.warp_ns as f64 * 1e-9,

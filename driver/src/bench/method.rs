@@ -7,7 +7,7 @@
 
 use clap::ValueEnum;
 
-use crate::bake::settings::{BakeSettings, Combine, Guiding, Schedule, Transport};
+use crate::bake::settings::{BakeSettings, Combine, GuidedPasses, Guiding, Schedule, Transport};
 
 /// One way of baking: what the bake's `--guiding`, `--combine` and `--bias-correction` say,
 /// and the guiding levers (`--mix`, `--schedule`, `--min-split`, `--smooth`).
@@ -34,6 +34,8 @@ pub struct Levers {
     pub min_split: u32,
     /// `--smooth`.
     pub smooth: u32,
+    /// `--guided-passes`.
+    pub guided_passes: GuidedPasses,
 }
 
 impl Default for Levers {
@@ -44,6 +46,7 @@ impl Default for Levers {
             schedule: d.schedule,
             min_split: d.min_split,
             smooth: d.smooth,
+            guided_passes: d.guided_passes,
         }
     }
 }
@@ -57,6 +60,7 @@ impl Levers {
             schedule: Schedule::Even,
             min_split: 4,
             smooth: 25,
+            guided_passes: GuidedPasses::Every,
         }
     }
 
@@ -75,6 +79,9 @@ impl Levers {
         }
         if self.smooth != d.smooth {
             s += &format!("+smooth={}", self.smooth);
+        }
+        if self.guided_passes != d.guided_passes {
+            s += &format!("+passes={}", value_name(&self.guided_passes));
         }
         s
     }
@@ -139,7 +146,7 @@ impl Method {
     }
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
-    /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`); the
+    /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -179,6 +186,10 @@ impl Method {
                 "schedule" => {
                     levers.schedule =
                         Schedule::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
+                }
+                "passes" => {
+                    levers.guided_passes = GuidedPasses::from_str(value, true)
+                        .map_err(|e| format!("{label:?}: {e}"))?;
                 }
                 _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
             }
@@ -235,6 +246,7 @@ impl Method {
             schedule: self.levers.schedule,
             min_split: self.levers.min_split,
             smooth: self.levers.smooth,
+            guided_passes: self.levers.guided_passes,
             ..Default::default()
         }
     }
@@ -281,6 +293,10 @@ mod tests {
         let m = Method::parse("naive/cluster/-+mix=25+split=16").unwrap();
         assert_eq!((m.levers.mix, m.levers.min_split), (25, 16));
         assert_eq!(Method::parse(&m.label()), Ok(m));
+        let m = Method::parse("coherent/cluster/rho+passes=every").unwrap();
+        assert_eq!(m.levers.guided_passes, GuidedPasses::Every);
+        assert_eq!(m.label(), "coherent/cluster/rho+passes=every");
+        assert!(Method::parse("coherent/cluster/rho+passes=some").is_err());
         assert!(Method::parse("coherent/texel").is_err());
         assert!(Method::parse("coherent/texel/rho+nope=1").is_err());
     }

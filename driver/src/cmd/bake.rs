@@ -8,7 +8,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use crate::bake::directional::Directional;
 use crate::bake::finish::{Denoise, FinishOptions, Seams};
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress};
-use crate::bake::settings::{BakeSettings, Combine, EmitterSampling, Guiding, Schedule, Transport};
+use crate::bake::settings::{
+    BakeSettings, Combine, EmitterSampling, GuidedPasses, Guiding, Schedule, Transport,
+};
 use crate::bake::shard::Shard;
 use crate::bake::workdir::work_dir;
 use crate::scene::{Scene, TextureOptions};
@@ -41,6 +43,10 @@ pub struct BakeArgs {
     /// defensive mixture; every sample is weighted with the mixture's density).
     #[arg(long, default_value_t = BakeSettings::default().mix)]
     pub mix: u32,
+    /// Which series passes sample a learned guide: the `last` (the lightmap; the passes
+    /// before it gather with cosine sampling) or `every` gather pass.
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().guided_passes)]
+    pub guided_passes: GuidedPasses,
     /// How the samples are split over the learning iterations.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
     pub schedule: Schedule,
@@ -154,6 +160,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         bounces: args.bounces,
         mix: args.mix,
         schedule: args.schedule,
+        guided_passes: args.guided_passes,
         min_split: args.min_split,
         smooth: args.smooth,
         emitters: args.emitters,
