@@ -94,10 +94,13 @@ mod triangle;
 
 use packet::{Closest, Occlusion, Visitor, start8, walk8};
 use scalar::{FAR_FLOOR, FAR_UP, NEAR_DOWN, box1_at, walk1, widened};
-use triangle::{Best8, Pre, Pre8, accept, closest1, no_hit, occludes1, traceable, tri1};
+use triangle::{
+    Best8, Pre, Pre1x8, Pre8, accept, closest_rows, closest1, no_hit, occludes_rows, occludes1,
+    traceable, tri1,
+};
 
 #[cfg(any(feature = "alloc", test))]
-pub use bvh8::collapse;
+pub use bvh8::{collapse, leaf_rows};
 pub use bvh8::{WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
 use node::STACK;
 pub use node::{BvhRef, LEAF, LayoutError, MAX_DEPTH, Node, Tri};
@@ -255,15 +258,20 @@ pub fn intersect1(bvh: &impl Tree, ray: &Ray) -> Option<Hit> {
     }
     let pre = Pre::new(ray);
     let mut best = no_hit(ray.tmax);
-    let visit = |leaf: &[Tri]| {
-        for tri in leaf {
-            closest1(&pre, tri, &mut best);
-        }
-        best.t
-    };
     match bvh.layout() {
-        Layout::Binary(b) => walk1(&b, &pre, visit),
-        Layout::Wide(w) => bvh8::walk1(&w, &pre, visit),
+        Layout::Binary(b) => walk1(&b, &pre, |leaf: &[Tri]| {
+            for tri in leaf {
+                closest1(&pre, tri, &mut best);
+            }
+            best.t
+        }),
+        Layout::Wide(w) => {
+            let pre8 = Pre1x8::new(&pre);
+            bvh8::walk1(&w, &pre, |rows, n| {
+                closest_rows(&pre, &pre8, rows, n, &mut best);
+                best.t
+            })
+        }
     };
     (best.prim != NO_HIT).then_some(best)
 }
@@ -275,16 +283,17 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
     }
     let pre = Pre::new(ray);
     let tmax = ray.tmax.min(f32::MAX);
-    let visit = |leaf: &[Tri]| {
-        if leaf.iter().any(|tri| occludes1(&pre, tri, tmax)) {
-            f32::NEG_INFINITY
-        } else {
-            tmax
-        }
-    };
+    let blocked = |yes: bool| if yes { f32::NEG_INFINITY } else { tmax };
     let end = match bvh.layout() {
-        Layout::Binary(b) => walk1(&b, &pre, visit),
-        Layout::Wide(w) => bvh8::walk1(&w, &pre, visit),
+        Layout::Binary(b) => walk1(&b, &pre, |leaf: &[Tri]| {
+            blocked(leaf.iter().any(|tri| occludes1(&pre, tri, tmax)))
+        }),
+        Layout::Wide(w) => {
+            let pre8 = Pre1x8::new(&pre);
+            bvh8::walk1(&w, &pre, |rows, n| {
+                blocked(occludes_rows(&pre, &pre8, rows, n, tmax))
+            })
+        }
     };
     end == f32::NEG_INFINITY
 }
@@ -446,11 +455,18 @@ mod tests {
         Ray::new(org, d, 0.0, tmax)
     }
 
+    /// The collapse of `binary` and its leaf rows.
+    fn widen(binary: &BvhRef<'_>) -> (Vec<WideNode>, Vec<f32>) {
+        let wide = collapse(binary);
+        let rows = leaf_rows(&wide, binary.tris());
+        (wide, rows)
+    }
+
     /// The binary view of `nodes`/`tris` and the wide view of its collapse (`wide`).
-    fn layouts<'a>(bvh: BvhRef<'a>, wide: &'a [WideNode]) -> [Layout<'a>; 2] {
+    fn layouts<'a>(bvh: BvhRef<'a>, wide: &'a (Vec<WideNode>, Vec<f32>)) -> [Layout<'a>; 2] {
         [
             Layout::Binary(bvh),
-            Layout::Wide(WideRef::new(wide, bvh.tris()).expect("collapse is valid")),
+            Layout::Wide(WideRef::new(&wide.0, bvh.tris(), &wide.1).expect("collapse is valid")),
         ]
     }
 
@@ -460,8 +476,8 @@ mod tests {
         let soup = soup(&mut rng, 150);
         let (nodes, tris) = build(&soup);
         let binary = BvhRef::new(&nodes, &tris).unwrap();
-        let wide = collapse(&binary);
-        assert!(wide.len() * 3 < nodes.len(), "{} wide nodes", wide.len());
+        let wide = widen(&binary);
+        assert!(wide.0.len() * 3 < nodes.len(), "{} wide nodes", wide.0.len());
         for trial in 0..300 {
             let lanes = trial % LANES + 1;
             let shared = v3(&mut rng, 4.5);
@@ -521,7 +537,7 @@ mod tests {
         let (nodes, tris) = build(&soup);
         assert_eq!(nodes[0].hi[0][0], 0.0, "the left leaf's box ends at x = 0");
         let binary = BvhRef::new(&nodes, &tris).unwrap();
-        let wide = collapse(&binary);
+        let wide = widen(&binary);
         let rays = [
             // The ray: origin (8.8e-44, −6.7e-9, 9.2e-41), direction (0, 0, 56.06).
             Ray::new(
@@ -590,7 +606,7 @@ mod tests {
         ];
         let (nodes, tris) = build(&soup);
         let binary = BvhRef::new(&nodes, &tris).unwrap();
-        let wide = collapse(&binary);
+        let wide = widen(&binary);
         let org = Vec3::new(3.762_040_7e-37, 1.504_563_9e-36, 3.761_926_3e-37);
         let r = Ray::new(org, Vec3::new(-6400.0, 3.0, -1280.0), 0.0, f32::INFINITY);
         let brute = intersect_brute(&tris, &r);
@@ -644,8 +660,8 @@ mod tests {
     /// Both traversals' answers, which the contract must allow.
     fn traversals_keep_to_the_contract(bvh: &impl Tree, r: &Ray) {
         if let Layout::Binary(binary) = bvh.layout() {
-            let wide = collapse(&binary);
-            let wide = WideRef::new(&wide, binary.tris()).unwrap();
+            let (wide, rows) = widen(&binary);
+            let wide = WideRef::new(&wide, binary.tris(), &rows).unwrap();
             traversals_keep_to_the_contract(&wide, r);
         }
         assert!(closest_hit_allowed(bvh, r, intersect1(bvh, r)));

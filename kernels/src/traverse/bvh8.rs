@@ -19,6 +19,7 @@
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
+use super::triangle::{PRIM_ROW, ROWS};
 use super::{FAR_FLOOR, FAR_UP, LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor};
 use crate::packet::LANES;
 use bytemuck::{Pod, Zeroable};
@@ -84,20 +85,25 @@ impl WideNode {
     }
 }
 
-/// A validated view of a wide BVH: nodes (root first) and triangles in leaf order.
+/// A validated view of a wide BVH: nodes (root first), triangles in leaf order, and the same
+/// triangles as structure-of-arrays rows per leaf ([`leaf_rows`]), which single rays test
+/// eight at a time.
 #[derive(Clone, Copy, Debug)]
 pub struct WideRef<'a> {
     nodes: &'a [WideNode],
     tris: &'a [Tri],
+    rows: &'a [f32],
 }
 
 impl<'a> WideRef<'a> {
     /// Checks every child index, leaf range, that used slots come first, and the depth, once,
-    /// so traversal can trust them.
+    /// so traversal can trust them; and that `rows` is [`leaf_rows`]`(nodes, tris)`, bit for
+    /// bit.
     ///
     /// # Errors
-    /// The first [`LayoutError`] found, walking depth first from the root (slots `0..8`).
-    pub fn new(nodes: &'a [WideNode], tris: &'a [Tri]) -> Result<Self, LayoutError> {
+    /// The first [`LayoutError`] found, walking depth first from the root (slots `0..8`);
+    /// [`LayoutError::BadRows`] when `rows` differs from the triangles.
+    pub fn new(nodes: &'a [WideNode], tris: &'a [Tri], rows: &'a [f32]) -> Result<Self, LayoutError> {
         if nodes.is_empty() {
             return Err(LayoutError::NoNodes);
         }
@@ -135,17 +141,25 @@ impl<'a> WideRef<'a> {
                     sp += 1;
                 } else if child as u64 + u64::from(meta & !LEAF) > tris.len() as u64 {
                     return Err(bad_leaf);
+                } else if !rows_match(tris, rows, child, meta) {
+                    return Err(LayoutError::BadRows {
+                        node: index,
+                        slot: slot as u8,
+                    });
                 }
             }
         }
-        Ok(Self { nodes, tris })
+        if rows.len() != rows_len(tris.len()) {
+            return Err(LayoutError::BadRows { node: 0, slot: 0 });
+        }
+        Ok(Self { nodes, tris, rows })
     }
 
     /// A view of a layout that already passed [`WideRef::new`] and has not changed since
     /// (see [`BvhRef::new_trusted`]; debug builds check the layout anyway).
-    pub fn new_trusted(nodes: &'a [WideNode], tris: &'a [Tri]) -> Self {
-        debug_assert!(Self::new(nodes, tris).is_ok(), "layout never validated");
-        Self { nodes, tris }
+    pub fn new_trusted(nodes: &'a [WideNode], tris: &'a [Tri], rows: &'a [f32]) -> Self {
+        debug_assert!(Self::new(nodes, tris, rows).is_ok(), "layout never validated");
+        Self { nodes, tris, rows }
     }
 
     /// The nodes, root first.
@@ -156,6 +170,12 @@ impl<'a> WideRef<'a> {
     /// The triangles, in leaf order.
     pub fn tris(&self) -> &'a [Tri] {
         self.tris
+    }
+
+    /// The rows of the leaf starting at triangle `first`, to the end of the slice (the
+    /// 8-wide loads read past a leaf's last row).
+    fn leaf_rows(&self, first: u32) -> &'a [f32] {
+        &self.rows[ROWS * first as usize..]
     }
 
     fn leaf(&self, first: u32, meta: u32) -> &'a [Tri] {
@@ -242,6 +262,50 @@ pub fn collapse(bvh: &BvhRef<'_>) -> alloc::vec::Vec<WideNode> {
     out
 }
 
+/// Length of the rows of `tris` triangles: [`ROWS`] values per triangle and eight of
+/// padding, so the last leaf's 8-wide loads stay inside.
+fn rows_len(tris: usize) -> usize {
+    ROWS * tris + 8
+}
+
+/// Whether the rows of the leaf `child`, `meta` (a valid range of `tris`) hold its triangles.
+fn rows_match(tris: &[Tri], rows: &[f32], child: u32, meta: u32) -> bool {
+    let (first, n) = (child as usize, (meta & !LEAF) as usize);
+    let Some(leaf) = rows.get(ROWS * first..ROWS * (first + n)) else {
+        return false;
+    };
+    tris[first..first + n].iter().enumerate().all(|(i, t)| {
+        let same = |row: usize, x: f32| leaf[row * n + i].to_bits() == x.to_bits();
+        (0..9).all(|r| same(r, t.v[r / 3][r % 3])) && same(PRIM_ROW, f32::from_bits(t.prim))
+    })
+}
+
+/// The triangles of each leaf of `nodes` as structure-of-arrays rows, for [`WideRef::new`]:
+/// the leaf of `n` triangles starting at triangle `first` holds row `r` (vertex `r / 3`, axis
+/// `r % 3`; row 9 the primitive ids' bits) at `ROWS·first + r·n`, so one 8-wide load reads an
+/// axis of eight of its triangles. Triangles outside every leaf keep zeros.
+#[cfg(any(feature = "alloc", test))]
+pub fn leaf_rows(nodes: &[WideNode], tris: &[Tri]) -> alloc::vec::Vec<f32> {
+    extern crate alloc;
+    let mut rows = alloc::vec![0.0; rows_len(tris.len())];
+    for node in nodes {
+        for slot in 0..WIDTH {
+            let (first, meta) = (node.child[slot] as usize, node.meta[slot]);
+            if meta == 0 || meta == LEAF {
+                continue;
+            }
+            let n = (meta & !LEAF) as usize;
+            for (i, t) in tris[first..first + n].iter().enumerate() {
+                for r in 0..9 {
+                    rows[ROWS * first + r * n + i] = t.v[r / 3][r % 3];
+                }
+                rows[ROWS * first + PRIM_ROW * n + i] = f32::from_bits(t.prim);
+            }
+        }
+    }
+    rows
+}
+
 // ---------------------------------------------------------------------------------------------
 // Single ray.
 
@@ -284,71 +348,64 @@ impl Ray1x8 {
     }
 }
 
-/// Pushes the slots of node `index` in `bits`, farthest first, as `near bits << 32 | index·8 +
-/// slot` (entry distances are ≥ 0, so their bits order like the values).
-#[inline(always)]
-fn push_sorted(
-    stack: &mut [u64; STACK],
-    sp: &mut usize,
-    bits: u8,
-    near: &[f32; WIDTH],
-    index: usize,
-) {
-    let key = |slot: usize| u64::from(near[slot].to_bits()) << 32 | (index * WIDTH + slot) as u64;
-    let mut keys = [0u64; WIDTH];
-    let mut n = 0;
-    let mut rest = bits;
-    while rest != 0 {
-        let slot = rest.trailing_zeros() as usize;
-        rest &= rest - 1;
-        // Insertion, descending.
-        let k = key(slot);
-        let mut i = n;
-        while i > 0 && keys[i - 1] < k {
-            keys[i] = keys[i - 1];
-            i -= 1;
-        }
-        keys[i] = k;
-        n += 1;
-    }
-    stack[*sp..*sp + n].copy_from_slice(&keys[..n]);
-    *sp += n;
-}
-
-/// Depth-first walk of one ray, nearest child first. `visit` tests a leaf's triangles and
-/// returns the ray's new `tmax` (−∞ stops the walk). A popped entry whose entry distance lies
-/// beyond the widened `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
+/// Depth-first walk of one ray, nearest child first. `visit` tests the leaf of `n` triangles
+/// whose rows start at `rows[0]` and returns the ray's new `tmax` (−∞ stops the walk).
+///
+/// The stack holds `(child, meta)` with the slot's entry distance beside it, so a pop never
+/// reads the parent node again; a popped entry whose entry distance lies beyond the widened
+/// `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
 pub(super) fn walk1<'a>(
     bvh: &WideRef<'a>,
     pre: &Pre,
-    mut visit: impl FnMut(&'a [Tri]) -> f32,
+    mut visit: impl FnMut(&'a [f32], usize) -> f32,
 ) -> f32 {
-    let mut tmax = visit(&[]);
+    let mut tmax = visit(&[], 0);
     let ray = Ray1x8::new(pre);
     let mut stack = [0u64; STACK];
+    let mut dist = [0f32; STACK];
     let mut sp = 0;
     let mut index = 0usize;
     loop {
         let node = &bvh.nodes[index];
         let (bits, near) = ray.boxes(node, tmax);
-        push_sorted(&mut stack, &mut sp, bits, near.as_array(), index);
+        let near = near.as_array();
+        // Farthest first: keys `near bits << 32 | slot`, insertion-sorted descending
+        // (entry distances are ≥ 0, so their bits order like the values).
+        let mut keys = [0u64; WIDTH];
+        let mut n = 0;
+        let mut rest = bits;
+        while rest != 0 {
+            let slot = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            let k = u64::from(near[slot].to_bits()) << 32 | slot as u64;
+            let mut i = n;
+            while i > 0 && keys[i - 1] < k {
+                keys[i] = keys[i - 1];
+                i -= 1;
+            }
+            keys[i] = k;
+            n += 1;
+        }
+        for &k in &keys[..n] {
+            let slot = k as usize & (WIDTH - 1);
+            stack[sp] = u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
+            dist[sp] = near[slot];
+            sp += 1;
+        }
         loop {
             if sp == 0 {
                 return tmax;
             }
             sp -= 1;
-            let entry = stack[sp];
-            if f32::from_bits((entry >> 32) as u32) > super::widened(tmax) {
+            if dist[sp] > super::widened(tmax) {
                 continue;
             }
-            let (parent, slot) = ((entry as u32 as usize) / WIDTH, entry as usize % WIDTH);
-            let node = &bvh.nodes[parent];
-            let (child, meta) = (node.child[slot], node.meta[slot]);
+            let (child, meta) = (stack[sp] as u32, (stack[sp] >> 32) as u32);
             if meta == 0 {
                 index = child as usize;
                 break;
             }
-            tmax = visit(bvh.leaf(child, meta));
+            tmax = visit(bvh.leaf_rows(child), (meta & !LEAF) as usize);
             if tmax == f32::NEG_INFINITY {
                 return tmax;
             }
@@ -553,7 +610,8 @@ mod tests {
         let (nodes, tris) = chain(super::super::MAX_DEPTH + 1);
         let binary = BvhRef::new(&nodes, &tris).unwrap();
         let wide = collapse(&binary);
-        let view = WideRef::new(&wide, &tris).expect("valid wide layout");
+        let rows = leaf_rows(&wide, &tris);
+        let view = WideRef::new(&wide, &tris, &rows).expect("valid wide layout");
         assert!(wide.len() <= WIDE_MAX_DEPTH + 1, "{} nodes", wide.len());
         for i in 0..tris.len() {
             let r = Ray::new(
@@ -571,23 +629,26 @@ mod tests {
     #[test]
     fn wide_layout_errors_are_reported() {
         let tris = [Tri::new([Vec3::ZERO, Vec3::X, Vec3::Y], 0)];
-        assert_eq!(WideRef::new(&[], &tris).unwrap_err(), LayoutError::NoNodes);
+        let mut one = WideNode::EMPTY;
+        one.meta[0] = LEAF | 1;
+        let rows = leaf_rows(&[one], &tris);
+        assert_eq!(WideRef::new(&[], &tris, &rows).unwrap_err(), LayoutError::NoNodes);
         let mut bad = WideNode::EMPTY;
         bad.meta[0] = 0;
         assert_eq!(
-            WideRef::new(&[bad], &tris).unwrap_err(),
+            WideRef::new(&[bad], &tris, &rows).unwrap_err(),
             LayoutError::BadChild { node: 0, slot: 0 }
         );
         bad.meta[0] = LEAF | 2;
         assert_eq!(
-            WideRef::new(&[bad], &tris).unwrap_err(),
+            WideRef::new(&[bad], &tris, &rows).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 0 }
         );
         // A used slot after an empty one.
         let mut gap = WideNode::EMPTY;
         gap.meta[3] = LEAF | 1;
         assert_eq!(
-            WideRef::new(&[gap], &tris).unwrap_err(),
+            WideRef::new(&[gap], &tris, &rows).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 3 }
         );
         let chain: Vec<WideNode> = (0..WIDE_MAX_DEPTH as u32 + 2)
@@ -600,12 +661,13 @@ mod tests {
             .chain([WideNode::EMPTY])
             .collect();
         assert!(matches!(
-            WideRef::new(&chain, &tris),
+            WideRef::new(&chain, &tris, &rows),
             Err(LayoutError::TooDeep { .. })
         ));
         // The empty tree: every ray misses.
         let empty = [WideNode::EMPTY];
-        let view = WideRef::new(&empty, &[]).unwrap();
+        let empty_rows = leaf_rows(&empty, &[]);
+        let view = WideRef::new(&empty, &[], &empty_rows).unwrap();
         let r = Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY);
         assert_eq!(intersect1(&view, &r), None);
         assert!(!occluded1(&view, &r));
