@@ -495,6 +495,22 @@ fn bench(c: &mut Criterion) {
                     Box::new(|| packet8(&wide, &resorted)),
                 ),
             ];
+            for sw in [2u32, 4, 7, 8] {
+                let wide = &wide;
+                entries.push((
+                    format!("wide_packet8_s{sw}"),
+                    gather.len(),
+                    Box::new(move || {
+                        let mut sum = 0u64;
+                        for p in gather {
+                            let mut hits = Hit8::NONE;
+                            guidebake_kernels::traverse::intersect8_switch(wide, p, &mut hits, sw);
+                            sum += hits.prim.to_array().iter().map(|&x| u64::from(x)).sum::<u64>();
+                        }
+                        sum
+                    }),
+                ));
+            }
             #[cfg(feature = "embree")]
             for coherent in [true, false] {
                 let tag = if coherent { "coherent" } else { "incoherent" };
@@ -557,6 +573,19 @@ fn bench(c: &mut Criterion) {
                     Box::new(|| obvhs_occluded(&s, shadow)),
                 ),
             ];
+            for sw in [2u32, 4, 7, 8] {
+                let wide = &wide;
+                entries.push((
+                    format!("wide_occluded8_s{sw}"),
+                    shadow.len(),
+                    Box::new(move || {
+                        shadow
+                            .iter()
+                            .map(|p| u64::from(guidebake_kernels::traverse::occluded8_switch(wide, p, sw).count_ones()))
+                            .sum()
+                    }),
+                ));
+            }
             #[cfg(feature = "embree")]
             for coherent in [true, false] {
                 let tag = if coherent { "coherent" } else { "incoherent" };
