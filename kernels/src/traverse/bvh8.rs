@@ -402,36 +402,27 @@ pub(super) fn walk1<'a>(
         let node = &bvh.nodes[index];
         let (bits, near) = ray.boxes(node, tmax);
         let near = near.as_array();
-        // Farthest first: keys `near bits << 32 | slot`, insertion-sorted descending
-        // (entry distances are ≥ 0, so their bits order like the values).
-        let mut keys = [0u64; WIDTH];
-        let mut n = 0;
-        let mut rest = bits;
-        while rest != 0 {
-            let slot = rest.trailing_zeros() as usize;
-            rest &= rest - 1;
-            let k = u64::from(near[slot].to_bits()) << 32 | slot as u64;
-            let mut i = n;
-            while i > 0 && keys[i - 1] < k {
-                keys[i] = keys[i - 1];
-                i -= 1;
-            }
-            keys[i] = k;
-            n += 1;
-        }
-        for &k in &keys[..n] {
-            let slot = k as usize & (WIDTH - 1);
-            let entry = u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
-            stack.push((entry, near[slot]));
-        }
+        let entry = |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
+        // The nearest slot met is visited next; the others are pushed farthest first.
+        let mut next = match bits.count_ones() {
+            0 => None,
+            1 => Some(entry(bits.trailing_zeros() as usize)),
+            _ => Some(entry(push_sorted(&mut stack, bits, near, entry))),
+        };
         loop {
-            let Some((entry, dist)) = stack.pop() else {
-                return tmax;
+            let e = match next.take() {
+                Some(e) => e,
+                None => {
+                    let Some((e, dist)) = stack.pop() else {
+                        return tmax;
+                    };
+                    if dist > super::widened(tmax) {
+                        continue;
+                    }
+                    e
+                }
             };
-            if dist > super::widened(tmax) {
-                continue;
-            }
-            let (child, meta) = (entry as u32, (entry >> 32) as u32);
+            let (child, meta) = (e as u32, (e >> 32) as u32);
             if meta == 0 {
                 index = child as usize;
                 break;
@@ -442,6 +433,38 @@ pub(super) fn walk1<'a>(
             }
         }
     }
+}
+
+/// Pushes the slots of `bits` (two or more) but the nearest, farthest first, with their
+/// entry distances, and returns the nearest. Keys are `near bits & !7 | slot` (entry
+/// distances are ≥ 0, so their bits order like the values; the order only steers the walk).
+#[inline(always)]
+fn push_sorted(
+    stack: &mut Stack<(u64, f32)>,
+    bits: u8,
+    near: &[f32; WIDTH],
+    entry: impl Fn(usize) -> u64,
+) -> usize {
+    let mut keys = [0u32; WIDTH];
+    let mut n = 0;
+    let mut rest = bits;
+    while rest != 0 {
+        let slot = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        let k = near[slot].to_bits() & !7 | slot as u32;
+        let mut i = n;
+        while i > 0 && keys[i - 1] < k {
+            keys[i] = keys[i - 1];
+            i -= 1;
+        }
+        keys[i] = k;
+        n += 1;
+    }
+    for &k in &keys[..n - 1] {
+        let slot = (k & 7) as usize;
+        stack.push((entry(slot), near[slot]));
+    }
+    (keys[n - 1] & 7) as usize
 }
 
 // ---------------------------------------------------------------------------------------------
