@@ -539,7 +539,8 @@ pub(super) fn walk8<'a>(
     switch: u32,
 ) {
     let lanes = lanes(pre);
-    let mut stack = Stack::<u64>::new();
+    // (child | meta << 32, the nearest entry distance of the lanes met, those lanes)
+    let mut stack = Stack::<(u64, f32, u8)>::new();
     let mut alive = pre.traced;
     let mut index = 0usize;
     let mut live = alive;
@@ -549,17 +550,16 @@ pub(super) fn walk8<'a>(
         let (met, nearest) = boxes8(node, &lanes, live, tmax.as_array());
         let met = met.to_array();
         let nearest = nearest.as_array();
-        let mut keys = [0u64; WIDTH];
+        // Keys `nearest bits & !7 | slot`, insertion-sorted descending (entry distances are
+        // ≥ 0, so their bits order like the values); the nearest is visited next, the others
+        // pushed farthest first.
+        let mut keys = [0u32; WIDTH];
         let mut n = 0;
         for slot in 0..WIDTH {
             if met[slot] == 0 {
                 continue;
             }
-            // The nearest entry by its top 24 bits (entry distances are ≥ 0, so their bits
-            // order like the values).
-            let k = u64::from(nearest[slot].to_bits() >> 8) << 40
-                | u64::from(met[slot]) << 32
-                | (index * WIDTH + slot) as u64;
+            let k = nearest[slot].to_bits() & !7 | slot as u32;
             let mut i = n;
             while i > 0 && keys[i - 1] < k {
                 keys[i] = keys[i - 1];
@@ -568,22 +568,35 @@ pub(super) fn walk8<'a>(
             keys[i] = k;
             n += 1;
         }
-        for &k in &keys[..n] {
-            stack.push(k);
+        let entry = |k: u32| {
+            let slot = (k & 7) as usize;
+            let e = u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
+            (e, nearest[slot], met[slot] as u8)
+        };
+        for &k in &keys[..n.saturating_sub(1)] {
+            stack.push(entry(k));
         }
+        let mut next = (n > 0).then(|| entry(keys[n - 1]));
         loop {
-            let Some(entry) = stack.pop() else {
-                return;
+            let (e, lanes_met) = match next.take() {
+                Some((e, _, lanes_met)) => (e, lanes_met),
+                None => {
+                    let Some((e, dist, lanes_met)) = stack.pop() else {
+                        return;
+                    };
+                    // Beyond every live lane's widened `tmax`: the slab tests repeated
+                    // would all fail.
+                    if dist > far {
+                        continue;
+                    }
+                    (e, lanes_met)
+                }
             };
-            live = (entry >> 32) as u8 & alive;
-            // The stored distance (its bits truncated, so no larger than the lanes' nearest)
-            // beyond every live lane's widened `tmax`: the slab test repeated would fail.
-            if live == 0 || f32::from_bits(((entry >> 40) as u32) << 8) > far {
+            live = lanes_met & alive;
+            if live == 0 {
                 continue;
             }
-            let (parent, slot) = ((entry as u32 as usize) / WIDTH, entry as usize % WIDTH);
-            let node = &bvh.nodes[parent];
-            let (child, meta) = (node.child[slot], node.meta[slot]);
+            let (child, meta) = (e as u32, (e >> 32) as u32);
             if meta == 0 {
                 if live.count_ones() <= switch {
                     tmax = visitor.subtree1(bvh, child as usize, live);
