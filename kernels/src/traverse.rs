@@ -268,7 +268,7 @@ pub fn intersect1(bvh: &impl Tree, ray: &Ray) -> Option<Hit> {
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
             bvh8::walk1(&w, 0, &pre, |rows, n| {
-                closest_rows(&pre, &pre8, rows, n, &mut best);
+                closest_rows(|| pre, &pre8, rows, n, &mut best);
                 best.t
             })
         }
@@ -291,7 +291,7 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
             bvh8::walk1(&w, 0, &pre, |rows, n| {
-                blocked(occludes_rows(&pre, &pre8, rows, n, tmax))
+                blocked(occludes_rows(|| pre, &pre8, rows, n, tmax))
             })
         }
     };
@@ -304,11 +304,11 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
 /// miss leave their `hits` lane untouched. Returns the bit mask of lanes that hit. Each hit
 /// equals [`intersect1`]'s for that lane, bit for bit, whatever the layout.
 pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
-    intersect8_switch(bvh, rays, hits, 0)
+    intersect8_switch(bvh, rays, hits, 0, true)
 }
 
 /// tmp: [`intersect8`] handing subtrees reached by at most `switch` lanes to single rays.
-pub fn intersect8_switch(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8, switch: u32) -> u8 {
+pub fn intersect8_switch(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8, switch: u32, rows: bool) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;
     };
@@ -323,7 +323,7 @@ pub fn intersect8_switch(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8, switch: 
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut closest),
-        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut closest, switch),
+        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut closest, switch, rows),
     }
     let best = closest.best;
     let hit_mask = best.prim.simd_ne(u32x8::splat(NO_HIT));
@@ -339,11 +339,11 @@ pub fn intersect8_switch(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8, switch: 
 /// drops out when blocked, the walk ends when all have). Returns the bit mask of blocked lanes;
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
 pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
-    occluded8_switch(bvh, rays, 0)
+    occluded8_switch(bvh, rays, 0, true)
 }
 
 /// tmp: [`occluded8`] handing subtrees reached by at most `switch` lanes to single rays.
-pub fn occluded8_switch(bvh: &impl Tree, rays: &Ray8, switch: u32) -> u8 {
+pub fn occluded8_switch(bvh: &impl Tree, rays: &Ray8, switch: u32, rows: bool) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;
     };
@@ -354,7 +354,7 @@ pub fn occluded8_switch(bvh: &impl Tree, rays: &Ray8, switch: u32) -> u8 {
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut occlusion),
-        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion, switch),
+        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion, switch, rows),
     }
     occlusion.blocked
 }

@@ -537,6 +537,7 @@ pub(super) fn walk8<'a>(
     mut tmax: f32x8,
     visitor: &mut impl Visitor<'a>,
     switch: u32,
+    rows: bool,
 ) {
     let lanes = lanes(pre);
     // (child | meta << 32, the nearest entry distance of the lanes met, those lanes)
@@ -610,7 +611,14 @@ pub(super) fn walk8<'a>(
                 index = child as usize;
                 break;
             }
-            tmax = visitor.leaf8(bvh.leaf(child, meta));
+            let n = (meta & !LEAF) as usize;
+            // Lane by lane, eight triangles per pass, when that takes fewer passes than
+            // triangle by triangle, eight lanes per test.
+            tmax = if rows && live.count_ones() as usize * n.div_ceil(8) < n {
+                visitor.rows1(bvh.leaf_rows(child), n, live)
+            } else {
+                visitor.leaf8(bvh.leaf(child, meta))
+            };
             alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
             if alive == 0 {
                 return;

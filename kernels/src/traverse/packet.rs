@@ -73,6 +73,10 @@ pub(super) trait Visitor<'a> {
     /// Walks the wide subtree at node `root` for each lane of `lanes` as a single ray (the
     /// wide walk's switch); returns the packet's new `tmax`.
     fn subtree1(&mut self, bvh: &WideRef<'a>, root: usize, lanes: u8) -> f32x8;
+
+    /// Tests the wide leaf of `n` triangles whose rows start at `rows[0]` for each lane of
+    /// `lanes`, eight triangles per pass; returns the packet's new `tmax`.
+    fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8;
 }
 
 /// Closest-hit visitor.
@@ -99,9 +103,22 @@ impl<'a> Visitor<'a> for Closest<'_> {
             let pre8 = Pre1x8::new(&pre);
             let mut best = self.best.lane(i);
             bvh8::walk1(bvh, root, &pre, |rows, n| {
-                closest_rows(&pre, &pre8, rows, n, &mut best);
+                closest_rows(|| pre, &pre8, rows, n, &mut best);
                 best.t
             });
+            set_lane(&mut self.best, i, &best);
+        }
+        self.best.t
+    }
+
+    #[inline(always)]
+    fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8 {
+        let mut rest = lanes;
+        while rest != 0 {
+            let i = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            let mut best = self.best.lane(i);
+            closest_rows(|| self.pre.lane(i), &Pre1x8::lane(self.pre, i), rows, n, &mut best);
             set_lane(&mut self.best, i, &best);
         }
         self.best.t
@@ -140,13 +157,28 @@ impl<'a> Visitor<'a> for Occlusion<'_> {
             let pre8 = Pre1x8::new(&pre);
             let tmax = self.tmax.as_array()[i];
             let end = bvh8::walk1(bvh, root, &pre, |rows, n| {
-                if occludes_rows(&pre, &pre8, rows, n, tmax) {
+                if occludes_rows(|| pre, &pre8, rows, n, tmax) {
                     f32::NEG_INFINITY
                 } else {
                     tmax
                 }
             });
             if end == f32::NEG_INFINITY {
+                self.blocked |= 1 << i;
+                self.tmax.as_mut_array()[i] = f32::NEG_INFINITY;
+            }
+        }
+        self.tmax
+    }
+
+    #[inline(always)]
+    fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8 {
+        let mut rest = lanes;
+        while rest != 0 {
+            let i = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            let tmax = self.tmax.as_array()[i];
+            if occludes_rows(|| self.pre.lane(i), &Pre1x8::lane(self.pre, i), rows, n, tmax) {
                 self.blocked |= 1 << i;
                 self.tmax.as_mut_array()[i] = f32::NEG_INFINITY;
             }

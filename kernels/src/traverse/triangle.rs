@@ -409,6 +409,7 @@ pub(super) const ROWS: usize = 10;
 pub(super) const PRIM_ROW: usize = 9;
 
 /// One ray's watertight-test constants splatted over eight triangles.
+#[derive(Debug, PartialEq)]
 pub(super) struct Pre1x8 {
     k: [usize; 3],
     /// Permuted origin `o[kx], o[ky], o[kz]`.
@@ -424,6 +425,31 @@ impl Pre1x8 {
             porg: pre.k.map(|k| f32x8::splat(pre.org[k])),
             s: pre.s.map(f32x8::splat),
             tmin: f32x8::splat(pre.tmin),
+        }
+    }
+
+    /// [`Pre1x8::new`] of lane `i` of a packet (traced), from the packet's constants, which
+    /// equal the lane's scalar ones bit for bit.
+    #[inline(always)]
+    pub(super) fn lane(pre: &Pre8, i: usize) -> Self {
+        let k = pre.uniform.unwrap_or_else(|| {
+            [0, 1, 2].map(|a| {
+                let sel = pre.sel[a].map(|m| m.to_bitmask() >> i & 1 == 1);
+                if sel[0] {
+                    0
+                } else if sel[1] {
+                    1
+                } else {
+                    2
+                }
+            })
+        });
+        let at = |v: &f32x8| f32x8::splat(v.as_array()[i]);
+        Self {
+            k,
+            porg: pre.porg.each_ref().map(at),
+            s: pre.s.each_ref().map(at),
+            tmin: at(&pre.tmin),
         }
     }
 
@@ -462,7 +488,14 @@ fn first_lanes(n: usize) -> u8 {
 /// function go through [`closest1`] (the result does not depend on the order: the tie rule
 /// picks the least `(t, prim)`).
 #[inline(always)]
-pub(super) fn closest_rows(pre: &Pre, p8: &Pre1x8, leaf: &[f32], n: usize, best: &mut Hit) {
+pub(super) fn closest_rows(
+    pre: impl Fn() -> Pre,
+    p8: &Pre1x8,
+    leaf: &[f32],
+    n: usize,
+    best: &mut Hit,
+) {
+    let tmin = p8.tmin.as_array()[0];
     for j in 0..n.div_ceil(8) {
         let valid = first_lanes(n - 8 * j);
         let r = p8.tris8(leaf, n, j);
@@ -475,7 +508,7 @@ pub(super) fn closest_rows(pre: &Pre, p8: &Pre1x8, leaf: &[f32], n: usize, best:
                 bits &= bits - 1;
                 let ti = t.as_array()[i];
                 let prim = leaf[PRIM_ROW * n + 8 * j + i].to_bits();
-                if accept(ti, prim, pre.tmin, best) {
+                if accept(ti, prim, tmin, best) {
                     let det = r.det.as_array()[i];
                     *best = Hit {
                         t: ti,
@@ -488,7 +521,7 @@ pub(super) fn closest_rows(pre: &Pre, p8: &Pre1x8, leaf: &[f32], n: usize, best:
         }
         let zero = r.any_zero.to_bitmask() as u8 & valid;
         if zero != 0 {
-            closest_rows_rare(pre, leaf, n, 8 * j, zero, best);
+            closest_rows_rare(&pre(), leaf, n, 8 * j, zero, best);
         }
     }
 }
@@ -507,7 +540,13 @@ fn closest_rows_rare(pre: &Pre, leaf: &[f32], n: usize, first: usize, zero: u8, 
 /// Whether any of the `n` triangles of a leaf stored as rows blocks the ray on
 /// `[tmin, tmax]`: [`occludes1`], eight triangles per pass.
 #[inline(always)]
-pub(super) fn occludes_rows(pre: &Pre, p8: &Pre1x8, leaf: &[f32], n: usize, tmax: f32) -> bool {
+pub(super) fn occludes_rows(
+    pre: impl Fn() -> Pre,
+    p8: &Pre1x8,
+    leaf: &[f32],
+    n: usize,
+    tmax: f32,
+) -> bool {
     (0..n.div_ceil(8)).any(|j| {
         let valid = first_lanes(n - 8 * j);
         let r = p8.tris8(leaf, n, j);
@@ -519,7 +558,7 @@ pub(super) fn occludes_rows(pre: &Pre, p8: &Pre1x8, leaf: &[f32], n: usize, tmax
             }
         }
         let zero = r.any_zero.to_bitmask() as u8 & valid;
-        zero != 0 && occludes_rows_rare(pre, leaf, n, 8 * j, zero, tmax)
+        zero != 0 && occludes_rows_rare(&pre(), leaf, n, 8 * j, zero, tmax)
     })
 }
 
@@ -615,14 +654,14 @@ mod tests {
                 closest1(&pre, tri, &mut want);
             }
             let mut got = no_hit(tmax);
-            closest_rows(&pre, &pre8, &rows[start..], n, &mut got);
+            closest_rows(|| pre, &pre8, &rows[start..], n, &mut got);
             let bits = |h: &Hit| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim);
             assert_eq!(bits(&got), bits(&want), "trial {trial}, n {n}: {ray:?}");
             hits += usize::from(want.prim != NO_HIT);
             let tmax = tmax.min(f32::MAX);
             let blocked = leaf.iter().any(|tri| occludes1(&pre, tri, tmax));
             assert_eq!(
-                occludes_rows(&pre, &pre8, &rows[start..], n, tmax),
+                occludes_rows(|| pre, &pre8, &rows[start..], n, tmax),
                 blocked,
                 "trial {trial}: {ray:?}"
             );
@@ -664,7 +703,7 @@ mod tests {
                 closest1(&pre, tri, &mut want);
             }
             let mut got = no_hit(ray.tmax);
-            closest_rows(&pre, &Pre1x8::new(&pre), &rows[start..], fan.len(), &mut got);
+            closest_rows(|| pre, &Pre1x8::new(&pre), &rows[start..], fan.len(), &mut got);
             assert_eq!(got, want, "{ray:?}");
             assert_ne!(got.prim, NO_HIT, "a ray through the fan missed it: {ray:?}");
             let r = Pre1x8::new(&pre).tris8(&rows[start..], fan.len(), 0);
