@@ -93,6 +93,8 @@ mod scalar;
 mod triangle;
 
 use packet::{Closest, Occlusion, Visitor, start8, walk8};
+#[allow(unused_imports)]
+use packet::Visitor as _;
 use scalar::{FAR_FLOOR, FAR_UP, NEAR_DOWN, box1_at, walk1, widened};
 use triangle::{
     Best8, Pre, Pre1x8, Pre8, accept, closest_rows, closest1, no_hit, occludes_rows, occludes1,
@@ -354,6 +356,9 @@ pub fn occluded8_switch(bvh: &impl Tree, rays: &Ray8, switch: u32, rows: bool) -
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut occlusion),
+        Layout::Wide(w) if switch == 9 && !pre.shared_origin() => {
+            occlusion.subtree1(&w, 0, pre.traced);
+        }
         Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion, switch, rows),
     }
     occlusion.blocked

@@ -65,6 +65,20 @@ impl Pre8 {
     }
 }
 
+impl Pre8 {
+    /// Whether every traced lane has the same origin (bit for bit), as a texel's gather or
+    /// next-event packet does.
+    pub(super) fn shared_origin(&self) -> bool {
+        let lead = self.traced.trailing_zeros().min(7) as usize;
+        self.org.iter().all(|o| {
+            let bits: wide::u32x8 = bytemuck::cast(*o);
+            let same = bits.simd_eq(wide::u32x8::splat(bits.as_array()[lead]));
+            let same: f32x8 = bytemuck::cast(same);
+            same.to_bitmask() as u8 & self.traced == self.traced
+        })
+    }
+}
+
 /// What a packet walk does at a leaf.
 pub(super) trait Visitor<'a> {
     /// Tests a leaf for the packet; returns the packet's new `tmax` (−∞ in finished lanes).
