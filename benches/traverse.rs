@@ -495,22 +495,6 @@ fn bench(c: &mut Criterion) {
                     Box::new(|| packet8(&wide, &resorted)),
                 ),
             ];
-            for (sw, rows) in [(0u32, false)] {
-                let wide = &wide;
-                entries.push((
-                    format!("wide_packet8_s{sw}{}", if rows { "_rows" } else { "" }),
-                    gather.len(),
-                    Box::new(move || {
-                        let mut sum = 0u64;
-                        for p in gather {
-                            let mut hits = Hit8::NONE;
-                            guidebake_kernels::traverse::intersect8_switch(wide, p, &mut hits, sw, rows);
-                            sum += hits.prim.to_array().iter().map(|&x| u64::from(x)).sum::<u64>();
-                        }
-                        sum
-                    }),
-                ));
-            }
             #[cfg(feature = "embree")]
             for coherent in [true, false] {
                 let tag = if coherent { "coherent" } else { "incoherent" };
@@ -573,19 +557,6 @@ fn bench(c: &mut Criterion) {
                     Box::new(|| obvhs_occluded(&s, shadow)),
                 ),
             ];
-            for (sw, rows) in [(0u32, false), (9, true)] {
-                let wide = &wide;
-                entries.push((
-                    format!("wide_occluded8_s{sw}{}", if rows { "_rows" } else { "" }),
-                    shadow.len(),
-                    Box::new(move || {
-                        shadow
-                            .iter()
-                            .map(|p| u64::from(guidebake_kernels::traverse::occluded8_switch(wide, p, sw, rows).count_ones()))
-                            .sum()
-                    }),
-                ));
-            }
             #[cfg(feature = "embree")]
             for coherent in [true, false] {
                 let tag = if coherent { "coherent" } else { "incoherent" };
@@ -634,10 +605,6 @@ fn duel(scene: &str, set: &str, entries: &[DuelEntry<'_>], rounds: usize, embree
         return;
     }
     let n = entries.len();
-    let reference = (entries[0].2)();
-    for (name, _, run) in entries.iter().filter(|e| e.0.contains("8_s")) {
-        assert_eq!(run(), reference, "{scene} {set}: {name} differs from {}", entries[0].0);
-    }
     let mut rates = vec![Vec::with_capacity(rounds); n];
     for round in 0..rounds {
         for k in 0..n {

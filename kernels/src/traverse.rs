@@ -83,7 +83,7 @@
 //!   found first, but culls so much less that the packet path ran 12–46 % slower on
 //!   `benches/traverse.rs`.)
 
-use crate::packet::{Hit, Hit8, NO_HIT, Ray, Ray8};
+use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
 use wide::{f32x8, u32x8};
 
 mod bvh8;
@@ -93,8 +93,6 @@ mod scalar;
 mod triangle;
 
 use packet::{Closest, Occlusion, Visitor, start8, walk8};
-#[allow(unused_imports)]
-use packet::Visitor as _;
 use scalar::{FAR_FLOOR, FAR_UP, NEAR_DOWN, box1_at, walk1, widened};
 use triangle::{
     Best8, Pre, Pre1x8, Pre8, accept, closest_rows, closest1, no_hit, occludes_rows, occludes1,
@@ -269,7 +267,7 @@ pub fn intersect1(bvh: &impl Tree, ray: &Ray) -> Option<Hit> {
         }),
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            bvh8::walk1(&w, 0, &pre, |rows, n| {
+            bvh8::walk1(&w, &pre, |rows, n| {
                 closest_rows(|| pre, &pre8, rows, n, &mut best);
                 best.t
             })
@@ -292,7 +290,7 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
         }),
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            bvh8::walk1(&w, 0, &pre, |rows, n| {
+            bvh8::walk1(&w, &pre, |rows, n| {
                 blocked(occludes_rows(|| pre, &pre8, rows, n, tmax))
             })
         }
@@ -306,11 +304,6 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
 /// miss leave their `hits` lane untouched. Returns the bit mask of lanes that hit. Each hit
 /// equals [`intersect1`]'s for that lane, bit for bit, whatever the layout.
 pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
-    intersect8_switch(bvh, rays, hits, 0, true)
-}
-
-/// tmp: [`intersect8`] handing subtrees reached by at most `switch` lanes to single rays.
-pub fn intersect8_switch(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8, switch: u32, rows: bool) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;
     };
@@ -325,7 +318,7 @@ pub fn intersect8_switch(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8, switch: 
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut closest),
-        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut closest, switch, rows),
+        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut closest),
     }
     let best = closest.best;
     let hit_mask = best.prim.simd_ne(u32x8::splat(NO_HIT));
@@ -340,12 +333,12 @@ pub fn intersect8_switch(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8, switch: 
 /// Which of eight rays are blocked on `[tmin, tmax]`: packet traversal with early exit (a lane
 /// drops out when blocked, the walk ends when all have). Returns the bit mask of blocked lanes;
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
+///
+/// On the wide layout, a packet whose lanes do not share an origin (eight unrelated shadow
+/// rays) is traced lane by lane as single rays: on a tree larger than
+/// [`bvh8::INTERLEAVE_BYTES`] interleaved, so that the lanes' cache misses overlap
+/// (docs/traverse.md, "Shadow packets").
 pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
-    occluded8_switch(bvh, rays, 0, true)
-}
-
-/// tmp: [`occluded8`] handing subtrees reached by at most `switch` lanes to single rays.
-pub fn occluded8_switch(bvh: &impl Tree, rays: &Ray8, switch: u32, rows: bool) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;
     };
@@ -356,12 +349,51 @@ pub fn occluded8_switch(bvh: &impl Tree, rays: &Ray8, switch: u32, rows: bool) -
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut occlusion),
-        Layout::Wide(w) if switch == 9 && !pre.shared_origin() => {
-            occlusion.subtree1(&w, 0, pre.traced);
+        Layout::Wide(w) if !pre.shared_origin() => {
+            return if w.bytes() > bvh8::INTERLEAVE_BYTES {
+                occluded_interleaved(&w, &pre, tmax)
+            } else {
+                occluded_lanes(&w, &pre, tmax)
+            };
         }
-        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion, switch, rows),
+        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion),
     }
     occlusion.blocked
+}
+
+/// The traced lanes of a packet through the wide layout as single rays, one after another:
+/// the blocked lanes.
+fn occluded_lanes(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
+    (0..LANES)
+        .filter(|&i| pre.traced >> i & 1 == 1)
+        .fold(0, |blocked, i| {
+            let lane = pre.lane(i);
+            let pre8 = Pre1x8::new(&lane);
+            let tmax = tmax.as_array()[i];
+            let end = bvh8::walk1(w, &lane, |rows, n| {
+                if occludes_rows(|| lane, &pre8, rows, n, tmax) {
+                    f32::NEG_INFINITY
+                } else {
+                    tmax
+                }
+            });
+            blocked | u8::from(end == f32::NEG_INFINITY) << i
+        })
+}
+
+/// [`occluded_lanes`], the lanes' walks interleaved ([`bvh8::walk_interleaved`]).
+fn occluded_interleaved(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
+    let mut blocked = 0u8;
+    bvh8::walk_interleaved(w, pre, tmax, pre.traced, |i, (lane, pre8), rows, n| {
+        let tmax = tmax.as_array()[i];
+        if occludes_rows(|| *lane, pre8, rows, n, tmax) {
+            blocked |= 1 << i;
+            f32::NEG_INFINITY
+        } else {
+            tmax
+        }
+    });
+    blocked
 }
 
 #[cfg(test)]
@@ -511,6 +543,11 @@ mod tests {
                 let mut hits = Hit8::NONE;
                 let mask = intersect8(&bvh, &packet, &mut hits);
                 let blocked = occluded8(&bvh, &packet);
+                if let (Layout::Wide(w), Some((pre, tmax))) = (bvh, start8(&packet)) {
+                    // Both single-ray paths of `occluded8`, whichever the tree's size picks.
+                    assert_eq!(occluded_lanes(&w, &pre, tmax), blocked, "{packet:?}");
+                    assert_eq!(occluded_interleaved(&w, &pre, tmax), blocked, "{packet:?}");
+                }
                 for lane in 0..LANES {
                     let r = packet.lane(lane);
                     let oracle = intersect_brute(&tris, &r);

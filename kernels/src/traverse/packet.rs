@@ -9,7 +9,7 @@ use super::scalar::{FAR_FLOOR, FAR_UP};
 use super::triangle::{
     Best8, Pre1x8, Pre8, closest_rows, closest8, occludes_rows, occludes8, set_lane,
 };
-use super::{BvhRef, Node, STACK, Tri, WideRef, bvh8};
+use super::{BvhRef, Node, STACK, Tri};
 use crate::packet::Ray8;
 use wide::f32x8;
 
@@ -84,10 +84,6 @@ pub(super) trait Visitor<'a> {
     /// Tests a leaf for the packet; returns the packet's new `tmax` (−∞ in finished lanes).
     fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8;
 
-    /// Walks the wide subtree at node `root` for each lane of `lanes` as a single ray (the
-    /// wide walk's switch); returns the packet's new `tmax`.
-    fn subtree1(&mut self, bvh: &WideRef<'a>, root: usize, lanes: u8) -> f32x8;
-
     /// Tests the wide leaf of `n` triangles whose rows start at `rows[0]` for each lane of
     /// `lanes`, eight triangles per pass; returns the packet's new `tmax`.
     fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8;
@@ -104,23 +100,6 @@ impl<'a> Visitor<'a> for Closest<'_> {
     fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8 {
         for tri in leaf {
             closest8(self.pre, tri, &mut self.best);
-        }
-        self.best.t
-    }
-
-    fn subtree1(&mut self, bvh: &WideRef<'a>, root: usize, lanes: u8) -> f32x8 {
-        let mut rest = lanes;
-        while rest != 0 {
-            let i = rest.trailing_zeros() as usize;
-            rest &= rest - 1;
-            let pre = self.pre.lane(i);
-            let pre8 = Pre1x8::new(&pre);
-            let mut best = self.best.lane(i);
-            bvh8::walk1(bvh, root, &pre, |rows, n| {
-                closest_rows(|| pre, &pre8, rows, n, &mut best);
-                best.t
-            });
-            set_lane(&mut self.best, i, &best);
         }
         self.best.t
     }
@@ -157,29 +136,6 @@ impl<'a> Visitor<'a> for Occlusion<'_> {
                 if self.blocked == self.pre.traced {
                     break;
                 }
-            }
-        }
-        self.tmax
-    }
-
-    fn subtree1(&mut self, bvh: &WideRef<'a>, root: usize, lanes: u8) -> f32x8 {
-        let mut rest = lanes;
-        while rest != 0 {
-            let i = rest.trailing_zeros() as usize;
-            rest &= rest - 1;
-            let pre = self.pre.lane(i);
-            let pre8 = Pre1x8::new(&pre);
-            let tmax = self.tmax.as_array()[i];
-            let end = bvh8::walk1(bvh, root, &pre, |rows, n| {
-                if occludes_rows(|| pre, &pre8, rows, n, tmax) {
-                    f32::NEG_INFINITY
-                } else {
-                    tmax
-                }
-            });
-            if end == f32::NEG_INFINITY {
-                self.blocked |= 1 << i;
-                self.tmax.as_mut_array()[i] = f32::NEG_INFINITY;
             }
         }
         self.tmax

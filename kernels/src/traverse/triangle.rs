@@ -672,6 +672,34 @@ mod tests {
         assert!(hits > 1000, "{hits} hits");
     }
 
+    /// [`Pre1x8::lane`] (from a packet's constants) equals [`Pre1x8::new`] of the lane's own
+    /// ray, bit for bit, for packets of mixed shear permutations and signs.
+    #[test]
+    fn a_packets_lane_constants_equal_the_lanes_own() {
+        let mut rng = Pcg32::new(3, 5);
+        let bits = |p: &Pre1x8| {
+            let b = |v: &[f32x8; 3]| v.map(|x| x.to_array().map(f32::to_bits));
+            (p.k, b(&p.porg), b(&p.s), p.tmin.to_array().map(f32::to_bits))
+        };
+        for trial in 0..500 {
+            let rays: Vec<Ray> = (0..LANES)
+                .map(|_| {
+                    let c = |rng: &mut Pcg32| rng.next_f32() * 2.0 - 1.0;
+                    let d = Vec3::new(c(&mut rng), c(&mut rng), c(&mut rng));
+                    let o = Vec3::new(c(&mut rng), c(&mut rng), c(&mut rng)) * 1e3;
+                    let d = if trial % 2 == 0 { d } else { Vec3::new(d.x.abs(), 0.1, 0.2) };
+                    Ray::new(o, d, rng.next_f32(), f32::INFINITY)
+                })
+                .collect();
+            let packet = Ray8::from_rays(&rays);
+            let pre = Pre8::new(&packet);
+            for (i, ray) in rays.iter().enumerate() {
+                let own = Pre1x8::new(&Pre::new(ray));
+                assert_eq!(bits(&Pre1x8::lane(&pre, i)), bits(&own), "lane {i}: {ray:?}");
+            }
+        }
+    }
+
     /// Rays through the shared vertex of a fan and along its shared edges hit it (the `f64`
     /// path of [`closest_rows`]), like the scalar test.
     #[test]
