@@ -99,9 +99,9 @@ use triangle::{
     traceable, tri1,
 };
 
+pub use bvh8::{WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
 #[cfg(any(feature = "alloc", test))]
 pub use bvh8::{collapse, leaf_rows};
-pub use bvh8::{WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
 use node::STACK;
 pub use node::{BvhRef, LEAF, LayoutError, MAX_DEPTH, Node, Tri};
 
@@ -524,7 +524,11 @@ mod tests {
         let (nodes, tris) = build(&soup);
         let binary = BvhRef::new(&nodes, &tris).unwrap();
         let wide = widen(&binary);
-        assert!(wide.0.len() * 3 < nodes.len(), "{} wide nodes", wide.0.len());
+        assert!(
+            wide.0.len() * 3 < nodes.len(),
+            "{} wide nodes",
+            wide.0.len()
+        );
         for trial in 0..300 {
             let lanes = trial % LANES + 1;
             let shared = v3(&mut rng, 4.5);

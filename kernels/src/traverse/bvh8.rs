@@ -136,7 +136,11 @@ impl<'a> WideRef<'a> {
     /// # Errors
     /// The first [`LayoutError`] found, walking depth first from the root (slots `0..8`);
     /// [`LayoutError::BadRows`] when `rows` differs from the triangles.
-    pub fn new(nodes: &'a [WideNode], tris: &'a [Tri], rows: &'a [f32]) -> Result<Self, LayoutError> {
+    pub fn new(
+        nodes: &'a [WideNode],
+        tris: &'a [Tri],
+        rows: &'a [f32],
+    ) -> Result<Self, LayoutError> {
         if nodes.is_empty() {
             return Err(LayoutError::NoNodes);
         }
@@ -191,7 +195,10 @@ impl<'a> WideRef<'a> {
     /// A view of a layout that already passed [`WideRef::new`] and has not changed since
     /// (see [`BvhRef::new_trusted`]; debug builds check the layout anyway).
     pub fn new_trusted(nodes: &'a [WideNode], tris: &'a [Tri], rows: &'a [f32]) -> Self {
-        debug_assert!(Self::new(nodes, tris, rows).is_ok(), "layout never validated");
+        debug_assert!(
+            Self::new(nodes, tris, rows).is_ok(),
+            "layout never validated"
+        );
         Self { nodes, tris, rows }
     }
 
@@ -852,7 +859,10 @@ mod tests {
         let mut one = WideNode::EMPTY;
         one.meta[0] = LEAF | 1;
         let rows = leaf_rows(&[one], &tris);
-        assert_eq!(WideRef::new(&[], &tris, &rows).unwrap_err(), LayoutError::NoNodes);
+        assert_eq!(
+            WideRef::new(&[], &tris, &rows).unwrap_err(),
+            LayoutError::NoNodes
+        );
         let mut bad = WideNode::EMPTY;
         bad.meta[0] = 0;
         assert_eq!(

@@ -111,7 +111,13 @@ impl<'a> Visitor<'a> for Closest<'_> {
             let i = rest.trailing_zeros() as usize;
             rest &= rest - 1;
             let mut best = self.best.lane(i);
-            closest_rows(|| self.pre.lane(i), &Pre1x8::lane(self.pre, i), rows, n, &mut best);
+            closest_rows(
+                || self.pre.lane(i),
+                &Pre1x8::lane(self.pre, i),
+                rows,
+                n,
+                &mut best,
+            );
             set_lane(&mut self.best, i, &best);
         }
         self.best.t
@@ -148,7 +154,13 @@ impl<'a> Visitor<'a> for Occlusion<'_> {
             let i = rest.trailing_zeros() as usize;
             rest &= rest - 1;
             let tmax = self.tmax.as_array()[i];
-            if occludes_rows(|| self.pre.lane(i), &Pre1x8::lane(self.pre, i), rows, n, tmax) {
+            if occludes_rows(
+                || self.pre.lane(i),
+                &Pre1x8::lane(self.pre, i),
+                rows,
+                n,
+                tmax,
+            ) {
                 self.blocked |= 1 << i;
                 self.tmax.as_mut_array()[i] = f32::NEG_INFINITY;
             }

@@ -565,7 +565,14 @@ pub(super) fn occludes_rows(
 /// The `f64` fallback of [`occludes_rows`]' lanes with a zero edge function.
 #[cold]
 #[inline(never)]
-fn occludes_rows_rare(pre: &Pre, leaf: &[f32], n: usize, first: usize, zero: u8, tmax: f32) -> bool {
+fn occludes_rows_rare(
+    pre: &Pre,
+    leaf: &[f32],
+    n: usize,
+    first: usize,
+    zero: u8,
+    tmax: f32,
+) -> bool {
     (0..8).any(|i| zero >> i & 1 == 1 && occludes1(pre, &row_tri(leaf, n, first + i), tmax))
 }
 
@@ -611,7 +618,7 @@ mod tests {
             let leaf: Vec<Tri> = (0..n)
                 .map(|i| {
                     let mut v = [v3(&mut rng, 2.0), v3(&mut rng, 2.0), v3(&mut rng, 2.0)];
-                    if rng.next_u32() % 3 == 0 {
+                    if rng.next_u32().is_multiple_of(3) {
                         // A shared edge.
                         v[0] = shared[0];
                         v[1] = shared[1];
@@ -679,7 +686,12 @@ mod tests {
         let mut rng = Pcg32::new(3, 5);
         let bits = |p: &Pre1x8| {
             let b = |v: &[f32x8; 3]| v.map(|x| x.to_array().map(f32::to_bits));
-            (p.k, b(&p.porg), b(&p.s), p.tmin.to_array().map(f32::to_bits))
+            (
+                p.k,
+                b(&p.porg),
+                b(&p.s),
+                p.tmin.to_array().map(f32::to_bits),
+            )
         };
         for trial in 0..500 {
             let rays: Vec<Ray> = (0..LANES)
@@ -687,7 +699,11 @@ mod tests {
                     let c = |rng: &mut Pcg32| rng.next_f32() * 2.0 - 1.0;
                     let d = Vec3::new(c(&mut rng), c(&mut rng), c(&mut rng));
                     let o = Vec3::new(c(&mut rng), c(&mut rng), c(&mut rng)) * 1e3;
-                    let d = if trial % 2 == 0 { d } else { Vec3::new(d.x.abs(), 0.1, 0.2) };
+                    let d = if trial % 2 == 0 {
+                        d
+                    } else {
+                        Vec3::new(d.x.abs(), 0.1, 0.2)
+                    };
                     Ray::new(o, d, rng.next_f32(), f32::INFINITY)
                 })
                 .collect();
@@ -695,7 +711,11 @@ mod tests {
             let pre = Pre8::new(&packet);
             for (i, ray) in rays.iter().enumerate() {
                 let own = Pre1x8::new(&Pre::new(ray));
-                assert_eq!(bits(&Pre1x8::lane(&pre, i)), bits(&own), "lane {i}: {ray:?}");
+                assert_eq!(
+                    bits(&Pre1x8::lane(&pre, i)),
+                    bits(&own),
+                    "lane {i}: {ray:?}"
+                );
             }
         }
     }
@@ -731,7 +751,13 @@ mod tests {
                 closest1(&pre, tri, &mut want);
             }
             let mut got = no_hit(ray.tmax);
-            closest_rows(|| pre, &Pre1x8::new(&pre), &rows[start..], fan.len(), &mut got);
+            closest_rows(
+                || pre,
+                &Pre1x8::new(&pre),
+                &rows[start..],
+                fan.len(),
+                &mut got,
+            );
             assert_eq!(got, want, "{ray:?}");
             assert_ne!(got.prim, NO_HIT, "a ray through the fan missed it: {ray:?}");
             let r = Pre1x8::new(&pre).tris8(&rows[start..], fan.len(), 0);
