@@ -13,7 +13,9 @@
 //!   tree by [`collapse`]): eight child boxes per 256-byte node, structure of arrays, so one
 //!   `f32x8` slab test per axis covers a node's children for one ray. Both share the leaves:
 //!   ranges of [`Tri`]s, three vertices each (not edges: the watertight test needs the
-//!   vertices themselves) and the primitive id, in leaf order.
+//!   vertices themselves) and the primitive id, in leaf order; the wide view also holds them
+//!   as structure-of-arrays rows per leaf ([`leaf_rows`]), so one ray tests eight triangles
+//!   per `f32x8` pass.
 //! - **Ray/triangle test.** Woop, Benthin & Wald, *Watertight Ray/Triangle Intersection*,
 //!   JCGT 2(1), 2013: shear into the ray's space (`kz` = largest direction axis, `kx`/`ky`
 //!   swapped when `d[kz] < 0`), 2D edge functions `U, V, W`, recomputed in `f64` when one is
@@ -99,7 +101,7 @@ use triangle::{
     traceable, tri1,
 };
 
-pub use bvh8::{WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
+pub use bvh8::{INTERLEAVE_BYTES, WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
 #[cfg(any(feature = "alloc", test))]
 pub use bvh8::{collapse, leaf_rows};
 use node::STACK;
@@ -335,9 +337,9 @@ pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
 ///
 /// On the wide layout, a packet whose lanes do not share an origin (eight unrelated shadow
-/// rays) is traced lane by lane as single rays: on a tree larger than
-/// [`bvh8::INTERLEAVE_BYTES`] interleaved, so that the lanes' cache misses overlap
-/// (docs/traverse.md, "Shadow packets").
+/// rays) is traced lane by lane as single rays: on a tree larger than [`INTERLEAVE_BYTES`]
+/// interleaved, so that the lanes' cache misses overlap (docs/traverse.md, "Wide layout,
+/// session 9").
 pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;

@@ -8,6 +8,13 @@
 //! view and its wide view share one triangle array. After Wald, Benthin & Boulos, *Getting
 //! Rid of Packets* (2008) and Embree's BVH8 (Wald et al., *Embree*, ACM TOG 33(4), 2014).
 //!
+//! The wide view also holds each leaf's triangles as structure-of-arrays rows
+//! ([`leaf_rows`]), so one ray tests up to eight triangles per `f32x8` pass (Embree's
+//! `triangle8v` idea, with the watertight test): the single-ray walk does so at every leaf,
+//! the packet walk at a leaf few lanes reach. Packets of unrelated rays on a large tree are
+//! walked as interleaved single rays with prefetching ([`walk_interleaved`]): eight
+//! independent chains of cache misses overlap.
+//!
 //! [`collapse`] builds a wide tree from a binary [`BvhRef`]: every wide node takes its binary
 //! node's grandchildren (so a wide level spans at least two binary levels and the depth stays
 //! within [`WIDE_MAX_DEPTH`]), then opens the inner child of largest surface area until
@@ -38,7 +45,9 @@ pub const WIDE_MAX_DEPTH: usize = super::MAX_DEPTH / 2;
 const STACK: usize = (WIDTH - 1) * (WIDE_MAX_DEPTH + 1) + WIDTH + 1;
 
 /// A walk's stack of [`STACK`] entries, left uninitialised: zeroing the 3.7–7.4 KB per ray
-/// was a fifth of the wide single-ray walk's time on the Veach room (libc `memset`).
+/// was a fifth of the wide single-ray walk's time on the Veach room (libc `memset`). (Built
+/// from an associated `const` holding `len: 0` beside the uninitialised array, it was copied
+/// from a constant instead: the single-ray walk lost 40 %.)
 struct Stack<T: Copy> {
     items: [MaybeUninit<T>; STACK],
     len: usize,
@@ -480,7 +489,7 @@ fn push_sorted(
     (keys[n - 1] & 7) as usize
 }
 
-/// Layout size from which [`super::occluded8`] interleaves the single-ray walks of a packet
+/// Layout size ([`WideRef::bytes`]) from which [`super::occluded8`] interleaves the single-ray walks of a packet
 /// whose lanes do not share an origin: 1 MiB, a core's L2 on the measuring machine. Measured
 /// on two trees only (docs/traverse.md, "Shadow packets"): on the Veach room (0.27 MB, in
 /// cache) interleaving costs 37 %, on the 1M-triangle city (59 MB) it gains 1.9×.
