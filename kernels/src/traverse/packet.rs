@@ -63,9 +63,7 @@ impl Pre8 {
             near,
         )
     }
-}
 
-impl Pre8 {
     /// Whether every traced lane has the same origin (bit for bit), as a texel's gather or
     /// next-event packet does.
     pub(super) fn shared_origin(&self) -> bool {
