@@ -489,10 +489,11 @@ fn push_sorted(
     (keys[n - 1] & 7) as usize
 }
 
-/// Layout size ([`WideRef::bytes`]) from which [`super::occluded8`] interleaves the single-ray walks of a packet
-/// whose lanes do not share an origin: 1 MiB, a core's L2 on the measuring machine. Measured
-/// on two trees only (docs/traverse.md, "Shadow packets"): on the Veach room (0.27 MB, in
-/// cache) interleaving costs 37 %, on the 1M-triangle city (59 MB) it gains 1.9×.
+/// Layout size ([`WideRef::bytes`]) from which [`super::occluded8`] interleaves the
+/// single-ray walks of a packet whose lanes do not share an origin: 1 MiB, a core's L2 on the
+/// measuring machine. Measured on two trees only (docs/traverse.md, "Wide layout, session
+/// 9"): on the Veach room (0.27 MB, in cache) interleaving costs 30–37 %, on the 1M-triangle
+/// city (59 MB) it gains 1.9×.
 pub const INTERLEAVE_BYTES: usize = 1 << 20;
 
 /// Asks the cache for the 256 bytes at `p` (a node, or the first rows of a leaf).
