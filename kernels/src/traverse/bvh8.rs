@@ -429,7 +429,18 @@ pub(super) fn walk1<'a>(
         let mut next = match bits.count_ones() {
             0 => None,
             1 => Some(entry(bits.trailing_zeros() as usize)),
-            _ => Some(entry(push_sorted(&mut stack, bits, near, entry))),
+            _ => {
+                let nearest = push_sorted(&mut stack, bits, near, entry);
+                // The pushed slots are prefetched (+4-5 % on the city's single rays, -1 % in
+                // cache on the room: docs/traverse.md).
+                let mut rest = bits & !(1 << nearest);
+                while rest != 0 {
+                    let slot = rest.trailing_zeros() as usize;
+                    rest &= rest - 1;
+                    prefetch_entry(bvh, entry(slot));
+                }
+                Some(entry(nearest))
+            }
         };
         loop {
             let e = match next.take() {
