@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 
 use glam::{Vec3, Vec3A};
 use guidebake_kernels::traverse::{
-    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse,
+    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse, leaf_rows,
 };
 use obvhs::{
     BvhBuildParams,
@@ -139,6 +139,8 @@ pub enum BvhError {
 pub struct Bvh {
     nodes: Vec<Node>,
     wide: Vec<WideNode>,
+    /// The triangles as structure-of-arrays rows per wide leaf ([`leaf_rows`]).
+    rows: Vec<f32>,
     tris: Vec<Tri>,
     build_time: Duration,
     preset: Preset,
@@ -175,10 +177,12 @@ impl Bvh {
         };
         let binary = BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
         let wide = collapse(&binary);
-        WideRef::new(&wide, &tris).map_err(BvhError::Layout)?;
+        let rows = leaf_rows(&wide, &tris);
+        WideRef::new(&wide, &tris, &rows).map_err(BvhError::Layout)?;
         Ok(Self {
             nodes,
             wide,
+            rows,
             tris,
             build_time: start.elapsed(),
             preset,
@@ -195,7 +199,7 @@ impl Bvh {
     /// The wide view (eight child boxes per node, collapsed from the binary tree, same
     /// triangles). Same results as [`Bvh::view`], bit for bit. Cheap: `build` validated it.
     pub fn wide(&self) -> WideRef<'_> {
-        WideRef::new_trusted(&self.wide, &self.tris)
+        WideRef::new_trusted(&self.wide, &self.tris, &self.rows)
     }
 
     /// Wide nodes, root first.

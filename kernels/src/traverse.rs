@@ -13,7 +13,9 @@
 //!   tree by [`collapse`]): eight child boxes per 256-byte node, structure of arrays, so one
 //!   `f32x8` slab test per axis covers a node's children for one ray. Both share the leaves:
 //!   ranges of [`Tri`]s, three vertices each (not edges: the watertight test needs the
-//!   vertices themselves) and the primitive id, in leaf order.
+//!   vertices themselves) and the primitive id, in leaf order; the wide view also holds them
+//!   as structure-of-arrays rows per leaf ([`leaf_rows`]), so one ray tests eight triangles
+//!   per `f32x8` pass.
 //! - **Ray/triangle test.** Woop, Benthin & Wald, *Watertight Ray/Triangle Intersection*,
 //!   JCGT 2(1), 2013: shear into the ray's space (`kz` = largest direction axis, `kx`/`ky`
 //!   swapped when `d[kz] < 0`), 2D edge functions `U, V, W`, recomputed in `f64` when one is
@@ -83,7 +85,7 @@
 //!   found first, but culls so much less that the packet path ran 12–46 % slower on
 //!   `benches/traverse.rs`.)
 
-use crate::packet::{Hit, Hit8, NO_HIT, Ray, Ray8};
+use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
 use wide::{f32x8, u32x8};
 
 mod bvh8;
@@ -94,11 +96,14 @@ mod triangle;
 
 use packet::{Closest, Occlusion, Visitor, start8, walk8};
 use scalar::{FAR_FLOOR, FAR_UP, NEAR_DOWN, box1_at, walk1, widened};
-use triangle::{Best8, Pre, Pre8, accept, closest1, no_hit, occludes1, traceable, tri1};
+use triangle::{
+    Best8, Pre, Pre1x8, Pre8, accept, closest_rows, closest1, no_hit, occludes_rows, occludes1,
+    traceable, tri1,
+};
 
+pub use bvh8::{INTERLEAVE_BYTES, WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
 #[cfg(any(feature = "alloc", test))]
-pub use bvh8::collapse;
-pub use bvh8::{WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
+pub use bvh8::{collapse, leaf_rows};
 use node::STACK;
 pub use node::{BvhRef, LEAF, LayoutError, MAX_DEPTH, Node, Tri};
 
@@ -255,15 +260,20 @@ pub fn intersect1(bvh: &impl Tree, ray: &Ray) -> Option<Hit> {
     }
     let pre = Pre::new(ray);
     let mut best = no_hit(ray.tmax);
-    let visit = |leaf: &[Tri]| {
-        for tri in leaf {
-            closest1(&pre, tri, &mut best);
-        }
-        best.t
-    };
     match bvh.layout() {
-        Layout::Binary(b) => walk1(&b, &pre, visit),
-        Layout::Wide(w) => bvh8::walk1(&w, &pre, visit),
+        Layout::Binary(b) => walk1(&b, &pre, |leaf: &[Tri]| {
+            for tri in leaf {
+                closest1(&pre, tri, &mut best);
+            }
+            best.t
+        }),
+        Layout::Wide(w) => {
+            let pre8 = Pre1x8::new(&pre);
+            bvh8::walk1(&w, &pre, |rows, n| {
+                closest_rows(|| pre, &pre8, rows, n, &mut best);
+                best.t
+            })
+        }
     };
     (best.prim != NO_HIT).then_some(best)
 }
@@ -275,16 +285,17 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
     }
     let pre = Pre::new(ray);
     let tmax = ray.tmax.min(f32::MAX);
-    let visit = |leaf: &[Tri]| {
-        if leaf.iter().any(|tri| occludes1(&pre, tri, tmax)) {
-            f32::NEG_INFINITY
-        } else {
-            tmax
-        }
-    };
+    let blocked = |yes: bool| if yes { f32::NEG_INFINITY } else { tmax };
     let end = match bvh.layout() {
-        Layout::Binary(b) => walk1(&b, &pre, visit),
-        Layout::Wide(w) => bvh8::walk1(&w, &pre, visit),
+        Layout::Binary(b) => walk1(&b, &pre, |leaf: &[Tri]| {
+            blocked(leaf.iter().any(|tri| occludes1(&pre, tri, tmax)))
+        }),
+        Layout::Wide(w) => {
+            let pre8 = Pre1x8::new(&pre);
+            bvh8::walk1(&w, &pre, |rows, n| {
+                blocked(occludes_rows(|| pre, &pre8, rows, n, tmax))
+            })
+        }
     };
     end == f32::NEG_INFINITY
 }
@@ -324,6 +335,11 @@ pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
 /// Which of eight rays are blocked on `[tmin, tmax]`: packet traversal with early exit (a lane
 /// drops out when blocked, the walk ends when all have). Returns the bit mask of blocked lanes;
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
+///
+/// On the wide layout, a packet whose lanes do not share an origin (eight unrelated shadow
+/// rays) is traced lane by lane as single rays: on a tree larger than [`INTERLEAVE_BYTES`]
+/// interleaved, so that the lanes' cache misses overlap (docs/traverse.md, "Wide layout,
+/// session 9").
 pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;
@@ -335,9 +351,51 @@ pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut occlusion),
+        Layout::Wide(w) if !pre.shared_origin() => {
+            return if w.bytes() > bvh8::INTERLEAVE_BYTES {
+                occluded_interleaved(&w, &pre, tmax)
+            } else {
+                occluded_lanes(&w, &pre, tmax)
+            };
+        }
         Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion),
     }
     occlusion.blocked
+}
+
+/// The traced lanes of a packet through the wide layout as single rays, one after another:
+/// the blocked lanes.
+fn occluded_lanes(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
+    (0..LANES)
+        .filter(|&i| pre.traced >> i & 1 == 1)
+        .fold(0, |blocked, i| {
+            let lane = pre.lane(i);
+            let pre8 = Pre1x8::new(&lane);
+            let tmax = tmax.as_array()[i];
+            let end = bvh8::walk1(w, &lane, |rows, n| {
+                if occludes_rows(|| lane, &pre8, rows, n, tmax) {
+                    f32::NEG_INFINITY
+                } else {
+                    tmax
+                }
+            });
+            blocked | u8::from(end == f32::NEG_INFINITY) << i
+        })
+}
+
+/// [`occluded_lanes`], the lanes' walks interleaved ([`bvh8::walk_interleaved`]).
+fn occluded_interleaved(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
+    let mut blocked = 0u8;
+    bvh8::walk_interleaved(w, pre, tmax, pre.traced, |i, (lane, pre8), rows, n| {
+        let tmax = tmax.as_array()[i];
+        if occludes_rows(|| *lane, pre8, rows, n, tmax) {
+            blocked |= 1 << i;
+            f32::NEG_INFINITY
+        } else {
+            tmax
+        }
+    });
+    blocked
 }
 
 #[cfg(test)]
@@ -446,11 +504,18 @@ mod tests {
         Ray::new(org, d, 0.0, tmax)
     }
 
+    /// The collapse of `binary` and its leaf rows.
+    fn widen(binary: &BvhRef<'_>) -> (Vec<WideNode>, Vec<f32>) {
+        let wide = collapse(binary);
+        let rows = leaf_rows(&wide, binary.tris());
+        (wide, rows)
+    }
+
     /// The binary view of `nodes`/`tris` and the wide view of its collapse (`wide`).
-    fn layouts<'a>(bvh: BvhRef<'a>, wide: &'a [WideNode]) -> [Layout<'a>; 2] {
+    fn layouts<'a>(bvh: BvhRef<'a>, wide: &'a (Vec<WideNode>, Vec<f32>)) -> [Layout<'a>; 2] {
         [
             Layout::Binary(bvh),
-            Layout::Wide(WideRef::new(wide, bvh.tris()).expect("collapse is valid")),
+            Layout::Wide(WideRef::new(&wide.0, bvh.tris(), &wide.1).expect("collapse is valid")),
         ]
     }
 
@@ -460,8 +525,12 @@ mod tests {
         let soup = soup(&mut rng, 150);
         let (nodes, tris) = build(&soup);
         let binary = BvhRef::new(&nodes, &tris).unwrap();
-        let wide = collapse(&binary);
-        assert!(wide.len() * 3 < nodes.len(), "{} wide nodes", wide.len());
+        let wide = widen(&binary);
+        assert!(
+            wide.0.len() * 3 < nodes.len(),
+            "{} wide nodes",
+            wide.0.len()
+        );
         for trial in 0..300 {
             let lanes = trial % LANES + 1;
             let shared = v3(&mut rng, 4.5);
@@ -480,6 +549,11 @@ mod tests {
                 let mut hits = Hit8::NONE;
                 let mask = intersect8(&bvh, &packet, &mut hits);
                 let blocked = occluded8(&bvh, &packet);
+                if let (Layout::Wide(w), Some((pre, tmax))) = (bvh, start8(&packet)) {
+                    // Both single-ray paths of `occluded8`, whichever the tree's size picks.
+                    assert_eq!(occluded_lanes(&w, &pre, tmax), blocked, "{packet:?}");
+                    assert_eq!(occluded_interleaved(&w, &pre, tmax), blocked, "{packet:?}");
+                }
                 for lane in 0..LANES {
                     let r = packet.lane(lane);
                     let oracle = intersect_brute(&tris, &r);
@@ -521,7 +595,7 @@ mod tests {
         let (nodes, tris) = build(&soup);
         assert_eq!(nodes[0].hi[0][0], 0.0, "the left leaf's box ends at x = 0");
         let binary = BvhRef::new(&nodes, &tris).unwrap();
-        let wide = collapse(&binary);
+        let wide = widen(&binary);
         let rays = [
             // The issue's ray: origin (8.8e-44, −6.7e-9, 9.2e-41), direction (0, 0, 56.06).
             Ray::new(
@@ -590,7 +664,7 @@ mod tests {
         ];
         let (nodes, tris) = build(&soup);
         let binary = BvhRef::new(&nodes, &tris).unwrap();
-        let wide = collapse(&binary);
+        let wide = widen(&binary);
         let org = Vec3::new(3.762_040_7e-37, 1.504_563_9e-36, 3.761_926_3e-37);
         let r = Ray::new(org, Vec3::new(-6400.0, 3.0, -1280.0), 0.0, f32::INFINITY);
         let brute = intersect_brute(&tris, &r);
@@ -644,8 +718,8 @@ mod tests {
     /// Both traversals' answers, which the contract must allow.
     fn traversals_keep_to_the_contract(bvh: &impl Tree, r: &Ray) {
         if let Layout::Binary(binary) = bvh.layout() {
-            let wide = collapse(&binary);
-            let wide = WideRef::new(&wide, binary.tris()).unwrap();
+            let (wide, rows) = widen(&binary);
+            let wide = WideRef::new(&wide, binary.tris(), &rows).unwrap();
             traversals_keep_to_the_contract(&wide, r);
         }
         assert!(closest_hit_allowed(bvh, r, intersect1(bvh, r)));

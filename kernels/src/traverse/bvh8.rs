@@ -8,6 +8,13 @@
 //! view and its wide view share one triangle array. After Wald, Benthin & Boulos, *Getting
 //! Rid of Packets* (2008) and Embree's BVH8 (Wald et al., *Embree*, ACM TOG 33(4), 2014).
 //!
+//! The wide view also holds each leaf's triangles as structure-of-arrays rows
+//! ([`leaf_rows`]), so one ray tests up to eight triangles per `f32x8` pass (Embree's
+//! `triangle8v` idea, with the watertight test): the single-ray walk does so at every leaf,
+//! the packet walk at a leaf few lanes reach. Packets of unrelated rays on a large tree are
+//! walked as interleaved single rays with prefetching ([`walk_interleaved`]): eight
+//! independent chains of cache misses overlap.
+//!
 //! [`collapse`] builds a wide tree from a binary [`BvhRef`]: every wide node takes its binary
 //! node's grandchildren (so a wide level spans at least two binary levels and the depth stays
 //! within [`WIDE_MAX_DEPTH`]), then opens the inner child of largest surface area until
@@ -19,9 +26,11 @@
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
+use super::triangle::{PRIM_ROW, Pre1x8, ROWS};
 use super::{FAR_FLOOR, FAR_UP, LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor};
 use crate::packet::LANES;
 use bytemuck::{Pod, Zeroable};
+use core::mem::MaybeUninit;
 use wide::{f32x8, u32x8};
 
 /// Children per wide node.
@@ -34,6 +43,40 @@ pub const WIDE_MAX_DEPTH: usize = super::MAX_DEPTH / 2;
 /// Stack entries a walk needs: at most `WIDTH − 1` pending siblings per level, plus one
 /// node's children.
 const STACK: usize = (WIDTH - 1) * (WIDE_MAX_DEPTH + 1) + WIDTH + 1;
+
+/// A walk's stack of [`STACK`] entries, left uninitialised: zeroing the 3.7–7.4 KB per ray
+/// was a fifth of the wide single-ray walk's time on the Veach room (libc `memset`). (Built
+/// from an associated `const` holding `len: 0` beside the uninitialised array, it was copied
+/// from a constant instead: the single-ray walk lost 40 %.)
+struct Stack<T: Copy> {
+    items: [MaybeUninit<T>; STACK],
+    len: usize,
+}
+
+impl<T: Copy> Stack<T> {
+    #[inline(always)]
+    fn new() -> Self {
+        Self {
+            items: [const { MaybeUninit::uninit() }; STACK],
+            len: 0,
+        }
+    }
+
+    /// Pushes `v` (a walk never exceeds [`STACK`]; indexing checks it anyway).
+    #[inline(always)]
+    fn push(&mut self, v: T) {
+        self.items[self.len].write(v);
+        self.len += 1;
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> Option<T> {
+        self.len = self.len.checked_sub(1)?;
+        // SAFETY: `push` wrote every entry below the previous `len`, and `len` only grows
+        // through `push`.
+        Some(unsafe { self.items[self.len].assume_init() })
+    }
+}
 
 /// One wide node: the boxes of up to eight children, four 64-byte cache lines.
 ///
@@ -84,20 +127,29 @@ impl WideNode {
     }
 }
 
-/// A validated view of a wide BVH: nodes (root first) and triangles in leaf order.
+/// A validated view of a wide BVH: nodes (root first), triangles in leaf order, and the same
+/// triangles as structure-of-arrays rows per leaf ([`leaf_rows`]), which single rays test
+/// eight at a time.
 #[derive(Clone, Copy, Debug)]
 pub struct WideRef<'a> {
     nodes: &'a [WideNode],
     tris: &'a [Tri],
+    rows: &'a [f32],
 }
 
 impl<'a> WideRef<'a> {
     /// Checks every child index, leaf range, that used slots come first, and the depth, once,
-    /// so traversal can trust them.
+    /// so traversal can trust them; and that `rows` is [`leaf_rows`]`(nodes, tris)`, bit for
+    /// bit.
     ///
     /// # Errors
-    /// The first [`LayoutError`] found, walking depth first from the root (slots `0..8`).
-    pub fn new(nodes: &'a [WideNode], tris: &'a [Tri]) -> Result<Self, LayoutError> {
+    /// The first [`LayoutError`] found, walking depth first from the root (slots `0..8`);
+    /// [`LayoutError::BadRows`] when `rows` differs from the triangles.
+    pub fn new(
+        nodes: &'a [WideNode],
+        tris: &'a [Tri],
+        rows: &'a [f32],
+    ) -> Result<Self, LayoutError> {
         if nodes.is_empty() {
             return Err(LayoutError::NoNodes);
         }
@@ -135,17 +187,28 @@ impl<'a> WideRef<'a> {
                     sp += 1;
                 } else if child as u64 + u64::from(meta & !LEAF) > tris.len() as u64 {
                     return Err(bad_leaf);
+                } else if !rows_match(tris, rows, child, meta) {
+                    return Err(LayoutError::BadRows {
+                        node: index,
+                        slot: slot as u8,
+                    });
                 }
             }
         }
-        Ok(Self { nodes, tris })
+        if rows.len() != rows_len(tris.len()) {
+            return Err(LayoutError::BadRows { node: 0, slot: 0 });
+        }
+        Ok(Self { nodes, tris, rows })
     }
 
     /// A view of a layout that already passed [`WideRef::new`] and has not changed since
     /// (see [`BvhRef::new_trusted`]; debug builds check the layout anyway).
-    pub fn new_trusted(nodes: &'a [WideNode], tris: &'a [Tri]) -> Self {
-        debug_assert!(Self::new(nodes, tris).is_ok(), "layout never validated");
-        Self { nodes, tris }
+    pub fn new_trusted(nodes: &'a [WideNode], tris: &'a [Tri], rows: &'a [f32]) -> Self {
+        debug_assert!(
+            Self::new(nodes, tris, rows).is_ok(),
+            "layout never validated"
+        );
+        Self { nodes, tris, rows }
     }
 
     /// The nodes, root first.
@@ -156,6 +219,19 @@ impl<'a> WideRef<'a> {
     /// The triangles, in leaf order.
     pub fn tris(&self) -> &'a [Tri] {
         self.tris
+    }
+
+    /// Bytes of nodes and leaf rows (what a walk reads).
+    pub fn bytes(&self) -> usize {
+        core::mem::size_of_val(self.nodes) + core::mem::size_of_val(self.rows)
+    }
+
+    /// The rows of the leaf starting at triangle `first`, to the end of the slice (the
+    /// 8-wide loads read past a leaf's last row).
+    fn leaf_rows(&self, first: u32) -> &'a [f32] {
+        // An empty slot (`meta == LEAF`, any `child`) that a crafted box lets a ray meet
+        // reads no rows.
+        self.rows.get(ROWS * first as usize..).unwrap_or(&[])
     }
 
     fn leaf(&self, first: u32, meta: u32) -> &'a [Tri] {
@@ -242,6 +318,50 @@ pub fn collapse(bvh: &BvhRef<'_>) -> alloc::vec::Vec<WideNode> {
     out
 }
 
+/// Length of the rows of `tris` triangles: [`ROWS`] values per triangle and eight of
+/// padding, so the last leaf's 8-wide loads stay inside.
+fn rows_len(tris: usize) -> usize {
+    ROWS * tris + 8
+}
+
+/// Whether the rows of the leaf `child`, `meta` (a valid range of `tris`) hold its triangles.
+fn rows_match(tris: &[Tri], rows: &[f32], child: u32, meta: u32) -> bool {
+    let (first, n) = (child as usize, (meta & !LEAF) as usize);
+    let Some(leaf) = rows.get(ROWS * first..ROWS * (first + n)) else {
+        return false;
+    };
+    tris[first..first + n].iter().enumerate().all(|(i, t)| {
+        let same = |row: usize, x: f32| leaf[row * n + i].to_bits() == x.to_bits();
+        (0..9).all(|r| same(r, t.v[r / 3][r % 3])) && same(PRIM_ROW, f32::from_bits(t.prim))
+    })
+}
+
+/// The triangles of each leaf of `nodes` as structure-of-arrays rows, for [`WideRef::new`]:
+/// the leaf of `n` triangles starting at triangle `first` holds row `r` (vertex `r / 3`, axis
+/// `r % 3`; row 9 the primitive ids' bits) at `ROWS·first + r·n`, so one 8-wide load reads an
+/// axis of eight of its triangles. Triangles outside every leaf keep zeros.
+#[cfg(any(feature = "alloc", test))]
+pub fn leaf_rows(nodes: &[WideNode], tris: &[Tri]) -> alloc::vec::Vec<f32> {
+    extern crate alloc;
+    let mut rows = alloc::vec![0.0; rows_len(tris.len())];
+    for node in nodes {
+        for slot in 0..WIDTH {
+            let (first, meta) = (node.child[slot] as usize, node.meta[slot]);
+            if meta == 0 || meta == LEAF {
+                continue;
+            }
+            let n = (meta & !LEAF) as usize;
+            for (i, t) in tris[first..first + n].iter().enumerate() {
+                for r in 0..9 {
+                    rows[ROWS * first + r * n + i] = t.v[r / 3][r % 3];
+                }
+                rows[ROWS * first + PRIM_ROW * n + i] = f32::from_bits(t.prim);
+            }
+        }
+    }
+    rows
+}
+
 // ---------------------------------------------------------------------------------------------
 // Single ray.
 
@@ -284,25 +404,87 @@ impl Ray1x8 {
     }
 }
 
-/// Pushes the slots of node `index` in `bits`, farthest first, as `near bits << 32 | index·8 +
-/// slot` (entry distances are ≥ 0, so their bits order like the values).
+/// Depth-first walk of one ray, nearest child first. `visit` tests the leaf of `n` triangles
+/// whose rows start at `rows[0]` and returns the ray's new `tmax` (−∞ stops the walk).
+///
+/// The stack holds `(child, meta)` with the slot's entry distance beside it, so a pop never
+/// reads the parent node again; a popped entry whose entry distance lies beyond the widened
+/// `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
+pub(super) fn walk1<'a>(
+    bvh: &WideRef<'a>,
+    pre: &Pre,
+    mut visit: impl FnMut(&'a [f32], usize) -> f32,
+) -> f32 {
+    let mut tmax = visit(&[], 0);
+    let ray = Ray1x8::new(pre);
+    // (child | meta << 32, entry distance)
+    let mut stack = Stack::<(u64, f32)>::new();
+    let mut index = 0;
+    loop {
+        let node = &bvh.nodes[index];
+        let (bits, near) = ray.boxes(node, tmax);
+        let near = near.as_array();
+        let entry = |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
+        // The nearest slot met is visited next; the others are pushed farthest first.
+        let mut next = match bits.count_ones() {
+            0 => None,
+            1 => Some(entry(bits.trailing_zeros() as usize)),
+            _ => {
+                let nearest = push_sorted(&mut stack, bits, near, entry);
+                // The pushed slots are prefetched (+4-5 % on the city's single rays, -1 % in
+                // cache on the room: docs/traverse.md).
+                let mut rest = bits & !(1 << nearest);
+                while rest != 0 {
+                    let slot = rest.trailing_zeros() as usize;
+                    rest &= rest - 1;
+                    prefetch_entry(bvh, entry(slot));
+                }
+                Some(entry(nearest))
+            }
+        };
+        loop {
+            let e = match next.take() {
+                Some(e) => e,
+                None => {
+                    let Some((e, dist)) = stack.pop() else {
+                        return tmax;
+                    };
+                    if dist > super::widened(tmax) {
+                        continue;
+                    }
+                    e
+                }
+            };
+            let (child, meta) = (e as u32, (e >> 32) as u32);
+            if meta == 0 {
+                index = child as usize;
+                break;
+            }
+            tmax = visit(bvh.leaf_rows(child), (meta & !LEAF) as usize);
+            if tmax == f32::NEG_INFINITY {
+                return tmax;
+            }
+        }
+    }
+}
+
+/// Pushes the slots of `bits` (two or more) but the nearest, farthest first, with their
+/// entry distances, and returns the nearest. Keys are `near bits & !7 | slot` (entry
+/// distances are ≥ 0, so their bits order like the values; the order only steers the walk).
 #[inline(always)]
 fn push_sorted(
-    stack: &mut [u64; STACK],
-    sp: &mut usize,
+    stack: &mut Stack<(u64, f32)>,
     bits: u8,
     near: &[f32; WIDTH],
-    index: usize,
-) {
-    let key = |slot: usize| u64::from(near[slot].to_bits()) << 32 | (index * WIDTH + slot) as u64;
-    let mut keys = [0u64; WIDTH];
+    entry: impl Fn(usize) -> u64,
+) -> usize {
+    let mut keys = [0u32; WIDTH];
     let mut n = 0;
     let mut rest = bits;
     while rest != 0 {
         let slot = rest.trailing_zeros() as usize;
         rest &= rest - 1;
-        // Insertion, descending.
-        let k = key(slot);
+        let k = near[slot].to_bits() & !7 | slot as u32;
         let mut i = n;
         while i > 0 && keys[i - 1] < k {
             keys[i] = keys[i - 1];
@@ -311,47 +493,143 @@ fn push_sorted(
         keys[i] = k;
         n += 1;
     }
-    stack[*sp..*sp + n].copy_from_slice(&keys[..n]);
-    *sp += n;
+    for &k in &keys[..n - 1] {
+        let slot = (k & 7) as usize;
+        stack.push((entry(slot), near[slot]));
+    }
+    (keys[n - 1] & 7) as usize
 }
 
-/// Depth-first walk of one ray, nearest child first. `visit` tests a leaf's triangles and
-/// returns the ray's new `tmax` (−∞ stops the walk). A popped entry whose entry distance lies
-/// beyond the widened `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
-pub(super) fn walk1<'a>(
-    bvh: &WideRef<'a>,
-    pre: &Pre,
-    mut visit: impl FnMut(&'a [Tri]) -> f32,
-) -> f32 {
-    let mut tmax = visit(&[]);
-    let ray = Ray1x8::new(pre);
-    let mut stack = [0u64; STACK];
-    let mut sp = 0;
-    let mut index = 0usize;
-    loop {
-        let node = &bvh.nodes[index];
-        let (bits, near) = ray.boxes(node, tmax);
-        push_sorted(&mut stack, &mut sp, bits, near.as_array(), index);
-        loop {
-            if sp == 0 {
-                return tmax;
+/// Layout size ([`WideRef::bytes`]) from which [`super::occluded8`] interleaves the
+/// single-ray walks of a packet whose lanes do not share an origin: 1 MiB, a core's L2 on the
+/// measuring machine. Measured on two trees only (docs/traverse.md, "Wide layout, session
+/// 9"): on the Veach room (0.27 MB, in cache) interleaving costs 30–37 %, on the 1M-triangle
+/// city (59 MB) it gains 1.9×.
+pub const INTERLEAVE_BYTES: usize = 1 << 20;
+
+/// Asks the cache for the 256 bytes at `p` (a node, or the first rows of a leaf).
+#[inline(always)]
+fn prefetch<T>(p: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let p = (p as *const T).cast::<i8>();
+        for line in 0..4 {
+            // SAFETY: a prefetch never faults and has no effect on memory; `wrapping_add`
+            // keeps the address arithmetic defined.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * line)) };
+        }
+    }
+}
+
+/// Prefetches the node or the leaf rows of the entry `child | meta << 32`.
+#[inline(always)]
+fn prefetch_entry(bvh: &WideRef<'_>, e: u64) {
+    let (child, meta) = (e as u32, (e >> 32) as u32);
+    if meta == 0 {
+        prefetch(&bvh.nodes[child as usize]);
+    } else if let Some(first) = bvh.leaf_rows(child).first() {
+        prefetch(first);
+    }
+}
+
+/// The lanes `lanes` of a packet as single rays, walked interleaved: each round advances
+/// every unfinished lane by one node or leaf and prefetches what that lane visits next, so
+/// the cache misses of the independent walks overlap (a single walk waits for each node in
+/// turn). Each lane's walk is [`walk1`]'s: the slots met pushed farthest first with their
+/// entry distances, the nearest visited next, a popped entry beyond the lane's widened
+/// `tmax` skipped. `visit(lane, pre, rows, n)` tests a leaf for one lane and returns its new
+/// `tmax` (−∞ ends that lane's walk).
+pub(super) fn walk_interleaved(
+    bvh: &WideRef<'_>,
+    pre: &Pre8,
+    tmax: f32x8,
+    lanes: u8,
+    mut visit: impl FnMut(usize, &(Pre, Pre1x8), &[f32], usize) -> f32,
+) {
+    let ray: [Option<(Ray1x8, (Pre, Pre1x8))>; LANES] = core::array::from_fn(|i| {
+        (lanes >> i & 1 == 1).then(|| {
+            let p = pre.lane(i);
+            (Ray1x8::new(&p), (p, Pre1x8::new(&p)))
+        })
+    });
+    let mut tmax = tmax.to_array();
+    let mut stacks: [[MaybeUninit<(u64, f32)>; STACK]; LANES] =
+        [const { [const { MaybeUninit::uninit() }; STACK] }; LANES];
+    let mut sp = [0usize; LANES];
+    // The entry each lane visits next (`child | meta << 32`): the root first.
+    let mut next = [0u64; LANES];
+    let mut active = lanes;
+    while active != 0 {
+        let mut rest = active;
+        while rest != 0 {
+            let i = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            let Some((r, consts)) = &ray[i] else {
+                continue;
+            };
+            let (child, meta) = (next[i] as u32, (next[i] >> 32) as u32);
+            let mut go = None;
+            if meta == 0 {
+                let node = &bvh.nodes[child as usize];
+                let (bits, near) = r.boxes(node, tmax[i]);
+                let near = near.as_array();
+                let entry =
+                    |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
+                if bits != 0 {
+                    let mut keys = [0u32; WIDTH];
+                    let mut n = 0;
+                    let mut bits = bits;
+                    while bits != 0 {
+                        let slot = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        let k = near[slot].to_bits() & !7 | slot as u32;
+                        let mut j = n;
+                        while j > 0 && keys[j - 1] < k {
+                            keys[j] = keys[j - 1];
+                            j -= 1;
+                        }
+                        keys[j] = k;
+                        n += 1;
+                    }
+                    for &k in &keys[..n - 1] {
+                        let slot = (k & 7) as usize;
+                        stacks[i][sp[i]].write((entry(slot), near[slot]));
+                        sp[i] += 1;
+                    }
+                    go = Some(entry((keys[n - 1] & 7) as usize));
+                }
+            } else {
+                tmax[i] = visit(i, consts, bvh.leaf_rows(child), (meta & !LEAF) as usize);
+                if tmax[i] == f32::NEG_INFINITY {
+                    active &= !(1 << i);
+                    continue;
+                }
             }
-            sp -= 1;
-            let entry = stack[sp];
-            if f32::from_bits((entry >> 32) as u32) > super::widened(tmax) {
+            let e = match go {
+                Some(e) => e,
+                None => {
+                    let far = super::widened(tmax[i]);
+                    loop {
+                        if sp[i] == 0 {
+                            break None;
+                        }
+                        sp[i] -= 1;
+                        // SAFETY: every entry below `sp[i]` was written above.
+                        let (e, dist) = unsafe { stacks[i][sp[i]].assume_init() };
+                        if dist <= far {
+                            break Some(e);
+                        }
+                    }
+                    .unwrap_or(u64::MAX)
+                }
+            };
+            if e == u64::MAX {
+                active &= !(1 << i);
                 continue;
             }
-            let (parent, slot) = ((entry as u32 as usize) / WIDTH, entry as usize % WIDTH);
-            let node = &bvh.nodes[parent];
-            let (child, meta) = (node.child[slot], node.meta[slot]);
-            if meta == 0 {
-                index = child as usize;
-                break;
-            }
-            tmax = visit(bvh.leaf(child, meta));
-            if tmax == f32::NEG_INFINITY {
-                return tmax;
-            }
+            prefetch_entry(bvh, e);
+            next[i] = e;
         }
     }
 }
@@ -427,8 +705,8 @@ pub(super) fn walk8<'a>(
     visitor: &mut impl Visitor<'a>,
 ) {
     let lanes = lanes(pre);
-    let mut stack = [0u64; STACK];
-    let mut sp = 0;
+    // (child | meta << 32, the nearest entry distance of the lanes met, those lanes)
+    let mut stack = Stack::<(u64, f32, u8)>::new();
     let mut alive = pre.traced;
     let mut index = 0usize;
     let mut live = alive;
@@ -438,17 +716,16 @@ pub(super) fn walk8<'a>(
         let (met, nearest) = boxes8(node, &lanes, live, tmax.as_array());
         let met = met.to_array();
         let nearest = nearest.as_array();
-        let mut keys = [0u64; WIDTH];
+        // Keys `nearest bits & !7 | slot`, insertion-sorted descending (entry distances are
+        // ≥ 0, so their bits order like the values); the nearest is visited next, the others
+        // pushed farthest first.
+        let mut keys = [0u32; WIDTH];
         let mut n = 0;
         for slot in 0..WIDTH {
             if met[slot] == 0 {
                 continue;
             }
-            // The nearest entry by its top 24 bits (entry distances are ≥ 0, so their bits
-            // order like the values).
-            let k = u64::from(nearest[slot].to_bits() >> 8) << 40
-                | u64::from(met[slot]) << 32
-                | (index * WIDTH + slot) as u64;
+            let k = nearest[slot].to_bits() & !7 | slot as u32;
             let mut i = n;
             while i > 0 && keys[i - 1] < k {
                 keys[i] = keys[i - 1];
@@ -457,28 +734,56 @@ pub(super) fn walk8<'a>(
             keys[i] = k;
             n += 1;
         }
-        stack[sp..sp + n].copy_from_slice(&keys[..n]);
-        sp += n;
-        loop {
-            if sp == 0 {
-                return;
+        let entry = |k: u32| {
+            let slot = (k & 7) as usize;
+            let e = u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
+            (e, nearest[slot], met[slot] as u8)
+        };
+        // The pushed entries are prefetched: the walk comes back to them after the nearest
+        // subtree (+2-6 % on the gather packets, docs/traverse.md).
+        for &k in &keys[..n.saturating_sub(1)] {
+            let pushed = entry(k);
+            let (c, m) = (pushed.0 as u32, (pushed.0 >> 32) as u32);
+            if m == 0 {
+                prefetch(&bvh.nodes[c as usize]);
+            } else if let Some(first) = bvh.tris.get(c as usize) {
+                prefetch(first);
             }
-            sp -= 1;
-            let entry = stack[sp];
-            live = (entry >> 32) as u8 & alive;
-            // The stored distance (its bits truncated, so no larger than the lanes' nearest)
-            // beyond every live lane's widened `tmax`: the slab test repeated would fail.
-            if live == 0 || f32::from_bits(((entry >> 40) as u32) << 8) > far {
+            stack.push(pushed);
+        }
+        let mut next = (n > 0).then(|| entry(keys[n - 1]));
+        loop {
+            let (e, lanes_met) = match next.take() {
+                Some((e, _, lanes_met)) => (e, lanes_met),
+                None => {
+                    let Some((e, dist, lanes_met)) = stack.pop() else {
+                        return;
+                    };
+                    // Beyond every live lane's widened `tmax`: the slab tests repeated
+                    // would all fail.
+                    if dist > far {
+                        continue;
+                    }
+                    (e, lanes_met)
+                }
+            };
+            live = lanes_met & alive;
+            if live == 0 {
                 continue;
             }
-            let (parent, slot) = ((entry as u32 as usize) / WIDTH, entry as usize % WIDTH);
-            let node = &bvh.nodes[parent];
-            let (child, meta) = (node.child[slot], node.meta[slot]);
+            let (child, meta) = (e as u32, (e >> 32) as u32);
             if meta == 0 {
                 index = child as usize;
                 break;
             }
-            tmax = visitor.leaf8(bvh.leaf(child, meta));
+            let n = (meta & !LEAF) as usize;
+            // Lane by lane, eight triangles per pass, when that takes fewer passes than
+            // triangle by triangle, eight lanes per test.
+            tmax = if live.count_ones() as usize * n.div_ceil(8) < n {
+                visitor.rows1(bvh.leaf_rows(child), n, live)
+            } else {
+                visitor.leaf8(bvh.leaf(child, meta))
+            };
             alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
             if alive == 0 {
                 return;
@@ -553,7 +858,8 @@ mod tests {
         let (nodes, tris) = chain(super::super::MAX_DEPTH + 1);
         let binary = BvhRef::new(&nodes, &tris).unwrap();
         let wide = collapse(&binary);
-        let view = WideRef::new(&wide, &tris).expect("valid wide layout");
+        let rows = leaf_rows(&wide, &tris);
+        let view = WideRef::new(&wide, &tris, &rows).expect("valid wide layout");
         assert!(wide.len() <= WIDE_MAX_DEPTH + 1, "{} nodes", wide.len());
         for i in 0..tris.len() {
             let r = Ray::new(
@@ -571,23 +877,29 @@ mod tests {
     #[test]
     fn wide_layout_errors_are_reported() {
         let tris = [Tri::new([Vec3::ZERO, Vec3::X, Vec3::Y], 0)];
-        assert_eq!(WideRef::new(&[], &tris).unwrap_err(), LayoutError::NoNodes);
+        let mut one = WideNode::EMPTY;
+        one.meta[0] = LEAF | 1;
+        let rows = leaf_rows(&[one], &tris);
+        assert_eq!(
+            WideRef::new(&[], &tris, &rows).unwrap_err(),
+            LayoutError::NoNodes
+        );
         let mut bad = WideNode::EMPTY;
         bad.meta[0] = 0;
         assert_eq!(
-            WideRef::new(&[bad], &tris).unwrap_err(),
+            WideRef::new(&[bad], &tris, &rows).unwrap_err(),
             LayoutError::BadChild { node: 0, slot: 0 }
         );
         bad.meta[0] = LEAF | 2;
         assert_eq!(
-            WideRef::new(&[bad], &tris).unwrap_err(),
+            WideRef::new(&[bad], &tris, &rows).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 0 }
         );
         // A used slot after an empty one.
         let mut gap = WideNode::EMPTY;
         gap.meta[3] = LEAF | 1;
         assert_eq!(
-            WideRef::new(&[gap], &tris).unwrap_err(),
+            WideRef::new(&[gap], &tris, &rows).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 3 }
         );
         let chain: Vec<WideNode> = (0..WIDE_MAX_DEPTH as u32 + 2)
@@ -600,12 +912,13 @@ mod tests {
             .chain([WideNode::EMPTY])
             .collect();
         assert!(matches!(
-            WideRef::new(&chain, &tris),
+            WideRef::new(&chain, &tris, &rows),
             Err(LayoutError::TooDeep { .. })
         ));
         // The empty tree: every ray misses.
         let empty = [WideNode::EMPTY];
-        let view = WideRef::new(&empty, &[]).unwrap();
+        let empty_rows = leaf_rows(&empty, &[]);
+        let view = WideRef::new(&empty, &[], &empty_rows).unwrap();
         let r = Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY);
         assert_eq!(intersect1(&view, &r), None);
         assert!(!occluded1(&view, &r));

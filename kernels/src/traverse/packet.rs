@@ -6,7 +6,9 @@
 //! the wide walk ([`super::bvh8`]) shares.
 
 use super::scalar::{FAR_FLOOR, FAR_UP};
-use super::triangle::{Best8, Pre8, closest8, occludes8};
+use super::triangle::{
+    Best8, Pre1x8, Pre8, closest_rows, closest8, occludes_rows, occludes8, set_lane,
+};
 use super::{BvhRef, Node, STACK, Tri};
 use crate::packet::Ray8;
 use wide::f32x8;
@@ -61,12 +63,28 @@ impl Pre8 {
             near,
         )
     }
+
+    /// Whether every traced lane has the same origin (bit for bit), as a texel's gather or
+    /// next-event packet does.
+    pub(super) fn shared_origin(&self) -> bool {
+        let lead = self.traced.trailing_zeros().min(7) as usize;
+        self.org.iter().all(|o| {
+            let bits: wide::u32x8 = bytemuck::cast(*o);
+            let same = bits.simd_eq(wide::u32x8::splat(bits.as_array()[lead]));
+            let same: f32x8 = bytemuck::cast(same);
+            same.to_bitmask() as u8 & self.traced == self.traced
+        })
+    }
 }
 
 /// What a packet walk does at a leaf.
 pub(super) trait Visitor<'a> {
     /// Tests a leaf for the packet; returns the packet's new `tmax` (−∞ in finished lanes).
     fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8;
+
+    /// Tests the wide leaf of `n` triangles whose rows start at `rows[0]` for each lane of
+    /// `lanes`, eight triangles per pass; returns the packet's new `tmax`.
+    fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8;
 }
 
 /// Closest-hit visitor.
@@ -80,6 +98,25 @@ impl<'a> Visitor<'a> for Closest<'_> {
     fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8 {
         for tri in leaf {
             closest8(self.pre, tri, &mut self.best);
+        }
+        self.best.t
+    }
+
+    #[inline(always)]
+    fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8 {
+        let mut rest = lanes;
+        while rest != 0 {
+            let i = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            let mut best = self.best.lane(i);
+            closest_rows(
+                || self.pre.lane(i),
+                &Pre1x8::lane(self.pre, i),
+                rows,
+                n,
+                &mut best,
+            );
+            set_lane(&mut self.best, i, &best);
         }
         self.best.t
     }
@@ -103,6 +140,27 @@ impl<'a> Visitor<'a> for Occlusion<'_> {
                 if self.blocked == self.pre.traced {
                     break;
                 }
+            }
+        }
+        self.tmax
+    }
+
+    #[inline(always)]
+    fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8 {
+        let mut rest = lanes;
+        while rest != 0 {
+            let i = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            let tmax = self.tmax.as_array()[i];
+            if occludes_rows(
+                || self.pre.lane(i),
+                &Pre1x8::lane(self.pre, i),
+                rows,
+                n,
+                tmax,
+            ) {
+                self.blocked |= 1 << i;
+                self.tmax.as_mut_array()[i] = f32::NEG_INFINITY;
             }
         }
         self.tmax

@@ -265,27 +265,36 @@ impl Pre8 {
         let a = self.rel(&tri.v[0]);
         let b = self.rel(&tri.v[1]);
         let c = self.rel(&tri.v[2]);
-        let shear = |p: &[f32x8; 3]| [p[0] - self.s[0] * p[2], p[1] - self.s[1] * p[2]];
-        let (a2, b2, c2) = (shear(&a), shear(&b), shear(&c));
-        let u = c2[0] * b2[1] - c2[1] * b2[0];
-        let v = a2[0] * c2[1] - a2[1] * c2[0];
-        let w = b2[0] * a2[1] - b2[1] * a2[0];
-        let zero = f32x8::ZERO;
-        let any_zero = u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero);
-        let neg = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
-        let pos = u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero);
-        let det = u + v + w;
-        let sz = self.s[2];
-        let tt = u * (sz * a[2]) + v * (sz * b[2]) + w * (sz * c[2]);
-        let ok = !(neg & pos) & det.simd_ne(zero) & !any_zero;
-        Tri8 {
-            tt,
-            v,
-            w,
-            det,
-            ok,
-            any_zero,
-        }
+        watertight8(a, b, c, &self.s)
+    }
+}
+
+/// [`tri1`]'s arithmetic after the vertices are taken relative to the origin (`a`, `b`, `c`
+/// in the permuted axes), eight at a time: eight rays against one triangle ([`Pre8::tri8`])
+/// or one ray against eight triangles ([`Pre1x8::tris8`]), the same IEEE operations in the
+/// same order per lane.
+#[inline(always)]
+fn watertight8(a: [f32x8; 3], b: [f32x8; 3], c: [f32x8; 3], s: &[f32x8; 3]) -> Tri8 {
+    let shear = |p: &[f32x8; 3]| [p[0] - s[0] * p[2], p[1] - s[1] * p[2]];
+    let (a2, b2, c2) = (shear(&a), shear(&b), shear(&c));
+    let u = c2[0] * b2[1] - c2[1] * b2[0];
+    let v = a2[0] * c2[1] - a2[1] * c2[0];
+    let w = b2[0] * a2[1] - b2[1] * a2[0];
+    let zero = f32x8::ZERO;
+    let any_zero = u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero);
+    let neg = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
+    let pos = u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero);
+    let det = u + v + w;
+    let sz = s[2];
+    let tt = u * (sz * a[2]) + v * (sz * b[2]) + w * (sz * c[2]);
+    let ok = !(neg & pos) & det.simd_ne(zero) & !any_zero;
+    Tri8 {
+        tt,
+        v,
+        w,
+        det,
+        ok,
+        any_zero,
     }
 }
 
@@ -387,4 +396,373 @@ pub(super) fn occludes8_rare(pre: &Pre8, tri: &Tri, tmax: f32x8, zero: u8) -> u8
         let blocked = zero >> i & 1 == 1 && occludes1(&pre.lane(i), tri, tmax.as_array()[i]);
         bits | u8::from(blocked) << i
     })
+}
+
+// ---------------------------------------------------------------------------------------------
+// One ray against a leaf's triangles, eight at a time.
+
+/// Rows per triangle in a leaf's structure-of-arrays block ([`super::WideRef`]'s `rows`):
+/// vertex `c`, axis `a` in row `3c + a`, the primitive id's bits in row 9.
+pub(super) const ROWS: usize = 10;
+
+/// Row of the primitive ids.
+pub(super) const PRIM_ROW: usize = 9;
+
+/// One ray's watertight-test constants splatted over eight triangles.
+#[derive(Debug, PartialEq)]
+pub(super) struct Pre1x8 {
+    k: [usize; 3],
+    /// Permuted origin `o[kx], o[ky], o[kz]`.
+    porg: [f32x8; 3],
+    s: [f32x8; 3],
+    tmin: f32x8,
+}
+
+impl Pre1x8 {
+    pub(super) fn new(pre: &Pre) -> Self {
+        Self {
+            k: pre.k,
+            porg: pre.k.map(|k| f32x8::splat(pre.org[k])),
+            s: pre.s.map(f32x8::splat),
+            tmin: f32x8::splat(pre.tmin),
+        }
+    }
+
+    /// [`Pre1x8::new`] of lane `i` of a packet (traced), from the packet's constants, which
+    /// equal the lane's scalar ones bit for bit.
+    #[inline(always)]
+    pub(super) fn lane(pre: &Pre8, i: usize) -> Self {
+        let k = pre.uniform.unwrap_or_else(|| {
+            [0, 1, 2].map(|a| {
+                let sel = pre.sel[a].map(|m| m.to_bitmask() >> i & 1 == 1);
+                if sel[0] {
+                    0
+                } else if sel[1] {
+                    1
+                } else {
+                    2
+                }
+            })
+        });
+        let at = |v: &f32x8| f32x8::splat(v.as_array()[i]);
+        Self {
+            k,
+            porg: pre.porg.each_ref().map(at),
+            s: pre.s.each_ref().map(at),
+            tmin: at(&pre.tmin),
+        }
+    }
+
+    /// [`tri1`] for triangles `8j .. 8j + 8` of a leaf of `n` triangles whose rows start at
+    /// `leaf[0]` (row `r` at `leaf[r·n ..]`). Lanes past `n` read the next rows: garbage the
+    /// caller masks off.
+    #[inline(always)]
+    fn tris8(&self, leaf: &[f32], n: usize, j: usize) -> Tri8 {
+        let row = |c: usize, i: usize| {
+            let at = (3 * c + self.k[i]) * n + 8 * j;
+            let lanes: [f32; 8] = leaf[at..at + 8].try_into().expect("eight lanes");
+            f32x8::from(lanes) - self.porg[i]
+        };
+        let vertex = |c: usize| [row(c, 0), row(c, 1), row(c, 2)];
+        watertight8(vertex(0), vertex(1), vertex(2), &self.s)
+    }
+}
+
+/// Triangle `i` of a leaf of `n` triangles stored as rows (for the scalar paths).
+pub(super) fn row_tri(leaf: &[f32], n: usize, i: usize) -> Tri {
+    Tri {
+        v: [0, 1, 2].map(|c| [0, 1, 2].map(|a| leaf[(3 * c + a) * n + i])),
+        prim: leaf[PRIM_ROW * n + i].to_bits(),
+        pad: [0; 2],
+    }
+}
+
+/// The mask of the first `n` lanes (all eight from `n ≥ 8`).
+#[inline(always)]
+fn first_lanes(n: usize) -> u8 {
+    if n >= 8 { u8::MAX } else { (1u8 << n) - 1 }
+}
+
+/// [`closest1`] over the `n` triangles of a leaf stored as rows, eight per pass: the
+/// candidates of a pass are accepted in triangle order, then its lanes with a zero edge
+/// function go through [`closest1`] (the result does not depend on the order: the tie rule
+/// picks the least `(t, prim)`).
+#[inline(always)]
+pub(super) fn closest_rows(
+    pre: impl Fn() -> Pre,
+    p8: &Pre1x8,
+    leaf: &[f32],
+    n: usize,
+    best: &mut Hit,
+) {
+    let tmin = p8.tmin.as_array()[0];
+    for j in 0..n.div_ceil(8) {
+        let valid = first_lanes(n - 8 * j);
+        let r = p8.tris8(leaf, n, j);
+        if r.ok.to_bitmask() as u8 & valid != 0 {
+            let t = r.tt / r.det;
+            let cand = r.ok & t.simd_ge(p8.tmin) & t.simd_le(f32x8::splat(best.t));
+            let mut bits = cand.to_bitmask() as u8 & valid;
+            while bits != 0 {
+                let i = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let ti = t.as_array()[i];
+                let prim = leaf[PRIM_ROW * n + 8 * j + i].to_bits();
+                if accept(ti, prim, tmin, best) {
+                    let det = r.det.as_array()[i];
+                    *best = Hit {
+                        t: ti,
+                        u: r.v.as_array()[i] / det,
+                        v: r.w.as_array()[i] / det,
+                        prim,
+                    };
+                }
+            }
+        }
+        let zero = r.any_zero.to_bitmask() as u8 & valid;
+        if zero != 0 {
+            closest_rows_rare(&pre(), leaf, n, 8 * j, zero, best);
+        }
+    }
+}
+
+/// The `f64` fallback of [`closest_rows`]' lanes with a zero edge function.
+#[cold]
+#[inline(never)]
+fn closest_rows_rare(pre: &Pre, leaf: &[f32], n: usize, first: usize, zero: u8, best: &mut Hit) {
+    for i in 0..8 {
+        if zero >> i & 1 == 1 {
+            closest1(pre, &row_tri(leaf, n, first + i), best);
+        }
+    }
+}
+
+/// Whether any of the `n` triangles of a leaf stored as rows blocks the ray on
+/// `[tmin, tmax]`: [`occludes1`], eight triangles per pass.
+#[inline(always)]
+pub(super) fn occludes_rows(
+    pre: impl Fn() -> Pre,
+    p8: &Pre1x8,
+    leaf: &[f32],
+    n: usize,
+    tmax: f32,
+) -> bool {
+    (0..n.div_ceil(8)).any(|j| {
+        let valid = first_lanes(n - 8 * j);
+        let r = p8.tris8(leaf, n, j);
+        if r.ok.to_bitmask() as u8 & valid != 0 {
+            let t = r.tt / r.det;
+            let hit = r.ok & t.simd_ge(p8.tmin) & t.simd_le(f32x8::splat(tmax));
+            if hit.to_bitmask() as u8 & valid != 0 {
+                return true;
+            }
+        }
+        let zero = r.any_zero.to_bitmask() as u8 & valid;
+        zero != 0 && occludes_rows_rare(&pre(), leaf, n, 8 * j, zero, tmax)
+    })
+}
+
+/// The `f64` fallback of [`occludes_rows`]' lanes with a zero edge function.
+#[cold]
+#[inline(never)]
+fn occludes_rows_rare(
+    pre: &Pre,
+    leaf: &[f32],
+    n: usize,
+    first: usize,
+    zero: u8,
+    tmax: f32,
+) -> bool {
+    (0..8).any(|i| zero >> i & 1 == 1 && occludes1(pre, &row_tri(leaf, n, first + i), tmax))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::Pcg32;
+    use glam::Vec3;
+    use std::vec::Vec;
+
+    /// A leaf's rows as [`super::super::leaf_rows`] lays them out, between two other leaves'
+    /// rows so that the lanes past `n` read foreign values.
+    fn rows_of(leaf: &[Tri], pad: &[Tri]) -> (Vec<f32>, usize) {
+        let mut rows = Vec::new();
+        let push = |rows: &mut Vec<f32>, tris: &[Tri]| {
+            for r in 0..9 {
+                rows.extend(tris.iter().map(|t| t.v[r / 3][r % 3]));
+            }
+            rows.extend(tris.iter().map(|t| f32::from_bits(t.prim)));
+        };
+        push(&mut rows, pad);
+        let start = rows.len();
+        push(&mut rows, leaf);
+        push(&mut rows, pad);
+        rows.extend([f32::NAN; 8]);
+        (rows, start)
+    }
+
+    /// One ray against a leaf of 1..20 triangles, eight per pass, equals [`closest1`] and
+    /// [`occludes1`] triangle by triangle, bit for bit: random triangles, exact duplicates
+    /// under other ids (ties on `t`), rays through shared vertices and edges (zero edge
+    /// functions), axis-aligned and signed-zero directions, random `tmin`/`tmax`.
+    #[test]
+    fn eight_triangles_per_pass_equal_the_scalar_test() {
+        let mut rng = Pcg32::new(7, 9);
+        let v3 = |rng: &mut Pcg32, s: f32| {
+            Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * s - Vec3::splat(s / 2.0)
+        };
+        let mut hits = 0;
+        for trial in 0..4000 {
+            let n = trial % 20 + 1;
+            let shared = [v3(&mut rng, 2.0), v3(&mut rng, 2.0)];
+            let leaf: Vec<Tri> = (0..n)
+                .map(|i| {
+                    let mut v = [v3(&mut rng, 2.0), v3(&mut rng, 2.0), v3(&mut rng, 2.0)];
+                    if rng.next_u32().is_multiple_of(3) {
+                        // A shared edge.
+                        v[0] = shared[0];
+                        v[1] = shared[1];
+                    }
+                    Tri::new(v, (i as u32 * 7919) % 61)
+                })
+                .collect();
+            let mut leaf = leaf;
+            if n > 2 && trial % 4 == 0 {
+                // A duplicate under another id: a tie on t.
+                leaf[n - 1].v = leaf[0].v;
+            }
+            let pad: Vec<Tri> = (0..5)
+                .map(|i| Tri::new([v3(&mut rng, 9.0), v3(&mut rng, 9.0), v3(&mut rng, 9.0)], i))
+                .collect();
+            let (rows, start) = rows_of(&leaf, &pad);
+            let org = v3(&mut rng, 6.0);
+            let target = match trial % 3 {
+                0 => shared[0],
+                1 => (shared[0] + shared[1]) * 0.5,
+                _ => v3(&mut rng, 2.0),
+            };
+            let mut dir = target - org;
+            if trial % 7 == 0 {
+                dir.x = if trial % 14 == 0 { 0.0 } else { -0.0 };
+            }
+            let (tmin, tmax) = if trial % 5 == 0 {
+                (rng.next_f32(), 0.5 + rng.next_f32())
+            } else {
+                (0.0, f32::INFINITY)
+            };
+            let ray = Ray::new(org, dir, tmin, tmax);
+            if !traceable(&ray) {
+                continue;
+            }
+            let pre = Pre::new(&ray);
+            let pre8 = Pre1x8::new(&pre);
+            let mut want = no_hit(tmax);
+            for tri in &leaf {
+                closest1(&pre, tri, &mut want);
+            }
+            let mut got = no_hit(tmax);
+            closest_rows(|| pre, &pre8, &rows[start..], n, &mut got);
+            let bits = |h: &Hit| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim);
+            assert_eq!(bits(&got), bits(&want), "trial {trial}, n {n}: {ray:?}");
+            hits += usize::from(want.prim != NO_HIT);
+            let tmax = tmax.min(f32::MAX);
+            let blocked = leaf.iter().any(|tri| occludes1(&pre, tri, tmax));
+            assert_eq!(
+                occludes_rows(|| pre, &pre8, &rows[start..], n, tmax),
+                blocked,
+                "trial {trial}: {ray:?}"
+            );
+            for (i, tri) in leaf.iter().enumerate() {
+                assert_eq!(row_tri(&rows[start..], n, i), *tri);
+            }
+        }
+        assert!(hits > 1000, "{hits} hits");
+    }
+
+    /// [`Pre1x8::lane`] (from a packet's constants) equals [`Pre1x8::new`] of the lane's own
+    /// ray, bit for bit, for packets of mixed shear permutations and signs.
+    #[test]
+    fn a_packets_lane_constants_equal_the_lanes_own() {
+        let mut rng = Pcg32::new(3, 5);
+        let bits = |p: &Pre1x8| {
+            let b = |v: &[f32x8; 3]| v.map(|x| x.to_array().map(f32::to_bits));
+            (
+                p.k,
+                b(&p.porg),
+                b(&p.s),
+                p.tmin.to_array().map(f32::to_bits),
+            )
+        };
+        for trial in 0..500 {
+            let rays: Vec<Ray> = (0..LANES)
+                .map(|_| {
+                    let c = |rng: &mut Pcg32| rng.next_f32() * 2.0 - 1.0;
+                    let d = Vec3::new(c(&mut rng), c(&mut rng), c(&mut rng));
+                    let o = Vec3::new(c(&mut rng), c(&mut rng), c(&mut rng)) * 1e3;
+                    let d = if trial % 2 == 0 {
+                        d
+                    } else {
+                        Vec3::new(d.x.abs(), 0.1, 0.2)
+                    };
+                    Ray::new(o, d, rng.next_f32(), f32::INFINITY)
+                })
+                .collect();
+            let packet = Ray8::from_rays(&rays);
+            let pre = Pre8::new(&packet);
+            for (i, ray) in rays.iter().enumerate() {
+                let own = Pre1x8::new(&Pre::new(ray));
+                assert_eq!(
+                    bits(&Pre1x8::lane(&pre, i)),
+                    bits(&own),
+                    "lane {i}: {ray:?}"
+                );
+            }
+        }
+    }
+
+    /// Rays through the shared vertex of a fan and along its shared edges hit it (the `f64`
+    /// path of [`closest_rows`]), like the scalar test.
+    #[test]
+    fn eight_triangles_per_pass_take_the_f64_path_on_shared_edges() {
+        let centre = Vec3::new(0.25, -0.5, 0.0);
+        let fan: Vec<Tri> = (0..11u32)
+            .map(|i| {
+                let a = |k: u32| {
+                    let phi = k as f32 * core::f32::consts::TAU / 11.0;
+                    centre + Vec3::new(phi.cos(), phi.sin(), 0.0)
+                };
+                Tri::new([centre, a(i), a(i + 1)], 40 - i)
+            })
+            .collect();
+        let (rows, start) = rows_of(&fan, &fan[..3]);
+        let mut rays = Vec::new();
+        for (k, tri) in fan.iter().enumerate() {
+            let (p, q) = (Vec3::from(tri.v[0]), Vec3::from(tri.v[1]));
+            for target in [p, (p + q) * 0.5, q] {
+                let org = target + Vec3::new(0.01 * k as f32, -0.02, 3.0);
+                rays.push(Ray::new(org, target - org, 0.0, f32::INFINITY));
+            }
+        }
+        let mut rare = 0;
+        for ray in &rays {
+            let pre = Pre::new(ray);
+            let mut want = no_hit(ray.tmax);
+            for tri in &fan {
+                closest1(&pre, tri, &mut want);
+            }
+            let mut got = no_hit(ray.tmax);
+            closest_rows(
+                || pre,
+                &Pre1x8::new(&pre),
+                &rows[start..],
+                fan.len(),
+                &mut got,
+            );
+            assert_eq!(got, want, "{ray:?}");
+            assert_ne!(got.prim, NO_HIT, "a ray through the fan missed it: {ray:?}");
+            let r = Pre1x8::new(&pre).tris8(&rows[start..], fan.len(), 0);
+            rare += usize::from(r.any_zero.any());
+        }
+        assert!(rare > 0, "no ray took the f64 path");
+    }
 }
