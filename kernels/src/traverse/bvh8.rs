@@ -468,16 +468,12 @@ pub(super) fn walk1<'a>(
     }
 }
 
-/// Pushes the slots of `bits` (two or more) but the nearest, farthest first, with their
-/// entry distances, and returns the nearest. Keys are `near bits & !7 | slot` (entry
-/// distances are ≥ 0, so their bits order like the values; the order only steers the walk).
+/// The slots of `bits` (one or more) ordered farthest first by their entry distances, as
+/// keys `near bits & !7 | slot` (entry distances are ≥ 0, so their bits order like the
+/// values; the order only steers the walk), and how many there are. The slot of key `k` is
+/// `k & 7`; the last key is the nearest slot.
 #[inline(always)]
-fn push_sorted(
-    stack: &mut Stack<(u64, f32)>,
-    bits: u8,
-    near: &[f32; WIDTH],
-    entry: impl Fn(usize) -> u64,
-) -> usize {
+fn slots_far_to_near(bits: u8, near: &[f32; WIDTH]) -> ([u32; WIDTH], usize) {
     let mut keys = [0u32; WIDTH];
     let mut n = 0;
     let mut rest = bits;
@@ -493,6 +489,19 @@ fn push_sorted(
         keys[i] = k;
         n += 1;
     }
+    (keys, n)
+}
+
+/// Pushes the slots of `bits` (two or more) but the nearest, farthest first, with their
+/// entry distances ([`slots_far_to_near`]), and returns the nearest.
+#[inline(always)]
+fn push_sorted(
+    stack: &mut Stack<(u64, f32)>,
+    bits: u8,
+    near: &[f32; WIDTH],
+    entry: impl Fn(usize) -> u64,
+) -> usize {
+    let (keys, n) = slots_far_to_near(bits, near);
     for &k in &keys[..n - 1] {
         let slot = (k & 7) as usize;
         stack.push((entry(slot), near[slot]));
@@ -577,21 +586,7 @@ pub(super) fn walk_interleaved(
                 let entry =
                     |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
                 if bits != 0 {
-                    let mut keys = [0u32; WIDTH];
-                    let mut n = 0;
-                    let mut bits = bits;
-                    while bits != 0 {
-                        let slot = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        let k = near[slot].to_bits() & !7 | slot as u32;
-                        let mut j = n;
-                        while j > 0 && keys[j - 1] < k {
-                            keys[j] = keys[j - 1];
-                            j -= 1;
-                        }
-                        keys[j] = k;
-                        n += 1;
-                    }
+                    let (keys, n) = slots_far_to_near(bits, near);
                     for &k in &keys[..n - 1] {
                         let slot = (k & 7) as usize;
                         stacks[i][sp[i]].write((entry(slot), near[slot]));
