@@ -231,11 +231,7 @@ fn prims_of(view: &impl Tree, packets: &[Ray8]) -> Vec<u32> {
 
 /// Both layouts' packet and scalar traversals against the binary scalar reference.
 fn check_ours(s: &Scene, packets: &[Ray8], reference: &[u32]) {
-    for view in [
-        Layout::Binary(s.bvh.view()),
-        Layout::Wide(s.bvh.wide()),
-        Layout::Quant(s.bvh.quant()),
-    ] {
+    for view in [Layout::Binary(s.bvh.view()), Layout::Wide(s.bvh.wide())] {
         // Brute force on a sample (it is O(triangles) per ray), exact equality everywhere else.
         for p in packets.iter().step_by(packets.len() / 16 + 1) {
             for l in 0..LANES {
@@ -266,29 +262,6 @@ fn bench(c: &mut Criterion) {
     for s in scenes() {
         let view = s.bvh.view();
         let wide = s.bvh.wide();
-        let quant = s.bvh.quant();
-        let loose_nodes: Vec<_> = quant.nodes().iter().map(|q| q.decoded()).collect();
-        let loose_rows = guidebake_kernels::traverse::leaf_rows(&loose_nodes, view.tris());
-        let loose =
-            guidebake_kernels::traverse::WideRef::new(&loose_nodes, view.tris(), &loose_rows)
-                .expect("loose layout");
-        let tris = s.soup.len() as f64;
-        let node_bytes = |b: usize| {
-            format!(
-                "{:.1} MB ({:.1} B/triangle)",
-                b as f64 / 1e6,
-                b as f64 / tris
-            )
-        };
-        println!(
-            "{}: memory: binary nodes {}, wide nodes {}, quantised wide nodes {}, Tris {}, leaf rows {}",
-            s.name,
-            node_bytes(std::mem::size_of_val(view.nodes())),
-            node_bytes(std::mem::size_of_val(wide.nodes())),
-            node_bytes(std::mem::size_of_val(quant.nodes())),
-            node_bytes(std::mem::size_of_val(view.tris())),
-            node_bytes(wide.bytes() - std::mem::size_of_val(wide.nodes())),
-        );
         println!(
             "{}: {} triangles, {} binary nodes, {} wide nodes, {} leaf triangles, build {:?}",
             s.name,
@@ -324,11 +297,7 @@ fn bench(c: &mut Criterion) {
                     .iter()
                     .flat_map(|p| (0..LANES).map(move |l| u32::from(occluded1(&view, &p.lane(l)))))
                     .collect();
-                for layout in [
-                    Layout::Binary(view),
-                    Layout::Wide(wide),
-                    Layout::Quant(quant),
-                ] {
+                for layout in [Layout::Binary(view), Layout::Wide(wide)] {
                     let packet_blocked: Vec<u32> = packets
                         .iter()
                         .flat_map(|p| {
@@ -501,16 +470,6 @@ fn bench(c: &mut Criterion) {
                     Box::new(|| packet8(&wide, gather)),
                 ),
                 (
-                    "quant_packet8".into(),
-                    gather.len(),
-                    Box::new(|| packet8(&quant, gather)),
-                ),
-                (
-                    "loose_packet8".into(),
-                    gather.len(),
-                    Box::new(|| packet8(&loose, gather)),
-                ),
-                (
                     "scalar".into(),
                     gather.len(),
                     Box::new(|| scalar(&view, gather)),
@@ -519,16 +478,6 @@ fn bench(c: &mut Criterion) {
                     "wide_scalar".into(),
                     gather.len(),
                     Box::new(|| scalar(&wide, gather)),
-                ),
-                (
-                    "quant_scalar".into(),
-                    gather.len(),
-                    Box::new(|| scalar(&quant, gather)),
-                ),
-                (
-                    "loose_scalar".into(),
-                    gather.len(),
-                    Box::new(|| scalar(&loose, gather)),
                 ),
                 (
                     "obvhs_cwbvh".into(),
@@ -544,11 +493,6 @@ fn bench(c: &mut Criterion) {
                     "resorted_wide_packet8".into(),
                     resorted.len(),
                     Box::new(|| packet8(&wide, &resorted)),
-                ),
-                (
-                    "resorted_quant_packet8".into(),
-                    resorted.len(),
-                    Box::new(|| packet8(&quant, &resorted)),
                 ),
             ];
             #[cfg(feature = "embree")]
@@ -598,16 +542,6 @@ fn bench(c: &mut Criterion) {
                     Box::new(|| occl8(&wide, shadow)),
                 ),
                 (
-                    "quant_occluded8".into(),
-                    shadow.len(),
-                    Box::new(|| occl8(&quant, shadow)),
-                ),
-                (
-                    "loose_occluded8".into(),
-                    shadow.len(),
-                    Box::new(|| occl8(&loose, shadow)),
-                ),
-                (
                     "scalar".into(),
                     shadow.len(),
                     Box::new(|| occl1(&view, shadow)),
@@ -616,16 +550,6 @@ fn bench(c: &mut Criterion) {
                     "wide_scalar".into(),
                     shadow.len(),
                     Box::new(|| occl1(&wide, shadow)),
-                ),
-                (
-                    "quant_scalar".into(),
-                    shadow.len(),
-                    Box::new(|| occl1(&quant, shadow)),
-                ),
-                (
-                    "loose_scalar".into(),
-                    shadow.len(),
-                    Box::new(|| occl1(&loose, shadow)),
                 ),
                 (
                     "obvhs_cwbvh".into(),
@@ -720,15 +644,8 @@ fn duel(scene: &str, set: &str, entries: &[DuelEntry<'_>], rounds: usize, embree
                     .collect(),
             )
         };
-        let f32_wide = ["quant_", "loose_"]
-            .iter()
-            .find_map(|p| name.strip_prefix(p))
-            .and_then(|rest| index(&format!("wide_{rest}")))
-            .map_or(String::new(), |w| {
-                format!("  x{:.3} f32 wide", ratio_to(&[w]))
-            });
         println!(
-            "duel {scene} {set} {name:<36} {:>7.2} Mrays/s  x{:.2} obvhs  x{:.2} binary  x{:.2} embree8{f32_wide}",
+            "duel {scene} {set} {name:<36} {:>7.2} Mrays/s  x{:.2} obvhs  x{:.2} binary  x{:.2} embree8",
             median(rates[k].clone()),
             ratio_to(&[obvhs]),
             ratio_to(&[0]),

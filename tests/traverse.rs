@@ -14,24 +14,16 @@ use guidebake_kernels::traverse::{
     Layout, intersect_brute, intersect1, intersect8, occluded_brute, occluded1, occluded8,
 };
 
-/// The binary, the wide and the quantised wide view of `bvh`: every check runs on each.
-fn layouts(bvh: &Bvh) -> [Layout<'_>; 3] {
-    [
-        Layout::Binary(bvh.view()),
-        Layout::Wide(bvh.wide()),
-        Layout::Quant(bvh.quant()),
-    ]
+/// The binary and the wide view of `bvh`: every check runs on both.
+fn layouts(bvh: &Bvh) -> [Layout<'_>; 2] {
+    [Layout::Binary(bvh.view()), Layout::Wide(bvh.wide())]
 }
 
 /// [`check_layout`] on both layouts of `bvh`; the rays that hit.
 fn check_packets(bvh: &Bvh, packets: &[Ray8], what: &str) -> usize {
-    let [binary, wide, quant] = layouts(bvh);
+    let [binary, wide] = layouts(bvh);
     let hits = check_layout(&binary, packets, &format!("{what}, binary"));
     assert_eq!(check_layout(&wide, packets, &format!("{what}, wide")), hits);
-    assert_eq!(
-        check_layout(&quant, packets, &format!("{what}, quant")),
-        hits
-    );
     hits
 }
 
@@ -450,80 +442,5 @@ fn offset_origins_avoid_self_intersection_at_1e6() {
                 assert!(raw_self_hits > 0, "expected raw self-hits at {offset}");
             }
         }
-    }
-}
-
-#[test]
-fn zz_quant_stats() {
-    use guidebake_kernels::traverse::QuantNode;
-    let dir = scenes::converted_dir().unwrap();
-    for (name, soup) in [
-        (
-            "ajar",
-            scenes::load_glb(&dir.join("bitterli_veach_ajar_no_teapots.glb")),
-        ),
-        ("city", scenes::city(30, 3, 4)),
-    ] {
-        let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
-        let wide = bvh.wide_nodes();
-        let (mut ra, mut n, mut flat, mut flat_q) = (0.0f64, 0usize, 0usize, 0usize);
-        let mut hist = [0usize; 6];
-        for w in wide {
-            let q = QuantNode::from_wide(w);
-            let d = q.decoded();
-            for s in 0..8 {
-                if w.meta[s] == guidebake_kernels::traverse::LEAF {
-                    continue;
-                }
-                let area = |lo: [f32; 3], hi: [f32; 3]| {
-                    let e = [0, 1, 2].map(|a| (hi[a] - lo[a]) as f64);
-                    e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
-                };
-                let a0 = area([0, 1, 2].map(|a| w.lo[a][s]), [0, 1, 2].map(|a| w.hi[a][s]));
-                let a1 = area([0, 1, 2].map(|a| d.lo[a][s]), [0, 1, 2].map(|a| d.hi[a][s]));
-                let r = a1 / a0.max(1e-30);
-                ra += r.min(100.0);
-                n += 1;
-                hist[match r {
-                    r if r < 1.01 => 0,
-                    r if r < 1.05 => 1,
-                    r if r < 1.2 => 2,
-                    r if r < 1.5 => 3,
-                    r if r < 2.0 => 4,
-                    _ => 5,
-                }] += 1;
-                flat += (0..3).filter(|&a| w.lo[a][s] == w.hi[a][s]).count();
-                flat_q += (0..3).filter(|&a| d.lo[a][s] == d.hi[a][s]).count();
-            }
-        }
-        // Leaf boxes holding each gather origin (rays start on surfaces).
-        let packets = scenes::gather_packets(&soup, 64, 8, 1);
-        let (mut inside, mut inside_q, mut rays) = (0usize, 0usize, 0usize);
-        for p in &packets {
-            let o = p.lane(0).org;
-            rays += 1;
-            for w in wide {
-                let d = QuantNode::from_wide(w).decoded();
-                for s in 0..8 {
-                    if w.meta[s] == 0 || w.meta[s] == guidebake_kernels::traverse::LEAF {
-                        continue;
-                    }
-                    let within = |n: &guidebake_kernels::traverse::WideNode| {
-                        (0..3).all(|a| n.lo[a][s] <= o[a] && o[a] <= n.hi[a][s])
-                    };
-                    inside += usize::from(within(w));
-                    inside_q += usize::from(within(&d));
-                }
-            }
-        }
-        println!(
-            "{name}: leaf boxes holding a gather origin, per origin: exact {:.2}, quantised {:.2}",
-            inside as f64 / rays as f64,
-            inside_q as f64 / rays as f64
-        );
-        println!(
-            "{name}: {n} slots, mean area ratio {:.3}, hist <1.01 <1.05 <1.2 <1.5 <2 more {hist:?}, flat axes {flat} -> {flat_q}",
-            ra / n as f64
-        );
     }
 }

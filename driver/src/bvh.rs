@@ -25,8 +25,7 @@ use std::time::{Duration, Instant};
 
 use glam::{Vec3, Vec3A};
 use guidebake_kernels::traverse::{
-    BvhRef, LEAF, LayoutError, Node, QuantNode, Tri, WideNode, WideRef, collapse, leaf_rows,
-    quantise,
+    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse, leaf_rows,
 };
 use obvhs::{
     BvhBuildParams,
@@ -140,8 +139,6 @@ pub enum BvhError {
 pub struct Bvh {
     nodes: Vec<Node>,
     wide: Vec<WideNode>,
-    /// `wide` with quantised child boxes ([`quantise`]).
-    quant: Vec<QuantNode>,
     /// The triangles as structure-of-arrays rows per wide leaf ([`leaf_rows`]).
     rows: Vec<f32>,
     tris: Vec<Tri>,
@@ -182,12 +179,9 @@ impl Bvh {
         let wide = collapse(&binary);
         let rows = leaf_rows(&wide, &tris);
         WideRef::new(&wide, &tris, &rows).map_err(BvhError::Layout)?;
-        let quant = quantise(&wide);
-        WideRef::new(&quant, &tris, &rows).map_err(BvhError::Layout)?;
         Ok(Self {
             nodes,
             wide,
-            quant,
             rows,
             tris,
             build_time: start.elapsed(),
@@ -206,12 +200,6 @@ impl Bvh {
     /// triangles). Same results as [`Bvh::view`], bit for bit. Cheap: `build` validated it.
     pub fn wide(&self) -> WideRef<'_> {
         WideRef::new_trusted(&self.wide, &self.tris, &self.rows)
-    }
-
-    /// The wide view with quantised child boxes (same tree, same results). Cheap: `build`
-    /// validated it.
-    pub fn quant(&self) -> WideRef<'_, QuantNode> {
-        WideRef::new_trusted(&self.quant, &self.tris, &self.rows)
     }
 
     /// Wide nodes, root first.

@@ -91,7 +91,6 @@ use wide::{f32x8, u32x8};
 mod bvh8;
 mod node;
 mod packet;
-mod qbvh8;
 mod scalar;
 mod triangle;
 
@@ -102,15 +101,11 @@ use triangle::{
     traceable, tri1,
 };
 
-use bvh8::WideBoxes;
 pub use bvh8::{INTERLEAVE_BYTES, WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
 #[cfg(any(feature = "alloc", test))]
 pub use bvh8::{collapse, leaf_rows};
 use node::STACK;
 pub use node::{BvhRef, LEAF, LayoutError, MAX_DEPTH, Node, Tri};
-pub use qbvh8::QuantNode;
-#[cfg(any(feature = "alloc", test))]
-pub use qbvh8::quantise;
 
 /// A validated BVH in one of the kernels' layouts: what the traversals walk.
 #[derive(Clone, Copy, Debug)]
@@ -119,8 +114,6 @@ pub enum Layout<'a> {
     Binary(BvhRef<'a>),
     /// Eight child boxes per node ([`WideNode`]).
     Wide(WideRef<'a>),
-    /// Eight quantised child boxes per node ([`QuantNode`]).
-    Quant(WideRef<'a, QuantNode>),
 }
 
 impl<'a> Layout<'a> {
@@ -129,16 +122,14 @@ impl<'a> Layout<'a> {
         match self {
             Layout::Binary(b) => b.tris,
             Layout::Wide(w) => w.tris(),
-            Layout::Quant(q) => q.tris(),
         }
     }
 
     /// Every leaf: its box and its triangles.
     fn leaves(&self) -> impl Iterator<Item = (([f32; 3], [f32; 3]), &'a [Tri])> {
-        let (binary, wide, quant) = match *self {
-            Layout::Binary(b) => (Some(b), None, None),
-            Layout::Wide(w) => (None, Some(w), None),
-            Layout::Quant(q) => (None, None, Some(q)),
+        let (binary, wide) = match *self {
+            Layout::Binary(b) => (Some(b), None),
+            Layout::Wide(w) => (None, Some(w)),
         };
         let binary = binary.into_iter().flat_map(|b| {
             b.nodes.iter().flat_map(move |node| {
@@ -149,9 +140,7 @@ impl<'a> Layout<'a> {
                 })
             })
         });
-        binary
-            .chain(wide.into_iter().flat_map(|w| w.leaves()))
-            .chain(quant.into_iter().flat_map(|q| q.leaves()))
+        binary.chain(wide.into_iter().flat_map(|w| w.leaves()))
     }
 }
 
@@ -170,12 +159,6 @@ impl Tree for BvhRef<'_> {
 impl Tree for WideRef<'_> {
     fn layout(&self) -> Layout<'_> {
         Layout::Wide(*self)
-    }
-}
-
-impl Tree for WideRef<'_, QuantNode> {
-    fn layout(&self) -> Layout<'_> {
-        Layout::Quant(*self)
     }
 }
 
@@ -284,8 +267,13 @@ pub fn intersect1(bvh: &impl Tree, ray: &Ray) -> Option<Hit> {
             }
             best.t
         }),
-        Layout::Wide(w) => closest_wide(&w, &pre, &mut best),
-        Layout::Quant(q) => closest_wide(&q, &pre, &mut best),
+        Layout::Wide(w) => {
+            let pre8 = Pre1x8::new(&pre);
+            bvh8::walk1(&w, &pre, |rows, n| {
+                closest_rows(|| pre, &pre8, rows, n, &mut best);
+                best.t
+            })
+        }
     };
     (best.prim != NO_HIT).then_some(best)
 }
@@ -302,31 +290,14 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
         Layout::Binary(b) => walk1(&b, &pre, |leaf: &[Tri]| {
             blocked(leaf.iter().any(|tri| occludes1(&pre, tri, tmax)))
         }),
-        Layout::Wide(w) => occluded_wide(&w, &pre, tmax),
-        Layout::Quant(q) => occluded_wide(&q, &pre, tmax),
+        Layout::Wide(w) => {
+            let pre8 = Pre1x8::new(&pre);
+            bvh8::walk1(&w, &pre, |rows, n| {
+                blocked(occludes_rows(|| pre, &pre8, rows, n, tmax))
+            })
+        }
     };
     end == f32::NEG_INFINITY
-}
-
-/// [`intersect1`] on a wide layout: the closest hit into `best`; returns its `t`.
-fn closest_wide<N: WideBoxes>(w: &WideRef<'_, N>, pre: &Pre, best: &mut Hit) -> f32 {
-    let pre8 = Pre1x8::new(pre);
-    bvh8::walk1(w, pre, |rows, n| {
-        closest_rows(|| *pre, &pre8, rows, n, best);
-        best.t
-    })
-}
-
-/// [`occluded1`] on a wide layout: −∞ when blocked on `[tmin, tmax]`, else `tmax`.
-fn occluded_wide<N: WideBoxes>(w: &WideRef<'_, N>, pre: &Pre, tmax: f32) -> f32 {
-    let pre8 = Pre1x8::new(pre);
-    bvh8::walk1(w, pre, |rows, n| {
-        if occludes_rows(|| *pre, &pre8, rows, n, tmax) {
-            f32::NEG_INFINITY
-        } else {
-            tmax
-        }
-    })
 }
 
 /// Closest hits of eight rays: the packet traversal.
@@ -350,7 +321,6 @@ pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut closest),
         Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut closest),
-        Layout::Quant(q) => bvh8::walk8(&q, &pre, tmax, &mut closest),
     }
     let best = closest.best;
     let hit_mask = best.prim.simd_ne(u32x8::splat(NO_HIT));
@@ -381,42 +351,40 @@ pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut occlusion),
-        Layout::Wide(w) => return occluded8_wide(&w, &pre, tmax, occlusion),
-        Layout::Quant(q) => return occluded8_wide(&q, &pre, tmax, occlusion),
+        Layout::Wide(w) if !pre.shared_origin() => {
+            return if w.bytes() > bvh8::INTERLEAVE_BYTES {
+                occluded_interleaved(&w, &pre, tmax)
+            } else {
+                occluded_lanes(&w, &pre, tmax)
+            };
+        }
+        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion),
     }
     occlusion.blocked
 }
 
-/// [`occluded8`] on a wide layout.
-fn occluded8_wide<N: WideBoxes>(
-    w: &WideRef<'_, N>,
-    pre: &Pre8,
-    tmax: f32x8,
-    mut occlusion: Occlusion<'_>,
-) -> u8 {
-    if pre.shared_origin() {
-        bvh8::walk8(w, pre, tmax, &mut occlusion);
-        occlusion.blocked
-    } else if w.bytes() > bvh8::INTERLEAVE_BYTES {
-        occluded_interleaved(w, pre, tmax)
-    } else {
-        occluded_lanes(w, pre, tmax)
-    }
-}
-
 /// The traced lanes of a packet through the wide layout as single rays, one after another:
 /// the blocked lanes.
-fn occluded_lanes<N: WideBoxes>(w: &WideRef<'_, N>, pre: &Pre8, tmax: f32x8) -> u8 {
+fn occluded_lanes(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
     (0..LANES)
         .filter(|&i| pre.traced >> i & 1 == 1)
         .fold(0, |blocked, i| {
-            let end = occluded_wide(w, &pre.lane(i), tmax.as_array()[i]);
+            let lane = pre.lane(i);
+            let pre8 = Pre1x8::new(&lane);
+            let tmax = tmax.as_array()[i];
+            let end = bvh8::walk1(w, &lane, |rows, n| {
+                if occludes_rows(|| lane, &pre8, rows, n, tmax) {
+                    f32::NEG_INFINITY
+                } else {
+                    tmax
+                }
+            });
             blocked | u8::from(end == f32::NEG_INFINITY) << i
         })
 }
 
 /// [`occluded_lanes`], the lanes' walks interleaved ([`bvh8::walk_interleaved`]).
-fn occluded_interleaved<N: WideBoxes>(w: &WideRef<'_, N>, pre: &Pre8, tmax: f32x8) -> u8 {
+fn occluded_interleaved(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
     let mut blocked = 0u8;
     bvh8::walk_interleaved(w, pre, tmax, pre.traced, |i, (lane, pre8), rows, n| {
         let tmax = tmax.as_array()[i];
@@ -536,24 +504,18 @@ mod tests {
         Ray::new(org, d, 0.0, tmax)
     }
 
-    /// The collapse of `binary`, its leaf rows and its quantised form.
-    fn widen(binary: &BvhRef<'_>) -> (Vec<WideNode>, Vec<f32>, Vec<QuantNode>) {
+    /// The collapse of `binary` and its leaf rows.
+    fn widen(binary: &BvhRef<'_>) -> (Vec<WideNode>, Vec<f32>) {
         let wide = collapse(binary);
         let rows = leaf_rows(&wide, binary.tris());
-        let quant = quantise(&wide);
-        (wide, rows, quant)
+        (wide, rows)
     }
 
-    /// The binary view of `nodes`/`tris` and the wide and quantised views of its collapse
-    /// (`wide`).
-    fn layouts<'a>(
-        bvh: BvhRef<'a>,
-        wide: &'a (Vec<WideNode>, Vec<f32>, Vec<QuantNode>),
-    ) -> [Layout<'a>; 3] {
+    /// The binary view of `nodes`/`tris` and the wide view of its collapse (`wide`).
+    fn layouts<'a>(bvh: BvhRef<'a>, wide: &'a (Vec<WideNode>, Vec<f32>)) -> [Layout<'a>; 2] {
         [
             Layout::Binary(bvh),
             Layout::Wide(WideRef::new(&wide.0, bvh.tris(), &wide.1).expect("collapse is valid")),
-            Layout::Quant(WideRef::new(&wide.2, bvh.tris(), &wide.1).expect("quantise is valid")),
         ]
     }
 
@@ -587,17 +549,10 @@ mod tests {
                 let mut hits = Hit8::NONE;
                 let mask = intersect8(&bvh, &packet, &mut hits);
                 let blocked = occluded8(&bvh, &packet);
-                // Both single-ray paths of `occluded8`, whichever the tree's size picks.
-                match (bvh, start8(&packet)) {
-                    (Layout::Wide(w), Some((pre, tmax))) => {
-                        assert_eq!(occluded_lanes(&w, &pre, tmax), blocked, "{packet:?}");
-                        assert_eq!(occluded_interleaved(&w, &pre, tmax), blocked, "{packet:?}");
-                    }
-                    (Layout::Quant(q), Some((pre, tmax))) => {
-                        assert_eq!(occluded_lanes(&q, &pre, tmax), blocked, "{packet:?}");
-                        assert_eq!(occluded_interleaved(&q, &pre, tmax), blocked, "{packet:?}");
-                    }
-                    _ => {}
+                if let (Layout::Wide(w), Some((pre, tmax))) = (bvh, start8(&packet)) {
+                    // Both single-ray paths of `occluded8`, whichever the tree's size picks.
+                    assert_eq!(occluded_lanes(&w, &pre, tmax), blocked, "{packet:?}");
+                    assert_eq!(occluded_interleaved(&w, &pre, tmax), blocked, "{packet:?}");
                 }
                 for lane in 0..LANES {
                     let r = packet.lane(lane);
@@ -763,11 +718,9 @@ mod tests {
     /// Both traversals' answers, which the contract must allow.
     fn traversals_keep_to_the_contract(bvh: &impl Tree, r: &Ray) {
         if let Layout::Binary(binary) = bvh.layout() {
-            let (wide, rows, quant) = widen(&binary);
+            let (wide, rows) = widen(&binary);
             let wide = WideRef::new(&wide, binary.tris(), &rows).unwrap();
             traversals_keep_to_the_contract(&wide, r);
-            let quant = WideRef::new(&quant, binary.tris(), &rows).unwrap();
-            traversals_keep_to_the_contract(&quant, r);
         }
         assert!(closest_hit_allowed(bvh, r, intersect1(bvh, r)));
         let mut hits = Hit8::NONE;

@@ -117,46 +117,13 @@ impl WideNode {
         self.child[slot] = child;
         self.meta[slot] = meta;
     }
-}
 
-/// What the wide walks read of a node: its slot boxes as `f32` planes, which slots the slab
-/// test may report, and each slot's child and meta. [`WideNode`] stores the planes as they
-/// are; [`super::QuantNode`] decodes them from 8-bit grid coordinates.
-pub trait WideBoxes: Copy + 'static {
-    /// 64-byte cache lines of one node (what a prefetch asks for).
-    const LINES: usize;
-    /// The slot boxes the slab test uses, `(lo[axis], hi[axis])` over the eight slots.
-    fn planes(&self) -> ([f32x8; 3], [f32x8; 3]);
-    /// The slots a slab test may report (bit `c` for slot `c`).
-    fn slots(&self) -> u8;
-    /// Node index (inner child) or first triangle (leaf child), per slot.
-    fn child(&self) -> &[u32; WIDTH];
-    /// `0` for an inner child, `LEAF | count` for a leaf, `LEAF` for an empty slot.
-    fn meta(&self) -> &[u32; WIDTH];
-}
-
-impl WideBoxes for WideNode {
-    const LINES: usize = 4;
-
-    #[inline(always)]
-    fn planes(&self) -> ([f32x8; 3], [f32x8; 3]) {
-        (self.lo.map(f32x8::from), self.hi.map(f32x8::from))
-    }
-
-    /// Every slot: an empty slot's inverted box misses every slab test.
-    #[inline(always)]
-    fn slots(&self) -> u8 {
-        0xff
-    }
-
-    #[inline(always)]
-    fn child(&self) -> &[u32; WIDTH] {
-        &self.child
-    }
-
-    #[inline(always)]
-    fn meta(&self) -> &[u32; WIDTH] {
-        &self.meta
+    /// The box of slot `slot`.
+    fn slot_box(&self, slot: usize) -> ([f32; 3], [f32; 3]) {
+        (
+            [0, 1, 2].map(|a| self.lo[a][slot]),
+            [0, 1, 2].map(|a| self.hi[a][slot]),
+        )
     }
 }
 
@@ -164,13 +131,13 @@ impl WideBoxes for WideNode {
 /// triangles as structure-of-arrays rows per leaf ([`leaf_rows`]), which single rays test
 /// eight at a time.
 #[derive(Clone, Copy, Debug)]
-pub struct WideRef<'a, N = WideNode> {
-    nodes: &'a [N],
+pub struct WideRef<'a> {
+    nodes: &'a [WideNode],
     tris: &'a [Tri],
     rows: &'a [f32],
 }
 
-impl<'a, N: WideBoxes> WideRef<'a, N> {
+impl<'a> WideRef<'a> {
     /// Checks every child index, leaf range, that used slots come first, and the depth, once,
     /// so traversal can trust them; and that `rows` is [`leaf_rows`]`(nodes, tris)`, bit for
     /// bit.
@@ -178,7 +145,11 @@ impl<'a, N: WideBoxes> WideRef<'a, N> {
     /// # Errors
     /// The first [`LayoutError`] found, walking depth first from the root (slots `0..8`);
     /// [`LayoutError::BadRows`] when `rows` differs from the triangles.
-    pub fn new(nodes: &'a [N], tris: &'a [Tri], rows: &'a [f32]) -> Result<Self, LayoutError> {
+    pub fn new(
+        nodes: &'a [WideNode],
+        tris: &'a [Tri],
+        rows: &'a [f32],
+    ) -> Result<Self, LayoutError> {
         if nodes.is_empty() {
             return Err(LayoutError::NoNodes);
         }
@@ -196,20 +167,14 @@ impl<'a, N: WideBoxes> WideRef<'a, N> {
             let node = &nodes[index as usize];
             let mut ended = false;
             for slot in 0..WIDTH {
-                let (child, meta) = (node.child()[slot], node.meta()[slot]);
+                let (child, meta) = (node.child[slot], node.meta[slot]);
                 let bad_leaf = LayoutError::BadLeaf {
                     node: index,
                     slot: slot as u8,
                 };
-                let reported = node.slots() >> slot & 1 == 1;
                 if meta == LEAF {
-                    // An empty slot a slab test may report is a leaf of no triangles at
-                    // `child`: it must index the triangles.
-                    if reported && child as usize > tris.len() {
-                        return Err(bad_leaf);
-                    }
                     ended = true;
-                } else if ended || !reported {
+                } else if ended {
                     return Err(bad_leaf);
                 } else if meta == 0 {
                     if child <= index || child as usize >= nodes.len() {
@@ -238,7 +203,7 @@ impl<'a, N: WideBoxes> WideRef<'a, N> {
 
     /// A view of a layout that already passed [`WideRef::new`] and has not changed since
     /// (see [`BvhRef::new_trusted`]; debug builds check the layout anyway).
-    pub fn new_trusted(nodes: &'a [N], tris: &'a [Tri], rows: &'a [f32]) -> Self {
+    pub fn new_trusted(nodes: &'a [WideNode], tris: &'a [Tri], rows: &'a [f32]) -> Self {
         debug_assert!(
             Self::new(nodes, tris, rows).is_ok(),
             "layout never validated"
@@ -247,7 +212,7 @@ impl<'a, N: WideBoxes> WideRef<'a, N> {
     }
 
     /// The nodes, root first.
-    pub fn nodes(&self) -> &'a [N] {
+    pub fn nodes(&self) -> &'a [WideNode] {
         self.nodes
     }
 
@@ -274,50 +239,13 @@ impl<'a, N: WideBoxes> WideRef<'a, N> {
         &self.tris[first..first + (meta & !LEAF) as usize]
     }
 
-    /// Every leaf slot met depth first from the root, with the intersection of its box and
-    /// its ancestors' boxes (a walk reaches a leaf only through all of them; the slab test is
-    /// monotone in the box), and its triangles: for the contract oracle.
+    /// Every leaf slot: its box and its triangles (for the contract oracle).
     pub(super) fn leaves(self) -> impl Iterator<Item = (([f32; 3], [f32; 3]), &'a [Tri])> {
-        type Aabb = ([f32; 3], [f32; 3]);
-        let all: Aabb = ([f32::NEG_INFINITY; 3], [f32::INFINITY; 3]);
-        let mut stack = [(0u32, all); STACK];
-        let mut sp = 1usize;
-        // (node, its clip box, its planes, next slot)
-        let mut at: Option<(u32, Aabb, [[[f32; WIDTH]; 3]; 2], usize)> = None;
-        core::iter::from_fn(move || {
-            loop {
-                let (index, clip, planes, slot) = match at.as_mut() {
-                    Some(a) => a,
-                    None => {
-                        sp = sp.checked_sub(1)?;
-                        let (index, clip) = stack[sp];
-                        let (lo, hi) = self.nodes[index as usize].planes();
-                        let planes = [lo.map(|p| p.to_array()), hi.map(|p| p.to_array())];
-                        at.insert((index, clip, planes, 0))
-                    }
-                };
-                let s = *slot;
-                if s == WIDTH {
-                    at = None;
-                    continue;
-                }
-                *slot += 1;
-                let node = &self.nodes[*index as usize];
-                let (child, meta) = (node.child()[s], node.meta()[s]);
-                if node.slots() >> s & 1 == 0 || meta == LEAF {
-                    continue;
-                }
-                let aabb = (
-                    [0, 1, 2].map(|a| planes[0][a][s].max(clip.0[a])),
-                    [0, 1, 2].map(|a| planes[1][a][s].min(clip.1[a])),
-                );
-                if meta == 0 {
-                    stack[sp] = (child, aabb);
-                    sp += 1;
-                    continue;
-                }
-                return Some((aabb, self.leaf(child, meta)));
-            }
+        let view = self;
+        self.nodes.iter().flat_map(move |node| {
+            (0..WIDTH)
+                .filter(move |&s| node.meta[s] != 0 && node.meta[s] != LEAF)
+                .map(move |s| (node.slot_box(s), view.leaf(node.child[s], node.meta[s])))
         })
     }
 }
@@ -413,12 +341,12 @@ fn rows_match(tris: &[Tri], rows: &[f32], child: u32, meta: u32) -> bool {
 /// `r % 3`; row 9 the primitive ids' bits) at `ROWS·first + r·n`, so one 8-wide load reads an
 /// axis of eight of its triangles. Triangles outside every leaf keep zeros.
 #[cfg(any(feature = "alloc", test))]
-pub fn leaf_rows<N: WideBoxes>(nodes: &[N], tris: &[Tri]) -> alloc::vec::Vec<f32> {
+pub fn leaf_rows(nodes: &[WideNode], tris: &[Tri]) -> alloc::vec::Vec<f32> {
     extern crate alloc;
     let mut rows = alloc::vec![0.0; rows_len(tris.len())];
     for node in nodes {
         for slot in 0..WIDTH {
-            let (first, meta) = (node.child()[slot] as usize, node.meta()[slot]);
+            let (first, meta) = (node.child[slot] as usize, node.meta[slot]);
             if meta == 0 || meta == LEAF {
                 continue;
             }
@@ -460,12 +388,11 @@ impl Ray1x8 {
     /// (far bound widened unfused, like [`super::widened`]): the mask of slots met and their
     /// entry distances.
     #[inline(always)]
-    fn boxes(&self, node: &impl WideBoxes, tmax: f32) -> (u8, f32x8) {
+    fn boxes(&self, node: &WideNode, tmax: f32) -> (u8, f32x8) {
         let mut near = self.tmin_down;
         let mut far = f32x8::splat(tmax);
-        let (lo, hi) = node.planes();
         for axis in 0..3 {
-            let (lo, hi) = (lo[axis], hi[axis]);
+            let (lo, hi) = (f32x8::from(node.lo[axis]), f32x8::from(node.hi[axis]));
             let (pn, pf) = if self.neg[axis] { (hi, lo) } else { (lo, hi) };
             let tn = (pn - self.org[axis]) * self.inv[axis];
             let tf = (pf - self.org[axis]) * self.inv[axis];
@@ -473,10 +400,7 @@ impl Ray1x8 {
             far = tf.fast_min(far);
         }
         let widened = far * f32x8::splat(FAR_UP) + f32x8::splat(FAR_FLOOR);
-        (
-            near.simd_le(widened).to_bitmask() as u8 & node.slots(),
-            near,
-        )
+        (near.simd_le(widened).to_bitmask() as u8, near)
     }
 }
 
@@ -486,8 +410,8 @@ impl Ray1x8 {
 /// The stack holds `(child, meta)` with the slot's entry distance beside it, so a pop never
 /// reads the parent node again; a popped entry whose entry distance lies beyond the widened
 /// `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
-pub(super) fn walk1<'a, N: WideBoxes>(
-    bvh: &WideRef<'a, N>,
+pub(super) fn walk1<'a>(
+    bvh: &WideRef<'a>,
     pre: &Pre,
     mut visit: impl FnMut(&'a [f32], usize) -> f32,
 ) -> f32 {
@@ -500,8 +424,7 @@ pub(super) fn walk1<'a, N: WideBoxes>(
         let node = &bvh.nodes[index];
         let (bits, near) = ray.boxes(node, tmax);
         let near = near.as_array();
-        let entry =
-            |slot: usize| u64::from(node.child()[slot]) | u64::from(node.meta()[slot]) << 32;
+        let entry = |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
         // The nearest slot met is visited next; the others are pushed farthest first.
         let mut next = match bits.count_ones() {
             0 => None,
@@ -593,14 +516,14 @@ fn push_sorted(
 /// city (59 MB) it gains 1.9×.
 pub const INTERLEAVE_BYTES: usize = 1 << 20;
 
-/// Asks the cache for the `lines` 64-byte lines at `p` (a node, or the first rows of a leaf).
+/// Asks the cache for the 256 bytes at `p` (a node, or the first rows of a leaf).
 #[inline(always)]
-fn prefetch<T>(p: &T, lines: usize) {
+fn prefetch<T>(p: &T) {
     #[cfg(target_arch = "x86_64")]
     {
         use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
         let p = (p as *const T).cast::<i8>();
-        for line in 0..lines {
+        for line in 0..4 {
             // SAFETY: a prefetch never faults and has no effect on memory; `wrapping_add`
             // keeps the address arithmetic defined.
             unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * line)) };
@@ -610,12 +533,12 @@ fn prefetch<T>(p: &T, lines: usize) {
 
 /// Prefetches the node or the leaf rows of the entry `child | meta << 32`.
 #[inline(always)]
-fn prefetch_entry<N: WideBoxes>(bvh: &WideRef<'_, N>, e: u64) {
+fn prefetch_entry(bvh: &WideRef<'_>, e: u64) {
     let (child, meta) = (e as u32, (e >> 32) as u32);
     if meta == 0 {
-        prefetch(&bvh.nodes[child as usize], N::LINES);
+        prefetch(&bvh.nodes[child as usize]);
     } else if let Some(first) = bvh.leaf_rows(child).first() {
-        prefetch(first, 4);
+        prefetch(first);
     }
 }
 
@@ -626,8 +549,8 @@ fn prefetch_entry<N: WideBoxes>(bvh: &WideRef<'_, N>, e: u64) {
 /// entry distances, the nearest visited next, a popped entry beyond the lane's widened
 /// `tmax` skipped. `visit(lane, pre, rows, n)` tests a leaf for one lane and returns its new
 /// `tmax` (−∞ ends that lane's walk).
-pub(super) fn walk_interleaved<N: WideBoxes>(
-    bvh: &WideRef<'_, N>,
+pub(super) fn walk_interleaved(
+    bvh: &WideRef<'_>,
     pre: &Pre8,
     tmax: f32x8,
     lanes: u8,
@@ -660,9 +583,8 @@ pub(super) fn walk_interleaved<N: WideBoxes>(
                 let node = &bvh.nodes[child as usize];
                 let (bits, near) = r.boxes(node, tmax[i]);
                 let near = near.as_array();
-                let entry = |slot: usize| {
-                    u64::from(node.child()[slot]) | u64::from(node.meta()[slot]) << 32
-                };
+                let entry =
+                    |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
                 if bits != 0 {
                     let (keys, n) = slots_far_to_near(bits, near);
                     for &k in &keys[..n - 1] {
@@ -734,13 +656,9 @@ fn lanes(pre: &Pre8) -> [Lane; LANES] {
 /// test per lane, [`Ray1x8::boxes`]' operations): per slot, the mask of lanes that meet it
 /// (`u32` lanes) and the nearest of their entry distances (+∞ where none does).
 #[inline(always)]
-fn boxes8(
-    node: &impl WideBoxes,
-    lanes: &[Lane; LANES],
-    live: u8,
-    tmax: &[f32; LANES],
-) -> (u32x8, f32x8) {
-    let (lo, hi) = node.planes();
+fn boxes8(node: &WideNode, lanes: &[Lane; LANES], live: u8, tmax: &[f32; LANES]) -> (u32x8, f32x8) {
+    let lo = node.lo.map(f32x8::from);
+    let hi = node.hi.map(f32x8::from);
     let inf = f32x8::splat(f32::INFINITY);
     let mut met = u32x8::ZERO;
     let mut nearest = inf;
@@ -775,8 +693,8 @@ fn boxes8(
 /// live lanes are tested, and a packet's lanes drift apart deeper in the tree. (Measured
 /// against testing slot by slot, eight lanes at a time, and against one frustum test for a
 /// shared-origin packet: docs/traverse.md, "Wide BVH".)
-pub(super) fn walk8<'a, N: WideBoxes>(
-    bvh: &WideRef<'a, N>,
+pub(super) fn walk8<'a>(
+    bvh: &WideRef<'a>,
     pre: &Pre8,
     mut tmax: f32x8,
     visitor: &mut impl Visitor<'a>,
@@ -798,9 +716,8 @@ pub(super) fn walk8<'a, N: WideBoxes>(
         // pushed farthest first.
         let mut keys = [0u32; WIDTH];
         let mut n = 0;
-        let slots = node.slots();
         for slot in 0..WIDTH {
-            if met[slot] == 0 || slots >> slot & 1 == 0 {
+            if met[slot] == 0 {
                 continue;
             }
             let k = nearest[slot].to_bits() & !7 | slot as u32;
@@ -814,7 +731,7 @@ pub(super) fn walk8<'a, N: WideBoxes>(
         }
         let entry = |k: u32| {
             let slot = (k & 7) as usize;
-            let e = u64::from(node.child()[slot]) | u64::from(node.meta()[slot]) << 32;
+            let e = u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
             (e, nearest[slot], met[slot] as u8)
         };
         // The pushed entries are prefetched: the walk comes back to them after the nearest
@@ -823,9 +740,9 @@ pub(super) fn walk8<'a, N: WideBoxes>(
             let pushed = entry(k);
             let (c, m) = (pushed.0 as u32, (pushed.0 >> 32) as u32);
             if m == 0 {
-                prefetch(&bvh.nodes[c as usize], N::LINES);
+                prefetch(&bvh.nodes[c as usize]);
             } else if let Some(first) = bvh.tris.get(c as usize) {
-                prefetch(first, 4);
+                prefetch(first);
             }
             stack.push(pushed);
         }
@@ -959,7 +876,7 @@ mod tests {
         one.meta[0] = LEAF | 1;
         let rows = leaf_rows(&[one], &tris);
         assert_eq!(
-            WideRef::<WideNode>::new(&[], &tris, &rows).unwrap_err(),
+            WideRef::new(&[], &tris, &rows).unwrap_err(),
             LayoutError::NoNodes
         );
         let mut bad = WideNode::EMPTY;
