@@ -82,8 +82,8 @@ impl<T: Copy> Stack<T> {
 ///
 /// Slot `c` is an inner child when `meta[c] == 0` (node `child[c]`), a leaf of
 /// `meta[c] & !LEAF` triangles starting at `child[c]` otherwise. Used slots come first; an
-/// empty slot has `meta == LEAF` and the inverted box `lo = +∞`, `hi = −∞`, which every slab
-/// test misses. Node 0 is the root.
+/// empty slot has `meta == LEAF`, a `child` of at most the triangle count, and the inverted
+/// box `lo = +∞`, `hi = −∞`, which every slab test misses. Node 0 is the root.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C, align(64))]
 pub struct WideNode {
@@ -138,7 +138,8 @@ pub struct WideRef<'a> {
 }
 
 impl<'a> WideRef<'a> {
-    /// Checks every child index, leaf range, that used slots come first, and the depth, once,
+    /// Checks every child index, leaf range (an empty slot's empty one too, which a crafted
+    /// box lets a ray reach), that used slots come first, and the depth, once,
     /// so traversal can trust them; and that `rows` is [`leaf_rows`]`(nodes, tris)`, bit for
     /// bit.
     ///
@@ -173,6 +174,11 @@ impl<'a> WideRef<'a> {
                     slot: slot as u8,
                 };
                 if meta == LEAF {
+                    // A crafted box can let a ray meet an empty slot: the packet walk then
+                    // slices the leaf of no triangles at `child`.
+                    if child as usize > tris.len() {
+                        return Err(bad_leaf);
+                    }
                     ended = true;
                 } else if ended {
                     return Err(bad_leaf);
@@ -801,8 +807,8 @@ fn widened_largest(tmax: f32x8, alive: u8) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::packet::Ray;
-    use crate::traverse::{Node, intersect1, occluded1};
+    use crate::packet::{Hit8, LANES, Ray, Ray8};
+    use crate::traverse::{Node, intersect1, intersect8, occluded1, occluded8};
     use glam::Vec3;
     use std::vec::Vec;
 
@@ -890,6 +896,23 @@ mod tests {
             WideRef::new(&[bad], &tris, &rows).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 0 }
         );
+        // An empty slot whose child lies past the triangles: a box that a ray meets would
+        // have it sliced (with a box here; the packet walk panicked before the check).
+        let mut past = WideNode::EMPTY;
+        past.set_slot(0, [0.0; 3], [1.0, 1.0, 0.0], 0, LEAF | 1);
+        past.set_slot(1, [0.0; 3], [1.0, 1.0, 0.0], 2, LEAF);
+        assert_eq!(
+            WideRef::new(&[past], &tris, &rows).unwrap_err(),
+            LayoutError::BadLeaf { node: 0, slot: 1 }
+        );
+        past.child[1] = 1;
+        let nodes = [past];
+        let view = WideRef::new(&nodes, &tris, &rows).expect("an empty range at the end");
+        let r = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
+        let mut hits = Hit8::NONE;
+        let mask = intersect8(&view, &Ray8::from_rays(&[r; LANES]), &mut hits);
+        assert_eq!((mask, hits.lane(0)), (0xff, intersect1(&view, &r)));
+        assert_eq!(occluded8(&view, &Ray8::from_rays(&[r; LANES])), 0xff);
         // A used slot after an empty one.
         let mut gap = WideNode::EMPTY;
         gap.meta[3] = LEAF | 1;
