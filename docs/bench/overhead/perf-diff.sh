@@ -3,7 +3,7 @@
 # (`--guiding off --combine average`) and one with the defaults (coherent guiding), then the
 # per-symbol difference in samples. Usage (from the repository root, after
 # `cargo build --release -p guidebake`):
-#   docs/bench/overhead/perf-diff.sh SCENE.glb [SPP] [OUT_DIR]
+#   [TRANSPORT=path] docs/bench/overhead/perf-diff.sh SCENE.glb [SPP] [OUT_DIR]
 # Needs `perf` (linux-perf). Prints the total samples of both runs and the 24 symbols whose
 # sample count grew the most.
 set -euo pipefail
@@ -17,7 +17,7 @@ for m in off coherent; do
     extra=()
     [ "$m" = off ] && extra=(--guiding off --combine average)
     perf record -q -F 2000 -g -o "$out/perf-$m.data" "$bin" bake "$out/scene.texels" \
-        --scene "$scene" -o "$out/$m.exr" --spp "$spp" --seed 1 --threads 1 "${extra[@]}" \
+        --scene "$scene" -o "$out/$m.exr" --spp "$spp" --seed 1 --threads 1 ${TRANSPORT:+--transport $TRANSPORT} "${extra[@]}" \
         >/dev/null 2>&1
 done
 python3 - "$out" <<'PY'
