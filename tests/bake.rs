@@ -751,9 +751,7 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
                 assert_eq!(report.counters.path_rays, 0);
                 // Every gather pass clusters its texels; only the guided ones learn.
                 let c = &report.counters;
-                let learned = c.iterations_guided
-                    + c.iterations_unguided_no_energy
-                    + c.iterations_unguided_uniform_guide;
+                let learned = c.iterations_learnable();
                 let guided_passes = match (guiding, guided_passes) {
                     (Guiding::Off, _) => 0,
                     (_, Last) => 1,

@@ -97,6 +97,9 @@ pub struct GatherCounters {
     pub iterations_unguided_no_energy: u64,
     /// Guided iterations that fell back to the baseline because the guide was uniform.
     pub iterations_unguided_uniform_guide: u64,
+    /// Guided iterations that fell back to the baseline because the guide the cluster sampled
+    /// in an earlier iteration beat stratified cosine points by less than `--min-gain`.
+    pub iterations_unguided_no_gain: u64,
     /// Guided iterations that sampled a learned guide.
     pub iterations_guided: u64,
     /// Nanoseconds spent building guides (summed over workers: CPU time, not wall time).
@@ -113,6 +116,15 @@ impl GatherCounters {
         self.gather_rays + self.shadow_rays + self.path_rays
     }
 
+    /// Cluster-iterations that could sample a learned guide (every iteration after the first
+    /// of a guided pass), guided or fallen back to the baseline for one of the counted reasons.
+    pub fn iterations_learnable(&self) -> u64 {
+        self.iterations_guided
+            + self.iterations_unguided_no_energy
+            + self.iterations_unguided_uniform_guide
+            + self.iterations_unguided_no_gain
+    }
+
     /// Adds another worker's counts.
     pub fn merge(&mut self, o: &Self) {
         self.gather_rays += o.gather_rays;
@@ -126,6 +138,7 @@ impl GatherCounters {
         self.clusters += o.clusters;
         self.iterations_unguided_no_energy += o.iterations_unguided_no_energy;
         self.iterations_unguided_uniform_guide += o.iterations_unguided_uniform_guide;
+        self.iterations_unguided_no_gain += o.iterations_unguided_no_gain;
         self.iterations_guided += o.iterations_guided;
         self.guide_build_ns += o.guide_build_ns;
         self.warp_ns += o.warp_ns;
@@ -140,7 +153,7 @@ pub struct TileBaker<'w> {
     orders: Vec<IterationOrders>,
     rotated: Vec<u32>,
     /// The cluster's learning records of the current iteration.
-    records: Vec<Record>,
+    learning: Learning,
     nodes: Vec<Node>,
     /// Per valid texel and iteration: the weight of `--combine cluster`.
     weights: Vec<f64>,
@@ -212,7 +225,7 @@ impl<'w> TileBaker<'w> {
             settings,
             orders,
             rotated: Vec::new(),
-            records: Vec::new(),
+            learning: Learning::default(),
             nodes: vec![Node::default(); GUIDE_CAPACITY],
             weights: Vec::new(),
             batches: Vec::new(),
@@ -401,7 +414,7 @@ impl<'w> TileBaker<'w> {
             settings,
             orders,
             rotated,
-            records,
+            learning,
             nodes,
             batches,
             weights,
@@ -432,8 +445,15 @@ impl<'w> TileBaker<'w> {
             },
             ..GuideParams::default()
         };
+        // Once the guide a cluster sampled shows too little gain (`--min-gain`), the cluster
+        // gathers with cosine points for the rest of its iterations and stops learning.
+        let mut stopped = false;
         for k in 0..iterations {
-            records.clear();
+            learning.clear();
+            if stopped {
+                counters.iterations_unguided_no_gain += 1;
+            }
+            let learns = !stopped && k + 1 < iterations && settings.guiding != Guiding::Off;
             for &m in members {
                 let i = valid[m as usize];
                 let t = gather_texel(&texels[i as usize], first_texel + u64::from(i), frame);
@@ -450,7 +470,7 @@ impl<'w> TileBaker<'w> {
                     batch: &mut batches[at],
                     gathered: &mut gathered[m as usize],
                     sh: sh.get_mut(at),
-                    records,
+                    learning: learns.then_some(&mut *learning),
                 };
                 let ctx = IterationCtx {
                     texel_direct: *texel_direct,
@@ -463,13 +483,24 @@ impl<'w> TileBaker<'w> {
                     }
                 }
             }
-            if k + 1 < iterations {
+            if learns {
                 let clock = Instant::now();
                 match settings.guiding {
                     Guiding::Off => {}
-                    Guiding::Grid => grid = learn_grid(records, counters),
+                    Guiding::Grid => grid = learn_grid(&learning.records, counters),
                     Guiding::Naive | Guiding::Coherent => {
-                        guide = learn(records, &params, nodes, counters);
+                        // The guide this iteration sampled, judged by its own records: below
+                        // `--min-gain` the cluster gathers with cosine points from now on.
+                        let sampled = guide.is_some();
+                        if sampled
+                            && settings.min_gain > 0
+                            && learning.gain() * 100.0 < f64::from(settings.min_gain)
+                        {
+                            guide = None;
+                            stopped = true;
+                        } else {
+                            guide = learn(&mut learning.records, &params, nodes, counters);
+                        }
                     }
                 }
                 counters.guide_build_ns += clock.elapsed().as_nanos() as u64;
@@ -745,8 +776,79 @@ struct Sinks<'a> {
     sh: Option<&'a mut ShSums>,
     /// The texel's gather-only samples over all iterations.
     gathered: &'a mut Welford,
-    /// The cluster's learning records.
-    records: &'a mut Vec<Record>,
+    /// The cluster's learning records, when this iteration learns.
+    learning: Option<&'a mut Learning>,
+}
+
+/// The records one iteration of a cluster learns from, and what `--min-gain` needs of them.
+#[derive(Default)]
+struct Learning {
+    /// Point and flux `lum(L) / q` of every finite sample.
+    records: Vec<Record>,
+    /// `densities[i]`: the density `q` on the primary sample square that drew `records[i]`
+    /// (until a guide's build reorders the records).
+    densities: Vec<f32>,
+}
+
+impl Learning {
+    fn clear(&mut self) {
+        self.records.clear();
+        self.densities.clear();
+    }
+
+    fn push(&mut self, record: Record, density: f32) {
+        self.records.push(record);
+        self.densities.push(density);
+    }
+
+    /// How many times less variance per sample the density that drew the records had than
+    /// stratified cosine points would have had, both estimated from the records: the
+    /// iteration's own samples measure the guide it sampled, out of sample (a guide judged
+    /// on the records it was fitted to looks better than it is).
+    ///
+    /// A record drawn with density `q` has flux `g/q`, so the iteration's variance per
+    /// sample is the flux's, `∫ g²/q − (∫ g)²`. The cosine points are stratified: an
+    /// iteration's presorted Sobol points cover the square's [`GAIN_STRATA`]² cells evenly,
+    /// so their variance is what is left inside the cells, `∫ g² − Σ_c (∫_c g)² / a_c`, with
+    /// `∫ g²` estimated as the mean of `flux² · q` and each `(∫_c g)²` without bias from the
+    /// cell's records. (Against independent cosine points a guide would look better than it
+    /// is on smooth light: docs/BENCHMARKS.md, "Why guiding does not pay by RMSE".)
+    /// Infinite when the records show no variance; 1 with fewer than two.
+    fn gain(&self) -> f64 {
+        let n = self.records.len() as f64;
+        if n < 2.0 {
+            return 1.0;
+        }
+        const CELLS: usize = GAIN_STRATA * GAIN_STRATA;
+        let cell = |x: f32| ((x * GAIN_STRATA as f32) as usize).min(GAIN_STRATA - 1);
+        let (mut sums, mut squares) = ([0.0f64; CELLS], [0.0f64; CELLS]);
+        let (mut mean, mut second, mut cosine) = (0.0f64, 0.0f64, 0.0f64);
+        for (r, &q) in self.records.iter().zip(&self.densities) {
+            let (flux, q) = (f64::from(r.flux), f64::from(q));
+            let c = cell(r.u[0]) + GAIN_STRATA * cell(r.u[1]);
+            sums[c] += flux;
+            squares[c] += flux * flux;
+            mean += flux;
+            second += flux * flux;
+            cosine += flux * flux * q;
+        }
+        // ((Σ X)² − Σ X²) / (n (n − 1)) estimates (∫_c g)² without bias, X a record's flux
+        // in cell c and 0 elsewhere.
+        let between = sums
+            .iter()
+            .zip(&squares)
+            .map(|(s, q)| (s * s - q) / (n * (n - 1.0)))
+            .sum::<f64>()
+            * CELLS as f64;
+        let mean = mean / n;
+        let stratified = cosine / n - between;
+        let sampled = second / n - mean * mean;
+        if sampled > 0.0 {
+            stratified.max(0.0) / sampled
+        } else {
+            f64::INFINITY
+        }
+    }
 }
 
 /// What one iteration's gather needs, borrowed.
@@ -796,7 +898,11 @@ impl<'a> IterationCtx<'a> {
     /// The cosine baseline's share `c` of the mixture this iteration samples: the fraction of
     /// its packets drawn from the baseline.
     fn cosine_share(&self) -> f32 {
-        self.cosine_packets as f32 / self.packets.max(1) as f32
+        if self.cosine_packets == 0 {
+            0.0
+        } else {
+            self.settings.cosine_share(self.k)
+        }
     }
 
     /// Whether packet `j` (in the order traced) is drawn from the cosine baseline: the
@@ -1237,11 +1343,18 @@ impl<'a> IterationCtx<'a> {
             sh.add(&projected);
         }
         let flux = luminance_f32(radiance.to_array()) / q;
-        if flux.is_finite() {
-            sinks.records.push(Record { u: w, flux });
+        if let Some(learning) = sinks.learning.as_deref_mut()
+            && flux.is_finite()
+        {
+            learning.push(Record { u: w, flux }, q);
         }
     }
 }
+
+/// Cells per side of the square over which [`Learning::gain`] takes the cosine
+/// points as stratified: 64 cells, about one per sample of a texel's middle iterations at
+/// 256 spp.
+const GAIN_STRATA: usize = 8;
 
 /// One packet in this many has its warp timed ([`GatherCounters::warp_ns`]).
 const WARP_TIMED_EVERY: u32 = 8;
@@ -1825,9 +1938,12 @@ mod tests {
         const SEEDS: u32 = 32;
         const PER_SAMPLE: f64 = 10.0;
         const WHOLE_BAKE: f32 = 4.0;
+        // The mixtures' means with every cluster guided (`--min-gain 0`), then with the
+        // default `--min-gain`.
         let base = BakeSettings {
             combine: Combine::Average,
             bias_correction: false,
+            min_gain: 0,
             ..settings(Guiding::Off)
         };
         let (off_mean, off_sd, _, _) = emitter_bake(base);
@@ -1840,6 +1956,20 @@ mod tests {
                 };
                 let (mean, sd, _, counters) = emitter_bake(mixed);
                 assert_eq!(counters.iterations_guided, 2, "{mode}: {counters:?}");
+                // The guide of a small emitter beats stratified cosine points (by 1.9–5×).
+                let gainful = BakeSettings {
+                    min_gain: BakeSettings::default().min_gain,
+                    ..mixed
+                };
+                let (_, _, _, c) = emitter_bake(gainful);
+                // (Under `--mix 100` every packet is a cosine one: the first guided iteration
+                // shows no gain and the cluster stops sampling its guide.)
+                let guided = if mix == 100 && mode != Guiding::Grid {
+                    1
+                } else {
+                    2
+                };
+                assert_eq!(c.iterations_guided, guided, "{mode} min gain: {c:?}");
                 let tol = 3.0 * (off_sd * off_sd + sd * sd).sqrt() / 8.0;
                 assert!(
                     (mean - off_mean).abs() <= tol,
@@ -1885,6 +2015,94 @@ mod tests {
                 "{mode}: per-texel variance {default_var} not {WHOLE_BAKE}× below unguided {off_var}"
             );
         }
+    }
+
+    /// [`Learning::gain`] against the closed form. An integrand 1 on a spike [0, 1/32)²
+    /// inside one stratum and 0 elsewhere: stratified cosine points leave the variance inside
+    /// that stratum, a_c·p(1 − p) with a_c = 1/64, p = 1/16; a 25 % mixture with a guide of
+    /// density 1024 on the spike samples it with density 768.25, variance
+    /// (1/1024)/768.25 − 1/1024². Records drawn from the mixture (its mass 0.7502 on the spike
+    /// as 55 × 55 grid points there, the rest as the 1 023 points of a 32 × 32 grid outside
+    /// it) measure that gain; records of cosine points never beat stratified cosine points.
+    #[test]
+    fn the_gain_is_the_variance_ratio_to_stratified_cosine_points() {
+        let grid = |n: usize, scale: f32| -> Vec<[f32; 2]> {
+            (0..n * n)
+                .map(|i| [(i % n) as f32 + 0.5, (i / n) as f32 + 0.5].map(|x| x * scale / n as f32))
+                .collect()
+        };
+        let records =
+            |points: &[[f32; 2]], g: &dyn Fn([f32; 2]) -> f32, q: &dyn Fn([f32; 2]) -> f32| {
+                let mut learning = Learning::default();
+                for &u in points {
+                    learning.push(
+                        Record {
+                            u,
+                            flux: g(u) / q(u),
+                        },
+                        q(u),
+                    );
+                }
+                learning
+            };
+        let spike = |u: [f32; 2]| {
+            if u[0] < 1.0 / 32.0 && u[1] < 1.0 / 32.0 {
+                1.0
+            } else {
+                0.0
+            }
+        };
+        let mixture = |u: [f32; 2]| 0.25 + 0.75 * 1024.0 * spike(u);
+        let want = (1.0 / 64.0) * (1.0 / 16.0) * (15.0 / 16.0)
+            / ((1.0 / 1024.0) / 768.25 - 1.0 / (1024.0 * 1024.0));
+        let mut points = grid(55, 1.0 / 32.0);
+        points.extend(grid(32, 1.0).into_iter().filter(|&u| spike(u) == 0.0));
+        assert_eq!(points.len(), 55 * 55 + 1023);
+        let gain = records(&points, &spike, &mixture).gain();
+        assert!((gain / want - 1.0).abs() < 0.1, "{gain} against {want}");
+        // Cosine points (q = 1) of the spike, and of a corner of whole strata.
+        let cosine = records(&grid(64, 1.0), &spike, &|_| 1.0).gain();
+        assert!(cosine <= 1.0 + 1e-9, "{cosine}");
+        let corner = |u: [f32; 2]| if u[0] < 0.25 && u[1] < 0.25 { 1.0 } else { 0.0 };
+        let aligned = records(&grid(64, 1.0), &corner, &|_| 1.0).gain();
+        assert!(aligned < 0.05, "{aligned}");
+        // A guide that put its mass on the wrong corner.
+        let wrong = |u: [f32; 2]| mixture([1.0 - u[0], u[1]]);
+        let mut points = grid(55, 1.0 / 32.0)
+            .into_iter()
+            .map(|u| [1.0 - u[0], u[1]])
+            .collect::<Vec<_>>();
+        points.extend(grid(32, 1.0).into_iter().filter(|&u| wrong(u) < 1.0));
+        let lost = records(&points, &spike, &wrong).gain();
+        assert!(lost < 0.5, "{lost}");
+    }
+
+    /// `--min-gain`: under a sky that varies smoothly (stratified cosine points leave little
+    /// for a guide to gain), the cluster stops guiding after its first guided iteration and
+    /// gathers with cosine points, counted, and the irradiance is still the analytic one.
+    #[test]
+    fn a_cluster_whose_guide_shows_too_little_gain_gathers_with_cosine_points() {
+        let (sky, rows) = gradient_sky(32, Vec3::new(0.5, 1.0, 2.0), 1.0, 0.3);
+        let world = World::new(
+            &scene(ground(), vec![grey(0.0, 0.0)], sky, None),
+            Preset::DEFAULT,
+        )
+        .unwrap();
+        let want = gradient_sky_coefficients(&rows)[3] / directional::Y1;
+        let texels = texels_on_plane(64, 0.0);
+        let (mean, se, c) = bake_mean(&world, settings(Guiding::Coherent), &texels);
+        assert_within_3_sigma("the default --min-gain", (mean, se), want);
+        assert!(c.iterations_unguided_no_gain > 0, "{c:?}");
+        assert_eq!(c.iterations_learnable(), c.clusters * 2, "{c:?}");
+        // Without the lever the same clusters sample their guides.
+        let always = BakeSettings {
+            min_gain: 0,
+            ..settings(Guiding::Coherent)
+        };
+        let (mean, se, c) = bake_mean(&world, always, &texels);
+        assert_within_3_sigma("min gain 0", (mean, se), want);
+        assert_eq!(c.iterations_unguided_no_gain, 0);
+        assert!(c.iterations_guided > 0, "{c:?}");
     }
 
     /// One frame per cluster: texels on a wall facing +x whose normals have n.z = +0 and

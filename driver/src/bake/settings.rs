@@ -144,6 +144,15 @@ pub struct BakeSettings {
     /// The guide's smoothing α (paper §2.3) in percent: each child's share of its parent
     /// pulled toward a quarter by this much (the paper's filter: a prior toward the parent).
     pub smooth: u32,
+    /// A cluster keeps sampling its guide only while the guide shows, on the records of the
+    /// iteration that sampled it, at least this gain in percent: the stratified cosine
+    /// points' variance per sample over its own (`--min-gain`; 0: always guide). Below it
+    /// the cluster gathers with cosine points for its remaining iterations
+    /// ([`GatherCounters`]'s `iterations_unguided_no_gain`). 150 by the benchmark
+    /// (docs/BENCHMARKS.md, "Guiding only where it pays"): a guided pass costs 1.1–1.2×.
+    ///
+    /// [`GatherCounters`]: crate::bake::gather::GatherCounters
+    pub min_gain: u32,
     /// How emissive triangles are found.
     pub emitters: EmitterSampling,
     /// How next-event estimation picks an emitter.
@@ -175,6 +184,7 @@ impl Default for BakeSettings {
             schedule: Schedule::Doubling,
             min_split: 64,
             smooth: 10,
+            min_gain: 150,
             emitters: EmitterSampling::default(),
             emitter_selection: EmitterSelection::default(),
             directional: Directional::None,
@@ -322,6 +332,12 @@ impl BakeSettings {
     pub fn cosine_packets(&self, k: u32) -> u32 {
         let packets = self.samples_in_iteration(k) / 8;
         (packets * self.mix + 50) / 100
+    }
+
+    /// The cosine baseline's share of iteration `k`'s mixture when it samples a learned
+    /// guide: the fraction of its packets drawn from the baseline.
+    pub fn cosine_share(&self, k: u32) -> f32 {
+        self.cosine_packets(k) as f32 / (self.samples_in_iteration(k) / 8).max(1) as f32
     }
 
     /// Identity of a bake of `texel_file_id` with these settings (and [`BAKE_FORMAT`]: work

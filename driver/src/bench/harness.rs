@@ -224,8 +224,7 @@ impl RunRecord {
 /// guide actually steered (0 for `--guiding off`).
 fn guided_fraction(report: &BakeReport) -> f64 {
     let c = &report.counters;
-    let learnable =
-        c.iterations_guided + c.iterations_unguided_no_energy + c.iterations_unguided_uniform_guide;
+    let learnable = c.iterations_learnable();
     if learnable == 0 {
         0.0
     } else {

@@ -10,7 +10,7 @@ use clap::ValueEnum;
 use crate::bake::settings::{BakeSettings, Combine, GuidedPasses, Guiding, Schedule, Transport};
 
 /// One way of baking: what the bake's `--guiding`, `--combine` and `--bias-correction` say,
-/// and the guiding levers (`--mix`, `--schedule`, `--min-split`, `--smooth`).
+/// and the guiding levers (`--mix`, `--schedule`, `--min-split`, `--smooth`, `--min-gain`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Method {
     /// Direction choice.
@@ -36,6 +36,8 @@ pub struct Levers {
     pub smooth: u32,
     /// `--guided-passes`.
     pub guided_passes: GuidedPasses,
+    /// `--min-gain`.
+    pub min_gain: u32,
 }
 
 impl Default for Levers {
@@ -47,6 +49,7 @@ impl Default for Levers {
             min_split: d.min_split,
             smooth: d.smooth,
             guided_passes: d.guided_passes,
+            min_gain: d.min_gain,
         }
     }
 }
@@ -61,6 +64,7 @@ impl Levers {
             min_split: 4,
             smooth: 25,
             guided_passes: GuidedPasses::Every,
+            min_gain: 0,
         }
     }
 
@@ -82,6 +86,9 @@ impl Levers {
         }
         if self.guided_passes != d.guided_passes {
             s += &format!("+passes={}", value_name(&self.guided_passes));
+        }
+        if self.min_gain != d.min_gain {
+            s += &format!("+gain={}", self.min_gain);
         }
         s
     }
@@ -146,7 +153,7 @@ impl Method {
     }
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
-    /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`); the
+    /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -183,6 +190,7 @@ impl Method {
                 "mix" => levers.mix = number()?,
                 "split" => levers.min_split = number()?,
                 "smooth" => levers.smooth = number()?,
+                "gain" => levers.min_gain = number()?,
                 "schedule" => {
                     levers.schedule =
                         Schedule::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
@@ -247,6 +255,7 @@ impl Method {
             min_split: self.levers.min_split,
             smooth: self.levers.smooth,
             guided_passes: self.levers.guided_passes,
+            min_gain: self.levers.min_gain,
             ..Default::default()
         }
     }
@@ -297,6 +306,10 @@ mod tests {
         assert_eq!(m.levers.guided_passes, GuidedPasses::Every);
         assert_eq!(m.label(), "coherent/cluster/rho+passes=every");
         assert!(Method::parse("coherent/cluster/rho+passes=some").is_err());
+        let m = Method::parse("coherent/cluster/rho+gain=0").unwrap();
+        assert_eq!(m.levers.min_gain, 0);
+        assert_eq!(m.label(), "coherent/cluster/rho+gain=0");
+        assert_eq!(m.settings(256, 4, Transport::Series, 3, 1).min_gain, 0);
         assert!(Method::parse("coherent/texel").is_err());
         assert!(Method::parse("coherent/texel/rho+nope=1").is_err());
     }
