@@ -898,11 +898,7 @@ impl<'a> IterationCtx<'a> {
     /// The cosine baseline's share `c` of the mixture this iteration samples: the fraction of
     /// its packets drawn from the baseline.
     fn cosine_share(&self) -> f32 {
-        if self.cosine_packets == 0 {
-            0.0
-        } else {
-            self.settings.cosine_share(self.k)
-        }
+        self.cosine_packets as f32 / self.packets.max(1) as f32
     }
 
     /// Whether packet `j` (in the order traced) is drawn from the cosine baseline: the

@@ -334,12 +334,6 @@ impl BakeSettings {
         (packets * self.mix + 50) / 100
     }
 
-    /// The cosine baseline's share of iteration `k`'s mixture when it samples a learned
-    /// guide: the fraction of its packets drawn from the baseline.
-    pub fn cosine_share(&self, k: u32) -> f32 {
-        self.cosine_packets(k) as f32 / (self.samples_in_iteration(k) / 8).max(1) as f32
-    }
-
     /// Identity of a bake of `texel_file_id` with these settings (and [`BAKE_FORMAT`]: work
     /// left by a bake of another layout is not resumed).
     pub fn bake_id(&self, texel_file_id: u64) -> u64 {
