@@ -26,6 +26,7 @@
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
+use super::packet::set_lanes;
 use super::triangle::{PRIM_ROW, Pre1x8, ROWS};
 use super::{FAR_FLOOR, FAR_UP, LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor};
 use crate::packet::LANES;
@@ -576,10 +577,7 @@ pub(super) fn walk_interleaved(
     let mut next = [0u64; LANES];
     let mut active = lanes;
     while active != 0 {
-        let mut rest = active;
-        while rest != 0 {
-            let i = rest.trailing_zeros() as usize;
-            rest &= rest - 1;
+        for i in set_lanes(active) {
             let Some((r, consts)) = &ray[i] else {
                 continue;
             };
@@ -668,10 +666,7 @@ fn boxes8(node: &WideNode, lanes: &[Lane; LANES], live: u8, tmax: &[f32; LANES])
     let inf = f32x8::splat(f32::INFINITY);
     let mut met = u32x8::ZERO;
     let mut nearest = inf;
-    let mut rest = live;
-    while rest != 0 {
-        let i = rest.trailing_zeros() as usize;
-        rest &= rest - 1;
+    for i in set_lanes(live) {
         let lane = &lanes[i];
         let mut near = f32x8::splat(lane.tmin_down);
         let mut far = f32x8::splat(tmax[i]);

@@ -13,6 +13,19 @@ use super::{BvhRef, Node, STACK, Tri};
 use crate::packet::Ray8;
 use wide::f32x8;
 
+/// The lanes whose bit is set in `bits`, lowest first.
+#[inline(always)]
+pub(super) fn set_lanes(bits: u8) -> impl Iterator<Item = usize> {
+    let mut rest = bits;
+    core::iter::from_fn(move || {
+        (rest != 0).then(|| {
+            let i = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            i
+        })
+    })
+}
+
 pub(super) fn mask_of(bits: u8) -> f32x8 {
     f32x8::new(core::array::from_fn(|i| {
         if bits >> i & 1 == 1 {
@@ -104,10 +117,7 @@ impl<'a> Visitor<'a> for Closest<'_> {
 
     #[inline(always)]
     fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8 {
-        let mut rest = lanes;
-        while rest != 0 {
-            let i = rest.trailing_zeros() as usize;
-            rest &= rest - 1;
+        for i in set_lanes(lanes) {
             let mut best = self.best.lane(i);
             closest_rows(
                 || self.pre.lane(i),
@@ -147,10 +157,7 @@ impl<'a> Visitor<'a> for Occlusion<'_> {
 
     #[inline(always)]
     fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8 {
-        let mut rest = lanes;
-        while rest != 0 {
-            let i = rest.trailing_zeros() as usize;
-            rest &= rest - 1;
+        for i in set_lanes(lanes) {
             let tmax = self.tmax.as_array()[i];
             if occludes_rows(
                 || self.pre.lane(i),

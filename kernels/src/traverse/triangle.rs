@@ -5,6 +5,7 @@
 //! lane), with the closest-hit acceptance (tie rule) and occlusion tests built on them.
 
 use super::Tri;
+use super::packet::set_lanes;
 use super::scalar::NEAR_DOWN;
 use crate::packet::{Hit, LANES, NO_HIT, Ray, Ray8};
 use wide::{f32x8, u32x8};
@@ -502,10 +503,7 @@ pub(super) fn closest_rows(
         if r.ok.to_bitmask() as u8 & valid != 0 {
             let t = r.tt / r.det;
             let cand = r.ok & t.simd_ge(p8.tmin) & t.simd_le(f32x8::splat(best.t));
-            let mut bits = cand.to_bitmask() as u8 & valid;
-            while bits != 0 {
-                let i = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
+            for i in set_lanes(cand.to_bitmask() as u8 & valid) {
                 let ti = t.as_array()[i];
                 let prim = leaf[PRIM_ROW * n + 8 * j + i].to_bits();
                 if accept(ti, prim, tmin, best) {
