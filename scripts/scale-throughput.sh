@@ -14,14 +14,18 @@
 #
 # DIR holds city-N.texels / .toml for N in 1000000 10000000 100000000 (from `guidebake synth
 # --texels N -o DIR/city-N.texels`; scripts/scale.sh deletes its worlds after measuring).
-# BAKE_ARGS, THREADS and GUIDEBAKE as in scripts/scale.sh; STRATA (default 3). Runs under
-# `nice -n 10`. Every bake's line goes to DIR/throughput.tsv too.
+# THREADS and GUIDEBAKE as in scripts/scale.sh; STRATA (default 3); BAKE_ARGS (default
+# "--transport path --spp 16 --iterations 2 --bounces 1": one gather per texel and a shadow ray
+# at each hit, the work of the scale runs; a series bake of one bounce now has two passes, the
+# direct pass and the gather, and a shard of the gather needs the whole direct pass merged
+# first, docs/farm.md). Runs under `nice -n 10`. Every bake's line goes to DIR/throughput.tsv
+# too.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 dir=$1
 rounds=${2:-3}
 strata=${STRATA:-3}
-bake_args=(${BAKE_ARGS:---spp 16 --iterations 2 --bounces 1})
+bake_args=(${BAKE_ARGS:---transport path --spp 16 --iterations 2 --bounces 1})
 bin=${GUIDEBAKE:-$root/target/release/guidebake}
 threads=${THREADS:-$(nproc)}
 sizes=()
