@@ -17,7 +17,9 @@
 //! - `TRAVERSE_PRESET=very_slow` (a `Preset::name`): the build preset of our trees and CwBvh.
 //! - `TRAVERSE_PRESETS=1`: build every obvhs preset and time it (build time vs trace time).
 //! - `TRAVERSE_SIZES=1e5,1e6,1e7` (`TRAVERSE_SIZE_PRESETS=medium,very_slow`): cities of about
-//!   that many triangles: build seconds and gather Mrays/s per preset and layout.
+//!   that many triangles: build seconds and gather Mrays/s per preset and layout, and
+//!   Embree's `rtcIntersect8` on the same packets; `TRAVERSE_GLB=a.glb,...` likewise for the
+//!   triangles of scene files.
 //!
 //! A `gather_resorted` set (each texel's rotated points fully re-sorted) feeds Embree's
 //! `rtcIntersect16` two of our packets at a time.
@@ -704,30 +706,75 @@ fn report_builds(name: &str, built: &[(Preset, Bvh)], packets: &[Ray8], rounds: 
     }
 }
 
+/// A named world's triangles, made when its turn comes (one big world in memory at a time).
+type World = dyn Fn() -> Vec<[Vec3; 3]>;
+
 /// `TRAVERSE_SIZES=1e5,1e6,...`: procedural cities of about these many triangles, built with
 /// each preset of `TRAVERSE_SIZE_PRESETS` (names, comma-separated; default `medium,very_slow`):
 /// build seconds and gather Mrays/s (256 texels × 64 directions).
+///
+/// `TRAVERSE_GLB=a.glb,b.glb,...` does the same for the triangles of scene files (e.g. the
+/// cities of `guidebake synth`, docs/farm.md "Scale runs").
 fn sizes() {
-    let Ok(list) = std::env::var("TRAVERSE_SIZES") else {
-        return;
-    };
     let names = std::env::var("TRAVERSE_SIZE_PRESETS").unwrap_or("medium,very_slow".into());
     let wanted: Vec<Preset> = Preset::ALL
         .into_iter()
         .filter(|p| names.split(',').any(|n| n == p.name()))
         .collect();
-    for size in list.split(',') {
-        let triangles: f64 = size.parse().expect("TRAVERSE_SIZES: numbers like 1e6");
-        // About side² · 90 triangles with 3 × 3 quads per box face.
-        let side = (triangles / 90.0).sqrt().round().max(2.0) as usize;
-        let soup = scenes::city(side, 3, 4);
+    let mut worlds: Vec<(String, Box<World>)> = Vec::new();
+    if let Ok(list) = std::env::var("TRAVERSE_SIZES") {
+        for size in list.split(',').map(str::to_owned) {
+            let triangles: f64 = size.parse().expect("TRAVERSE_SIZES: numbers like 1e6");
+            // About side² · 90 triangles with 3 × 3 quads per box face.
+            let side = (triangles / 90.0).sqrt().round().max(2.0) as usize;
+            worlds.push((
+                format!("city{size}"),
+                Box::new(move || scenes::city(side, 3, 4)),
+            ));
+        }
+    }
+    if let Ok(list) = std::env::var("TRAVERSE_GLB") {
+        for path in list.split(',').map(std::path::PathBuf::from) {
+            let name = path
+                .file_stem()
+                .map_or("glb".into(), |s| s.to_string_lossy().into());
+            worlds.push((name, Box::new(move || scenes::load_glb(&path))));
+        }
+    }
+    for (name, soup) in worlds {
+        let soup = soup();
         let packets = scenes::gather_packets(&soup, TEXELS, 64, 1);
         let built: Vec<(Preset, Bvh)> = wanted
             .iter()
-            .map(|&p| (p, Bvh::build(&soup, p).expect("city BVH")))
+            .map(|&p| (p, Bvh::build(&soup, p).expect("BVH")))
             .collect();
-        report_builds(&format!("city{size}"), &built, &packets, 5);
+        report_builds(&name, &built, &packets, 5);
+        #[cfg(feature = "embree")]
+        report_embree(&name, &soup, &packets, 5);
     }
+}
+
+/// Embree's `rtcIntersect8` on the same gather packets as [`report_builds`]: whether its
+/// rays slow down as much as ours when the world grows (docs/farm.md, "Scale runs").
+#[cfg(feature = "embree")]
+fn report_embree(name: &str, soup: &[[Vec3; 3]], packets: &[Ray8], rounds: usize) {
+    let start = Instant::now();
+    let em = embree_rt::EmbreeScene::new(soup);
+    let build = start.elapsed().as_secs_f64();
+    let mut rates: Vec<f64> = (0..rounds)
+        .map(|_| {
+            let start = Instant::now();
+            black_box(em.intersect8_sum(packets, true));
+            (packets.len() * LANES) as f64 / start.elapsed().as_secs_f64() / 1e6
+        })
+        .collect();
+    rates.sort_by(f64::total_cmp);
+    println!(
+        "embree {name}: {} triangles, build {build:.3} s, gather rtcIntersect8 {:.2} Mrays/s \
+         (median of {rounds})",
+        soup.len(),
+        rates[rounds / 2],
+    );
 }
 
 #[cfg(feature = "embree")]
