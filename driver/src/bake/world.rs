@@ -10,11 +10,11 @@
 
 use glam::Vec3;
 use guidebake_kernels::packet::{offset_origin, triangle_extent};
-use guidebake_kernels::traverse::{BvhRef, WideRef};
+use guidebake_kernels::traverse::WideRef;
 
 use super::settings::{EmitterSampling, Transport};
 
-use crate::bvh::{Bvh, BvhError, Preset};
+use crate::bvh::{Bvh, BvhError, PacketTree, Preset};
 use crate::scene::texture::{HitAlbedo, VaryingAlbedo};
 use crate::scene::{Scene, Sky};
 use crate::transport::emitters::{EmitterSelection, Emitters};
@@ -190,10 +190,11 @@ impl World {
         }
     }
 
-    /// The BVH's binary view, for the 8-ray packets (gather and next-event packets): on
-    /// coherent packets it is faster than the wide view (docs/traverse.md, "Wide BVH").
-    pub fn bvh(&self) -> BvhRef<'_> {
-        self.bvh.view()
+    /// The tree the 8-ray packets walk (gather and next-event packets): the binary view on
+    /// small worlds, where coherent packets walk it faster, the wide one on big worlds
+    /// ([`Bvh::packets`], docs/traverse.md, "Wide BVH" and "Sizes").
+    pub fn packets(&self) -> PacketTree<'_> {
+        self.bvh.packets()
     }
 
     /// The BVH's wide view, for single rays (shadow rays at hits, path continuations): the

@@ -16,7 +16,7 @@
 
 use glam::Vec3;
 use guidebake_kernels::packet::{LANES, Ray, Ray8};
-use guidebake_kernels::traverse::{occluded1, occluded8};
+use guidebake_kernels::traverse::occluded1;
 
 use super::emitters::EmitterSample;
 use crate::bake::directional::{ShSample, add_irradiance_sample, hemisphere};
@@ -124,7 +124,7 @@ impl World {
         out: &mut [Vec3; LANES],
         mut sh: Option<&mut [ShSample; LANES]>,
     ) -> u32 {
-        let bvh = self.bvh();
+        let tree = self.packets();
         let (p, n) = (at.point, at.normal);
         let mut rays = 0;
         for light in self.lights() {
@@ -144,7 +144,7 @@ impl World {
                     packet.set_lane(lane, &shadow_ray(p, s.direction, s.distance));
                 }
             }
-            let (visible, traced) = visible_lanes(&bvh, &packet, unshadowed);
+            let (visible, traced) = visible_lanes(&tree, &packet, unshadowed);
             for lane in lanes_of(visible) {
                 out[lane] += weights[lane];
                 if let Some(sh) = sh.as_deref_mut() {
@@ -172,7 +172,7 @@ impl World {
             }
             // The weight (and its MIS density, a guide lookup when the gather is guided) only
             // for the lanes that see their emitter, as in the scalar version: the same bits.
-            let (visible, traced) = visible_lanes(&bvh, &packet, 0);
+            let (visible, traced) = visible_lanes(&tree, &packet, 0);
             let live = lanes_of(visible)
                 .fold(0u8, |m, lane| m | u8::from(samples[lane].is_some()) << lane);
             let others = self.other_densities8(at, &samples, live);
@@ -244,14 +244,10 @@ fn emitter_irradiance(normal: Vec3, s: &EmitterSample, w: f32) -> Vec3 {
 
 /// Traces `packet`'s live lanes for occlusion: the mask of visible lanes (the unoccluded
 /// traced lanes and every lane of `unshadowed`) and the lanes traced.
-fn visible_lanes(
-    bvh: &guidebake_kernels::traverse::BvhRef<'_>,
-    packet: &Ray8,
-    unshadowed: u8,
-) -> (u8, u32) {
+fn visible_lanes(tree: &crate::bvh::PacketTree<'_>, packet: &Ray8, unshadowed: u8) -> (u8, u32) {
     let traced = lanes_traced(packet);
     let blocked = if traced != 0 {
-        occluded8(bvh, packet)
+        tree.occluded8(packet)
     } else {
         0
     };
@@ -385,7 +381,7 @@ mod tests {
         let (t, b) = orthonormal_basis(n);
         let d = sample_cosine_hemisphere([rng.next_f32(), rng.next_f32()]);
         let dir = (t * d.x + b * d.y + n * d.z).normalize();
-        let hit = intersect1(&world.bvh(), &Ray::new(p, dir, 0.0, f32::INFINITY));
+        let hit = intersect1(&world.wide_bvh(), &Ray::new(p, dir, 0.0, f32::INFINITY));
         let hit_e = hit.map_or(0.0, |h| {
             let from = Departure {
                 point: p,
