@@ -247,8 +247,9 @@ impl Bvh {
 /// triangles: gather 0.89–0.99× binary in the duel, whole bakes 1–3 % slower with wide
 /// shadow packets), and less once the binary walk's many small nodes miss it: on the gather
 /// packets of `guidebake synth`'s cities 1.08×, 1.21× and 1.30× binary at 3·10⁴, 3·10⁵ and
-/// 3·10⁶ triangles, and their bakes' gathers 8–16 % faster (docs/traverse.md, "Packets through
-/// the wide tree on big worlds"). Set between the room and the smallest city; nothing was
+/// 3·10⁶ triangles, and their bakes' gathers 2–16 % faster by round, 8–10 % by the medians
+/// (docs/traverse.md, "Sizes against Embree, and packets through the wide tree on big
+/// worlds"). Set between the room and the smallest city; nothing was
 /// measured in between.
 pub const WIDE_PACKETS_FROM: usize = 10_000;
 
@@ -461,12 +462,11 @@ mod tests {
                     let want = intersect_brute(bvh.tris(), &Ray::new(origin, dir, 0.0, tmax));
                     assert_eq!(hit_lanes >> lane & 1 == 1, want.is_some(), "{k} {lane}");
                     assert_eq!(blocked >> lane & 1 == 1, want.is_some(), "{k} {lane}");
-                    (hit, missed) = if want.is_some() {
-                        (hit + 1, missed)
-                    } else {
-                        (hit, missed + 1)
-                    };
+                    if want.is_none() {
+                        missed += 1;
+                    }
                     if let Some(want) = want {
+                        hit += 1;
                         assert_eq!(hits.prim.to_array()[lane], want.prim, "{k} {lane}");
                         assert_eq!(hits.t.to_array()[lane].to_bits(), want.t.to_bits());
                     }

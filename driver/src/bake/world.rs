@@ -192,7 +192,7 @@ impl World {
 
     /// The tree the 8-ray packets walk (gather and next-event packets): the binary view on
     /// small worlds, where coherent packets walk it faster, the wide one on big worlds
-    /// ([`Bvh::packets`], docs/traverse.md, "Wide BVH" and "Sizes").
+    /// ([`Bvh::packets`], docs/traverse.md, "Wide BVH" and "Sizes against Embree").
     pub fn packets(&self) -> PacketTree<'_> {
         self.bvh.packets()
     }

@@ -22,6 +22,7 @@ use super::emitters::EmitterSample;
 use crate::bake::directional::{ShSample, add_irradiance_sample, hemisphere};
 use crate::bake::settings::EmitterSampling;
 use crate::bake::world::World;
+use crate::bvh::PacketTree;
 
 /// Shadow rays stop this fraction short of a light at a finite distance, so the light's own
 /// geometry (a sphere light's surface) does not occlude it.
@@ -244,7 +245,7 @@ fn emitter_irradiance(normal: Vec3, s: &EmitterSample, w: f32) -> Vec3 {
 
 /// Traces `packet`'s live lanes for occlusion: the mask of visible lanes (the unoccluded
 /// traced lanes and every lane of `unshadowed`) and the lanes traced.
-fn visible_lanes(tree: &crate::bvh::PacketTree<'_>, packet: &Ray8, unshadowed: u8) -> (u8, u32) {
+fn visible_lanes(tree: &PacketTree<'_>, packet: &Ray8, unshadowed: u8) -> (u8, u32) {
     let traced = lanes_traced(packet);
     let blocked = if traced != 0 {
         tree.occluded8(packet)
