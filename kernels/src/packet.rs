@@ -28,6 +28,20 @@ use wide::{f32x8, u32x8};
 /// Number of lanes in a packet.
 pub const LANES: usize = 8;
 
+/// The lanes whose bit is set in the lane mask `bits` (as the packet traversals return
+/// them), lowest first.
+#[inline(always)]
+pub fn set_lanes(bits: u8) -> impl Iterator<Item = usize> {
+    let mut rest = bits;
+    core::iter::from_fn(move || {
+        (rest != 0).then(|| {
+            let i = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            i
+        })
+    })
+}
+
 /// Primitive id of a lane that has not hit anything.
 pub const NO_HIT: u32 = u32::MAX;
 

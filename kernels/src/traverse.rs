@@ -85,7 +85,7 @@
 //!   found first, but culls so much less that the packet path ran 12–46 % slower on
 //!   `benches/traverse.rs`.)
 
-use crate::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
+use crate::packet::{Hit, Hit8, NO_HIT, Ray, Ray8, set_lanes};
 use wide::{f32x8, u32x8};
 
 mod bvh8;
@@ -366,21 +366,19 @@ pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
 /// The traced lanes of a packet through the wide layout as single rays, one after another:
 /// the blocked lanes.
 fn occluded_lanes(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
-    (0..LANES)
-        .filter(|&i| pre.traced >> i & 1 == 1)
-        .fold(0, |blocked, i| {
-            let lane = pre.lane(i);
-            let pre8 = Pre1x8::new(&lane);
-            let tmax = tmax.as_array()[i];
-            let end = bvh8::walk1(w, &lane, |rows, n| {
-                if occludes_rows(|| lane, &pre8, rows, n, tmax) {
-                    f32::NEG_INFINITY
-                } else {
-                    tmax
-                }
-            });
-            blocked | u8::from(end == f32::NEG_INFINITY) << i
-        })
+    set_lanes(pre.traced).fold(0, |blocked, i| {
+        let lane = pre.lane(i);
+        let pre8 = Pre1x8::new(&lane);
+        let tmax = tmax.as_array()[i];
+        let end = bvh8::walk1(w, &lane, |rows, n| {
+            if occludes_rows(|| lane, &pre8, rows, n, tmax) {
+                f32::NEG_INFINITY
+            } else {
+                tmax
+            }
+        });
+        blocked | u8::from(end == f32::NEG_INFINITY) << i
+    })
 }
 
 /// [`occluded_lanes`], the lanes' walks interleaved ([`bvh8::walk_interleaved`]).

@@ -15,7 +15,7 @@
 //! comparators.
 
 use glam::Vec3;
-use guidebake_kernels::packet::{LANES, Ray, Ray8};
+use guidebake_kernels::packet::{LANES, Ray, Ray8, set_lanes};
 use guidebake_kernels::traverse::occluded1;
 
 use super::emitters::EmitterSample;
@@ -146,7 +146,7 @@ impl World {
                 }
             }
             let (visible, traced) = visible_lanes(&tree, &packet, unshadowed);
-            for lane in lanes_of(visible) {
+            for lane in set_lanes(visible) {
                 out[lane] += weights[lane];
                 if let Some(sh) = sh.as_deref_mut() {
                     if unshadowed >> lane & 1 == 1 {
@@ -174,10 +174,10 @@ impl World {
             // The weight (and its MIS density, a guide lookup when the gather is guided) only
             // for the lanes that see their emitter, as in the scalar version: the same bits.
             let (visible, traced) = visible_lanes(&tree, &packet, 0);
-            let live = lanes_of(visible)
+            let live = set_lanes(visible)
                 .fold(0u8, |m, lane| m | u8::from(samples[lane].is_some()) << lane);
             let others = self.other_densities8(at, &samples, live);
-            for lane in lanes_of(live) {
+            for lane in set_lanes(live) {
                 if let Some(s) = &samples[lane] {
                     let w = others[lane].map_or(1.0, |other| power_heuristic(s.pdf, other));
                     let e = emitter_irradiance(at.normal, s, w);
@@ -253,11 +253,6 @@ fn visible_lanes(tree: &PacketTree<'_>, packet: &Ray8, unshadowed: u8) -> (u8, u
         0
     };
     (unshadowed | (traced & !blocked), traced.count_ones())
-}
-
-/// The lanes set in `mask`, in order.
-fn lanes_of(mask: u8) -> impl Iterator<Item = usize> {
-    (0..LANES).filter(move |lane| mask & (1 << lane) != 0)
 }
 
 fn lanes_traced(packet: &Ray8) -> u8 {

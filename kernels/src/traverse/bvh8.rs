@@ -26,10 +26,9 @@
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
-use super::packet::set_lanes;
 use super::triangle::{PRIM_ROW, Pre1x8, ROWS};
 use super::{FAR_FLOOR, FAR_UP, LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor};
-use crate::packet::LANES;
+use crate::packet::{LANES, set_lanes};
 use bytemuck::{Pod, Zeroable};
 use core::mem::MaybeUninit;
 use wide::{f32x8, u32x8};

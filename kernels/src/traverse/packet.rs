@@ -10,21 +10,8 @@ use super::triangle::{
     Best8, Pre1x8, Pre8, closest_rows, closest8, occludes_rows, occludes8, set_lane,
 };
 use super::{BvhRef, Node, STACK, Tri};
-use crate::packet::Ray8;
+use crate::packet::{Ray8, set_lanes};
 use wide::f32x8;
-
-/// The lanes whose bit is set in `bits`, lowest first.
-#[inline(always)]
-pub(super) fn set_lanes(bits: u8) -> impl Iterator<Item = usize> {
-    let mut rest = bits;
-    core::iter::from_fn(move || {
-        (rest != 0).then(|| {
-            let i = rest.trailing_zeros() as usize;
-            rest &= rest - 1;
-            i
-        })
-    })
-}
 
 pub(super) fn mask_of(bits: u8) -> f32x8 {
     f32x8::new(core::array::from_fn(|i| {

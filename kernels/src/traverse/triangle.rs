@@ -5,9 +5,8 @@
 //! lane), with the closest-hit acceptance (tie rule) and occlusion tests built on them.
 
 use super::Tri;
-use super::packet::set_lanes;
 use super::scalar::NEAR_DOWN;
-use crate::packet::{Hit, LANES, NO_HIT, Ray, Ray8};
+use crate::packet::{Hit, LANES, NO_HIT, Ray, Ray8, set_lanes};
 use wide::{f32x8, u32x8};
 
 /// Per-ray constants of the box and watertight tests.
