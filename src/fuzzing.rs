@@ -267,7 +267,7 @@ fn assert_names(message: &str, path: &Path) {
 }
 
 /// Guide parameters, learning records and sample points → [`guide::build`] (split rule,
-/// floor, normalization, smoothing) and the warp. For every point: the warped point lies in
+/// floor, normalization, smoothing, defensive mixture) and the warp. For every point: the warped point lies in
 /// [0,1)², its pdf is finite and positive and equals [`warp::pdf`] there bit for bit,
 /// inverting and warping again lands on the same density, and [`warp::sample8`] /
 /// [`warp::sample8_lanes`] equal the scalar warp lane for lane, bit for bit. The leaves'
@@ -292,6 +292,9 @@ pub fn guide(data: &[u8]) {
         } else {
             f32::from(b.u8()) / 255.0
         },
+        // The defensive mixture's share, from flag bits 4–6 (no input byte of its own, so
+        // older inputs keep their meaning): out-of-range and NaN shares must be clamped.
+        uniform: [0.0, 0.25, 0.5, 1.0, -0.5, f32::NAN, 2.0, 0.02][usize::from(flags >> 4 & 7)],
     };
     let capacity = 1 + usize::from(b.u16() % 4096);
     let count = usize::from(b.u16()).min(b.remaining() / 12);

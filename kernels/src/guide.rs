@@ -29,7 +29,9 @@
 //! 5. smooths (§2.3), top-down, every node visited once: each child's share of its parent is
 //!    interpolated toward the parent's average (a quarter) by α ([`DEFAULT_ALPHA`] = 0.25):
 //!    `m_child' = m_parent' · ((1 − α)·m_child / m_parent + α/4)`, with `m_parent'` the
-//!    already smoothed parent mass. Masses stay normalized.
+//!    already smoothed parent mass. Masses stay normalized. With a **defensive mixture**
+//!    ([`GuideParams::uniform`] = c > 0) every mass then becomes `c·area + (1 − c)·mass`:
+//!    the density `c + (1 − c)·q`, never below `c` (the bake's `--mix`);
 //! 6. derives what the warp needs (Clarberg et al. 2005, see [`crate::warp`]): from the
 //!    marginal probability `px` of a node's left half and the conditionals `py[h]` of its
 //!    lower half given the x-half `h`, the split **thresholds in primary sample space** — the
@@ -140,6 +142,13 @@ pub struct GuideParams {
     /// Smoothing strength α ∈ [0, 1] (default [`DEFAULT_ALPHA`]); 0 disables smoothing,
     /// 1 makes every node uniform over its children.
     pub alpha: f32,
+    /// Share `c` ∈ [0, 1] of the uniform density in the **defensive mixture** the guide
+    /// samples: `c + (1 − c)·q(u)`, with `q` the floored, smoothed guide (default 0). The
+    /// mixture is folded into the tree (every node's mass becomes `c·area + (1 − c)·mass`
+    /// before the thresholds are derived), so one warp draws from it and one lookup gives its
+    /// density: the bake's presorted points stay one coherent set, none is set aside for the
+    /// uniform part, and no sample needs a second density.
+    pub uniform: f32,
 }
 
 impl Default for GuideParams {
@@ -150,6 +159,7 @@ impl Default for GuideParams {
             max_depth: 10,
             ambient: DEFAULT_AMBIENT,
             alpha: DEFAULT_ALPHA,
+            uniform: 0.0,
         }
     }
 }
@@ -457,7 +467,11 @@ fn build_with<'a>(
     subdivide(records, params, &mut storage[..capacity], &mut stats, split);
     let (nodes, rest) = storage.split_at_mut(stats.nodes as usize);
     set_masses(nodes, f64::from(sanitize(params.ambient, 0.0, f32::MAX)));
-    smooth(nodes, f64::from(sanitize(params.alpha, 0.0, 1.0)));
+    smooth(
+        nodes,
+        f64::from(sanitize(params.alpha, 0.0, 1.0)),
+        f64::from(sanitize(params.uniform, 0.0, 1.0)),
+    );
     set_links(nodes);
     let (start, shortcuts): (&mut [u16], &mut [[u16; 4]]) = match rest.get_mut(..START_TABLE_NODES)
     {
@@ -776,9 +790,20 @@ fn set_masses(nodes: &mut [Node], floor: f64) {
     nodes[0].mass = 1.0;
 }
 
-/// Hierarchical smoothing (§2.3) and the warp's thresholds, top-down: when node `i` is
-/// visited its mass and source rectangle are final, and it fixes its children's.
-fn smooth(nodes: &mut [Node], alpha: f64) {
+/// Hierarchical smoothing (§2.3), the defensive mixture with the uniform density (share
+/// `uniform`, [`GuideParams::uniform`]) and the warp's thresholds, top-down: when node `i`
+/// is visited its mass and source rectangle are final, and it fixes its children's. The
+/// thresholds split the mixed masses `uniform·area + (1 − uniform)·mass`; the smoothing
+/// works on the unmixed ones, which are replaced by the mixed ones at the end (mixing is
+/// linear in the masses, so children still sum to their parent).
+fn smooth(nodes: &mut [Node], alpha: f64, uniform: f64) {
+    let mixed = |mass: f64, size: f32| {
+        if uniform > 0.0 {
+            (1.0 - uniform) * mass + uniform * f64::from(size) * f64::from(size)
+        } else {
+            mass
+        }
+    };
     for i in 0..nodes.len() {
         let n = nodes[i];
         let Some(c) = n.first_child() else {
@@ -795,11 +820,13 @@ fn smooth(nodes: &mut [Node], alpha: f64) {
         let parent = f64::from(n.mass);
         let m: [f64; 4] =
             core::array::from_fn(|q| parent * ((1.0 - alpha) * raw[q] / sum + alpha * 0.25));
+        let sampled: [f64; 4] = core::array::from_fn(|q| mixed(m[q], nodes[c + q].size));
         // A ratio 0/0 (zero-mass parent, only with `ambient = 0`) becomes ½: the node is
         // unreachable by sampling.
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.5 };
-        let px = ratio(m[0] + m[2], m[0] + m[1] + m[2] + m[3]);
-        let py = [ratio(m[0], m[0] + m[2]), ratio(m[1], m[1] + m[3])];
+        let m_s = &sampled;
+        let px = ratio(m_s[0] + m_s[2], m_s[0] + m_s[1] + m_s[2] + m_s[3]);
+        let py = [ratio(m_s[0], m_s[0] + m_s[2]), ratio(m_s[1], m_s[1] + m_s[3])];
         let tx = split_at(n.lo[0], n.hi[0], px);
         let ty = [
             split_at(n.lo[1], n.hi[1], py[0]),
@@ -808,17 +835,22 @@ fn smooth(nodes: &mut [Node], alpha: f64) {
         let lo = |q: usize| [[n.lo[0], tx][q & 1], [n.lo[1], ty[q & 1]][q >> 1]];
         let hi = |q: usize| [[tx, n.hi[0]][q & 1], [ty[q & 1], n.hi[1]][q >> 1]];
         let empty = |q: usize| (0..2).any(|a| lo(q)[a] >= hi(q)[a]);
-        if (0..4).any(|q| m[q] > 0.0 && empty(q)) {
+        if (0..4).any(|q| sampled[q] > 0.0 && empty(q)) {
             collapse(nodes, i);
             continue;
         }
         nodes[i].t = [tx, ty[0], ty[1]];
-        nodes[i].pdf = (parent / (f64::from(n.size) * f64::from(n.size))) as f32;
+        nodes[i].pdf = (mixed(parent, n.size) / (f64::from(n.size) * f64::from(n.size))) as f32;
         for (q, &mass) in m.iter().enumerate() {
             let k = &mut nodes[c + q];
             k.mass = mass as f32;
             k.lo = lo(q);
             k.hi = hi(q);
+        }
+    }
+    if uniform > 0.0 {
+        for n in nodes.iter_mut().filter(|n| n.size > 0.0) {
+            n.mass = mixed(f64::from(n.mass), n.size) as f32;
         }
     }
 }

@@ -38,11 +38,20 @@ fn build<'a>(
 
 /// The guide learned in two iterations: uniform samples, then samples of the first guide.
 fn learned(storage: &mut [Node], capacity: usize) -> (Guide<'_>, BuildStats) {
+    learned_with(storage, capacity, 0.0)
+}
+
+/// [`learned`], the second guide mixed with the uniform density by the share `uniform`.
+fn learned_with(storage: &mut [Node], capacity: usize, uniform: f32) -> (Guide<'_>, BuildStats) {
     let mut first = vec![Node::default(); 4096];
     let mut r0 = learn_records(None, 300, 1);
     let (g0, _) = build(&mut r0, GuideParams::default(), &mut first);
     let mut r1 = learn_records(Some(&g0), 600, 2);
-    build(&mut r1, GuideParams::default(), &mut storage[..capacity])
+    let params = GuideParams {
+        uniform,
+        ..GuideParams::default()
+    };
+    build(&mut r1, params, &mut storage[..capacity])
 }
 
 /// Expected counts per cell of a window [lo, hi)² split into RES² cells, plus one last cell
@@ -528,50 +537,39 @@ fn learning_from_guided_samples_is_unbiased() {
     );
 }
 
-/// The bake's defensive mixture (driver `gather.rs`, `--mix`): a share `c` of the samples
-/// drawn uniformly on the square (the cosine baseline), the rest warped through the guide,
-/// every sample weighted with the density `c + (1 − c)·q`. The pooled points must follow that
-/// density (chi-square over the whole square), and a weighted estimate of the disk-and-sky
-/// integral must agree with the uniform one.
+/// The bake's defensive mixture (driver `gather.rs`, `--mix`), folded into the guide
+/// (`GuideParams::uniform`): a share `c` of the uniform density (the cosine baseline) and
+/// `1 − c` of the guide learned from the same records. Every leaf's density is
+/// `c + (1 − c)·q` of the unmixed guide's leaf (so never below `c`), the warped points follow
+/// it (chi-square, and sample / pdf / invert agree), and a weighted estimate of the
+/// disk-and-sky integral agrees with the uniform one.
 #[test]
 fn the_defensive_mixture_samples_its_density() {
+    let c = 0.25f32;
+    let mut plain_storage = vec![Node::default(); 4096];
+    let (plain, _) = learned(&mut plain_storage, 4096);
     let mut storage = vec![Node::default(); 4096];
-    let (g, _) = learned(&mut storage, 4096);
+    let (g, _) = learned_with(&mut storage, 4096, c);
     assert!(!g.is_uniform());
-    let c = 0.25f64;
-    let n_cosine = (SAMPLES as f64 * c) as usize;
-    let mut rng = Pcg32::new(21, 3);
-    let mut observed = vec![0.0; RES * RES + 1];
-    let (mut estimate, mut uniform) = (0.0f64, 0.0f64);
-    for i in 0..SAMPLES {
-        let u = [rng.next_f32(), rng.next_f32()];
-        let (w, q) = if i < n_cosine {
-            (u, warp::pdf(&g, u))
-        } else {
-            let s = warp::sample(&g, u);
-            (s.u, s.pdf)
-        };
-        assert_eq!(
-            q,
-            warp::pdf(&g, w),
-            "the density at the point is the one sampled"
-        );
-        let mixture = c + (1.0 - c) * f64::from(q);
-        estimate += f64::from(disk_and_sky(w)) / mixture;
-        uniform += f64::from(disk_and_sky([rng.next_f32(), rng.next_f32()]));
-        let i = ((f64::from(w[0]) * RES as f64) as usize).min(RES - 1);
-        let j = ((f64::from(w[1]) * RES as f64) as usize).min(RES - 1);
-        observed[j * RES + i] += 1.0;
+    let mut plain_leaves = Vec::new();
+    plain.for_each_leaf(|l| plain_leaves.push(l));
+    let mut leaves = Vec::new();
+    g.for_each_leaf(|l| leaves.push(l));
+    assert_eq!(leaves.len(), plain_leaves.len(), "the same tree");
+    for (m, p) in leaves.iter().zip(&plain_leaves) {
+        assert_eq!((m.origin, m.size), (p.origin, p.size));
+        let want = c + (1.0 - c) * p.pdf;
+        assert!((m.pdf - want).abs() <= 1e-4 * want, "{m:?}: want {want}");
+        assert!(m.pdf >= c * (1.0 - 1e-4), "{m:?}");
     }
-    let guided = expected(&g, 0.0, 1.0, SAMPLES - n_cosine);
-    let cell = n_cosine as f64 / (RES * RES) as f64;
-    let e: Vec<f64> = guided
-        .iter()
-        .enumerate()
-        .map(|(k, &x)| x + if k < RES * RES { cell } else { 0.0 })
-        .collect();
-    let r = chi_square(&observed, &e, 5.0);
-    assert!(r.passes(ALPHA, CHI2_TESTS), "mixture: {r:?}");
+    check_all("defensive_mixture", &g, 5);
+    let mut rng = Pcg32::new(21, 3);
+    let (mut estimate, mut uniform) = (0.0f64, 0.0f64);
+    for _ in 0..SAMPLES {
+        let s = warp::sample(&g, [rng.next_f32(), rng.next_f32()]);
+        estimate += f64::from(disk_and_sky(s.u)) / f64::from(s.pdf);
+        uniform += f64::from(disk_and_sky([rng.next_f32(), rng.next_f32()]));
+    }
     let (estimate, uniform) = (estimate / SAMPLES as f64, uniform / SAMPLES as f64);
     assert!(
         (estimate / uniform - 1.0).abs() < 0.02,

@@ -69,7 +69,6 @@ pub const MIXED_AMBIENT: f32 = 0.02;
 const LIGHT_SALT: u32 = 0x6c69_6768;
 const EMITTER_SALT: u32 = 0x656d_6974;
 const ORIGIN_SALT: u32 = 0x6f72_6967;
-const COSINE_SALT: u32 = 0x636f_7369;
 
 /// What the workers counted, merged over the bake.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -149,8 +148,8 @@ impl GatherCounters {
 pub struct TileBaker<'w> {
     world: &'w World,
     settings: BakeSettings,
-    /// Presorted Sobol orders of each iteration.
-    orders: Vec<IterationOrders>,
+    /// The presorted Sobol order of each iteration's samples.
+    orders: Vec<Vec<u32>>,
     rotated: Vec<u32>,
     /// The cluster's learning records of the current iteration.
     learning: Learning,
@@ -179,27 +178,6 @@ pub struct TileBaker<'w> {
     pub counters: GatherCounters,
 }
 
-/// The presorted Sobol orders of one iteration: all its samples (traced when it samples no
-/// guide), and the cosine and guided parts of the mixture (when it does).
-struct IterationOrders {
-    all: Vec<u32>,
-    cosine: Vec<u32>,
-    guided: Vec<u32>,
-}
-
-impl IterationOrders {
-    fn new(settings: &BakeSettings, k: u32) -> Self {
-        let n = settings.samples_in_iteration(k);
-        let c = settings.cosine_packets(k) * LANES as u32;
-        let sorted = |n: u32| if n > 0 { presorted(n) } else { Vec::new() };
-        Self {
-            all: sorted(n),
-            cosine: sorted(c),
-            guided: sorted(n - c),
-        }
-    }
-}
-
 /// A texel as the gather needs it.
 #[derive(Clone, Copy, Debug)]
 struct GatherTexel {
@@ -218,7 +196,10 @@ impl<'w> TileBaker<'w> {
     /// A baker for `world` with `settings` (already validated).
     pub fn new(world: &'w World, settings: BakeSettings) -> Self {
         let orders = (0..settings.iterations)
-            .map(|k| IterationOrders::new(&settings, k))
+            .map(|k| match settings.samples_in_iteration(k) {
+                0 => Vec::new(),
+                n => presorted(n),
+            })
             .collect();
         Self {
             world,
@@ -443,6 +424,7 @@ impl<'w> TileBaker<'w> {
             } else {
                 guide::DEFAULT_AMBIENT
             },
+            uniform: settings.uniform_share(),
             ..GuideParams::default()
         };
         // Once the guide a cluster sampled shows too little gain (`--min-gain`), the cluster
@@ -487,7 +469,9 @@ impl<'w> TileBaker<'w> {
                 let clock = Instant::now();
                 match settings.guiding {
                     Guiding::Off => {}
-                    Guiding::Grid => grid = learn_grid(&learning.records, counters),
+                    Guiding::Grid => {
+                        grid = learn_grid(&learning.records, settings.uniform_share(), counters);
+                    }
                     Guiding::Naive | Guiding::Coherent => {
                         // The guide this iteration sampled, judged by its own records: below
                         // `--min-gain` the cluster gathers with cosine points from now on.
@@ -638,9 +622,14 @@ fn learn<'n>(
     }
 }
 
-/// The grid comparator's next guide (`None`, counted, when learning saw no energy).
-fn learn_grid(records: &[Record], counters: &mut GatherCounters) -> Option<GridGuide> {
-    let grid = GridGuide::learn(records);
+/// The grid comparator's next guide, mixed with the uniform density by `uniform` (`None`,
+/// counted, when learning saw no energy).
+fn learn_grid(
+    records: &[Record],
+    uniform: f32,
+    counters: &mut GatherCounters,
+) -> Option<GridGuide> {
+    let grid = GridGuide::learn(records, uniform);
     if grid.is_some() {
         counters.iterations_guided += 1;
     } else {
@@ -856,11 +845,9 @@ struct IterationCtx<'a> {
     world: &'a World,
     settings: &'a BakeSettings,
     k: u32,
+    /// The guide this iteration samples; it holds the defensive mixture with the cosine
+    /// baseline ([`GuideParams::uniform`]), so its density is the mixture's.
     guide: Option<Learned<'a>>,
-    /// Packets in this iteration, and how many of them come from the cosine baseline when a
-    /// guide is sampled (the defensive mixture; 0 without a guide).
-    packets: u32,
-    cosine_packets: u32,
     /// Whether samples include the texel's next-event estimate ([`TileBaker::texel_direct`]).
     texel_direct: bool,
 }
@@ -872,19 +859,11 @@ impl<'a> IterationCtx<'a> {
         k: u32,
         guide: Option<Learned<'a>>,
     ) -> Self {
-        let packets = settings.samples_in_iteration(k) / LANES as u32;
-        let cosine_packets = if guide.is_some() {
-            settings.cosine_packets(k)
-        } else {
-            0
-        };
         Self {
             world,
             settings,
             k,
             guide,
-            packets,
-            cosine_packets,
             texel_direct: true,
         }
     }
@@ -895,31 +874,9 @@ impl<'a> IterationCtx<'a> {
         (self.guide.is_some() && j.is_multiple_of(WARP_TIMED_EVERY)).then(Instant::now)
     }
 
-    /// The cosine baseline's share `c` of the mixture this iteration samples: the fraction of
-    /// its packets drawn from the baseline.
-    fn cosine_share(&self) -> f32 {
-        self.cosine_packets as f32 / self.packets.max(1) as f32
-    }
-
-    /// Whether packet `j` (in the order traced) is drawn from the cosine baseline: the
-    /// `cosine_packets` of `packets` spread evenly (Bresenham), the same for every texel.
-    fn is_cosine_packet(&self, j: u32) -> bool {
-        let (n, c) = (
-            u64::from(self.packets.max(1)),
-            u64::from(self.cosine_packets),
-        );
-        (u64::from(j) + 1) * c / n > u64::from(j) * c / n
-    }
-
     /// The density on the primary sample square this iteration's gather samples with, at
-    /// `u`: `c + (1 − c)·q(u)` for the mixture of the cosine baseline (share `c`) and the
-    /// guide `q`; 1 without a guide.
-    fn mixture_density(&self, q: f32) -> f32 {
-        let c = self.cosine_share();
-        c + (1.0 - c) * q
-    }
-
-    /// The guide's own density at `u` (1 without a guide).
+    /// `u`: the guide's (the mixture's, [`GuideParams::uniform`]); 1 without a guide.
+    #[cfg(test)]
     fn guide_pdf(&self, u: [f32; 2]) -> f32 {
         match self.guide {
             Some(Learned::Tree(g)) => warp::pdf(g, u),
@@ -942,7 +899,7 @@ impl<'a> IterationCtx<'a> {
             return 1.0;
         }
         let u = guidebake_kernels::mapping::invert_cosine_hemisphere(local.normalize());
-        self.mixture_density(self.guide_pdf(u))
+        self.guide_pdf(u)
     }
 
     /// The origin of packet `packet`: a point of the texel's footprint (its centre for
@@ -971,86 +928,38 @@ impl<'a> IterationCtx<'a> {
         (t.tangent * d.x + t.bitangent * d.y + t.normal * d.z).normalize_or(t.normal)
     }
 
-    /// Presorted packets, optionally warped 8-wide, traced as packets. Without a guide, the
-    /// iteration's points are one presorted Sobol set. With one, the mixture's two parts are
-    /// two sets, each a whole presorted Sobol prefix with its own rotation: the cosine
-    /// packets first, then the guided ones. (Choosing packets of one set by their place in
-    /// the presorted order would pick them by position on the square, since the order
-    /// depends on the rotation: the cosine points would not be uniform, nor the guided
-    /// ones distributed as the guide.)
+    /// The iteration's points, one presorted Sobol set rotated per texel, traced as
+    /// packets of eight; warped 8-wide through the guide when the iteration samples one.
+    /// The guide holds the defensive mixture with the cosine baseline
+    /// ([`GuideParams::uniform`]), so every packet is drawn from the mixture and the set
+    /// stays whole: no packets are set aside for the baseline, whose few points would spread
+    /// over the whole hemisphere and cost the packet walk its coherence.
     fn gather_packets(
         &self,
         t: &GatherTexel,
-        orders: &IterationOrders,
+        order: &[u32],
         rotated: &mut Vec<u32>,
         sinks: &mut Sinks<'_>,
         counters: &mut GatherCounters,
     ) {
         let rot = rotation(self.settings.seed, t.id, self.k);
-        if self.guide.is_none() {
-            self.gather_part(t, &orders.all, rot, false, 0, rotated, sinks, counters);
-        } else {
-            let cosine_rot = rotation(self.settings.seed ^ COSINE_SALT, t.id, self.k);
-            let n = orders.cosine.len() as u32;
-            self.gather_part(
-                t,
-                &orders.cosine,
-                cosine_rot,
-                true,
-                0,
-                rotated,
-                sinks,
-                counters,
-            );
-            self.gather_part(t, &orders.guided, rot, false, n, rotated, sinks, counters);
-        }
-    }
-
-    /// One presorted set of points (`order`, rotated by `rot`), traced as packets: unwarped
-    /// if `cosine` or without a guide, else warped through the guide. The set's sample `i`
-    /// is the iteration's sample `first + i` (its packet origin, light sample and random
-    /// numbers).
-    #[allow(clippy::too_many_arguments)]
-    fn gather_part(
-        &self,
-        t: &GatherTexel,
-        order: &[u32],
-        rot: [u32; 2],
-        cosine: bool,
-        first: u32,
-        rotated: &mut Vec<u32>,
-        sinks: &mut Sinks<'_>,
-        counters: &mut GatherCounters,
-    ) {
         let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
         rotated.resize(order.len(), 0);
         reorder_after_rotation_into(order, rot, rotated);
         let tree = self.world.packets();
         for (j, chunk) in rotated.chunks_exact(LANES).enumerate() {
-            let j = j as u32 + first / LANES as u32;
+            let j = j as u32;
             let index = u32x8::new(chunk.try_into().expect("packets of 8"));
             let [sx, sy] = rotate_x8(sobol_2d_x8(index), rot);
             let (x, y) = (to_unit_x8(sx), to_unit_x8(sy));
             let clock = self.warp_clock(j);
             let (wx, wy, q) = match self.guide {
-                Some(Learned::Tree(g)) if cosine => (x, y, warp::pdf8(g, x, y)),
                 Some(Learned::Tree(g)) => {
                     let w = warp::sample8(g, x, y);
                     (w.x, w.y, w.pdf)
                 }
-                Some(Learned::Grid(g)) if cosine => {
-                    let (xa, ya) = (x.to_array(), y.to_array());
-                    let q: [f32; LANES] = core::array::from_fn(|l| g.pdf([xa[l], ya[l]]));
-                    (x, y, f32x8::from(q))
-                }
                 Some(Learned::Grid(g)) => grid_sample8(g, x, y),
                 None => (x, y, f32x8::ONE),
-            };
-            let q = if self.guide.is_some() {
-                let c = f32x8::splat(self.cosine_share());
-                c + (f32x8::ONE - c) * q
-            } else {
-                q
             };
             count_warp(clock, counters);
             let [dx, dy, dz] = sample_cosine_hemisphere_x8([wx, wy]);
@@ -1071,10 +980,10 @@ impl<'a> IterationCtx<'a> {
             counters.gather_rays += LANES as u64;
             let (ht, hprim) = (hits.t.to_array(), hits.prim.to_array());
             let (hu, hv) = (hits.u.to_array(), hits.v.to_array());
-            let lu = rotate_x8(sobol_2d_x8(index + u32x8::splat(first)), light_rot);
+            let lu = rotate_x8(sobol_2d_x8(index), light_rot);
             let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
             let light_u: [[f32; 2]; LANES] = core::array::from_fn(|i| [lx[i], ly[i]]);
-            let samples: [u32; LANES] = core::array::from_fn(|i| chunk[i] + first);
+            let samples: [u32; LANES] = core::array::from_fn(|i| chunk[i]);
             let mut direct_sh = [ShSample::default(); LANES];
             let sh = sinks.sh.is_some().then_some(&mut direct_sh);
             let direct = self.direct8(t, origin, &samples, &light_u, sh, true, counters);
@@ -1090,7 +999,7 @@ impl<'a> IterationCtx<'a> {
                     normal: t.normal,
                     pdf: q[lane] * dz[lane] * core::f32::consts::FRAC_1_PI,
                 };
-                let l = self.incoming(t.id, chunk[lane] + first, &from, dirs[lane], hit, counters);
+                let l = self.incoming(t.id, chunk[lane], &from, dirs[lane], hit, counters);
                 let direct = (direct[lane], &direct_sh[lane]);
                 let dir = (dirs[lane], dz[lane]);
                 self.record(l, [wx[lane], wy[lane]], q[lane], dir, direct, sinks);
@@ -1111,20 +1020,17 @@ impl<'a> IterationCtx<'a> {
             let mut dirs = [(Vec3::Z, 1.0f32); LANES];
             // The packet's eight scalar warps first, timed together (the stats' warp time).
             let clock = self.warp_clock(j);
-            let cosine = self.is_cosine_packet(j);
             let warped: [([f32; 2], f32); LANES] = core::array::from_fn(|lane| {
                 let p = rotate(sobol_2d(j * LANES as u32 + lane as u32), rot);
                 let u = [to_unit(p[0]), to_unit(p[1])];
-                let (w, q) = match self.guide {
-                    Some(_) if cosine => (u, self.guide_pdf(u)),
+                match self.guide {
                     Some(Learned::Tree(g)) => {
                         let s = warp::sample(g, u);
                         (s.u, s.pdf)
                     }
                     Some(Learned::Grid(g)) => g.sample(u),
-                    None => return (u, 1.0),
-                };
-                (w, self.mixture_density(q))
+                    None => (u, 1.0),
+                }
             });
             count_warp(clock, counters);
             for (lane, &(w, q)) in warped.iter().enumerate() {
@@ -1169,7 +1075,7 @@ impl<'a> IterationCtx<'a> {
     /// iteration taking the light sample of Sobol point `i`.
     fn direct_alone(&self, t: &GatherTexel, batch: &mut Welford, counters: &mut GatherCounters) {
         let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
-        for j in 0..self.packets {
+        for j in 0..self.settings.samples_in_iteration(self.k) / LANES as u32 {
             let samples: [u32; LANES] = core::array::from_fn(|lane| j * LANES as u32 + lane as u32);
             let lu = rotate_x8(sobol_2d_x8(u32x8::new(samples)), light_rot);
             let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
@@ -1264,12 +1170,7 @@ impl<'a> IterationCtx<'a> {
             if local[lane].z <= 0.0 || cos <= 0.0 {
                 return 0.0;
             }
-            let density = if self.guide.is_none() {
-                1.0
-            } else {
-                self.mixture_density(q[lane])
-            };
-            density * cos * core::f32::consts::FRAC_1_PI
+            q[lane] * cos * core::f32::consts::FRAC_1_PI
         })
     }
 
@@ -2158,8 +2059,9 @@ mod tests {
         );
     }
 
-    /// The density the gather reports for a direction is the mixture's: `c + (1 − c)·q(u)`
-    /// at the inverse-mapped point, for points it sampled from either part.
+    /// The density the gather reports for a direction is the mixture's, `c + (1 − c)·q(u)`
+    /// at the inverse-mapped point (`q` the same guide built without the mixture), for
+    /// points the mixed guide sampled and for any other point.
     #[test]
     fn the_sampled_density_is_the_mixtures() {
         let world = world(ground(), grey(0.5, 0.0), Vec3::ONE, None);
@@ -2171,12 +2073,18 @@ mod tests {
                 Record { u, flux }
             })
             .collect();
+        let c = settings.uniform_share();
+        assert_eq!(c, 0.25, "the default mixture");
         let mut nodes = vec![Node::default(); GUIDE_CAPACITY];
-        let (g, _) = guide::build(&mut records, &GuideParams::default(), &mut nodes);
+        let (plain, _) = guide::build(&mut records.clone(), &GuideParams::default(), &mut nodes);
+        let mut mixed_nodes = vec![Node::default(); GUIDE_CAPACITY];
+        let params = GuideParams {
+            uniform: c,
+            ..GuideParams::default()
+        };
+        let (g, _) = guide::build(&mut records, &params, &mut mixed_nodes);
         assert!(!g.is_uniform());
         let ctx = IterationCtx::new(&world, &settings, 2, Some(Learned::Tree(&g)));
-        let c = ctx.cosine_share();
-        assert!(c > 0.2 && c < 0.3, "{c}");
         let t = gather_texel(
             &texels_on_plane(1, 0.0)[0],
             0,
@@ -2189,10 +2097,10 @@ mod tests {
                 0.02 + 0.96 * (i as f32 + 0.5) / 200.0,
             ];
             let s = warp::sample(&g, u);
-            for (w, q) in [(u, warp::pdf(&g, u)), (s.u, s.pdf)] {
+            for w in [u, s.u] {
                 let dir = ctx.to_world(&t, sample_cosine_hemisphere(w));
                 let got = ctx.sampled_density(&t, dir);
-                let want = c + (1.0 - c) * q;
+                let want = c + (1.0 - c) * warp::pdf(&plain, w);
                 assert!((got - want).abs() <= 1e-3 * want, "{w:?}: {got} vs {want}");
             }
         }

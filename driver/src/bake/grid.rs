@@ -33,11 +33,12 @@ pub struct GridGuide {
 }
 
 impl GridGuide {
-    /// Learns a grid from `records` (points on the square and their flux). `None` when the
-    /// records carry no usable energy (no finite positive flux), so the caller stays
-    /// unguided. Records with non-finite or negative flux, or points off the square, are
-    /// ignored.
-    pub fn learn(records: &[Record]) -> Option<Self> {
+    /// Learns a grid from `records` (points on the square and their flux), mixed with the
+    /// uniform density by the share `uniform` ∈ [0, 1] (the defensive mixture: every bin's
+    /// density at least `uniform`). `None` when the records carry no usable energy (no
+    /// finite positive flux), so the caller stays unguided. Records with non-finite or
+    /// negative flux, or points off the square, are ignored.
+    pub fn learn(records: &[Record], uniform: f32) -> Option<Self> {
         let mut flux = [0.0f64; BINS * BINS];
         for r in records {
             let [x, y] = r.u;
@@ -56,6 +57,11 @@ impl GridGuide {
         }
         let floor = total / (BINS * BINS) as f64 * f64::from(FLOOR);
         flux.iter_mut().for_each(|f| *f = f.max(floor));
+        // The defensive mixture with the uniform density, in the bins' masses.
+        let total: f64 = flux.iter().sum();
+        let c = f64::from(uniform.clamp(0.0, 1.0));
+        flux.iter_mut()
+            .for_each(|f| *f = (1.0 - c) * *f / total + c / (BINS * BINS) as f64);
         let total: f64 = flux.iter().sum();
         let mut g = GridGuide {
             rows: [0.0; BINS + 1],
@@ -135,14 +141,38 @@ mod tests {
     use super::*;
 
     fn learned() -> GridGuide {
+        learned_mixed(0.0)
+    }
+
+    fn learned_mixed(uniform: f32) -> GridGuide {
         let records = learning_records(None, 4096, 3, disk_and_sky);
-        GridGuide::learn(&records).expect("the disk and sky carry energy")
+        GridGuide::learn(&records, uniform).expect("the disk and sky carry energy")
     }
 
     #[test]
     fn samples_follow_the_pdf_chi_square() {
+        samples_follow_the_pdf(&learned());
+    }
+
+    /// The defensive mixture: no bin's density below the uniform share, the rest learned,
+    /// and the samples still follow the density.
+    #[test]
+    fn a_mixed_grid_keeps_the_uniform_share_and_follows_its_pdf() {
+        let (plain, mixed) = (learned(), learned_mixed(0.25));
+        for b in 0..BINS * BINS {
+            let want = 0.25 + 0.75 * plain.density[b];
+            assert!(
+                (mixed.density[b] - want).abs() <= 1e-5 * want,
+                "bin {b}: {} vs {want}",
+                mixed.density[b]
+            );
+            assert!(mixed.density[b] >= 0.25 * (1.0 - 1e-6));
+        }
+        samples_follow_the_pdf(&mixed);
+    }
+
+    fn samples_follow_the_pdf(g: &GridGuide) {
         // A resolution that does not align with the bins (odd), pooled low cells.
-        let g = learned();
         let res = 37;
         let mut observed = vec![0.0; res * res];
         let mut rng = Pcg32::new(7, 1);
@@ -217,12 +247,12 @@ mod tests {
 
     #[test]
     fn edges_and_bad_records() {
-        assert!(GridGuide::learn(&[]).is_none());
+        assert!(GridGuide::learn(&[], 0.0).is_none());
         let zero = [Record {
             u: [0.5, 0.5],
             flux: 0.0,
         }];
-        assert!(GridGuide::learn(&zero).is_none(), "no energy, no guide");
+        assert!(GridGuide::learn(&zero, 0.25).is_none(), "no energy, no guide");
         let bad = [
             Record {
                 u: [0.5, 0.5],
@@ -237,7 +267,7 @@ mod tests {
                 flux: 2.0,
             },
         ];
-        let g = GridGuide::learn(&bad).expect("one good record");
+        let g = GridGuide::learn(&bad, 0.0).expect("one good record");
         // One hot bin of flux 2; the 255 others keep the floor, 0.1 × 2/256 each.
         let floor = FLOOR * 2.0 / 256.0;
         let want = 2.0 / (2.0 + 255.0 * floor) * 256.0;

@@ -134,8 +134,10 @@ pub struct BakeSettings {
     /// Bounces of light after the gather hit: 1 = emission and direct light at the hit
     /// only; `series` runs this many passes, `path` paths of at most this many vertices.
     pub bounces: u32,
-    /// Percent of every guided iteration's packets drawn from the cosine baseline (the
-    /// defensive mixture); every sample is weighted with the mixture's density.
+    /// Percent of the cosine baseline in the defensive mixture every guided iteration
+    /// samples, `c + (1 − c)·q` on the primary sample square: folded into the guide
+    /// ([`guidebake_kernels::guide::GuideParams::uniform`]), so the guided density is
+    /// never below `c` and every sample is weighted with the mixture's density.
     pub mix: u32,
     /// How the samples are split over the iterations.
     pub schedule: Schedule,
@@ -327,11 +329,9 @@ impl BakeSettings {
         }
     }
 
-    /// How many of iteration `k`'s packets are drawn from the cosine baseline when it samples
-    /// a learned guide: `--mix` percent of its packets, rounded to whole packets.
-    pub fn cosine_packets(&self, k: u32) -> u32 {
-        let packets = self.samples_in_iteration(k) / 8;
-        (packets * self.mix + 50) / 100
+    /// The cosine baseline's share of the defensive mixture: `--mix` as a fraction.
+    pub fn uniform_share(&self) -> f32 {
+        self.mix as f32 / 100.0
     }
 
     /// Identity of a bake of `texel_file_id` with these settings (and [`BAKE_FORMAT`]: work

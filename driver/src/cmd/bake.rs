@@ -39,8 +39,9 @@ pub struct BakeArgs {
     /// How a texel's iterations are combined.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().combine)]
     pub combine: Combine,
-    /// Percent of each guided iteration's packets drawn from the cosine baseline (the
-    /// defensive mixture; every sample is weighted with the mixture's density).
+    /// Percent of the cosine baseline in the defensive mixture each guided iteration samples
+    /// (`c + (1 − c)·guide`, folded into the guide; every sample is weighted with the
+    /// mixture's density).
     #[arg(long, default_value_t = BakeSettings::default().mix)]
     pub mix: u32,
     /// Which series passes sample a learned guide: the `last` (the lightmap; the passes
