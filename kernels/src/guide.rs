@@ -824,9 +824,14 @@ fn smooth(nodes: &mut [Node], alpha: f64, uniform: f64) {
         // A ratio 0/0 (zero-mass parent, only with `ambient = 0`) becomes ½: the node is
         // unreachable by sampling.
         let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { 0.5 };
-        let m_s = &sampled;
-        let px = ratio(m_s[0] + m_s[2], m_s[0] + m_s[1] + m_s[2] + m_s[3]);
-        let py = [ratio(m_s[0], m_s[0] + m_s[2]), ratio(m_s[1], m_s[1] + m_s[3])];
+        let px = ratio(
+            sampled[0] + sampled[2],
+            sampled[0] + sampled[1] + sampled[2] + sampled[3],
+        );
+        let py = [
+            ratio(sampled[0], sampled[0] + sampled[2]),
+            ratio(sampled[1], sampled[1] + sampled[3]),
+        ];
         let tx = split_at(n.lo[0], n.hi[0], px);
         let ty = [
             split_at(n.lo[1], n.hi[1], py[0]),

@@ -252,7 +252,10 @@ mod tests {
             u: [0.5, 0.5],
             flux: 0.0,
         }];
-        assert!(GridGuide::learn(&zero, 0.25).is_none(), "no energy, no guide");
+        assert!(
+            GridGuide::learn(&zero, 0.25).is_none(),
+            "no energy, no guide"
+        );
         let bad = [
             Record {
                 u: [0.5, 0.5],
