@@ -21,12 +21,14 @@ use std::hint::black_box;
 const RECORD_COUNTS: [usize; 3] = [512, 4096, 16_384];
 
 /// The bake's guide parameters (`driver/src/bake/gather.rs`, defaults `--min-split 64`,
-/// `--smooth 10`, `--mix 25` and so the mixed ambient floor 0.02).
+/// `--smooth 10`, `--mix 25`: the mixture's uniform share 0.25 and so the mixed ambient
+/// floor 0.02).
 fn bake_params() -> GuideParams {
     GuideParams {
         min_records: 64,
         alpha: 0.1,
         ambient: 0.02,
+        uniform: 0.25,
         ..GuideParams::default()
     }
 }

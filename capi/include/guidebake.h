@@ -232,6 +232,13 @@ typedef struct GuidebakeGuideParams {
    * Smoothing strength α in 0..=1 of §2.3 (default 0.25; 0 disables smoothing).
    */
   float alpha;
+  /**
+   * Share `c` in 0..=1 of the uniform density in the defensive mixture the guide samples,
+   * `c + (1 − c)·guide` (default 0; the bake's `--mix 25` is 0.25): one warp draws from
+   * the mixture and its pdf is the mixture's. Added after `alpha`: callers compiled
+   * without it get 0.
+   */
+  float uniform;
 } GuidebakeGuideParams;
 
 /**

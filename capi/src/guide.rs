@@ -62,6 +62,11 @@ pub struct GuidebakeGuideParams {
     pub ambient: f32,
     /// Smoothing strength α in 0..=1 of §2.3 (default 0.25; 0 disables smoothing).
     pub alpha: f32,
+    /// Share `c` in 0..=1 of the uniform density in the defensive mixture the guide samples,
+    /// `c + (1 − c)·guide` (default 0; the bake's `--mix 25` is 0.25): one warp draws from
+    /// the mixture and its pdf is the mixture's. Added after `alpha`: callers compiled
+    /// without it get 0.
+    pub uniform: f32,
 }
 
 impl GuidebakeGuideParams {
@@ -74,6 +79,7 @@ impl GuidebakeGuideParams {
             max_depth: d.max_depth,
             ambient: d.ambient,
             alpha: d.alpha,
+            uniform: d.uniform,
         }
     }
 
@@ -86,6 +92,7 @@ impl GuidebakeGuideParams {
             max_depth: self.max_depth,
             ambient: self.ambient,
             alpha: self.alpha,
+            uniform: self.uniform,
             ..GuideParams::default()
         }
     }

@@ -81,12 +81,30 @@ fn c_build(
 
 #[test]
 fn guide_build_sample8_and_pdf8_match_the_kernels() {
+    // The defaults (null params), then the defensive mixture through `params->uniform`.
+    for uniform in [None, Some(0.25f32)] {
+        guide_matches_the_kernels(uniform);
+    }
+}
+
+fn guide_matches_the_kernels(uniform: Option<f32>) {
     let mut rng = Pcg32::new(1, 20);
     let recs = records(&mut rng, 2000);
     let mut storage = vec![Node::default(); 1024];
-    let (g, stats) = guide::build(&mut recs.clone(), &GuideParams::default(), &mut storage);
+    let kernel_params = GuideParams {
+        uniform: uniform.unwrap_or(0.0),
+        ..GuideParams::default()
+    };
+    let (g, stats) = guide::build(&mut recs.clone(), &kernel_params, &mut storage);
     let mut c_storage = vec![Node::default(); 1024];
-    let (s, handle, st) = c_build(&recs, std::ptr::null(), &mut c_storage);
+    let mut p = guidebake_guide_params_default();
+    p.uniform = uniform.unwrap_or(0.0);
+    let params = if uniform.is_some() {
+        &raw const p
+    } else {
+        std::ptr::null()
+    };
+    let (s, handle, st) = c_build(&recs, params, &mut c_storage);
     assert_eq!(s, S::Ok, "{}", last_error());
     assert_eq!(
         (st.nodes, st.leaves, st.accepted, st.has_start_table),
@@ -123,6 +141,12 @@ fn guide_build_sample8_and_pdf8_match_the_kernels() {
             op.map(f32::to_bits),
             "pdf8 equals the warp's pdf"
         );
+        if let Some(c) = uniform {
+            assert!(
+                op.iter().all(|&q| q >= c * (1.0 - 1e-4)),
+                "{op:?} below {c}"
+            );
+        }
     }
 }
 
