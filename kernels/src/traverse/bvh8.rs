@@ -709,18 +709,19 @@ pub(super) fn walk8<'a>(
     loop {
         let node = &bvh.nodes[index];
         let (met, nearest) = boxes8(node, &lanes, live, tmax.as_array());
+        // Keys `nearest bits & !7 | slot` (entry distances are ≥ 0, so their bits order like
+        // the values), built eight at a time; only the slots met are sorted (descending,
+        // by insertion): the nearest is visited next, the others pushed farthest first.
+        let slots_met = !met.simd_eq(u32x8::ZERO).to_bitmask() as u8;
+        let all_keys = (bytemuck::cast::<f32x8, u32x8>(nearest) & u32x8::splat(!7)
+            | u32x8::from([0, 1, 2, 3, 4, 5, 6, 7]))
+        .to_array();
         let met = met.to_array();
         let nearest = nearest.as_array();
-        // Keys `nearest bits & !7 | slot`, insertion-sorted descending (entry distances are
-        // ≥ 0, so their bits order like the values); the nearest is visited next, the others
-        // pushed farthest first.
         let mut keys = [0u32; WIDTH];
         let mut n = 0;
-        for slot in 0..WIDTH {
-            if met[slot] == 0 {
-                continue;
-            }
-            let k = nearest[slot].to_bits() & !7 | slot as u32;
+        for slot in set_lanes(slots_met) {
+            let k = all_keys[slot];
             let mut i = n;
             while i > 0 && keys[i - 1] < k {
                 keys[i] = keys[i - 1];
@@ -735,12 +736,18 @@ pub(super) fn walk8<'a>(
             (e, nearest[slot], met[slot] as u8)
         };
         // The pushed entries are prefetched: the walk comes back to them after the nearest
-        // subtree (+2-6 % on the gather packets, docs/traverse.md).
+        // subtree (+2-6 % on the gather packets, docs/traverse.md); a leaf in the form its
+        // test will read ([`rows_for`], decided by the lanes met: at most those are live
+        // when it is popped).
         for &k in &keys[..n.saturating_sub(1)] {
             let pushed = entry(k);
             let (c, m) = (pushed.0 as u32, (pushed.0 >> 32) as u32);
             if m == 0 {
                 prefetch(&bvh.nodes[c as usize]);
+            } else if rows_for(pushed.2, m) {
+                if let Some(first) = bvh.leaf_rows(c).first() {
+                    prefetch(first);
+                }
             } else if let Some(first) = bvh.tris.get(c as usize) {
                 prefetch(first);
             }
@@ -772,9 +779,7 @@ pub(super) fn walk8<'a>(
                 break;
             }
             let n = (meta & !LEAF) as usize;
-            // Lane by lane, eight triangles per pass, when that takes fewer passes than
-            // triangle by triangle, eight lanes per test.
-            tmax = if live.count_ones() as usize * n.div_ceil(8) < n {
+            tmax = if rows_for(live, meta) {
                 visitor.rows1(bvh.leaf_rows(child), n, live)
             } else {
                 visitor.leaf8(bvh.leaf(child, meta))
@@ -786,6 +791,15 @@ pub(super) fn walk8<'a>(
             far = widened_largest(tmax, alive);
         }
     }
+}
+
+/// Whether the packet walk tests the leaf `meta` for the lanes `live` lane by lane, eight
+/// triangles per pass on its rows: when that takes fewer passes than triangle by triangle,
+/// eight lanes per test on its [`Tri`]s.
+#[inline(always)]
+fn rows_for(live: u8, meta: u32) -> bool {
+    let n = (meta & !LEAF) as usize;
+    live.count_ones() as usize * n.div_ceil(8) < n
 }
 
 /// The widened far bound of the largest `tmax` among the lanes of `alive`.
