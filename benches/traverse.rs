@@ -20,6 +20,9 @@
 //!   that many triangles: build seconds and gather Mrays/s per preset and layout, and
 //!   Embree's `rtcIntersect8` on the same packets; `TRAVERSE_GLB=a.glb,...` likewise for the
 //!   triangles of scene files.
+//! - `TRAVERSE_EMBREE_CONFIG=verbose=2`: appended to Embree's device configuration; `verbose=2`
+//!   prints its BVH's statistics (surface-area cost, nodes, leaves), to set beside the wide
+//!   tree's cost that every run prints in the same terms.
 //!
 //! A `gather_resorted` set (each texel's rotated points fully re-sorted) feeds Embree's
 //! `rtcIntersect16` two of our packets at a time.
@@ -34,7 +37,7 @@ use glam::{Vec3, Vec3A};
 use guidebake::bvh::{Bvh, Preset};
 use guidebake_kernels::packet::{Hit8, LANES, Ray8};
 use guidebake_kernels::traverse::{
-    Layout, Tree, intersect_brute, intersect1, intersect8, occluded1, occluded8,
+    LEAF, Layout, Tree, WideNode, intersect_brute, intersect1, intersect8, occluded1, occluded8,
 };
 use obvhs::cwbvh::{CwBvh, builder::build_cwbvh_from_tris};
 use obvhs::ray::{Ray as ORay, RayHit};
@@ -117,6 +120,41 @@ fn scenes() -> Vec<Scene> {
         out.push(scene("city1m", city, Vec3::new(53.0, 12.0, 53.0)));
     }
     out
+}
+
+/// The wide tree's surface-area cost as Embree's `BVHNStatistics` reports it (`verbose=2`):
+/// each inner node costs its half area, each leaf its half area per block of four triangles,
+/// all relative to the root's half area. Returns (inner, leaves).
+fn wide_sah(nodes: &[WideNode]) -> (f64, f64) {
+    let half_area = |lo: [f32; 3], hi: [f32; 3]| {
+        let e = [0, 1, 2].map(|a| f64::from(hi[a] - lo[a]).max(0.0));
+        e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+    };
+    let slot =
+        |n: &WideNode, c: usize| ([0, 1, 2].map(|a| n.lo[a][c]), [0, 1, 2].map(|a| n.hi[a][c]));
+    let root = &nodes[0];
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for c in (0..8).filter(|&c| root.meta[c] != LEAF) {
+        let (l, h) = slot(root, c);
+        for a in 0..3 {
+            lo[a] = lo[a].min(l[a]);
+            hi[a] = hi[a].max(h[a]);
+        }
+    }
+    let root_area = half_area(lo, hi);
+    let (mut inner, mut leaves) = (1.0, 0.0);
+    for n in nodes {
+        for c in (0..8).filter(|&c| n.meta[c] != LEAF) {
+            let (l, h) = slot(n, c);
+            let a = half_area(l, h) / root_area;
+            if n.meta[c] == 0 {
+                inner += a;
+            } else {
+                leaves += a * ((n.meta[c] & !LEAF) as f64 / 4.0).ceil();
+            }
+        }
+    }
+    (inner, leaves)
 }
 
 fn bounds(soup: &[[Vec3; 3]]) -> (Vec3, Vec3) {
@@ -272,6 +310,14 @@ fn bench(c: &mut Criterion) {
             wide.nodes().len(),
             view.tris().len(),
             s.bvh.build_time()
+        );
+        let (inner, leaves) = wide_sah(wide.nodes());
+        println!(
+            "{}: wide tree SAH (Embree's statistics: inner nodes 1, leaves one per block of four \
+             triangles, relative to the root's half area): {:.3} = inner {inner:.3} + leaves \
+             {leaves:.3}",
+            s.name,
+            inner + leaves
         );
         let sets = [
             (
@@ -828,7 +874,12 @@ mod embree_rt {
             // SAFETY: plain Embree C API use: the device and scene live as long as `self`; the
             // buffers Embree allocates are written within their `soup.len()`-sized bounds.
             unsafe {
-                let device = rtcNewDevice(c"threads=1".as_ptr());
+                // `TRAVERSE_EMBREE_CONFIG` appends to the device's configuration (e.g.
+                // `verbose=2` prints the BVH's statistics at commit).
+                let extra = std::env::var("TRAVERSE_EMBREE_CONFIG").unwrap_or_default();
+                let config = std::ffi::CString::new(format!("threads=1,{extra}"))
+                    .expect("TRAVERSE_EMBREE_CONFIG has no NUL");
+                let device = rtcNewDevice(config.as_ptr());
                 assert!(!device.is_null(), "rtcNewDevice failed");
                 let scene = rtcNewScene(device);
                 rtcSetSceneBuildQuality(scene, RTCBuildQuality::HIGH);
