@@ -691,8 +691,9 @@ fn boxes8(node: &WideNode, lanes: &[Lane; LANES], live: u8, tmax: &[f32; LANES])
 /// node's live lanes meet are pushed farthest first, by the nearest entry distance among
 /// their lanes. A node is tested lane by lane, eight slots at a time ([`boxes8`]): only the
 /// live lanes are tested, and a packet's lanes drift apart deeper in the tree. (Measured
-/// against testing slot by slot, eight lanes at a time, and against one frustum test for a
-/// shared-origin packet: docs/traverse.md, "Wide BVH".)
+/// against testing slot by slot, eight lanes at a time, against one frustum test for a
+/// shared-origin packet, and against a frustum test choosing the slots then tested eight
+/// lanes at a time: docs/traverse.md, "Wide BVH" and "Session 13".)
 pub(super) fn walk8<'a>(
     bvh: &WideRef<'a>,
     pre: &Pre8,
