@@ -743,12 +743,8 @@ pub(super) fn walk8<'a>(
         for &k in &keys[..n.saturating_sub(1)] {
             let pushed = entry(k);
             let (c, m) = (pushed.0 as u32, (pushed.0 >> 32) as u32);
-            if m == 0 {
-                prefetch(&bvh.nodes[c as usize]);
-            } else if rows_for(pushed.2, m) {
-                if let Some(first) = bvh.leaf_rows(c).first() {
-                    prefetch(first);
-                }
+            if m == 0 || rows_for(pushed.2, m) {
+                prefetch_entry(bvh, pushed.0);
             } else if let Some(first) = bvh.tris.get(c as usize) {
                 prefetch(first);
             }
