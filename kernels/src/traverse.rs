@@ -94,6 +94,7 @@ mod packet;
 mod scalar;
 mod triangle;
 
+use bvh8::Ray1x8;
 use packet::{Closest, Occlusion, Visitor, start8, walk8};
 use scalar::{FAR_FLOOR, FAR_UP, NEAR_DOWN, box1_at, walk1, widened};
 use triangle::{
@@ -269,7 +270,7 @@ pub fn intersect1(bvh: &impl Tree, ray: &Ray) -> Option<Hit> {
         }),
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            bvh8::walk1(&w, &pre, |rows, n| {
+            bvh8::walk1(&w, &Ray1x8::new(&pre), |rows, n| {
                 closest_rows(|| pre, &pre8, rows, n, &mut best);
                 best.t
             })
@@ -292,9 +293,9 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
         }),
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            bvh8::walk1(&w, &pre, |rows, n| {
-                blocked(occludes_rows(|| pre, &pre8, rows, n, tmax))
-            })
+            return bvh8::walk1_any(&w, &Ray1x8::new(&pre), tmax, |rows, n| {
+                occludes_rows(|| pre, &pre8, rows, n, tmax)
+            });
         }
     };
     end == f32::NEG_INFINITY
@@ -367,26 +368,21 @@ pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
 /// the blocked lanes.
 fn occluded_lanes(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
     set_lanes(pre.traced).fold(0, |blocked, i| {
-        let lane = pre.lane(i);
-        let pre8 = Pre1x8::new(&lane);
+        let pre8 = Pre1x8::lane(pre, i);
         let tmax = tmax.as_array()[i];
-        let end = bvh8::walk1(w, &lane, |rows, n| {
-            if occludes_rows(|| lane, &pre8, rows, n, tmax) {
-                f32::NEG_INFINITY
-            } else {
-                tmax
-            }
+        let end = bvh8::walk1_any(w, &Ray1x8::lane(pre, i), tmax, |rows, n| {
+            occludes_rows(|| pre.lane(i), &pre8, rows, n, tmax)
         });
-        blocked | u8::from(end == f32::NEG_INFINITY) << i
+        blocked | u8::from(end) << i
     })
 }
 
 /// [`occluded_lanes`], the lanes' walks interleaved ([`bvh8::walk_interleaved`]).
 fn occluded_interleaved(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
     let mut blocked = 0u8;
-    bvh8::walk_interleaved(w, pre, tmax, pre.traced, |i, (lane, pre8), rows, n| {
+    bvh8::walk_interleaved(w, pre, tmax, pre.traced, |i, pre8, rows, n| {
         let tmax = tmax.as_array()[i];
-        if occludes_rows(|| *lane, pre8, rows, n, tmax) {
+        if occludes_rows(|| pre.lane(i), pre8, rows, n, tmax) {
             blocked |= 1 << i;
             f32::NEG_INFINITY
         } else {

@@ -118,6 +118,13 @@ impl WideNode {
         self.meta[slot] = meta;
     }
 
+    /// The node as eight rows of eight values: `lo` x, y, z, `hi` x, y, z, then `child` and
+    /// `meta` (as bits), so a walk picks an axis's near or far planes by row index.
+    #[inline(always)]
+    fn rows(&self) -> &[[f32; WIDTH]; 8] {
+        bytemuck::cast_ref(self)
+    }
+
     /// The box of slot `slot`.
     fn slot_box(&self, slot: usize) -> ([f32; 3], [f32; 3]) {
         (
@@ -372,21 +379,36 @@ pub fn leaf_rows(nodes: &[WideNode], tris: &[Tri]) -> alloc::vec::Vec<f32> {
 // Single ray.
 
 /// One ray's box-test constants splatted over the eight children of a node.
-struct Ray1x8 {
+pub(super) struct Ray1x8 {
     org: [f32x8; 3],
     inv: [f32x8; 3],
-    /// Axes whose near plane is `hi` (direction sign bit set).
+    /// Axes whose near plane is `hi` (direction sign bit set). A branch per axis: picking
+    /// the planes by row index, as the packet walk's lanes do, made the single-ray walks
+    /// 10 % slower (docs/traverse.md, session 14).
     neg: [bool; 3],
     tmin_down: f32x8,
 }
 
 impl Ray1x8 {
-    fn new(pre: &Pre) -> Self {
+    pub(super) fn new(pre: &Pre) -> Self {
         Self {
             org: pre.org.map(f32x8::splat),
             inv: pre.inv.map(f32x8::splat),
             neg: pre.inv.map(f32::is_sign_negative),
             tmin_down: f32x8::splat(pre.tmin * NEAR_DOWN),
+        }
+    }
+
+    /// [`Ray1x8::new`] of lane `i` of a packet (traced), from the packet's constants, which
+    /// equal the lane's scalar ones bit for bit: no divisions.
+    #[inline(always)]
+    pub(super) fn lane(pre: &Pre8, i: usize) -> Self {
+        let at = |v: &f32x8| f32x8::splat(v.as_array()[i]);
+        Self {
+            org: pre.org.each_ref().map(at),
+            inv: pre.inv.each_ref().map(at),
+            neg: pre.neg.map(|m| m.to_bitmask() >> i & 1 == 1),
+            tmin_down: at(&pre.tmin_down),
         }
     }
 
@@ -418,11 +440,10 @@ impl Ray1x8 {
 /// `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
 pub(super) fn walk1<'a>(
     bvh: &WideRef<'a>,
-    pre: &Pre,
+    ray: &Ray1x8,
     mut visit: impl FnMut(&'a [f32], usize) -> f32,
 ) -> f32 {
     let mut tmax = visit(&[], 0);
-    let ray = Ray1x8::new(pre);
     // (child | meta << 32, entry distance)
     let mut stack = Stack::<(u64, f32)>::new();
     let mut index = 0;
@@ -470,6 +491,57 @@ pub(super) fn walk1<'a>(
             if tmax == f32::NEG_INFINITY {
                 return tmax;
             }
+        }
+    }
+}
+
+/// Depth-first walk of one ray for any hit (occlusion): `blocked` tests the leaf of `n`
+/// triangles whose rows start at `rows[0]`; the walk ends at the first leaf that blocks.
+/// The slots met are taken in storage order, without a sort and without entry distances
+/// on the stack: `tmax` never shrinks, so a popped entry is always still met (Embree's
+/// any-hit traversal, `traverseAnyHit`). Returns whether a leaf blocked the ray.
+pub(super) fn walk1_any<'a>(
+    bvh: &WideRef<'a>,
+    ray: &Ray1x8,
+    tmax: f32,
+    mut blocked: impl FnMut(&'a [f32], usize) -> bool,
+) -> bool {
+    let mut stack = Stack::<u64>::new();
+    // The entry visited next, `child | meta << 32`: the root first.
+    let mut e = 0u64;
+    loop {
+        let (child, meta) = (e as u32, (e >> 32) as u32);
+        if meta == 0 {
+            let node = &bvh.nodes[child as usize];
+            let (bits, _) = ray.boxes(node, tmax);
+            if bits != 0 {
+                let entry = |slot: u32| {
+                    u64::from(node.child[slot as usize]) | u64::from(node.meta[slot as usize]) << 32
+                };
+                // Leaves last on the stack: popped first.
+                let leaves = !u32x8::from(node.meta).simd_eq(u32x8::ZERO).to_bitmask() as u8;
+                let order = [bits & !leaves, bits & leaves];
+                let mut last = None;
+                for group in order {
+                    let mut rest = group;
+                    while rest != 0 {
+                        let pushed = entry(rest.trailing_zeros());
+                        rest &= rest - 1;
+                        if let Some(p) = last.replace(pushed) {
+                            prefetch_entry(bvh, p);
+                            stack.push(p);
+                        }
+                    }
+                }
+                e = last.unwrap();
+                continue;
+            }
+        } else if blocked(bvh.leaf_rows(child), (meta & !LEAF) as usize) {
+            return true;
+        }
+        match stack.pop() {
+            Some(next) => e = next,
+            None => return false,
         }
     }
 }
@@ -560,13 +632,10 @@ pub(super) fn walk_interleaved(
     pre: &Pre8,
     tmax: f32x8,
     lanes: u8,
-    mut visit: impl FnMut(usize, &(Pre, Pre1x8), &[f32], usize) -> f32,
+    mut visit: impl FnMut(usize, &Pre1x8, &[f32], usize) -> f32,
 ) {
-    let ray: [Option<(Ray1x8, (Pre, Pre1x8))>; LANES] = core::array::from_fn(|i| {
-        (lanes >> i & 1 == 1).then(|| {
-            let p = pre.lane(i);
-            (Ray1x8::new(&p), (p, Pre1x8::new(&p)))
-        })
+    let ray: [Option<(Ray1x8, Pre1x8)>; LANES] = core::array::from_fn(|i| {
+        (lanes >> i & 1 == 1).then(|| (Ray1x8::lane(pre, i), Pre1x8::lane(pre, i)))
     });
     let mut tmax = tmax.to_array();
     let mut stacks: [[MaybeUninit<(u64, f32)>; STACK]; LANES] =
@@ -640,7 +709,9 @@ pub(super) fn walk_interleaved(
 struct Lane {
     org: [f32; 3],
     inv: [f32; 3],
-    neg: [bool; 3],
+    /// Rows of the near and far planes per axis, as in [`Ray1x8`].
+    near: [usize; 3],
+    far: [usize; 3],
     tmin_down: f32,
 }
 
@@ -650,7 +721,8 @@ fn lanes(pre: &Pre8) -> [Lane; LANES] {
     core::array::from_fn(|i| Lane {
         org: [0, 1, 2].map(|a| pre.org[a].as_array()[i]),
         inv: [0, 1, 2].map(|a| pre.inv[a].as_array()[i]),
-        neg: neg.map(|m| m >> i & 1 == 1),
+        near: [0, 1, 2].map(|a| a + 3 * usize::from(neg[a] >> i & 1 == 1)),
+        far: [0, 1, 2].map(|a| a + 3 * usize::from(neg[a] >> i & 1 == 0)),
         tmin_down: pre.tmin_down.as_array()[i],
     })
 }
@@ -660,8 +732,7 @@ fn lanes(pre: &Pre8) -> [Lane; LANES] {
 /// (`u32` lanes) and the nearest of their entry distances (+∞ where none does).
 #[inline(always)]
 fn boxes8(node: &WideNode, lanes: &[Lane; LANES], live: u8, tmax: &[f32; LANES]) -> (u32x8, f32x8) {
-    let lo = node.lo.map(f32x8::from);
-    let hi = node.hi.map(f32x8::from);
+    let rows = node.rows();
     let inf = f32x8::splat(f32::INFINITY);
     let mut met = u32x8::ZERO;
     let mut nearest = inf;
@@ -670,11 +741,8 @@ fn boxes8(node: &WideNode, lanes: &[Lane; LANES], live: u8, tmax: &[f32; LANES])
         let mut near = f32x8::splat(lane.tmin_down);
         let mut far = f32x8::splat(tmax[i]);
         for axis in 0..3 {
-            let (pn, pf) = if lane.neg[axis] {
-                (hi[axis], lo[axis])
-            } else {
-                (lo[axis], hi[axis])
-            };
+            let pn = f32x8::from(rows[lane.near[axis] & 7]);
+            let pf = f32x8::from(rows[lane.far[axis] & 7]);
             let (o, inv) = (f32x8::splat(lane.org[axis]), f32x8::splat(lane.inv[axis]));
             near = ((pn - o) * inv).fast_max(near);
             far = ((pf - o) * inv).fast_min(far);
