@@ -24,6 +24,9 @@
 
 use std::time::{Duration, Instant};
 
+mod huge;
+use huge::HugeSlice;
+
 use glam::{Vec3, Vec3A};
 use guidebake_kernels::packet::{Hit8, Ray8};
 use guidebake_kernels::traverse::{
@@ -140,11 +143,12 @@ pub enum BvhError {
 /// A BVH in the kernels' layout, owning its nodes and leaf-ordered triangles.
 #[derive(Clone, Debug)]
 pub struct Bvh {
-    nodes: Vec<Node>,
-    wide: Vec<WideNode>,
+    // On huge pages when big enough ([`huge`]).
+    nodes: HugeSlice<Node>,
+    wide: HugeSlice<WideNode>,
     /// The triangles as structure-of-arrays rows per wide leaf ([`leaf_rows`]).
-    rows: Vec<f32>,
-    tris: Vec<Tri>,
+    rows: HugeSlice<f32>,
+    tris: HugeSlice<Tri>,
     build_time: Duration,
     preset: Preset,
 }
@@ -183,10 +187,10 @@ impl Bvh {
         let rows = leaf_rows(&wide, &tris);
         WideRef::new(&wide, &tris, &rows).map_err(BvhError::Layout)?;
         Ok(Self {
-            nodes,
-            wide,
-            rows,
-            tris,
+            nodes: HugeSlice::new(nodes),
+            wide: HugeSlice::new(wide),
+            rows: HugeSlice::new(rows),
+            tris: HugeSlice::new(tris),
             build_time: start.elapsed(),
             preset,
         })
