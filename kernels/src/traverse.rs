@@ -377,19 +377,11 @@ fn occluded_lanes(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
     })
 }
 
-/// [`occluded_lanes`], the lanes' walks interleaved ([`bvh8::walk_interleaved`]).
+/// [`occluded_lanes`], the lanes' walks interleaved ([`bvh8::walk_interleaved_any`]).
 fn occluded_interleaved(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
-    let mut blocked = 0u8;
-    bvh8::walk_interleaved(w, pre, tmax, pre.traced, |i, pre8, rows, n| {
-        let tmax = tmax.as_array()[i];
-        if occludes_rows(|| pre.lane(i), pre8, rows, n, tmax) {
-            blocked |= 1 << i;
-            f32::NEG_INFINITY
-        } else {
-            tmax
-        }
-    });
-    blocked
+    bvh8::walk_interleaved_any(w, pre, tmax, pre.traced, |i, pre8, rows, n| {
+        occludes_rows(|| pre.lane(i), pre8, rows, n, tmax.as_array()[i])
+    })
 }
 
 #[cfg(test)]

@@ -12,7 +12,7 @@
 //! ([`leaf_rows`]), so one ray tests up to eight triangles per `f32x8` pass (Embree's
 //! `triangle8v` idea, with the watertight test): the single-ray walk does so at every leaf,
 //! the packet walk at a leaf few lanes reach. Packets of unrelated rays on a large tree are
-//! walked as interleaved single rays with prefetching ([`walk_interleaved`]): eight
+//! walked as interleaved single rays with prefetching ([`walk_interleaved_any`]): eight
 //! independent chains of cache misses overlap.
 //!
 //! [`collapse`] builds a wide tree from a binary [`BvhRef`]: every wide node takes its binary
@@ -515,14 +515,14 @@ pub(super) fn walk1_any<'a>(
             let node = &bvh.nodes[child as usize];
             let (bits, _) = ray.boxes(node, tmax);
             if bits != 0 {
+                // [`slots_any_hit`] written out: through it (a closure pushing), the lanes of
+                // the room's shadow packets walked 5 % slower (docs/traverse.md, session 14).
                 let entry = |slot: u32| {
                     u64::from(node.child[slot as usize]) | u64::from(node.meta[slot as usize]) << 32
                 };
-                // Leaves last on the stack: popped first.
                 let leaves = !u32x8::from(node.meta).simd_eq(u32x8::ZERO).to_bitmask() as u8;
-                let order = [bits & !leaves, bits & leaves];
                 let mut last = None;
-                for group in order {
+                for group in [bits & !leaves, bits & leaves] {
                     let mut rest = group;
                     while rest != 0 {
                         let pushed = entry(rest.trailing_zeros());
@@ -544,6 +544,30 @@ pub(super) fn walk1_any<'a>(
             None => return false,
         }
     }
+}
+
+/// The slots `bits` (one or more) of `node` in the order an any-hit walk takes them: inner
+/// nodes pushed first, then leaves (so a leaf is popped, and may end the walk, before another
+/// subtree is opened), each group in storage order. `push` takes the entries
+/// `child | meta << 32` but the last, which is returned: the one visited next.
+#[inline(always)]
+fn slots_any_hit(node: &WideNode, bits: u8, mut push: impl FnMut(u64)) -> u64 {
+    let entry = |slot: u32| {
+        u64::from(node.child[slot as usize]) | u64::from(node.meta[slot as usize]) << 32
+    };
+    let leaves = !u32x8::from(node.meta).simd_eq(u32x8::ZERO).to_bitmask() as u8;
+    let mut last = None;
+    for group in [bits & !leaves, bits & leaves] {
+        let mut rest = group;
+        while rest != 0 {
+            let pushed = entry(rest.trailing_zeros());
+            rest &= rest - 1;
+            if let Some(p) = last.replace(pushed) {
+                push(p);
+            }
+        }
+    }
+    last.unwrap()
 }
 
 /// The slots of `bits` (one or more) ordered farthest first by their entry distances, as
@@ -620,30 +644,30 @@ fn prefetch_entry(bvh: &WideRef<'_>, e: u64) {
     }
 }
 
-/// The lanes `lanes` of a packet as single rays, walked interleaved: each round advances
-/// every unfinished lane by one node or leaf and prefetches what that lane visits next, so
-/// the cache misses of the independent walks overlap (a single walk waits for each node in
-/// turn). Each lane's walk is [`walk1`]'s: the slots met pushed farthest first with their
-/// entry distances, the nearest visited next, a popped entry beyond the lane's widened
-/// `tmax` skipped. `visit(lane, pre, rows, n)` tests a leaf for one lane and returns its new
-/// `tmax` (−∞ ends that lane's walk).
-pub(super) fn walk_interleaved(
+/// The lanes `lanes` of a packet as single rays looking for any hit (occlusion), walked
+/// interleaved: each round advances every unfinished lane by one node or leaf and prefetches
+/// what that lane visits next, so the cache misses of the independent walks overlap (a single
+/// walk waits for each node in turn). Each lane's walk is [`walk1_any`]'s: the slots met in
+/// storage order, leaves first. `blocked(lane, pre, rows, n)` tests a leaf for one lane;
+/// the lanes it blocks are returned as a bit mask.
+pub(super) fn walk_interleaved_any(
     bvh: &WideRef<'_>,
     pre: &Pre8,
     tmax: f32x8,
     lanes: u8,
-    mut visit: impl FnMut(usize, &Pre1x8, &[f32], usize) -> f32,
-) {
+    mut blocked: impl FnMut(usize, &Pre1x8, &[f32], usize) -> bool,
+) -> u8 {
     let ray: [Option<(Ray1x8, Pre1x8)>; LANES] = core::array::from_fn(|i| {
         (lanes >> i & 1 == 1).then(|| (Ray1x8::lane(pre, i), Pre1x8::lane(pre, i)))
     });
-    let mut tmax = tmax.to_array();
-    let mut stacks: [[MaybeUninit<(u64, f32)>; STACK]; LANES] =
+    let tmax = tmax.to_array();
+    let mut stacks: [[MaybeUninit<u64>; STACK]; LANES] =
         [const { [const { MaybeUninit::uninit() }; STACK] }; LANES];
     let mut sp = [0usize; LANES];
     // The entry each lane visits next (`child | meta << 32`): the root first.
     let mut next = [0u64; LANES];
     let mut active = lanes;
+    let mut hit = 0;
     while active != 0 {
         for i in set_lanes(active) {
             let Some((r, consts)) = &ray[i] else {
@@ -653,52 +677,32 @@ pub(super) fn walk_interleaved(
             let mut go = None;
             if meta == 0 {
                 let node = &bvh.nodes[child as usize];
-                let (bits, near) = r.boxes(node, tmax[i]);
-                let near = near.as_array();
-                let entry =
-                    |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
+                let (bits, _) = r.boxes(node, tmax[i]);
                 if bits != 0 {
-                    let (keys, n) = slots_far_to_near(bits, near);
-                    for &k in &keys[..n - 1] {
-                        let slot = (k & 7) as usize;
-                        stacks[i][sp[i]].write((entry(slot), near[slot]));
+                    go = Some(slots_any_hit(node, bits, |p| {
+                        stacks[i][sp[i]].write(p);
                         sp[i] += 1;
-                    }
-                    go = Some(entry((keys[n - 1] & 7) as usize));
+                    }));
                 }
-            } else {
-                tmax[i] = visit(i, consts, bvh.leaf_rows(child), (meta & !LEAF) as usize);
-                if tmax[i] == f32::NEG_INFINITY {
-                    active &= !(1 << i);
-                    continue;
-                }
-            }
-            let e = match go {
-                Some(e) => e,
-                None => {
-                    let far = super::widened(tmax[i]);
-                    loop {
-                        if sp[i] == 0 {
-                            break None;
-                        }
-                        sp[i] -= 1;
-                        // SAFETY: every entry below `sp[i]` was written above.
-                        let (e, dist) = unsafe { stacks[i][sp[i]].assume_init() };
-                        if dist <= far {
-                            break Some(e);
-                        }
-                    }
-                    .unwrap_or(u64::MAX)
-                }
-            };
-            if e == u64::MAX {
+            } else if blocked(i, consts, bvh.leaf_rows(child), (meta & !LEAF) as usize) {
+                hit |= 1 << i;
                 active &= !(1 << i);
                 continue;
             }
+            let e = go.or_else(|| {
+                sp[i] = sp[i].checked_sub(1)?;
+                // SAFETY: every entry below the previous `sp[i]` was written above.
+                Some(unsafe { stacks[i][sp[i]].assume_init() })
+            });
+            let Some(e) = e else {
+                active &= !(1 << i);
+                continue;
+            };
             prefetch_entry(bvh, e);
             next[i] = e;
         }
     }
+    hit
 }
 
 // ---------------------------------------------------------------------------------------------
