@@ -453,18 +453,52 @@ impl Pre1x8 {
         }
     }
 
-    /// [`tri1`] for triangles `8j .. 8j + 8` of a leaf of `n` triangles whose rows start at
-    /// `leaf[0]` (row `r` at `leaf[r·n ..]`). Lanes past `n` read the next rows: garbage the
-    /// caller masks off.
+    /// [`tri1`] for triangles `8j .. 8j + 8` of `leaf`. Lanes past its `n` triangles read
+    /// the next rows: garbage the caller masks off.
     #[inline(always)]
-    fn tris8(&self, leaf: &[f32], n: usize, j: usize) -> Tri8 {
-        let row = |c: usize, i: usize| {
-            let at = (3 * c + self.k[i]) * n + 8 * j;
-            let lanes: [f32; 8] = leaf[at..at + 8].try_into().expect("eight lanes");
-            f32x8::from(lanes) - self.porg[i]
-        };
+    fn tris8(&self, leaf: &LeafRows<'_>, j: usize) -> Tri8 {
+        let row = |c: usize, i: usize| leaf.load(3 * c + self.k[i], j) - self.porg[i];
         let vertex = |c: usize| [row(c, 0), row(c, 1), row(c, 2)];
         watertight8(vertex(0), vertex(1), vertex(2), &self.s)
+    }
+}
+
+/// A leaf's `n` triangles as rows (row `r` at `r·n`), its length checked once: at least
+/// `ROWS·n + 8` values (the layout pads the last leaf with eight), so that each of the nine
+/// vertex rows' 8-wide loads stays inside without a check of its own. (Checked per load,
+/// the offsets and checks were 145 of the ~700 instructions a shadow ray of the Veach room
+/// executes: docs/traverse.md, session 14.)
+#[derive(Clone, Copy)]
+pub(super) struct LeafRows<'a> {
+    rows: &'a [f32],
+    n: usize,
+}
+
+impl<'a> LeafRows<'a> {
+    /// # Panics
+    /// When `rows` is shorter than `ROWS·n + 8` for `n > 0`: a layout [`super::WideRef::new`]
+    /// accepted never is.
+    #[inline(always)]
+    pub(super) fn new(rows: &'a [f32], n: usize) -> Self {
+        assert!(n == 0 || rows.len() >= ROWS * n + 8, "leaf rows too short");
+        Self { rows, n }
+    }
+
+    /// Lanes `8j .. 8j + 8` of vertex row `row` (`row < 9`, `8j < n`).
+    #[inline(always)]
+    fn load(&self, row: usize, j: usize) -> f32x8 {
+        assert!(row < PRIM_ROW && 8 * j < self.n);
+        let at = row * self.n + 8 * j;
+        // SAFETY: `8j < n` and `8j` a multiple of 8 give `8j ≤ n − 1`, so
+        // `at + 8 ≤ 8n + (n − 1) + 8 < ROWS·n + 8 ≤ rows.len()` (checked in `new`, `n > 0`
+        // here); `[f32; 8]` needs the alignment of `f32` only.
+        f32x8::from(unsafe { self.rows.as_ptr().add(at).cast::<[f32; 8]>().read() })
+    }
+
+    /// The primitive id of triangle `i < n`.
+    #[inline(always)]
+    fn prim(&self, i: usize) -> u32 {
+        self.rows[PRIM_ROW * self.n + i].to_bits()
     }
 }
 
@@ -496,15 +530,16 @@ pub(super) fn closest_rows(
     best: &mut Hit,
 ) {
     let tmin = p8.tmin.as_array()[0];
+    let rows = LeafRows::new(leaf, n);
     for j in 0..n.div_ceil(8) {
         let valid = first_lanes(n - 8 * j);
-        let r = p8.tris8(leaf, n, j);
+        let r = p8.tris8(&rows, j);
         if r.ok.to_bitmask() as u8 & valid != 0 {
             let t = r.tt / r.det;
             let cand = r.ok & t.simd_ge(p8.tmin) & t.simd_le(f32x8::splat(best.t));
             for i in set_lanes(cand.to_bitmask() as u8 & valid) {
                 let ti = t.as_array()[i];
-                let prim = leaf[PRIM_ROW * n + 8 * j + i].to_bits();
+                let prim = rows.prim(8 * j + i);
                 if accept(ti, prim, tmin, best) {
                     let det = r.det.as_array()[i];
                     *best = Hit {
@@ -544,9 +579,10 @@ pub(super) fn occludes_rows(
     n: usize,
     tmax: f32,
 ) -> bool {
+    let rows = LeafRows::new(leaf, n);
     (0..n.div_ceil(8)).any(|j| {
         let valid = first_lanes(n - 8 * j);
-        let r = p8.tris8(leaf, n, j);
+        let r = p8.tris8(&rows, j);
         if r.ok.to_bitmask() as u8 & valid != 0 {
             let t = r.tt / r.det;
             let hit = r.ok & t.simd_ge(p8.tmin) & t.simd_le(f32x8::splat(tmax));
@@ -757,7 +793,7 @@ mod tests {
             );
             assert_eq!(got, want, "{ray:?}");
             assert_ne!(got.prim, NO_HIT, "a ray through the fan missed it: {ray:?}");
-            let r = Pre1x8::new(&pre).tris8(&rows[start..], fan.len(), 0);
+            let r = Pre1x8::new(&pre).tris8(&LeafRows::new(&rows[start..], fan.len()), 0);
             rare += usize::from(r.any_zero.any());
         }
         assert!(rare > 0, "no ray took the f64 path");
