@@ -155,6 +155,12 @@ pub(super) struct Pre8 {
     pub(super) s: [f32x8; 3],
     /// `sel[i][j]`: lanes whose `k[i] == j` (for `j` in 0..2; else 2).
     pub(super) sel: [[f32x8; 2]; 3],
+    /// `k[i]` per lane (0, 1 or 2), for [`Pre8::rel`]'s lane-wise permutation.
+    #[cfg_attr(
+        not(all(target_arch = "x86_64", target_feature = "avx2")),
+        allow(dead_code)
+    )]
+    k: [u32x8; 3],
     /// Lanes whose direction has the sign bit set, per axis.
     pub(super) neg: [f32x8; 3],
     /// The shared direction sign bits when all traced lanes have the same ones.
@@ -228,6 +234,11 @@ impl Pre8 {
             org,
             inv,
             sel: [sel[0], sel[1], sel[2]],
+            k: sel.map(|[is0, is1]| {
+                // 0 where `is0`, else 1 where `is1`, else 2 (the masks are all ones or zeros).
+                let (is0, is1): (u32x8, u32x8) = (bytemuck::cast(is0), bytemuck::cast(is1));
+                !is0 & (u32x8::ONE + (!is1 & u32x8::ONE))
+            }),
             neg,
             octant,
             uniform,
@@ -248,6 +259,21 @@ impl Pre8 {
     pub(super) fn rel(&self, v: &[f32; 3]) -> [f32x8; 3] {
         match self.uniform {
             Some(k) => [0, 1, 2].map(|i| f32x8::splat(v[k[i]]) - self.porg[i]),
+            // One lane-wise permute per axis (`vpermps`: each lane takes `v[k[i]]`) in
+            // place of two blends (docs/traverse.md, session 14); the same values.
+            #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+            None => {
+                use core::arch::x86_64::{__m256, _mm256_permutevar8x32_ps};
+                let v: __m256 =
+                    bytemuck::cast(f32x8::from([v[0], v[1], v[2], 0.0, 0.0, 0.0, 0.0, 0.0]));
+                [0, 1, 2].map(|i| {
+                    // SAFETY: AVX2 is enabled at compile time (the `cfg` above), so `vpermps`
+                    // exists on every CPU this code runs on.
+                    let pick = unsafe { _mm256_permutevar8x32_ps(v, bytemuck::cast(self.k[i])) };
+                    bytemuck::cast::<__m256, f32x8>(pick) - self.porg[i]
+                })
+            }
+            #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
             None => {
                 let c = v.map(f32x8::splat);
                 [0, 1, 2].map(|i| {
