@@ -926,9 +926,7 @@ mod tests {
                     assert_eq!(bits(pre.inv[a], i), p.inv[a].to_bits(), "{r:?}");
                     assert_eq!(bits(pre.s[a], i), p.s[a].to_bits(), "{r:?}");
                     assert_eq!(bits(pre.porg[a], i), p.org[p.k[a]].to_bits(), "{r:?}");
-                    for j in 0..2 {
-                        assert_eq!(bits(pre.sel[a][j], i) != 0, p.k[a] == j, "{r:?}");
-                    }
+                    assert_eq!(pre.k[a].as_array()[i] as usize, p.k[a], "{r:?}");
                 }
                 assert_eq!(bits(pre.tmin, i), p.tmin.to_bits());
             }

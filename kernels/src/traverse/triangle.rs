@@ -153,14 +153,9 @@ pub(super) struct Pre8 {
     /// Permuted origin `o[kx], o[ky], o[kz]` per lane.
     pub(super) porg: [f32x8; 3],
     pub(super) s: [f32x8; 3],
-    /// `sel[i][j]`: lanes whose `k[i] == j` (for `j` in 0..2; else 2).
-    pub(super) sel: [[f32x8; 2]; 3],
-    /// `k[i]` per lane (0, 1 or 2), for [`Pre8::rel`]'s lane-wise permutation.
-    #[cfg_attr(
-        not(all(target_arch = "x86_64", target_feature = "avx2")),
-        allow(dead_code)
-    )]
-    k: [u32x8; 3],
+    /// `k[i]` per lane (0, 1 or 2), for [`Pre8::rel`]'s lane-wise permutation and
+    /// [`Pre1x8::lane`].
+    pub(super) k: [u32x8; 3],
     /// Lanes whose direction has the sign bit set, per axis.
     pub(super) neg: [f32x8; 3],
     /// The shared direction sign bits when all traced lanes have the same ones.
@@ -233,7 +228,6 @@ impl Pre8 {
             s: [dx / dz, dy / dz, one / dz],
             org,
             inv,
-            sel: [sel[0], sel[1], sel[2]],
             k: sel.map(|[is0, is1]| {
                 // 0 where `is0`, else 1 where `is1`, else 2 (the masks are all ones or zeros).
                 let (is0, is1): (u32x8, u32x8) = (bytemuck::cast(is0), bytemuck::cast(is1));
@@ -277,8 +271,9 @@ impl Pre8 {
             None => {
                 let c = v.map(f32x8::splat);
                 [0, 1, 2].map(|i| {
-                    let pick = self.sel[i][0].bitselect(c[0], self.sel[i][1].bitselect(c[1], c[2]));
-                    pick - self.porg[i]
+                    let is =
+                        |j: u32| bytemuck::cast::<u32x8, f32x8>(self.k[i].simd_eq(u32x8::splat(j)));
+                    is(0).bitselect(c[0], is(1).bitselect(c[1], c[2])) - self.porg[i]
                 })
             }
         }
@@ -458,18 +453,9 @@ impl Pre1x8 {
     /// equal the lane's scalar ones bit for bit.
     #[inline(always)]
     pub(super) fn lane(pre: &Pre8, i: usize) -> Self {
-        let k = pre.uniform.unwrap_or_else(|| {
-            [0, 1, 2].map(|a| {
-                let sel = pre.sel[a].map(|m| m.to_bitmask() >> i & 1 == 1);
-                if sel[0] {
-                    0
-                } else if sel[1] {
-                    1
-                } else {
-                    2
-                }
-            })
-        });
+        let k = pre
+            .uniform
+            .unwrap_or_else(|| pre.k.map(|k| k.as_array()[i] as usize));
         let at = |v: &f32x8| f32x8::splat(v.as_array()[i]);
         Self {
             k,
