@@ -11,6 +11,8 @@
 //! on coherent gather packets (docs/traverse.md, "Wide BVH"), and the wide one from
 //! [`WIDE_PACKETS_FROM`] triangles ([`Bvh::packets`]); single rays always walk the wide one.
 //! obvhs builds on every core (its `parallel` feature: PLOC and reinsertion through rayon).
+//! The nodes, leaf rows and triangles are then moved to transparent huge pages (`bvh/huge.rs`),
+//! as Embree allocates its BVH: a big world's node visits miss the TLB far less.
 //!
 //! Deviations: obvhs's own traversals ignore `tmin` in the node test; ours honour it. With the
 //! spatial-split presets a triangle can sit in several leaves; it is then copied once per leaf
