@@ -286,19 +286,25 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
     }
     let pre = Pre::new(ray);
     let tmax = ray.tmax.min(f32::MAX);
-    let blocked = |yes: bool| if yes { f32::NEG_INFINITY } else { tmax };
-    let end = match bvh.layout() {
-        Layout::Binary(b) => walk1(&b, &pre, |leaf: &[Tri]| {
-            blocked(leaf.iter().any(|tri| occludes1(&pre, tri, tmax)))
-        }),
+    match bvh.layout() {
+        Layout::Binary(b) => {
+            // The binary walk ends when a leaf returns −∞.
+            let end = walk1(&b, &pre, |leaf: &[Tri]| {
+                if leaf.iter().any(|tri| occludes1(&pre, tri, tmax)) {
+                    f32::NEG_INFINITY
+                } else {
+                    tmax
+                }
+            });
+            end == f32::NEG_INFINITY
+        }
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            return bvh8::walk1_any(&w, &Ray1x8::new(&pre), tmax, |rows, n| {
+            bvh8::walk1_any(&w, &Ray1x8::new(&pre), tmax, |rows, n| {
                 occludes_rows(|| pre, &pre8, rows, n, tmax)
-            });
+            })
         }
-    };
-    end == f32::NEG_INFINITY
+    }
 }
 
 /// Closest hits of eight rays: the packet traversal.
