@@ -11,7 +11,8 @@ use guidebake::bvh::{Bvh, Preset};
 use guidebake_kernels::packet::{Hit, Hit8, LANES, Ray, Ray8, offset_origin, triangle_extent};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::{
-    Layout, intersect_brute, intersect1, intersect8, occluded_brute, occluded1, occluded8,
+    Layout, closest_hit_allowed, intersect_brute, intersect1, intersect8, occluded_brute,
+    occluded1, occluded8, occlusion_allowed,
 };
 
 /// The binary and the wide view of `bvh`: every check runs on both.
@@ -441,6 +442,159 @@ fn offset_origins_avoid_self_intersection_at_1e6() {
                 // Without the offset the same rays do hit their own triangle: the check can fail.
                 assert!(raw_self_hits > 0, "expected raw self-hits at {offset}");
             }
+        }
+    }
+}
+
+/// Gather packets as the bake traces them from texels in corners: points on a triangle a
+/// hair inside one of its edges (10⁻⁴ to 10⁻⁷ of the way to the opposite vertex), where a
+/// neighbouring wall, frame or sliver meets it, lifted with [`offset_origin`] to the side a
+/// random sign picks; eight cosine directions each.
+fn corner_packets(soup: &[[Vec3; 3]], count: usize, seed: u64) -> Vec<Ray8> {
+    let mut rng = Pcg32::new(seed, 9);
+    scenes::surface_points(soup, count, seed)
+        .into_iter()
+        .map(|s| {
+            let tri = &soup[s.prim as usize];
+            let i = rng.next_u32() as usize % 3;
+            let (a, b, c) = (tri[i], tri[(i + 1) % 3], tri[(i + 2) % 3]);
+            let on_edge = a.lerp(b, rng.next_f32());
+            let inside = [1.0e-4, 1.0e-5, 1.0e-6, 1.0e-7][rng.next_u32() as usize % 4];
+            let p = on_edge.lerp(c, inside);
+            let n = if rng.next_u32() & 1 == 0 { s.n } else { -s.n };
+            let origin = offset_origin(p, n, triangle_extent(p, tri));
+            let dirs: [Vec3; LANES] =
+                core::array::from_fn(|_| scenes::cosine_dir(n, [rng.next_f32(), rng.next_f32()]));
+            Ray8::from_origin(origin, &dirs, 0.0, f32::INFINITY)
+        })
+        .collect()
+}
+
+/// Every traversal's answer for every lane of `packets` through `bvh`, checked against the
+/// traversal contract (`closest_hit_allowed`, `occlusion_allowed`); the number of answers
+/// that differ from brute force.
+fn check_contract(bvh: &Layout<'_>, packets: &[Ray8], what: &str) -> usize {
+    let mut differ = 0;
+    for (p, packet) in packets.iter().enumerate() {
+        let mut hits = Hit8::NONE;
+        intersect8(bvh, packet, &mut hits);
+        let blocked = occluded8(bvh, packet);
+        for lane in 0..LANES {
+            let ray = packet.lane(lane);
+            let (oracle, occ) = (
+                intersect_brute(bvh.tris(), &ray),
+                occluded_brute(bvh.tris(), &ray),
+            );
+            for (how, got) in [
+                ("intersect8", hits.lane(lane)),
+                ("intersect1", intersect1(bvh, &ray)),
+            ] {
+                if got != oracle {
+                    differ += 1;
+                    assert!(
+                        closest_hit_allowed(bvh, &ray, got),
+                        "{what}: {how} packet {p} lane {lane}: {got:?} (brute force {oracle:?}) {ray:?}"
+                    );
+                }
+            }
+            for (how, got) in [
+                ("occluded8", blocked >> lane & 1 == 1),
+                ("occluded1", occluded1(bvh, &ray)),
+            ] {
+                if got != occ {
+                    differ += 1;
+                    assert!(
+                        occlusion_allowed(bvh, &ray, got),
+                        "{what}: {how} packet {p} lane {lane}: {got} (brute force {occ}) {ray:?}"
+                    );
+                }
+            }
+        }
+    }
+    differ
+}
+
+/// Rays the bake traces from texels in corners can start within a few ulps of another
+/// triangle. The watertight test's `t` is then the rounded quotient of terms far larger
+/// than itself and can come out positive for a plane crossed behind the origin (module docs
+/// of `traverse`, "Hits outside their own box"): such a hit lies outside its leaf's box, so
+/// a traversal may or may not test that leaf, and the two layouts and the packet and
+/// single-ray walks may answer differently. Every answer must still keep the contract.
+#[test]
+fn corner_rays_of_a_bake_keep_the_contract_on_both_layouts() {
+    let mut soups = vec![("city", scenes::city(6, 2, 3))];
+    match scenes::converted_dir() {
+        Some(dir) => soups.extend(
+            ["bitterli_veach_bidir", "bitterli_veach_ajar_no_teapots"]
+                .map(|name| (name, scenes::load_glb(&dir.join(format!("{name}.glb"))))),
+        ),
+        None => println!("skipping the converted scenes: ../shared/scenes/converted not found"),
+    }
+    for (name, soup) in &soups {
+        let packets = corner_packets(soup, 3000, 17);
+        let bvh = Bvh::build(soup, Preset::DEFAULT).unwrap();
+        for view in layouts(&bvh) {
+            let what = format!(
+                "{name} {}",
+                if matches!(view, Layout::Wide(_)) {
+                    "wide"
+                } else {
+                    "binary"
+                }
+            );
+            let differ = check_contract(&view, &packets, &what);
+            println!(
+                "{what}: {differ} of {} answers differ from brute force",
+                packets.len() * LANES * 4
+            );
+            // 11 and 13 on 2026-11-27: the rays reach the case this test is for (if the
+            // triangle test ever makes t's sign exact, this count drops to 0 and may go).
+            if *name == "city" {
+                assert!(differ > 0, "{what}: no corner ray left the oracle");
+            }
+        }
+    }
+}
+
+/// The first such ray found (a bake of Veach's bidir scene, 2026-11-27): it starts 2·10⁻⁶
+/// from the edge of a sliver of the door frame (triangle 658), beyond it. In exact arithmetic
+/// the ray meets that triangle's plane at t = −2.9·10⁻⁶; the watertight test reports
+/// t = +1.15·10⁻⁶, a point outside the sliver's box. Brute force and the binary packet walk
+/// report it; the single-ray walks and the wide packet walk cull the sliver's leaf and go
+/// on to the wall at 0.152. Both answers keep the contract.
+#[test]
+fn a_hit_behind_the_origin_rounded_ahead_of_it_is_allowed_either_way() {
+    let sliver = [
+        Vec3::new(-2.414856, 1.6, 2.663052),
+        Vec3::new(-2.414856, 0.2, 2.663052),
+        Vec3::new(-2.411322, 0.2, 2.659688),
+    ];
+    let wall = [
+        Vec3::new(-3.0, -5.0, -5.0),
+        Vec3::new(-3.0, 10.0, -5.0),
+        Vec3::new(-3.0, -5.0, 10.0),
+    ];
+    let mut rng = Pcg32::new(658, 1);
+    let mut soup = random_soup(&mut rng, 200, 2.0, Vec3::new(6.0, 0.0, 6.0));
+    soup.push(sliver);
+    soup.push(wall);
+    let ray = Ray::new(
+        Vec3::new(-2.4148579, 0.86818504, 2.6630523),
+        Vec3::new(-0.69441444, -0.71014196, 0.11613388),
+        0.0,
+        f32::INFINITY,
+    );
+    let near = intersect_brute(Bvh::build(&soup, Preset::DEFAULT).unwrap().tris(), &ray);
+    let near = near.expect("brute force reports the sliver");
+    assert_eq!(near.prim, 200, "{near:?}");
+    assert!(near.t > 0.0 && near.t < 1.0e-5, "{near:?}");
+    for preset in Preset::ALL {
+        let bvh = Bvh::build(&soup, preset).unwrap();
+        for view in layouts(&bvh) {
+            let packet = Ray8::from_origin(ray.org, &[ray.dir; LANES], 0.0, f32::INFINITY);
+            check_contract(&view, &[packet], &format!("{preset:?}"));
+            let got = intersect1(&view, &ray).expect("the sliver or the wall");
+            assert!(got.prim == 200 || got.prim == 201, "{preset:?}: {got:?}");
         }
     }
 }

@@ -66,7 +66,16 @@
 //!   - *before the box*: origins of 10⁻²⁶–10⁻³⁸ on triangles of 10⁻⁶: `t = T/det` is the
 //!     quotient of products that underflow (the terms `U·(s_z·a_z)` of 10⁻⁵⁰ round to 0), so
 //!     a hit at a true distance of 2·10⁻³⁸ comes out at `t = 0`, below the box's entry
-//!     distance, and no absolute slack covers `2⁻¹⁴⁹ / det` for every `det`.
+//!     distance, and no absolute slack covers `2⁻¹⁴⁹ / det` for every `det`;
+//!   - *behind the origin*, at ordinary magnitudes: a ray that starts within a few ulps of
+//!     a triangle's plane, just beyond one of its edges, and leaves it: `t = T/det` is then
+//!     the rounded quotient of terms far larger than itself and can come out positive for a
+//!     plane crossed behind the origin. Bakes meet it: a ray from a texel in a corner, lifted
+//!     off its own surface by `offset_origin`, can start that close to a neighbouring sliver
+//!     (Veach's bidir scene, door frame: exact `t = −2.9·10⁻⁶`, reported `+1.15·10⁻⁶`, in
+//!     125 of its bake's 4.4·10⁷ gather rays at 16 spp, 2026-11-27). pbrt-v4 rejects hits
+//!     below a conservative bound on `t`'s rounding error (`deltaT`), which makes `t`'s sign
+//!     exact at the price of about twenty more operations per candidate hit; not done here.
 //!
 //!   A traversal culls a box once its entry distance passes the closest hit found so far,
 //!   so it may miss such a hit, find it (a leaf tests all its triangles), or find it in place
@@ -79,8 +88,10 @@
 //!   boxes guarantees, a parent's box holding its children's; it answers occlusion `true`
 //!   only for a triangle that occludes, `false` only when no triangle of a leaf the ray
 //!   meets on `[tmin, tmax]` does. Where every hit lies inside its leaf's box interval
-//!   (every ray at ordinary magnitudes, and every ray a bake traces: unit directions,
-//!   origins lifted off their surface by `offset_origin`) that is exactly brute force.
+//!   (every ray at ordinary magnitudes that does not start within a few ulps of a
+//!   triangle's plane) that is exactly brute force. Otherwise the layouts, and the packet
+//!   and single-ray walks, may answer differently (each within the contract), so a bake's
+//!   result can depend on which tree its packets walk (`tests/traverse.rs`, corner rays).
 //!   (A far bound widened by 2⁻¹⁸ of the root box's extent along `kz` removes the first kind
 //!   found first, but culls so much less that the packet path ran 12–46 % slower on
 //!   `benches/traverse.rs`.)
@@ -311,7 +322,8 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
 ///
 /// Lanes that are not traced (inactive, non-finite, zero direction, `tmin < 0`) and lanes that
 /// miss leave their `hits` lane untouched. Returns the bit mask of lanes that hit. Each hit
-/// equals [`intersect1`]'s for that lane, bit for bit, whatever the layout.
+/// equals [`intersect1`]'s for that lane, bit for bit, whatever the layout, wherever every
+/// hit lies inside its leaf's box (module docs, "Hits outside their own box").
 pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;

@@ -22,7 +22,8 @@
 //!
 //! The boxes, the slab arithmetic and the triangle test are the binary traversal's, operation
 //! for operation; the wide walks only visit children in another order and with another
-//! stack, so their results equal the binary traversal's and brute force bit for bit.
+//! stack, so their results equal the binary traversal's and brute force bit for bit
+//! (wherever every hit lies inside its leaf's box: `traverse`'s module docs).
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
