@@ -6,10 +6,9 @@
 //! picks the build parameters ([`Preset`]), then flattens obvhs's binary tree into
 //! [`Node`]s (two child boxes per 64-byte node), copies the triangles into leaf order as
 //! [`Tri`]s for the watertight test, and collapses the binary tree into [`WideNode`]s (eight
-//! child boxes per node, same leaves and triangles; [`Bvh::wide`]). The bake's 8-ray packets
-//! walk the binary view ([`Bvh::view`]) on small worlds, where the wide packet walk is slower
-//! on coherent gather packets (docs/traverse.md, "Wide BVH"), and the wide one from
-//! [`WIDE_PACKETS_FROM`] triangles ([`Bvh::packets`]); single rays always walk the wide one.
+//! child boxes per node, same leaves and triangles; [`Bvh::wide`]), which every ray the bake
+//! traces walks, single or in packets (docs/traverse.md, "The bake's packets walk the wide
+//! tree"); the binary tree is the collapse's input and the benches' comparator.
 //! obvhs builds on every core (its `parallel` feature: PLOC and reinsertion through rayon).
 //! The nodes, leaf rows and triangles are then moved to transparent huge pages (`bvh/huge.rs`),
 //! as Embree allocates its BVH: a big world's node visits miss the TLB far less.
@@ -30,10 +29,8 @@ mod huge;
 use huge::HugeSlice;
 
 use glam::{Vec3, Vec3A};
-use guidebake_kernels::packet::{Hit8, Ray8};
 use guidebake_kernels::traverse::{
-    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse, intersect8, leaf_rows,
-    occluded8,
+    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse, leaf_rows,
 };
 use obvhs::{
     BvhBuildParams,
@@ -206,19 +203,11 @@ impl Bvh {
     }
 
     /// The wide view (eight child boxes per node, collapsed from the binary tree, same
-    /// triangles). Same results as [`Bvh::view`], bit for bit. Cheap: `build` validated it.
+    /// triangles). Same results as [`Bvh::view`], bit for bit, wherever every hit lies inside
+    /// its leaf's box (the kernels' `traverse` docs, "Hits outside their own box": rays that
+    /// start within ulps of a triangle's plane). Cheap: `build` validated it.
     pub fn wide(&self) -> WideRef<'_> {
         WideRef::new_trusted(&self.wide, &self.tris, &self.rows)
-    }
-
-    /// The tree the bake's 8-ray packets walk: the wide one from [`WIDE_PACKETS_FROM`]
-    /// triangles, else the binary one.
-    pub fn packets(&self) -> PacketTree<'_> {
-        if self.tris.len() >= WIDE_PACKETS_FROM {
-            PacketTree::Wide(self.wide())
-        } else {
-            PacketTree::Binary(self.view())
-        }
     }
 
     /// Wide nodes, root first.
@@ -244,46 +233,6 @@ impl Bvh {
     /// The preset it was built with.
     pub fn preset(&self) -> Preset {
         self.preset
-    }
-}
-
-/// Triangles (in leaf order) from which the bake's packets walk the wide tree. The wide
-/// packet walk tests all eight slots of a node for every live lane, which costs more than the
-/// binary walk's two boxes where coherent packets stay in the cache (the Veach room, 4.5 k
-/// triangles: gather 0.89–0.99× binary in the duel, whole bakes 1–3 % slower with wide
-/// shadow packets), and less once the binary walk's many small nodes miss it: on the gather
-/// packets of `guidebake synth`'s cities 1.08×, 1.21× and 1.30× binary at 3·10⁴, 3·10⁵ and
-/// 3·10⁶ triangles, and their bakes' gathers 2–16 % faster by round, 8–10 % by the medians
-/// (docs/traverse.md, "Sizes against Embree, and packets through the wide tree on big
-/// worlds"). Set between the room and the smallest city; nothing was
-/// measured in between.
-pub const WIDE_PACKETS_FROM: usize = 10_000;
-
-/// The tree the bake's 8-ray packets walk ([`Bvh::packets`]); either gives the same hits, bit
-/// for bit.
-#[derive(Clone, Copy, Debug)]
-pub enum PacketTree<'a> {
-    /// Two child boxes per node.
-    Binary(BvhRef<'a>),
-    /// Eight child boxes per node.
-    Wide(WideRef<'a>),
-}
-
-impl PacketTree<'_> {
-    /// [`intersect8`] on this tree.
-    pub fn intersect8(&self, rays: &Ray8, hits: &mut Hit8) -> u8 {
-        match self {
-            PacketTree::Binary(bvh) => intersect8(bvh, rays, hits),
-            PacketTree::Wide(bvh) => intersect8(bvh, rays, hits),
-        }
-    }
-
-    /// [`occluded8`] on this tree.
-    pub fn occluded8(&self, rays: &Ray8) -> u8 {
-        match self {
-            PacketTree::Binary(bvh) => occluded8(bvh, rays),
-            PacketTree::Wide(bvh) => occluded8(bvh, rays),
-        }
     }
 }
 
@@ -362,8 +311,8 @@ fn fill_slot(
 mod tests {
     use super::*;
 
-    use guidebake_kernels::packet::Ray;
-    use guidebake_kernels::traverse::{intersect_brute, intersect1};
+    use guidebake_kernels::packet::{Hit8, Ray, Ray8};
+    use guidebake_kernels::traverse::{intersect_brute, intersect1, intersect8, occluded8};
 
     #[test]
     fn the_better_tree_only_where_it_repays_its_build() {
@@ -437,20 +386,17 @@ mod tests {
             assert_eq!(intersect1(&bvh.wide(), &ray), want);
             assert_eq!(want, intersect_brute(bvh.tris(), &ray));
         }
-        // 131 072 triangles: the packets take the wide tree, with the brute-force hits.
-        assert!(matches!(bvh.packets(), PacketTree::Wide(_)));
         packets_match_brute_force(&bvh, Vec3::new(100.5, 60.25, 3.0), 0.8);
     }
 
     #[test]
-    fn packets_walk_the_binary_tree_of_a_small_world() {
+    fn packets_through_the_wide_tree_of_a_small_world_match_brute_force() {
         let bvh = Bvh::build(&quad(), Preset::FastBuild).unwrap();
-        assert!(matches!(bvh.packets(), PacketTree::Binary(_)));
         packets_match_brute_force(&bvh, Vec3::new(0.4, 0.3, 0.5), 0.6);
     }
 
     /// Packets of eight rays from `origin`, fanned downwards by `spread` (some miss), through
-    /// [`Bvh::packets`]: every lane's closest hit and occlusion (also with a `tmax` short of
+    /// both views of `bvh`: every lane's closest hit and occlusion (also with a `tmax` short of
     /// the hit) as brute force gives them.
     fn packets_match_brute_force(bvh: &Bvh, origin: Vec3, spread: f32) {
         let (mut hit, mut missed) = (0, 0);
@@ -461,9 +407,12 @@ mod tests {
             });
             for tmax in [f32::INFINITY, 1.5] {
                 let packet = Ray8::from_origin(origin, &dirs, 0.0, tmax);
-                let mut hits = Hit8::NONE;
-                let hit_lanes = bvh.packets().intersect8(&packet, &mut hits);
-                let blocked = bvh.packets().occluded8(&packet);
+                let (mut hits, mut binary) = (Hit8::NONE, Hit8::NONE);
+                let hit_lanes = intersect8(&bvh.wide(), &packet, &mut hits);
+                assert_eq!(intersect8(&bvh.view(), &packet, &mut binary), hit_lanes);
+                assert_eq!(binary, hits);
+                let blocked = occluded8(&bvh.wide(), &packet);
+                assert_eq!(occluded8(&bvh.view(), &packet), blocked);
                 for (lane, &dir) in dirs.iter().enumerate() {
                     let want = intersect_brute(bvh.tris(), &Ray::new(origin, dir, 0.0, tmax));
                     assert_eq!(hit_lanes >> lane & 1 == 1, want.is_some(), "{k} {lane}");

@@ -13,7 +13,7 @@
 use glam::Vec3;
 use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere};
 use guidebake_kernels::packet::{Ray, offset_origin, triangle_extent};
-use guidebake_kernels::traverse::{BvhRef, intersect1};
+use guidebake_kernels::traverse::{WideRef, intersect1};
 
 use crate::bvh::{Bvh, BvhError, Preset};
 use crate::scene::Scene;
@@ -34,7 +34,7 @@ pub fn facing_sides(scene: &Scene) -> Result<Vec<bool>, BvhError> {
     // Rays per triangle: 8 from each point, on both sides.
     let rays = (POINTS.len() * 8 * 2 * corners.len()) as f64;
     let bvh = Bvh::build(&corners, Preset::for_rays(corners.len(), rays))?;
-    let view = bvh.view();
+    let view = bvh.wide();
     Ok(scene
         .triangles
         .iter()
@@ -50,7 +50,7 @@ pub fn facing_sides(scene: &Scene) -> Result<Vec<bool>, BvhError> {
 }
 
 /// Rays from points of triangle `c` over the hemisphere around `n` that hit nothing.
-fn escaping(bvh: &BvhRef<'_>, c: &[Vec3; 3], n: Vec3) -> u32 {
+fn escaping(bvh: &WideRef<'_>, c: &[Vec3; 3], n: Vec3) -> u32 {
     let (tangent, bitangent) = orthonormal_basis(n);
     let mut misses = 0;
     for [b1, b2] in POINTS {

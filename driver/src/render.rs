@@ -431,7 +431,7 @@ fn shade(
     dir: Vec3,
     cutaway: bool,
 ) -> (Vec3, bool) {
-    let view = stage.bvh.view();
+    let view = stage.bvh.wide();
     let mut tmin = 0.0f32;
     for _ in 0..MAX_PASS_THROUGH {
         let Some(hit) = intersect1(&view, &Ray::new(org, dir, tmin, f32::INFINITY)) else {

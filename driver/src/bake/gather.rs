@@ -39,7 +39,7 @@ use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{
     rotate, rotate_x8, rotation, sobol_2d, sobol_2d_x8, to_unit, to_unit_x8,
 };
-use guidebake_kernels::traverse::intersect1;
+use guidebake_kernels::traverse::{intersect1, intersect8};
 use guidebake_kernels::warp;
 use wide::{f32x8, u32x8};
 
@@ -946,7 +946,7 @@ impl<'a> IterationCtx<'a> {
         let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
         rotated.resize(order.len(), 0);
         reorder_after_rotation_into(order, rot, rotated);
-        let tree = self.world.packets();
+        let tree = self.world.wide_bvh();
         for (j, chunk) in rotated.chunks_exact(LANES).enumerate() {
             let j = j as u32;
             let index = u32x8::new(chunk.try_into().expect("packets of 8"));
@@ -976,7 +976,7 @@ impl<'a> IterationCtx<'a> {
             let origin = self.origin(t, j);
             let packet = Ray8::from_origin(origin, &dirs, 0.0, f32::INFINITY);
             let mut hits = guidebake_kernels::packet::Hit8::NONE;
-            tree.intersect8(&packet, &mut hits);
+            intersect8(&tree, &packet, &mut hits);
             counters.gather_rays += LANES as u64;
             let (ht, hprim) = (hits.t.to_array(), hits.prim.to_array());
             let (hu, hv) = (hits.u.to_array(), hits.v.to_array());

@@ -14,7 +14,7 @@ use guidebake_kernels::traverse::WideRef;
 
 use super::settings::{EmitterSampling, Transport};
 
-use crate::bvh::{Bvh, BvhError, PacketTree, Preset};
+use crate::bvh::{Bvh, BvhError, Preset};
 use crate::scene::texture::{HitAlbedo, VaryingAlbedo};
 use crate::scene::{Scene, Sky};
 use crate::transport::emitters::{EmitterSelection, Emitters};
@@ -190,16 +190,12 @@ impl World {
         }
     }
 
-    /// The tree the 8-ray packets walk (gather and next-event packets): the binary view on
-    /// small worlds, where coherent packets walk it faster, the wide one on big worlds
-    /// ([`Bvh::packets`], docs/traverse.md, "Wide BVH" and "Sizes against Embree").
-    pub fn packets(&self) -> PacketTree<'_> {
-        self.bvh.packets()
-    }
-
-    /// The BVH's wide view, for single rays (shadow rays at hits, path continuations): the
-    /// same hits bit for bit, 1.1–1.4× the binary single-ray walk in the duel, up to 7 %
-    /// less CPU for whole bakes (docs/traverse.md, "The bake's single rays").
+    /// The BVH's wide view, which every ray the bake traces walks: single rays (shadow rays
+    /// at hits, path continuations; 1.1–1.4× the binary single-ray walk in the duel, up to
+    /// 7 % less CPU for whole bakes, docs/traverse.md, "The bake's single rays") and 8-ray
+    /// packets (gather and next-event packets; whole bakes of the three converted rooms
+    /// level or faster than through the binary tree, docs/traverse.md, "The bake's packets
+    /// walk the wide tree").
     pub fn wide_bvh(&self) -> WideRef<'_> {
         self.bvh.wide()
     }

@@ -16,13 +16,12 @@
 
 use glam::Vec3;
 use guidebake_kernels::packet::{LANES, Ray, Ray8, set_lanes};
-use guidebake_kernels::traverse::occluded1;
+use guidebake_kernels::traverse::{WideRef, occluded1, occluded8};
 
 use super::emitters::EmitterSample;
 use crate::bake::directional::{ShSample, add_irradiance_sample, hemisphere};
 use crate::bake::settings::EmitterSampling;
 use crate::bake::world::World;
-use crate::bvh::PacketTree;
 
 /// Shadow rays stop this fraction short of a light at a finite distance, so the light's own
 /// geometry (a sphere light's surface) does not occlude it.
@@ -125,7 +124,7 @@ impl World {
         out: &mut [Vec3; LANES],
         mut sh: Option<&mut [ShSample; LANES]>,
     ) -> u32 {
-        let tree = self.packets();
+        let tree = self.wide_bvh();
         let (p, n) = (at.point, at.normal);
         let mut rays = 0;
         for light in self.lights() {
@@ -245,10 +244,10 @@ fn emitter_irradiance(normal: Vec3, s: &EmitterSample, w: f32) -> Vec3 {
 
 /// Traces `packet`'s live lanes for occlusion: the mask of visible lanes (the unoccluded
 /// traced lanes and every lane of `unshadowed`) and the lanes traced.
-fn visible_lanes(tree: &PacketTree<'_>, packet: &Ray8, unshadowed: u8) -> (u8, u32) {
+fn visible_lanes(tree: &WideRef<'_>, packet: &Ray8, unshadowed: u8) -> (u8, u32) {
     let traced = lanes_traced(packet);
     let blocked = if traced != 0 {
-        tree.occluded8(packet)
+        occluded8(tree, packet)
     } else {
         0
     };
