@@ -194,8 +194,7 @@ impl World {
     /// at hits, path continuations; 1.1–1.4× the binary single-ray walk in the duel, up to
     /// 7 % less CPU for whole bakes, docs/traverse.md, "The bake's single rays") and 8-ray
     /// packets (gather and next-event packets; whole bakes of the three converted rooms
-    /// level or faster than through the binary tree, docs/traverse.md, "The bake's packets
-    /// walk the wide tree").
+    /// level or faster than through the binary tree, docs/traverse.md, "Session 15").
     pub fn wide_bvh(&self) -> WideRef<'_> {
         self.bvh.wide()
     }
