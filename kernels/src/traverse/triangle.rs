@@ -175,6 +175,7 @@ impl Pre8 {
     /// The packet's constants, computed 8-wide with the same IEEE operations as [`Pre::new`]
     /// per lane (so every lane's values equal its scalar [`Pre`]'s bit for bit); untraced
     /// lanes get the stub ray (origin 0, direction +x, `tmin = +∞`).
+    #[inline(always)]
     pub(super) fn new(rays: &Ray8) -> Self {
         let (zero, one) = (f32x8::ZERO, f32x8::ONE);
         let live = rays.traceable() & rays.tmin.simd_ge(zero);
