@@ -7,6 +7,7 @@
 use super::Tri;
 use super::scalar::NEAR_DOWN;
 use crate::packet::{Hit, LANES, NO_HIT, Ray, Ray8, set_lanes};
+use glam::Vec3;
 use wide::{f32x8, u32x8};
 
 /// Per-ray constants of the box and watertight tests.
@@ -165,8 +166,8 @@ pub(super) struct Pre8 {
     pub(super) tmin: f32x8,
     /// `tmin · (1 − 2⁻¹⁸)` for the box test.
     pub(super) tmin_down: f32x8,
-    /// The rays, for [`Pre8::lane`].
-    pub(super) rays: Ray8,
+    /// The directions (the stub's in lanes not traced), for [`Pre8::lane`].
+    pub(super) dir: [f32x8; 3],
     /// Bit mask of traced lanes.
     pub(super) traced: u8,
 }
@@ -239,14 +240,16 @@ impl Pre8 {
             uniform,
             tmin,
             tmin_down: tmin * f32x8::splat(NEAR_DOWN),
-            rays: *rays,
+            dir: d,
             traced,
         }
     }
 
     /// Lane `i`'s scalar constants (for the rare per-lane paths); `i` must be traced.
     pub(super) fn lane(&self, i: usize) -> Pre {
-        Pre::new(&self.rays.lane(i))
+        let at = |v: &[f32x8; 3]| Vec3::from(v.map(|x| x.as_array()[i]));
+        let tmin = self.tmin.as_array()[i];
+        Pre::new(&Ray::new(at(&self.org), at(&self.dir), tmin, f32::INFINITY))
     }
 
     /// Vertex `v` relative to the origin in each lane's permuted axes.
