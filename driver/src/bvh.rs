@@ -8,7 +8,8 @@
 //! [`Tri`]s for the watertight test, and collapses the binary tree into [`WideNode`]s (eight
 //! child boxes per node, same leaves and triangles; [`Bvh::wide`]), which every ray the bake
 //! traces walks, single or in packets (docs/traverse.md, "Session 15: the bake's packets walk
-//! the wide tree on every world"); the binary tree is the collapse's input and the benches' comparator.
+//! the wide tree on every world"); the binary tree ([`Bvh::view`]) is the collapse's input
+//! and the comparator of the benches and tests.
 //! obvhs builds on every core (its `parallel` feature: PLOC and reinsertion through rayon).
 //! The nodes, leaf rows and triangles are then moved to transparent huge pages (`bvh/huge.rs`),
 //! as Embree allocates its BVH: a big world's node visits miss the TLB far less.

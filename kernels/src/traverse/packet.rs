@@ -229,7 +229,7 @@ pub(super) fn walk8<'a>(
 
 /// A packet's constants and its starting `tmax` (`min(tmax, f32::MAX)`, −∞ in lanes not
 /// traced), or `None` when no lane is traced. Inlined with [`Pre8::new`], so the constants
-/// (about 1 KB) are built in place rather than returned through memory: 2–4 % more room
+/// (about 800 bytes) are built in place rather than returned through memory: 2–4 % more room
 /// gather and shadow packets a second (docs/traverse.md, "Session 15").
 #[inline(always)]
 pub(super) fn start8(rays: &Ray8) -> Option<(Pre8, f32x8)> {
