@@ -20,9 +20,15 @@ cc -std=c11 "${cflags[@]}" examples/c/embed.c "$lib/libguidebake_capi.a" "${nati
 cc -std=c11 "${cflags[@]}" examples/c/embed.c -L"$lib" -lguidebake_capi -lm -Wl,-rpath,"$PWD/$lib" -o "$out/embed-c-shared"
 c++ -std=c++17 "${cflags[@]}" examples/cpp/embed.cpp "$lib/libguidebake_capi.a" "${native[@]}" -o "$out/embed-cpp-static"
 c++ -std=c++17 "${cflags[@]}" examples/cpp/embed.cpp -L"$lib" -lguidebake_capi -Wl,-rpath,"$PWD/$lib" -o "$out/embed-cpp-shared"
-# The shared builds really load the .so (not a static copy).
-ldd "$out/embed-c-shared" | grep -q libguidebake_capi.so
-ldd "$out/embed-cpp-shared" | grep -q libguidebake_capi.so
+# The shared builds really load the .so (not a static copy). Not `grep -q`: it exits at the
+# first match, and ldd, still writing, dies of SIGPIPE, which pipefail turns into a silent
+# failure of this script (about 1 run in 600; it failed CI once).
+for exe in embed-c-shared embed-cpp-shared; do
+    if ! ldd "$out/$exe" | grep libguidebake_capi.so >/dev/null; then
+        echo "examples/run.sh: $out/$exe does not load libguidebake_capi.so" >&2
+        exit 1
+    fi
+done
 
 for exe in embed-c-static embed-c-shared embed-cpp-static embed-cpp-shared; do
     "$out/$exe" > "$out/$exe.txt"
