@@ -37,7 +37,8 @@ use glam::{Vec3, Vec3A};
 use guidebake::bvh::{Bvh, Preset};
 use guidebake_kernels::packet::{Hit8, LANES, Ray8};
 use guidebake_kernels::traverse::{
-    LEAF, Layout, Tree, WideNode, intersect_brute, intersect1, intersect8, occluded1, occluded8,
+    BvhRef, LEAF, Layout, Tree, WideNode, intersect_brute, intersect1, intersect8, occluded1,
+    occluded8,
 };
 use obvhs::cwbvh::{CwBvh, builder::build_cwbvh_from_tris};
 use obvhs::ray::{Ray as ORay, RayHit};
@@ -65,8 +66,13 @@ fn preset() -> Preset {
         .unwrap_or(Preset::DEFAULT)
 }
 
+/// The binary tree of a bench's BVH (every bench BVH is built with it, as the comparator).
+fn binary(bvh: &Bvh) -> BvhRef<'_> {
+    bvh.binary().expect("built with the binary tree")
+}
+
 fn scene(name: &'static str, soup: Vec<[Vec3; 3]>, light: Vec3) -> Scene {
-    let bvh = Bvh::build(&soup, preset()).expect("scene BVH");
+    let bvh = Bvh::build_with_binary(&soup, preset()).expect("scene BVH");
     let cw_tris: Vec<Triangle> = soup
         .iter()
         .map(|t| Triangle {
@@ -271,7 +277,7 @@ fn prims_of(view: &impl Tree, packets: &[Ray8]) -> Vec<u32> {
 
 /// Both layouts' packet and scalar traversals against the binary scalar reference.
 fn check_ours(s: &Scene, packets: &[Ray8], reference: &[u32]) {
-    for view in [Layout::Binary(s.bvh.view()), Layout::Wide(s.bvh.wide())] {
+    for view in [Layout::Binary(binary(&s.bvh)), Layout::Wide(s.bvh.wide())] {
         // Brute force on a sample (it is O(triangles) per ray), exact equality everywhere else.
         for p in packets.iter().step_by(packets.len() / 16 + 1) {
             for l in 0..LANES {
@@ -300,16 +306,20 @@ fn bench(c: &mut Criterion) {
     embree_rt::ftz_daz();
     let mut group = c.benchmark_group("traverse");
     for s in scenes() {
-        let view = s.bvh.view();
+        let view = binary(&s.bvh);
         let wide = s.bvh.wide();
         println!(
-            "{}: {} triangles, {} binary nodes, {} wide nodes, {} leaf triangles, build {:?}",
+            "{}: {} triangles, {} binary nodes, {} wide nodes, {} leaf triangles, build {:?}; \
+             {:.1} MB resident as the bake keeps it (wide nodes, leaf rows, triangles), \
+             {:.1} MB more for the binary nodes",
             s.name,
             s.soup.len(),
             view.nodes().len(),
             wide.nodes().len(),
             view.tris().len(),
-            s.bvh.build_time()
+            s.bvh.build_time(),
+            (s.bvh.bytes() - std::mem::size_of_val(view.nodes())) as f64 / 1e6,
+            std::mem::size_of_val(view.nodes()) as f64 / 1e6,
         );
         let (inner, leaves) = wide_sah(wide.nodes());
         println!(
@@ -709,7 +719,7 @@ fn duel(scene: &str, set: &str, entries: &[DuelEntry<'_>], rounds: usize, embree
 fn presets(s: &Scene, packets: &[Ray8]) {
     let built: Vec<(Preset, Bvh)> = Preset::ALL
         .iter()
-        .map(|&p| (p, Bvh::build(&s.soup, p).expect("preset BVH")))
+        .map(|&p| (p, Bvh::build_with_binary(&s.soup, p).expect("preset BVH")))
         .collect();
     report_builds(s.name, &built, packets, 15);
 }
@@ -725,7 +735,7 @@ fn report_builds(name: &str, built: &[(Preset, Bvh)], packets: &[Ray8], rounds: 
             for (layout, rate) in rates[i].iter_mut().enumerate() {
                 let start = Instant::now();
                 if layout == 0 {
-                    black_box(packet8(&bvh.view(), packets));
+                    black_box(packet8(&binary(bvh), packets));
                 } else {
                     black_box(packet8(&bvh.wide(), packets));
                 }
@@ -738,16 +748,16 @@ fn report_builds(name: &str, built: &[(Preset, Bvh)], packets: &[Ray8], rounds: 
             v.sort_by(f64::total_cmp);
             v[v.len() / 2]
         };
-        let [binary, wide] = r;
+        let [binary_rates, wide_rates] = r;
         println!(
             "preset {name} {:>10}: {} triangles, build {:>9.3} s, {} nodes, gather packet8 {:.2} \
              Mrays/s, wide {:.2} Mrays/s (median of {rounds})",
             preset.name(),
             bvh.tris().len(),
             bvh.build_time().as_secs_f64(),
-            bvh.view().nodes().len(),
-            median(binary),
-            median(wide),
+            binary(bvh).nodes().len(),
+            median(binary_rates),
+            median(wide_rates),
         );
     }
 }
@@ -792,7 +802,7 @@ fn sizes() {
         let packets = scenes::gather_packets(&soup, TEXELS, 64, 1);
         let built: Vec<(Preset, Bvh)> = wanted
             .iter()
-            .map(|&p| (p, Bvh::build(&soup, p).expect("BVH")))
+            .map(|&p| (p, Bvh::build_with_binary(&soup, p).expect("BVH")))
             .collect();
         report_builds(&name, &built, &packets, 5);
         #[cfg(feature = "embree")]

@@ -587,11 +587,13 @@ pub fn traverse(data: &[u8]) {
     }
 
     let corners: Vec<[_; 3]> = soup.iter().map(|t| t.map(Into::into)).collect();
-    let bvh = match Bvh::build(&corners, preset) {
+    let bvh = match Bvh::build_with_binary(&corners, preset) {
         Ok(bvh) => bvh,
         Err(e) => panic!("finite triangles build a BVH: {e}"),
     };
-    let view = bvh.view();
+    let Some(view) = bvh.binary() else {
+        panic!("build_with_binary keeps the binary tree")
+    };
     let tris: Vec<Tri> = corners
         .iter()
         .enumerate()

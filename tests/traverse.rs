@@ -16,9 +16,11 @@ use guidebake_kernels::traverse::{
     occluded1, occluded8, occlusion_allowed,
 };
 
-/// The binary and the wide view of `bvh`: every check runs on both.
+/// The binary and the wide view of `bvh` (built with [`Bvh::build_with_binary`]): every
+/// check runs on both.
 fn layouts(bvh: &Bvh) -> [Layout<'_>; 2] {
-    [Layout::Binary(bvh.view()), Layout::Wide(bvh.wide())]
+    let binary = bvh.binary().expect("built with the binary tree");
+    [Layout::Binary(binary), Layout::Wide(bvh.wide())]
 }
 
 /// [`check_layout`] on both layouts of `bvh`; the rays that hit.
@@ -135,7 +137,7 @@ fn random_soups_every_preset_match_the_oracle() {
         let soup = random_soup(&mut rng, count, scale, Vec3::ZERO);
         let packets = random_packets(&mut rng, 60, scale, Vec3::ZERO);
         for preset in Preset::ALL {
-            let bvh = Bvh::build(&soup, preset).unwrap();
+            let bvh = Bvh::build_with_binary(&soup, preset).unwrap();
             let hits = check_packets(&bvh, &packets, &format!("{count} tris, {preset:?}"));
             if count >= 300 {
                 assert!(hits > 20, "the ray set must exercise hits ({hits})");
@@ -150,7 +152,7 @@ fn origins_at_1e6_match_the_oracle() {
     let offset = Vec3::new(1.0e6, -1.0e6, 1.0e6);
     let soup = random_soup(&mut rng, 500, 20.0, offset);
     let packets = random_packets(&mut rng, 80, 20.0, offset);
-    let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
+    let bvh = Bvh::build_with_binary(&soup, Preset::DEFAULT).unwrap();
     assert!(check_packets(&bvh, &packets, "1e6") > 20);
 }
 
@@ -158,7 +160,7 @@ fn origins_at_1e6_match_the_oracle() {
 fn non_finite_zero_and_negative_tmin_rays_never_hit_and_leave_lanes_untouched() {
     let mut rng = Pcg32::new(9, 3);
     let soup = random_soup(&mut rng, 200, 1.0, Vec3::ZERO);
-    let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
+    let bvh = Bvh::build_with_binary(&soup, Preset::DEFAULT).unwrap();
     for view in layouts(&bvh) {
         let good = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, 0.0, f32::INFINITY);
         let bad = [
@@ -219,7 +221,7 @@ fn non_finite_zero_and_negative_tmin_rays_never_hit_and_leave_lanes_untouched() 
 fn inactive_lanes_with_1_to_8_active_come_back_untouched() {
     let mut rng = Pcg32::new(12, 4);
     let soup = random_soup(&mut rng, 400, 4.0, Vec3::ZERO);
-    let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
+    let bvh = Bvh::build_with_binary(&soup, Preset::DEFAULT).unwrap();
     for view in layouts(&bvh) {
         let sentinel = Hit {
             t: 99.0,
@@ -318,7 +320,7 @@ fn rays_through_shared_edges_and_vertices_of_a_closed_mesh_never_miss() {
         (Vec3::new(1.0e6, 2.5e5, -1.0e6), 3.0),
     ] {
         let mesh = closed_mesh(&mut rng, 3, center, radius);
-        let bvh = Bvh::build(&mesh, Preset::DEFAULT).unwrap();
+        let bvh = Bvh::build_with_binary(&mesh, Preset::DEFAULT).unwrap();
         for view in layouts(&bvh) {
             let mut misses = 0;
             let mut rays = Vec::new();
@@ -368,7 +370,7 @@ fn grazing_rays_match_the_oracle() {
                 soup.push([p(0.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)]);
             }
         }
-        let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
+        let bvh = Bvh::build_with_binary(&soup, Preset::DEFAULT).unwrap();
         let packets: Vec<Ray8> = (0..100)
             .map(|_| {
                 let rays: [Ray; LANES] = std::array::from_fn(|_| {
@@ -403,7 +405,7 @@ fn converted_scenes_match_the_oracle() {
         let shadow = scenes::shadow_packets(&soup, soup[0][0] + Vec3::splat(0.1), 0.2, 24, 2);
         let random = scenes::incoherent_packets(&soup, 24, 3);
         for preset in Preset::ALL {
-            let bvh = Bvh::build(&soup, preset).unwrap();
+            let bvh = Bvh::build_with_binary(&soup, preset).unwrap();
             let what = format!("{name} {preset:?}");
             let hits = check_packets(&bvh, &gather, &format!("{what} gather"));
             // Surfaces are two-sided and origins face a random side, so rays leaving the
@@ -424,7 +426,7 @@ fn offset_origins_avoid_self_intersection_at_1e6() {
         Vec3::new(1.0e6, -1.0e6, 1.0e6),
     ] {
         let soup = random_soup(&mut rng, 300, 8.0, offset);
-        let bvh = Bvh::build(&soup, Preset::DEFAULT).unwrap();
+        let bvh = Bvh::build_with_binary(&soup, Preset::DEFAULT).unwrap();
         for view in layouts(&bvh) {
             let (mut self_hits, mut raw_self_hits) = (0, 0);
             for s in scenes::surface_points(&soup, 20000, 8) {
@@ -533,7 +535,7 @@ fn corner_rays_of_a_bake_keep_the_contract_on_both_layouts() {
     }
     for (name, soup) in &soups {
         let packets = corner_packets(soup, 3000, 17);
-        let bvh = Bvh::build(soup, Preset::DEFAULT).unwrap();
+        let bvh = Bvh::build_with_binary(soup, Preset::DEFAULT).unwrap();
         for view in layouts(&bvh) {
             let what = format!(
                 "{name} {}",
@@ -585,14 +587,19 @@ fn a_hit_behind_the_origin_rounded_ahead_of_it_is_allowed_either_way() {
         0.0,
         f32::INFINITY,
     );
-    let near = intersect_brute(Bvh::build(&soup, Preset::DEFAULT).unwrap().tris(), &ray);
+    let near = intersect_brute(
+        Bvh::build_with_binary(&soup, Preset::DEFAULT)
+            .unwrap()
+            .tris(),
+        &ray,
+    );
     // The exact crossing lies behind the origin: a triangle test that gets t's sign right
     // makes brute force miss the sliver, and these asserts go.
     let near = near.expect("brute force reports the sliver");
     assert_eq!(near.prim, 200, "{near:?}");
     assert!(near.t > 0.0 && near.t < 1.0e-5, "{near:?}");
     for preset in Preset::ALL {
-        let bvh = Bvh::build(&soup, preset).unwrap();
+        let bvh = Bvh::build_with_binary(&soup, preset).unwrap();
         for view in layouts(&bvh) {
             let packet = Ray8::from_origin(ray.org, &[ray.dir; LANES], 0.0, f32::INFINITY);
             check_contract(&view, &[packet], &format!("{preset:?}"));

@@ -8,8 +8,10 @@
 //! [`Tri`]s for the watertight test, and collapses the binary tree into [`WideNode`]s (eight
 //! child boxes per node, same leaves and triangles; [`Bvh::wide`]), which every ray the bake
 //! traces walks, single or in packets (docs/traverse.md, "Session 15: the bake's packets walk
-//! the wide tree on every world"); the binary tree ([`Bvh::view`]) is the collapse's input
-//! and the comparator of the benches and tests.
+//! the wide tree on every world"). The binary tree is the collapse's input; [`Bvh::build`]
+//! drops it afterwards (an eighth of the resident tree on the 1M-triangle city: 15.6 of 123 MB,
+//! [`Bvh::bytes`]), and [`Bvh::build_with_binary`] keeps it ([`Bvh::binary`]) as the
+//! comparator of the benches and tests.
 //! obvhs builds on every core (its `parallel` feature: PLOC and reinsertion through rayon).
 //! The nodes, leaf rows and triangles are then moved to transparent huge pages (`bvh/huge.rs`),
 //! as Embree allocates its BVH: a big world's node visits miss the TLB far less.
@@ -144,7 +146,8 @@ pub enum BvhError {
 #[derive(Clone, Debug)]
 pub struct Bvh {
     // On huge pages when big enough ([`huge`]).
-    nodes: HugeSlice<Node>,
+    /// The binary tree, kept only by [`Bvh::build_with_binary`].
+    binary: Option<HugeSlice<Node>>,
     wide: HugeSlice<WideNode>,
     /// The triangles as structure-of-arrays rows per wide leaf ([`leaf_rows`]).
     rows: HugeSlice<f32>,
@@ -154,7 +157,8 @@ pub struct Bvh {
 }
 
 impl Bvh {
-    /// Builds a BVH over `soup` (primitive id = index) with obvhs and flattens it.
+    /// Builds a BVH over `soup` (primitive id = index) with obvhs, flattens it and collapses
+    /// it into the wide layout the bake walks; the binary tree is dropped.
     ///
     /// An empty soup gives a valid tree that every ray misses.
     ///
@@ -162,49 +166,55 @@ impl Bvh {
     /// [`BvhError::NonFinite`] for a NaN/∞ vertex, [`BvhError::TooMany`] past `u32::MAX − 1`
     /// triangles, [`BvhError::Layout`] if the tree is deeper than the kernels' stack.
     pub fn build(soup: &[[Vec3; 3]], preset: Preset) -> Result<Self, BvhError> {
+        Self::build_keeping(soup, preset, false)
+    }
+
+    /// [`Bvh::build`] that also keeps the binary tree ([`Bvh::binary`]): the comparator of
+    /// the benches and tests, and of embedders walking the binary layout.
+    ///
+    /// # Errors
+    /// As [`Bvh::build`].
+    pub fn build_with_binary(soup: &[[Vec3; 3]], preset: Preset) -> Result<Self, BvhError> {
+        Self::build_keeping(soup, preset, true)
+    }
+
+    fn build_keeping(
+        soup: &[[Vec3; 3]],
+        preset: Preset,
+        keep_binary: bool,
+    ) -> Result<Self, BvhError> {
         check_soup(soup)?;
         let start = Instant::now();
-        let triangles: Vec<Triangle> = soup
-            .iter()
-            .map(|t| Triangle {
-                v0: Vec3A::from(t[0]),
-                v1: Vec3A::from(t[1]),
-                v2: Vec3A::from(t[2]),
-            })
-            .collect();
-        let mut core = Duration::ZERO;
-        let bvh2 = if soup.is_empty() {
-            None
-        } else {
-            Some(build_bvh2_from_tris(&triangles, preset.params(), &mut core))
-        };
-        let (nodes, tris) = match &bvh2 {
-            None => (vec![Node::EMPTY], Vec::new()),
-            Some(bvh2) => flatten(bvh2, soup),
-        };
-        let binary = BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
-        let wide = collapse(&binary);
-        let rows = leaf_rows(&wide, &tris);
+        // Each array is dropped, or moved to huge pages, as soon as the next step allows: a
+        // big world's build peaks at the sum of what is alive at once.
+        let (nodes, tris) = obvhs_flattened(soup, preset);
+        let tris = HugeSlice::new(tris);
+        let tree = BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
+        let wide = collapse(&tree);
+        let binary = keep_binary.then(|| HugeSlice::new(nodes));
+        let wide = HugeSlice::new(wide);
+        let rows = HugeSlice::new(leaf_rows(&wide, &tris));
         WideRef::new(&wide, &tris, &rows).map_err(BvhError::Layout)?;
         Ok(Self {
-            nodes: HugeSlice::new(nodes),
-            wide: HugeSlice::new(wide),
-            rows: HugeSlice::new(rows),
-            tris: HugeSlice::new(tris),
+            binary,
+            wide,
+            rows,
+            tris,
             build_time: start.elapsed(),
             preset,
         })
     }
 
     /// The binary view for [`guidebake_kernels::traverse`]'s functions (two child boxes per
-    /// node). Cheap: `build` validated the layout.
-    pub fn view(&self) -> BvhRef<'_> {
-        // `build` validated this exact layout and nothing mutates it since.
-        BvhRef::new_trusted(&self.nodes, &self.tris)
+    /// node) when built by [`Bvh::build_with_binary`]. Cheap: the build validated the layout.
+    pub fn binary(&self) -> Option<BvhRef<'_>> {
+        // The build validated this exact layout and nothing mutates it since.
+        let nodes = self.binary.as_ref()?;
+        Some(BvhRef::new_trusted(nodes, &self.tris))
     }
 
     /// The wide view (eight child boxes per node, collapsed from the binary tree, same
-    /// triangles). Same results as [`Bvh::view`], bit for bit, wherever every hit lies inside
+    /// triangles). Same results as [`Bvh::binary`], bit for bit, wherever every hit lies inside
     /// its leaf's box (the kernels' `traverse` docs, "Hits outside their own box": rays that
     /// start within ulps of a triangle's plane). Cheap: `build` validated it.
     pub fn wide(&self) -> WideRef<'_> {
@@ -216,17 +226,24 @@ impl Bvh {
         &self.wide
     }
 
-    /// Nodes, root first.
-    pub fn nodes(&self) -> &[Node] {
-        &self.nodes
-    }
-
     /// Triangles in leaf order.
     pub fn tris(&self) -> &[Tri] {
         &self.tris
     }
 
-    /// Wall time of [`Bvh::build`] (obvhs build, flattening and collapsing).
+    /// Bytes the tree holds: wide nodes, leaf rows, triangles, and the binary nodes if kept.
+    pub fn bytes(&self) -> usize {
+        let size = |bytes: &[u8]| bytes.len();
+        size(bytemuck::cast_slice(&self.wide))
+            + size(bytemuck::cast_slice(&self.rows))
+            + size(bytemuck::cast_slice(&self.tris))
+            + self
+                .binary
+                .as_ref()
+                .map_or(0, |b| size(bytemuck::cast_slice(b)))
+    }
+
+    /// Wall time of the build (obvhs build, flattening and collapsing).
     pub fn build_time(&self) -> Duration {
         self.build_time
     }
@@ -251,6 +268,26 @@ fn check_soup(soup: &[[Vec3; 3]]) -> Result<(), BvhError> {
         }
     }
     Ok(())
+}
+
+/// obvhs's tree over `soup`, flattened ([`flatten`]); obvhs's tree and its copy of the
+/// triangles are dropped on return.
+fn obvhs_flattened(soup: &[[Vec3; 3]], preset: Preset) -> (Vec<Node>, Vec<Tri>) {
+    if soup.is_empty() {
+        return (vec![Node::EMPTY], Vec::new());
+    }
+    let triangles: Vec<Triangle> = soup
+        .iter()
+        .map(|t| Triangle {
+            v0: Vec3A::from(t[0]),
+            v1: Vec3A::from(t[1]),
+            v2: Vec3A::from(t[2]),
+        })
+        .collect();
+    let mut core = Duration::ZERO;
+    let bvh2 = build_bvh2_from_tris(&triangles, preset.params(), &mut core);
+    drop(triangles);
+    flatten(&bvh2, soup)
 }
 
 /// Flattens obvhs's binary tree (children of inner node `i` at `first_index` and
@@ -361,12 +398,15 @@ mod tests {
     #[test]
     fn empty_and_single_triangle_soups_trace() {
         let ray = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
-        let empty = Bvh::build(&[], Preset::DEFAULT).unwrap();
-        assert_eq!(intersect1(&empty.view(), &ray), None);
+        let empty = Bvh::build_with_binary(&[], Preset::DEFAULT).unwrap();
+        assert_eq!(intersect1(&empty.binary().unwrap(), &ray), None);
         assert_eq!(intersect1(&empty.wide(), &ray), None);
-        let one = Bvh::build(&quad()[..1], Preset::DEFAULT).unwrap();
-        assert_eq!(intersect1(&one.wide(), &ray), intersect1(&one.view(), &ray));
-        let hit = intersect1(&one.view(), &ray).unwrap();
+        let one = Bvh::build_with_binary(&quad()[..1], Preset::DEFAULT).unwrap();
+        assert_eq!(
+            intersect1(&one.wide(), &ray),
+            intersect1(&one.binary().unwrap(), &ray)
+        );
+        let hit = intersect1(&one.binary().unwrap(), &ray).unwrap();
         assert_eq!((hit.prim, hit.t), (0, 1.0));
     }
 
@@ -378,12 +418,12 @@ mod tests {
                 [p, p + Vec3::X, p + Vec3::Y]
             })
             .collect();
-        let bvh = Bvh::build(&grid, Preset::FastBuild).unwrap();
-        assert!(bvh.wide_nodes().len() * 2 < bvh.nodes().len());
+        let bvh = Bvh::build_with_binary(&grid, Preset::FastBuild).unwrap();
+        assert!(bvh.wide_nodes().len() * 2 < bvh.binary().unwrap().nodes().len());
         for i in 0..200 {
             let o = Vec3::new(i as f32 * 2.3 % 512.0, i as f32 * 1.7 % 256.0, 5.0);
             let ray = Ray::new(o, Vec3::new(0.3, -0.2, -1.0), 0.0, f32::INFINITY);
-            let want = intersect1(&bvh.view(), &ray);
+            let want = intersect1(&bvh.binary().unwrap(), &ray);
             assert_eq!(intersect1(&bvh.wide(), &ray), want);
             assert_eq!(want, intersect_brute(bvh.tris(), &ray));
         }
@@ -391,8 +431,34 @@ mod tests {
     }
 
     #[test]
+    fn the_bake_s_tree_drops_the_binary_nodes_and_traces_the_same() {
+        let grid: Vec<[Vec3; 3]> = (0..1 << 12)
+            .map(|i| {
+                let p = Vec3::new((i % 64) as f32, (i / 64) as f32, (i % 5) as f32 * 0.2);
+                [p, p + Vec3::X, p + Vec3::Y]
+            })
+            .collect();
+        let bake = Bvh::build(&grid, Preset::DEFAULT).unwrap();
+        let both = Bvh::build_with_binary(&grid, Preset::DEFAULT).unwrap();
+        assert!(bake.binary().is_none());
+        let binary = both.binary().unwrap().nodes();
+        assert!(binary.len() > 1000);
+        assert_eq!(both.bytes() - bake.bytes(), std::mem::size_of_val(binary));
+        assert_eq!(bake.wide_nodes(), both.wide_nodes());
+        assert_eq!(bake.tris(), both.tris());
+        for i in 0..100 {
+            let o = Vec3::new(i as f32 * 0.61 % 64.0, i as f32 * 0.37 % 64.0, 3.0);
+            let ray = Ray::new(o, Vec3::new(0.2, 0.1, -1.0), 0.0, f32::INFINITY);
+            assert_eq!(
+                intersect1(&bake.wide(), &ray),
+                intersect_brute(bake.tris(), &ray)
+            );
+        }
+    }
+
+    #[test]
     fn packets_through_the_wide_tree_of_a_small_world_match_brute_force() {
-        let bvh = Bvh::build(&quad(), Preset::FastBuild).unwrap();
+        let bvh = Bvh::build_with_binary(&quad(), Preset::FastBuild).unwrap();
         packets_match_brute_force(&bvh, Vec3::new(0.4, 0.3, 0.5), 0.6);
     }
 
@@ -410,10 +476,13 @@ mod tests {
                 let packet = Ray8::from_origin(origin, &dirs, 0.0, tmax);
                 let (mut hits, mut binary) = (Hit8::NONE, Hit8::NONE);
                 let hit_lanes = intersect8(&bvh.wide(), &packet, &mut hits);
-                assert_eq!(intersect8(&bvh.view(), &packet, &mut binary), hit_lanes);
+                assert_eq!(
+                    intersect8(&bvh.binary().unwrap(), &packet, &mut binary),
+                    hit_lanes
+                );
                 assert_eq!(binary, hits);
                 let blocked = occluded8(&bvh.wide(), &packet);
-                assert_eq!(occluded8(&bvh.view(), &packet), blocked);
+                assert_eq!(occluded8(&bvh.binary().unwrap(), &packet), blocked);
                 for (lane, &dir) in dirs.iter().enumerate() {
                     let want = intersect_brute(bvh.tris(), &Ray::new(origin, dir, 0.0, tmax));
                     assert_eq!(hit_lanes >> lane & 1 == 1, want.is_some(), "{k} {lane}");
@@ -436,18 +505,21 @@ mod tests {
     fn every_preset_keeps_every_triangle() {
         let soup = quad();
         for preset in Preset::ALL {
-            let bvh = Bvh::build(&soup, preset).unwrap();
+            let bvh = Bvh::build_with_binary(&soup, preset).unwrap();
             let mut prims: Vec<u32> = bvh.tris().iter().map(|t| t.prim).collect();
             prims.sort_unstable();
             prims.dedup();
             assert_eq!(prims, [0, 1], "{preset:?}");
             let ray = Ray::new(Vec3::new(0.7, 0.7, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
             assert_eq!(
-                intersect1(&bvh.view(), &ray),
+                intersect1(&bvh.binary().unwrap(), &ray),
                 intersect_brute(bvh.tris(), &ray)
             );
-            assert_eq!(intersect1(&bvh.view(), &ray).unwrap().prim, 1);
-            assert_eq!(intersect1(&bvh.wide(), &ray), intersect1(&bvh.view(), &ray));
+            assert_eq!(intersect1(&bvh.binary().unwrap(), &ray).unwrap().prim, 1);
+            assert_eq!(
+                intersect1(&bvh.wide(), &ray),
+                intersect1(&bvh.binary().unwrap(), &ray)
+            );
         }
     }
 }
