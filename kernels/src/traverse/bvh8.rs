@@ -27,7 +27,7 @@
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
-use super::triangle::{PRIM_ROW, Pre1x8, ROWS};
+use super::triangle::{PRIM_ROW, Pre1x8, ROWS, RowTri};
 use super::{FAR_FLOOR, FAR_UP, LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor};
 use crate::packet::{LANES, set_lanes};
 use bytemuck::{Pod, Zeroable};
@@ -810,17 +810,10 @@ pub(super) fn walk8<'a>(
             (e, nearest[slot], met[slot] as u8)
         };
         // The pushed entries are prefetched: the walk comes back to them after the nearest
-        // subtree (+2-6 % on the gather packets, docs/traverse.md); a leaf in the form its
-        // test will read ([`rows_for`], decided by the lanes met: at most those are live
-        // when it is popped).
+        // subtree (+2-6 % on the gather packets, docs/traverse.md).
         for &k in &keys[..n.saturating_sub(1)] {
             let pushed = entry(k);
-            let (c, m) = (pushed.0 as u32, (pushed.0 >> 32) as u32);
-            if m == 0 || rows_for(pushed.2, m) {
-                prefetch_entry(bvh, pushed.0);
-            } else if let Some(first) = bvh.tris.get(c as usize) {
-                prefetch(first);
-            }
+            prefetch_entry(bvh, pushed.0);
             stack.push(pushed);
         }
         let mut next = (n > 0).then(|| entry(keys[n - 1]));
@@ -849,10 +842,12 @@ pub(super) fn walk8<'a>(
                 break;
             }
             let n = (meta & !LEAF) as usize;
+            let rows = bvh.leaf_rows(child);
             tmax = if rows_for(live, meta) {
-                visitor.rows1(bvh.leaf_rows(child), n, live)
+                visitor.rows1(rows, n, live)
             } else {
-                visitor.leaf8(bvh.leaf(child, meta))
+                let leaf = &rows[..ROWS * n];
+                visitor.leaf8((0..n).map(|i| RowTri { leaf, n, i }))
             };
             alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
             if alive == 0 {

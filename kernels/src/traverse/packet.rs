@@ -7,9 +7,9 @@
 
 use super::scalar::{FAR_FLOOR, FAR_UP};
 use super::triangle::{
-    Best8, Pre1x8, Pre8, closest_rows, closest8, occludes_rows, occludes8, set_lane,
+    Best8, Pre1x8, Pre8, TriAt, closest_rows, closest8, occludes_rows, occludes8, set_lane,
 };
-use super::{BvhRef, Node, STACK, Tri};
+use super::{BvhRef, Node, STACK};
 use crate::packet::{Ray8, set_lanes};
 use wide::f32x8;
 
@@ -79,8 +79,9 @@ impl Pre8 {
 
 /// What a packet walk does at a leaf.
 pub(super) trait Visitor<'a> {
-    /// Tests a leaf for the packet; returns the packet's new `tmax` (−∞ in finished lanes).
-    fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8;
+    /// Tests a leaf's triangles for the packet, eight lanes per test; returns the packet's
+    /// new `tmax` (−∞ in finished lanes).
+    fn leaf8<T: TriAt>(&mut self, leaf: impl Iterator<Item = T>) -> f32x8;
 
     /// Tests the wide leaf of `n` triangles whose rows start at `rows[0]` for each lane of
     /// `lanes`, eight triangles per pass; returns the packet's new `tmax`.
@@ -95,7 +96,7 @@ pub(super) struct Closest<'p> {
 
 impl<'a> Visitor<'a> for Closest<'_> {
     #[inline(always)]
-    fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8 {
+    fn leaf8<T: TriAt>(&mut self, leaf: impl Iterator<Item = T>) -> f32x8 {
         for tri in leaf {
             closest8(self.pre, tri, &mut self.best);
         }
@@ -128,7 +129,7 @@ pub(super) struct Occlusion<'p> {
 
 impl<'a> Visitor<'a> for Occlusion<'_> {
     #[inline(always)]
-    fn leaf8(&mut self, leaf: &'a [Tri]) -> f32x8 {
+    fn leaf8<T: TriAt>(&mut self, leaf: impl Iterator<Item = T>) -> f32x8 {
         for tri in leaf {
             let bits = occludes8(self.pre, tri, self.tmax);
             if bits != 0 {
@@ -182,7 +183,7 @@ pub(super) fn walk8<'a>(
         sp -= 1;
         let (child, meta, lanes) = (stack[sp] as u32, (stack[sp] >> 32) as u32, lanes_of[sp]);
         if meta != 0 {
-            tmax = visitor.leaf8(bvh.leaf(child, meta));
+            tmax = visitor.leaf8(bvh.leaf(child, meta).iter());
             alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
             if alive == 0 {
                 return;

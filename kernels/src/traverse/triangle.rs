@@ -252,18 +252,19 @@ impl Pre8 {
         Pre::new(&Ray::new(at(&self.org), at(&self.dir), tmin, f32::INFINITY))
     }
 
-    /// Vertex `v` relative to the origin in each lane's permuted axes.
+    /// Vertex `v` (its coordinate on each axis) relative to the origin in each lane's
+    /// permuted axes.
     #[inline(always)]
-    pub(super) fn rel(&self, v: &[f32; 3]) -> [f32x8; 3] {
+    pub(super) fn rel(&self, v: impl Fn(usize) -> f32) -> [f32x8; 3] {
         match self.uniform {
-            Some(k) => [0, 1, 2].map(|i| f32x8::splat(v[k[i]]) - self.porg[i]),
+            Some(k) => [0, 1, 2].map(|i| f32x8::splat(v(k[i])) - self.porg[i]),
             // One lane-wise permute per axis (`vpermps`: each lane takes `v[k[i]]`) in
             // place of two blends (docs/traverse.md, session 14); the same values.
             #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
             None => {
                 use core::arch::x86_64::{__m256, _mm256_permutevar8x32_ps};
                 let v: __m256 =
-                    bytemuck::cast(f32x8::from([v[0], v[1], v[2], 0.0, 0.0, 0.0, 0.0, 0.0]));
+                    bytemuck::cast(f32x8::from([v(0), v(1), v(2), 0.0, 0.0, 0.0, 0.0, 0.0]));
                 [0, 1, 2].map(|i| {
                     // SAFETY: AVX2 is enabled at compile time (the `cfg` above), so `vpermps`
                     // exists on every CPU this code runs on.
@@ -273,7 +274,7 @@ impl Pre8 {
             }
             #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
             None => {
-                let c = v.map(f32x8::splat);
+                let c = [0, 1, 2].map(|a| f32x8::splat(v(a)));
                 [0, 1, 2].map(|i| {
                     let is =
                         |j: u32| bytemuck::cast::<u32x8, f32x8>(self.k[i].simd_eq(u32x8::splat(j)));
@@ -286,10 +287,10 @@ impl Pre8 {
     /// [`tri1`] for eight lanes: `(t, U, V, W, det, ok)` where `ok` marks lanes with a hit
     /// computed in `f32`, and `zero` lanes that need the scalar `f64` fallback.
     #[inline(always)]
-    pub(super) fn tri8(&self, tri: &Tri) -> Tri8 {
-        let a = self.rel(&tri.v[0]);
-        let b = self.rel(&tri.v[1]);
-        let c = self.rel(&tri.v[2]);
+    pub(super) fn tri8(&self, tri: impl TriAt) -> Tri8 {
+        let a = self.rel(|axis| tri.at(0, axis));
+        let b = self.rel(|axis| tri.at(1, axis));
+        let c = self.rel(|axis| tri.at(2, axis));
         watertight8(a, b, c, &self.s)
     }
 }
@@ -353,7 +354,7 @@ impl Best8 {
 }
 
 #[inline(always)]
-pub(super) fn closest8(pre: &Pre8, tri: &Tri, best: &mut Best8) {
+pub(super) fn closest8(pre: &Pre8, tri: impl TriAt, best: &mut Best8) {
     let r = pre.tri8(tri);
     let live = pre.tmin.simd_le(best.t);
     if !((r.ok | r.any_zero) & live).any() {
@@ -367,12 +368,12 @@ pub(super) fn closest8(pre: &Pre8, tri: &Tri, best: &mut Best8) {
         best.t = strict.bitselect(t, best.t);
         best.u = strict.bitselect(r.v / r.det, best.u);
         best.v = strict.bitselect(r.w / r.det, best.v);
-        best.prim = m.bitselect(u32x8::splat(tri.prim), best.prim);
+        best.prim = m.bitselect(u32x8::splat(tri.prim()), best.prim);
     }
     // Rare lanes: exact ties on t (tie rule) and zero edge functions (f64 fallback).
     let rare = ((cand & !strict) | (r.any_zero & live)).to_bitmask();
     if rare != 0 {
-        closest8_rare(pre, tri, best, rare as u8);
+        closest8_rare(pre, &tri.tri(), best, rare as u8);
     }
 }
 
@@ -398,7 +399,7 @@ pub(super) fn set_lane(best: &mut Best8, i: usize, hit: &Hit) {
 
 /// Lanes `tri` blocks on `[tmin, tmax]`, as a bit mask.
 #[inline(always)]
-pub(super) fn occludes8(pre: &Pre8, tri: &Tri, tmax: f32x8) -> u8 {
+pub(super) fn occludes8(pre: &Pre8, tri: impl TriAt, tmax: f32x8) -> u8 {
     let r = pre.tri8(tri);
     if !(r.ok | r.any_zero).any() {
         return 0;
@@ -408,7 +409,7 @@ pub(super) fn occludes8(pre: &Pre8, tri: &Tri, tmax: f32x8) -> u8 {
     let mut bits = hit.to_bitmask() as u8;
     let zero = (r.any_zero & pre.tmin.simd_le(tmax)).to_bitmask() as u8;
     if zero != 0 {
-        bits |= occludes8_rare(pre, tri, tmax, zero);
+        bits |= occludes8_rare(pre, &tri.tri(), tmax, zero);
     }
     bits
 }
@@ -432,6 +433,61 @@ pub(super) const ROWS: usize = 10;
 
 /// Row of the primitive ids.
 pub(super) const PRIM_ROW: usize = 9;
+
+/// A triangle eight rays are tested against ([`Pre8::tri8`]): a [`Tri`], or one triangle of
+/// a leaf's rows ([`RowTri`]), read where it lies.
+pub(super) trait TriAt: Copy {
+    /// Vertex `c`'s coordinate on axis `a`.
+    fn at(self, c: usize, a: usize) -> f32;
+    /// The primitive id.
+    fn prim(self) -> u32;
+    /// The triangle as a [`Tri`] (for the rare lanes' scalar paths).
+    fn tri(self) -> Tri;
+}
+
+impl TriAt for &Tri {
+    #[inline(always)]
+    fn at(self, c: usize, a: usize) -> f32 {
+        self.v[c][a]
+    }
+
+    #[inline(always)]
+    fn prim(self) -> u32 {
+        self.prim
+    }
+
+    fn tri(self) -> Tri {
+        *self
+    }
+}
+
+/// Triangle `i` of the leaf of `n` triangles whose rows are `leaf` (`ROWS · n` values).
+#[derive(Clone, Copy)]
+pub(super) struct RowTri<'a> {
+    pub(super) leaf: &'a [f32],
+    pub(super) n: usize,
+    pub(super) i: usize,
+}
+
+impl TriAt for RowTri<'_> {
+    #[inline(always)]
+    fn at(self, c: usize, a: usize) -> f32 {
+        self.leaf[(3 * c + a) * self.n + self.i]
+    }
+
+    #[inline(always)]
+    fn prim(self) -> u32 {
+        self.leaf[PRIM_ROW * self.n + self.i].to_bits()
+    }
+
+    fn tri(self) -> Tri {
+        Tri {
+            v: [0, 1, 2].map(|c| [0, 1, 2].map(|a| self.at(c, a))),
+            prim: self.prim(),
+            pad: [0; 2],
+        }
+    }
+}
 
 /// One ray's watertight-test constants splatted over eight triangles.
 #[derive(Debug, PartialEq)]
