@@ -12,9 +12,15 @@ use guidebake::bvh::{Bvh, Preset};
 use guidebake_kernels::packet::{Hit, Hit8, LANES, Ray, Ray8, offset_origin, triangle_extent};
 use guidebake_kernels::testing::Pcg32;
 use guidebake_kernels::traverse::{
-    Layout, closest_hit_allowed, intersect_brute, intersect1, intersect8, occluded_brute,
+    Layout, Tri, closest_hit_allowed, intersect_brute, intersect1, intersect8, occluded_brute,
     occluded1, occluded8, occlusion_allowed,
 };
+
+/// The triangles of `bvh`'s binary tree, in leaf order (built with
+/// [`Bvh::build_with_binary`]): brute force's input.
+fn tris(bvh: &Bvh) -> &[Tri] {
+    bvh.binary().expect("built with the binary tree").tris()
+}
 
 /// The binary and the wide view of `bvh` (built with [`Bvh::build_with_binary`]): every
 /// check runs on both.
@@ -26,13 +32,18 @@ fn layouts(bvh: &Bvh) -> [Layout<'_>; 2] {
 /// [`check_layout`] on both layouts of `bvh`; the rays that hit.
 fn check_packets(bvh: &Bvh, packets: &[Ray8], what: &str) -> usize {
     let [binary, wide] = layouts(bvh);
-    let hits = check_layout(&binary, packets, &format!("{what}, binary"));
-    assert_eq!(check_layout(&wide, packets, &format!("{what}, wide")), hits);
+    let tris = tris(bvh);
+    let hits = check_layout(&binary, tris, packets, &format!("{what}, binary"));
+    assert_eq!(
+        check_layout(&wide, tris, packets, &format!("{what}, wide")),
+        hits
+    );
     hits
 }
 
-/// Compares every lane of every packet with the scalar traversal and the oracle.
-fn check_layout(bvh: &Layout<'_>, packets: &[Ray8], what: &str) -> usize {
+/// Compares every lane of every packet with the scalar traversal and the oracle (brute force
+/// over `tris`, the tree's triangles).
+fn check_layout(bvh: &Layout<'_>, tris: &[Tri], packets: &[Ray8], what: &str) -> usize {
     let mut hits_seen = 0;
     for (p, packet) in packets.iter().enumerate() {
         let mut hits = Hit8::NONE;
@@ -40,7 +51,7 @@ fn check_layout(bvh: &Layout<'_>, packets: &[Ray8], what: &str) -> usize {
         let blocked = occluded8(bvh, packet);
         for lane in 0..LANES {
             let ray = packet.lane(lane);
-            let oracle = intersect_brute(bvh.tris(), &ray);
+            let oracle = intersect_brute(tris, &ray);
             assert_eq!(
                 intersect1(bvh, &ray),
                 oracle,
@@ -56,7 +67,7 @@ fn check_layout(bvh: &Layout<'_>, packets: &[Ray8], what: &str) -> usize {
                 oracle.is_some(),
                 "{what}: mask, packet {p}"
             );
-            let occ = occluded_brute(bvh.tris(), &ray);
+            let occ = occluded_brute(tris, &ray);
             assert_eq!(
                 occ,
                 oracle.is_some(),
@@ -207,13 +218,18 @@ fn non_finite_zero_and_negative_tmin_rays_never_hit_and_leave_lanes_untouched() 
             for lane in (0..LANES).filter(|&l| l != i % LANES) {
                 assert_eq!(
                     hits.lane(lane),
-                    intersect_brute(view.tris(), &good).or(Some(sentinel))
+                    intersect_brute(tris(&bvh), &good).or(Some(sentinel))
                 );
             }
         }
         // Huge but finite directions are traced normally.
         let huge = Ray::new(good.org, Vec3::new(1e-30, 3e-30, 1e30), 0.0, f32::INFINITY);
-        check_layout(&view, &[Ray8::from_rays(&[huge, good])], "huge direction");
+        check_layout(
+            &view,
+            tris(&bvh),
+            &[Ray8::from_rays(&[huge, good])],
+            "huge direction",
+        );
     }
 }
 
@@ -250,7 +266,7 @@ fn inactive_lanes_with_1_to_8_active_come_back_untouched() {
                 assert_eq!(packet, before, "rays must not change");
                 for lane in 0..LANES {
                     let ray = packet.lane(lane);
-                    let oracle = intersect_brute(view.tris(), &ray);
+                    let oracle = intersect_brute(tris(&bvh), &ray);
                     if lanes[active..].contains(&lane) {
                         assert_eq!(
                             hits.lane(lane),
@@ -345,7 +361,7 @@ fn rays_through_shared_edges_and_vertices_of_a_closed_mesh_never_miss() {
                 for (lane, ray) in chunk.iter().enumerate() {
                     let one = intersect1(&view, ray);
                     misses += usize::from(one.is_none());
-                    assert_eq!(one, intersect_brute(view.tris(), ray));
+                    assert_eq!(one, intersect_brute(tris(&bvh), ray));
                     assert_eq!(hits.lane(lane), one);
                     assert_eq!(mask >> lane & 1 == 1, one.is_some());
                     assert_eq!(blocked >> lane & 1 == 1, one.is_some());
@@ -475,8 +491,8 @@ fn corner_packets(soup: &[[Vec3; 3]], count: usize, seed: u64) -> Vec<Ray8> {
 
 /// Every traversal's answer for every lane of `packets` through `bvh`, checked against the
 /// traversal contract (`closest_hit_allowed`, `occlusion_allowed`); the number of answers
-/// that differ from brute force.
-fn check_contract(bvh: &Layout<'_>, packets: &[Ray8], what: &str) -> usize {
+/// that differ from brute force (over `tris`, the tree's triangles).
+fn check_contract(bvh: &Layout<'_>, tris: &[Tri], packets: &[Ray8], what: &str) -> usize {
     let mut differ = 0;
     for (p, packet) in packets.iter().enumerate() {
         let mut hits = Hit8::NONE;
@@ -484,10 +500,7 @@ fn check_contract(bvh: &Layout<'_>, packets: &[Ray8], what: &str) -> usize {
         let blocked = occluded8(bvh, packet);
         for lane in 0..LANES {
             let ray = packet.lane(lane);
-            let (oracle, occ) = (
-                intersect_brute(bvh.tris(), &ray),
-                occluded_brute(bvh.tris(), &ray),
-            );
+            let (oracle, occ) = (intersect_brute(tris, &ray), occluded_brute(tris, &ray));
             for (how, got) in [
                 ("intersect8", hits.lane(lane)),
                 ("intersect1", intersect1(bvh, &ray)),
@@ -545,7 +558,7 @@ fn corner_rays_of_a_bake_keep_the_contract_on_both_layouts() {
                     "binary"
                 }
             );
-            let differ = check_contract(&view, &packets, &what);
+            let differ = check_contract(&view, tris(&bvh), &packets, &what);
             println!(
                 "{what}: {differ} of {} answers differ from brute force",
                 packets.len() * LANES * 4
@@ -588,9 +601,7 @@ fn a_hit_behind_the_origin_rounded_ahead_of_it_is_allowed_either_way() {
         f32::INFINITY,
     );
     let near = intersect_brute(
-        Bvh::build_with_binary(&soup, Preset::DEFAULT)
-            .unwrap()
-            .tris(),
+        tris(&Bvh::build_with_binary(&soup, Preset::DEFAULT).unwrap()),
         &ray,
     );
     // The exact crossing lies behind the origin: a triangle test that gets t's sign right
@@ -602,7 +613,7 @@ fn a_hit_behind_the_origin_rounded_ahead_of_it_is_allowed_either_way() {
         let bvh = Bvh::build_with_binary(&soup, preset).unwrap();
         for view in layouts(&bvh) {
             let packet = Ray8::from_origin(ray.org, &[ray.dir; LANES], 0.0, f32::INFINITY);
-            check_contract(&view, &[packet], &format!("{preset:?}"));
+            check_contract(&view, tris(&bvh), &[packet], &format!("{preset:?}"));
             let got = intersect1(&view, &ray).expect("the sliver or the wall");
             assert!(got.prim == 200 || got.prim == 201, "{preset:?}: {got:?}");
         }

@@ -4,17 +4,18 @@
 //! 2019 §2.4). Building a good tree is obvhs's job: PLOC (Meister & Bittner 2018) plus
 //! reinsertion and leaf collapsing ([`obvhs::bvh2::builder::build_bvh2_from_tris`]). This module
 //! picks the build parameters ([`Preset`]), then flattens obvhs's binary tree into
-//! [`Node`]s (two child boxes per 64-byte node), copies the triangles into leaf order as
-//! [`Tri`]s for the watertight test, and collapses the binary tree into [`WideNode`]s (eight
-//! child boxes per node, same leaves and triangles; [`Bvh::wide`]), which every ray the bake
-//! traces walks, single or in packets (docs/traverse.md, "Session 15: the bake's packets walk
-//! the wide tree on every world"). The binary tree is the collapse's input; [`Bvh::build`]
-//! drops it afterwards (an eighth of the resident tree on the 1M-triangle city: 15.6 of 123 MB,
-//! [`Bvh::bytes`]), and [`Bvh::build_with_binary`] keeps it ([`Bvh::binary`]) as the
+//! [`Node`]s (two child boxes per 64-byte node) over the triangles in leaf order ([`Tri`]s),
+//! collapses it into [`WideNode`]s (eight child boxes per node, same leaves; [`Bvh::wide`]),
+//! which every ray the bake traces walks, single or in packets (docs/traverse.md, "Session 15:
+//! the bake's packets walk the wide tree on every world"), and writes each wide leaf's
+//! triangles as structure-of-arrays rows ([`leaf_rows`]), the wide tree's only copy of them.
+//! The binary tree and its `Tri`s are the collapse's input; [`Bvh::build`] drops them
+//! afterwards (the 1M-triangle city's resident tree: 59 MB, where it held 123 MB with them;
+//! [`Bvh::bytes`]), and [`Bvh::build_with_binary`] keeps them ([`Bvh::binary`]) as the
 //! comparator of the benches and tests.
 //! obvhs builds on every core (its `parallel` feature: PLOC and reinsertion through rayon;
 //! 10⁷ triangles with `VerySlowBuild` take 75 s on one thread and 37 s on two, docs/traverse.md).
-//! The nodes, leaf rows and triangles are then moved to transparent huge pages (`bvh/huge.rs`),
+//! The nodes and leaf rows are then moved to transparent huge pages (`bvh/huge.rs`),
 //! as Embree allocates its BVH: a big world's node visits miss the TLB far less.
 //!
 //! Deviations: obvhs's own traversals ignore `tmin` in the node test; ours honour it. With the
@@ -147,12 +148,13 @@ pub enum BvhError {
 #[derive(Clone, Debug)]
 pub struct Bvh {
     // On huge pages when big enough ([`huge`]).
-    /// The binary tree, kept only by [`Bvh::build_with_binary`].
-    binary: Option<HugeSlice<Node>>,
+    /// The binary tree and its triangles in leaf order, kept only by
+    /// [`Bvh::build_with_binary`].
+    binary: Option<(HugeSlice<Node>, HugeSlice<Tri>)>,
     wide: HugeSlice<WideNode>,
-    /// The triangles as structure-of-arrays rows per wide leaf ([`leaf_rows`]).
+    /// The triangles as structure-of-arrays rows per wide leaf ([`leaf_rows`]): the wide
+    /// tree's only copy of them.
     rows: HugeSlice<f32>,
-    tris: HugeSlice<Tri>,
     build_time: Duration,
     preset: Preset,
 }
@@ -189,18 +191,17 @@ impl Bvh {
         // Each array is dropped, or moved to huge pages, as soon as the next step allows: a
         // big world's build peaks at the sum of what is alive at once.
         let (nodes, tris) = obvhs_flattened(soup, preset);
-        let tris = HugeSlice::new(tris);
         let tree = BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
         let wide = collapse(&tree);
-        let binary = keep_binary.then(|| HugeSlice::new(nodes));
+        let rows = leaf_rows(&wide, &tris);
+        let binary = keep_binary.then(|| (HugeSlice::new(nodes), HugeSlice::new(tris)));
         let wide = HugeSlice::new(wide);
-        let rows = HugeSlice::new(leaf_rows(&wide, &tris));
-        WideRef::new(&wide, &tris, &rows).map_err(BvhError::Layout)?;
+        let rows = HugeSlice::new(rows);
+        WideRef::new(&wide, &rows).map_err(BvhError::Layout)?;
         Ok(Self {
             binary,
             wide,
             rows,
-            tris,
             build_time: start.elapsed(),
             preset,
         })
@@ -210,8 +211,8 @@ impl Bvh {
     /// node) when built by [`Bvh::build_with_binary`]. Cheap: the build validated the layout.
     pub fn binary(&self) -> Option<BvhRef<'_>> {
         // The build validated this exact layout and nothing mutates it since.
-        let nodes = self.binary.as_ref()?;
-        Some(BvhRef::new_trusted(nodes, &self.tris))
+        let (nodes, tris) = self.binary.as_ref()?;
+        Some(BvhRef::new_trusted(nodes, tris))
     }
 
     /// The wide view (eight child boxes per node, collapsed from the binary tree, same
@@ -219,7 +220,7 @@ impl Bvh {
     /// its leaf's box (the kernels' `traverse` docs, "Hits outside their own box": rays that
     /// start within ulps of a triangle's plane). Cheap: `build` validated it.
     pub fn wide(&self) -> WideRef<'_> {
-        WideRef::new_trusted(&self.wide, &self.tris, &self.rows)
+        WideRef::new_trusted(&self.wide, &self.rows)
     }
 
     /// Wide nodes, root first.
@@ -227,21 +228,15 @@ impl Bvh {
         &self.wide
     }
 
-    /// Triangles in leaf order.
-    pub fn tris(&self) -> &[Tri] {
-        &self.tris
-    }
-
-    /// Bytes the tree holds: wide nodes, leaf rows, triangles, and the binary nodes if kept.
+    /// Bytes the tree holds: wide nodes and leaf rows, and the binary tree's nodes and
+    /// triangles if kept.
     pub fn bytes(&self) -> usize {
-        let size = |bytes: &[u8]| bytes.len();
-        size(bytemuck::cast_slice(&self.wide))
-            + size(bytemuck::cast_slice(&self.rows))
-            + size(bytemuck::cast_slice(&self.tris))
-            + self
-                .binary
-                .as_ref()
-                .map_or(0, |b| size(bytemuck::cast_slice(b)))
+        let binary = self.binary.as_ref().map_or(0, |(nodes, tris)| {
+            std::mem::size_of_val::<[Node]>(nodes) + std::mem::size_of_val::<[Tri]>(tris)
+        });
+        std::mem::size_of_val::<[WideNode]>(&self.wide)
+            + std::mem::size_of_val::<[f32]>(&self.rows)
+            + binary
     }
 
     /// Wall time of the build (obvhs build, flattening and collapsing).
@@ -426,7 +421,7 @@ mod tests {
             let ray = Ray::new(o, Vec3::new(0.3, -0.2, -1.0), 0.0, f32::INFINITY);
             let want = intersect1(&bvh.binary().unwrap(), &ray);
             assert_eq!(intersect1(&bvh.wide(), &ray), want);
-            assert_eq!(want, intersect_brute(bvh.tris(), &ray));
+            assert_eq!(want, intersect_brute(bvh.binary().unwrap().tris(), &ray));
         }
         packets_match_brute_force(&bvh, Vec3::new(100.5, 60.25, 3.0), 0.8);
     }
@@ -442,18 +437,24 @@ mod tests {
         let bake = Bvh::build(&grid, Preset::DEFAULT).unwrap();
         let both = Bvh::build_with_binary(&grid, Preset::DEFAULT).unwrap();
         assert!(bake.binary().is_none());
-        let binary = both.binary().unwrap().nodes();
-        assert!(binary.len() > 1000);
-        assert_eq!(both.bytes() - bake.bytes(), std::mem::size_of_val(binary));
+        let binary = both.binary().unwrap();
+        assert!(binary.nodes().len() > 1000);
+        assert_eq!(
+            both.bytes() - bake.bytes(),
+            std::mem::size_of_val(binary.nodes()) + std::mem::size_of_val(binary.tris())
+        );
         assert_eq!(bake.wide_nodes(), both.wide_nodes());
-        assert_eq!(bake.tris(), both.tris());
+        // The wide tree's rows are its only triangles: every leaf's, read back bit for bit.
+        let mut rows: Vec<Tri> = bake.wide().tris().collect();
+        let mut tris = binary.tris().to_vec();
+        let key = |t: &Tri| (t.prim, t.v.map(|v| v.map(f32::to_bits)));
+        rows.sort_by_key(key);
+        tris.sort_by_key(key);
+        assert_eq!(rows, tris);
         for i in 0..100 {
             let o = Vec3::new(i as f32 * 0.61 % 64.0, i as f32 * 0.37 % 64.0, 3.0);
             let ray = Ray::new(o, Vec3::new(0.2, 0.1, -1.0), 0.0, f32::INFINITY);
-            assert_eq!(
-                intersect1(&bake.wide(), &ray),
-                intersect_brute(bake.tris(), &ray)
-            );
+            assert_eq!(intersect1(&bake.wide(), &ray), intersect_brute(&tris, &ray));
         }
     }
 
@@ -485,7 +486,10 @@ mod tests {
                 let blocked = occluded8(&bvh.wide(), &packet);
                 assert_eq!(occluded8(&bvh.binary().unwrap(), &packet), blocked);
                 for (lane, &dir) in dirs.iter().enumerate() {
-                    let want = intersect_brute(bvh.tris(), &Ray::new(origin, dir, 0.0, tmax));
+                    let want = intersect_brute(
+                        bvh.binary().unwrap().tris(),
+                        &Ray::new(origin, dir, 0.0, tmax),
+                    );
                     assert_eq!(hit_lanes >> lane & 1 == 1, want.is_some(), "{k} {lane}");
                     assert_eq!(blocked >> lane & 1 == 1, want.is_some(), "{k} {lane}");
                     if want.is_none() {
@@ -507,14 +511,20 @@ mod tests {
         let soup = quad();
         for preset in Preset::ALL {
             let bvh = Bvh::build_with_binary(&soup, preset).unwrap();
-            let mut prims: Vec<u32> = bvh.tris().iter().map(|t| t.prim).collect();
+            let mut prims: Vec<u32> = bvh
+                .binary()
+                .unwrap()
+                .tris()
+                .iter()
+                .map(|t| t.prim)
+                .collect();
             prims.sort_unstable();
             prims.dedup();
             assert_eq!(prims, [0, 1], "{preset:?}");
             let ray = Ray::new(Vec3::new(0.7, 0.7, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
             assert_eq!(
                 intersect1(&bvh.binary().unwrap(), &ray),
-                intersect_brute(bvh.tris(), &ray)
+                intersect_brute(bvh.binary().unwrap().tris(), &ray)
             );
             assert_eq!(intersect1(&bvh.binary().unwrap(), &ray).unwrap().prim, 1);
             assert_eq!(

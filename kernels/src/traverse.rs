@@ -128,18 +128,32 @@ pub enum Layout<'a> {
     Wide(WideRef<'a>),
 }
 
-impl<'a> Layout<'a> {
-    /// The triangles, in leaf order.
-    pub fn tris(&self) -> &'a [Tri] {
+/// The triangles of one leaf of either layout.
+enum LeafTris<'a> {
+    Binary(core::slice::Iter<'a, Tri>),
+    Wide(bvh8::RowTris<'a>),
+}
+
+impl Iterator for LeafTris<'_> {
+    type Item = Tri;
+
+    fn next(&mut self) -> Option<Tri> {
         match self {
-            Layout::Binary(b) => b.tris,
-            Layout::Wide(w) => w.tris(),
+            LeafTris::Binary(tris) => tris.next().copied(),
+            LeafTris::Wide(rows) => rows.next(),
         }
+    }
+}
+
+impl<'a> Layout<'a> {
+    /// The triangles of every leaf (a triangle in several leaves comes once per leaf).
+    pub fn tris(self) -> impl Iterator<Item = Tri> + 'a {
+        self.leaves().flat_map(|(_, leaf)| leaf)
     }
 
     /// Every leaf: its box and its triangles.
-    fn leaves(&self) -> impl Iterator<Item = (([f32; 3], [f32; 3]), &'a [Tri])> {
-        let (binary, wide) = match *self {
+    fn leaves(self) -> impl Iterator<Item = (([f32; 3], [f32; 3]), LeafTris<'a>)> {
+        let (binary, wide) = match self {
             Layout::Binary(b) => (Some(b), None),
             Layout::Wide(w) => (None, Some(w)),
         };
@@ -148,11 +162,17 @@ impl<'a> Layout<'a> {
                 (0..2).filter(move |&s| node.meta[s] != 0).map(move |s| {
                     let lo = [0, 1, 2].map(|a| node.lo[a][s]);
                     let hi = [0, 1, 2].map(|a| node.hi[a][s]);
-                    ((lo, hi), b.leaf(node.child[s], node.meta[s]))
+                    (
+                        (lo, hi),
+                        LeafTris::Binary(b.leaf(node.child[s], node.meta[s]).iter()),
+                    )
                 })
             })
         });
-        binary.chain(wide.into_iter().flat_map(|w| w.leaves()))
+        let wide = wide
+            .into_iter()
+            .flat_map(|w| w.leaves().map(|(aabb, leaf)| (aabb, LeafTris::Wide(leaf))));
+        binary.chain(wide)
     }
 }
 
@@ -215,14 +235,14 @@ pub fn closest_hit_allowed(bvh: &impl Tree, ray: &Ray, got: Option<Hit>) -> bool
                 closest1(&pre, tri, &mut own);
                 bits(&own) == bits(&h)
             };
-            if !bvh.tris().iter().any(|tri| tri.prim == h.prim && own(tri)) {
+            if !bvh.tris().any(|tri| tri.prim == h.prim && own(&tri)) {
                 return false;
             }
             h
         }
     };
-    !leaves_met(&bvh, &pre, best.t)
-        .any(|tri| tri1(&pre, tri).is_some_and(|(t, _, _)| accept(t, tri.prim, pre.tmin, &best)))
+    !leaves_met(bvh, &pre, best.t)
+        .any(|tri| tri1(&pre, &tri).is_some_and(|(t, _, _)| accept(t, tri.prim, pre.tmin, &best)))
 }
 
 /// Whether `got` is an occlusion answer the traversal contract allows: `true` only when a
@@ -237,16 +257,16 @@ pub fn occlusion_allowed(bvh: &impl Tree, ray: &Ray, got: bool) -> bool {
     let pre = Pre::new(ray);
     let tmax = ray.tmax.min(f32::MAX);
     if got {
-        bvh.tris().iter().any(|tri| occludes1(&pre, tri, tmax))
+        bvh.tris().any(|tri| occludes1(&pre, &tri, tmax))
     } else {
-        !leaves_met(&bvh, &pre, tmax).any(|tri| occludes1(&pre, tri, tmax))
+        !leaves_met(bvh, &pre, tmax).any(|tri| occludes1(&pre, &tri, tmax))
     }
 }
 
 /// The triangles of every leaf whose box the ray's conservative slab interval on
 /// `[tmin, tmax]` meets: what a traversal whose closest hit is at `tmax` must have tested
 /// (a parent's box contains its children's, and the slab test is monotone in the box).
-fn leaves_met<'a>(bvh: &Layout<'a>, pre: &Pre, tmax: f32) -> impl Iterator<Item = &'a Tri> {
+fn leaves_met<'a>(bvh: Layout<'a>, pre: &Pre, tmax: f32) -> impl Iterator<Item = Tri> + 'a {
     let pre = *pre;
     bvh.leaves()
         .filter(move |(aabb, _)| box1_at(*aabb, &pre, tmax).is_some())
@@ -519,7 +539,7 @@ mod tests {
     fn layouts<'a>(bvh: BvhRef<'a>, wide: &'a (Vec<WideNode>, Vec<f32>)) -> [Layout<'a>; 2] {
         [
             Layout::Binary(bvh),
-            Layout::Wide(WideRef::new(&wide.0, bvh.tris(), &wide.1).expect("collapse is valid")),
+            Layout::Wide(WideRef::new(&wide.0, &wide.1).expect("collapse is valid")),
         ]
     }
 
@@ -723,7 +743,7 @@ mod tests {
     fn traversals_keep_to_the_contract(bvh: &impl Tree, r: &Ray) {
         if let Layout::Binary(binary) = bvh.layout() {
             let (wide, rows) = widen(&binary);
-            let wide = WideRef::new(&wide, binary.tris(), &rows).unwrap();
+            let wide = WideRef::new(&wide, &rows).unwrap();
             traversals_keep_to_the_contract(&wide, r);
         }
         assert!(closest_hit_allowed(bvh, r, intersect1(bvh, r)));

@@ -27,7 +27,7 @@
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
-use super::triangle::{PRIM_ROW, Pre1x8, ROWS, RowTri};
+use super::triangle::{Pre1x8, ROWS, RowTri, TriAt};
 use super::{FAR_FLOOR, FAR_UP, LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor};
 use crate::packet::{LANES, set_lanes};
 use bytemuck::{Pod, Zeroable};
@@ -135,30 +135,25 @@ impl WideNode {
     }
 }
 
-/// A validated view of a wide BVH: nodes (root first), triangles in leaf order, and the same
-/// triangles as structure-of-arrays rows per leaf ([`leaf_rows`]), which single rays test
-/// eight at a time.
+/// A validated view of a wide BVH: nodes (root first) and the triangles as
+/// structure-of-arrays rows per leaf ([`leaf_rows`]), which a single ray tests eight at a
+/// time and a packet one at a time for its eight lanes; no other copy of the triangles.
 #[derive(Clone, Copy, Debug)]
 pub struct WideRef<'a> {
     nodes: &'a [WideNode],
-    tris: &'a [Tri],
     rows: &'a [f32],
 }
 
 impl<'a> WideRef<'a> {
     /// Checks every child index, leaf range (an empty slot's empty one too, which a crafted
-    /// box lets a ray reach), that used slots come first, and the depth, once,
-    /// so traversal can trust them; and that `rows` is [`leaf_rows`]`(nodes, tris)`, bit for
-    /// bit.
+    /// box lets a ray reach) against the triangles `rows` holds, that used slots come first,
+    /// and the depth, once, so traversal can trust them.
     ///
     /// # Errors
-    /// The first [`LayoutError`] found, walking depth first from the root (slots `0..8`);
-    /// [`LayoutError::BadRows`] when `rows` differs from the triangles.
-    pub fn new(
-        nodes: &'a [WideNode],
-        tris: &'a [Tri],
-        rows: &'a [f32],
-    ) -> Result<Self, LayoutError> {
+    /// [`LayoutError::BadRows`] when `rows` is not the length [`leaf_rows`] gives; else the
+    /// first [`LayoutError`] found, walking depth first from the root (slots `0..8`).
+    pub fn new(nodes: &'a [WideNode], rows: &'a [f32]) -> Result<Self, LayoutError> {
+        let tris = rows_tris(rows.len()).ok_or(LayoutError::BadRows)?;
         if nodes.is_empty() {
             return Err(LayoutError::NoNodes);
         }
@@ -184,7 +179,7 @@ impl<'a> WideRef<'a> {
                 if meta == LEAF {
                     // A crafted box can let a ray meet an empty slot: the packet walk then
                     // slices the leaf of no triangles at `child`.
-                    if child as usize > tris.len() {
+                    if child as usize > tris {
                         return Err(bad_leaf);
                     }
                     ended = true;
@@ -199,30 +194,19 @@ impl<'a> WideRef<'a> {
                     }
                     stack[sp] = (child, depth + 1);
                     sp += 1;
-                } else if child as u64 + u64::from(meta & !LEAF) > tris.len() as u64 {
+                } else if child as u64 + u64::from(meta & !LEAF) > tris as u64 {
                     return Err(bad_leaf);
-                } else if !rows_match(tris, rows, child, meta) {
-                    return Err(LayoutError::BadRows {
-                        node: index,
-                        slot: slot as u8,
-                    });
                 }
             }
         }
-        if rows.len() != rows_len(tris.len()) {
-            return Err(LayoutError::BadRows { node: 0, slot: 0 });
-        }
-        Ok(Self { nodes, tris, rows })
+        Ok(Self { nodes, rows })
     }
 
     /// A view of a layout that already passed [`WideRef::new`] and has not changed since
     /// (see [`BvhRef::new_trusted`]; debug builds check the layout anyway).
-    pub fn new_trusted(nodes: &'a [WideNode], tris: &'a [Tri], rows: &'a [f32]) -> Self {
-        debug_assert!(
-            Self::new(nodes, tris, rows).is_ok(),
-            "layout never validated"
-        );
-        Self { nodes, tris, rows }
+    pub fn new_trusted(nodes: &'a [WideNode], rows: &'a [f32]) -> Self {
+        debug_assert!(Self::new(nodes, rows).is_ok(), "layout never validated");
+        Self { nodes, rows }
     }
 
     /// The nodes, root first.
@@ -230,12 +214,13 @@ impl<'a> WideRef<'a> {
         self.nodes
     }
 
-    /// The triangles, in leaf order.
-    pub fn tris(&self) -> &'a [Tri] {
-        self.tris
+    /// The triangles of every leaf, read back from the rows, leaf by leaf (a triangle in
+    /// several leaves comes once per leaf).
+    pub fn tris(&self) -> impl Iterator<Item = Tri> + 'a {
+        self.leaves().flat_map(|(_, leaf)| leaf)
     }
 
-    /// Bytes of nodes and leaf rows (what a walk reads).
+    /// Bytes of nodes and leaf rows (all the view holds).
     pub fn bytes(&self) -> usize {
         core::mem::size_of_val(self.nodes) + core::mem::size_of_val(self.rows)
     }
@@ -248,13 +233,18 @@ impl<'a> WideRef<'a> {
         self.rows.get(ROWS * first as usize..).unwrap_or(&[])
     }
 
-    fn leaf(&self, first: u32, meta: u32) -> &'a [Tri] {
-        let first = first as usize;
-        &self.tris[first..first + (meta & !LEAF) as usize]
+    /// The triangles of the leaf `first`, `meta` (a used leaf slot), from its rows.
+    fn leaf(&self, first: u32, meta: u32) -> RowTris<'a> {
+        let n = (meta & !LEAF) as usize;
+        RowTris {
+            leaf: &self.rows[ROWS * first as usize..][..ROWS * n],
+            n,
+            i: 0,
+        }
     }
 
     /// Every leaf slot: its box and its triangles (for the contract oracle).
-    pub(super) fn leaves(self) -> impl Iterator<Item = (([f32; 3], [f32; 3]), &'a [Tri])> {
+    pub(super) fn leaves(self) -> impl Iterator<Item = (([f32; 3], [f32; 3]), RowTris<'a>)> {
         let view = self;
         self.nodes.iter().flat_map(move |node| {
             (0..WIDTH)
@@ -334,20 +324,40 @@ pub fn collapse(bvh: &BvhRef<'_>) -> alloc::vec::Vec<WideNode> {
 
 /// Length of the rows of `tris` triangles: [`ROWS`] values per triangle and eight of
 /// padding, so the last leaf's 8-wide loads stay inside.
+#[cfg(any(feature = "alloc", test))]
 fn rows_len(tris: usize) -> usize {
     ROWS * tris + 8
 }
 
-/// Whether the rows of the leaf `child`, `meta` (a valid range of `tris`) hold its triangles.
-fn rows_match(tris: &[Tri], rows: &[f32], child: u32, meta: u32) -> bool {
-    let (first, n) = (child as usize, (meta & !LEAF) as usize);
-    let Some(leaf) = rows.get(ROWS * first..ROWS * (first + n)) else {
-        return false;
-    };
-    tris[first..first + n].iter().enumerate().all(|(i, t)| {
-        let same = |row: usize, x: f32| leaf[row * n + i].to_bits() == x.to_bits();
-        (0..9).all(|r| same(r, t.v[r / 3][r % 3])) && same(PRIM_ROW, f32::from_bits(t.prim))
-    })
+/// The triangles rows of length `len` hold, if [`rows_len`] gives that length.
+fn rows_tris(len: usize) -> Option<usize> {
+    let values = len.checked_sub(8)?;
+    values.is_multiple_of(ROWS).then_some(values / ROWS)
+}
+
+/// The triangles of one leaf, read back from its rows ([`WideRef::leaves`]).
+#[derive(Clone, Debug)]
+pub(super) struct RowTris<'a> {
+    leaf: &'a [f32],
+    n: usize,
+    i: usize,
+}
+
+impl Iterator for RowTris<'_> {
+    type Item = Tri;
+
+    fn next(&mut self) -> Option<Tri> {
+        let i = self.i;
+        (i < self.n).then(|| {
+            self.i += 1;
+            RowTri {
+                leaf: self.leaf,
+                n: self.n,
+                i,
+            }
+            .tri()
+        })
+    }
 }
 
 /// The triangles of each leaf of `nodes` as structure-of-arrays rows, for [`WideRef::new`]:
@@ -369,7 +379,7 @@ pub fn leaf_rows(nodes: &[WideNode], tris: &[Tri]) -> alloc::vec::Vec<f32> {
                 for r in 0..9 {
                     rows[ROWS * first + r * n + i] = t.v[r / 3][r % 3];
                 }
-                rows[ROWS * first + PRIM_ROW * n + i] = f32::from_bits(t.prim);
+                rows[ROWS * first + super::triangle::PRIM_ROW * n + i] = f32::from_bits(t.prim);
             }
         }
     }
@@ -933,7 +943,7 @@ mod tests {
         let binary = BvhRef::new(&nodes, &tris).unwrap();
         let wide = collapse(&binary);
         let rows = leaf_rows(&wide, &tris);
-        let view = WideRef::new(&wide, &tris, &rows).expect("valid wide layout");
+        let view = WideRef::new(&wide, &rows).expect("valid wide layout");
         assert!(wide.len() <= WIDE_MAX_DEPTH + 1, "{} nodes", wide.len());
         for i in 0..tris.len() {
             let r = Ray::new(
@@ -954,19 +964,16 @@ mod tests {
         let mut one = WideNode::EMPTY;
         one.meta[0] = LEAF | 1;
         let rows = leaf_rows(&[one], &tris);
-        assert_eq!(
-            WideRef::new(&[], &tris, &rows).unwrap_err(),
-            LayoutError::NoNodes
-        );
+        assert_eq!(WideRef::new(&[], &rows).unwrap_err(), LayoutError::NoNodes);
         let mut bad = WideNode::EMPTY;
         bad.meta[0] = 0;
         assert_eq!(
-            WideRef::new(&[bad], &tris, &rows).unwrap_err(),
+            WideRef::new(&[bad], &rows).unwrap_err(),
             LayoutError::BadChild { node: 0, slot: 0 }
         );
         bad.meta[0] = LEAF | 2;
         assert_eq!(
-            WideRef::new(&[bad], &tris, &rows).unwrap_err(),
+            WideRef::new(&[bad], &rows).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 0 }
         );
         // An empty slot whose child lies past the triangles: a box that a ray meets would
@@ -975,12 +982,12 @@ mod tests {
         past.set_slot(0, [0.0; 3], [1.0, 1.0, 0.0], 0, LEAF | 1);
         past.set_slot(1, [0.0; 3], [1.0, 1.0, 0.0], 2, LEAF);
         assert_eq!(
-            WideRef::new(&[past], &tris, &rows).unwrap_err(),
+            WideRef::new(&[past], &rows).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 1 }
         );
         past.child[1] = 1;
         let nodes = [past];
-        let view = WideRef::new(&nodes, &tris, &rows).expect("an empty range at the end");
+        let view = WideRef::new(&nodes, &rows).expect("an empty range at the end");
         let r = Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, 0.0, f32::INFINITY);
         let mut hits = Hit8::NONE;
         let mask = intersect8(&view, &Ray8::from_rays(&[r; LANES]), &mut hits);
@@ -990,7 +997,7 @@ mod tests {
         let mut gap = WideNode::EMPTY;
         gap.meta[3] = LEAF | 1;
         assert_eq!(
-            WideRef::new(&[gap], &tris, &rows).unwrap_err(),
+            WideRef::new(&[gap], &rows).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 3 }
         );
         let chain: Vec<WideNode> = (0..WIDE_MAX_DEPTH as u32 + 2)
@@ -1003,13 +1010,28 @@ mod tests {
             .chain([WideNode::EMPTY])
             .collect();
         assert!(matches!(
-            WideRef::new(&chain, &tris, &rows),
+            WideRef::new(&chain, &rows),
             Err(LayoutError::TooDeep { .. })
         ));
+        // Rows of no whole number of triangles, or shorter than the padding.
+        for len in [rows.len() - 1, rows.len() + 3, 7, 0] {
+            let odd = std::vec![0.0; len];
+            assert_eq!(
+                WideRef::new(&[one], &odd).unwrap_err(),
+                LayoutError::BadRows,
+                "{len}"
+            );
+        }
+        // Rows of fewer triangles than a leaf's range.
+        let short = leaf_rows(&[WideNode::EMPTY], &[]);
+        assert_eq!(
+            WideRef::new(&[one], &short).unwrap_err(),
+            LayoutError::BadLeaf { node: 0, slot: 0 }
+        );
         // The empty tree: every ray misses.
         let empty = [WideNode::EMPTY];
         let empty_rows = leaf_rows(&empty, &[]);
-        let view = WideRef::new(&empty, &[], &empty_rows).unwrap();
+        let view = WideRef::new(&empty, &empty_rows).unwrap();
         let r = Ray::new(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY);
         assert_eq!(intersect1(&view, &r), None);
         assert!(!occluded1(&view, &r));

@@ -100,13 +100,9 @@ pub enum LayoutError {
         /// Slot (0 or 1).
         slot: u8,
     },
-    /// A wide view's leaf rows are not its triangles ([`super::leaf_rows`]).
-    BadRows {
-        /// Node holding the slot.
-        node: u32,
-        /// Slot (0..8).
-        slot: u8,
-    },
+    /// A wide view's leaf rows are not the length [`super::leaf_rows`] gives for any number
+    /// of triangles.
+    BadRows,
     /// The tree is deeper than [`MAX_DEPTH`].
     TooDeep {
         /// First node found too deep.
