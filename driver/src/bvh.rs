@@ -406,14 +406,23 @@ mod tests {
         assert_eq!((hit.prim, hit.t), (0, 1.0));
     }
 
-    #[test]
-    fn a_large_world_traces_the_same_through_both_layouts() {
-        let grid: Vec<[Vec3; 3]> = (0..1 << 17)
+    /// `n` unit triangles on rows of `side`, at heights stepping by `step` over `levels`.
+    fn grid(n: usize, side: usize, levels: usize, step: f32) -> Vec<[Vec3; 3]> {
+        (0..n)
             .map(|i| {
-                let p = Vec3::new((i % 512) as f32, (i / 512) as f32, (i % 7) as f32 * 0.1);
+                let p = Vec3::new(
+                    (i % side) as f32,
+                    (i / side) as f32,
+                    (i % levels) as f32 * step,
+                );
                 [p, p + Vec3::X, p + Vec3::Y]
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn a_large_world_traces_the_same_through_both_layouts() {
+        let grid = grid(1 << 17, 512, 7, 0.1);
         let bvh = Bvh::build_with_binary(&grid, Preset::FastBuild).unwrap();
         assert!(bvh.wide_nodes().len() * 2 < bvh.binary().unwrap().nodes().len());
         for i in 0..200 {
@@ -427,13 +436,8 @@ mod tests {
     }
 
     #[test]
-    fn the_bake_s_tree_drops_the_binary_nodes_and_traces_the_same() {
-        let grid: Vec<[Vec3; 3]> = (0..1 << 12)
-            .map(|i| {
-                let p = Vec3::new((i % 64) as f32, (i / 64) as f32, (i % 5) as f32 * 0.2);
-                [p, p + Vec3::X, p + Vec3::Y]
-            })
-            .collect();
+    fn the_bake_s_tree_drops_the_binary_tree_and_traces_the_same() {
+        let grid = grid(1 << 12, 64, 5, 0.2);
         let bake = Bvh::build(&grid, Preset::DEFAULT).unwrap();
         let both = Bvh::build_with_binary(&grid, Preset::DEFAULT).unwrap();
         assert!(bake.binary().is_none());
