@@ -5,7 +5,7 @@
 //! scheduler with `scripts/slurm/` (ignored by default; see [`slurm_bake_equals_one_bake`]).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 const BIN: &str = env!("CARGO_BIN_EXE_guidebake");
@@ -93,14 +93,22 @@ fn bytes(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// Starts `command` and waits until `started` exists (the pass has begun), the child has
+/// exited, or 120 s have passed.
+fn spawn_until_started(command: &mut Command, started: &Path) -> Child {
+    let mut child = command.spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while !started.exists() && child.try_wait().unwrap().is_none() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    child
+}
+
 /// Runs `command` to success; returns how long it ran after `started` appeared: the pass's
 /// own work, without the set-up before it (loading the scene, building the BVH, reading the
 /// previous pass), which a debug build spends most of a shard's time on.
 fn run_after(mut command: Command, started: &Path) -> Duration {
-    let mut child = command.spawn().unwrap();
-    while !started.exists() && child.try_wait().unwrap().is_none() {
-        std::thread::sleep(Duration::from_millis(1));
-    }
+    let child = spawn_until_started(&mut command, started);
     let start = Instant::now();
     let out = child.wait_with_output().unwrap();
     assert!(
@@ -114,11 +122,7 @@ fn run_after(mut command: Command, started: &Path) -> Duration {
 /// Starts `command`, waits until `started` exists (the pass has begun), then `after` more,
 /// and SIGKILLs it. Returns whether it was still running (killed mid-pass).
 fn kill_mid_pass(mut command: Command, started: &Path, after: Duration) -> bool {
-    let mut child = command.spawn().unwrap();
-    let deadline = Instant::now() + Duration::from_secs(120);
-    while !started.exists() && Instant::now() < deadline {
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    let mut child = spawn_until_started(&mut command, started);
     std::thread::sleep(after);
     let running = child.try_wait().unwrap().is_none();
     child.kill().unwrap(); // SIGKILL
