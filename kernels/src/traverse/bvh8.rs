@@ -237,7 +237,7 @@ impl<'a> WideRef<'a> {
     fn leaf(&self, first: u32, meta: u32) -> RowTris<'a> {
         let n = (meta & !LEAF) as usize;
         RowTris {
-            leaf: &self.rows[ROWS * first as usize..][..ROWS * n],
+            leaf: &self.leaf_rows(first)[..ROWS * n],
             n,
             i: 0,
         }
