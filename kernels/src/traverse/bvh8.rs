@@ -119,13 +119,6 @@ impl WideNode {
         self.meta[slot] = meta;
     }
 
-    /// The node as eight rows of eight values: `lo` x, y, z, `hi` x, y, z, then `child` and
-    /// `meta` (as bits), so a walk picks an axis's near or far planes by row index.
-    #[inline(always)]
-    fn rows(&self) -> &[[f32; WIDTH]; 8] {
-        bytemuck::cast_ref(self)
-    }
-
     /// The box of slot `slot`.
     fn slot_box(&self, slot: usize) -> ([f32; 3], [f32; 3]) {
         (
@@ -719,52 +712,96 @@ pub(super) fn walk_interleaved_any(
 // ---------------------------------------------------------------------------------------------
 // Eight rays.
 
-/// One lane's box-test constants, read from a packet's [`Pre8`].
-#[derive(Clone, Copy)]
-struct Lane {
-    org: [f32; 3],
-    inv: [f32; 3],
-    /// Rows of the near and far planes per axis, as in [`Ray1x8`].
-    near: [usize; 3],
-    far: [usize; 3],
-    tmin_down: f32,
+/// The box-test constants of a packet's lanes, read from its [`Pre8`], by lane (lane `i` at
+/// index `i`), so a lane's test loads each of them with one scaled index.
+struct Lanes {
+    org: [[f32; LANES]; 3],
+    inv: [[f32; LANES]; 3],
+    /// Byte offsets within a [`WideNode`] of the rows of each lane's near and far planes per
+    /// axis, `32·row` (`lo` rows 0–2, `hi` rows 3–5, as in [`Ray1x8`]): only [`Lanes::new`]
+    /// writes them, and [`Lanes::row`] relies on them being such offsets.
+    near: [[u32; LANES]; 3],
+    far: [[u32; LANES]; 3],
+    tmin_down: [f32; LANES],
 }
 
-/// The box-test constants of each lane of `pre`.
-fn lanes(pre: &Pre8) -> [Lane; LANES] {
-    let neg = pre.neg.map(|m| m.to_bitmask());
-    core::array::from_fn(|i| Lane {
-        org: [0, 1, 2].map(|a| pre.org[a].as_array()[i]),
-        inv: [0, 1, 2].map(|a| pre.inv[a].as_array()[i]),
-        near: [0, 1, 2].map(|a| a + 3 * usize::from(neg[a] >> i & 1 == 1)),
-        far: [0, 1, 2].map(|a| a + 3 * usize::from(neg[a] >> i & 1 == 0)),
-        tmin_down: pre.tmin_down.as_array()[i],
-    })
+/// Bytes of one row of a [`WideNode`] ([`WideNode::rows`]).
+const ROW_BYTES: u32 = 4 * WIDTH as u32;
+
+impl Lanes {
+    fn new(pre: &Pre8) -> Self {
+        let offsets = |far: bool| {
+            [0, 1, 2].map(|a| {
+                // 1 in the lanes whose direction has the sign bit set (near plane `hi`).
+                let neg = bytemuck::cast::<f32x8, u32x8>(pre.neg[a]) >> 31;
+                let hi = if far { u32x8::ONE - neg } else { neg };
+                (u32x8::splat(a as u32) + hi * u32x8::splat(3)) * u32x8::splat(ROW_BYTES)
+            })
+        };
+        Self {
+            org: pre.org.map(f32x8::to_array),
+            inv: pre.inv.map(f32x8::to_array),
+            near: offsets(false).map(u32x8::to_array),
+            far: offsets(true).map(u32x8::to_array),
+            tmin_down: pre.tmin_down.to_array(),
+        }
+    }
+
+    /// The row of `node` at the byte offset `off`, one of [`Lanes::near`] or [`Lanes::far`].
+    /// (Indexing the rows by row number took an `and` and a shift per plane and lane: 12 of
+    /// the 70 instructions of a lane's test, docs/traverse.md, session 17.)
+    #[inline(always)]
+    fn row(node: &WideNode, off: u32) -> f32x8 {
+        debug_assert!(off.is_multiple_of(ROW_BYTES) && off < 6 * ROW_BYTES);
+        // SAFETY: `off` is `32·row` with `row < 6` (`Lanes::new` writes no other values), so
+        // the 32 bytes read lie inside the 256-byte node; `[f32; 8]` needs the alignment of
+        // `f32` only, which `off` (a multiple of 4) keeps.
+        f32x8::from(unsafe {
+            core::ptr::from_ref(node)
+                .cast::<u8>()
+                .add(off as usize)
+                .cast::<[f32; WIDTH]>()
+                .read()
+        })
+    }
 }
+
+/// `u32x8::splat(1 << i)` for lane `i`, as one load.
+const LANE_BIT: [[u32; WIDTH]; LANES] = {
+    let mut bits = [[0; WIDTH]; LANES];
+    let mut i = 0;
+    while i < LANES {
+        bits[i] = [1 << i; WIDTH];
+        i += 1;
+    }
+    bits
+};
 
 /// The slab test of `node`'s eight slots for each lane of `live`, lane by lane (one `f32x8`
 /// test per lane, [`Ray1x8::boxes`]' operations): per slot, the mask of lanes that meet it
 /// (`u32` lanes) and the nearest of their entry distances (+∞ where none does).
 #[inline(always)]
-fn boxes8(node: &WideNode, lanes: &[Lane; LANES], live: u8, tmax: &[f32; LANES]) -> (u32x8, f32x8) {
-    let rows = node.rows();
+fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32x8, f32x8) {
     let inf = f32x8::splat(f32::INFINITY);
     let mut met = u32x8::ZERO;
     let mut nearest = inf;
     for i in set_lanes(live) {
-        let lane = &lanes[i];
-        let mut near = f32x8::splat(lane.tmin_down);
+        let i = i & 7;
+        let mut near = f32x8::splat(lanes.tmin_down[i]);
         let mut far = f32x8::splat(tmax[i]);
         for axis in 0..3 {
-            let pn = f32x8::from(rows[lane.near[axis] & 7]);
-            let pf = f32x8::from(rows[lane.far[axis] & 7]);
-            let (o, inv) = (f32x8::splat(lane.org[axis]), f32x8::splat(lane.inv[axis]));
+            let pn = Lanes::row(node, lanes.near[axis][i]);
+            let pf = Lanes::row(node, lanes.far[axis][i]);
+            let (o, inv) = (
+                f32x8::splat(lanes.org[axis][i]),
+                f32x8::splat(lanes.inv[axis][i]),
+            );
             near = ((pn - o) * inv).fast_max(near);
             far = ((pf - o) * inv).fast_min(far);
         }
         let m = near.simd_le(far * f32x8::splat(FAR_UP) + f32x8::splat(FAR_FLOOR));
-        nearest = m.bitselect(near, inf).fast_min(nearest);
-        met |= bytemuck::cast::<f32x8, u32x8>(m) & u32x8::splat(1 << i);
+        nearest = m.select(near, inf).fast_min(nearest);
+        met |= bytemuck::cast::<f32x8, u32x8>(m) & u32x8::from(LANE_BIT[i]);
     }
     (met, nearest)
 }
@@ -783,7 +820,7 @@ pub(super) fn walk8<'a>(
     mut tmax: f32x8,
     visitor: &mut impl Visitor<'a>,
 ) {
-    let lanes = lanes(pre);
+    let lanes = Lanes::new(pre);
     // (child | meta << 32, the nearest entry distance of the lanes met, those lanes)
     let mut stack = Stack::<(u64, f32, u8)>::new();
     let mut alive = pre.traced;
