@@ -529,7 +529,7 @@ impl Pre1x8 {
     /// the next rows: garbage the caller masks off.
     #[inline(always)]
     fn tris8(&self, leaf: &LeafRows<'_>, j: usize) -> Tri8 {
-        let row = |c: usize, i: usize| leaf.load(3 * c + self.k[i], j) - self.porg[i];
+        let row = |c: usize, i: usize| leaf.load(c, i, j) - self.porg[i];
         let vertex = |c: usize| [row(c, 0), row(c, 1), row(c, 2)];
         watertight8(vertex(0), vertex(1), vertex(2), &self.s)
     }
@@ -537,33 +537,45 @@ impl Pre1x8 {
 
 /// A leaf's `n` triangles as rows (row `r` at `r·n`), its length checked once: at least
 /// `ROWS·n + 8` values (the layout pads the last leaf with eight), so that each of the nine
-/// vertex rows' 8-wide loads stays inside without a check of its own. (Checked per load,
-/// the offsets and checks were 145 of the ~700 instructions a shadow ray of the Veach room
-/// executes: docs/traverse.md, session 14.)
+/// vertex rows' 8-wide loads stays inside without a check of its own; and the offsets of the
+/// rows of one ray's permuted axes, computed once a leaf. (Checked per load, the offsets and
+/// checks were 145 of the ~700 instructions a shadow ray of the Veach room executed; the
+/// axes' offsets and their checks computed per load, 39 of its ~543: docs/traverse.md,
+/// sessions 14 and 17.)
 #[derive(Clone, Copy)]
 pub(super) struct LeafRows<'a> {
     rows: &'a [f32],
     n: usize,
+    /// `(k[i] & 3)·n` for the ray's axis permutation `k` (each `k[i] < 3`; the mask bounds
+    /// the offset by `3n` whatever `k` holds).
+    axis: [usize; 3],
 }
 
 impl<'a> LeafRows<'a> {
+    /// The leaf of `n` triangles whose rows start at `rows[0]`, read in the axis order `k`.
+    ///
     /// # Panics
     /// When `rows` is shorter than `ROWS·n + 8` for `n > 0`: a layout [`super::WideRef::new`]
     /// accepted never is.
     #[inline(always)]
-    pub(super) fn new(rows: &'a [f32], n: usize) -> Self {
+    pub(super) fn new(rows: &'a [f32], n: usize, k: [usize; 3]) -> Self {
         assert!(n == 0 || rows.len() >= ROWS * n + 8, "leaf rows too short");
-        Self { rows, n }
+        Self {
+            rows,
+            n,
+            axis: k.map(|k| (k & 3) * n),
+        }
     }
 
-    /// Lanes `8j .. 8j + 8` of vertex row `row` (`row < 9`, `8j < n`).
+    /// Lanes `8j .. 8j + 8` of the row of vertex `c < 3`, permuted axis `i < 3` (`8j < n`).
     #[inline(always)]
-    fn load(&self, row: usize, j: usize) -> f32x8 {
-        assert!(row < PRIM_ROW && 8 * j < self.n);
-        let at = row * self.n + 8 * j;
-        // SAFETY: `8j < n` and `8j` a multiple of 8 give `8j ≤ n − 1`, so
-        // `at + 8 ≤ 8n + (n − 1) + 8 < ROWS·n + 8 ≤ rows.len()` (checked in `new`, `n > 0`
-        // here); `[f32; 8]` needs the alignment of `f32` only.
+    fn load(&self, c: usize, i: usize, j: usize) -> f32x8 {
+        assert!(c < 3 && 8 * j < self.n);
+        let at = 3 * c * self.n + self.axis[i] + 8 * j;
+        // SAFETY: `8j < n` and `8j` a multiple of 8 give `8j ≤ n − 1`, and `axis[i] ≤ 3n`
+        // (`new` masks `k[i]` to at most 3), so `at + 8 ≤ 6n + 3n + (n − 1) + 8 < ROWS·n + 8
+        // ≤ rows.len()` (checked in `new`, `n > 0` here; `ROWS·n + 8` does not overflow for
+        // rows that exist); `[f32; 8]` needs the alignment of `f32` only.
         f32x8::from(unsafe { self.rows.as_ptr().add(at).cast::<[f32; 8]>().read() })
     }
 
@@ -602,7 +614,7 @@ pub(super) fn closest_rows(
     best: &mut Hit,
 ) {
     let tmin = p8.tmin.as_array()[0];
-    let rows = LeafRows::new(leaf, n);
+    let rows = LeafRows::new(leaf, n, p8.k);
     for j in 0..n.div_ceil(8) {
         let valid = first_lanes(n - 8 * j);
         let r = p8.tris8(&rows, j);
@@ -651,7 +663,7 @@ pub(super) fn occludes_rows(
     n: usize,
     tmax: f32,
 ) -> bool {
-    let rows = LeafRows::new(leaf, n);
+    let rows = LeafRows::new(leaf, n, p8.k);
     (0..n.div_ceil(8)).any(|j| {
         let valid = first_lanes(n - 8 * j);
         let r = p8.tris8(&rows, j);
@@ -865,7 +877,7 @@ mod tests {
             );
             assert_eq!(got, want, "{ray:?}");
             assert_ne!(got.prim, NO_HIT, "a ray through the fan missed it: {ray:?}");
-            let r = Pre1x8::new(&pre).tris8(&LeafRows::new(&rows[start..], fan.len()), 0);
+            let r = Pre1x8::new(&pre).tris8(&LeafRows::new(&rows[start..], fan.len(), pre.k), 0);
             rare += usize::from(r.any_zero.any());
         }
         assert!(rare > 0, "no ray took the f64 path");
