@@ -595,6 +595,19 @@ pub(super) fn row_tri(leaf: &[f32], n: usize, i: usize) -> Tri {
     }
 }
 
+/// Whether `pass(j)` holds for any pass `j` over a leaf of `n` triangles (eight a pass),
+/// with the single pass of a leaf of up to eight triangles (every leaf [`super::collapse`]
+/// makes) written out of the loop: in the loop the nine rows' addresses were hoisted and
+/// spilled to the stack (docs/traverse.md, session 17).
+#[inline(always)]
+fn one_pass_or_loop(n: usize, mut pass: impl FnMut(usize) -> bool) -> bool {
+    if n <= 8 {
+        n > 0 && pass(0)
+    } else {
+        (0..n.div_ceil(8)).any(pass)
+    }
+}
+
 /// The mask of the first `n` lanes (all eight from `n ≥ 8`).
 #[inline(always)]
 fn first_lanes(n: usize) -> u8 {
@@ -615,7 +628,7 @@ pub(super) fn closest_rows(
 ) {
     let tmin = p8.tmin.as_array()[0];
     let rows = LeafRows::new(leaf, n, p8.k);
-    for j in 0..n.div_ceil(8) {
+    let mut pass = |j: usize| {
         let valid = first_lanes(n - 8 * j);
         let r = p8.tris8(&rows, j);
         if r.ok.to_bitmask() as u8 & valid != 0 {
@@ -639,7 +652,11 @@ pub(super) fn closest_rows(
         if zero != 0 {
             closest_rows_rare(&pre(), leaf, n, 8 * j, zero, best);
         }
-    }
+    };
+    one_pass_or_loop(n, |j| {
+        pass(j);
+        false
+    });
 }
 
 /// The `f64` fallback of [`closest_rows`]' lanes with a zero edge function.
@@ -664,7 +681,7 @@ pub(super) fn occludes_rows(
     tmax: f32,
 ) -> bool {
     let rows = LeafRows::new(leaf, n, p8.k);
-    (0..n.div_ceil(8)).any(|j| {
+    let pass = |j: usize| {
         let valid = first_lanes(n - 8 * j);
         let r = p8.tris8(&rows, j);
         if r.ok.to_bitmask() as u8 & valid != 0 {
@@ -676,7 +693,8 @@ pub(super) fn occludes_rows(
         }
         let zero = r.any_zero.to_bitmask() as u8 & valid;
         zero != 0 && occludes_rows_rare(&pre(), leaf, n, 8 * j, zero, tmax)
-    })
+    };
+    one_pass_or_loop(n, pass)
 }
 
 /// The `f64` fallback of [`occludes_rows`]' lanes with a zero edge function.
