@@ -343,12 +343,7 @@ impl Iterator for RowTris<'_> {
         let i = self.i;
         (i < self.n).then(|| {
             self.i += 1;
-            RowTri {
-                leaf: self.leaf,
-                n: self.n,
-                i,
-            }
-            .tri()
+            RowTri::new(self.leaf, self.n, i).tri()
         })
     }
 }
@@ -894,7 +889,7 @@ pub(super) fn walk8<'a>(
                 visitor.rows1(rows, n, live)
             } else {
                 let leaf = &rows[..ROWS * n];
-                visitor.leaf8((0..n).map(|i| RowTri { leaf, n, i }))
+                visitor.leaf8((0..n).map(|i| RowTri::new(leaf, n, i)))
             };
             alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
             if alive == 0 {

@@ -461,23 +461,49 @@ impl TriAt for &Tri {
     }
 }
 
-/// Triangle `i` of the leaf of `n` triangles whose rows are `leaf` (`ROWS · n` values).
+/// Triangle `i` of the leaf of `n` triangles whose rows are `leaf` (`ROWS · n` values),
+/// its bounds checked once ([`RowTri::new`]) rather than per coordinate (nine checks a
+/// triangle in the packet walk's leaf test: docs/traverse.md, session 17).
 #[derive(Clone, Copy)]
 pub(super) struct RowTri<'a> {
-    pub(super) leaf: &'a [f32],
-    pub(super) n: usize,
-    pub(super) i: usize,
+    leaf: &'a [f32],
+    n: usize,
+    i: usize,
+}
+
+impl<'a> RowTri<'a> {
+    /// # Panics
+    /// When `i ≥ n` or `leaf` holds fewer than `ROWS · n` values (free where the caller's
+    /// slice and range show it, as the walks' do).
+    #[inline(always)]
+    pub(super) fn new(leaf: &'a [f32], n: usize, i: usize) -> Self {
+        assert!(
+            i < n && leaf.len() >= ROWS * n,
+            "triangle outside its leaf's rows"
+        );
+        Self { leaf, n, i }
+    }
+
+    /// Row `r < ROWS` of the triangle.
+    #[inline(always)]
+    fn row(self, r: usize) -> f32 {
+        assert!(r < ROWS);
+        // SAFETY: `r < ROWS` and `i < n` (checked in `new`) give `r·n + i < ROWS·n ≤
+        // leaf.len()` (checked in `new`).
+        unsafe { *self.leaf.get_unchecked(r * self.n + self.i) }
+    }
 }
 
 impl TriAt for RowTri<'_> {
     #[inline(always)]
     fn at(self, c: usize, a: usize) -> f32 {
-        self.leaf[(3 * c + a) * self.n + self.i]
+        assert!(a < 3);
+        self.row(3 * c + a)
     }
 
     #[inline(always)]
     fn prim(self) -> u32 {
-        self.leaf[PRIM_ROW * self.n + self.i].to_bits()
+        self.row(PRIM_ROW).to_bits()
     }
 
     fn tri(self) -> Tri {
@@ -586,15 +612,6 @@ impl<'a> LeafRows<'a> {
     }
 }
 
-/// Triangle `i` of a leaf of `n` triangles stored as rows (for the scalar paths).
-pub(super) fn row_tri(leaf: &[f32], n: usize, i: usize) -> Tri {
-    Tri {
-        v: [0, 1, 2].map(|c| [0, 1, 2].map(|a| leaf[(3 * c + a) * n + i])),
-        prim: leaf[PRIM_ROW * n + i].to_bits(),
-        pad: [0; 2],
-    }
-}
-
 /// Whether `pass(j)` holds for any pass `j` over a leaf of `n` triangles (eight a pass),
 /// with the single pass of a leaf of up to eight triangles (every leaf [`super::collapse`]
 /// makes) written out of the loop: in the loop the nine rows' addresses were hoisted and
@@ -665,7 +682,7 @@ pub(super) fn closest_rows(
 fn closest_rows_rare(pre: &Pre, leaf: &[f32], n: usize, first: usize, zero: u8, best: &mut Hit) {
     for i in 0..8 {
         if zero >> i & 1 == 1 {
-            closest1(pre, &row_tri(leaf, n, first + i), best);
+            closest1(pre, &RowTri::new(leaf, n, first + i).tri(), best);
         }
     }
 }
@@ -708,7 +725,8 @@ fn occludes_rows_rare(
     zero: u8,
     tmax: f32,
 ) -> bool {
-    (0..8).any(|i| zero >> i & 1 == 1 && occludes1(pre, &row_tri(leaf, n, first + i), tmax))
+    (0..8)
+        .any(|i| zero >> i & 1 == 1 && occludes1(pre, &RowTri::new(leaf, n, first + i).tri(), tmax))
 }
 
 #[cfg(test)]
@@ -808,7 +826,7 @@ mod tests {
                 "trial {trial}: {ray:?}"
             );
             for (i, tri) in leaf.iter().enumerate() {
-                assert_eq!(row_tri(&rows[start..], n, i), *tri);
+                assert_eq!(RowTri::new(&rows[start..], n, i).tri(), *tri);
             }
         }
         assert!(hits > 1000, "{hits} hits");
