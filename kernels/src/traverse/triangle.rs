@@ -612,19 +612,6 @@ impl<'a> LeafRows<'a> {
     }
 }
 
-/// Whether `pass(j)` holds for any pass `j` over a leaf of `n` triangles (eight a pass),
-/// with the single pass of a leaf of up to eight triangles (every leaf [`super::collapse`]
-/// makes) written out of the loop: in the loop the nine rows' addresses were hoisted and
-/// spilled to the stack (docs/traverse.md, session 17).
-#[inline(always)]
-fn one_pass_or_loop(n: usize, mut pass: impl FnMut(usize) -> bool) -> bool {
-    if n <= 8 {
-        n > 0 && pass(0)
-    } else {
-        (0..n.div_ceil(8)).any(pass)
-    }
-}
-
 /// The mask of the first `n` lanes (all eight from `n ≥ 8`).
 #[inline(always)]
 fn first_lanes(n: usize) -> u8 {
@@ -635,6 +622,11 @@ fn first_lanes(n: usize) -> u8 {
 /// candidates of a pass are accepted in triangle order, then its lanes with a zero edge
 /// function go through [`closest1`] (the result does not depend on the order: the tie rule
 /// picks the least `(t, prim)`).
+///
+/// The single pass of a leaf of up to eight triangles (every leaf [`super::collapse`] makes)
+/// is written out of the loop, here and in [`occludes_rows`]: in the loop the nine rows'
+/// addresses were hoisted and spilled to the stack, and a pass shared by both as a closure
+/// was called out of line (docs/traverse.md, session 17).
 #[inline(always)]
 pub(super) fn closest_rows(
     pre: impl Fn() -> Pre,
@@ -643,37 +635,51 @@ pub(super) fn closest_rows(
     n: usize,
     best: &mut Hit,
 ) {
-    let tmin = p8.tmin.as_array()[0];
     let rows = LeafRows::new(leaf, n, p8.k);
-    let mut pass = |j: usize| {
-        let valid = first_lanes(n - 8 * j);
-        let r = p8.tris8(&rows, j);
-        if r.ok.to_bitmask() as u8 & valid != 0 {
-            let t = r.tt / r.det;
-            let cand = r.ok & t.simd_ge(p8.tmin) & t.simd_le(f32x8::splat(best.t));
-            for i in set_lanes(cand.to_bitmask() as u8 & valid) {
-                let ti = t.as_array()[i];
-                let prim = rows.prim(8 * j + i);
-                if accept(ti, prim, tmin, best) {
-                    let det = r.det.as_array()[i];
-                    *best = Hit {
-                        t: ti,
-                        u: r.v.as_array()[i] / det,
-                        v: r.w.as_array()[i] / det,
-                        prim,
-                    };
-                }
+    if n <= 8 {
+        if n > 0 {
+            closest_pass(&pre, p8, &rows, 0, best);
+        }
+    } else {
+        for j in 0..n.div_ceil(8) {
+            closest_pass(&pre, p8, &rows, j, best);
+        }
+    }
+}
+
+/// Pass `j` of [`closest_rows`]: triangles `8j .. 8j + 8`.
+#[inline(always)]
+fn closest_pass(
+    pre: &impl Fn() -> Pre,
+    p8: &Pre1x8,
+    rows: &LeafRows<'_>,
+    j: usize,
+    best: &mut Hit,
+) {
+    let tmin = p8.tmin.as_array()[0];
+    let valid = first_lanes(rows.n - 8 * j);
+    let r = p8.tris8(rows, j);
+    if r.ok.to_bitmask() as u8 & valid != 0 {
+        let t = r.tt / r.det;
+        let cand = r.ok & t.simd_ge(p8.tmin) & t.simd_le(f32x8::splat(best.t));
+        for i in set_lanes(cand.to_bitmask() as u8 & valid) {
+            let ti = t.as_array()[i];
+            let prim = rows.prim(8 * j + i);
+            if accept(ti, prim, tmin, best) {
+                let det = r.det.as_array()[i];
+                *best = Hit {
+                    t: ti,
+                    u: r.v.as_array()[i] / det,
+                    v: r.w.as_array()[i] / det,
+                    prim,
+                };
             }
         }
-        let zero = r.any_zero.to_bitmask() as u8 & valid;
-        if zero != 0 {
-            closest_rows_rare(&pre(), leaf, n, 8 * j, zero, best);
-        }
-    };
-    one_pass_or_loop(n, |j| {
-        pass(j);
-        false
-    });
+    }
+    let zero = r.any_zero.to_bitmask() as u8 & valid;
+    if zero != 0 {
+        closest_rows_rare(&pre(), rows.rows, rows.n, 8 * j, zero, best);
+    }
 }
 
 /// The `f64` fallback of [`closest_rows`]' lanes with a zero edge function.
@@ -688,7 +694,8 @@ fn closest_rows_rare(pre: &Pre, leaf: &[f32], n: usize, first: usize, zero: u8, 
 }
 
 /// Whether any of the `n` triangles of a leaf stored as rows blocks the ray on
-/// `[tmin, tmax]`: [`occludes1`], eight triangles per pass.
+/// `[tmin, tmax]`: [`occludes1`], eight triangles per pass (one written out, as in
+/// [`closest_rows`]).
 #[inline(always)]
 pub(super) fn occludes_rows(
     pre: impl Fn() -> Pre,
@@ -698,20 +705,33 @@ pub(super) fn occludes_rows(
     tmax: f32,
 ) -> bool {
     let rows = LeafRows::new(leaf, n, p8.k);
-    let pass = |j: usize| {
-        let valid = first_lanes(n - 8 * j);
-        let r = p8.tris8(&rows, j);
-        if r.ok.to_bitmask() as u8 & valid != 0 {
-            let t = r.tt / r.det;
-            let hit = r.ok & t.simd_ge(p8.tmin) & t.simd_le(f32x8::splat(tmax));
-            if hit.to_bitmask() as u8 & valid != 0 {
-                return true;
-            }
+    if n <= 8 {
+        n > 0 && occludes_pass(&pre, p8, &rows, 0, tmax)
+    } else {
+        (0..n.div_ceil(8)).any(|j| occludes_pass(&pre, p8, &rows, j, tmax))
+    }
+}
+
+/// Pass `j` of [`occludes_rows`]: triangles `8j .. 8j + 8`.
+#[inline(always)]
+fn occludes_pass(
+    pre: &impl Fn() -> Pre,
+    p8: &Pre1x8,
+    rows: &LeafRows<'_>,
+    j: usize,
+    tmax: f32,
+) -> bool {
+    let valid = first_lanes(rows.n - 8 * j);
+    let r = p8.tris8(rows, j);
+    if r.ok.to_bitmask() as u8 & valid != 0 {
+        let t = r.tt / r.det;
+        let hit = r.ok & t.simd_ge(p8.tmin) & t.simd_le(f32x8::splat(tmax));
+        if hit.to_bitmask() as u8 & valid != 0 {
+            return true;
         }
-        let zero = r.any_zero.to_bitmask() as u8 & valid;
-        zero != 0 && occludes_rows_rare(&pre(), leaf, n, 8 * j, zero, tmax)
-    };
-    one_pass_or_loop(n, pass)
+    }
+    let zero = r.any_zero.to_bitmask() as u8 & valid;
+    zero != 0 && occludes_rows_rare(&pre(), rows.rows, rows.n, 8 * j, zero, tmax)
 }
 
 /// The `f64` fallback of [`occludes_rows`]' lanes with a zero edge function.
