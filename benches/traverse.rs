@@ -12,7 +12,11 @@
 //! Environment:
 //! - `TRAVERSE_DUEL=N`: also time the gather and the shadow tracers round-robin for N rounds
 //!   (ratios per round: robust on a loaded machine); `-- no_such_bench` skips criterion.
-//! - `TRAVERSE_ONLY=name,...`: in the duel, time only those entries (for a profiler).
+//! - `TRAVERSE_ONLY=name,...`: in the duel, time only those entries (for a profiler). Under
+//!   callgrind, only their passes are counted: `TRAVERSE_ONLY=wide_packet8 TRAVERSE_DUEL=3
+//!   valgrind --tool=callgrind --instr-atstart=no --cache-sim=yes --D1=49152,12,64
+//!   --LL=2097152,16,64 target/release/deps/traverse-* --bench no_such_bench` (the passes
+//!   switch callgrind's instrumentation on and off; natively a few no-op instructions).
 //! - `TRAVERSE_SCENES=ajar` (or `city1m`, or `none`): the scenes to run.
 //! - `TRAVERSE_PRESET=very_slow` (a `Preset::name`): the build preset of our trees and CwBvh.
 //! - `TRAVERSE_PRESETS=1`: build every obvhs preset and time it (build time vs trace time).
@@ -655,9 +659,11 @@ fn duel(scene: &str, set: &str, entries: &[DuelEntry<'_>], rounds: usize, embree
     if let Ok(only) = std::env::var("TRAVERSE_ONLY") {
         for (name, packets, run) in entries.iter().filter(|e| only.split(',').any(|o| o == e.0)) {
             let start = Instant::now();
+            callgrind::instrument(true);
             for _ in 0..rounds {
                 black_box(run());
             }
+            callgrind::instrument(false);
             let rate = (packets * LANES * rounds) as f64 / start.elapsed().as_secs_f64() / 1e6;
             println!("only {scene} {set} {name}: {rate:.2} Mrays/s");
         }
@@ -1121,3 +1127,33 @@ mod embree_rt {
 
 criterion_group!(benches, bench);
 criterion_main!(benches);
+
+/// Callgrind's `START_INSTRUMENTATION` / `STOP_INSTRUMENTATION` client requests (valgrind's
+/// `callgrind.h`), so that `--instr-atstart=no` counts only the passes of `TRAVERSE_ONLY`
+/// (instruction counts, simulated cache misses: docs/traverse.md, session 17). Natively the
+/// request is a sequence of rotations that leaves every register as it was.
+mod callgrind {
+    /// Switches instrumentation on or off (no effect outside valgrind or off x86-64).
+    pub fn instrument(on: bool) {
+        // VG_USERREQ_TOOL_BASE('C', 'T') + 4 (start) or + 5 (stop).
+        let request: u64 = (u64::from(b'C') << 24 | u64::from(b'T') << 16) + if on { 4 } else { 5 };
+        #[cfg(target_arch = "x86_64")]
+        {
+            let args = [request, 0, 0, 0, 0, 0];
+            // SAFETY: valgrind's client-request preamble: four rotations of `rdi` by 128 bits
+            // in all (no change), then `xchg rbx, rbx` (no change); valgrind recognises the
+            // sequence and reads the request from `args` through `rax`, answering in `rdx`.
+            unsafe {
+                core::arch::asm!(
+                    "rol rdi, 3", "rol rdi, 13", "rol rdi, 61", "rol rdi, 51", "xchg rbx, rbx",
+                    inout("rdx") 0u64 => _,
+                    in("rax") args.as_ptr(),
+                    inout("rdi") 0u64 => _,
+                    options(nostack),
+                );
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = request;
+    }
+}
