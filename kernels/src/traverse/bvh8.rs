@@ -720,7 +720,7 @@ struct Lanes {
     tmin_down: [f32; LANES],
 }
 
-/// Bytes of one row of a [`WideNode`] ([`WideNode::rows`]).
+/// Bytes of one row of a [`WideNode`]: the eight `lo` or `hi` values of one axis.
 const ROW_BYTES: u32 = 4 * WIDTH as u32;
 
 impl Lanes {
