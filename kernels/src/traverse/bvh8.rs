@@ -713,8 +713,8 @@ struct Lanes {
     org: [[f32; LANES]; 3],
     inv: [[f32; LANES]; 3],
     /// Byte offsets within a [`WideNode`] of the rows of each lane's near and far planes per
-    /// axis, `32·row` (`lo` rows 0–2, `hi` rows 3–5, as in [`Ray1x8`]): only [`Lanes::new`]
-    /// writes them, and [`Lanes::row`] relies on them being such offsets.
+    /// axis, `32·row` (`lo` x, y, z rows 0–2, `hi` rows 3–5): only [`Lanes::new`] writes
+    /// them, and [`Lanes::row`] relies on them being such offsets.
     near: [[u32; LANES]; 3],
     far: [[u32; LANES]; 3],
     tmin_down: [f32; LANES],
