@@ -608,7 +608,7 @@ impl<'a> LeafRows<'a> {
     /// The primitive id of triangle `i < n`.
     #[inline(always)]
     fn prim(&self, i: usize) -> u32 {
-        self.rows[PRIM_ROW * self.n + i].to_bits()
+        RowTri::new(self.rows, self.n, i).prim()
     }
 }
 
