@@ -617,30 +617,28 @@ fn push_sorted(
 /// city (59 MB) it gains 1.9×.
 pub const INTERLEAVE_BYTES: usize = 1 << 20;
 
-/// Asks the cache for the 256 bytes at `p` (a node, or the first rows of a leaf).
+/// Asks the cache for the 256 bytes of the node, or the first rows of the leaf, of the entry
+/// `child | meta << 32`. The address is chosen without a branch: branching on the kind of
+/// entry mispredicted a third of the time in the packet walk (docs/traverse.md, session 18).
 #[inline(always)]
-fn prefetch<T>(p: &T) {
+fn prefetch_entry(bvh: &WideRef<'_>, e: u64) {
+    let (child, meta) = (e as usize & 0xffff_ffff, (e >> 32) as u32);
+    let node = bvh.nodes.as_ptr().wrapping_add(child).cast::<i8>();
+    let rows = bvh.rows.as_ptr().wrapping_add(child * ROWS).cast::<i8>();
+    // `rows − node` for a leaf, 0 for an inner node.
+    let leaf = (rows as isize).wrapping_sub(node as isize) & -isize::from(meta != 0);
+    let p = node.wrapping_byte_offset(leaf);
     #[cfg(target_arch = "x86_64")]
     {
         use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        let p = (p as *const T).cast::<i8>();
         for line in 0..4 {
             // SAFETY: a prefetch never faults and has no effect on memory; `wrapping_add`
             // keeps the address arithmetic defined.
             unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * line)) };
         }
     }
-}
-
-/// Prefetches the node or the leaf rows of the entry `child | meta << 32`.
-#[inline(always)]
-fn prefetch_entry(bvh: &WideRef<'_>, e: u64) {
-    let (child, meta) = (e as u32, (e >> 32) as u32);
-    if meta == 0 {
-        prefetch(&bvh.nodes[child as usize]);
-    } else if let Some(first) = bvh.leaf_rows(child).first() {
-        prefetch(first);
-    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
 }
 
 /// The lanes `lanes` of a packet as single rays looking for any hit (occlusion), walked
@@ -801,10 +799,10 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
     (met, nearest)
 }
 
-/// Depth-first walk of a packet: a shared stack of `index·8 + slot | lanes << 32` entries,
-/// `lanes` the lanes whose interval met the slot's box when it was pushed; the children a
-/// node's live lanes meet are pushed farthest first, by the nearest entry distance among
-/// their lanes. A node is tested lane by lane, eight slots at a time ([`boxes8`]): only the
+/// Depth-first walk of a packet: a shared stack ([`Stack8`]) of slots, each with the lanes
+/// whose interval met its box when it was pushed; the children a node's live lanes meet are
+/// sorted by the nearest entry distance among their lanes ([`sort8_descending`]), the
+/// nearest visited next and the others pushed farthest first. A node is tested lane by lane, eight slots at a time ([`boxes8`]): only the
 /// live lanes are tested, and a packet's lanes drift apart deeper in the tree. (Measured
 /// against testing slot by slot, eight lanes at a time, against one frustum test for a
 /// shared-origin packet, and against a frustum test choosing the slots then tested eight
@@ -816,8 +814,7 @@ pub(super) fn walk8<'a>(
     visitor: &mut impl Visitor<'a>,
 ) {
     let lanes = Lanes::new(pre);
-    // (child | meta << 32, the nearest entry distance of the lanes met, those lanes)
-    let mut stack = Stack::<(u64, f32, u8)>::new();
+    let mut stack = Stack8::new();
     let mut alive = pre.traced;
     let mut index = 0usize;
     let mut live = alive;
@@ -825,60 +822,49 @@ pub(super) fn walk8<'a>(
     loop {
         let node = &bvh.nodes[index];
         let (met, nearest) = boxes8(node, &lanes, live, tmax.as_array());
-        // Keys `nearest bits & !7 | slot` (entry distances are ≥ 0, so their bits order like
-        // the values), built eight at a time; only the slots met are sorted (descending,
-        // by insertion): the nearest is visited next, the others pushed farthest first.
-        let slots_met = !met.simd_eq(u32x8::ZERO).to_bitmask() as u8;
-        let all_keys = (bytemuck::cast::<f32x8, u32x8>(nearest) & u32x8::splat(!7)
-            | u32x8::from([0, 1, 2, 3, 4, 5, 6, 7]))
-        .to_array();
-        let met = met.to_array();
-        let nearest = nearest.as_array();
-        let mut keys = [0u32; WIDTH];
-        let mut n = 0;
-        for slot in set_lanes(slots_met) {
-            let k = all_keys[slot];
-            let mut i = n;
-            while i > 0 && keys[i - 1] < k {
-                keys[i] = keys[i - 1];
-                i -= 1;
-            }
-            keys[i] = k;
-            n += 1;
-        }
-        let entry = |k: u32| {
-            let slot = (k & 7) as usize;
-            let e = u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
-            (e, nearest[slot], met[slot] as u8)
-        };
-        // The pushed entries are prefetched: the walk comes back to them after the nearest
-        // subtree (+2-6 % on the gather packets, docs/traverse.md).
-        for &k in &keys[..n.saturating_sub(1)] {
-            let pushed = entry(k);
-            prefetch_entry(bvh, pushed.0);
-            stack.push(pushed);
-        }
-        let mut next = (n > 0).then(|| entry(keys[n - 1]));
+        // Keys `nearest bits & !7 | slot` of the slots met (entry distances are ≥ 0, so their
+        // bits order like the values), 0 elsewhere, sorted descending without a branch: the
+        // first `n − 1` are pushed, farthest first, and the nearest, key `n − 1`, is visited
+        // next (a key 0 met, slot 0 at distance 0, sorts among the zeros and is still key
+        // `n − 1`). Sorted by insertion, the sort's and the pushes' branches were two fifths
+        // of the walk's mispredictions on the city (callgrind; docs/traverse.md, session 18).
+        let hit = !met.simd_eq(u32x8::ZERO);
+        let n = hit.to_bitmask().count_ones() as usize;
+        let keys = (bytemuck::cast::<f32x8, u32x8>(nearest) & u32x8::splat(!7) | SLOTS) & hit;
+        let order = sort8_descending(keys) & u32x8::splat(7);
+        let mut next = (n > 0).then(|| {
+            let rows = [
+                u32x8::from(node.child),
+                u32x8::from(node.meta),
+                bytemuck::cast(nearest),
+                met,
+            ];
+            let (next, pushed) = stack.push_sorted(rows.map(|row| permute(row, order)), n);
+            // The nearest entry pushed is prefetched: the walk comes back to it after the
+            // nearest subtree (docs/traverse.md).
+            prefetch_entry(bvh, u64::from(pushed.child) | u64::from(pushed.meta) << 32);
+            next
+        });
         loop {
-            let (e, lanes_met) = match next.take() {
-                Some((e, _, lanes_met)) => (e, lanes_met),
+            let e = match next.take() {
+                Some(e) => e,
                 None => {
-                    let Some((e, dist, lanes_met)) = stack.pop() else {
+                    let Some(e) = stack.pop() else {
                         return;
                     };
                     // Beyond every live lane's widened `tmax`: the slab tests repeated
                     // would all fail.
-                    if dist > far {
+                    if e.dist > far {
                         continue;
                     }
-                    (e, lanes_met)
+                    e
                 }
             };
-            live = lanes_met & alive;
+            let (child, meta) = (e.child, e.meta);
+            live = e.lanes & alive;
             if live == 0 {
                 continue;
             }
-            let (child, meta) = (e as u32, (e >> 32) as u32);
             if meta == 0 {
                 index = child as usize;
                 break;
@@ -896,6 +882,137 @@ pub(super) fn walk8<'a>(
                 return;
             }
             far = widened_largest(tmax, alive);
+        }
+    }
+}
+
+/// The slot numbers, lane by lane.
+const SLOTS: u32x8 = u32x8::new([0, 1, 2, 3, 4, 5, 6, 7]);
+
+/// `v[idx[i] & 7]` in each lane `i` (`vpermd`).
+#[inline(always)]
+fn permute(v: u32x8, idx: u32x8) -> u32x8 {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        use core::arch::x86_64::{__m256i, _mm256_permutevar8x32_epi32};
+        // SAFETY: AVX2 is enabled at compile time (the `cfg` above), so `vpermd` exists on
+        // every CPU this code runs on.
+        bytemuck::cast(unsafe {
+            _mm256_permutevar8x32_epi32(bytemuck::cast::<u32x8, __m256i>(v), bytemuck::cast(idx))
+        })
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    {
+        let (v, idx) = (v.to_array(), idx.to_array());
+        u32x8::from(idx.map(|i| v[(i & 7) as usize]))
+    }
+}
+
+/// The comparators of an optimal sorting network for eight keys (19 comparators in 6
+/// layers; Knuth, *TAOCP* vol. 3, §5.3.4), layer by layer.
+const NETWORK_PAIRS: [&[(usize, usize)]; 6] = [
+    &[(0, 2), (1, 3), (4, 6), (5, 7)],
+    &[(0, 4), (1, 5), (2, 6), (3, 7)],
+    &[(0, 1), (2, 3), (4, 5), (6, 7)],
+    &[(2, 4), (3, 5)],
+    &[(1, 4), (3, 6)],
+    &[(1, 2), (3, 4), (5, 6)],
+];
+
+/// [`NETWORK_PAIRS`] as lanes: per layer, each lane's partner (itself where it has none) and
+/// a mask of the lanes that are the lower of their pair.
+const NETWORK: [([u32; WIDTH], [u32; WIDTH]); 6] = {
+    let mut layers = [([0, 1, 2, 3, 4, 5, 6, 7], [0; WIDTH]); 6];
+    let mut l = 0;
+    while l < layers.len() {
+        let mut p = 0;
+        while p < NETWORK_PAIRS[l].len() {
+            let (a, b) = NETWORK_PAIRS[l][p];
+            layers[l].0[a] = b as u32;
+            layers[l].0[b] = a as u32;
+            layers[l].1[a] = u32::MAX;
+            p += 1;
+        }
+        l += 1;
+    }
+    layers
+};
+
+/// `keys` sorted descending by [`NETWORK`], without a branch: per layer one permute, a `max`,
+/// a `min` and a blend.
+#[inline(always)]
+fn sort8_descending(mut keys: u32x8) -> u32x8 {
+    for (partner, lower) in NETWORK {
+        let other = permute(keys, u32x8::from(partner));
+        keys = u32x8::from(lower).select(keys.max(other), keys.min(other));
+    }
+    keys
+}
+
+/// An entry of the packet walk's stack: the slot's child and meta, the nearest entry
+/// distance of the lanes that met its box, and those lanes.
+#[derive(Clone, Copy)]
+struct Entry8 {
+    child: u32,
+    meta: u32,
+    dist: f32,
+    lanes: u8,
+}
+
+/// The packet walk's stack as four rows (child, meta, entry distance bits, lanes met), so
+/// that a node's sorted slots are pushed with four 8-wide stores ([`Stack8::push_sorted`]).
+/// Left uninitialised, as [`Stack`].
+struct Stack8 {
+    rows: [[MaybeUninit<u32>; STACK + WIDTH]; 4],
+    len: usize,
+}
+
+impl Stack8 {
+    #[inline(always)]
+    fn new() -> Self {
+        Self {
+            rows: [[const { MaybeUninit::uninit() }; STACK + WIDTH]; 4],
+            len: 0,
+        }
+    }
+
+    /// Writes the eight entries `rows`, sorted farthest first, at the top and pushes the
+    /// first `n − 1` of them (`n ≥ 1`). Returns entry `n − 1`, the nearest (visited next), and
+    /// the nearest entry pushed (entry `n − 1` again when none is).
+    #[inline(always)]
+    fn push_sorted(&mut self, rows: [u32x8; 4], n: usize) -> (Entry8, Entry8) {
+        let at = self.len;
+        // A walk never exceeds `STACK` entries; the eight-wide stores need `WIDTH` beyond.
+        assert!(at <= STACK && (1..=WIDTH).contains(&n));
+        for (row, v) in self.rows.iter_mut().zip(rows) {
+            row[at..at + WIDTH].copy_from_slice(&v.to_array().map(MaybeUninit::new));
+        }
+        self.len = at + n - 1;
+        // SAFETY: entries `at .. at + WIDTH` were written just above.
+        unsafe { (self.get(at + n - 1), self.get(at + n.max(2) - 2)) }
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> Option<Entry8> {
+        self.len = self.len.checked_sub(1)?;
+        // SAFETY: `push_sorted` wrote every entry below the previous `len`, and `len` only
+        // grows through `push_sorted`.
+        Some(unsafe { self.get(self.len) })
+    }
+
+    /// Entry `i`.
+    ///
+    /// # Safety
+    /// `push_sorted` wrote entry `i`.
+    #[inline(always)]
+    unsafe fn get(&self, i: usize) -> Entry8 {
+        // SAFETY: the caller's promise.
+        let row = |k: usize| unsafe { self.rows[k][i].assume_init() };
+        Entry8 {
+            child: row(0),
+            meta: row(1),
+            dist: f32::from_bits(row(2)),
+            lanes: row(3) as u8,
         }
     }
 }
@@ -967,6 +1084,37 @@ mod tests {
         nodes[last].child[1] = depth as u32;
         nodes[last].meta[1] = LEAF | 1;
         (nodes, tris)
+    }
+
+    /// The sorting network sorts every 0–1 input (so, by the 0–1 principle, every input)
+    /// and random keys with ties, as `sort` does.
+    #[test]
+    fn the_network_sorts_eight_keys_descending() {
+        let check = |keys: [u32; WIDTH]| {
+            let mut want = keys;
+            want.sort_unstable_by(|a, b| b.cmp(a));
+            assert_eq!(
+                sort8_descending(u32x8::from(keys)).to_array(),
+                want,
+                "{keys:?}"
+            );
+        };
+        for bits in 0..=255u32 {
+            check(core::array::from_fn(|i| bits >> i & 1));
+        }
+        let mut rng = crate::testing::Pcg32::new(7, 1);
+        for _ in 0..10_000 {
+            let range = [4, 1 << 16, u32::MAX][rng.next_u32() as usize % 3];
+            check(core::array::from_fn(|_| rng.next_u32() % range));
+        }
+    }
+
+    #[test]
+    fn permute_takes_each_lanes_index() {
+        let v = u32x8::from([10, 11, 12, 13, 14, 15, 16, 17]);
+        let idx = [7, 0, 3, 3, 9, 1, 6, 2];
+        let want = idx.map(|i| 10 + (i & 7));
+        assert_eq!(permute(v, u32x8::from(idx)).to_array(), want);
     }
 
     #[test]
