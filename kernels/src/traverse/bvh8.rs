@@ -434,8 +434,8 @@ impl Ray1x8 {
 /// Depth-first walk of one ray, nearest child first. `visit` tests the leaf of `n` triangles
 /// whose rows start at `rows[0]` and returns the ray's new `tmax` (−∞ stops the walk).
 ///
-/// The stack holds `(child, meta)` with the slot's entry distance beside it, so a pop never
-/// reads the parent node again; a popped entry whose entry distance lies beyond the widened
+/// The stack ([`Stack8`]) holds each slot's child and meta with its entry distance beside
+/// it, so a pop never reads the parent node again; a popped entry whose entry distance lies beyond the widened
 /// `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
 pub(super) fn walk1<'a>(
     bvh: &WideRef<'a>,
@@ -443,45 +443,48 @@ pub(super) fn walk1<'a>(
     mut visit: impl FnMut(&'a [f32], usize) -> f32,
 ) -> f32 {
     let mut tmax = visit(&[], 0);
-    // (child | meta << 32, entry distance)
-    let mut stack = Stack::<(u64, f32)>::new();
+    let mut stack = Stack8::new();
     let mut index = 0;
     loop {
         let node = &bvh.nodes[index];
         let (bits, near) = ray.boxes(node, tmax);
-        let near = near.as_array();
-        let entry = |slot: usize| u64::from(node.child[slot]) | u64::from(node.meta[slot]) << 32;
-        // The nearest slot met is visited next; the others are pushed farthest first.
-        let mut next = match bits.count_ones() {
+        let n = bits.count_ones() as usize;
+        // The nearest slot met is visited next; the others are pushed farthest first, sorted
+        // as the packet walk sorts them (+4–8 % on single gather rays, session 18).
+        let mut next = match n {
             0 => None,
-            1 => Some(entry(bits.trailing_zeros() as usize)),
+            1 => {
+                let slot = bits.trailing_zeros() as usize;
+                Some((node.child[slot], node.meta[slot]))
+            }
             _ => {
-                let nearest = push_sorted(&mut stack, bits, near, entry);
-                // The pushed slots are prefetched (+4-5 % on the city's single rays, -1 % in
-                // cache on the room: docs/traverse.md).
-                let mut rest = bits & !(1 << nearest);
-                while rest != 0 {
-                    let slot = rest.trailing_zeros() as usize;
-                    rest &= rest - 1;
-                    prefetch_entry(bvh, entry(slot));
-                }
-                Some(entry(nearest))
+                let hit = !(u32x8::splat(u32::from(bits)) & SLOT_BITS).simd_eq(u32x8::ZERO);
+                let rows = [
+                    u32x8::from(node.child),
+                    u32x8::from(node.meta),
+                    bytemuck::cast(near),
+                    u32x8::ZERO,
+                ];
+                let (next, pushed) = stack.push_sorted(sorted_rows(near, hit, rows), n);
+                // The nearest slot pushed is prefetched (every slot pushed, before session
+                // 18: +4–5 % on the city's single rays, −1 % in cache on the room).
+                prefetch_entry(bvh, pushed.entry());
+                Some((next.child, next.meta))
             }
         };
         loop {
-            let e = match next.take() {
+            let (child, meta) = match next.take() {
                 Some(e) => e,
                 None => {
-                    let Some((e, dist)) = stack.pop() else {
+                    let Some(e) = stack.pop() else {
                         return tmax;
                     };
-                    if dist > super::widened(tmax) {
+                    if e.dist > super::widened(tmax) {
                         continue;
                     }
-                    e
+                    (e.child, e.meta)
                 }
             };
-            let (child, meta) = (e as u32, (e >> 32) as u32);
             if meta == 0 {
                 index = child as usize;
                 break;
@@ -567,47 +570,6 @@ fn slots_any_hit(node: &WideNode, bits: u8, mut push: impl FnMut(u64)) -> u64 {
         }
     }
     last.unwrap()
-}
-
-/// The slots of `bits` (one or more) ordered farthest first by their entry distances, as
-/// keys `near bits & !7 | slot` (entry distances are ≥ 0, so their bits order like the
-/// values; the order only steers the walk), and how many there are. The slot of key `k` is
-/// `k & 7`; the last key is the nearest slot.
-#[inline(always)]
-fn slots_far_to_near(bits: u8, near: &[f32; WIDTH]) -> ([u32; WIDTH], usize) {
-    let mut keys = [0u32; WIDTH];
-    let mut n = 0;
-    let mut rest = bits;
-    while rest != 0 {
-        let slot = rest.trailing_zeros() as usize;
-        rest &= rest - 1;
-        let k = near[slot].to_bits() & !7 | slot as u32;
-        let mut i = n;
-        while i > 0 && keys[i - 1] < k {
-            keys[i] = keys[i - 1];
-            i -= 1;
-        }
-        keys[i] = k;
-        n += 1;
-    }
-    (keys, n)
-}
-
-/// Pushes the slots of `bits` (two or more) but the nearest, farthest first, with their
-/// entry distances ([`slots_far_to_near`]), and returns the nearest.
-#[inline(always)]
-fn push_sorted(
-    stack: &mut Stack<(u64, f32)>,
-    bits: u8,
-    near: &[f32; WIDTH],
-    entry: impl Fn(usize) -> u64,
-) -> usize {
-    let (keys, n) = slots_far_to_near(bits, near);
-    for &k in &keys[..n - 1] {
-        let slot = (k & 7) as usize;
-        stack.push((entry(slot), near[slot]));
-    }
-    (keys[n - 1] & 7) as usize
 }
 
 /// Layout size ([`WideRef::bytes`]) from which [`super::occluded8`] interleaves the
@@ -822,16 +784,12 @@ pub(super) fn walk8<'a>(
     loop {
         let node = &bvh.nodes[index];
         let (met, nearest) = boxes8(node, &lanes, live, tmax.as_array());
-        // Keys `nearest bits & !7 | slot` of the slots met (entry distances are ≥ 0, so their
-        // bits order like the values), 0 elsewhere, sorted descending without a branch: the
-        // first `n − 1` are pushed, farthest first, and the nearest, key `n − 1`, is visited
-        // next (a key 0 met, slot 0 at distance 0, sorts among the zeros and is still key
-        // `n − 1`). Sorted by insertion, the sort's and the pushes' branches were two fifths
-        // of the walk's mispredictions on the city (callgrind; docs/traverse.md, session 18).
+        // The slots met sorted farthest first without a branch: the first `n − 1` pushed,
+        // the nearest visited next. (Sorted by insertion, the sort's and the pushes' branches
+        // were two fifths of the walk's mispredictions on the city: callgrind's model,
+        // docs/traverse.md, session 18.)
         let hit = !met.simd_eq(u32x8::ZERO);
         let n = hit.to_bitmask().count_ones() as usize;
-        let keys = (bytemuck::cast::<f32x8, u32x8>(nearest) & u32x8::splat(!7) | SLOTS) & hit;
-        let order = sort8_descending(keys) & u32x8::splat(7);
         let mut next = (n > 0).then(|| {
             let rows = [
                 u32x8::from(node.child),
@@ -839,10 +797,10 @@ pub(super) fn walk8<'a>(
                 bytemuck::cast(nearest),
                 met,
             ];
-            let (next, pushed) = stack.push_sorted(rows.map(|row| permute(row, order)), n);
+            let (next, pushed) = stack.push_sorted(sorted_rows(nearest, hit, rows), n);
             // The nearest entry pushed is prefetched: the walk comes back to it after the
             // nearest subtree (docs/traverse.md).
-            prefetch_entry(bvh, u64::from(pushed.child) | u64::from(pushed.meta) << 32);
+            prefetch_entry(bvh, pushed.entry());
             next
         });
         loop {
@@ -888,6 +846,22 @@ pub(super) fn walk8<'a>(
 
 /// The slot numbers, lane by lane.
 const SLOTS: u32x8 = u32x8::new([0, 1, 2, 3, 4, 5, 6, 7]);
+
+/// Each slot's bit, lane by lane.
+const SLOT_BITS: u32x8 = u32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
+
+/// The slot rows `rows` permuted so that the slots of `hit` come first, farthest first by
+/// their entry distances `near`. Keys `near bits & !7 | slot` of the slots met (entry
+/// distances are ≥ 0, so their bits order like the values; the order only steers the walk),
+/// 0 elsewhere, sorted descending ([`sort8_descending`]): with `n` slots met, entry `n − 1`
+/// is the nearest (a key 0 met, slot 0 at distance 0, sorts among the zeros and is still
+/// entry `n − 1`).
+#[inline(always)]
+fn sorted_rows(near: f32x8, hit: u32x8, rows: [u32x8; 4]) -> [u32x8; 4] {
+    let keys = (bytemuck::cast::<f32x8, u32x8>(near) & u32x8::splat(!7) | SLOTS) & hit;
+    let order = sort8_descending(keys) & u32x8::splat(7);
+    rows.map(|row| permute(row, order))
+}
 
 /// `v[idx[i] & 7]` in each lane `i` (`vpermd`).
 #[inline(always)]
@@ -949,8 +923,8 @@ fn sort8_descending(mut keys: u32x8) -> u32x8 {
     keys
 }
 
-/// An entry of the packet walk's stack: the slot's child and meta, the nearest entry
-/// distance of the lanes that met its box, and those lanes.
+/// An entry of [`Stack8`]: the slot's child and meta, the (nearest) entry distance into its
+/// box, and the lanes that met it (packets; 0 for a single ray).
 #[derive(Clone, Copy)]
 struct Entry8 {
     child: u32,
@@ -959,9 +933,16 @@ struct Entry8 {
     lanes: u8,
 }
 
-/// The packet walk's stack as four rows (child, meta, entry distance bits, lanes met), so
-/// that a node's sorted slots are pushed with four 8-wide stores ([`Stack8::push_sorted`]).
-/// Left uninitialised, as [`Stack`].
+impl Entry8 {
+    /// `child | meta << 32`.
+    fn entry(self) -> u64 {
+        u64::from(self.child) | u64::from(self.meta) << 32
+    }
+}
+
+/// The closest-hit walks' stack as four rows (child, meta, entry distance bits, lanes met),
+/// so that a node's sorted slots are pushed with four 8-wide stores
+/// ([`Stack8::push_sorted`]). Left uninitialised, as [`Stack`].
 struct Stack8 {
     rows: [[MaybeUninit<u32>; STACK + WIDTH]; 4],
     len: usize,
