@@ -435,8 +435,8 @@ impl Ray1x8 {
 /// whose rows start at `rows[0]` and returns the ray's new `tmax` (−∞ stops the walk).
 ///
 /// The stack ([`Stack8`]) holds each slot's child and meta with its entry distance beside
-/// it, so a pop never reads the parent node again; a popped entry whose entry distance lies beyond the widened
-/// `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
+/// it, so a pop never reads the parent node again; a popped entry whose entry distance lies
+/// beyond the widened `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
 pub(super) fn walk1<'a>(
     bvh: &WideRef<'a>,
     ray: &Ray1x8,
@@ -586,7 +586,11 @@ pub const INTERLEAVE_BYTES: usize = 1 << 20;
 fn prefetch_entry(bvh: &WideRef<'_>, e: u64) {
     let (child, meta) = (e as usize & 0xffff_ffff, (e >> 32) as u32);
     let node = bvh.nodes.as_ptr().wrapping_add(child).cast::<i8>();
-    let rows = bvh.rows.as_ptr().wrapping_add(child * ROWS).cast::<i8>();
+    let rows = bvh
+        .rows
+        .as_ptr()
+        .wrapping_add(child.wrapping_mul(ROWS))
+        .cast::<i8>();
     // `rows − node` for a leaf, 0 for an inner node.
     let leaf = (rows as isize).wrapping_sub(node as isize) & -isize::from(meta != 0);
     let p = node.wrapping_byte_offset(leaf);
@@ -764,11 +768,12 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
 /// Depth-first walk of a packet: a shared stack ([`Stack8`]) of slots, each with the lanes
 /// whose interval met its box when it was pushed; the children a node's live lanes meet are
 /// sorted by the nearest entry distance among their lanes ([`sort8_descending`]), the
-/// nearest visited next and the others pushed farthest first. A node is tested lane by lane, eight slots at a time ([`boxes8`]): only the
-/// live lanes are tested, and a packet's lanes drift apart deeper in the tree. (Measured
-/// against testing slot by slot, eight lanes at a time, against one frustum test for a
-/// shared-origin packet, and against a frustum test choosing the slots then tested eight
-/// lanes at a time: docs/traverse.md, "Wide BVH" and "Session 13".)
+/// nearest visited next and the others pushed farthest first. A node is tested lane by lane,
+/// eight slots at a time ([`boxes8`]): only the live lanes are tested, and a packet's lanes
+/// drift apart deeper in the tree. (Measured against testing slot by slot, eight lanes at a
+/// time, against one frustum test for a shared-origin packet, and against a frustum test
+/// choosing the slots then tested eight lanes at a time: docs/traverse.md, "Wide BVH" and
+/// "Session 13".)
 pub(super) fn walk8<'a>(
     bvh: &WideRef<'a>,
     pre: &Pre8,
@@ -958,8 +963,8 @@ impl Stack8 {
     }
 
     /// Writes the eight entries `rows`, sorted farthest first, at the top and pushes the
-    /// first `n − 1` of them (`n ≥ 1`). Returns entry `n − 1`, the nearest (visited next), and
-    /// the nearest entry pushed (entry `n − 1` again when none is).
+    /// first `n − 1` of them (`n ≥ 1`). Returns entry `n − 1`, the nearest (visited next),
+    /// and the nearest entry pushed (entry `n − 1` again when none is).
     #[inline(always)]
     fn push_sorted(&mut self, rows: [u32x8; 4], n: usize) -> (Entry8, Entry8) {
         let at = self.len;
