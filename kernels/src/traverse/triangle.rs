@@ -5,7 +5,7 @@
 //! lane), with the closest-hit acceptance (tie rule) and occlusion tests built on them.
 
 use super::Tri;
-use super::scalar::NEAR_DOWN;
+use super::scalar::{NEAR_DOWN, slab8};
 use crate::packet::{Hit, LANES, NO_HIT, Ray, Ray8, set_lanes};
 use glam::Vec3;
 use wide::{f32x8, u32x8};
@@ -151,6 +151,11 @@ pub(super) fn traceable(ray: &Ray) -> bool {
 pub(super) struct Pre8 {
     pub(super) org: [f32x8; 3],
     pub(super) inv: [f32x8; 3],
+    /// The wide walks' fused slab test per axis ([`slab8`]): the inverse direction and the
+    /// near and far planes' offsets.
+    pub(super) slab_inv: [f32x8; 3],
+    pub(super) c_near: [f32x8; 3],
+    pub(super) c_far: [f32x8; 3],
     /// Permuted origin `o[kx], o[ky], o[kz]` per lane.
     pub(super) porg: [f32x8; 3],
     pub(super) s: [f32x8; 3],
@@ -206,6 +211,7 @@ impl Pre8 {
             |v: &[f32x8; 3], i: usize| sel[i][0].bitselect(v[0], sel[i][1].bitselect(v[1], v[2]));
         let (dx, dy, dz) = (pick(&d, 0), pick(&d, 1), pick(&d, 2));
         let neg = inv.map(f32x8::is_sign_negative);
+        let slabs = [0, 1, 2].map(|a| slab8(org[a], inv[a]));
         // Lanes agree when a mask is all-traced or none-traced.
         let same = |m: f32x8| {
             let bits = m.to_bitmask() as u8 & traced;
@@ -230,6 +236,9 @@ impl Pre8 {
             s: [dx / dz, dy / dz, one / dz],
             org,
             inv,
+            slab_inv: slabs.map(|[inv, _, _]| inv),
+            c_near: slabs.map(|[_, near, _]| near),
+            c_far: slabs.map(|[_, _, far]| far),
             k: sel.map(|[is0, is1]| {
                 // 0 where `is0`, else 1 where `is1`, else 2 (the masks are all ones or zeros).
                 let (is0, is1): (u32x8, u32x8) = (bytemuck::cast(is0), bytemuck::cast(is1));
