@@ -752,8 +752,7 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
     let inf = f32x8::splat(f32::INFINITY);
     let mut met = u32x8::ZERO;
     let mut nearest = inf;
-    for i in set_lanes(live) {
-        let i = i & 7;
+    let mut test = |i: usize| {
         let mut near = f32x8::splat(lanes.tmin_down[i]);
         let mut far = f32x8::splat(tmax[i]);
         for axis in 0..3 {
@@ -770,6 +769,19 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
         let m = near.simd_le(far.mul_add(f32x8::splat(FAR_UP), f32x8::splat(FAR_FLOOR)));
         nearest = m.select(near, inf).fast_min(nearest);
         met |= bytemuck::cast::<f32x8, u32x8>(m) & u32x8::from(LANE_BIT[i]);
+    };
+    // A node that all eight lanes reach is tested without the loop over set lanes, whose
+    // exit the branch predictor misses once a node (city gather 0.92–0.93× → 0.99–1.00×
+    // Embree, docs/traverse.md, session 19; the same for six or more lanes, the dead ones
+    // tested with `tmax = −∞`, was no faster).
+    if live == 0xff {
+        for i in 0..LANES {
+            test(i);
+        }
+    } else {
+        for i in set_lanes(live) {
+            test(i & 7);
+        }
     }
     (met, nearest)
 }
