@@ -36,8 +36,9 @@
 //!   packet has the same shear permutation (the usual case for a coherent packet) the
 //!   vertices are permuted once per triangle as scalars, otherwise per lane with blends.
 //! - **Single rays** ([`intersect1`], [`occluded1`]) walk the same nodes with the same box and
-//!   triangle arithmetic as the packets of their layout (the binary walk is the scalar reference), and [`intersect_brute`] /
-//!   [`occluded_brute`] test every triangle: the test oracle.
+//!   triangle arithmetic as the packets of their layout (the binary walk is the scalar
+//!   reference), and [`intersect_brute`] / [`occluded_brute`] test every triangle: the test
+//!   oracle.
 //! - **Sections**, as Embree keeps `bvh_node_*`, `*_intersector*` and `bvh_traverser*` apart:
 //!   `node` (binary layout), `triangle` (per-ray constants, the watertight test for one and
 //!   eight rays), `scalar` (slab test, single-ray walk), `packet` (8-lane slab test, packet
