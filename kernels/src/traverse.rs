@@ -110,7 +110,7 @@ mod triangle;
 
 use bvh8::Ray1x8;
 use packet::{Closest, Occlusion, Visitor, start8, walk8};
-use scalar::{FAR_FLOOR, FAR_UP, NEAR_DOWN, box1_at, slab, walk1, widened};
+use scalar::{NEAR_DOWN, box1_at, slab, walk1, widened, widened8};
 use triangle::{
     Best8, Pre, Pre1x8, Pre8, accept, closest_rows, closest1, no_hit, occludes_rows, occludes1,
     traceable, tri1,

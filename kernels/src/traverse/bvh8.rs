@@ -29,7 +29,7 @@
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
 use super::triangle::{Pre1x8, ROWS, RowTri, TriAt};
-use super::{FAR_FLOOR, FAR_UP, LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor, slab};
+use super::{LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor, slab, widened8};
 use crate::packet::{LANES, set_lanes};
 use bytemuck::{Pod, Zeroable};
 use core::mem::MaybeUninit;
@@ -417,8 +417,7 @@ impl Ray1x8 {
     }
 
     /// The fused slab test ([`super::slab`]) of the eight slots of `node` at once, the far bound
-    /// widened as [`super::widened`] (fused): the mask of slots met and their entry
-    /// distances.
+    /// widened by [`super::widened8`]: the mask of slots met and their entry distances.
     #[inline(always)]
     fn boxes(&self, node: &WideNode, tmax: f32) -> (u8, f32x8) {
         let mut near = self.tmin_down;
@@ -431,8 +430,7 @@ impl Ray1x8 {
             near = tn.fast_max(near);
             far = tf.fast_min(far);
         }
-        let widened = far.mul_add(f32x8::splat(FAR_UP), f32x8::splat(FAR_FLOOR));
-        (near.simd_le(widened).to_bitmask() as u8, near)
+        (near.simd_le(widened8(far)).to_bitmask() as u8, near)
     }
 }
 
@@ -766,7 +764,7 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
                 .mul_sub(inv, f32x8::splat(lanes.c_far[axis][i]))
                 .fast_min(far);
         }
-        let m = near.simd_le(far.mul_add(f32x8::splat(FAR_UP), f32x8::splat(FAR_FLOOR)));
+        let m = near.simd_le(widened8(far));
         nearest = m.select(near, inf).fast_min(nearest);
         met |= bytemuck::cast::<f32x8, u32x8>(m) & u32x8::from(LANE_BIT[i]);
     };

@@ -5,7 +5,7 @@
 //! the one visited first. Leaves are tested by a [`Visitor`] (closest hit or occlusion), which
 //! the wide walk ([`super::bvh8`]) shares.
 
-use super::scalar::{FAR_FLOOR, FAR_UP};
+use super::scalar::widened8;
 use super::triangle::{
     Best8, Pre1x8, Pre8, TriAt, closest_rows, closest8, occludes_rows, occludes8, set_lane,
 };
@@ -58,10 +58,7 @@ impl Pre8 {
             near = tn.fast_max(near);
             far = tf.fast_min(far);
         }
-        (
-            near.simd_le(far.mul_add(f32x8::splat(FAR_UP), f32x8::splat(FAR_FLOOR))),
-            near,
-        )
+        (near.simd_le(widened8(far)), near)
     }
 
     /// Whether every traced lane has the same origin (bit for bit), as a texel's gather or
