@@ -99,7 +99,7 @@
 //!   found first, but culls so much less that the packet path ran 12–46 % slower on
 //!   `benches/traverse.rs`.)
 
-use crate::packet::{Hit, Hit8, NO_HIT, Ray, Ray8, set_lanes};
+use crate::packet::{Hit, Hit8, NO_HIT, Ray, Ray8};
 use wide::{f32x8, u32x8};
 
 mod bvh8;
@@ -334,7 +334,7 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
         }
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            bvh8::walk1_any(&w, &Ray1x8::new(&pre), tmax, |rows, n| {
+            bvh8::walk1_any(&w, &Ray1x8::new(&pre), tmax, 0, |rows, n| {
                 occludes_rows(|| pre, &pre8, rows, n, tmax)
             })
         }
@@ -378,10 +378,11 @@ pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
 /// drops out when blocked, the walk ends when all have). Returns the bit mask of blocked lanes;
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
 ///
-/// On the wide layout, a packet whose lanes do not share an origin (eight unrelated shadow
-/// rays) is traced lane by lane as single rays: on a tree larger than [`INTERLEAVE_BYTES`]
-/// interleaved, so that the lanes' cache misses overlap (docs/traverse.md, "Wide layout,
-/// session 9").
+/// On the wide layout the packet walk finishes a subtree that at most two live lanes reach
+/// lane by lane, as single rays (Embree's hybrid switch; docs/traverse.md, session 20). On a
+/// tree larger than [`INTERLEAVE_BYTES`], a packet whose lanes do not share an origin (eight
+/// unrelated shadow rays) is traced as single rays from the root, interleaved, so that the
+/// lanes' cache misses overlap (docs/traverse.md, "Wide layout, session 9").
 pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;
@@ -393,32 +394,16 @@ pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut occlusion),
-        Layout::Wide(w) if !pre.shared_origin() => {
-            return if w.bytes() > bvh8::INTERLEAVE_BYTES {
-                occluded_interleaved(&w, &pre, tmax)
-            } else {
-                occluded_lanes(&w, &pre, tmax)
-            };
+        Layout::Wide(w) if w.bytes() > bvh8::INTERLEAVE_BYTES && !pre.shared_origin() => {
+            return occluded_interleaved(&w, &pre, tmax);
         }
         Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion),
     }
     occlusion.blocked
 }
 
-/// The traced lanes of a packet through the wide layout as single rays, one after another:
-/// the blocked lanes.
-fn occluded_lanes(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
-    set_lanes(pre.traced).fold(0, |blocked, i| {
-        let pre8 = Pre1x8::lane(pre, i);
-        let tmax = tmax.as_array()[i];
-        let end = bvh8::walk1_any(w, &Ray1x8::lane(pre, i), tmax, |rows, n| {
-            occludes_rows(|| pre.lane(i), &pre8, rows, n, tmax)
-        });
-        blocked | u8::from(end) << i
-    })
-}
-
-/// [`occluded_lanes`], the lanes' walks interleaved ([`bvh8::walk_interleaved_any`]).
+/// The traced lanes of a packet through the wide layout as single rays from the root, their
+/// walks interleaved ([`bvh8::walk_interleaved_any`]): the blocked lanes.
 fn occluded_interleaved(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
     bvh8::walk_interleaved_any(w, pre, tmax, pre.traced, |i, pre8, rows, n| {
         occludes_rows(|| pre.lane(i), pre8, rows, n, tmax.as_array()[i])
@@ -577,8 +562,14 @@ mod tests {
                 let mask = intersect8(&bvh, &packet, &mut hits);
                 let blocked = occluded8(&bvh, &packet);
                 if let (Layout::Wide(w), Some((pre, tmax))) = (bvh, start8(&packet)) {
-                    // Both single-ray paths of `occluded8`, whichever the tree's size picks.
-                    assert_eq!(occluded_lanes(&w, &pre, tmax), blocked, "{packet:?}");
+                    // The single-ray any-hit walks from the root, whatever the tree's size:
+                    // lane after lane (what the hybrid switch runs from an inner node) and
+                    // interleaved (a large tree's packets of unrelated lanes).
+                    assert_eq!(
+                        bvh8::occluded_alone(&w, &pre, tmax, pre.traced, 0),
+                        blocked,
+                        "{packet:?}"
+                    );
                     assert_eq!(occluded_interleaved(&w, &pre, tmax), blocked, "{packet:?}");
                 }
                 for lane in 0..LANES {

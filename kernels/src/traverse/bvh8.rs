@@ -11,9 +11,11 @@
 //! The wide view also holds each leaf's triangles as structure-of-arrays rows
 //! ([`leaf_rows`]), so one ray tests up to eight triangles per `f32x8` pass (Embree's
 //! `triangle8v` idea, with the watertight test): the single-ray walk does so at every leaf,
-//! the packet walk at a leaf few lanes reach. Packets of unrelated rays on a large tree are
-//! walked as interleaved single rays with prefetching ([`walk_interleaved_any`]): eight
-//! independent chains of cache misses overlap.
+//! the packet walk at a leaf few lanes reach. The packet walk looking for any hit finishes a
+//! subtree that at most two lanes reach lane by lane ([`occluded_alone`], Embree's hybrid
+//! switch). Packets of unrelated rays on a large tree are walked as interleaved single rays
+//! with prefetching ([`walk_interleaved_any`]): eight independent chains of cache misses
+//! overlap.
 //!
 //! [`collapse`] builds a wide tree from a binary [`BvhRef`]: every wide node takes its binary
 //! node's grandchildren (so a wide level spans at least two binary levels and the depth stays
@@ -28,7 +30,7 @@
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
-use super::triangle::{Pre1x8, ROWS, RowTri, TriAt};
+use super::triangle::{Pre1x8, ROWS, RowTri, TriAt, occludes_rows};
 use super::{LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor, slab, widened8};
 use crate::packet::{LANES, set_lanes};
 use bytemuck::{Pod, Zeroable};
@@ -500,7 +502,8 @@ pub(super) fn walk1<'a>(
     }
 }
 
-/// Depth-first walk of one ray for any hit (occlusion): `blocked` tests the leaf of `n`
+/// Depth-first walk of one ray for any hit (occlusion) through the subtree of the entry
+/// `start` (`child | meta << 32`; 0 for the whole tree): `blocked` tests the leaf of `n`
 /// triangles whose rows start at `rows[0]`; the walk ends at the first leaf that blocks.
 /// The slots met are taken in storage order, without a sort and without entry distances
 /// on the stack: `tmax` never shrinks, so a popped entry is always still met (Embree's
@@ -509,11 +512,12 @@ pub(super) fn walk1_any<'a>(
     bvh: &WideRef<'a>,
     ray: &Ray1x8,
     tmax: f32,
+    start: u64,
     mut blocked: impl FnMut(&'a [f32], usize) -> bool,
 ) -> bool {
     let mut stack = Stack::<u64>::new();
-    // The entry visited next, `child | meta << 32`: the root first.
-    let mut e = 0u64;
+    // The entry visited next: `start` first.
+    let mut e = start;
     loop {
         let (child, meta) = (e as u32, (e >> 32) as u32);
         if meta == 0 {
@@ -549,6 +553,26 @@ pub(super) fn walk1_any<'a>(
             None => return false,
         }
     }
+}
+
+/// The lanes `lanes` of a packet as single rays looking for any hit ([`walk1_any`]), one
+/// after another, each from the entry `entry` (`child | meta << 32`; 0 for the root): the
+/// lanes blocked.
+pub(super) fn occluded_alone(
+    bvh: &WideRef<'_>,
+    pre: &Pre8,
+    tmax: f32x8,
+    lanes: u8,
+    entry: u64,
+) -> u8 {
+    set_lanes(lanes).fold(0, |blocked, i| {
+        let pre1 = Pre1x8::lane(pre, i);
+        let tmax = tmax.as_array()[i];
+        let end = walk1_any(bvh, &Ray1x8::lane(pre, i), tmax, entry, |rows, n| {
+            occludes_rows(|| pre.lane(i), &pre1, rows, n, tmax)
+        });
+        blocked | u8::from(end) << i
+    })
 }
 
 /// The slots `bits` (one or more) of `node` in the order an any-hit walk takes them: inner
@@ -792,12 +816,13 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
 /// drift apart deeper in the tree. (Measured against testing slot by slot, eight lanes at a
 /// time, against one frustum test for a shared-origin packet, and against a frustum test
 /// choosing the slots then tested eight lanes at a time: docs/traverse.md, "Wide BVH" and
-/// "Session 13".)
-pub(super) fn walk8<'a>(
+/// "Session 13".) A popped inner node that at most [`Visitor::ALONE`] live lanes reach is
+/// handed to [`Visitor::alone`] (any-hit walks only: docs/traverse.md, session 20).
+pub(super) fn walk8<'a, V: Visitor<'a>>(
     bvh: &WideRef<'a>,
     pre: &Pre8,
     mut tmax: f32x8,
-    visitor: &mut impl Visitor<'a>,
+    visitor: &mut V,
 ) {
     let lanes = Lanes::new(pre);
     let mut stack = Stack8::new();
@@ -848,6 +873,15 @@ pub(super) fn walk8<'a>(
                 continue;
             }
             if meta == 0 {
+                if live.count_ones() <= V::ALONE {
+                    tmax = visitor.alone(bvh, live, e.entry());
+                    alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
+                    if alive == 0 {
+                        return;
+                    }
+                    far = widened_largest(tmax, alive);
+                    continue;
+                }
                 index = child as usize;
                 break;
             }

@@ -5,6 +5,7 @@
 //! the one visited first. Leaves are tested by a [`Visitor`] (closest hit or occlusion), which
 //! the wide walk ([`super::bvh8`]) shares.
 
+use super::bvh8::WideRef;
 use super::scalar::widened8;
 use super::triangle::{
     Best8, Pre1x8, Pre8, TriAt, closest_rows, closest8, occludes_rows, occludes8, set_lane,
@@ -76,6 +77,18 @@ impl Pre8 {
 
 /// What a packet walk does at a leaf.
 pub(super) trait Visitor<'a> {
+    /// The live lanes at most from which the wide walk finishes the subtree of an inner
+    /// node lane by lane ([`Visitor::alone`]); 0: never. (The closest-hit walk never does:
+    /// Embree's hybrid switch was measured and dropped there, docs/traverse.md, sessions 8
+    /// and 9.)
+    const ALONE: u32 = 0;
+
+    /// Walks the subtree of the wide entry `entry` (`child | meta << 32`) for each lane of
+    /// `lanes` alone; returns the packet's new `tmax`.
+    fn alone(&mut self, _bvh: &WideRef<'a>, _lanes: u8, _entry: u64) -> f32x8 {
+        unreachable!("ALONE is 0")
+    }
+
     /// Tests a leaf's triangles for the packet, eight lanes per test; returns the packet's
     /// new `tmax` (−∞ in finished lanes).
     fn leaf8<T: TriAt>(&mut self, leaf: impl Iterator<Item = T>) -> f32x8;
@@ -125,6 +138,19 @@ pub(super) struct Occlusion<'p> {
 }
 
 impl<'a> Visitor<'a> for Occlusion<'_> {
+    /// Two: the room's shadow packets of unrelated lanes 0.97–0.98× → 0.99–1.01× Embree's
+    /// `rtcOccluded8`, against T = 1, 3, 4 level with it or a little slower (docs/traverse.md,
+    /// session 20).
+    const ALONE: u32 = 2;
+
+    #[inline(always)]
+    fn alone(&mut self, bvh: &WideRef<'a>, lanes: u8, entry: u64) -> f32x8 {
+        let blocked = super::bvh8::occluded_alone(bvh, self.pre, self.tmax, lanes, entry);
+        self.blocked |= blocked;
+        self.tmax = mask_of(blocked).bitselect(f32x8::splat(f32::NEG_INFINITY), self.tmax);
+        self.tmax
+    }
+
     #[inline(always)]
     fn leaf8<T: TriAt>(&mut self, leaf: impl Iterator<Item = T>) -> f32x8 {
         for tri in leaf {
