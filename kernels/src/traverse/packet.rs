@@ -138,9 +138,10 @@ pub(super) struct Occlusion<'p> {
 }
 
 impl<'a> Visitor<'a> for Occlusion<'_> {
-    /// Two: the room's shadow packets of unrelated lanes 0.97–0.98× → 0.99–1.01× Embree's
-    /// `rtcOccluded8`, against T = 1, 3, 4 level with it or a little slower (docs/traverse.md,
-    /// session 20).
+    /// Two: the room's shadow packets of unrelated lanes 1.18–1.19× → 1.20–1.22× Embree's
+    /// `rtcOccluded8` against never (and 0.97–0.98× → 0.99–1.01× against single rays from the
+    /// root, before the far bound lost its branches); T = 1, 3, 4 within 0.02 of two
+    /// (docs/traverse.md, session 20).
     const ALONE: u32 = 2;
 
     #[inline(always)]
