@@ -79,8 +79,8 @@ impl Pre8 {
 pub(super) trait Visitor<'a> {
     /// The live lanes at most from which the wide walk finishes the subtree of an inner
     /// node lane by lane ([`Visitor::alone`]); 0: never. (The closest-hit walk never does:
-    /// Embree's hybrid switch was measured and dropped there, docs/traverse.md, sessions 8
-    /// and 9.)
+    /// Embree's hybrid switch was measured and dropped there, docs/traverse.md, sessions 8,
+    /// 9, 15 and 20.)
     const ALONE: u32 = 0;
 
     /// Walks the subtree of the wide entry `entry` (`child | meta << 32`) for each lane of
@@ -138,10 +138,9 @@ pub(super) struct Occlusion<'p> {
 }
 
 impl<'a> Visitor<'a> for Occlusion<'_> {
-    /// Two: the room's shadow packets of unrelated lanes 1.18–1.19× → 1.20–1.22× Embree's
-    /// `rtcOccluded8` against never (and 0.97–0.98× → 0.99–1.01× against single rays from the
-    /// root, before the far bound lost its branches); T = 1, 3, 4 within 0.02 of two
-    /// (docs/traverse.md, session 20).
+    /// Two: the room's shadow packets of unrelated lanes ran at 1.20–1.22× Embree's
+    /// `rtcOccluded8` with the switch at two lanes and at 1.18–1.19× without it; T = 1, 3, 4
+    /// came within 0.02 of two (docs/traverse.md, session 20).
     const ALONE: u32 = 2;
 
     #[inline(always)]
