@@ -30,6 +30,7 @@
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
+use super::packet::mask_of;
 use super::triangle::{Pre1x8, ROWS, RowTri, TriAt, occludes_rows};
 use super::{LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor, slab, widened8};
 use crate::packet::{LANES, set_lanes};
@@ -463,7 +464,7 @@ pub(super) fn walk1<'a>(
                 Some((node.child[slot], node.meta[slot]))
             }
             _ => {
-                let hit = !(u32x8::splat(u32::from(bits)) & SLOT_BITS).simd_eq(u32x8::ZERO);
+                let hit = bytemuck::cast(mask_of(bits));
                 let rows = [
                     u32x8::from(node.child),
                     u32x8::from(node.meta),
@@ -872,26 +873,20 @@ pub(super) fn walk8<'a, V: Visitor<'a>>(
             if live == 0 {
                 continue;
             }
-            if meta == 0 {
-                if live.count_ones() <= V::ALONE {
-                    tmax = visitor.alone(bvh, live, e.entry());
-                    alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
-                    if alive == 0 {
-                        return;
-                    }
-                    far = widened_largest(tmax, alive);
-                    continue;
+            tmax = if meta != 0 {
+                let n = (meta & !LEAF) as usize;
+                let rows = bvh.leaf_rows(child);
+                if rows_for(live, meta) {
+                    visitor.rows1(rows, n, live)
+                } else {
+                    let leaf = &rows[..ROWS * n];
+                    visitor.leaf8((0..n).map(|i| RowTri::new(leaf, n, i)))
                 }
+            } else if live.count_ones() <= V::ALONE {
+                visitor.alone(bvh, live, e.entry())
+            } else {
                 index = child as usize;
                 break;
-            }
-            let n = (meta & !LEAF) as usize;
-            let rows = bvh.leaf_rows(child);
-            tmax = if rows_for(live, meta) {
-                visitor.rows1(rows, n, live)
-            } else {
-                let leaf = &rows[..ROWS * n];
-                visitor.leaf8((0..n).map(|i| RowTri::new(leaf, n, i)))
             };
             alive = pre.tmin.simd_le(tmax).to_bitmask() as u8;
             if alive == 0 {
@@ -904,9 +899,6 @@ pub(super) fn walk8<'a, V: Visitor<'a>>(
 
 /// The slot numbers, lane by lane.
 const SLOTS: u32x8 = u32x8::new([0, 1, 2, 3, 4, 5, 6, 7]);
-
-/// Each slot's bit, lane by lane.
-const SLOT_BITS: u32x8 = u32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
 
 /// The slot rows `rows` permuted so that the slots of `hit` come first, farthest first by
 /// their entry distances `near`. Keys `near bits & !7 | slot` of the slots met (entry
@@ -1070,9 +1062,7 @@ fn rows_for(live: u8, meta: u32) -> bool {
 /// do (the room's shadow packets 1.00× → 1.21–1.23× Embree, docs/traverse.md, session 20).
 #[inline(always)]
 fn widened_largest(tmax: f32x8, alive: u8) -> f32 {
-    // `SLOT_BITS` serves as the lanes' bits.
-    let live = !(u32x8::splat(u32::from(alive)) & SLOT_BITS).simd_eq(u32x8::ZERO);
-    let t = bytemuck::cast::<u32x8, f32x8>(live)
+    let t = mask_of(alive)
         .select(tmax, f32x8::splat(f32::NEG_INFINITY))
         .to_array();
     // Without `f32::max`'s NaN handling: an alive lane's `tmax` is never NaN.

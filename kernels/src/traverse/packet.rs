@@ -12,16 +12,15 @@ use super::triangle::{
 };
 use super::{BvhRef, Node, STACK};
 use crate::packet::{Ray8, set_lanes};
-use wide::f32x8;
+use wide::{f32x8, u32x8};
 
+/// The lanes (or a node's slots) of `bits` as a mask vector: lane `i` all ones where bit `i`
+/// is set, zero elsewhere. Without a branch per lane (a branch per lane on the live lanes
+/// mispredicted where lanes finish at random: docs/traverse.md, session 20).
+#[inline(always)]
 pub(super) fn mask_of(bits: u8) -> f32x8 {
-    f32x8::new(core::array::from_fn(|i| {
-        if bits >> i & 1 == 1 {
-            f32::from_bits(u32::MAX)
-        } else {
-            0.0
-        }
-    }))
+    const BITS: u32x8 = u32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
+    bytemuck::cast(!(u32x8::splat(u32::from(bits)) & BITS).simd_eq(u32x8::ZERO))
 }
 
 impl Pre8 {
