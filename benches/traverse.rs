@@ -11,7 +11,8 @@
 //! `cargo bench --bench traverse --features embree -- --warm-up-time 1 --measurement-time 5`
 //! Environment:
 //! - `TRAVERSE_DUEL=N`: also time the gather and the shadow tracers round-robin for N rounds
-//!   (ratios per round: robust on a loaded machine); `-- no_such_bench` skips criterion.
+//!   (ratios per round: robust on a loaded machine; 0 times none); `-- no_such_bench` skips
+//!   criterion.
 //! - `TRAVERSE_ONLY=name,...`: in the duel, time only those entries (for a profiler). Under
 //!   callgrind, only their passes are counted: `TRAVERSE_ONLY=wide_packet8 TRAVERSE_DUEL=3
 //!   valgrind --tool=callgrind --instr-atstart=no --cache-sim=yes --D1=49152,12,64
@@ -518,6 +519,7 @@ fn bench(c: &mut Criterion) {
         if let Some(rounds) = std::env::var("TRAVERSE_DUEL")
             .ok()
             .and_then(|v| v.parse::<usize>().ok())
+            .filter(|&rounds| rounds > 0)
         {
             let gather = &sets[0].1;
             #[cfg_attr(not(feature = "embree"), allow(unused_mut))]
