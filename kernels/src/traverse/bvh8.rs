@@ -23,7 +23,8 @@
 //! area cost's choice, found by dynamic programming (Ylitie, Karras & Laine 2017, with the
 //! binary tree's leaves kept; [`SlotCosts`]). It replaced opening the inner child of largest
 //! surface area until eight slots were filled (Embree's collapse order): 30 % fewer wide nodes
-//! on the 1M city and 2–7 % faster walks (docs/traverse.md, session 21).
+//! on the 1M city, whose gather packets went from 1.01× to 1.06–1.07× Embree's
+//! (docs/traverse.md, session 21).
 //!
 //! The boxes and the triangle test are the binary traversal's. The slab test is as
 //! conservative as the binary traversal's, in the fused form `p·inv − o·inv` with the offsets
@@ -260,7 +261,7 @@ impl<'a> WideRef<'a> {
 /// Which binary nodes become wide nodes is chosen by the surface area heuristic, optimally
 /// (Ylitie, Karras & Laine, *Efficient Incoherent Ray Traversal on GPUs Through Compressed
 /// Wide BVHs*, HPG 2017, §3.1, with the leaves fixed): the leaves are the binary tree's, so
-/// the cost to minimise is the sum of the wide nodes' surface areas ([`SlotCosts`]). Every wide
+/// the cost to minimise is the sum of the wide nodes' surface areas (`SlotCosts`). Every wide
 /// node opens its binary node's inner children (so a wide level spans at least two binary
 /// levels and the depth stays within [`WIDE_MAX_DEPTH`]).
 #[cfg(any(feature = "alloc", test))]
