@@ -360,21 +360,27 @@ impl<'b> SlotCosts<'b> {
 
     /// `G(s, k)`: as [`SlotCosts::of`], but an inner child opened (two slots at least).
     fn opened(&self, s: BinSlot) -> [f32; WIDTH + 1] {
-        if s.meta != 0 {
-            return self.of(s);
+        if s.meta == 0 {
+            self.splits(s.child)
+        } else {
+            self.of(s)
         }
-        let mut g = [f32::INFINITY; WIDTH + 1];
-        for (k, g) in g.iter_mut().enumerate().skip(2) {
-            *g = self.split(s.child, k).0;
-        }
-        g
     }
 
-    /// The least cost of node `n` opened, its children covered by at most `k` slots, and the
-    /// slots of the left child in that split.
-    fn split(&self, n: u32, k: usize) -> (f32, usize) {
+    /// `D(n, k)` for each `k`: the least cost of node `n` opened, its children covered by at
+    /// most `k` slots between them (+∞ below two slots, which [`SlotCosts::opened`] needs).
+    fn splits(&self, n: u32) -> [f32; WIDTH + 1] {
         let (l, r) = (self.of(self.slot(n, 0)), self.of(self.slot(n, 1)));
-        best_split(&l, &r, k)
+        let mut d = [f32::INFINITY; WIDTH + 1];
+        for (k, d) in d.iter_mut().enumerate().skip(2) {
+            *d = best_split(&l, &r, k).0;
+        }
+        d
+    }
+
+    /// The slots of the left child in the least split of node `n` opened into `k` slots.
+    fn split(&self, n: u32, k: usize) -> usize {
+        best_split(&self.of(self.slot(n, 0)), &self.of(self.slot(n, 1)), k).1
     }
 
     /// The least cost of a wide node's content built from node `n` (`n` and its inner
@@ -386,10 +392,10 @@ impl<'b> SlotCosts<'b> {
 
     fn compute(&self, n: u32, scale: f64) -> Costs {
         let area = (half_area(&self.nodes[n as usize]) * scale).min(1e30) as f32;
-        let whole = area + self.content(n).0;
-        let mut f = [whole; WIDTH];
+        let d = self.splits(n);
+        let mut f = [area + self.content(n).0; WIDTH];
         for k in 2..=WIDTH {
-            f[k - 1] = f[k - 2].min(self.split(n, k).0);
+            f[k - 1] = f[k - 2].min(d[k]);
         }
         f
     }
@@ -413,7 +419,7 @@ impl<'b> SlotCosts<'b> {
 
     /// The slots covering inner node `n` opened with at most `k`.
     fn expand_node(&self, n: u32, k: usize, out: &mut alloc::vec::Vec<BinSlot>) {
-        let kl = self.split(n, k).1;
+        let kl = self.split(n, k);
         self.expand(self.slot(n, 0), kl, out);
         self.expand(self.slot(n, 1), k - kl, out);
     }
@@ -425,8 +431,9 @@ impl<'b> SlotCosts<'b> {
             return self.expand_opened(s, k, out);
         }
         let whole = self.least[s.child as usize][0];
+        let d = self.splits(s.child);
         let (cost, j) = (2..=k)
-            .map(|j| (self.split(s.child, j).0, j))
+            .map(|j| (d[j], j))
             .fold((f32::INFINITY, 0), |b, c| if c.0 < b.0 { c } else { b });
         if whole <= cost {
             out.push(s);
