@@ -22,7 +22,8 @@
 //! - `TRAVERSE_PRESET=very_slow` (a `Preset::name`): the build preset of our trees and CwBvh.
 //! - `TRAVERSE_PRESETS=1`: build every obvhs preset and time it (build time vs trace time).
 //! - `TRAVERSE_SIZES=1e5,1e6,1e7` (`TRAVERSE_SIZE_PRESETS=medium,very_slow`): cities of about
-//!   that many triangles: build seconds and gather Mrays/s per preset and layout, and
+//!   that many triangles: build seconds, the wide tree's size and surface-area cost, and
+//!   gather Mrays/s per preset and layout, and
 //!   Embree's `rtcIntersect8` on the same packets; `TRAVERSE_GLB=a.glb,...` likewise for the
 //!   triangles of scene files.
 //! - `TRAVERSE_EMBREE_CONFIG=verbose=2`: appended to Embree's device configuration; `verbose=2`
@@ -758,13 +759,17 @@ fn report_builds(name: &str, built: &[(Preset, Bvh)], packets: &[Ray8], rounds: 
             v[v.len() / 2]
         };
         let [binary_rates, wide_rates] = r;
+        let (inner, leaves) = wide_sah(bvh.wide().nodes());
         println!(
-            "preset {name} {:>10}: {} triangles, build {:>9.3} s, {} nodes, gather packet8 {:.2} \
-             Mrays/s, wide {:.2} Mrays/s (median of {rounds})",
+            "preset {name} {:>10}: {} triangles, build {:>9.3} s, {} nodes, {} wide nodes (SAH \
+             {:.2} = inner {inner:.2} + leaves {leaves:.2}), gather packet8 {:.2} Mrays/s, wide \
+             {:.2} Mrays/s (median of {rounds})",
             preset.name(),
             binary(bvh).tris().len(),
             bvh.build_time().as_secs_f64(),
             binary(bvh).nodes().len(),
+            bvh.wide().nodes().len(),
+            inner + leaves,
             median(binary_rates),
             median(wide_rates),
         );
