@@ -323,7 +323,7 @@ impl<'b> SlotCosts<'b> {
             nodes,
             least: alloc::vec![[f32::INFINITY; WIDTH]; nodes.len()],
         };
-        let root = half_area(&nodes[0]);
+        let root = costs.half_area(0);
         let scale = if root.is_finite() && root > 0.0 {
             1.0 / root
         } else {
@@ -333,6 +333,17 @@ impl<'b> SlotCosts<'b> {
             costs.least[n as usize] = costs.compute(n, scale);
         }
         costs
+    }
+
+    /// Half the surface area of node `n`'s box (its non-empty slots').
+    fn half_area(&self, n: u32) -> f64 {
+        half_area(
+            [0, 1]
+                .map(|s| self.slot(n, s))
+                .into_iter()
+                .filter(|s| s.meta != LEAF)
+                .map(|s| (s.lo, s.hi)),
+        )
     }
 
     fn slot(&self, n: u32, s: usize) -> BinSlot {
@@ -391,7 +402,7 @@ impl<'b> SlotCosts<'b> {
     }
 
     fn compute(&self, n: u32, scale: f64) -> Costs {
-        let area = (half_area(&self.nodes[n as usize]) * scale).min(1e30) as f32;
+        let area = (self.half_area(n) * scale).min(1e30) as f32;
         let d = self.splits(n);
         let mut f = [area + self.content(n).0; WIDTH];
         for k in 2..=WIDTH {
@@ -432,9 +443,7 @@ impl<'b> SlotCosts<'b> {
         }
         let whole = self.least[s.child as usize][0];
         let d = self.splits(s.child);
-        let (cost, j) = (2..=k)
-            .map(|j| (d[j], j))
-            .fold((f32::INFINITY, 0), |b, c| if c.0 < b.0 { c } else { b });
+        let (cost, j) = first_least((2..=k).map(|j| (d[j], j)));
         if whole <= cost {
             out.push(s);
         } else {
@@ -443,23 +452,28 @@ impl<'b> SlotCosts<'b> {
     }
 }
 
-/// The least `l[i] + r[k − i]` over `i = 0 ..= k`, and its `i` (the first where several tie).
+/// The least `l[i] + r[k − i]` over `i = 0 ..= k`, and its `i` ([`first_least`]).
 #[cfg(any(feature = "alloc", test))]
 fn best_split(l: &[f32; WIDTH + 1], r: &[f32; WIDTH + 1], k: usize) -> (f32, usize) {
-    (0..=k)
-        .map(|i| (l[i] + r[k - i], i))
-        .fold((f32::INFINITY, 0), |b, c| if c.0 < b.0 { c } else { b })
+    first_least((0..=k).map(|i| (l[i] + r[k - i], i)))
 }
 
-/// Half the surface area of the box of `node`'s non-empty slots, in `f64` (finite for any
-/// finite box).
+/// The least cost of `(cost, choice)` pairs and its choice, the first where several tie
+/// (+∞ and 0 for none).
 #[cfg(any(feature = "alloc", test))]
-fn half_area(node: &super::Node) -> f64 {
+fn first_least(choices: impl Iterator<Item = (f32, usize)>) -> (f32, usize) {
+    choices.fold((f32::INFINITY, 0), |b, c| if c.0 < b.0 { c } else { b })
+}
+
+/// Half the surface area of the union of `boxes` (`lo`, `hi`), in `f64` (finite for finite
+/// boxes; 0 for none).
+#[cfg(any(feature = "alloc", test))]
+fn half_area(boxes: impl Iterator<Item = ([f32; 3], [f32; 3])>) -> f64 {
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for s in (0..2).filter(|&s| node.meta[s] != LEAF) {
+    for (l, h) in boxes {
         for a in 0..3 {
-            lo[a] = lo[a].min(f64::from(node.lo[a][s]));
-            hi[a] = hi[a].max(f64::from(node.hi[a][s]));
+            lo[a] = lo[a].min(f64::from(l[a]));
+            hi[a] = hi[a].max(f64::from(h[a]));
         }
     }
     let e = [0, 1, 2].map(|a| (hi[a] - lo[a]).max(0.0));
@@ -1540,7 +1554,14 @@ mod tests {
             .into_iter()
             .map(|(_, c)| c)
             .fold(f64::INFINITY, f64::min);
-        half_area(&nodes[n as usize]) + content
+        let node = &nodes[n as usize];
+        let slot_box = |s: usize| {
+            (
+                [0, 1, 2].map(|a| node.lo[a][s]),
+                [0, 1, 2].map(|a| node.hi[a][s]),
+            )
+        };
+        half_area((0..2).filter(|&s| node.meta[s] != LEAF).map(slot_box)) + content
     }
 
     #[test]
@@ -1557,16 +1578,11 @@ mod tests {
             let cost: f64 = wide
                 .iter()
                 .map(|w| {
-                    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-                    for s in (0..WIDTH).filter(|&s| w.meta[s] != LEAF) {
-                        let (l, h) = w.slot_box(s);
-                        for a in 0..3 {
-                            lo[a] = lo[a].min(f64::from(l[a]));
-                            hi[a] = hi[a].max(f64::from(h[a]));
-                        }
-                    }
-                    let e = [0, 1, 2].map(|a| hi[a] - lo[a]);
-                    e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+                    half_area(
+                        (0..WIDTH)
+                            .filter(|&s| w.meta[s] != LEAF)
+                            .map(|s| w.slot_box(s)),
+                    )
                 })
                 .sum();
             let least = best_wide(&nodes, 0);
