@@ -228,7 +228,7 @@ pub fn texel_file(data: &[u8]) {
     };
     let header = *texels.header();
     assert_eq!(texels.pages().len(), header.page_count as usize);
-    assert_eq!(texels.meshes().len(), header.mesh_count as usize);
+    assert_eq!(texels.triangles().len(), header.triangle_count as usize);
     assert_eq!(texels.tiles().len() as u64, header.tile_count);
     assert_eq!(texels.texels().len() as u64, header.texel_count);
     let mut covered = 0u64;

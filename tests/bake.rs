@@ -14,9 +14,9 @@ use guidebake::bake::shard::Shard;
 use guidebake::bake::workdir::{merged_results, work_dir};
 use guidebake::output::readback::read_channel;
 use guidebake::scene::{Material, Mesh, Scene, Sky, Triangle};
-use guidebake::test_support::inward_box_faces;
+use guidebake::test_support::{inward_box_faces, triangles_on_page};
 use guidebake::texels::{
-    FLAG_VALID, MeshRecord, PageRecord, TexelFile, TexelRecord, TexelWriter, TileRect,
+    FLAG_VALID, PageRecord, SEEN_FRONT, TexelFile, TexelRecord, TexelWriter, TileRect,
 };
 
 const SKY: f32 = 0.75;
@@ -70,15 +70,8 @@ fn write_texels(path: &Path) {
         width: SIDE,
         height: SIDE,
     };
-    let mesh = MeshRecord {
-        first_triangle: 0,
-        triangle_count: 2,
-        page: 0,
-        flags: 1,
-        uv_scale: [SIDE as f32; 2],
-        uv_offset: [0.0; 2],
-    };
-    let mut writer = TexelWriter::create(path, &[page], &[mesh], 2, SIDE as f32 / 4.0).unwrap();
+    let triangles = triangles_on_page(&plane_scene(), page, SEEN_FRONT);
+    let mut writer = TexelWriter::create(path, &[page], &triangles, SIDE as f32 / 4.0).unwrap();
     let size = 4.0 / SIDE as f32;
     for ty in 0..SIDE / TILE {
         for tx in 0..SIDE / TILE {
@@ -519,15 +512,28 @@ fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
         width: w,
         height: h,
     };
-    let mesh = MeshRecord {
-        first_triangle: 0,
-        triangle_count: triangles.len() as u32,
-        page: 0,
-        flags: 1,
-        uv_scale: [w as f32, h as f32],
-        uv_offset: [0.0; 2],
+    let scene = Scene {
+        path: PathBuf::from("<box>"),
+        meshes: vec![Mesh {
+            name: "box".into(),
+            first_triangle: 0,
+            triangle_count: 12,
+            has_lightmap_uvs: true,
+        }],
+        triangles,
+        materials: vec![Material {
+            name: "glow".into(),
+            base_color_texture: None,
+            albedo: Vec3::splat(albedo),
+            emission: Vec3::splat(le),
+        }],
+        lights: Vec::new(),
+        sun: None,
+        sky: Sky::Constant(Vec3::splat(100.0)),
+        degenerate_triangles: 0,
     };
-    let mut writer = TexelWriter::create(path, &[page], &[mesh], 12, FACE as f32 / s).unwrap();
+    let records = triangles_on_page(&scene, page, SEEN_FRONT);
+    let mut writer = TexelWriter::create(path, &[page], &records, FACE as f32 / s).unwrap();
     for (i, &(c, u, v)) in faces.iter().enumerate() {
         let n = u.cross(v).normalize();
         let (cx, cy) = chart(i);
@@ -557,26 +563,7 @@ fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
         writer.push_tile(rect, &texels).unwrap();
     }
     writer.finish().unwrap();
-    Scene {
-        path: PathBuf::from("<box>"),
-        meshes: vec![Mesh {
-            name: "box".into(),
-            first_triangle: 0,
-            triangle_count: 12,
-            has_lightmap_uvs: true,
-        }],
-        triangles,
-        materials: vec![Material {
-            name: "glow".into(),
-            base_color_texture: None,
-            albedo: Vec3::splat(albedo),
-            emission: Vec3::splat(le),
-        }],
-        lights: Vec::new(),
-        sun: None,
-        sky: Sky::Constant(Vec3::splat(100.0)),
-        degenerate_triangles: 0,
-    }
+    scene
 }
 
 /// Channel `name` of the single-page lightmap at `path`, row by row.

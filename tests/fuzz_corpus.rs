@@ -424,7 +424,7 @@ fn two_tile_texels(path: &Path) {
         width: 8,
         height: 8,
     };
-    let mut w = TexelWriter::create(path, &[page], &[], 0, 1.0).unwrap();
+    let mut w = TexelWriter::create(path, &[page], &[], 1.0).unwrap();
     let texel = floor_texel;
     let rect = |y| TileRect {
         page: 0,

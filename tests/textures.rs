@@ -23,7 +23,10 @@ use guidebake::output::readback::read_channel;
 use guidebake::scene::texture::{Image, TextureOptions, Wrap};
 use guidebake::scene::{BaseColorTexture, Material, Mesh, Scene, Sky, Sun, Triangle};
 use guidebake::test_support::quad;
-use guidebake::texels::{FLAG_VALID, MeshRecord, PageRecord, TexelRecord, TexelWriter, TileRect};
+use guidebake::texels::{
+    FLAG_VALID, PageRecord, SEEN_BACK, SEEN_FRONT, TexelRecord, TexelWriter, TileRect,
+    TriangleRecord,
+};
 
 /// Checker square side, metres.
 const P: f64 = 0.25;
@@ -149,25 +152,17 @@ fn write_texels(path: &Path) {
         width: COLUMNS,
         height: HEIGHTS.len() as u32,
     };
-    let meshes = [
-        MeshRecord {
-            first_triangle: 0,
-            triangle_count: 2,
-            page: 0,
-            flags: 1,
-            uv_scale: [1.0; 2],
-            uv_offset: [0.0; 2],
-        },
-        MeshRecord {
-            first_triangle: 2,
-            triangle_count: 2,
-            page: 0,
-            flags: 0,
-            uv_scale: [1.0; 2],
-            uv_offset: [0.0; 2],
-        },
+    // The wall has texels (its lightmap UVs play no part here); the floor has none. Both are
+    // open space on both sides.
+    let seen = SEEN_FRONT | SEEN_BACK;
+    let wall = TriangleRecord::lightmapped(0, [Vec2::ZERO; 3], seen);
+    let triangles = [
+        wall,
+        wall,
+        TriangleRecord::unmapped(seen),
+        TriangleRecord::unmapped(seen),
     ];
-    let mut writer = TexelWriter::create(path, &[page], &meshes, 4, 64.0).unwrap();
+    let mut writer = TexelWriter::create(path, &[page], &triangles, 64.0).unwrap();
     let texels: Vec<TexelRecord> = (0..COLUMNS * page.height)
         .map(|i| {
             let (k, r) = (i % COLUMNS, i / COLUMNS);

@@ -5,7 +5,7 @@
 //! them from glTF `TEXCOORD_1`:
 //!
 //! 1. **Layout.** Every mesh gets a map `pixel = uv · scale + offset` onto an atlas page
-//!    ([`MeshRecord`]). *Shared* layout: all meshes already share one atlas (the converted
+//!    ([`MeshLayout`]). *Shared* layout: all meshes already share one atlas (the converted
 //!    Bitterli scenes, made with xatlas) — page 0, `scale` = page size. *Per-mesh* layout:
 //!    every mesh has its own 0..1 UVs (the vinc3r Cornell box) — each mesh's UV bounding
 //!    square becomes a square cell sized for the requested texel density, cells are shelf
@@ -45,12 +45,13 @@ use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
 use guidebake_kernels::presort::CurveOrder;
+use rayon::prelude::*;
 
-use crate::facing::facing_sides;
+use crate::facing::{FacingReport, Visibility, seen_sides};
 use crate::scene::{Scene, Triangle};
 use crate::texels::{
-    FLAG_PARTIAL, FLAG_VALID, MeshRecord, PageRecord, TILE_SIZE, TexelFileError, TexelRecord,
-    TexelWriter, TileRect,
+    FLAG_INSIDE, FLAG_PARTIAL, FLAG_VALID, PageRecord, TILE_SIZE, TexelFileError, TexelRecord,
+    TexelWriter, TileRect, TriangleRecord,
 };
 
 pub mod unwrap;
@@ -118,6 +119,11 @@ pub struct PrepareReport {
     /// Triangles whose texels face against their winding: the side that sees the scene
     /// ([`crate::facing`]).
     pub flipped_triangles: u64,
+    /// Of the texels, those inside geometry ([`FLAG_INSIDE`]): not baked, filled by the
+    /// lightmap's dilation.
+    pub inside_texels: u64,
+    /// Which sides of the triangles face open space ([`crate::facing`]).
+    pub facing: FacingReport,
     /// What the unwrapper did, when it ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unwrap: Option<UnwrapReport>,
@@ -172,6 +178,21 @@ pub enum PrepareError {
     /// The unwrapper failed on a mesh.
     #[error(transparent)]
     Unwrap(#[from] UnwrapError),
+}
+
+/// Where a mesh's lightmap UVs land on the atlas: `pixel = uv · uv_scale + uv_offset` on
+/// `page` (continuous pixel coordinates). Each triangle's result is what the texel file's
+/// triangle table holds ([`TriangleRecord`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct MeshLayout {
+    /// Atlas page.
+    page: u32,
+    /// 1 when the mesh has lightmap UVs (and texels), else 0.
+    flags: u32,
+    /// UV → pixel scale.
+    uv_scale: [f32; 2],
+    /// UV → pixel offset.
+    uv_offset: [f32; 2],
 }
 
 /// Per-mesh UV statistics.
@@ -235,7 +256,7 @@ pub struct Lightmap {
 
 impl Lightmap {
     /// The layout of `records` applied to the scene's own UVs.
-    fn of_records(scene: &Scene, pages: &[PageRecord], meshes: &[MeshRecord]) -> Self {
+    fn of_records(scene: &Scene, pages: &[PageRecord], meshes: &[MeshLayout]) -> Self {
         let uv = scene
             .triangles
             .iter()
@@ -316,15 +337,16 @@ fn rasterise(
     scene: &Scene,
     out: &Path,
     pages: &[PageRecord],
-    meshes: &[MeshRecord],
+    meshes: &[MeshLayout],
     tpu: f32,
     per_mesh: bool,
 ) -> Result<PrepareReport, PrepareError> {
-    let flip = facing_sides(scene).map_err(|e| PrepareError::Resolution {
+    let (visibility, facing) = seen_sides(scene).map_err(|e| PrepareError::Resolution {
         path: scene.path.clone(),
         message: format!("cannot trace the scene to orient its surfaces: {e}"),
     })?;
-    let mut w = TexelWriter::create(out, pages, meshes, scene.triangles.len() as u32, tpu)?;
+    let triangles = triangle_records(scene, meshes, visibility.sides());
+    let mut w = TexelWriter::create(out, pages, &triangles, tpu)?;
     let mut report = PrepareReport {
         texels: 0,
         partial_texels: 0,
@@ -338,12 +360,14 @@ fn rasterise(
             .map(str::to_owned)
             .collect(),
         uv_degenerate_triangles: 0,
-        flipped_triangles: flip.iter().filter(|&&f| f).count() as u64,
+        inside_texels: 0,
+        flipped_triangles: triangles.iter().filter(|t| t.texels_face_back()).count() as u64,
+        facing,
         unwrap: None,
     };
     for (page_index, page) in pages.iter().enumerate() {
-        let raster = PageRaster::new(scene, meshes, page_index as u32, *page, &mut report);
-        raster.emit_tiles(scene, meshes, &flip, &mut w, &mut report)?;
+        let raster = PageRaster::new(&triangles, page_index as u32, *page, &mut report);
+        raster.emit_tiles(scene, &triangles, &visibility, &mut w, &mut report)?;
     }
     if report.texels == 0 {
         return Err(PrepareError::NoTexels {
@@ -358,7 +382,7 @@ fn shared_layout(
     scene: &Scene,
     stats: &[Option<MeshUv>],
     res: Resolution,
-) -> Result<(Vec<PageRecord>, Vec<MeshRecord>, f32), PrepareError> {
+) -> Result<(Vec<PageRecord>, Vec<MeshLayout>, f32), PrepareError> {
     let (wa, ua) = stats
         .iter()
         .flatten()
@@ -379,13 +403,9 @@ fn shared_layout(
         width: w,
         height: h,
     };
-    let meshes = scene
-        .meshes
+    let meshes = stats
         .iter()
-        .zip(stats)
-        .map(|(m, s)| MeshRecord {
-            first_triangle: m.first_triangle,
-            triangle_count: m.triangle_count,
+        .map(|s| MeshLayout {
             page: 0,
             flags: u32::from(s.is_some()),
             uv_scale: [w as f32, h as f32],
@@ -465,7 +485,7 @@ fn per_mesh_layout(
     scene: &Scene,
     stats: &[Option<MeshUv>],
     res: Resolution,
-) -> Result<(Vec<PageRecord>, Vec<MeshRecord>, f32), PrepareError> {
+) -> Result<(Vec<PageRecord>, Vec<MeshLayout>, f32), PrepareError> {
     let sum_ratio: f64 = stats
         .iter()
         .flatten()
@@ -502,11 +522,8 @@ fn per_mesh_layout(
             message: format!("{n} pages needed; choose a smaller --texels-per-unit"),
         });
     }
-    let meshes = scene
-        .meshes
-        .iter()
-        .enumerate()
-        .map(|(i, m)| {
+    let meshes = (0..scene.meshes.len())
+        .map(|i| {
             let (page, scale, offset) = match (places[i], cs[i], stats[i]) {
                 (Some((p, x, y)), Some(c), Some(s)) => {
                     let k = c as f32 / (s.hi - s.lo).max_element().max(1e-12);
@@ -514,9 +531,7 @@ fn per_mesh_layout(
                 }
                 _ => (0, [0.0; 2], [0.0; 2]),
             };
-            MeshRecord {
-                first_triangle: m.first_triangle,
-                triangle_count: m.triangle_count,
+            MeshLayout {
                 page,
                 flags: u32::from(stats[i].is_some()),
                 uv_scale: scale,
@@ -561,7 +576,7 @@ const UNWRAP_FILL: f64 = 0.6;
 
 /// The scene with page UVs on every triangle that gets texels, its layout records, the
 /// density, and what the unwrapper did.
-type Unwrapped = (Scene, Vec<PageRecord>, Vec<MeshRecord>, f32, UnwrapReport);
+type Unwrapped = (Scene, Vec<PageRecord>, Vec<MeshLayout>, f32, UnwrapReport);
 
 /// Unwraps the `selected` meshes with xatlas into one atlas (one per mesh when one would
 /// not fit a page), packs it with the other meshes' UV squares ([`cells`]) onto pages, and
@@ -742,9 +757,7 @@ fn unwrap_layout(
             0
         };
         m.has_lightmap_uvs = selected[i] || uvs.iter().all(Option::is_some);
-        records.push(MeshRecord {
-            first_triangle: m.first_triangle,
-            triangle_count: m.triangle_count,
+        records.push(MeshLayout {
             page: mesh_page[i],
             flags: u32::from(selected[i] || kept[i].is_some()),
             uv_scale: [size.x, size.y],
@@ -887,9 +900,28 @@ fn closest_barycentric(q: &[Vec2; 3], c: Vec2, area: f32) -> [f32; 3] {
 }
 
 /// A triangle's UVs in page pixel coordinates.
-fn pixel_uv(t: &Triangle, m: &MeshRecord) -> Option<[Vec2; 3]> {
+fn pixel_uv(t: &Triangle, m: &MeshLayout) -> Option<[Vec2; 3]> {
     let (s, o) = (Vec2::from(m.uv_scale), Vec2::from(m.uv_offset));
     t.lightmap_uv.map(|uv| uv.map(|v| v * s + o))
+}
+
+/// The texel file's triangle table: each triangle's UVs through its mesh's layout (where the
+/// mesh has texels) and the sides it is seen from (`sides`, [`Visibility::sides`]).
+fn triangle_records(scene: &Scene, meshes: &[MeshLayout], sides: &[u32]) -> Vec<TriangleRecord> {
+    scene
+        .triangles
+        .iter()
+        .zip(sides)
+        .map(|(t, &seen)| {
+            let m = &meshes[t.mesh as usize];
+            match pixel_uv(t, m).filter(|_| m.flags != 0) {
+                Some(q) if q.iter().all(|v| v.is_finite()) => {
+                    TriangleRecord::lightmapped(m.page, q, seen)
+                }
+                _ => TriangleRecord::unmapped(seen),
+            }
+        })
+        .collect()
 }
 
 /// Ownership grid of one page: `triangle + 1` (0 empty), high bit = partial.
@@ -901,8 +933,7 @@ struct PageRaster {
 
 impl PageRaster {
     fn new(
-        scene: &Scene,
-        meshes: &[MeshRecord],
+        triangles: &[TriangleRecord],
         page: u32,
         size: PageRecord,
         report: &mut PrepareReport,
@@ -911,9 +942,8 @@ impl PageRaster {
         let mut owner = vec![0u32; size.width as usize * size.height as usize];
         // The page's triangles in pixel space, once for both passes; UV-degenerate ones counted.
         let mut on_page: Vec<(u32, [Vec2; 3])> = Vec::new();
-        for (i, t) in scene.triangles.iter().enumerate() {
-            let mesh = &meshes[t.mesh as usize];
-            let Some(q) = pixel_uv(t, mesh).filter(|_| mesh.page == page) else {
+        for (i, t) in triangles.iter().enumerate() {
+            let Some((_, q)) = t.pixel_uv().filter(|&(p, _)| p == page) else {
                 continue;
             };
             let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
@@ -950,8 +980,8 @@ impl PageRaster {
     fn emit_tiles(
         &self,
         scene: &Scene,
-        meshes: &[MeshRecord],
-        flip: &[bool],
+        triangles: &[TriangleRecord],
+        visibility: &Visibility,
         w: &mut TexelWriter,
         report: &mut PrepareReport,
     ) -> Result<(), PrepareError> {
@@ -981,14 +1011,18 @@ impl PageRaster {
                     }
                     let tri = (o & !PARTIAL_BIT) - 1;
                     let partial = o & PARTIAL_BIT != 0;
-                    let mut record = texel_record(scene, meshes, self.page, tri, x, y, partial);
-                    if flip[tri as usize] {
-                        record.normal = record.normal.map(|c| -c);
-                    }
+                    let record = texel_record(scene, triangles, self.page, tri, x, y, partial);
                     buf.push(record);
                     report.partial_texels += u64::from(partial);
                 }
             }
+            buf.par_iter_mut().for_each(|t| {
+                if visibility.inside_geometry(t) {
+                    t.flags = (t.flags & !FLAG_VALID) | FLAG_INSIDE;
+                }
+            });
+            report.inside_texels +=
+                buf.iter().filter(|t| t.flags & FLAG_INSIDE != 0).count() as u64;
             if !buf.is_empty() {
                 w.push_tile(rect, &buf)?;
                 report.tiles += 1;
@@ -999,10 +1033,11 @@ impl PageRaster {
     }
 }
 
-/// The record of texel (x, y) owned by triangle `tri`.
+/// The record of texel (x, y) owned by triangle `tri`: its normal on the side the triangle is
+/// seen from ([`TriangleRecord::texels_face_back`]).
 fn texel_record(
     scene: &Scene,
-    meshes: &[MeshRecord],
+    triangles: &[TriangleRecord],
     page: u32,
     tri: u32,
     x: u32,
@@ -1010,15 +1045,18 @@ fn texel_record(
     partial: bool,
 ) -> TexelRecord {
     let t = &scene.triangles[tri as usize];
-    let q = pixel_uv(t, &meshes[t.mesh as usize]).unwrap_or([Vec2::ZERO; 3]);
+    let record = &triangles[tri as usize];
+    let q = record.pixel_uv().map_or([Vec2::ZERO; 3], |(_, q)| q);
     let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
     let c = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
     let l = clamp_barycentric(closest_barycentric(&q, c, area));
     let p = t.positions;
     let position = p[0] * l[0] + p[1] * l[1] + p[2] * l[2];
     let geometric = t.geometric_normal();
-    let n =
-        (t.normals[0] * l[0] + t.normals[1] * l[1] + t.normals[2] * l[2]).normalize_or(geometric);
+    let side = if record.texels_face_back() { -1.0 } else { 1.0 };
+    let n = (t.normals[0] * l[0] + t.normals[1] * l[1] + t.normals[2] * l[2])
+        .normalize_or(geometric)
+        * side;
     // dP/dq = [p1-p0, p2-p0] · [q1-q0, q2-q0]^-1
     let (e1, e2) = (q[1] - q[0], q[2] - q[0]);
     let (f1, f2) = (p[1] - p[0], p[2] - p[0]);

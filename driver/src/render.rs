@@ -32,11 +32,10 @@ use guidebake_kernels::traverse::intersect1;
 use rayon::prelude::*;
 
 use crate::bvh::{Bvh, BvhError, Preset};
-use crate::facing::facing_sides;
 use crate::output::exr_pages::page_path;
 use crate::output::readback::read_page;
 use crate::scene::Scene;
-use crate::texels::TexelFile;
+use crate::texels::{TexelFile, TriangleRecord};
 use crate::transport::series::PreviousPass;
 use crate::transport::sky::sky_radiance;
 
@@ -248,17 +247,7 @@ impl Lightmap {
     /// [`RenderError`] naming the file: the scene is not the texel file's, a page is missing,
     /// unreadable, of another size or without R, G, B channels.
     pub fn load(texels: &TexelFile, scene: &Scene, out: &Path) -> Result<Self, RenderError> {
-        let expected = texels.header().triangle_count as usize;
-        if expected != scene.triangles.len() {
-            return Err(RenderError::Scene {
-                path: scene.path.clone(),
-                what: format!(
-                    "has {} triangles, but the texel file {} was prepared from a scene of {expected}",
-                    scene.triangles.len(),
-                    texels.path().display()
-                ),
-            });
-        }
+        check_scene_matches(texels, scene)?;
         let pages = texels.pages();
         let mut covered: Vec<Vec<bool>> = pages
             .iter()
@@ -285,7 +274,7 @@ impl Lightmap {
             );
         }
         Ok(Self {
-            lookup: PreviousPass::from_pixels(scene, texels.meshes(), pages, &images),
+            lookup: PreviousPass::from_pixels(scene, texels.triangles(), pages, &images),
         })
     }
 
@@ -293,6 +282,22 @@ impl Lightmap {
     pub fn irradiance(&self, prim: u32, b1: f32, b2: f32) -> Vec3 {
         self.lookup.irradiance(prim, b1, b2)
     }
+}
+
+/// The texel file must have been prepared from `scene`: the same triangle count.
+fn check_scene_matches(texels: &TexelFile, scene: &Scene) -> Result<(), RenderError> {
+    let expected = texels.header().triangle_count as usize;
+    if expected != scene.triangles.len() {
+        return Err(RenderError::Scene {
+            path: scene.path.clone(),
+            what: format!(
+                "has {} triangles, but the texel file {} was prepared from a scene of {expected}",
+                scene.triangles.len(),
+                texels.path().display()
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// The R, G, B channels of an EXR page of `width` × `height`, checked.
@@ -323,42 +328,33 @@ fn read_rgb(path: &Path, width: usize, height: usize) -> Result<Vec<Vec3>, Rende
         .collect())
 }
 
-/// The scene prepared for eye rays: its BVH and the side each triangle's texels face.
+/// The scene prepared for eye rays: its BVH and, from the texel file, the sides each triangle
+/// is seen from and whether it has lightmap UVs.
 pub struct Stage<'s> {
     scene: &'s Scene,
     bvh: Bvh,
-    /// Per triangle: the unit normal of the side its lightmap describes (geometric normal,
-    /// flipped where [`facing_sides`] says so); zero for triangles without lightmap UVs.
-    lit_side: Vec<Vec3>,
+    triangles: Vec<TriangleRecord>,
 }
 
 impl<'s> Stage<'s> {
-    /// Builds the BVH and decides every triangle's lit side.
+    /// Builds the BVH and reads every triangle's seen sides from `texels` (prepared from
+    /// `scene`).
     ///
     /// # Errors
-    /// [`RenderError::Bvh`] for a non-finite vertex.
-    pub fn new(scene: &'s Scene) -> Result<Self, RenderError> {
+    /// [`RenderError::Bvh`] for a non-finite vertex; [`RenderError::Scene`] when `texels`
+    /// was prepared from a scene of another triangle count.
+    pub fn new(scene: &'s Scene, texels: &TexelFile) -> Result<Self, RenderError> {
+        check_scene_matches(texels, scene)?;
         // The tree for the rays of a full-HD view or two ([`Preset::for_rays`]).
         let rays = 2.0 * 1920.0 * 1080.0 * (SUBPIXELS * SUBPIXELS) as f64;
         let bvh = Bvh::build(
             &scene.triangle_positions(),
             Preset::for_rays(scene.triangles.len(), rays),
         )?;
-        let flips = facing_sides(scene)?;
-        let lit_side = scene
-            .triangles
-            .iter()
-            .zip(flips)
-            .map(|(t, flip)| match (t.lightmap_uv, flip) {
-                (None, _) => Vec3::ZERO,
-                (Some(_), false) => t.geometric_normal(),
-                (Some(_), true) => -t.geometric_normal(),
-            })
-            .collect();
         Ok(Self {
             scene,
             bvh,
-            lit_side,
+            triangles: texels.triangles().to_vec(),
         })
     }
 }
@@ -438,19 +434,20 @@ fn shade(
             break;
         };
         let prim = hit.prim as usize;
-        let lit = stage.lit_side[prim];
-        if cutaway && lit.dot(dir) > 0.0 {
-            // Seen from the side its texels do not face: a cutaway passes through.
+        let triangle = &stage.scene.triangles[prim];
+        let record = &stage.triangles[prim];
+        let front = triangle.geometric_normal().dot(dir) < 0.0;
+        if cutaway && !record.seen_from(front) {
+            // Seen from a side that faces no open space: a cutaway passes through.
             tmin = hit.t + hit.t.abs().max(1.0) * 1e-5;
             continue;
         }
-        let triangle = &stage.scene.triangles[prim];
         let material = stage.scene.triangle_material(prim);
         let mut radiance = Vec3::ZERO;
-        if triangle.geometric_normal().dot(dir) < 0.0 {
+        if front {
             radiance += material.emission;
         }
-        if triangle.lightmap_uv.is_some() {
+        if record.pixel_uv().is_some() {
             let e = lightmap.irradiance(hit.prim, hit.u, hit.v);
             let albedo = stage.scene.hit_albedo(prim).at(hit.u, hit.v);
             radiance += albedo * e / std::f32::consts::PI;
@@ -607,7 +604,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (scene, texels, out) = baked_plane(dir.path());
         let lightmap = Lightmap::load(&texels, &scene, &out).unwrap();
-        let stage = Stage::new(&scene).unwrap();
+        let stage = Stage::new(&scene, &texels).unwrap();
         let options = ViewOptions {
             width: 64,
             height: 48,
@@ -676,7 +673,7 @@ mod tests {
             t.texture_uv = t.lightmap_uv;
         }
         let lightmap = Lightmap::load(&texels, &scene, &out).unwrap();
-        let stage = Stage::new(&scene).unwrap();
+        let stage = Stage::new(&scene, &texels).unwrap();
         // Straight down from above the centre, the plane filling the middle of the view.
         let camera = Camera::look_at(Vec3::new(0.0, 6.0, 0.0), Vec3::ZERO, -Vec3::Z, 0.9);
         let options = ViewOptions {
@@ -718,7 +715,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (scene, texels, out) = baked_plane(dir.path());
         let lightmap = Lightmap::load(&texels, &scene, &out).unwrap();
-        let stage = Stage::new(&scene).unwrap();
+        let stage = Stage::new(&scene, &texels).unwrap();
         // From below, looking straight up at the plane's unlit side.
         let camera = Camera::look_at(Vec3::new(0.0, -1.0, 0.0), Vec3::ZERO, Vec3::Z, 0.5);
         let mut options = ViewOptions {

@@ -44,8 +44,8 @@ use std::path::{Path, PathBuf};
 use glam::{Vec2, Vec3};
 
 use crate::texels::{
-    FLAG_VALID, MeshRecord, PageRecord, TILE_SIZE, TexelFileError, TexelRecord, TexelWriter,
-    TileRect,
+    FLAG_VALID, PageRecord, SEEN_FRONT, TILE_SIZE, TexelFileError, TexelRecord, TexelWriter,
+    TileRect, TriangleRecord,
 };
 
 /// Page edge for synthesized worlds.
@@ -408,9 +408,12 @@ pub fn synth_with(n: u64, out: &Path, options: &SynthOptions) -> Result<SynthRep
     let city_triangles = first;
     let geometry = out.with_extension("glb");
     let scene = out.with_extension("toml");
-    let meshes = write_glb(&geometry, &placed, pages, &lit)?;
+    let triangles = write_glb(&geometry, &placed, pages, &lit)?;
+    debug_assert_eq!(
+        triangles.len(),
+        (city_triangles + 2 * lit.len() as u32) as usize
+    );
     write_scene_file(&scene, &geometry, options.night)?;
-    let triangles = city_triangles + 2 * lit.len() as u32;
     let page_records = vec![
         PageRecord {
             width: PAGE,
@@ -418,7 +421,7 @@ pub fn synth_with(n: u64, out: &Path, options: &SynthOptions) -> Result<SynthRep
         };
         pages as usize
     ];
-    let mut w = TexelWriter::create(out, &page_records, &meshes, triangles, d as f32)?;
+    let mut w = TexelWriter::create(out, &page_records, &triangles, d as f32)?;
     let mut buf = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
     let mut tiles = 0u64;
     for p in &placed {
@@ -445,7 +448,7 @@ pub fn synth_with(n: u64, out: &Path, options: &SynthOptions) -> Result<SynthRep
         tiles,
         pages,
         grid,
-        triangles,
+        triangles: triangles.len() as u32,
         emissive_triangles: 2 * lit.len() as u32,
         texels_per_unit: d as f32,
         geometry,
@@ -493,13 +496,14 @@ fn write_atomically(path: &Path, bytes: &[&[u8]]) -> Result<(), SynthError> {
     crate::output::atomic::write_parts(path, bytes).map_err(io_err(path))
 }
 
-/// Writes one glTF mesh per page; returns the mesh records of the texel file.
+/// Writes one glTF mesh per page; returns the triangle table of the texel file (every face is
+/// seen from its front, where its texels face).
 fn write_glb(
     path: &Path,
     placed: &[Placed],
     pages: u32,
     windows: &[Window],
-) -> Result<Vec<MeshRecord>, SynthError> {
+) -> Result<Vec<TriangleRecord>, SynthError> {
     use serde_json::json;
     let mut bin: Vec<u8> = Vec::new();
     let (mut views, mut accessors, mut meshes, mut nodes, mut records) =
@@ -576,14 +580,14 @@ fn write_glb(
             "attributes": {"POSITION": a0, "NORMAL": a0 + 1, "TEXCOORD_1": a0 + 2},
             "indices": a0 + 3, "material": 0, "mode": 4}]}));
         nodes.push(json!({"name": format!("city_page{page}"), "mesh": page}));
-        records.push(MeshRecord {
-            first_triangle: quads.first().map_or(0, |p| p.first_triangle),
-            triangle_count: quads.iter().map(|p| p.triangle_count()).sum(),
-            page,
-            flags: 1,
-            uv_scale: [PAGE as f32; 2],
-            uv_offset: [0.0; 2],
-        });
+        records.extend(idx.chunks_exact(3).map(|t| {
+            let corner = |v: u32| uv[v as usize] * PAGE as f32;
+            TriangleRecord::lightmapped(
+                page,
+                [corner(t[0]), corner(t[1]), corner(t[2])],
+                SEEN_FRONT,
+            )
+        }));
     }
     let mut materials = vec![
         json!({"name": "concrete", "doubleSided": true, "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.58, 0.55, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}}),
@@ -616,14 +620,11 @@ fn write_glb(
         }
         meshes.push(json!({"name": "lit_windows", "primitives": primitives}));
         nodes.push(json!({"name": "lit_windows", "mesh": pages}));
-        records.push(MeshRecord {
-            first_triangle: placed.iter().map(|p| p.triangle_count()).sum(),
-            triangle_count: 2 * windows.len() as u32,
-            page: 0,
-            flags: 0,
-            uv_scale: [0.0; 2],
-            uv_offset: [0.0; 2],
-        });
+        let window_triangles = 2 * windows.len();
+        records.extend(std::iter::repeat_n(
+            TriangleRecord::unmapped(SEEN_FRONT),
+            window_triangles,
+        ));
     }
     let doc = json!({
         "asset": {"version": "2.0", "generator": "guidebake synth"},
@@ -770,9 +771,12 @@ mod tests {
             (a.min(lum(i)), b.max(lum(i)))
         });
         assert!(lo < 2.0 && hi > 900.0, "radiance spans {lo}..{hi}");
-        let windows = f.meshes().last().unwrap();
-        assert_eq!(windows.flags, 0);
-        assert_eq!(windows.triangle_count, 2 * n);
+        let unmapped = f
+            .triangles()
+            .iter()
+            .filter(|t| t.pixel_uv().is_none())
+            .count();
+        assert_eq!(unmapped, 2 * n as usize, "the windows have no lightmap UVs");
         for &i in &emissive {
             let t = &scene.triangles[i];
             assert!(t.lightmap_uv.is_none());

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use glam::{Vec2, Vec3};
 
 use crate::scene::{Material, Mesh, Scene, Sky, Triangle};
-use crate::texels::{FLAG_VALID, MeshRecord, PageRecord, TexelFile, TexelRecord};
+use crate::texels::{FLAG_VALID, PageRecord, SEEN_FRONT, TexelFile, TexelRecord, TriangleRecord};
 
 /// Where the tests and benches find the third-party scenes: `GUIDEBAKE_SCENES` if set, else
 /// `../shared/scenes` beside the workspace (or `../../shared/scenes`, for a workspace that is a
@@ -111,9 +111,12 @@ pub fn assert_texels_on_triangles(scene: &Scene, f: &TexelFile) {
 }
 
 /// One right triangle of legs `size` on z = 0 facing +z, of grey `albedo`, whose lightmap
-/// UVs span the lower-left half of a 4×4 page (one texel is `size` / 4): the scene, its mesh
-/// record and its page, as a texel file would lay them out.
-pub fn lightmapped_triangle(size: f32, albedo: f32) -> (Scene, Vec<MeshRecord>, Vec<PageRecord>) {
+/// UVs span the lower-left half of a 4×4 page (one texel is `size` / 4), seen from its front:
+/// the scene, its triangle record and its page, as a texel file would lay them out.
+pub fn lightmapped_triangle(
+    size: f32,
+    albedo: f32,
+) -> (Scene, Vec<TriangleRecord>, Vec<PageRecord>) {
     let tri = Triangle {
         positions: [Vec3::ZERO, Vec3::X * size, Vec3::Y * size],
         normals: [Vec3::Z; 3],
@@ -143,17 +146,26 @@ pub fn lightmapped_triangle(size: f32, albedo: f32) -> (Scene, Vec<MeshRecord>, 
         sky: Sky::None,
         degenerate_triangles: 0,
     };
-    let meshes = vec![MeshRecord {
-        first_triangle: 0,
-        triangle_count: 1,
-        page: 0,
-        flags: 1,
-        uv_scale: [4.0, 4.0],
-        uv_offset: [0.0, 0.0],
-    }];
+    let uv = [Vec2::ZERO, Vec2::new(4.0, 0.0), Vec2::new(0.0, 4.0)];
+    let triangles = vec![TriangleRecord::lightmapped(0, uv, SEEN_FRONT)];
     let pages = vec![PageRecord {
         width: 4,
         height: 4,
     }];
-    (scene, meshes, pages)
+    (scene, triangles, pages)
+}
+
+/// The triangle table of a hand-made texel file whose one page of `page` texels holds
+/// `scene`'s own lightmap UVs (0..1 across the page), every triangle seen from `seen`
+/// ([`crate::texels::SEEN_FRONT`] | [`crate::texels::SEEN_BACK`]).
+pub fn triangles_on_page(scene: &Scene, page: PageRecord, seen: u32) -> Vec<TriangleRecord> {
+    let size = Vec2::new(page.width as f32, page.height as f32);
+    scene
+        .triangles
+        .iter()
+        .map(|t| match t.lightmap_uv {
+            Some(uv) => TriangleRecord::lightmapped(0, uv.map(|v| v * size), seen),
+            None => TriangleRecord::unmapped(seen),
+        })
+        .collect()
 }

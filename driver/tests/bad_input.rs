@@ -41,7 +41,6 @@ fn valid_file(dir: &Path) -> PathBuf {
             height: 8,
         }],
         &[],
-        0,
         1.0,
     )
     .unwrap();
@@ -134,9 +133,9 @@ fn bad_texel_files_are_clear_errors() {
         ),
         (
             "version",
-            Box::new(|b| b[8] = 2),
-            |e| matches!(e, TexelFileError::UnsupportedVersion { found: 2, .. }),
-            "version 2",
+            Box::new(|b| b[8] = 1),
+            |e| matches!(e, TexelFileError::UnsupportedVersion { found: 1, .. }),
+            "run `guidebake prepare` again",
         ),
         (
             "past_end",

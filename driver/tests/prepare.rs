@@ -3,7 +3,6 @@
 
 use std::path::PathBuf;
 
-use glam::Vec2;
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
 use guidebake::scene::Scene;
 use guidebake::test_support::assert_texels_on_triangles;
@@ -16,10 +15,11 @@ fn scenes_dir() -> Option<PathBuf> {
 /// Total UV area and UV perimeter of the scene's triangles, in page pixels.
 fn pixel_area_and_perimeter(scene: &Scene, f: &TexelFile) -> (f64, f64) {
     let (mut area, mut perim) = (0.0f64, 0.0f64);
-    for t in &scene.triangles {
-        let m = f.meshes()[t.mesh as usize];
-        let Some(uv) = t.lightmap_uv else { continue };
-        let q = uv.map(|v| v * Vec2::from(m.uv_scale) + Vec2::from(m.uv_offset));
+    for (t, record) in scene.triangles.iter().zip(f.triangles()) {
+        let Some((_, q)) = record.pixel_uv() else {
+            continue;
+        };
+        assert!(t.lightmap_uv.is_some(), "a triangle without UVs got some");
         area += f64::from(0.5 * (q[1] - q[0]).perp_dot(q[2] - q[0]).abs());
         perim += f64::from(q[0].distance(q[1]) + q[1].distance(q[2]) + q[2].distance(q[0]));
     }

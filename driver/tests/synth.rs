@@ -42,11 +42,18 @@ fn synth_texels_lie_on_the_written_scene() {
             Vec3::from(x.normal).dot(n.normalize()) > 0.9999,
             "texel {i} normal"
         );
-        // The mesh record maps the triangle's lightmap UVs onto the texel's pixel.
-        let m = f.meshes()[t.mesh as usize];
-        assert_eq!(m.page, x.page);
-        let uv = t.lightmap_uv.unwrap();
-        let q = uv.map(|v| v * glam::Vec2::from(m.uv_scale) + glam::Vec2::from(m.uv_offset));
+        // The triangle table holds the triangle's lightmap UVs, which map onto the texel's
+        // pixel, and the scene's own UVs say the same.
+        let (page, q) = f.triangles()[x.triangle as usize].pixel_uv().unwrap();
+        assert_eq!(page, x.page);
+        let size = glam::Vec2::splat(f.pages()[0].width as f32);
+        let from_scene = t.lightmap_uv.unwrap().map(|v| v * size);
+        assert!(
+            q.iter()
+                .zip(&from_scene)
+                .all(|(a, b)| a.distance(*b) < 1e-3),
+            "texel {i}"
+        );
         let px = q[0] * (1.0 - l1 - l2) + q[1] * l1 + q[2] * l2;
         assert_eq!(
             px.floor().as_uvec2().to_array(),

@@ -52,7 +52,9 @@ use crate::output::journal::TileRecord;
 use crate::output::result_file::{
     FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_UNGUIDED, FLAG_VALID, TexelResult,
 };
-use crate::texels::{FLAG_PARTIAL, FLAG_VALID as TEXEL_VALID, TexelRecord};
+use crate::texels::{
+    FLAG_INSIDE as TEXEL_INSIDE, FLAG_PARTIAL, FLAG_VALID as TEXEL_VALID, TexelRecord,
+};
 use crate::transport::direct::Receiver8;
 use crate::transport::path::{Departure, Leaving};
 use crate::transport::rng::SampleRng;
@@ -86,6 +88,9 @@ pub struct GatherCounters {
     pub texels_baked: u64,
     /// Invalid texels skipped without tracing.
     pub texels_invalid_skipped: u64,
+    /// Of those, texels inside geometry (`prepare` found their rays meeting sides of
+    /// surfaces that face no open space; the lightmap's dilation fills them).
+    pub texels_inside_geometry: u64,
     /// Texels whose every sample was non-finite (baked black, flagged).
     pub texels_without_finite_samples: u64,
     /// Non-finite samples rejected by the estimators.
@@ -132,6 +137,7 @@ impl GatherCounters {
         self.series_totals_read += o.series_totals_read;
         self.texels_baked += o.texels_baked;
         self.texels_invalid_skipped += o.texels_invalid_skipped;
+        self.texels_inside_geometry += o.texels_inside_geometry;
         self.texels_without_finite_samples += o.texels_without_finite_samples;
         self.samples_rejected += o.samples_rejected;
         self.clusters += o.clusters;
@@ -326,6 +332,7 @@ impl<'w> TileBaker<'w> {
                 self.normals.push(t.normal);
             } else {
                 self.counters.texels_invalid_skipped += 1;
+                self.counters.texels_inside_geometry += u64::from(t.flags & TEXEL_INSIDE != 0);
             }
         }
     }

@@ -42,7 +42,7 @@ use crate::output::exr_pages::PageWriteError;
 use crate::output::fnv1a64;
 use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
 use crate::scene::Scene;
-use crate::texels::{MESH_HAS_LIGHTMAP_UVS, TexelFile, TexelFileError};
+use crate::texels::{TexelFile, TexelFileError};
 use crate::transport::series::{PreviousPass, PreviousPassWriter};
 
 /// What a bake run is asked to do.
@@ -241,7 +241,7 @@ pub fn bake_pass_with_progress(
     let clock = Instant::now();
     let texels = TexelFile::open(&job.texels)?;
     report.seconds.open_texels = clock.elapsed().as_secs_f64();
-    check_scene_matches(&texels, scene, job.settings.pass_count() > 1)?;
+    check_scene_matches(&texels, scene)?;
 
     let clock = Instant::now();
     let mut world = World::new(scene, run_preset(job, &texels, scene, &run_passes))?;
@@ -557,16 +557,12 @@ fn previous_pass(
                 let [x, y] = texel.pixel.map(u32::from);
                 let total = core::array::from_fn(|c| r.total[c] + d.total[c]);
                 image.set(texel.page, x, y, r.gathered, total);
-                if let Some(tri) = scene.triangles.get(texel.triangle as usize) {
-                    let front = tri.geometric_normal().dot(texel.normal()) > 0.0;
-                    image.set_side(texel.triangle, front);
-                }
             }
         }
         texels.release_tile(t);
     }
     let previous = image
-        .finish(scene, texels.meshes())
+        .finish(scene, texels.triangles())
         .map_err(|e| file_error(&e.path, e.what))?;
     report.seconds.previous_pass_images += clock.elapsed().as_secs_f64();
     Ok(previous)
@@ -603,11 +599,10 @@ fn run_preset(
 /// transport both trace at least these two; path tracing traces more).
 const RAYS_PER_SAMPLE: f64 = 2.0;
 
-/// The texel file must have been prepared from `scene`: the same triangles and, when a
-/// series pass reads the previous one through the scene's lightmap UVs (`uvs_read`), lightmap
-/// UVs on every mesh that has texels — a scene whose UVs `prepare --unwrap` generated must be
-/// baked as the file `--write-gltf` wrote, or its bounced light would silently be black.
-fn check_scene_matches(texels: &TexelFile, scene: &Scene, uvs_read: bool) -> Result<(), BakeError> {
+/// The texel file must have been prepared from `scene`: the same triangles. Their lightmap
+/// UVs come from the file's triangle table, so the scene's own UV sets (or their absence, on a
+/// scene `prepare --unwrap` gave UVs) do not matter.
+fn check_scene_matches(texels: &TexelFile, scene: &Scene) -> Result<(), BakeError> {
     let expected = texels.header().triangle_count as usize;
     if expected != scene.triangles.len() {
         return Err(BakeError::Mismatch(format!(
@@ -615,21 +610,6 @@ fn check_scene_matches(texels: &TexelFile, scene: &Scene, uvs_read: bool) -> Res
             texels.path().display(),
             scene.path.display(),
             scene.triangles.len()
-        )));
-    }
-    let without_uvs = texels
-        .meshes()
-        .iter()
-        .zip(&scene.meshes)
-        .find(|(record, mesh)| record.flags & MESH_HAS_LIGHTMAP_UVS != 0 && !mesh.has_lightmap_uvs);
-    if let (true, Some((_, mesh))) = (uvs_read, without_uvs) {
-        return Err(BakeError::Mismatch(format!(
-            "{}: mesh '{}' has texels in {}, but no lightmap UVs (TEXCOORD_1) in this scene, \
-             through which series bounces are read: bake the scene `prepare --write-gltf` \
-             wrote, or use --transport path",
-            scene.path.display(),
-            mesh.name,
-            texels.path().display()
         )));
     }
     Ok(())

@@ -154,16 +154,9 @@ impl World {
     /// corner and see the sky), and never far from `p` on a huge triangle. `p` itself when
     /// `prim` is not a triangle of the scene.
     pub fn onto_triangle(&self, prim: u32, p: Vec3, max_shift: f32) -> Vec3 {
-        let Some(&[a, b, c]) = self.corners.get(prim as usize) else {
-            return p;
-        };
-        let q = closest_point_on_triangle(p, a, b, c);
-        let shift = ((a + b + c) / 3.0 - q) * 1e-3;
-        let length = shift.length();
-        if length > max_shift && length > 0.0 {
-            q + shift * (max_shift / length)
-        } else {
-            q + shift
+        match self.corners.get(prim as usize) {
+            Some(c) => onto_triangle(p, c, max_shift),
+            None => p,
         }
     }
 
@@ -265,6 +258,19 @@ impl World {
         } else {
             sky_radiance(&self.sky, dir)
         }
+    }
+}
+
+/// The point of triangle `c` closest to `p`, moved a thousandth of the way towards its
+/// centroid but never more than `max_shift` ([`World::onto_triangle`]).
+pub fn onto_triangle(p: Vec3, c: &[Vec3; 3], max_shift: f32) -> Vec3 {
+    let q = closest_point_on_triangle(p, c[0], c[1], c[2]);
+    let shift = ((c[0] + c[1] + c[2]) / 3.0 - q) * 1e-3;
+    let length = shift.length();
+    if length > max_shift && length > 0.0 {
+        q + shift * (max_shift / length)
+    } else {
+        q + shift
     }
 }
 

@@ -104,7 +104,7 @@ fn write_views(
     texels: &std::path::Path,
 ) -> Result<(), super::CmdError> {
     let texels = TexelFile::open(texels)?;
-    let stage = Stage::new(scene)?;
+    let stage = Stage::new(scene, &texels)?;
     let camera = demo_camera(VIEW.width as f32 / VIEW.height as f32);
     let mut views: Vec<View> = Vec::new();
     for name in ["baseline", "guided"] {

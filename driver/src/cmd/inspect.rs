@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use crate::texels::{TexelFile, TexelRecord};
+use crate::texels::{SEEN_BACK, SEEN_FRONT, TexelFile, TexelRecord, TriangleRecord};
 
 /// Arguments of `guidebake inspect`.
 #[derive(Debug, clap::Args)]
@@ -73,6 +73,7 @@ pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
         .iter()
         .filter(|t| t.flags & crate::texels::FLAG_PARTIAL != 0)
         .count();
+    let sides = TriangleCounts::of(f.triangles());
     if args.json {
         let v = serde_json::json!({
             "file": args.file,
@@ -83,8 +84,11 @@ pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
             "tile_count": h.tile_count,
             "tile_size": h.tile_size,
             "pages": f.pages().iter().map(|p| [p.width, p.height]).collect::<Vec<_>>(),
-            "mesh_count": h.mesh_count,
             "triangle_count": h.triangle_count,
+            "lightmapped_triangles": sides.lightmapped,
+            "triangles_seen_from_front": sides.front,
+            "triangles_seen_from_back": sides.back,
+            "triangles_seen_from_both_sides": sides.both,
             "texels_per_unit": h.texels_per_unit,
             "bounds": [h.bounds_min, h.bounds_max],
             "texels": dump,
@@ -110,8 +114,8 @@ pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
         .collect();
     println!("  pages:  {} [{}]", pages.len(), pages.join(", "));
     println!(
-        "  meshes: {}, scene triangles: {}",
-        h.mesh_count, h.triangle_count
+        "  triangles: {} ({} with lightmap UVs; seen from the front {}, the back {}, both sides {})",
+        h.triangle_count, sides.lightmapped, sides.front, sides.back, sides.both
     );
     println!("  bounds: {:?} .. {:?}", h.bounds_min, h.bounds_max);
     println!("  texels per unit: {}", h.texels_per_unit);
@@ -122,4 +126,29 @@ pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
         );
     }
     Ok(())
+}
+
+/// How many triangles of the table have lightmap UVs, and from which sides they are seen.
+struct TriangleCounts {
+    lightmapped: usize,
+    front: usize,
+    back: usize,
+    both: usize,
+}
+
+impl TriangleCounts {
+    fn of(triangles: &[TriangleRecord]) -> Self {
+        let seen = |flags: u32| {
+            triangles
+                .iter()
+                .filter(|t| t.flags & (SEEN_FRONT | SEEN_BACK) == flags)
+                .count()
+        };
+        Self {
+            lightmapped: triangles.iter().filter(|t| t.pixel_uv().is_some()).count(),
+            front: seen(SEEN_FRONT),
+            back: seen(SEEN_BACK),
+            both: seen(SEEN_FRONT | SEEN_BACK),
+        }
+    }
 }

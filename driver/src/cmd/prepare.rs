@@ -79,19 +79,9 @@ pub fn run(args: &PrepareArgs) -> Result<(), super::CmdError> {
         let _ = std::fs::remove_file(&args.output);
         return Err(e.into());
     }
-    if report.unwrap.is_some() && args.write_gltf.is_none() {
-        eprintln!(
-            "guidebake: warning: lightmap UVs were generated; bake with the scene that \
-             --write-gltf writes (the bake looks bounced light up through the scene's UVs)"
-        );
-    }
     // The seams beside the texel file, for `bake --seams stitch` (docs/lightmaps.md), found
-    // through the lightmap UVs: those of the written scene when they were generated.
-    let written = match (&args.write_gltf, &report.unwrap) {
-        (Some(glb), Some(_)) => Some(Scene::load(glb)?),
-        _ => None,
-    };
-    crate::output::seams::prepare_seams(written.as_ref().unwrap_or(&scene), &args.output)?;
+    // through the lightmap UVs the texel file holds.
+    crate::output::seams::prepare_seams(&scene, &args.output)?;
     for m in &report.meshes_without_lightmap_uvs {
         eprintln!(
             "guidebake: warning: mesh '{m}' has no lightmap UVs (TEXCOORD_1); it gets no texels"

@@ -92,7 +92,7 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
     let aspect = args.width as f32 / height as f32;
     let camera = from_file.unwrap_or_else(|| Camera::framing(scene.bounds(), aspect));
     let cutaway = args.cutaway.map_or(from_file.is_none(), |c| c == OnOff::On);
-    let stage = Stage::new(&scene)?;
+    let stage = Stage::new(&scene, &texels)?;
     let view = render(
         &stage,
         &lightmap,

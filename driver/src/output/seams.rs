@@ -148,7 +148,7 @@ pub fn seam_samples(scene: &Scene, texels: &TexelFile) -> SeamSamples {
     let bits = |v: glam::Vec3| v.to_array().map(f32::to_bits);
     let mut edges: HashMap<Key, Vec<(usize, usize)>> = HashMap::new();
     for (t, tri) in scene.triangles.iter().enumerate() {
-        if tri.lightmap_uv.is_none() {
+        if pixel_corners(texels, t).is_none() {
             continue;
         }
         for e in 0..3 {
@@ -211,12 +211,10 @@ fn texel_normals(
     normals
 }
 
-/// Where triangle `t`'s lightmap lies: its page and its corners in pixel coordinates.
-fn pixel_corners(scene: &Scene, texels: &TexelFile, t: usize) -> Option<(u32, [Vec2; 3])> {
-    let tri = &scene.triangles[t];
-    let mesh = texels.meshes().get(tri.mesh as usize)?;
-    let (scale, offset) = (Vec2::from(mesh.uv_scale), Vec2::from(mesh.uv_offset));
-    Some((mesh.page, tri.lightmap_uv?.map(|uv| uv * scale + offset)))
+/// Where triangle `t`'s lightmap lies (the texel file's triangle table): its page and its
+/// corners in pixel coordinates.
+fn pixel_corners(texels: &TexelFile, t: usize) -> Option<(u32, [Vec2; 3])> {
+    texels.triangles().get(t)?.pixel_uv()
 }
 
 /// Adds the samples of the edge shared by edge `e1` of triangle `t1` and edge `e2` of `t2`,
@@ -232,10 +230,9 @@ fn edge_samples(
     if tri1.geometric_normal().dot(tri2.geometric_normal()).abs() < PAIR_COS {
         return;
     }
-    let (Some((page1, c1)), Some((page2, c2))) = (
-        pixel_corners(scene, texels, t1),
-        pixel_corners(scene, texels, t2),
-    ) else {
+    let (Some((page1, c1)), Some((page2, c2))) =
+        (pixel_corners(texels, t1), pixel_corners(texels, t2))
+    else {
         return;
     };
     // The edge's ends on each side, in the same order (by position).

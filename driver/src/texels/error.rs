@@ -37,7 +37,7 @@ pub enum TexelFileError {
     },
     /// A version this build does not read.
     #[error(
-        "{path}: offset 8: version {found} is not supported (this build reads version {VERSION})"
+        "{path}: offset 8: version {found} is not supported (this build reads version {VERSION}; run `guidebake prepare` again to rewrite the file)"
     )]
     UnsupportedVersion {
         /// The file.
@@ -101,13 +101,13 @@ pub enum TexelFileError {
         /// What is wrong.
         message: String,
     },
-    /// A mesh record is invalid.
-    #[error("{path}: mesh {mesh} (offset {offset}): {message}")]
-    BadMesh {
+    /// A triangle record is invalid.
+    #[error("{path}: triangle {triangle} (offset {offset}): {message}")]
+    BadTriangle {
         /// The file.
         path: PathBuf,
-        /// Mesh index.
-        mesh: u64,
+        /// Triangle index.
+        triangle: u64,
         /// Byte offset of the record.
         offset: u64,
         /// What is wrong.

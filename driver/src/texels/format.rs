@@ -5,8 +5,10 @@ use super::*;
 
 /// `b"GBTEXELS"`: the first eight bytes of every texel file.
 pub const MAGIC: [u8; 8] = *b"GBTEXELS";
-/// The version this build writes and reads.
-pub const VERSION: u32 = 1;
+/// The version this build writes and reads. Version 2 replaced version 1's mesh table (a UV
+/// transform per mesh, applied to the scene's own lightmap UVs) with a triangle table: the
+/// file carries every triangle's lightmap UVs and seen sides itself.
+pub const VERSION: u32 = 2;
 /// Every section starts at a multiple of this many bytes.
 pub const SECTION_ALIGN: u64 = 64;
 /// Default tile edge in texels.
@@ -19,8 +21,28 @@ pub const FLAG_VALID: u32 = 1;
 /// Texel flag: no triangle covers the texel centre; the position is the closest point of
 /// the triangle that overlaps the texel (conservative rasterization, see `prepare`).
 pub const FLAG_PARTIAL: u32 = 2;
-/// Every flag bit version 1 defines.
-pub const KNOWN_FLAGS: u32 = FLAG_VALID | FLAG_PARTIAL;
+/// Texel flag: the texel lies inside geometry (its rays meet sides of surfaces that face no
+/// open space, [`crate::facing::Visibility::inside_geometry`]); such a texel is not
+/// [`FLAG_VALID`]: the bake skips it and the lightmap's dilation fills it.
+pub const FLAG_INSIDE: u32 = 4;
+/// Every texel flag bit version 2 defines.
+pub const KNOWN_FLAGS: u32 = FLAG_VALID | FLAG_PARTIAL | FLAG_INSIDE;
+
+/// [`TriangleRecord::flags`] bit: the winding's front side faces open space
+/// ([`crate::facing`]).
+pub const SEEN_FRONT: u32 = 1;
+/// [`TriangleRecord::flags`] bit: the back side faces open space.
+pub const SEEN_BACK: u32 = 2;
+/// [`TriangleRecord::flags`] bit: the triangle has lightmap UVs (`page` and `uv` hold them)
+/// and may have texels.
+pub const LIGHTMAPPED: u32 = 4;
+/// [`TriangleRecord::flags`] bit: its texels describe its back side (their normals face
+/// against the winding); only with [`SEEN_BACK`].
+pub const TEXELS_BACK: u32 = 8;
+/// The bits of [`TriangleRecord::flags`] that say which sides are seen and described.
+pub const SIDE_FLAGS: u32 = SEEN_FRONT | SEEN_BACK | TEXELS_BACK;
+/// Every triangle flag bit version 2 defines.
+pub const KNOWN_TRIANGLE_FLAGS: u32 = SIDE_FLAGS | LIGHTMAPPED;
 
 /// File header at offset 0, 128 bytes.
 #[repr(C)]
@@ -42,14 +64,14 @@ pub struct Header {
     pub page_count: u32,
     /// Tile edge in texels (tiles are at most `tile_size`² texels).
     pub tile_size: u32,
-    /// Number of [`MeshRecord`]s.
-    pub mesh_count: u32,
-    /// Triangles of the scene the file was prepared from (0 if unknown).
+    /// Reserved, 0.
+    pub reserved0: u32,
+    /// Number of [`TriangleRecord`]s: the triangles of the scene the file was prepared from.
     pub triangle_count: u32,
     /// Byte offset of the page table.
     pub pages_offset: u64,
-    /// Byte offset of the mesh table.
-    pub meshes_offset: u64,
+    /// Byte offset of the triangle table.
+    pub triangles_offset: u64,
     /// Byte offset of the texel records.
     pub texels_offset: u64,
     /// Byte offset of the tile table.
@@ -66,9 +88,6 @@ pub struct Header {
     pub reserved: [u8; 8],
 }
 
-/// [`MeshRecord::flags`] bit: the mesh has lightmap UVs, and texels.
-pub const MESH_HAS_LIGHTMAP_UVS: u32 = 1;
-
 /// One atlas page, 8 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
@@ -79,26 +98,97 @@ pub struct PageRecord {
     pub height: u32,
 }
 
-/// Where a mesh's lightmap UVs land: `pixel = uv * uv_scale + uv_offset` on `page`
-/// (continuous pixel coordinates; texel (x, y) has its centre at (x + 0.5, y + 0.5)).
-/// 32 bytes. The bake's series transport maps (hit triangle, barycentrics) → page/pixel
-/// through it.
+/// One scene triangle as the lightmap knows it, 32 bytes: where its texels lie and which of its
+/// sides face open space. The bake finds a hit's texel through it (series lookups), `render`
+/// and `merge` read the lightmap through it, and the gather tells from it whether a ray met a
+/// surface from inside geometry — so no scene UV set has to match the file.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
-pub struct MeshRecord {
-    /// First triangle of the mesh in the scene's triangle order.
-    pub first_triangle: u32,
-    /// Number of triangles.
-    pub triangle_count: u32,
-    /// Atlas page.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct TriangleRecord {
+    /// Atlas page (0 without [`LIGHTMAPPED`]).
     pub page: u32,
-    /// Bit 0 ([`MESH_HAS_LIGHTMAP_UVS`]): the mesh has lightmap UVs (otherwise it has no
-    /// texels).
+    /// [`SEEN_FRONT`] | [`SEEN_BACK`] | [`TEXELS_BACK`] | [`LIGHTMAPPED`].
     pub flags: u32,
-    /// UV → pixel scale.
-    pub uv_scale: [f32; 2],
-    /// UV → pixel offset.
-    pub uv_offset: [f32; 2],
+    /// Its corners' lightmap positions in continuous pixel coordinates of its page (texel
+    /// (x, y) covers [x, x+1) × [y, y+1)); zero without [`LIGHTMAPPED`].
+    pub uv: [[f32; 2]; 3],
+}
+
+impl TriangleRecord {
+    /// A triangle with lightmap UVs `uv` (pixel coordinates) on `page`, seen from `seen`
+    /// ([`SIDE_FLAGS`]).
+    #[must_use]
+    pub fn lightmapped(page: u32, uv: [Vec2; 3], seen: u32) -> Self {
+        Self {
+            page,
+            flags: LIGHTMAPPED | (seen & SIDE_FLAGS),
+            uv: uv.map(|v| v.to_array()),
+        }
+    }
+
+    /// A triangle without lightmap UVs, seen from `seen`.
+    #[must_use]
+    pub fn unmapped(seen: u32) -> Self {
+        Self {
+            flags: seen & SIDE_FLAGS,
+            ..Self::default()
+        }
+    }
+
+    /// Its page and corners in pixel coordinates, when it has lightmap UVs.
+    #[must_use]
+    pub fn pixel_uv(&self) -> Option<(u32, [Vec2; 3])> {
+        (self.flags & LIGHTMAPPED != 0).then(|| (self.page, self.uv.map(Vec2::from)))
+    }
+
+    /// Whether its winding's `front` side (or its back) faces open space: a ray meeting it
+    /// on a side that does not came from inside geometry.
+    #[must_use]
+    pub fn seen_from(&self, front: bool) -> bool {
+        self.flags & if front { SEEN_FRONT } else { SEEN_BACK } != 0
+    }
+
+    /// Whether its texels describe its back side ([`TEXELS_BACK`]): their normals face against
+    /// the winding.
+    #[must_use]
+    pub fn texels_face_back(&self) -> bool {
+        self.flags & TEXELS_BACK != 0
+    }
+
+    /// What is wrong with this record, given the file's page count, if anything.
+    fn defect(&self, pages: usize) -> Option<String> {
+        if self.flags & !KNOWN_TRIANGLE_FLAGS != 0 {
+            return Some(format!(
+                "unknown flag bits {:#x}",
+                self.flags & !KNOWN_TRIANGLE_FLAGS
+            ));
+        }
+        if self.flags & TEXELS_BACK != 0 && self.flags & SEEN_BACK == 0 {
+            return Some("TEXELS_BACK without SEEN_BACK".to_owned());
+        }
+        if self.flags & LIGHTMAPPED == 0 {
+            return (self.page != 0 || self.uv != [[0.0; 2]; 3])
+                .then(|| "UVs or a page without the LIGHTMAPPED flag".to_owned());
+        }
+        if self.page as usize >= pages {
+            return Some(format!("page {} does not exist ({pages} pages)", self.page));
+        }
+        if !self.uv.iter().flatten().all(|v| v.is_finite()) {
+            return Some(format!("UVs {:?} are not finite", self.uv));
+        }
+        None
+    }
+}
+
+/// Checks the triangle table against the page count: the first defective record, if any.
+pub(super) fn check_triangles(
+    triangles: &[TriangleRecord],
+    pages: usize,
+) -> Option<(usize, String)> {
+    triangles
+        .iter()
+        .enumerate()
+        .find_map(|(i, t)| t.defect(pages).map(|m| (i, m)))
 }
 
 /// One tile, 32 bytes: a pixel rectangle of one page and its texels, contiguous.
@@ -180,7 +270,7 @@ impl TexelRecord {
 const _: () = assert!(size_of::<Header>() == 128);
 const _: () = assert!(size_of::<TexelRecord>() == 64);
 const _: () = assert!(size_of::<TileRecord>() == 32);
-const _: () = assert!(size_of::<MeshRecord>() == 32);
+const _: () = assert!(size_of::<TriangleRecord>() == 32);
 const _: () = assert!(size_of::<PageRecord>() == 8);
 
 pub(super) fn align_up(x: u64) -> u64 {
@@ -241,8 +331,13 @@ pub(super) fn check_tile(
 }
 
 /// Checks a tile's texels: each valid on its own, on the tile's page and rectangle, strictly
-/// increasing row-major pixels (so no pixel appears twice).
-pub(super) fn check_tile_texels(t: &TileRecord, texels: &[TexelRecord]) -> Result<(), Defect> {
+/// increasing row-major pixels (so no pixel appears twice), on a triangle that has lightmap
+/// UVs (`mapped(i)`: whether triangle `i` has them, `None` past the table) or on none.
+pub(super) fn check_tile_texels(
+    t: &TileRecord,
+    texels: &[TexelRecord],
+    mapped: &dyn Fn(u32) -> Option<bool>,
+) -> Result<(), Defect> {
     if texels.len() != t.texel_count as usize || texels.is_empty() {
         return Err((
             None,
@@ -264,6 +359,21 @@ pub(super) fn check_tile_texels(t: &TileRecord, texels: &[TexelRecord]) -> Resul
                 Some(i),
                 format!("pixel ({px}, {py}) on page {} is outside its tile", x.page),
             ));
+        }
+        if x.triangle != u32::MAX {
+            match mapped(x.triangle) {
+                None => return Err((Some(i), format!("triangle {} does not exist", x.triangle))),
+                Some(false) => {
+                    return Err((
+                        Some(i),
+                        format!(
+                            "triangle {} has no lightmap UVs in the triangle table",
+                            x.triangle
+                        ),
+                    ));
+                }
+                Some(true) => {}
+            }
         }
         if prev.is_some_and(|p| (py, px) <= p) {
             return Err((

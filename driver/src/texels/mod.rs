@@ -23,7 +23,7 @@ use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 mod error;
 mod format;
@@ -32,7 +32,7 @@ mod writer;
 
 pub use error::TexelFileError;
 pub use format::*;
-use format::{align_up, check_tile, check_tile_texels};
+use format::{align_up, check_tile, check_tile_texels, check_triangles};
 pub use reader::TexelFile;
 pub use writer::{TexelWriter, TileRect};
 
@@ -77,15 +77,13 @@ mod tests {
                 height: 32,
             },
         ];
-        let meshes = [MeshRecord {
-            first_triangle: 0,
-            triangle_count: 8,
-            page: 1,
-            flags: 1,
-            uv_scale: [32.0; 2],
-            uv_offset: [0.0; 2],
-        }];
-        let mut w = TexelWriter::create(&path, &pages, &meshes, 8, 4.0).unwrap();
+        let mut triangles = vec![TriangleRecord::unmapped(SEEN_FRONT); 8];
+        triangles[7] = TriangleRecord::lightmapped(
+            1,
+            [Vec2::ZERO, Vec2::new(32.0, 0.0), Vec2::new(0.0, 32.0)],
+            SEEN_BACK,
+        );
+        let mut w = TexelWriter::create(&path, &pages, &triangles, 4.0).unwrap();
         let mut rng = Pcg32::new(5, 1);
         let mut all = Vec::new();
         for (page, tx, ty, tw, th) in [
@@ -118,7 +116,7 @@ mod tests {
         let f = TexelFile::open(&path).unwrap();
         assert_eq!(*f.header(), h);
         assert_eq!(f.pages(), pages);
-        assert_eq!(f.meshes(), meshes);
+        assert_eq!(f.triangles(), triangles);
         assert_eq!(f.tiles().len(), 3);
         for (i, tile) in all.iter().enumerate() {
             assert_eq!(f.tile_texels(i), tile.as_slice());
@@ -142,7 +140,6 @@ mod tests {
                 height: 8,
             }],
             &[],
-            0,
             0.0,
         )
         .unwrap();
@@ -207,7 +204,9 @@ mod tests {
             height: side,
         }];
         // 1024 tiles of 32 × 32 texels: a 64 MiB file.
-        let mut w = TexelWriter::create(&path, &pages, &[], 0, 1.0).unwrap();
+        let mut triangles = vec![TriangleRecord::unmapped(SEEN_FRONT); 8];
+        triangles[7] = TriangleRecord::lightmapped(0, [Vec2::ZERO; 3], SEEN_FRONT);
+        let mut w = TexelWriter::create(&path, &pages, &triangles, 1.0).unwrap();
         let mut rng = Pcg32::new(9, 1);
         let mut tile = Vec::with_capacity(1024);
         for ty in (0..side).step_by(32) {

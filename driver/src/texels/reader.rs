@@ -20,8 +20,9 @@ impl std::fmt::Debug for TexelFile {
 
 impl TexelFile {
     /// Maps and validates a texel file: magic, version, header fields, every section within
-    /// the file, aligned and disjoint, every page, mesh and tile record, and every texel
-    /// (finite position and axes, unit normal, known flags, inside its tile, no pixel twice).
+    /// the file, aligned and disjoint, every page, triangle and tile record, and every texel
+    /// (finite position and axes, unit normal, known flags, inside its tile, no pixel twice,
+    /// on a triangle with lightmap UVs).
     ///
     /// # Errors
     /// A [`TexelFileError`] naming the file, the offset and the record.
@@ -75,10 +76,14 @@ impl TexelFile {
         self.section(self.header.pages_offset, u64::from(self.header.page_count))
     }
 
-    /// Mesh table (UV → page/pixel mapping per mesh).
+    /// Triangle table: every scene triangle's lightmap UVs and seen sides, in the scene's
+    /// triangle order.
     #[must_use]
-    pub fn meshes(&self) -> &[MeshRecord] {
-        self.section(self.header.meshes_offset, u64::from(self.header.mesh_count))
+    pub fn triangles(&self) -> &[TriangleRecord] {
+        self.section(
+            self.header.triangles_offset,
+            u64::from(self.header.triangle_count),
+        )
     }
 
     /// Tile table in file order.
@@ -214,6 +219,9 @@ fn validate(
     if header.flags != 0 || header.reserved != [0; 8] {
         return Err(bad("offset 116: reserved fields are not zero".into()));
     }
+    if header.reserved0 != 0 {
+        return Err(bad("offset 48: reserved field is not zero".into()));
+    }
     let sections = [
         (
             "page",
@@ -222,10 +230,10 @@ fn validate(
             size_of::<PageRecord>() as u64,
         ),
         (
-            "mesh",
-            header.meshes_offset,
-            u64::from(header.mesh_count),
-            size_of::<MeshRecord>() as u64,
+            "triangle",
+            header.triangles_offset,
+            u64::from(header.triangle_count),
+            size_of::<TriangleRecord>() as u64,
         ),
         (
             "texel",
@@ -284,11 +292,14 @@ fn validate(
         "page",
         header.pages_offset,
     )?;
-    let meshes: &[MeshRecord] = try_cast(
+    let triangles: &[TriangleRecord] = try_cast(
         path,
-        cast(header.meshes_offset, u64::from(header.mesh_count) * 32),
-        "mesh",
-        header.meshes_offset,
+        cast(
+            header.triangles_offset,
+            u64::from(header.triangle_count) * 32,
+        ),
+        "triangle",
+        header.triangles_offset,
     )?;
     let tiles: &[TileRecord] = try_cast(
         path,
@@ -302,7 +313,7 @@ fn validate(
         "texel",
         header.texels_offset,
     )?;
-    validate_records(path, &header, pages, meshes, tiles, texels, release)?;
+    validate_records(path, &header, pages, triangles, tiles, texels, release)?;
     Ok(header)
 }
 
@@ -323,7 +334,7 @@ fn validate_records(
     path: &Path,
     h: &Header,
     pages: &[PageRecord],
-    meshes: &[MeshRecord],
+    triangles: &[TriangleRecord],
     tiles: &[TileRecord],
     texels: &[TexelRecord],
     release: &mut dyn FnMut(u64, u64),
@@ -338,30 +349,13 @@ fn validate_records(
             });
         }
     }
-    for (i, m) in meshes.iter().enumerate() {
-        let finite = m.uv_scale.iter().chain(&m.uv_offset).all(|v| v.is_finite());
-        let msg = if m.page as usize >= pages.len() {
-            Some(format!("page {} does not exist", m.page))
-        } else if !finite {
-            Some("UV transform is not finite".to_owned())
-        } else if u64::from(m.first_triangle) + u64::from(m.triangle_count)
-            > u64::from(h.triangle_count)
-        {
-            Some(format!(
-                "triangles {}+{} exceed the scene's {}",
-                m.first_triangle, m.triangle_count, h.triangle_count
-            ))
-        } else {
-            None
-        };
-        if let Some(message) = msg {
-            return Err(TexelFileError::BadMesh {
-                path: path.to_owned(),
-                mesh: i as u64,
-                offset: h.meshes_offset + 32 * i as u64,
-                message,
-            });
-        }
+    if let Some((i, message)) = check_triangles(triangles, pages.len()) {
+        return Err(TexelFileError::BadTriangle {
+            path: path.to_owned(),
+            triangle: i as u64,
+            offset: h.triangles_offset + 32 * i as u64,
+            message,
+        });
     }
     let mut next = 0u64;
     for (i, t) in tiles.iter().enumerate() {
@@ -379,7 +373,12 @@ fn validate_records(
                 h.texel_count
             )));
         }
-        check_tile_texels(t, &texels[next as usize..end as usize]).map_err(
+        let mapped = |i: u32| {
+            triangles
+                .get(i as usize)
+                .map(|t| t.flags & LIGHTMAPPED != 0)
+        };
+        check_tile_texels(t, &texels[next as usize..end as usize], &mapped).map_err(
             |(j, message)| match j {
                 Some(j) => {
                     let texel = next + j as u64;
@@ -393,22 +392,6 @@ fn validate_records(
                 None => tile_err(message),
             },
         )?;
-        if let Some((j, x)) =
-            texels[next as usize..end as usize]
-                .iter()
-                .enumerate()
-                .find(|(_, x)| {
-                    x.triangle != u32::MAX && x.triangle >= h.triangle_count && h.triangle_count > 0
-                })
-        {
-            let texel = next + j as u64;
-            return Err(TexelFileError::BadTexel {
-                path: path.to_owned(),
-                texel,
-                offset: h.texels_offset + 64 * texel,
-                message: format!("triangle {} of {}", x.triangle, h.triangle_count),
-            });
-        }
         release(h.texels_offset + 64 * next, end - next);
         next = end;
     }

@@ -17,7 +17,7 @@ pub struct TileRect {
     pub height: u32,
 }
 
-/// Streaming texel-file writer. Layout written: header, pages, meshes (known up front),
+/// Streaming texel-file writer. Layout written: header, pages, triangles (known up front),
 /// texels (appended tile by tile), tile table (spooled to a side file while writing and
 /// appended by [`TexelWriter::finish`], which then patches the header and renames the
 /// temporary file into place). Memory use is one tile, whatever the world size.
@@ -31,6 +31,8 @@ pub struct TexelWriter {
     tiles_out: BufWriter<File>,
     header: Header,
     pages: Vec<PageRecord>,
+    /// Per triangle: whether it has lightmap UVs (texels may lie only on those).
+    mapped: Vec<bool>,
     lo: Vec3,
     hi: Vec3,
     finished: bool,
@@ -41,12 +43,13 @@ impl TexelWriter {
     ///
     /// # Errors
     /// [`TexelFileError::Io`] if the temporary files cannot be created;
-    /// [`TexelFileError::Usage`] for pages outside 1..=65536 or meshes on missing pages.
+    /// [`TexelFileError::Usage`] for pages outside 1..=65536, more than `u32::MAX - 1`
+    /// triangles, or a triangle record the reader would refuse (a missing page, UVs that are
+    /// not finite, unknown flags).
     pub fn create(
         path: &Path,
         pages: &[PageRecord],
-        meshes: &[MeshRecord],
-        triangle_count: u32,
+        triangles: &[TriangleRecord],
         texels_per_unit: f32,
     ) -> Result<Self, TexelFileError> {
         let usage = |message: String| TexelFileError::Usage {
@@ -62,16 +65,14 @@ impl TexelWriter {
                 p.width, p.height
             )));
         }
-        if let Some(m) = meshes.iter().find(|m| m.page as usize >= pages.len()) {
-            return Err(usage(format!("mesh on page {} of {}", m.page, pages.len())));
-        }
-        if let Some(m) = meshes.iter().find(|m| {
-            u64::from(m.first_triangle) + u64::from(m.triangle_count) > u64::from(triangle_count)
-                || !m.uv_scale.iter().chain(&m.uv_offset).all(|v| v.is_finite())
-        }) {
+        let Ok(triangle_count) = u32::try_from(triangles.len()) else {
             return Err(usage(format!(
-                "mesh record {m:?} does not fit {triangle_count} triangles or is not finite"
+                "{} triangles; at most 2^32 - 1",
+                triangles.len()
             )));
+        };
+        if let Some((i, message)) = check_triangles(triangles, pages.len()) {
+            return Err(usage(format!("triangle {i}: {message}")));
         }
         let tmp = crate::output::atomic::temporary_name(path);
         let tiles_tmp = crate::output::atomic::with_suffix(path, "tiles");
@@ -89,18 +90,17 @@ impl TexelWriter {
         let tiles_out =
             BufWriter::new(File::create(&tiles_tmp).map_err(io("create temporary tile file"))?);
         let pages_offset = align_up(size_of::<Header>() as u64);
-        let meshes_offset = align_up(pages_offset + size_of_val(pages) as u64);
-        let texels_offset = align_up(meshes_offset + size_of_val(meshes) as u64);
+        let triangles_offset = align_up(pages_offset + size_of_val(pages) as u64);
+        let texels_offset = align_up(triangles_offset + size_of_val(triangles) as u64);
         let header = Header {
             magic: MAGIC,
             version: VERSION,
             header_size: size_of::<Header>() as u32,
             page_count: pages.len() as u32,
             tile_size: TILE_SIZE,
-            mesh_count: meshes.len() as u32,
             triangle_count,
             pages_offset,
-            meshes_offset,
+            triangles_offset,
             texels_offset,
             texels_per_unit,
             ..Zeroable::zeroed()
@@ -113,13 +113,17 @@ impl TexelWriter {
             tiles_out,
             header,
             pages: pages.to_vec(),
+            mapped: triangles
+                .iter()
+                .map(|t| t.flags & LIGHTMAPPED != 0)
+                .collect(),
             lo: Vec3::splat(f32::INFINITY),
             hi: Vec3::splat(f32::NEG_INFINITY),
             finished: false,
         };
         w.write_at_cursor(bytemuck::bytes_of(&header), 0)?;
         w.write_at_cursor(bytemuck::cast_slice(pages), pages_offset)?;
-        w.write_at_cursor(bytemuck::cast_slice(meshes), meshes_offset)?;
+        w.write_at_cursor(bytemuck::cast_slice(triangles), triangles_offset)?;
         w.pad_to(texels_offset)?;
         Ok(w)
     }
@@ -198,7 +202,10 @@ impl TexelWriter {
             self.header.tile_size,
             self.header.texel_count,
         )
-        .and_then(|()| check_tile_texels(&tile, texels))
+        .and_then(|()| {
+            let mapped = |i: u32| self.mapped.get(i as usize).copied();
+            check_tile_texels(&tile, texels, &mapped)
+        })
         .map_err(|(i, m)| TexelFileError::Usage {
             path: self.path.clone(),
             message: match i {

@@ -201,7 +201,6 @@ mod tests {
         for i in 0..16 {
             image.set(0, i % 4, i / 4, [1.0; 3], [5.0; 3]);
         }
-        image.set_side(0, true);
         let mut world = World::new(&scene, Preset::DEFAULT).unwrap();
         world.set_transport(Transport::Series, 3);
         world.set_previous_pass(Some(image.finish(&scene, &meshes).unwrap()));

@@ -37,7 +37,7 @@ use glam::{Vec2, Vec3};
 use memmap2::{Mmap, MmapMut};
 
 use crate::scene::Scene;
-use crate::texels::{MeshRecord, PageRecord};
+use crate::texels::{PageRecord, TriangleRecord};
 
 /// Rings of pixels filled around every chart from their covered neighbours.
 pub const DILATION: u32 = 4;
@@ -66,18 +66,14 @@ pub struct Lookup {
     pub total: Vec3,
 }
 
-/// Which side of a triangle its texels bake: none known, the winding's front, the back, or
-/// both (texels of one triangle that disagree; treated as unknown).
-const SIDE_FRONT: u8 = 1;
-const SIDE_BACK: u8 = 2;
-
-/// Where a triangle's lightmap lies: its page, its corners in pixel coordinates, and the
-/// world length of one of its texels.
+/// Where a triangle's lightmap lies: its page, its corners in pixel coordinates, the world
+/// length of one of its texels, and whether its texels bake its winding's front side.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct TriangleUv {
     page: u32,
     corners: [Vec2; 3],
     texel: f32,
+    front: bool,
 }
 
 /// The pixel images' bytes: a memory-mapped file, or a buffer (tests).
@@ -95,8 +91,6 @@ pub struct PreviousPass {
     /// First pixel of each page in the storage.
     offsets: Vec<usize>,
     triangles: Vec<Option<TriangleUv>>,
-    /// Per triangle: `SIDE_*` bits of the sides its texels bake.
-    sides: Vec<u8>,
 }
 
 /// Why a pass image could not be written or mapped.
@@ -119,28 +113,28 @@ fn page_offsets(pages: &[PageRecord]) -> (Vec<usize>, usize) {
     (offsets, total)
 }
 
-/// Each triangle's page and pixel-space corners, from the scene's lightmap UVs and the texel
-/// file's mesh layout (`pixel = uv · scale + offset`); `None` for triangles without UVs.
-fn triangle_uvs(scene: &Scene, meshes: &[MeshRecord]) -> Vec<Option<TriangleUv>> {
+/// Each triangle's page and pixel-space corners, from the texel file's triangle table (the
+/// lightmap `prepare` rasterised, whatever UVs the scene carries), and its texel size from the
+/// scene's positions; `None` for triangles without lightmap UVs.
+fn triangle_uvs(scene: &Scene, records: &[TriangleRecord]) -> Vec<Option<TriangleUv>> {
     scene
         .triangles
         .iter()
-        .map(|t| {
-            let m = meshes.get(t.mesh as usize)?;
-            let (s, o) = (Vec2::from(m.uv_scale), Vec2::from(m.uv_offset));
-            let uv = t.lightmap_uv?;
-            let corners = uv.map(|v| v * s + o);
+        .zip(records)
+        .map(|(t, r)| {
+            let (page, corners) = r.pixel_uv()?;
             let [a, b, c] = corners;
             let pixels = 0.5 * (b - a).perp_dot(c - a).abs();
             let texel = (t.area() / pixels).sqrt();
             Some(TriangleUv {
-                page: m.page,
+                page,
                 corners,
                 texel: if texel.is_finite() {
                     texel
                 } else {
                     f32::INFINITY
                 },
+                front: !r.texels_face_back(),
             })
         })
         .collect()
@@ -148,11 +142,11 @@ fn triangle_uvs(scene: &Scene, meshes: &[MeshRecord]) -> Vec<Option<TriangleUv>>
 
 impl PreviousPass {
     /// A lightmap held in memory: `images[p]` is page `p`'s pixels, row-major, RGB, `None`
-    /// for a pixel no texel covers; both layers hold it, and no side is known (so a series
-    /// lookup connects direct light at every hit). For rendering a baked lightmap, and tests.
+    /// for a pixel no texel covers; both layers hold it. For rendering a baked lightmap, and
+    /// tests.
     pub fn from_pixels(
         scene: &Scene,
-        meshes: &[MeshRecord],
+        triangles: &[TriangleRecord],
         pages: &[PageRecord],
         images: &[Vec<Option<Vec3>>],
     ) -> Self {
@@ -169,8 +163,7 @@ impl PreviousPass {
             storage: Storage::Owned(Vec::new()),
             pages: pages.to_vec(),
             offsets,
-            triangles: triangle_uvs(scene, meshes),
-            sides: Vec::new(),
+            triangles: triangle_uvs(scene, triangles),
         };
         for (p, size) in pages.iter().enumerate() {
             let o = pass.offsets[p];
@@ -208,8 +201,7 @@ impl PreviousPass {
     /// Whether triangle `prim`'s texels bake its winding's `front` side (or its back, when
     /// `front` is false): then its total irradiance holds the direct light arriving there.
     pub fn bakes_side(&self, prim: u32, front: bool) -> bool {
-        let want = if front { SIDE_FRONT } else { SIDE_BACK };
-        self.sides.get(prim as usize) == Some(&want)
+        matches!(self.triangles.get(prim as usize), Some(Some(t)) if t.front == front)
     }
 
     /// Whether a ray that hit triangle `prim` on its `front` (or back) side after travelling
@@ -302,7 +294,6 @@ pub struct PreviousPassWriter {
     map: MmapMut,
     pages: Vec<PageRecord>,
     offsets: Vec<usize>,
-    sides: Vec<u8>,
 }
 
 impl PreviousPassWriter {
@@ -336,7 +327,6 @@ impl PreviousPassWriter {
             map,
             pages: pages.to_vec(),
             offsets,
-            sides: Vec::new(),
         })
     }
 
@@ -356,15 +346,6 @@ impl PreviousPassWriter {
         pixels[i] = [g[0], g[1], g[2], 1.0, t[0], t[1], t[2], 0.0];
     }
 
-    /// Records that a texel of `triangle` bakes its winding's `front` side (or its back).
-    pub fn set_side(&mut self, triangle: u32, front: bool) {
-        let i = triangle as usize;
-        if self.sides.len() <= i {
-            self.sides.resize(i + 1, 0);
-        }
-        self.sides[i] |= if front { SIDE_FRONT } else { SIDE_BACK };
-    }
-
     /// Dilates every page, flushes, and maps the image for lookups.
     ///
     /// # Errors
@@ -372,7 +353,7 @@ impl PreviousPassWriter {
     pub fn finish(
         mut self,
         scene: &Scene,
-        meshes: &[MeshRecord],
+        triangles: &[TriangleRecord],
     ) -> Result<PreviousPass, PassImageError> {
         {
             let pixels: &mut [Pixel] = bytemuck::cast_slice_mut(&mut self.map[..]);
@@ -398,8 +379,7 @@ impl PreviousPassWriter {
             storage: Storage::Mapped(map),
             pages: self.pages,
             offsets: self.offsets,
-            triangles: triangle_uvs(scene, meshes),
-            sides: self.sides,
+            triangles: triangle_uvs(scene, triangles),
         })
     }
 }
@@ -408,9 +388,10 @@ impl PreviousPassWriter {
 mod tests {
     use super::*;
     use crate::test_support::lightmapped_triangle;
+    use crate::texels::{LIGHTMAPPED, SEEN_BACK, SEEN_FRONT, TEXELS_BACK};
 
     /// One triangle whose UVs span the 4×4 page's lower-left half.
-    fn scene() -> (Scene, Vec<MeshRecord>, Vec<PageRecord>) {
+    fn scene() -> (Scene, Vec<TriangleRecord>, Vec<PageRecord>) {
         lightmapped_triangle(1.0, 1.0)
     }
 
@@ -491,25 +472,26 @@ mod tests {
     }
 
     #[test]
-    fn a_triangle_bakes_the_side_its_texels_face_and_only_one() {
-        let (scene, meshes, pages) = scene();
-        let dir = tempfile::tempdir().unwrap();
-        let mut w = PreviousPassWriter::create(&dir.path().join("pass.bin"), &pages).unwrap();
-        w.set_side(0, true);
-        w.set_side(2, false);
-        w.set_side(3, true);
-        w.set_side(3, false);
-        let pass = w.finish(&scene, &meshes).unwrap();
+    fn a_triangle_bakes_the_side_its_texels_face() {
+        let (scene, mut triangles, pages) = scene();
+        let image = vec![None; 16];
+        let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image.clone()]);
         assert!(pass.bakes_side(0, true) && !pass.bakes_side(0, false));
-        assert!(pass.bakes_side(2, false) && !pass.bakes_side(2, true));
-        // No texel (1, 4) or texels on both sides (3): no side is known.
-        for prim in [1, 3, 4] {
-            assert!(
-                !pass.bakes_side(prim, true) && !pass.bakes_side(prim, false),
-                "{prim}"
-            );
-        }
-        let lightmap = PreviousPass::from_pixels(&scene, &meshes, &pages, &[vec![None; 16]]);
-        assert!(!lightmap.bakes_side(0, true) && !lightmap.bakes_side(0, false));
+        assert!(
+            !pass.bakes_side(1, true) && !pass.bakes_side(1, false),
+            "no such triangle"
+        );
+        // Seen from the back only: its texels describe the back.
+        triangles[0].flags = LIGHTMAPPED | SEEN_BACK | TEXELS_BACK;
+        let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image.clone()]);
+        assert!(pass.bakes_side(0, false) && !pass.bakes_side(0, true));
+        // Seen from both sides, its texels describing the front.
+        triangles[0].flags = LIGHTMAPPED | SEEN_FRONT | SEEN_BACK;
+        let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image.clone()]);
+        assert!(pass.bakes_side(0, true) && !pass.bakes_side(0, false));
+        // No lightmap UVs: no side is baked.
+        triangles[0] = TriangleRecord::unmapped(SEEN_FRONT);
+        let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image]);
+        assert!(!pass.bakes_side(0, true) && !pass.bakes_side(0, false));
     }
 }
