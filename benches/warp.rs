@@ -19,7 +19,7 @@
 //! the cache, as in the bake, which warps a texel's packets right after generating them, and
 //! are new to the branch predictor, as in the bake, which never warps the same points twice.
 //! Replaying one set trains the predictor on the descents' loop exits: the scalar warp then
-//! speeds up pass after pass to ~2.5× its speed on new points, the 8-wide warp to ~1.35×
+//! speeds up pass after pass to ~2.5× its speed on new points, the 8-wide warp to ~1.3×
 //! (docs/guide.md, "Benchmark"; `WARP_SETS=1` reproduces it).
 //!
 //! Before the criterion groups the bench prints how coherent the packets are and times the
