@@ -11,13 +11,24 @@
 //! records.
 //! The guide build has its own bench, `benches/guide.rs` (`guide/build/<records>`).
 //!
-//! Every function's output is checked against the scalar reference once before timing.
+//! Every function's output is checked against the scalar reference before timing.
+//!
+//! **No pass replays the points of the pass before.** Each warp cycles through [`SETS`]
+//! distinct point sets (set `s` covers the texels after set `s − 1`'s), copying the next
+//! one into its working buffer, untimed, before each timed pass — so the points are hot in
+//! the cache, as in the bake, which warps a texel's packets right after generating them, and
+//! are new to the branch predictor, as in the bake, which never warps the same points twice.
+//! Replaying one set trains the predictor on the descents' loop exits: the scalar warp then
+//! speeds up pass after pass to ~2.5× its speed on new points, the 8-wide warp to ~1.3×
+//! (docs/guide.md, "Benchmark"; `WARP_SETS=1` reproduces it).
 //!
 //! Before the criterion groups the bench prints how coherent the packets are and times the
-//! four warps round-robin (medians; the ratios to trust on a shared machine).
+//! four warps round-robin (medians; the ratios to trust on a shared machine). Both loops
+//! time the same pass (`Pass`), so their figures agree up to the machine's noise.
 //!
 //! Run: `cargo bench --bench warp -- --warm-up-time 1 --measurement-time 3`
-//! (`cargo bench --bench warp -- none` prints the round-robin medians only).
+//! (`cargo bench --bench warp -- none` prints the round-robin medians only;
+//! `WARP_SETS=<n>` cycles through n point sets instead of [`SETS`]).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
@@ -26,6 +37,7 @@ use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
 use guidebake_kernels::testing::{disk_and_sky, learning_records};
 use guidebake_kernels::warp::{self, Warped};
 use std::hint::black_box;
+use std::time::{Duration, Instant};
 use wide::f32x8;
 
 /// Points per timed iteration: texels × gather samples per texel.
@@ -33,6 +45,18 @@ const POINTS: u32 = 16_384;
 /// Gather samples per texel and iteration: the bake's default (256 spp over 4 iterations)
 /// and a high count, where presorted packets are more coherent.
 const SAMPLE_COUNTS: [u32; 2] = [64, 1024];
+/// Distinct point sets each warp cycles through, one per timed pass: enough that the branch
+/// predictor cannot learn them (on the 2-core EPYC the scalar warp is as slow on 8 sets as
+/// on 64, and 2.5× faster on one replayed set).
+const SETS: u32 = 16;
+
+/// [`SETS`], or `WARP_SETS` from the environment.
+fn sets() -> u32 {
+    std::env::var("WARP_SETS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .map_or(SETS, |n: u32| n.max(1))
+}
 
 fn records(previous: Option<&Guide<'_>>, n: usize, seed: u64) -> Vec<Record> {
     learning_records(previous, n, seed, disk_and_sky)
@@ -52,13 +76,15 @@ struct Points {
     presorted: Vec<[f32; 2]>,
 }
 
-/// `samples` points per texel for `POINTS / samples` texels, each rotated as the bake
-/// rotates iteration 1 of a texel (`gather_packets`: `rotation(seed, texel, k)`).
-fn points(samples: u32) -> Points {
+/// Point set `set`: `samples` points per texel for the `POINTS / samples` texels after those
+/// of set `set − 1`, each rotated as the bake rotates iteration 1 of a texel
+/// (`gather_packets`: `rotation(seed, texel, k)`).
+fn points(samples: u32, set: u32) -> Points {
     let order = presorted(samples);
     let mut repaired = vec![0u32; samples as usize];
     let (mut unsorted, mut sorted) = (Vec::new(), Vec::new());
-    for texel in 0..u64::from(POINTS / samples) {
+    let texels = u64::from(POINTS / samples);
+    for texel in u64::from(set) * texels..u64::from(set + 1) * texels {
         let r = rotation(7, texel, 1);
         let unit = |i: u32| {
             let p = rotate(sobol_2d(i), r);
@@ -184,67 +210,71 @@ fn packet_paths(g: &Guide<'_>, points: &[[f32; 2]]) -> PacketPaths {
 /// Rounds of the round-robin timing.
 const ROUNDS: usize = 101;
 
-/// A timed variant: its name and a run over all points.
-type Variant<'a> = (&'static str, Box<dyn FnMut() + 'a>);
+/// One timed pass of a warp: copies the next point set of its pool into its working buffer
+/// (untimed) and returns the time of the warp over it. The round-robin loop and criterion
+/// both time this.
+type Pass<'a> = Box<dyn FnMut() -> Duration + 'a>;
 
-/// The warp variants timed round-robin, [`ROUNDS`] rounds, medians printed: on a shared,
-/// noisy machine the ratios of one interleaved run are steadier than criterion's sequential
-/// groups (each of which can land in a different load phase).
-fn interleaved(g: &Guide<'_>, pts: &Points, samples: u32) {
-    let (su, sp) = (soa(&pts.unsorted), soa(&pts.presorted));
-    let n = pts.unsorted.len();
-    let scalar_run = |p: &'static str, points: &Vec<[f32; 2]>| -> Variant<'_> {
-        let points = points.clone();
-        let mut out = vec![
-            Warped {
-                u: [0.0; 2],
-                pdf: 0.0
-            };
-            n
-        ];
-        (
-            p,
-            Box::new(move || {
-                scalar(g, black_box(&points), &mut out);
-                black_box(&out);
-            }),
-        )
+/// A pass of `warp` over the sets of `pool` in turn.
+fn pass<'a, T: Copy, O: Copy + 'a>(
+    pool: &'a [Vec<T>],
+    out: O,
+    outs: usize,
+    mut warp: impl FnMut(&[T], &mut [O]) + 'a,
+) -> Pass<'a> {
+    let mut work = pool[0].clone();
+    let mut out = vec![out; outs];
+    let mut next = 0;
+    Box::new(move || {
+        work.copy_from_slice(&pool[next]);
+        next = (next + 1) % pool.len();
+        let t = Instant::now();
+        warp(black_box(&work), &mut out);
+        black_box(&out);
+        t.elapsed()
+    })
+}
+
+/// The four warps' passes on `samples` points per texel, named as their benchmark ids.
+fn variants<'a>(
+    g: &'a Guide<'a>,
+    unsorted: &'a [Vec<[f32; 2]>],
+    sorted: &'a [Vec<[f32; 2]>],
+    unsorted8: &'a [Vec<(f32x8, f32x8)>],
+    sorted8: &'a [Vec<(f32x8, f32x8)>],
+) -> [(&'static str, Pass<'a>); 4] {
+    let n = POINTS as usize;
+    let w = Warped {
+        u: [0.0; 2],
+        pdf: 0.0,
     };
-    let x8_run = |p: &'static str, packets: &Vec<(f32x8, f32x8)>| -> Variant<'_> {
-        let packets = packets.clone();
-        let zero = f32x8::splat(0.0);
-        let mut out8 = vec![
-            warp::Warped8 {
-                x: zero,
-                y: zero,
-                pdf: zero
-            };
-            n / 8
-        ];
-        (
-            p,
-            Box::new(move || {
-                x8(g, black_box(&packets), &mut out8);
-                black_box(&out8);
-            }),
-        )
+    let zero = f32x8::splat(0.0);
+    let w8 = warp::Warped8 {
+        x: zero,
+        y: zero,
+        pdf: zero,
     };
-    let mut variants = [
-        scalar_run("scalar_unsorted", &pts.unsorted),
-        scalar_run("scalar_presorted", &pts.presorted),
-        x8_run("x8_unsorted", &su),
-        x8_run("x8_presorted", &sp),
-    ];
+    let s = move |p: &[[f32; 2]], o: &mut [Warped]| scalar(g, p, o);
+    let v = move |p: &[(f32x8, f32x8)], o: &mut [warp::Warped8]| x8(g, p, o);
+    [
+        ("scalar_unsorted", pass(unsorted, w, n, s)),
+        ("scalar_presorted", pass(sorted, w, n, s)),
+        ("x8_unsorted", pass(unsorted8, w8, n / 8, v)),
+        ("x8_presorted", pass(sorted8, w8, n / 8, v)),
+    ]
+}
+
+/// The warps timed round-robin, [`ROUNDS`] rounds of four passes each, medians printed: on
+/// a shared, noisy machine the ratios of one interleaved run are steadier than criterion's
+/// sequential groups (each of which can land in a different load phase).
+fn interleaved(variants: &mut [(&'static str, Pass<'_>)], samples: u32) {
     let v = variants.len();
     let mut times = vec![Vec::new(); v];
     for round in 0..ROUNDS {
         // Rotate which variant goes first, so none always meets the same phase of the round.
         for k in (0..v).map(|j| (j + round) % v) {
-            let t = std::time::Instant::now();
-            for _ in 0..4 {
-                (variants[k].1)();
-            }
-            times[k].push(t.elapsed().as_secs_f64() / 4.0);
+            let t: Duration = (0..4).map(|_| (variants[k].1)()).sum();
+            times[k].push(t.as_secs_f64() / 4.0);
         }
     }
     let median = |v: &mut Vec<f64>| {
@@ -255,56 +285,22 @@ fn interleaved(g: &Guide<'_>, pts: &Points, samples: u32) {
     for ((name, _), t) in variants.iter().zip(&m) {
         eprintln!(
             "interleaved median warp/{name}/{samples}: {:.1} Msamples/s ({:.2}x scalar_unsorted)",
-            n as f64 / t / 1e6,
+            f64::from(POINTS) / t / 1e6,
             m[0] / t
         );
     }
 }
 
-/// Criterion timing of the four warps on `samples` points per texel.
+/// Criterion timing of the same passes.
 fn timed(
     group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
-    g: &Guide<'_>,
-    pts: &Points,
+    variants: &mut [(&'static str, Pass<'_>)],
     samples: u32,
 ) {
-    group.throughput(Throughput::Elements(pts.unsorted.len() as u64));
-    let mut out = vec![
-        Warped {
-            u: [0.0; 2],
-            pdf: 0.0
-        };
-        pts.unsorted.len()
-    ];
-    for (name, p) in [
-        ("scalar_unsorted", &pts.unsorted),
-        ("scalar_presorted", &pts.presorted),
-    ] {
-        group.bench_function(BenchmarkId::new(name, samples), |b| {
-            b.iter(|| {
-                scalar(g, black_box(p), &mut out);
-                black_box(&out);
-            })
-        });
-    }
-    let zero = f32x8::splat(0.0);
-    let mut out8 = vec![
-        warp::Warped8 {
-            x: zero,
-            y: zero,
-            pdf: zero
-        };
-        pts.unsorted.len() / 8
-    ];
-    for (name, p) in [
-        ("x8_unsorted", soa(&pts.unsorted)),
-        ("x8_presorted", soa(&pts.presorted)),
-    ] {
-        group.bench_function(BenchmarkId::new(name, samples), |b| {
-            b.iter(|| {
-                x8(g, black_box(&p), &mut out8);
-                black_box(&out8);
-            })
+    group.throughput(Throughput::Elements(u64::from(POINTS)));
+    for (name, pass) in variants {
+        group.bench_function(BenchmarkId::new(*name, samples), |b| {
+            b.iter_custom(|iters| (0..iters).map(|_| pass()).sum())
         });
     }
 }
@@ -318,15 +314,20 @@ fn bench(c: &mut Criterion) {
         "guide: {} nodes, {} leaves, depth {}",
         stats.nodes, stats.leaves, stats.depth
     );
+    let sets = sets();
+    eprintln!("{sets} point sets of {POINTS} points per sample count, one per pass in turn");
     let mut group = c.benchmark_group("warp");
     for samples in SAMPLE_COUNTS {
-        let pts = points(samples);
-        check(&g, &pts.unsorted);
-        check(&g, &pts.presorted);
-        let (ps, us) = (
-            packet_paths(&g, &pts.presorted),
-            packet_paths(&g, &pts.unsorted),
-        );
+        let pool: Vec<Points> = (0..sets).map(|s| points(samples, s)).collect();
+        for pts in &pool {
+            check(&g, &pts.unsorted);
+            check(&g, &pts.presorted);
+        }
+        let unsorted: Vec<_> = pool.iter().map(|p| p.unsorted.clone()).collect();
+        let sorted: Vec<_> = pool.iter().map(|p| p.presorted.clone()).collect();
+        let unsorted8: Vec<_> = unsorted.iter().map(|p| soa(p)).collect();
+        let sorted8: Vec<_> = sorted.iter().map(|p| soa(p)).collect();
+        let (ps, us) = (packet_paths(&g, &sorted[0]), packet_paths(&g, &unsorted[0]));
         eprintln!(
             "{samples} samples per texel: packets in one leaf: presorted {:.0}%, unsorted {:.0}%; \
              presorted packets part at depth {:.2} of a mean leaf depth {:.2} (unsorted {:.2} of {:.2})",
@@ -337,8 +338,9 @@ fn bench(c: &mut Criterion) {
             us.parting_depth,
             us.leaf_depth,
         );
-        interleaved(&g, &pts, samples);
-        timed(&mut group, &g, &pts, samples);
+        let mut v = variants(&g, &unsorted, &sorted, &unsorted8, &sorted8);
+        interleaved(&mut v, samples);
+        timed(&mut group, &mut v, samples);
     }
     group.finish();
 }
