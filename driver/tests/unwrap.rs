@@ -327,13 +327,39 @@ fn a_room_without_lightmap_uvs_unwraps_bakes_and_round_trips() {
         out: original.clone(),
         ..job.clone()
     };
-    bake(&job_original, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+    bake(
+        &job_original,
+        &scene,
+        &AtomicBool::new(false),
+        &mut |_, _| {},
+    )
+    .unwrap();
+    // So does one whose TEXCOORD_1 is some other layout (every triangle squeezed onto the
+    // page's corner).
+    let mut other = back.clone();
+    for t in &mut other.triangles {
+        t.lightmap_uv = t.lightmap_uv.map(|q| q.map(|v| v * 0.01));
+    }
+    let squeezed = dir.path().join("squeezed.exr");
+    let job_squeezed = BakeJob {
+        out: squeezed.clone(),
+        ..job.clone()
+    };
+    bake(
+        &job_squeezed,
+        &other,
+        &AtomicBool::new(false),
+        &mut |_, _| {},
+    )
+    .unwrap();
     bake(&job, &back, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
-    assert_eq!(
-        std::fs::read(&original).unwrap(),
-        std::fs::read(&out).unwrap(),
-        "the scene without UVs bakes other bits than the one with them"
-    );
+    for (what, path) in [("without UVs", &original), ("with other UVs", &squeezed)] {
+        assert_eq!(
+            std::fs::read(path).unwrap(),
+            std::fs::read(&out).unwrap(),
+            "the scene {what} bakes other bits than the one with the atlas"
+        );
+    }
     let rho = f64::from(ALBEDO);
     let want =
         std::f64::consts::PI * f64::from(LE) * (1.0 - rho.powi(bounces as i32)) / (1.0 - rho);

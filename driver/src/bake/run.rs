@@ -302,7 +302,7 @@ pub fn bake_pass_with_progress(
             };
             let previous = previous_pass(&texels, scene, sources, &image, bake_id, &mut report)
                 .map_err(|e| not_merged_hint(e, &source, pass - 1))?;
-            world.set_previous_pass(Some(previous));
+            world.set_previous_pass(Some(previous.of_pass(pass - 1)));
         }
         let run = bake_pass(
             job,
@@ -556,7 +556,7 @@ fn previous_pass(
             if r.flags & FLAG_BAKED != 0 {
                 let [x, y] = texel.pixel.map(u32::from);
                 let total = core::array::from_fn(|c| r.total[c] + d.total[c]);
-                image.set(texel.page, x, y, r.gathered, total);
+                image.set(texel.page, (x, y), r.gathered, total);
             }
         }
         texels.release_tile(t);

@@ -38,6 +38,9 @@ pub struct Levers {
     pub guided_passes: GuidedPasses,
     /// `--min-gain`.
     pub min_gain: u32,
+    /// `--transport`, where the method sets its own (else the ladder's, `guidebake bench
+    /// --transport`): so one run compares series and path transport at equal time.
+    pub transport: Option<Transport>,
 }
 
 impl Default for Levers {
@@ -50,6 +53,7 @@ impl Default for Levers {
             smooth: d.smooth,
             guided_passes: d.guided_passes,
             min_gain: d.min_gain,
+            transport: None,
         }
     }
 }
@@ -65,6 +69,7 @@ impl Levers {
             smooth: 25,
             guided_passes: GuidedPasses::Every,
             min_gain: 0,
+            transport: None,
         }
     }
 
@@ -89,6 +94,9 @@ impl Levers {
         }
         if self.min_gain != d.min_gain {
             s += &format!("+gain={}", self.min_gain);
+        }
+        if let Some(t) = self.transport {
+            s += &format!("+transport={}", value_name(&t));
         }
         s
     }
@@ -153,7 +161,8 @@ impl Method {
     }
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
-    /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`); the
+    /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`,
+    /// `transport`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -199,6 +208,11 @@ impl Method {
                     levers.guided_passes = GuidedPasses::from_str(value, true)
                         .map_err(|e| format!("{label:?}: {e}"))?;
                 }
+                "transport" => {
+                    levers.transport = Some(
+                        Transport::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?,
+                    );
+                }
                 _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
             }
         }
@@ -231,8 +245,9 @@ impl Method {
         )
     }
 
-    /// The bake settings of this method with `transport` at `bounces`; everything else keeps
-    /// the bake's defaults, so settings added to the bake need no change here.
+    /// The bake settings of this method with `transport` (unless the method sets its own) at
+    /// `bounces`; everything else keeps the bake's defaults, so settings added to the bake
+    /// need no change here.
     pub fn settings(
         &self,
         spp: u32,
@@ -244,7 +259,7 @@ impl Method {
         BakeSettings {
             spp,
             iterations,
-            transport,
+            transport: self.levers.transport.unwrap_or(transport),
             bounces,
             guiding: self.guiding,
             combine: self.combine,
@@ -310,6 +325,13 @@ mod tests {
         assert_eq!(m.levers.min_gain, 0);
         assert_eq!(m.label(), "coherent/cluster/rho+gain=0");
         assert_eq!(m.settings(256, 4, Transport::Series, 3, 1).min_gain, 0);
+        let m = Method::parse("coherent/cluster/rho+transport=path").unwrap();
+        assert_eq!(m.label(), "coherent/cluster/rho+transport=path");
+        assert_eq!(
+            m.settings(256, 4, Transport::Series, 3, 1).transport,
+            Transport::Path
+        );
+        assert!(Method::parse("coherent/cluster/rho+transport=light").is_err());
         assert!(Method::parse("coherent/texel").is_err());
         assert!(Method::parse("coherent/texel/rho+nope=1").is_err());
     }

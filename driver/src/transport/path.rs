@@ -4,7 +4,9 @@
 //! irradiance arriving there: under `series` ([`super::series`]), the previous pass's total
 //! irradiance (pass 1 reads the direct pass 0) where the hit is on the side its texels bake
 //! and not within `NEAR_FIELD_TEXELS` of its texels of the ray's origin, else direct light by
-//! next-event estimation plus the previous pass's gather-only irradiance;
+//! next-event estimation plus the previous pass's gather-only irradiance — or, on a side no
+//! texel describes (the far side of a thin wall, a triangle without lightmap UVs), plus one
+//! more bounce traced, whose hit is read as a gather hit's is;
 //! under `path`, direct light by next-event estimation plus a path continued with
 //! cosine-weighted directions, next-event estimation and MIS at every vertex, and Russian
 //! roulette from the third vertex. A ray that leaves the scene sees the sky.
@@ -72,6 +74,9 @@ impl World {
         let mut out = Leaving::default();
         let (mut from, mut dir, mut hit) = (*from, dir, hit);
         let mut throughput = Vec3::ONE;
+        // Series: the vertices a path traced from a gather hit that could not be read may
+        // have (the passes the previous one holds, plus the hit itself), once it is traced.
+        let mut traced: Option<u32> = None;
         for vertex in 1.. {
             let Some(s) = self.surfaces().get(hit.prim as usize) else {
                 break;
@@ -92,7 +97,33 @@ impl World {
             let facing = if front { s.normal } else { -s.normal };
             let p = self.leave_surface(hit.prim, from.point + dir * hit.t, facing, hit.t);
             let reflect = throughput * albedo;
-            let continues = self.transport() == Transport::Path && vertex < self.bounces();
+            let previous = match self.transport() {
+                Transport::Series if traced.is_none() => self.previous_pass(),
+                Transport::Series | Transport::Path => None,
+            };
+            // Series: a side no texel describes (the other side of a thin wall, a triangle
+            // without lightmap UVs) has no lightmap to read — the texels of its other side
+            // hold the light of the space behind it — and neither has a point where no baked
+            // texel lies (padding, texels inside geometry, whose values are the dilation's);
+            // where the texels read disagree (a doorway, a shadow edge), their average is not
+            // the light at the hit. The gather's hit computes it another way there: a path
+            // traced from it with as many bounces as the previous pass holds, next-event
+            // estimation at every vertex, as path transport does.
+            let lookup = previous
+                .filter(|p| p.bakes_side(hit.prim, front))
+                .map(|p| p.lookup(hit.prim, hit.u, hit.v))
+                .filter(|l| l.baked);
+            let far = previous.is_some_and(|p| p.reads_total(hit.prim, front, hit.t));
+            let reads_total = far && lookup.is_some_and(|l| l.smooth);
+            let reads_gathered = lookup.is_some_and(|l| l.gathered_smooth);
+            if let Some(p) = previous.filter(|_| !reads_total && !reads_gathered) {
+                traced = Some(p.pass() + 1);
+            }
+            let continues = match (self.transport(), traced) {
+                (Transport::Path, _) => vertex < self.bounces(),
+                (Transport::Series, Some(depth)) => vertex < depth,
+                (Transport::Series, None) => false,
+            };
             let cosine_pdf = |d: Vec3| facing.dot(d).max(0.0) * core::f32::consts::FRAC_1_PI;
             let at = Receiver {
                 point: p,
@@ -100,24 +131,20 @@ impl World {
                 other: continues.then_some(&cosine_pdf as &dyn Fn(Vec3) -> f32),
             };
             let mut irradiance = Vec3::ZERO;
-            let previous = match self.transport() {
-                Transport::Series => self.previous_pass(),
-                Transport::Path => None,
-            };
-            // Series: on the side a texel bakes, its total irradiance holds the direct light;
-            // read it where the hit is far enough for the texel's blur to average out.
-            let baked = previous.filter(|p| p.reads_total(hit.prim, front, hit.t));
-            if let Some(previous) = baked {
-                irradiance += previous.lookup(hit.prim, hit.u, hit.v).total;
-                out.totals_read += 1;
-            } else {
-                if self.has_direct_light() {
-                    let (direct, rays) = self.direct_irradiance(&at, rng.pair(), rng.unit());
-                    irradiance += direct;
-                    out.shadow_rays += rays;
+            match lookup {
+                Some(l) if reads_total => {
+                    irradiance += l.total;
+                    out.totals_read += 1;
                 }
-                if let Some(previous) = previous {
-                    irradiance += previous.lookup(hit.prim, hit.u, hit.v).gathered;
+                _ => {
+                    if self.has_direct_light() {
+                        let (direct, rays) = self.direct_irradiance(&at, rng.pair(), rng.unit());
+                        irradiance += direct;
+                        out.shadow_rays += rays;
+                    }
+                    if let Some(l) = lookup.filter(|_| reads_gathered) {
+                        irradiance += l.gathered;
+                    }
                 }
             }
             out.reflected += reflect * core::f32::consts::FRAC_1_PI * irradiance;
@@ -185,13 +212,13 @@ mod tests {
     use crate::bvh::Preset;
     use crate::scene::Sun;
     use crate::test_support::lightmapped_triangle;
-    use crate::transport::series::{NEAR_FIELD_TEXELS, PreviousPassWriter};
+    use crate::transport::series::{NEAR_FIELD_TEXELS, PreviousPassWriter, SMOOTH_RATIO};
 
     /// A 4 m right triangle on z = 0 facing +z, albedo 0.5, under a sun of irradiance 2 from
-    /// +z; its lightmap is a 4×4 page, so one texel is 1 m. The previous pass read 1 (gather
-    /// only) and 5 (total) everywhere, and baked the front side.
+    /// +z; its lightmap is a 4×4 page, so one texel is 1 m. The previous pass (pass 2) read 1
+    /// (gather only) and 5 (total) everywhere, and baked the front side.
     fn lit_triangle(dir: &std::path::Path) -> World {
-        let (mut scene, meshes, pages) = lightmapped_triangle(4.0, 0.5);
+        let (mut scene, triangles, pages) = lightmapped_triangle(4.0, 0.5);
         scene.sun = Some(Sun {
             direction: Vec3::Z,
             angular_radius: 0.0,
@@ -199,11 +226,11 @@ mod tests {
         });
         let mut image = PreviousPassWriter::create(&dir.join("pass.bin"), &pages).unwrap();
         for i in 0..16 {
-            image.set(0, i % 4, i / 4, [1.0; 3], [5.0; 3]);
+            image.set(0, (i % 4, i / 4), [1.0; 3], [5.0; 3]);
         }
         let mut world = World::new(&scene, Preset::DEFAULT).unwrap();
         world.set_transport(Transport::Series, 3);
-        world.set_previous_pass(Some(image.finish(&scene, &meshes).unwrap()));
+        world.set_previous_pass(Some(image.finish(&scene, &triangles).unwrap().of_pass(2)));
         world
     }
 
@@ -225,9 +252,10 @@ mod tests {
         world.radiance_from_hit(&from, dir, hit, &mut SampleRng::new(1, 0, 0, 0))
     }
 
-    /// Series from pass 1 (reading pass 0 or a later one): a far hit on the baked side reads the total (no shadow ray); a
-    /// near one, within [`NEAR_FIELD_TEXELS`] texels, and one on the other side connect the
-    /// sun and read the gather-only layer.
+    /// Series from pass 1 (reading pass 0 or a later one): a far hit on the baked side reads
+    /// the total (no shadow ray); a near one, within [`NEAR_FIELD_TEXELS`] texels, connects
+    /// the sun and reads the gather-only layer; one on the other side reads nothing and traces
+    /// one more bounce.
     #[test]
     fn a_series_hit_reads_the_total_only_far_away_on_the_baked_side() {
         let dir = tempfile::tempdir().unwrap();
@@ -243,13 +271,59 @@ mod tests {
         assert_eq!((near.shadow_rays, near.totals_read), (1, 0));
         let want = Vec3::splat((2.0 + 1.0) * albedo_over_pi);
         assert!((near.reflected - want).length() < 1e-5, "{near:?}");
-        // From below: the back, which no texel bakes and the sun does not reach.
+        // From below: the back, which no texel bakes and the sun does not reach. Its texels
+        // hold the light of the front, so it is not read: a path is traced instead (up to
+        // the 3 vertices pass 2's light has made), into the black sky under the triangle.
         let back = leaving(&world, -3.0 * NEAR_FIELD_TEXELS);
-        assert_eq!(back.totals_read, 0);
-        assert!(
-            (back.reflected - Vec3::splat(albedo_over_pi)).length() < 1e-5,
-            "{back:?}"
-        );
+        assert_eq!((back.totals_read, back.path_rays), (0, 1));
+        assert_eq!(back.reflected, Vec3::ZERO, "{back:?}");
         assert_eq!(far.emitted + near.emitted + back.emitted, Vec3::ZERO);
+    }
+
+    /// Where the texels a hit would read disagree by more than [`SMOOTH_RATIO`] (a shadow
+    /// edge), neither layer is read: the sun is connected at the hit and a path traced on.
+    #[test]
+    fn a_hit_where_the_texels_disagree_is_traced_not_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut scene, triangles, pages) = lightmapped_triangle(4.0, 0.5);
+        scene.sun = Some(Sun {
+            direction: Vec3::Z,
+            angular_radius: 0.0,
+            irradiance: Vec3::splat(2.0),
+        });
+        let mut image = PreviousPassWriter::create(&dir.path().join("pass.bin"), &pages).unwrap();
+        for i in 0..16 {
+            // Columns 0 and 1 dark, 2 and 3 bright.
+            let v = if i % 4 < 2 { 1.0 } else { 10.0 * SMOOTH_RATIO };
+            image.set(0, (i % 4, i / 4), [v; 3], [v; 3]);
+        }
+        let mut world = World::new(&scene, Preset::DEFAULT).unwrap();
+        world.set_transport(Transport::Series, 3);
+        world.set_previous_pass(Some(image.finish(&scene, &triangles).unwrap().of_pass(2)));
+        let read = |u: f32| {
+            let from = Departure {
+                point: Vec3::new(4.0 * u, 0.5, 3.0 * NEAR_FIELD_TEXELS),
+                normal: -Vec3::Z,
+                pdf: 1.0,
+            };
+            let hit = SurfaceHit {
+                prim: 0,
+                t: 3.0 * NEAR_FIELD_TEXELS,
+                u,
+                v: 0.125,
+            };
+            world.radiance_from_hit(&from, -Vec3::Z, hit, &mut SampleRng::new(1, 0, 0, 0))
+        };
+        // In column 0 (pixel x = 0.4): its taps, columns 0 and... 0 (clamped): agree, read.
+        let smooth = read(0.1);
+        assert_eq!(
+            (smooth.totals_read, smooth.shadow_rays),
+            (1, 0),
+            "{smooth:?}"
+        );
+        // Between columns 1 and 2 (pixel x = 2.0): they disagree; the sun is connected.
+        let edge = read(0.5);
+        assert_eq!(edge.totals_read, 0, "{edge:?}");
+        assert_eq!((edge.shadow_rays, edge.path_rays), (1, 1), "{edge:?}");
     }
 }

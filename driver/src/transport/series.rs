@@ -13,22 +13,28 @@
 //!   ray at the hit, and the direct light it brings is the average of the texel's whole
 //!   bake rather than one sample;
 //! - the **gather-only** irradiance (the final gather's samples `L π / q` without the
-//!   texel's own next-event estimate and the emission its rays hit): read everywhere else —
-//!   on the other side, so a wall lit on one side does not pass that light to the other, and
-//!   near the ray's origin, where a texel's blur of direct light would show — while the
-//!   caller connects the hit's direct light explicitly, so it is never counted twice.
+//!   texel's own next-event estimate and the emission its rays hit): read near the ray's
+//!   origin, where a texel's blur of direct light would show, while the caller connects the
+//!   hit's direct light explicitly, so it is never counted twice.
+//!
+//! **Leak-free lookups** (docs/bake.md, "Where series reads the lightmap"). A lookup is only
+//! read where the texels it interpolates truly describe the surface at the hit
+//! ([`Lookup::baked`], [`Lookup::smooth`]): on the side the texels describe (not the far side
+//! of a thin wall, whose texels hold the light of the space behind it), over baked texels
+//! (not a chart's padding, not texels inside geometry, whose values are the dilation's),
+//! agreeing within [`SMOOTH_RATIO`] (not across a shadow edge or the doorway light enters
+//! by). Elsewhere the
+//! caller computes the light at the hit as path transport would (`transport/path.rs`).
 //!
 //! [`PreviousPass`] holds one dense RGB image per atlas page, in a file of the work directory
 //! that is memory-mapped (file-backed pages, not anonymous memory), written by
 //! [`PreviousPassWriter`]: pixels of baked texels first, then [`DILATION`] rings of
-//! dilation so bilinear lookups near chart borders do not fetch black. Lookups are bilinear
-//! over covered pixels only (weights renormalised), so a hit at a chart's edge is not darkened
-//! by the empty atlas around it.
+//! dilation. Lookups are bilinear over the baked pixels among the four (weights
+//! renormalised), over the dilated ones only where none is baked.
 //!
-//! Deviations and limits: a lightmap stores one side of a surface, so a two-sided wall hit
-//! from its back reads its front's *indirect* irradiance; detail finer than a texel —
-//! including, since the total is read, the edges of shadows at hits — is averaged (the
-//! lightmap's resolution error, which the `path` transport does not have).
+//! Deviations and limits: detail finer than a texel where the texels agree — soft shadows,
+//! gradients within [`SMOOTH_RATIO`] — is averaged (the lightmap's resolution error, which
+//! the `path` transport does not have).
 
 use std::fs::{File, OpenOptions};
 use std::path::{Path, PathBuf};
@@ -38,6 +44,7 @@ use memmap2::{Mmap, MmapMut};
 
 use crate::scene::Scene;
 use crate::texels::{PageRecord, TriangleRecord};
+use crate::transport::emitters::luminance;
 
 /// Rings of pixels filled around every chart from their covered neighbours.
 pub const DILATION: u32 = 4;
@@ -57,6 +64,15 @@ type Pixel = [f32; 8];
 /// Index of the generation in a [`Pixel`].
 const GENERATION: usize = 3;
 
+/// A lookup reads a layer only where the baked texels it interpolates agree within this ratio
+/// (luminance): where light changes several-fold within a texel or two — the edge of a shadow,
+/// the doorway light enters a room by — a texel's average is far from the value at the hit,
+/// and the gather computes the light there another way (a path traced from the hit). Chosen
+/// by relative MSE against path references at equal time (docs/bake.md, "Where series reads
+/// the lightmap"): 1.5 traced paths at 31–47 % of the hits of the Veach rooms and doubled
+/// their error at equal samples; 2, 3 and 4 are within 10 % of each other, 3 the best.
+pub const SMOOTH_RATIO: f32 = 3.0;
+
 /// What a lookup brings back: both layers at one point.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Lookup {
@@ -64,6 +80,14 @@ pub struct Lookup {
     pub gathered: Vec3,
     /// Total irradiance: direct and gathered.
     pub total: Vec3,
+    /// Whether a baked texel is among the four the point interpolates (else it lies in a
+    /// chart's padding or on texels inside geometry, and the values are the dilation's).
+    pub baked: bool,
+    /// Whether the total is read from baked texels that agree within [`SMOOTH_RATIO`]: only
+    /// then does it stand for the irradiance at the point.
+    pub smooth: bool,
+    /// The same for the gather-only layer.
+    pub gathered_smooth: bool,
 }
 
 /// Where a triangle's lightmap lies: its page, its corners in pixel coordinates, the world
@@ -91,6 +115,8 @@ pub struct PreviousPass {
     /// First pixel of each page in the storage.
     offsets: Vec<usize>,
     triangles: Vec<Option<TriangleUv>>,
+    /// The series pass it holds.
+    pass: u32,
 }
 
 /// Why a pass image could not be written or mapped.
@@ -164,6 +190,7 @@ impl PreviousPass {
             pages: pages.to_vec(),
             offsets,
             triangles: triangle_uvs(scene, triangles),
+            pass: 0,
         };
         for (p, size) in pages.iter().enumerate() {
             let o = pass.offsets[p];
@@ -179,6 +206,18 @@ impl PreviousPass {
             Storage::Mapped(m) => bytemuck::cast_slice(&m[..]),
             Storage::Owned(v) => v,
         }
+    }
+
+    /// The same image, holding series pass `pass` (0: the direct pass): its light has made
+    /// at most `pass` bounces.
+    #[must_use]
+    pub fn of_pass(self, pass: u32) -> Self {
+        Self { pass, ..self }
+    }
+
+    /// The series pass it holds ([`Self::of_pass`]).
+    pub fn pass(&self) -> u32 {
+        self.pass
     }
 
     /// Both layers of the previous pass at barycentrics (`b1`, `b2`) of triangle `prim`
@@ -214,7 +253,10 @@ impl PreviousPass {
         self.bakes_side(prim, front) && t > NEAR_FIELD_TEXELS * tri.texel
     }
 
-    /// Bilinear filter over the covered pixels around `uv` (pixel centres at +0.5).
+    /// Bilinear filter around `uv` (pixel centres at +0.5) over the baked pixels among its
+    /// four, weights renormalised; over the dilated ones only where none is baked (a point in
+    /// a chart's padding). A dilated pixel may mix two charts that lie close in the atlas, so
+    /// a hit inside a chart never reads one.
     fn bilinear(&self, page: u32, uv: Vec2) -> Lookup {
         let Some(size) = self.pages.get(page as usize) else {
             return Lookup::default();
@@ -228,26 +270,47 @@ impl PreviousPass {
         }
         let (x0, y0) = (p.x.floor(), p.y.floor());
         let (fx, fy) = (p.x - x0, p.y - y0);
-        let (mut gathered, mut total, mut weight) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
-        for (dx, dy, wgt) in [
+        let taps = [
             (0, 0, (1.0 - fx) * (1.0 - fy)),
             (1, 0, fx * (1.0 - fy)),
             (0, 1, (1.0 - fx) * fy),
             (1, 1, fx * fy),
-        ] {
+        ]
+        .map(|(dx, dy, wgt)| {
             let x = (x0 as i64 + dx).clamp(0, w - 1);
             let y = (y0 as i64 + dy).clamp(0, h - 1);
-            let px = pixels[base + (y * w + x) as usize];
-            if px[GENERATION] > 0.0 && wgt > 0.0 {
-                gathered += Vec3::new(px[0], px[1], px[2]) * wgt;
-                total += Vec3::new(px[4], px[5], px[6]) * wgt;
+            (pixels[base + (y * w + x) as usize], wgt)
+        });
+        let baked = taps
+            .iter()
+            .any(|(px, wgt)| px[GENERATION] == 1.0 && *wgt > 0.0);
+        let (mut gathered, mut total, mut weight) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
+        let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
+        let (mut glo, mut ghi) = (f32::INFINITY, 0.0f32);
+        for (px, wgt) in taps {
+            let usable = if baked {
+                px[GENERATION] == 1.0
+            } else {
+                px[GENERATION] > 0.0
+            };
+            if usable && wgt > 0.0 {
+                let t = Vec3::new(px[4], px[5], px[6]);
+                let g = Vec3::new(px[0], px[1], px[2]);
+                gathered += g * wgt;
+                (glo, ghi) = (glo.min(luminance(g)), ghi.max(luminance(g)));
+                total += t * wgt;
                 weight += wgt;
+                let lum = luminance(t);
+                (lo, hi) = (lo.min(lum), hi.max(lum));
             }
         }
         if weight > 0.0 {
             Lookup {
                 gathered: gathered / weight,
                 total: total / weight,
+                baked,
+                smooth: baked && hi <= SMOOTH_RATIO * lo,
+                gathered_smooth: baked && ghi <= SMOOTH_RATIO * glo,
             }
         } else {
             Lookup::default()
@@ -332,7 +395,7 @@ impl PreviousPassWriter {
 
     /// Records texel (`x`, `y`) of page `page`: its gather-only and total irradiance.
     /// Non-finite values and pixels off the page are ignored.
-    pub fn set(&mut self, page: u32, x: u32, y: u32, gathered: [f32; 3], total: [f32; 3]) {
+    pub fn set(&mut self, page: u32, (x, y): (u32, u32), gathered: [f32; 3], total: [f32; 3]) {
         let Some(size) = self.pages.get(page as usize) else {
             return;
         };
@@ -380,6 +443,7 @@ impl PreviousPassWriter {
             pages: self.pages,
             offsets: self.offsets,
             triangles: triangle_uvs(scene, triangles),
+            pass: 0,
         })
     }
 }
@@ -426,15 +490,14 @@ mod tests {
             let g = px.unwrap();
             w.set(
                 0,
-                (i % 4) as u32,
-                (i / 4) as u32,
+                ((i % 4) as u32, (i / 4) as u32),
                 g.to_array(),
                 (g * 2.0).to_array(),
             );
         }
-        w.set(0, 9, 9, [1.0; 3], [1.0; 3]);
-        w.set(0, 0, 0, [f32::NAN; 3], [1.0; 3]);
-        w.set(0, 1, 0, [1.0; 3], [f32::INFINITY; 3]);
+        w.set(0, (9, 9), [1.0; 3], [1.0; 3]);
+        w.set(0, (0, 0), [f32::NAN; 3], [1.0; 3]);
+        w.set(0, (1, 0), [1.0; 3], [f32::INFINITY; 3]);
         let file = w.finish(&scene, &meshes).unwrap();
         for (b1, b2) in [(0.1, 0.2), (0.6, 0.3), (0.0, 0.0)] {
             let (a, b) = (mem.irradiance(0, b1, b2), file.lookup(0, b1, b2));
@@ -446,6 +509,27 @@ mod tests {
             );
             assert!(b.gathered.is_finite() && b.total.is_finite());
         }
+    }
+
+    #[test]
+    fn a_lookup_by_baked_pixels_never_reads_the_dilated_ones_beside_them() {
+        let (scene, triangles, pages) = scene();
+        // Column 0 baked 1, column 2 baked 5; column 1 (and 3) left to the dilation, which
+        // mixes the two charts there.
+        let image: Vec<Option<Vec3>> = (0..16)
+            .map(|i| match i % 4 {
+                0 => Some(Vec3::ONE),
+                2 => Some(Vec3::splat(5.0)),
+                _ => None,
+            })
+            .collect();
+        let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image]);
+        // Between the centres of columns 0 and 1: only column 0 is baked there.
+        let e = pass.bilinear(0, Vec2::new(1.0, 1.5)).total;
+        assert_eq!(e, Vec3::ONE, "read the dilated column");
+        // In column 3, whose taps are columns 3 and (clamped) 3: dilated only, read them.
+        let e = pass.bilinear(0, Vec2::new(3.9, 1.5)).total;
+        assert!(e.x > 1.0, "{e}");
     }
 
     #[test]
