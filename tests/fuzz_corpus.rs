@@ -66,6 +66,49 @@ fn replay_one() {
     println!("{target} {input}: {:.3} s", start.elapsed().as_secs_f64());
 }
 
+/// **Open** (2026-11-28): the wide walks' fused slab test replaces an infinite inverse
+/// direction by `2¹⁰⁰` with a slack of `2⁶⁰`, so along such an axis a ray inside a box's slab
+/// gets a finite far distance, `(hi − o)·2¹⁰⁰ + 2⁶⁰`, where the binary test's `(hi − o)·∞`
+/// is unbounded: a hit farther than that is culled. The `wide` fuzz target found it at once
+/// (inputs in `fuzz/open-crashes/wide/`) and now tolerates exactly this case
+/// (`fuzzing::beyond_the_stand_in`). Here: a hit at t = 10³⁸ beyond the reach
+/// `(0.25 − 0.1)·2¹⁰⁰ + 2⁶⁰ ≈ 2·10²⁹` on the y axis. This test pins the deviation down: when it fails, the
+/// kernels were fixed, and the tolerance and the open crashes should go.
+#[test]
+fn wide_walks_cull_hits_beyond_the_stand_in_reach_open() {
+    use glam::Vec3;
+    use guidebake::bvh::{Bvh, Preset};
+    use guidebake_kernels::packet::Ray;
+    use guidebake_kernels::traverse::{closest_hit_allowed, intersect1, occluded1};
+    // A square of side 0.5 in the plane x = 0; a ray from x = −10³⁸ along +x, inside the
+    // square's slabs in y and z, with dy = 3·10⁻⁴⁵ and dz = 0 (both inverses overflow).
+    let (a, b, c, d) = (
+        Vec3::new(0.0, -0.25, -0.25),
+        Vec3::new(0.0, 0.25, -0.25),
+        Vec3::new(0.0, 0.25, 0.25),
+        Vec3::new(0.0, -0.25, 0.25),
+    );
+    let square = [[a, b, c], [a, c, d]];
+    let bvh = Bvh::build_with_binary(&square, Preset::FastBuild).unwrap();
+    let org = |x: f32| Vec3::new(x, 0.1, 0.05);
+    let dir = Vec3::new(1.0, 3e-45, 0.0);
+    let ray = Ray::new(org(-1e38), dir, 0.0, f32::MAX);
+    let binary = intersect1(&bvh.binary().unwrap(), &ray).expect("the binary walk hits");
+    assert!(binary.t > 9e37, "{binary:?}");
+    assert!(occluded1(&bvh.binary().unwrap(), &ray));
+    // Near: the same ray 10¹⁵ away is within the stand-in's reach, and both agree.
+    let near = Ray::new(org(-1e15), dir, 0.0, f32::MAX);
+    assert_eq!(
+        intersect1(&bvh.wide(), &near),
+        intersect1(&bvh.binary().unwrap(), &near)
+    );
+    // Far: the wide walks miss what the contract (the binary slab test) requires.
+    let wide = intersect1(&bvh.wide(), &ray);
+    assert_eq!(wide, None, "fixed? drop fuzzing::beyond_the_stand_in");
+    assert!(!occluded1(&bvh.wide(), &ray));
+    assert!(!closest_hit_allowed(&bvh.wide(), &ray, wide));
+}
+
 /// The fuzz/Cargo.toml lists one `[[bin]]` per body here, and every wrapper calls its body:
 /// a target added to one place and forgotten in the other fails here, not in a fuzz run.
 #[test]

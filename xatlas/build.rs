@@ -12,7 +12,9 @@ fn main() {
     // instrumentation call the same runtime ABI).
     println!("cargo:rerun-if-env-changed=CARGO_ENCODED_RUSTFLAGS");
     let rustflags = std::env::var("CARGO_ENCODED_RUSTFLAGS").unwrap_or_default();
-    let asan = rustflags.split('\x1f').any(|f| f.ends_with("sanitizer=address"))
+    let asan = rustflags
+        .split('\x1f')
+        .any(|f| f.ends_with("sanitizer=address"))
         || rustflags.contains("-Zsanitizer=address");
     if asan {
         build
