@@ -20,6 +20,7 @@
 #   REPORT=path (e.g. REPORT=docs/RELIABILITY.md) it also replaces the part of that file
 #   between the markers `<!-- campaign:begin -->` and `<!-- campaign:end -->`.
 #   MACHINE="..." describes the machine in the table's caption (default: /proc/cpuinfo).
+# - An input running past 60 s counts as a crash (libFuzzer's -timeout), as in fuzz/run.sh.
 # - Toolchain as fuzz/run.sh: nightly with AddressSanitizer when installed, else stable with
 #   -s none (SANITIZER=none forces the latter on nightly); release with debug assertions;
 #   the AVX2 code path when the CPU has it. Builds every target first, in the foreground,
@@ -90,7 +91,7 @@ campaign() {
         before=$(find "artifacts/$target" -type f | wc -l)
         t=$( { TIMEFORMAT='%U %S'; time "$bin_dir/$target" -artifact_prefix="artifacts/$target/" \
             -max_total_time="$left" -runs=$((goal - done_execs)) -print_final_stats=1 \
-            -rss_limit_mb=4096 "artifacts/corpus/$target" "corpus/$target" >>"$log" 2>&1 ||
+            -rss_limit_mb=4096 -timeout=60 "artifacts/corpus/$target" "corpus/$target" >>"$log" 2>&1 ||
             true; } 2>&1 | tail -1)
         cpu=$(awk -v a="$cpu" -v t="$t" 'BEGIN { split(t, p, " "); printf "%.1f", a + p[1] + p[2] }')
         execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1 || true)

@@ -7,6 +7,8 @@
 # New inputs go to fuzz/artifacts/corpus/TARGET (the checked-in seeds in fuzz/corpus/TARGET
 # are read, never written); crashes land in fuzz/artifacts/TARGET/. Once a crash is fixed,
 # copy its input into fuzz/corpus/TARGET/ so `cargo test --test fuzz_corpus` replays it.
+# An input running past 60 s is a crash too (libFuzzer's -timeout; its default, 20 minutes,
+# would stall a smoke run on a hang such as prepare's NaN chart in xatlas).
 # Full logs: fuzz/artifacts/run-TARGET.log. Exits non-zero when any target crashed (CI's
 # smoke run relies on it).
 set -euo pipefail
@@ -26,7 +28,7 @@ for target in "${targets[@]}"; do
     log="artifacts/run-$target.log"
     status=ok
     cargo "${tc[@]}" fuzz run "${san[@]}" "$target" "artifacts/corpus/$target" "corpus/$target" -- \
-        -max_total_time="$seconds" -print_final_stats=1 -rss_limit_mb=4096 >"$log" 2>&1 || { status=CRASH; crashed+=("$log"); }
+        -max_total_time="$seconds" -print_final_stats=1 -rss_limit_mb=4096 -timeout=60 >"$log" 2>&1 || { status=CRASH; crashed+=("$log"); }
     execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1 || true)
     secs=$(grep -o 'Done [0-9]* runs in [0-9]* second' "$log" | grep -o 'in [0-9]*' | grep -o '[0-9]*' | tail -1 || true)
     echo "$target: ${execs:-?} executions in ${secs:-?} s, $status (log: fuzz/$log)"

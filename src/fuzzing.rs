@@ -10,7 +10,9 @@
 //! | [`guide`] | guide parameters, records, sample points | pdf > 0 and finite, warped points in [0,1)², `pdf(sample(u))` = its pdf, scalar == 8-wide |
 //! | [`estimator`] | batches of samples, NaN/∞/huge included | a finite combination inside the batches' range, or an explicit no-samples texel |
 //! | [`traverse`] | triangles and rays | packet == scalar == brute force, bit for bit, closest hit and occlusion (at extreme magnitudes: the kernels' contract for hits outside their own box) |
+//! | [`wide`] | [`traverse`]'s input, every preset | the collapse keeps every leaf once and covers every triangle; on the wide tree, single rays and packets (of 8, 2 and 1 live lanes: the hybrid switch) equal brute force bit for bit, or keep to the contract |
 //! | [`scene`] | glTF / GLB / OBJ / TOML bytes | a scene of finite, indexed triangles, or an error naming the file |
+//! | [`prepare`] | a hostile mesh (degenerate, non-manifold, NaN/∞, 10⁶ away, swarms of tiny triangles), unwrap mode, layout, resolution | `prepare_with` (xatlas included) returns an error naming the scene or the texel file, or a texel file whose texels are valid and on their triangles |
 //!
 //! The structured targets read their input with [`Bytes`], which returns zeros once the
 //! input is exhausted, so every byte string is a valid input and short inputs are cheap.
@@ -18,11 +20,13 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use glam::{Vec2, Vec3};
 use guidebake::bvh::{Bvh, Preset};
 use guidebake::output::journal::{Journal, TileRecord};
 use guidebake::output::result_file::{PerTexel, RecordFile, TexelResult};
-use guidebake::scene::Scene;
-use guidebake::texels::TexelFile;
+use guidebake::prepare::{Layout, PrepareOptions, Resolution, Unwrap, prepare_with};
+use guidebake::scene::{Material, Mesh, Scene, Triangle};
+use guidebake::texels::{FLAG_VALID, TexelFile};
 use guidebake_kernels::estimator::{
     GraybillDeal, IterationVariance, RhoAccumulator, TexelEstimate, Welford, combine_weighted,
     plain_average,
@@ -32,8 +36,8 @@ use guidebake_kernels::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
 use guidebake_kernels::sobol::ONE_MINUS_EPSILON;
 use guidebake_kernels::sobol::to_unit;
 use guidebake_kernels::traverse::{
-    BvhRef, LEAF, Tri, closest_hit_allowed, intersect_brute, intersect1, intersect8,
-    occluded_brute, occluded1, occluded8, occlusion_allowed,
+    BvhRef, LEAF, Tree, Tri, WIDTH, WideRef, closest_hit_allowed, intersect_brute, intersect1,
+    intersect8, occluded_brute, occluded1, occluded8, occlusion_allowed,
 };
 use guidebake_kernels::warp;
 
@@ -48,7 +52,9 @@ pub const TARGETS: &[(&str, Body)] = &[
     ("guide", guide),
     ("estimator", estimator),
     ("traverse", traverse),
+    ("wide", wide),
     ("scene", scene),
+    ("prepare", prepare),
 ];
 
 /// A unique path in the temporary directory for one input, removed when dropped.
@@ -226,6 +232,13 @@ pub fn texel_file(data: &[u8]) {
             return;
         }
     };
+    texels_in_bounds(&texels);
+}
+
+/// Every section, tile and texel of an opened texel file can be read, and every texel lies
+/// inside its tile's rectangle on its tile's page with a finite position and a unit normal;
+/// the tiles cover every texel once.
+fn texels_in_bounds(texels: &TexelFile) {
     let header = *texels.header();
     assert_eq!(texels.pages().len(), header.page_count as usize);
     assert_eq!(texels.triangles().len(), header.triangle_count as usize);
@@ -543,63 +556,181 @@ fn within(x: f64, (lo, hi): (f64, f64)) -> bool {
 /// direction. Flag bit 0 makes each packet of 8 share its first ray's origin, as gather
 /// packets do.
 pub fn traverse(data: &[u8]) {
-    let mut b = Bytes::new(data);
-    let preset = Preset::ALL[usize::from(b.u8()) % Preset::ALL.len()];
-    let scale = ((i32::from(b.u8() % 41) - 20) as f32).exp2();
-    let offset = [0.0, 1.0, 1e3, 1e6, -1e6, 0.5][usize::from(b.u8()) % 6];
-    let flags = b.u8();
-    let coord = |b: &mut Bytes| f32::from(b.u16() as i16) * scale + offset;
-    let tri_count = usize::from(b.u8() % 64);
-    let soup: Vec<[[f32; 3]; 3]> = (0..tri_count)
-        .map(|_| std::array::from_fn(|_| std::array::from_fn(|_| coord(&mut b))))
-        .collect();
-    let mut rays: Vec<Ray> = Vec::new();
-    while b.remaining() >= 13 && rays.len() < 64 {
-        let sel = b.u8();
-        let (org, dir): ([f32; 3], [f32; 3]) = if sel & 0x80 != 0 {
-            (
-                std::array::from_fn(|_| b.raw_f32()),
-                std::array::from_fn(|_| b.raw_f32()),
-            )
-        } else {
-            (
-                std::array::from_fn(|_| coord(&mut b)),
-                std::array::from_fn(|_| f32::from(b.u16() as i16)),
-            )
-        };
-        let tmin = [0.0, 1e-4 * scale, -1.0, f32::NAN][usize::from(sel & 3)];
-        let tmax = [
-            f32::INFINITY,
-            f32::MAX,
-            64.0 * scale,
-            0.0,
-            f32::NAN,
-            1e-4 * scale,
-            1e30,
-            -1.0,
-        ][usize::from((sel >> 2) & 7)];
-        let org = if flags & 1 != 0 && !rays.len().is_multiple_of(LANES) {
-            rays[rays.len() - rays.len() % LANES].org
-        } else {
-            org.into()
-        };
-        rays.push(Ray::new(org, dir.into(), tmin, tmax));
-    }
-
-    let corners: Vec<[_; 3]> = soup.iter().map(|t| t.map(Into::into)).collect();
-    let bvh = match Bvh::build_with_binary(&corners, preset) {
+    let input = TraverseInput::decode(data);
+    let corners = input.corners();
+    let bvh = match Bvh::build_with_binary(&corners, input.preset) {
         Ok(bvh) => bvh,
         Err(e) => panic!("finite triangles build a BVH: {e}"),
     };
     let Some(view) = bvh.binary() else {
         panic!("build_with_binary keeps the binary tree")
     };
-    let tris: Vec<Tri> = corners
-        .iter()
-        .enumerate()
-        .map(|(i, &v)| Tri::new(v, i as u32))
-        .collect();
-    leaves_cover_their_triangles(&view, &soup);
+    leaves_cover_their_triangles(binary_leaves(&view), &input.soup);
+    let tris = input.tris();
+    for packet in input.rays.chunks(LANES) {
+        let lanes = std::array::from_fn(|l| packet.get(l).map(|r| (*r, Brute::of(&tris, r))));
+        lanes_keep_to_the_contract(&view, &lanes, true, None);
+    }
+}
+
+/// The wide (8-child) tree the bake walks, built from [`traverse`]'s input with *every*
+/// preset (the input's preset byte is not read): [`Bvh::build_with_binary`]'s collapse
+/// keeps every leaf of the binary tree — box and triangles, read back from the wide tree's
+/// rows bit for bit — once, every vertex of every triangle lies in a leaf box holding it,
+/// every inner slot's box holds its node's boxes, and every node but the root is some slot's
+/// child exactly once; [`Bvh::build`] (the bake's, which drops the binary tree) gives the same
+/// wide nodes for the first preset of each input. Then, per ray, on the wide tree, the checks
+/// of [`traverse`]: [`intersect1`], [`occluded1`], [`intersect8`] and [`occluded8`] equal
+/// brute force bit for bit or keep to the contract. Besides each packet of eight, every pair
+/// of its lanes (0–1, 2–3, …) is traced again as a packet of two live lanes, and every lane
+/// alone as a packet of one: below the root such packets take the any-hit walk's hybrid
+/// switch (`occluded_alone`, at most two live lanes) and the closest-hit walk's leaf rows for
+/// few lanes.
+///
+/// Not reached: the interleaved walk `occluded8` takes for packets without a shared origin
+/// on trees above `INTERLEAVE_BYTES` (1 MiB; 63 triangles make a few kilobytes); the kernels'
+/// unit tests call it directly.
+pub fn wide(data: &[u8]) {
+    let input = TraverseInput::decode(data);
+    let corners = input.corners();
+    let tris = input.tris();
+    let brute: Vec<Brute> = input.rays.iter().map(|r| Brute::of(&tris, r)).collect();
+    for (i, preset) in Preset::ALL.into_iter().enumerate() {
+        let bvh = match Bvh::build_with_binary(&corners, preset) {
+            Ok(bvh) => bvh,
+            Err(e) => panic!("finite triangles build a BVH ({preset:?}): {e}"),
+        };
+        if i == 0 {
+            let bake = Bvh::build(&corners, preset).expect("built once already");
+            assert!(bake.binary().is_none(), "Bvh::build drops the binary tree");
+            assert!(
+                bake.wide_nodes() == bvh.wide_nodes(),
+                "{preset:?}: Bvh::build and build_with_binary collapse alike"
+            );
+        }
+        let Some(binary) = bvh.binary() else {
+            panic!("build_with_binary keeps the binary tree")
+        };
+        let wide = bvh.wide();
+        collapse_keeps_the_tree(&binary, &wide, &input.soup, preset);
+        for (packet, brute) in input.rays.chunks(LANES).zip(brute.chunks(LANES)) {
+            let lane = |l: usize| Some((packet[l], brute[l]));
+            lanes_keep_to_the_contract(
+                &wide,
+                &std::array::from_fn(|l| (l < packet.len()).then(|| lane(l)).flatten()),
+                true,
+                Some(&tris),
+            );
+            // Pairs of lanes and lone lanes, at their own lane positions: the hybrid switch.
+            let pairs = (0..packet.len())
+                .step_by(2)
+                .map(|l| l..(l + 2).min(packet.len()));
+            for used in pairs.chain((0..packet.len()).map(|l| l..l + 1)) {
+                let lanes = std::array::from_fn(|l| used.contains(&l).then(|| lane(l)).flatten());
+                lanes_keep_to_the_contract(&wide, &lanes, false, Some(&tris));
+            }
+        }
+    }
+}
+
+/// [`traverse`]'s input, decoded.
+struct TraverseInput {
+    preset: Preset,
+    soup: Vec<[[f32; 3]; 3]>,
+    rays: Vec<Ray>,
+}
+
+impl TraverseInput {
+    fn decode(data: &[u8]) -> Self {
+        let mut b = Bytes::new(data);
+        let preset = Preset::ALL[usize::from(b.u8()) % Preset::ALL.len()];
+        let scale = ((i32::from(b.u8() % 41) - 20) as f32).exp2();
+        let offset = [0.0, 1.0, 1e3, 1e6, -1e6, 0.5][usize::from(b.u8()) % 6];
+        let flags = b.u8();
+        let coord = |b: &mut Bytes| f32::from(b.u16() as i16) * scale + offset;
+        let tri_count = usize::from(b.u8() % 64);
+        let soup: Vec<[[f32; 3]; 3]> = (0..tri_count)
+            .map(|_| std::array::from_fn(|_| std::array::from_fn(|_| coord(&mut b))))
+            .collect();
+        let mut rays: Vec<Ray> = Vec::new();
+        while b.remaining() >= 13 && rays.len() < 64 {
+            let sel = b.u8();
+            let (org, dir): ([f32; 3], [f32; 3]) = if sel & 0x80 != 0 {
+                (
+                    std::array::from_fn(|_| b.raw_f32()),
+                    std::array::from_fn(|_| b.raw_f32()),
+                )
+            } else {
+                (
+                    std::array::from_fn(|_| coord(&mut b)),
+                    std::array::from_fn(|_| f32::from(b.u16() as i16)),
+                )
+            };
+            let tmin = [0.0, 1e-4 * scale, -1.0, f32::NAN][usize::from(sel & 3)];
+            let tmax = [
+                f32::INFINITY,
+                f32::MAX,
+                64.0 * scale,
+                0.0,
+                f32::NAN,
+                1e-4 * scale,
+                1e30,
+                -1.0,
+            ][usize::from((sel >> 2) & 7)];
+            let org = if flags & 1 != 0 && !rays.len().is_multiple_of(LANES) {
+                rays[rays.len() - rays.len() % LANES].org
+            } else {
+                org.into()
+            };
+            rays.push(Ray::new(org, dir.into(), tmin, tmax));
+        }
+        Self { preset, soup, rays }
+    }
+
+    fn corners(&self) -> Vec<[Vec3; 3]> {
+        self.soup.iter().map(|t| t.map(Into::into)).collect()
+    }
+
+    /// The triangles as brute force takes them: primitive id = index.
+    fn tris(&self) -> Vec<Tri> {
+        self.corners()
+            .into_iter()
+            .enumerate()
+            .map(|(i, v)| Tri::new(v, i as u32))
+            .collect()
+    }
+}
+
+/// Brute force's answers for one ray: closest hit and occlusion.
+#[derive(Clone, Copy)]
+struct Brute {
+    hit: Option<Hit>,
+    occluded: bool,
+}
+
+impl Brute {
+    fn of(tris: &[Tri], ray: &Ray) -> Self {
+        Self {
+            hit: intersect_brute(tris, ray),
+            occluded: occluded_brute(tris, ray),
+        }
+    }
+}
+
+/// The rays `lanes` (`None`: an inactive lane) through `tree` as one packet, and as single
+/// rays when `single`: closest hits and occlusion equal brute force bit for bit, else keep
+/// to the kernels' contract (`traverse`'s docs, "Hits outside their own box"; in the
+/// corpus: `contract-*`); a lane without a hit comes back untouched, an inactive lane never
+/// hits and is never blocked.
+///
+/// `far_open`: the wide tree's triangles, where its walks' open deviation is tolerated
+/// (see [`beyond_the_stand_in`]); `None` for the binary tree.
+fn lanes_keep_to_the_contract(
+    tree: &impl Tree,
+    lanes: &[Option<(Ray, Brute)>; LANES],
+    single: bool,
+    far_open: Option<&[Tri]>,
+) {
     let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim));
     let sentinel = Hit {
         t: -7.0,
@@ -607,81 +738,154 @@ pub fn traverse(data: &[u8]) {
         v: 0.5,
         prim: NO_HIT - 1,
     };
-    for (p, packet) in rays.chunks(LANES).enumerate() {
-        let rays8 = Ray8::from_rays(packet);
-        let mut hits = Hit8::NONE;
-        (0..LANES).for_each(|l| hits.set_lane(l, &sentinel));
-        let hit_mask = intersect8(&view, &rays8, &mut hits);
-        let blocked = occluded8(&view, &rays8);
-        for (l, ray) in packet.iter().enumerate() {
-            // Bit for bit brute force, else the contract (kernels' traverse docs, "Hits outside
-            // their own box"; in the corpus: `contract-*`).
-            let brute = intersect_brute(&tris, ray);
-            let allowed =
-                |h: Option<Hit>| bits(h) == bits(brute) || closest_hit_allowed(&view, ray, h);
-            let scalar = intersect1(&view, ray);
-            let n = p * LANES + l;
+    let mut rays8 = Ray8::INACTIVE;
+    for (l, lane) in lanes.iter().enumerate() {
+        if let Some((ray, _)) = lane {
+            rays8.set_lane(l, ray);
+        }
+    }
+    let mut hits = Hit8::NONE;
+    (0..LANES).for_each(|l| hits.set_lane(l, &sentinel));
+    let hit_mask = intersect8(tree, &rays8, &mut hits);
+    let blocked = occluded8(tree, &rays8);
+    for (l, lane) in lanes.iter().enumerate() {
+        let Some((ray, brute)) = lane else {
+            assert_eq!(hit_mask >> l & 1, 0, "inactive lane {l} never hits");
+            assert_eq!(blocked >> l & 1, 0, "inactive lane {l} is never blocked");
+            continue;
+        };
+        // Bit for bit brute force, else the contract.
+        let open = far_open.filter(|_| beyond_the_stand_in(ray, brute));
+        let own = |h: Hit| {
+            let tri = open.and_then(|tris| tris.get(h.prim as usize));
+            tri.is_some_and(|tri| bits(intersect_brute(&[*tri], ray)) == bits(Some(h)))
+        };
+        let allowed = |h: Option<Hit>| {
+            bits(h) == bits(brute.hit)
+                || closest_hit_allowed(tree, ray, h)
+                || (open.is_some() && h.is_none_or(|h| h.t > STAND_IN_REACH && own(h)))
+        };
+        let occlusion_ok = |got: bool| {
+            got == brute.occluded || occlusion_allowed(tree, ray, got) || (open.is_some() && !got)
+        };
+        if single {
+            let scalar = intersect1(tree, ray);
             assert!(
                 allowed(scalar),
-                "ray {n}: {ray:?}: {:?} vs brute force {:?}",
+                "single ray {ray:?}: {:?} vs brute force {:?}",
                 bits(scalar),
-                bits(brute)
+                bits(brute.hit)
             );
-            let lane = (hit_mask >> l & 1 != 0).then(|| hits.lane(l)).flatten();
-            assert!(
-                allowed(lane),
-                "packet lane {l}: {ray:?}: {:?} vs brute force {:?}",
-                bits(lane),
-                bits(brute)
-            );
-            if hit_mask >> l & 1 == 0 {
-                assert_eq!(
-                    bits(hits.lane(l)),
-                    bits(Some(sentinel)),
-                    "untouched lane {l}"
-                );
-            }
-            let occluded = occluded_brute(&tris, ray);
-            let occlusion_ok = |got: bool| got == occluded || occlusion_allowed(&view, ray, got);
-            assert!(occlusion_ok(occluded1(&view, ray)), "ray {ray:?}");
-            assert!(
-                occlusion_ok(blocked >> l & 1 != 0),
-                "packet lane {l}: {ray:?}"
+            assert!(occlusion_ok(occluded1(tree, ray)), "single ray {ray:?}");
+        }
+        let got = (hit_mask >> l & 1 != 0).then(|| hits.lane(l)).flatten();
+        assert!(
+            allowed(got),
+            "packet lane {l} of {:#010b}: {ray:?}: {:?} vs brute force {:?}",
+            rays8_lanes(lanes),
+            bits(got),
+            bits(brute.hit)
+        );
+        if hit_mask >> l & 1 == 0 {
+            assert_eq!(
+                bits(hits.lane(l)),
+                bits(Some(sentinel)),
+                "untouched lane {l}"
             );
         }
-        assert_eq!(
-            u32::from(hit_mask) >> packet.len(),
-            0,
-            "inactive lanes never hit"
-        );
-        assert_eq!(
-            u32::from(blocked) >> packet.len(),
-            0,
-            "inactive lanes are never blocked"
+        assert!(
+            occlusion_ok(blocked >> l & 1 != 0),
+            "packet lane {l} of {:#010b}: {ray:?}",
+            rays8_lanes(lanes)
         );
     }
 }
 
-/// The traversal contract is stated on the leaves' boxes (a leaf of a spatial-split BVH holds
-/// a clipped part of its triangle), so the builder must not shrink them: every vertex of
-/// every triangle lies in the box of a leaf that holds the triangle.
-fn leaves_cover_their_triangles(view: &BvhRef<'_>, corners: &[[[f32; 3]; 3]]) {
-    let mut covered = vec![[false; 3]; corners.len()];
+/// How far the wide walks' fused slab test reaches along an axis whose inverse direction is
+/// infinite (a zero or subnormal component): `bvh8`'s stand-in `2¹⁰⁰` for the inverse and its
+/// slack `2⁶⁰` (`scalar::HUGE_SLACK`) give that axis a finite far distance of at least
+/// `2⁶⁰` for a ray inside the slab, where the binary test's `(p − o)·∞` leaves it open.
+const STAND_IN_REACH: f32 = (1u64 << 60) as f32;
+
+/// **Open, not fixed** (2026-11-28, `fuzz/open-crashes/wide/`): whether `ray` is one on
+/// which the wide walks may cull a leaf that the binary slab test (the contract's) meets: a
+/// direction component whose inverse overflows, and brute force's closest hit farther than
+/// [`STAND_IN_REACH`] (10¹⁸; the campaign found t of 10²⁷–10³⁸, from origins of 10³⁸ or
+/// directions of 10⁻³³). On such rays the `wide` body accepts a miss, or any triangle's own
+/// hit beyond that reach, and `false` for occlusion; everything else is checked as before.
+fn beyond_the_stand_in(ray: &Ray, brute: &Brute) -> bool {
+    let infinite_axis = ray.dir.to_array().iter().any(|d| (1.0 / d).is_infinite());
+    infinite_axis && brute.hit.is_some_and(|h| h.t > STAND_IN_REACH)
+}
+
+/// The live lanes of a packet, as a mask (for messages).
+fn rays8_lanes(lanes: &[Option<(Ray, Brute)>; LANES]) -> u8 {
+    (0..LANES).fold(0, |m, l| m | u8::from(lanes[l].is_some()) << l)
+}
+
+/// A leaf: its box (lo, hi) and its triangles.
+type Leaf = (([f32; 3], [f32; 3]), Vec<Tri>);
+
+/// The binary tree's leaves (empty slots, of no triangles, included).
+fn binary_leaves(view: &BvhRef<'_>) -> Vec<Leaf> {
+    let mut leaves = Vec::new();
     for node in view.nodes() {
         for slot in 0..2 {
             if node.meta[slot] == 0 {
                 continue;
             }
-            let inside = |v: &[f32; 3]| {
-                (0..3).all(|a| (node.lo[a][slot]..=node.hi[a][slot]).contains(&v[a]))
-            };
             let first = node.child[slot] as usize;
             let count = (node.meta[slot] & !LEAF) as usize;
-            for tri in &view.tris()[first..first + count] {
-                let prim = tri.prim as usize;
-                for (k, v) in corners[prim].iter().enumerate() {
-                    covered[prim][k] |= inside(v);
-                }
+            leaves.push((
+                (
+                    [0, 1, 2].map(|a| node.lo[a][slot]),
+                    [0, 1, 2].map(|a| node.hi[a][slot]),
+                ),
+                view.tris()[first..first + count].to_vec(),
+            ));
+        }
+    }
+    leaves
+}
+
+/// The wide tree's used leaves, their triangles read back from its rows: the rows hold the
+/// leaves in node order, slots in storage order ([`WideRef::tris`]).
+fn wide_leaves(view: &WideRef<'_>) -> Vec<Leaf> {
+    let mut rows = view.tris();
+    let mut leaves = Vec::new();
+    for node in view.nodes() {
+        for slot in 0..WIDTH {
+            let meta = node.meta[slot];
+            if meta == 0 || meta == LEAF {
+                continue;
+            }
+            let count = (meta & !LEAF) as usize;
+            let tris: Vec<Tri> = rows.by_ref().take(count).collect();
+            assert_eq!(tris.len(), count, "the rows hold every leaf's triangles");
+            leaves.push((
+                (
+                    [0, 1, 2].map(|a| node.lo[a][slot]),
+                    [0, 1, 2].map(|a| node.hi[a][slot]),
+                ),
+                tris,
+            ));
+        }
+    }
+    assert!(rows.next().is_none(), "no rows beyond the leaves");
+    leaves
+}
+
+/// The traversal contract is stated on the leaves' boxes (a leaf of a spatial-split BVH holds
+/// a clipped part of its triangle), so the builder must not shrink them: every vertex of
+/// every triangle lies in the box of a leaf that holds the triangle.
+fn leaves_cover_their_triangles(leaves: Vec<Leaf>, corners: &[[[f32; 3]; 3]]) {
+    let mut covered = vec![[false; 3]; corners.len()];
+    for ((lo, hi), tris) in &leaves {
+        let inside = |v: &[f32; 3]| (0..3).all(|a| (lo[a]..=hi[a]).contains(&v[a]));
+        for tri in tris {
+            let prim = tri.prim as usize;
+            for (k, v) in corners[prim].iter().enumerate() {
+                covered[prim][k] |= inside(v);
             }
         }
     }
@@ -689,6 +893,69 @@ fn leaves_cover_their_triangles(view: &BvhRef<'_>, corners: &[[[f32; 3]; 3]]) {
         panic!(
             "triangle {prim} {:?}: a vertex outside every leaf box holding it",
             corners[prim]
+        );
+    }
+}
+
+/// The collapse ([`guidebake_kernels::traverse::collapse`]) of `binary` into `wide`: the
+/// same leaves, each once (box bits and triangle bits), covering every triangle; every inner
+/// slot's box holds the boxes of its node; every node but the root is one slot's child.
+fn collapse_keeps_the_tree(
+    binary: &BvhRef<'_>,
+    wide: &WideRef<'_>,
+    corners: &[[[f32; 3]; 3]],
+    preset: Preset,
+) {
+    let key = |(aabb, tris): &Leaf| {
+        let mut tris: Vec<_> = tris
+            .iter()
+            .map(|t| (t.prim, t.v.map(|v| v.map(f32::to_bits))))
+            .collect();
+        tris.sort_unstable();
+        ((aabb.0.map(f32::to_bits), aabb.1.map(f32::to_bits)), tris)
+    };
+    let mut want: Vec<_> = binary_leaves(binary)
+        .iter()
+        .filter(|(_, tris)| !tris.is_empty())
+        .map(key)
+        .collect();
+    let leaves = wide_leaves(wide);
+    let mut got: Vec<_> = leaves.iter().map(key).collect();
+    want.sort_unstable();
+    got.sort_unstable();
+    assert!(
+        got == want,
+        "{preset:?}: the wide tree's leaves are not the binary tree's ({} vs {})",
+        got.len(),
+        want.len()
+    );
+    leaves_cover_their_triangles(leaves, corners);
+    let nodes = wide.nodes();
+    let mut parents = vec![0u32; nodes.len()];
+    for (index, node) in nodes.iter().enumerate() {
+        for slot in 0..WIDTH {
+            if node.meta[slot] != 0 {
+                continue;
+            }
+            let child = node.child[slot] as usize;
+            parents[child] += 1;
+            let lo = [0, 1, 2].map(|a| node.lo[a][slot]);
+            let hi = [0, 1, 2].map(|a| node.hi[a][slot]);
+            let c = &nodes[child];
+            for s in (0..WIDTH).filter(|&s| c.meta[s] != LEAF) {
+                assert!(
+                    (0..3).all(|a| lo[a] <= c.lo[a][s] && c.hi[a][s] <= hi[a]),
+                    "{preset:?}: node {index} slot {slot}'s box does not hold node {child} slot {s}'s"
+                );
+            }
+        }
+    }
+    assert_eq!(parents[0], 0, "{preset:?}: the root is no node's child");
+    if let Some(n) = parents.iter().skip(1).position(|&p| p != 1) {
+        panic!(
+            "{preset:?}: node {} is the child of {} slots",
+            n + 1,
+            parents[n + 1]
         );
     }
 }
@@ -743,4 +1010,225 @@ pub fn scene(data: &[u8]) {
     assert_eq!(next as usize, scene.triangles.len());
     let (lo, hi) = scene.bounds();
     assert!(lo.is_finite() && hi.is_finite() && lo.cmple(hi).all());
+}
+
+/// Most tiny triangles the `prepare` target's swarm appends: 2 048 welded ones take ~0.3 s
+/// (xatlas and `facing_sides`), so more would starve the campaign of executions.
+pub const SWARM: usize = 2048;
+
+/// A hostile mesh → [`prepare_with`] with unwrapping (xatlas, C++: run under
+/// AddressSanitizer by `fuzz/run.sh`, which builds it instrumented): a clear error — one that
+/// names the scene (`<fuzz>`) or the texel file — or a texel file that opens, whose every
+/// texel is in bounds (as [`texel_file`] checks), valid, on a triangle of the scene that has
+/// lightmap UVs, within that triangle's box (up to f32 rounding of the interpolation); the
+/// report counts what the file holds; the returned layout has one finite UV triple or `None`
+/// per triangle.
+///
+/// Input: a header (flags: unwrap mode, layout, a tiny-triangle swarm; the resolution:
+/// default, a density from a table — 0, −1, NaN, ∞, 10⁻³⁰, 10³⁰, `f32::MAX`, or one aiming at
+/// 16 … 65 536 texels for the scene's area —, or a page size from a table of 0 … 2³² − 1;
+/// a scale 2⁻²⁰ … 2²⁰ and an offset up to 10⁶), up to 64 vertices as 3 × i16 grid
+/// coordinates (i16::MIN is NaN, i16::MIN + 1 is ∞), then triangles as three vertex indices
+/// (repeated indices: degenerate; shared ones: welded edges, non-manifold ones included) and
+/// a selector byte: a new mesh starts here (up to 4), lightmap UVs (projected from the
+/// positions, or 6 raw i8 bytes over −2…2), geometric or raw normals (3 raw f32 bits,
+/// zero and NaN included). The swarm appends up to [`SWARM`] triangles of side 2⁻⁴ … 2⁻¹⁹ (xatlas
+/// skips those below [`TINY_AREA`](guidebake::prepare::unwrap::TINY_AREA)) as a grid of
+/// welded quads or as loose triangles, in a mesh of their own.
+pub fn prepare(data: &[u8]) {
+    let mut b = Bytes::new(data);
+    let flags = b.u8();
+    let unwrap = [
+        Unwrap::Missing,
+        Unwrap::Always,
+        Unwrap::Never,
+        Unwrap::Missing,
+    ][usize::from(flags & 3)];
+    let layout =
+        [Layout::Auto, Layout::Shared, Layout::PerMesh, Layout::Auto][usize::from(flags >> 2 & 3)];
+    let (r, r2) = (b.u8(), b.u8());
+    let scale = ((i32::from(b.u8() % 41) - 20) as f32).exp2();
+    let offset = [0.0, 1.0, 1e3, 1e6, -1e6, 0.5][usize::from(b.u8()) % 6];
+    let coord = |b: &mut Bytes| match b.u16() as i16 {
+        i16::MIN => f32::NAN,
+        -32767 => f32::INFINITY,
+        c => f32::from(c) * scale + offset,
+    };
+    let vertex_count = usize::from(b.u8() % 64);
+    let vertices: Vec<Vec3> = (0..vertex_count)
+        .map(|_| Vec3::new(coord(&mut b), coord(&mut b), coord(&mut b)))
+        .collect();
+    let triangle_count = usize::from(b.u8()) * usize::from(vertex_count > 0);
+    let mut triangles = Vec::new();
+    let mut mesh = 0u32;
+    for _ in 0..triangle_count {
+        let corners: [Vec3; 3] =
+            std::array::from_fn(|_| vertices[usize::from(b.u8()) % vertex_count]);
+        let sel = b.u8();
+        if sel & 1 != 0 && !triangles.is_empty() && mesh < 3 {
+            mesh += 1;
+        }
+        let lightmap_uv = match sel >> 1 & 3 {
+            0 | 1 => None,
+            2 => Some(corners.map(|p| Vec2::new(p.x, p.y) / (65536.0 * scale) + 0.5)),
+            _ => Some(std::array::from_fn(|_| {
+                Vec2::new(f32::from(b.u8() as i8), f32::from(b.u8() as i8)) / 64.0
+            })),
+        };
+        let normals = if sel & 8 != 0 {
+            let n = Vec3::new(b.raw_f32(), b.raw_f32(), b.raw_f32());
+            [n; 3]
+        } else {
+            let [a, p, q] = corners;
+            [(p - a).cross(q - a).normalize_or_zero(); 3]
+        };
+        triangles.push(Triangle {
+            positions: corners,
+            normals,
+            lightmap_uv,
+            texture_uv: None,
+            colour: None,
+            mesh,
+            material: 0,
+        });
+    }
+    if flags & 16 != 0 {
+        // Many tiny triangles: a grid of welded quads, or loose triangles (flag 32).
+        let count = usize::from(b.u16()) % (SWARM + 1);
+        let side = (-f32::from(4 + b.u8() % 16)).exp2();
+        let columns = 1 + usize::from(b.u8());
+        let origin = Vec3::splat(offset);
+        if !triangles.is_empty() {
+            mesh += 1;
+        }
+        for i in 0..count {
+            let (quad, upper) = (i / 2, i % 2 == 1);
+            let (x, y) = ((quad % columns) as f32, (quad / columns) as f32);
+            let gap = if flags & 32 != 0 { 3.0 } else { 1.0 };
+            let at = |dx: f32, dy: f32| {
+                origin + Vec3::new((x * gap + dx) * side, (y * gap + dy) * side, 0.0)
+            };
+            let positions = if upper {
+                [at(1.0, 0.0), at(1.0, 1.0), at(0.0, 1.0)]
+            } else {
+                [at(0.0, 0.0), at(1.0, 0.0), at(0.0, 1.0)]
+            };
+            triangles.push(Triangle {
+                positions,
+                normals: [Vec3::Z; 3],
+                lightmap_uv: None,
+                texture_uv: None,
+                colour: None,
+                mesh,
+                material: 0,
+            });
+        }
+    }
+    let mut scene = Scene::of_triangles("fuzz", triangles, vec![Material::default_grey()]);
+    scene.meshes = (0..=mesh)
+        .map(|m| {
+            let first = scene.triangles.partition_point(|t| t.mesh < m);
+            let count = scene.triangles[first..].partition_point(|t| t.mesh == m);
+            let mine = &scene.triangles[first..first + count];
+            Mesh {
+                name: format!("mesh{m}"),
+                first_triangle: first as u32,
+                triangle_count: count as u32,
+                has_lightmap_uvs: mine.iter().all(|t| t.lightmap_uv.is_some()),
+            }
+        })
+        .collect();
+    // Texel counts the density choices aim at, for the scene's finite area.
+    let area: f64 = scene
+        .triangles
+        .iter()
+        .map(|t| f64::from(t.area()))
+        .filter(|a| a.is_finite())
+        .sum();
+    let aim = |texels: f64| (texels / area.max(1e-30)).sqrt() as f32;
+    const SIDES: [u32; 16] = [
+        0,
+        1,
+        6,
+        7,
+        8,
+        12,
+        16,
+        31,
+        32,
+        33,
+        64,
+        100,
+        256,
+        16_385,
+        65_536,
+        u32::MAX,
+    ];
+    let resolution = match r % 4 {
+        0 => Resolution::Default,
+        1 => Resolution::TexelsPerUnit(match r2 % 12 {
+            0 => 0.0,
+            1 => -1.0,
+            2 => f32::NAN,
+            3 => f32::INFINITY,
+            4 => 1e-30,
+            5 => 1e30,
+            6 => f32::MAX,
+            k => aim(f64::from(16u32 << (2 * (k - 7)))),
+        }),
+        _ => Resolution::Size(SIDES[usize::from(r2 & 15)], SIDES[usize::from(r2 >> 4)]),
+    };
+    let out = ScratchFile::named(b"", ".texels");
+    let opts = PrepareOptions { resolution, layout };
+    let (report, lightmap) = match prepare_with(&scene, &out.0, opts, unwrap) {
+        Ok(done) => done,
+        Err(e) => {
+            let message = e.to_string();
+            assert!(
+                message.contains("<fuzz>") || message.contains(&*out.0.to_string_lossy()),
+                "the error names neither the scene nor the texel file: {message}"
+            );
+            return;
+        }
+    };
+    let texels = match TexelFile::open(&out.0) {
+        Ok(t) => t,
+        Err(e) => panic!("prepare wrote a texel file that does not open: {e}"),
+    };
+    texels_in_bounds(&texels);
+    let header = *texels.header();
+    assert!(report.texels > 0, "Ok without texels: {report:?}");
+    assert_eq!(report.texels, header.texel_count);
+    assert_eq!(report.tiles, header.tile_count);
+    let pages: Vec<(u32, u32)> = texels.pages().iter().map(|p| (p.width, p.height)).collect();
+    assert_eq!(report.pages, pages);
+    assert_eq!(lightmap.uv.len(), scene.triangles.len());
+    assert!(
+        lightmap
+            .uv
+            .iter()
+            .flatten()
+            .flatten()
+            .all(|v| v.is_finite()),
+        "a non-finite lightmap UV"
+    );
+    for t in texels.texels() {
+        assert!(t.flags & FLAG_VALID != 0, "{t:?}");
+        let tri = scene
+            .triangles
+            .get(t.triangle as usize)
+            .unwrap_or_else(|| panic!("{t:?}: no such triangle"));
+        assert!(
+            lightmap.uv[t.triangle as usize].is_some(),
+            "{t:?}: a texel on a triangle without lightmap UVs"
+        );
+        let [a, p, q] = tri.positions;
+        let (lo, hi) = (a.min(p).min(q), a.max(p).max(q));
+        let slack = (lo.abs().max(hi.abs()).max_element() * f32::EPSILON * 8.0).max(1e-30);
+        let pos = t.position();
+        assert!(
+            pos.cmpge(lo - slack).all() && pos.cmple(hi + slack).all(),
+            "{t:?} lies outside its triangle's box {lo} … {hi}"
+        );
+    }
 }

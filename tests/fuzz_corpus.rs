@@ -50,6 +50,65 @@ fn every_corpus_input_passes_its_target() {
     );
 }
 
+/// One input through one body, for a look at a crash or a slow input:
+/// `FUZZ_TARGET=prepare FUZZ_INPUT=path cargo test --test fuzz_corpus -- --ignored replay_one --nocapture`.
+#[test]
+#[ignore = "needs FUZZ_TARGET and FUZZ_INPUT"]
+fn replay_one() {
+    let target = std::env::var("FUZZ_TARGET").expect("FUZZ_TARGET names a target");
+    let input = std::env::var("FUZZ_INPUT").expect("FUZZ_INPUT names a file");
+    let (_, body) = TARGETS
+        .iter()
+        .find(|(name, _)| *name == target)
+        .unwrap_or_else(|| panic!("no target {target}"));
+    let start = std::time::Instant::now();
+    body(&std::fs::read(&input).unwrap());
+    println!("{target} {input}: {:.3} s", start.elapsed().as_secs_f64());
+}
+
+/// **Open** (2026-11-28): the wide walks' fused slab test replaces an infinite inverse
+/// direction by `2¹⁰⁰` with a slack of `2⁶⁰`, so along such an axis a ray inside a box's slab
+/// gets a finite far distance, `(hi − o)·2¹⁰⁰ + 2⁶⁰`, where the binary test's `(hi − o)·∞`
+/// is unbounded: a hit farther than that is culled. The `wide` fuzz target found it at once
+/// (inputs in `fuzz/open-crashes/wide/`) and now tolerates exactly this case
+/// (`fuzzing::beyond_the_stand_in`). Here: a hit at t = 10³⁸ beyond the reach
+/// `(0.25 − 0.1)·2¹⁰⁰ + 2⁶⁰ ≈ 2·10²⁹` on the y axis. This test pins the deviation down: when it fails, the
+/// kernels were fixed, and the tolerance and the open crashes should go.
+#[test]
+fn wide_walks_cull_hits_beyond_the_stand_in_reach_open() {
+    use glam::Vec3;
+    use guidebake::bvh::{Bvh, Preset};
+    use guidebake_kernels::packet::Ray;
+    use guidebake_kernels::traverse::{closest_hit_allowed, intersect1, occluded1};
+    // A square of side 0.5 in the plane x = 0; a ray from x = −10³⁸ along +x, inside the
+    // square's slabs in y and z, with dy = 3·10⁻⁴⁵ and dz = 0 (both inverses overflow).
+    let (a, b, c, d) = (
+        Vec3::new(0.0, -0.25, -0.25),
+        Vec3::new(0.0, 0.25, -0.25),
+        Vec3::new(0.0, 0.25, 0.25),
+        Vec3::new(0.0, -0.25, 0.25),
+    );
+    let square = [[a, b, c], [a, c, d]];
+    let bvh = Bvh::build_with_binary(&square, Preset::FastBuild).unwrap();
+    let org = |x: f32| Vec3::new(x, 0.1, 0.05);
+    let dir = Vec3::new(1.0, 3e-45, 0.0);
+    let ray = Ray::new(org(-1e38), dir, 0.0, f32::MAX);
+    let binary = intersect1(&bvh.binary().unwrap(), &ray).expect("the binary walk hits");
+    assert!(binary.t > 9e37, "{binary:?}");
+    assert!(occluded1(&bvh.binary().unwrap(), &ray));
+    // Near: the same ray 10¹⁵ away is within the stand-in's reach, and both agree.
+    let near = Ray::new(org(-1e15), dir, 0.0, f32::MAX);
+    assert_eq!(
+        intersect1(&bvh.wide(), &near),
+        intersect1(&bvh.binary().unwrap(), &near)
+    );
+    // Far: the wide walks miss what the contract (the binary slab test) requires.
+    let wide = intersect1(&bvh.wide(), &ray);
+    assert_eq!(wide, None, "fixed? drop fuzzing::beyond_the_stand_in");
+    assert!(!occluded1(&bvh.wide(), &ray));
+    assert!(!closest_hit_allowed(&bvh.wide(), &ray, wide));
+}
+
 /// The fuzz/Cargo.toml lists one `[[bin]]` per body here, and every wrapper calls its body:
 /// a target added to one place and forgotten in the other fails here, not in a fuzz run.
 #[test]
@@ -457,6 +516,177 @@ fn write_texel_file_seeds() {
     write("texel_file", "synth-min", &std::fs::read(&city).unwrap());
 }
 
+/// A prepare input (layout on `fuzzing::prepare`): header, vertices, triangles as
+/// (three indices, selector byte, extra bytes), then the swarm's bytes.
+struct PrepareSeed {
+    bytes: Vec<u8>,
+}
+
+impl PrepareSeed {
+    /// `flags`: unwrap mode (bits 0–1), layout (2–3), swarm (4), loose swarm (5);
+    /// `res`, `res2`: the resolution selector and its argument; `scale_exp` −20…20.
+    fn new(flags: u8, res: u8, res2: u8, scale_exp: i8, offset: u8, verts: &[[i16; 3]]) -> Self {
+        let mut bytes = vec![
+            flags,
+            res,
+            res2,
+            (scale_exp + 20) as u8,
+            offset,
+            verts.len() as u8,
+        ];
+        for c in verts.iter().flatten() {
+            bytes.extend(c.to_le_bytes());
+        }
+        Self { bytes }
+    }
+
+    /// Triangles: indices and selector (bit 0 new mesh, bits 1–2 UVs: 2 projected, 3 raw
+    /// i8 pairs, bit 3 raw normal), and the selector's extra bytes.
+    fn tris(&mut self, tris: &[([u8; 3], u8, &[u8])]) -> &mut Self {
+        self.bytes.push(tris.len() as u8);
+        for (idx, sel, extra) in tris {
+            self.bytes.extend(idx);
+            self.bytes.push(*sel);
+            self.bytes.extend(*extra);
+        }
+        self
+    }
+
+    fn swarm(&mut self, count: u16, side_exp: u8, columns: u8) -> &mut Self {
+        self.bytes.extend(count.to_le_bytes());
+        self.bytes.extend([side_exp - 4, columns - 1]);
+        self
+    }
+}
+
+/// The unit cube's corners (times `s`) and its 12 triangles, welded, wound outwards.
+fn cube_mesh(s: i16, sel: u8) -> (Vec<[i16; 3]>, Vec<([u8; 3], u8, &'static [u8])>) {
+    let verts: Vec<[i16; 3]> = (0..8)
+        .map(|i| {
+            [
+                (i & 1) as i16 * s,
+                (i >> 1 & 1) as i16 * s,
+                (i >> 2 & 1) as i16 * s,
+            ]
+        })
+        .collect();
+    let faces: [[u8; 4]; 6] = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    let tris = faces
+        .iter()
+        .flat_map(|f| {
+            [
+                ([f[0], f[1], f[2]], sel, &[][..]),
+                ([f[0], f[2], f[3]], sel, &[][..]),
+            ]
+        })
+        .collect();
+    (verts, tris)
+}
+
+fn write_prepare_seeds() {
+    // A unit cube without UVs, unwrapped by xatlas at 64² texels for its area.
+    let (verts, tris) = cube_mesh(1024, 0);
+    write(
+        "prepare",
+        "cube-unwrapped",
+        &PrepareSeed::new(0, 1, 9, -10, 0, &verts).tris(&tris).bytes,
+    );
+    // The same cube 10⁶ from the origin, every mesh unwrapped, default resolution.
+    write(
+        "prepare",
+        "cube-far-away",
+        &PrepareSeed::new(1, 0, 0, 0, 3, &verts).tris(&tris).bytes,
+    );
+    // A quad with projected lightmap UVs beside the cube without (shared layout, a 32² page).
+    let mut mixed = tris.clone();
+    mixed[0].1 = 1;
+    let quad = [([0, 1, 3], 1 | 4, &[][..]), ([0, 3, 2], 4, &[][..])];
+    let mut seed = PrepareSeed::new(0, 2, 0x88, -10, 0, &verts);
+    seed.tris(&[&quad[..], &tris[..]].concat());
+    write("prepare", "uv-quad-and-unwrapped-cube", &seed.bytes);
+    // Degenerate and non-manifold: repeated indices, a fin of four triangles on one edge,
+    // a NaN vertex, raw normals (zero, NaN).
+    let hostile_verts = [
+        [0, 0, 0],
+        [1000, 0, 0],
+        [0, 1000, 0],
+        [0, -1000, 0],
+        [0, 0, 1000],
+        [0, 0, -1000],
+        [i16::MIN, 0, 0],
+        [-32767, 5, 5],
+    ];
+    let zero = [0u8; 12];
+    let nan = [0xff_u8; 12];
+    let hostile = [
+        ([0, 1, 2], 0, &[][..]),
+        ([0, 1, 3], 0, &[][..]),
+        ([0, 1, 4], 0, &[][..]),
+        ([0, 1, 5], 8, &zero[..]),
+        ([1, 1, 2], 8, &nan[..]),
+        ([2, 2, 2], 0, &[][..]),
+        ([0, 1, 6], 0, &[][..]),
+        ([0, 2, 7], 0, &[][..]),
+    ];
+    write(
+        "prepare",
+        "degenerate-non-manifold-nan",
+        &PrepareSeed::new(1, 1, 10, -10, 0, &hostile_verts)
+            .tris(&hostile)
+            .bytes,
+    );
+    // The same without its NaN and ∞ vertices, so xatlas charts it.
+    write(
+        "prepare",
+        "degenerate-non-manifold",
+        &PrepareSeed::new(1, 1, 10, -10, 0, &hostile_verts)
+            .tris(&hostile[..6])
+            .bytes,
+    );
+    // 2048 welded triangles of side 2⁻⁸ beside the cube, and 2000 loose ones of 2⁻¹²
+    // (below xatlas's area threshold).
+    write(
+        "prepare",
+        "tiny-triangle-grid",
+        &PrepareSeed::new(16, 1, 9, -10, 0, &verts)
+            .tris(&tris)
+            .swarm(2048, 8, 64)
+            .bytes,
+    );
+    write(
+        "prepare",
+        "tiny-loose-triangles",
+        &PrepareSeed::new(16 | 32, 0, 0, -10, 0, &[])
+            .tris(&[])
+            .swarm(2000, 12, 50)
+            .bytes,
+    );
+    // Raw UVs outside 0…1 and out-of-range densities and sizes.
+    let raw_uv: [u8; 6] = [0x80, 0x80, 0x7f, 0x00, 0x10, 0x7f];
+    let outside = [([0, 1, 2], 6, &raw_uv[..]), ([1, 3, 2], 6, &raw_uv[..])];
+    let square = [[0, 0, 0], [512, 0, 0], [0, 512, 0], [512, 512, 0]];
+    for (name, res, res2) in [
+        ("uvs-outside-the-square", 2, 0x88),
+        ("density-nan", 1, 2),
+        ("page-too-large", 2, 0xdd),
+    ] {
+        write(
+            "prepare",
+            name,
+            &PrepareSeed::new(2, res, res2, -10, 0, &square)
+                .tris(&outside)
+                .bytes,
+        );
+    }
+}
+
 #[test]
 #[ignore = "rewrites fuzz/corpus: cargo test --test fuzz_corpus -- --ignored write_seed_corpus"]
 fn write_seed_corpus() {
@@ -465,4 +695,5 @@ fn write_seed_corpus() {
     write_traverse_seeds();
     write_scene_seeds();
     write_texel_file_seeds();
+    write_prepare_seeds();
 }

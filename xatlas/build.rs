@@ -5,7 +5,23 @@ fn main() {
     println!("cargo:rerun-if-changed=vendor/xatlas.cpp");
     println!("cargo:rerun-if-changed=vendor/xatlas.h");
     println!("cargo:rerun-if-changed=src/shim.cpp");
-    cc::Build::new()
+    let mut build = cc::Build::new();
+    // Under AddressSanitizer (cargo-fuzz's default, `-Zsanitizer=address` in the rustflags)
+    // the C++ is instrumented too, so a bad access inside xatlas is reported, not only bad
+    // frees. Rust's ASan runtime serves the instrumented objects (GCC's and Clang's
+    // instrumentation call the same runtime ABI).
+    println!("cargo:rerun-if-env-changed=CARGO_ENCODED_RUSTFLAGS");
+    let rustflags = std::env::var("CARGO_ENCODED_RUSTFLAGS").unwrap_or_default();
+    let asan = rustflags
+        .split('\x1f')
+        .any(|f| f.ends_with("sanitizer=address"))
+        || rustflags.contains("-Zsanitizer=address");
+    if asan {
+        build
+            .flag("-fsanitize=address")
+            .flag("-fno-omit-frame-pointer");
+    }
+    build
         .cpp(true)
         .std("c++11")
         .file("vendor/xatlas.cpp")

@@ -7636,7 +7636,11 @@ private:
 					if (b) tmp.setBitAt(x, y);
 				}
 			}
-			swap(tmp, *bitImage);
+			// guidebake: was `swap(tmp, *bitImage)`, whose generic swap copy-constructs (deep)
+			// and then assigns (shallow, Array::operator=): the image's old bits leaked on every
+			// padding pass (LeakSanitizer, fuzz/corpus/prepare). Move, then size tmp again.
+			tmp.moveTo(*bitImage);
+			tmp.resize(w, h, false);
 		}
 	}
 

@@ -80,6 +80,21 @@ pub enum UnwrapError {
         /// xatlas's reason.
         source: AddMeshError,
     },
+    /// A vertex of the mesh is not finite (NaN or ±∞): xatlas's packer would rasterise its
+    /// chart without end.
+    #[error(
+        "{path}: mesh '{mesh}': triangle {triangle} has a vertex that is not finite: {position:?}"
+    )]
+    NonFinite {
+        /// The scene file.
+        path: PathBuf,
+        /// The mesh.
+        mesh: String,
+        /// The triangle, as an index into the scene's triangles.
+        triangle: usize,
+        /// The vertex.
+        position: [f32; 3],
+    },
     /// xatlas left triangles out of every chart, or gave UVs that are not finite.
     #[error(
         "{path}: mesh '{mesh}': xatlas left {triangles} of its triangles without lightmap UVs \
@@ -153,9 +168,28 @@ impl Charted {
     /// Welds and charts `meshes` of `scene` (mesh indices) into one atlas.
     ///
     /// # Errors
-    /// [`UnwrapError::Refused`] naming the mesh xatlas refuses.
+    /// [`UnwrapError::NonFinite`] naming a mesh with a NaN or infinite vertex (before xatlas
+    /// sees it: its packer then loops without end), [`UnwrapError::Refused`] naming the mesh
+    /// xatlas refuses.
     pub fn new(scene: &Scene, meshes: &[usize]) -> Result<Self, UnwrapError> {
         let start = Instant::now();
+        for &m in meshes {
+            let mesh = &scene.meshes[m];
+            let first = mesh.first_triangle as usize;
+            let tris = &scene.triangles[first..][..mesh.triangle_count as usize];
+            let bad = tris.iter().enumerate().find_map(|(k, t)| {
+                let p = t.positions.iter().find(|p| !p.is_finite())?;
+                Some((first + k, p.to_array()))
+            });
+            if let Some((triangle, position)) = bad {
+                return Err(UnwrapError::NonFinite {
+                    path: scene.path.clone(),
+                    mesh: mesh.name.clone(),
+                    triangle,
+                    position,
+                });
+            }
+        }
         let mut atlas = Atlas::new();
         for &m in meshes {
             let w = weld(scene, m);
@@ -276,6 +310,28 @@ mod tests {
         // A different normal at a shared position is a seam.
         s.triangles[1].normals[0] = Vec3::X;
         assert_eq!(weld(&s, 0).positions.len(), 5);
+    }
+
+    /// `fuzz/corpus/prepare/degenerate-non-manifold-nan`: a NaN vertex reached xatlas, whose
+    /// packer then rasterised the chart without end (`raster::drawTriangle`).
+    #[test]
+    fn non_finite_vertices_are_an_error_naming_the_mesh_before_xatlas_sees_them() {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut s = quad_scene();
+            s.triangles[1].positions[2].y = bad;
+            let Err(e) = Charted::new(&s, &[0]) else {
+                panic!("a vertex at {bad} was charted")
+            };
+            assert!(
+                matches!(e, UnwrapError::NonFinite { triangle: 1, .. }),
+                "{e}"
+            );
+            let message = e.to_string();
+            assert!(
+                message.contains("<quad>") && message.contains("mesh 'quad'"),
+                "{message}"
+            );
+        }
     }
 
     #[test]
