@@ -12,7 +12,7 @@
 //! | [`traverse`] | triangles and rays | packet == scalar == brute force, bit for bit, closest hit and occlusion (at extreme magnitudes: the kernels' contract for hits outside their own box) |
 //! | [`wide`] | [`traverse`]'s input, every preset | the collapse keeps every leaf once and covers every triangle; on the wide tree, single rays and packets (of 8, 2 and 1 live lanes: the hybrid switch) equal brute force bit for bit, or keep to the contract |
 //! | [`scene`] | glTF / GLB / OBJ / TOML bytes | a scene of finite, indexed triangles, or an error naming the file |
-//! | [`prepare`] | a hostile mesh (degenerate, non-manifold, NaN/∞, 10⁶ away, swarms of tiny triangles), unwrap mode, layout, resolution | `prepare_with` (xatlas included) returns an error naming the scene or the texel file, or a texel file whose texels are valid and on their triangles |
+//! | [`prepare`] | a hostile mesh (degenerate, non-manifold, NaN/∞, 10⁶ away, swarms of tiny triangles), unwrap mode, layout, resolution | `prepare_with` (xatlas included) returns an error naming the scene or the texel file, or a texel file whose texels are valid (or inside geometry) and on their triangles |
 //!
 //! The structured targets read their input with [`Bytes`], which returns zeros once the
 //! input is exhausted, so every byte string is a valid input and short inputs are cheap.
@@ -26,7 +26,7 @@ use guidebake::output::journal::{Journal, TileRecord};
 use guidebake::output::result_file::{PerTexel, RecordFile, TexelResult};
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, Unwrap, prepare_with};
 use guidebake::scene::{Material, Mesh, Scene, Triangle};
-use guidebake::texels::{FLAG_VALID, TexelFile};
+use guidebake::texels::{FLAG_INSIDE, FLAG_VALID, TexelFile};
 use guidebake_kernels::estimator::{
     GraybillDeal, IterationVariance, RhoAccumulator, TexelEstimate, Welford, combine_weighted,
     plain_average,
@@ -1212,8 +1212,18 @@ pub fn prepare(data: &[u8]) {
             .all(|v| v.is_finite()),
         "a non-finite lightmap UV"
     );
+    let inside = texels
+        .texels()
+        .iter()
+        .filter(|t| t.flags & FLAG_INSIDE != 0)
+        .count() as u64;
+    assert_eq!(inside, report.inside_texels, "{report:?}");
     for t in texels.texels() {
-        assert!(t.flags & FLAG_VALID != 0, "{t:?}");
+        // Valid, or inside geometry (not valid, flagged, filled by the dilation).
+        assert!(
+            (t.flags & FLAG_VALID != 0) != (t.flags & FLAG_INSIDE != 0),
+            "{t:?}"
+        );
         let tri = scene
             .triangles
             .get(t.triangle as usize)
