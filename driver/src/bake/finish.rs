@@ -6,7 +6,7 @@ use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
 use super::directional::{self, SH_CHANNELS, ShL1};
-use super::run::{BakeError, file_error};
+use super::error::{BakeError, file_error};
 use super::settings::{MAX_ITERATIONS, SettingsError};
 use super::shard::Split;
 use super::workdir::{

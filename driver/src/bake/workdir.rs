@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::run::{BakeError, file_error};
+use super::error::{BakeError, file_error};
 use super::shard::Shard;
 use crate::output::atomic::temporary_name;
 use crate::output::journal::{Journal, TileRecord, dedup_tiles};
