@@ -26,12 +26,11 @@ use std::time::Instant;
 use serde::Serialize;
 
 pub use super::error::BakeError;
-use super::directional::Directional;
 use super::error::file_error;
 use super::finish::{FinishOptions, finish_with};
 use super::gather::{GatherCounters, TileBaker};
 use super::pipeline::{self, PipelineConfig, TileBuffer, TileFiles};
-use super::settings::{BakeSettings, Combine, DIRECT_PASS, SettingsError};
+use super::settings::{BakeSettings, Combine, DIRECT_PASS, Directional, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::workdir::{
     Manifest, merged_results, open_batches, open_directional, open_pass, open_work, pass_files,
