@@ -1234,7 +1234,7 @@ fn widened_largest(tmax: f32x8, alive: u8) -> f32 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::scalar::slab8;
+    use super::super::slab::slab8;
     use super::*;
     use crate::packet::{Hit8, LANES, Ray, Ray8};
     use crate::testing::Pcg32;

@@ -5,8 +5,11 @@
 //! the one visited first. Leaves are tested by a [`Visitor`] (closest hit or occlusion), which
 //! the wide walk ([`super::bvh8`]) shares.
 
+// The one import back into the wide walk, kept: the `Visitor` trait's hybrid switch hands a
+// subtree to the wide single-ray walk (docs/ARCHITECTURE.md, "Crates and what may depend on
+// what").
 use super::bvh8::WideRef;
-use super::scalar::widened8;
+use super::slab::widened8;
 use super::triangle::{
     Best8, Pre1x8, Pre8, TriAt, closest_rows, closest8, occludes_rows, occludes8, set_lane,
 };

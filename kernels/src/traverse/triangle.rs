@@ -5,7 +5,7 @@
 //! lane), with the closest-hit acceptance (tie rule) and occlusion tests built on them.
 
 use super::Tri;
-use super::scalar::{NEAR_DOWN, slab8};
+use super::slab::{NEAR_DOWN, slab8};
 use crate::packet::{Hit, LANES, NO_HIT, Ray, Ray8, set_lanes};
 use glam::Vec3;
 use wide::{f32x8, u32x8};
