@@ -382,10 +382,10 @@ pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
 ///
 /// On the wide layout the packet walk finishes a subtree that at most two live lanes reach
-/// lane by lane, as single rays (Embree's hybrid switch; docs/traverse.md, session 20). On a
+/// lane by lane, as single rays (Embree's hybrid switch; docs/traverse.md, "Wide layout"). On a
 /// tree larger than [`INTERLEAVE_BYTES`], a packet whose lanes do not share an origin (eight
 /// unrelated shadow rays) is traced as single rays from the root, interleaved, so that the
-/// lanes' cache misses overlap (docs/traverse.md, "Wide layout, session 9").
+/// lanes' cache misses overlap (docs/traverse.md, "Wide layout").
 pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;

@@ -1,11 +1,11 @@
 //! # traverse::slab: the slack that keeps every slab test conservative
 //!
-//! The widened interval `[tmin · (1 − 2⁻¹⁸), far · (1 + 2⁻¹⁸) + 2⁻¹²⁶]` that [`box1`](super::scalar::box1) and the
-//! 8-wide box tests share, and the fused form's per-ray constants ([`slab`], [`slab8`]): the
-//! plane offsets `o·(1/d)` moved an ulp outwards (docs/traverse.md, "Wide layout", "The fused
-//! slab test"). A module of its own because the per-ray constants of the triangle test
-//! ([`super::triangle`]) and the walks ([`super::scalar`], [`super::packet`], [`super::bvh8`])
-//! all need it, and none of them needs the others for it.
+//! The widened interval `[tmin · (1 − 2⁻¹⁸), far · (1 + 2⁻¹⁸) + 2⁻¹²⁶]` that
+//! [`box1`](super::scalar::box1) and the 8-wide box tests share, and the fused form's per-ray
+//! constants ([`slab`], [`slab8`]): the plane offsets `o·(1/d)` moved an ulp outwards
+//! (docs/traverse.md, "Wide layout", "The fused slab test"). A module of its own because the
+//! per-ray constants of the triangle test ([`super::triangle`]) and the walks ([`super::scalar`],
+//! [`super::packet`], [`super::bvh8`]) all need it, and none of them needs the others for it.
 
 use wide::f32x8;
 
@@ -37,22 +37,22 @@ const OFFSET_SLACK: f32 = 1.0 / (1u32 << 22) as f32;
 /// its inverse overflows): `p·2¹⁰⁰ − o·2¹⁰⁰` has the sign of `p − o`, and `o·2¹⁰⁰` is exact
 /// for `|o| < 2²⁸`.
 const INV_HUGE: f32 = (1u128 << 100) as f32;
-/// Offset slack on such an axis, `2⁻⁴⁰·2¹⁰⁰`: a ray lying in a box face's plane (`p = o`, even
-/// at `o = 0`, where `o·inv` has no ulp to move by) is kept, as [`box1`](super::scalar::box1) keeps it
+/// Offset slack on such an axis, `2⁻⁴⁰·2¹⁰⁰`: a ray lying in a box face's plane (`p = o`, even at
+/// `o = 0`, where `o·inv` has no ulp to move by) is kept, as [`box1`](super::scalar::box1) keeps it
 /// (`(p − o)·∞` is NaN there).
 const HUGE_SLACK: f32 = (1u64 << 60) as f32;
 
-/// One axis of the wide walks' fused slab test: the plane distances are `t = p·inv − c`, one
-/// fused multiply-subtract per plane where [`box1`](super::scalar::box1)'s `(p − o)·inv` takes a subtraction and a
-/// product (Embree's fast kernels precompute `o·inv` so; it saved a fifth of the wide packet
-/// walk's lane test, docs/traverse.md, "What each kept change bought"). Returns `[inv, c_near, c_far]`:
-/// `c_near = o·inv + s` and `c_far = o·inv − s`, `s` = [`OFFSET_SLACK`]`·|o·inv|`, so the near
-/// distance never exceeds `(p − o)·inv` and the far one never falls below it, but for the
-/// rounding of the result, which [`FAR_UP`] covers. The test stays conservative at any origin;
-/// its boxes grow by one to two ulps of the origin's coordinate (four unfused). An infinite
-/// `inv` becomes ±[`INV_HUGE`] with [`HUGE_SLACK`] added to `s`; where `o·inv` overflows,
-/// `c_near` or `c_far` is NaN and the axis culls nothing (the max and min keep the other
-/// operand), as in [`box1`](super::scalar::box1) at `0·∞`.
+/// One axis of the wide walks' fused slab test: the plane distances are `t = p·inv − c`, one fused
+/// multiply-subtract per plane where [`box1`](super::scalar::box1)'s `(p − o)·inv` takes a
+/// subtraction and a product (Embree's fast kernels precompute `o·inv` so; it saved a fifth of the
+/// wide packet walk's lane test, docs/traverse.md, "What each kept change bought"). Returns
+/// `[inv, c_near, c_far]`: `c_near = o·inv + s` and `c_far = o·inv − s`, `s` =
+/// [`OFFSET_SLACK`]`·|o·inv|`, so the near distance never exceeds `(p − o)·inv` and the far one never falls below it, but for
+/// the rounding of the result, which [`FAR_UP`] covers. The test stays conservative at any origin;
+/// its boxes grow by one to two ulps of the origin's coordinate (four unfused). An infinite `inv`
+/// becomes ±[`INV_HUGE`] with [`HUGE_SLACK`] added to `s`; where `o·inv` overflows, `c_near` or
+/// `c_far` is NaN and the axis culls nothing (the max and min keep the other operand), as in
+/// [`box1`](super::scalar::box1) at `0·∞`.
 #[inline(always)]
 pub(super) fn slab(o: f32, inv: f32) -> [f32; 3] {
     let infinite = inv.abs() == f32::INFINITY;
