@@ -5,8 +5,8 @@
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
-use super::directional::{self, SH_CHANNELS, ShL1};
-use super::run::{BakeError, file_error};
+use super::directional::{self, DirectionalFile, SH_CHANNELS, ShL1};
+use super::error::{BakeError, file_error};
 use super::settings::{MAX_ITERATIONS, SettingsError};
 use super::shard::Split;
 use super::workdir::{
@@ -16,7 +16,7 @@ use crate::output::atomic::temporary_name;
 use crate::output::denoise::{ATrous, Denoiser, NoisyTexel, Window};
 use crate::output::exr_pages::{PageStream, page_path};
 use crate::output::journal::{Journal, TileRecord, dedup_tiles, rho_sums};
-use crate::output::result_file::{BatchFile, DirectionalFile, FLAG_BAKED, ResultFile, TexelResult};
+use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
 use crate::output::seams::{
     EdgePoint, PageFacts, Pixel, Written as PixelWritten, edge_system, mean_relative_jump,
     pixels_read, read_seam_file, seam_file_path, stitch_channels,
