@@ -778,16 +778,20 @@ fn unwrap_layout(
     let mut charted = unwrap::Charted::new(scene, &to_unwrap)?;
     let mut per_mesh_seconds = 0.0;
     let mut tries = 0;
-    // The smallest atlas packed so far (area, width, height, density) and the tries since it
-    // last shrank by 3 %: past a point the charts' padding, not their area, sets the atlas's
-    // size and a lower density no longer shrinks it.
+    // The smallest atlas packed so far (area, width, height, density, charts) and the tries
+    // since it last shrank by 3 %: past a point the charts' padding, not their area, sets the
+    // atlas's size, and the density drops faster to find that floor.
     let mut smallest: Option<(u64, u32, u32, f64, u32)> = None;
     let mut stalled = 0;
+    let lowest = d * 1e-4;
     let (atlases, cs, places, n) = loop {
         tries += 1;
-        if tries > 100 || stalled >= 6 {
+        if tries > 100 || d < lowest {
             let (_, w, h, at, charts) = smallest.unwrap_or((0, page.0, page.1, d, 0));
-            let fit = |v: u32| (v + 2 * GUTTER).next_multiple_of(TILE_SIZE);
+            // 5 % spare: the packer's placement varies with the density.
+            let fit = |v: u32| {
+                ((f64::from(v) * 1.05).ceil() as u32 + 2 * GUTTER).next_multiple_of(TILE_SIZE)
+            };
             return Err(resolution_error(format!(
                 "the {} charts do not fit one {}x{} page at any density tried: at {at:.4} texels/unit they pack into {w}x{h} texels, so the smallest page that holds them is about {}x{} (--size {}x{}); or leave out --size and prepare picks pages for --texels-per-unit",
                 charts,
@@ -814,6 +818,9 @@ fn unwrap_layout(
             d *= 0.98
                 * (f64::from(page.0) / f64::from(one.width + 2 * GUTTER))
                     .min(f64::from(page.1) / f64::from(one.height + 2 * GUTTER));
+            if stalled >= 3 {
+                d *= 0.5;
+            }
             continue;
         } else {
             // Too big for one page: an atlas per mesh, each on one page.
