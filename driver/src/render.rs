@@ -27,7 +27,9 @@
 //!
 //! Tone mapping: exposure, then Reinhard's `x / (1 + x)` and the sRGB curve
 //! ([`crate::preview::tonemap_reinhard`]); the automatic exposure maps the mean luminance of
-//! the surface pixels to ½, as the lightmap previews do. Views compared side by side (the
+//! the surface pixels to ½, as the lightmap previews do, and for the inside view their
+//! log-average to an 18 % grey ([`View::key_exposure`], Reinhard et al. 2002's key), which
+//! keeps both sunlit floors and the shade beside them readable. Views compared side by side (the
 //! demo's baseline and guided) share one exposure.
 
 use std::path::{Path, PathBuf};
@@ -50,6 +52,8 @@ use crate::transport::sky::sky_radiance;
 pub const SUBPIXELS: u32 = 2;
 /// Vertical field of view of the automatic view, radians.
 pub const AUTO_FOV: f32 = 0.75;
+/// The luminance [`View::key_exposure`] maps the log-average to.
+pub const KEY: f32 = 0.18;
 /// Vertical field of view of the inside view, radians (about 65°, a game's).
 pub const INSIDE_FOV: f32 = 1.13;
 /// Points per axis of the grid [`Camera::inside`] probes (1000 points).
@@ -620,6 +624,28 @@ impl View {
         }
     }
 
+    /// The exposure that maps the log-average luminance of the pixels that see only surfaces
+    /// to [`KEY`] (Reinhard et al. 2002's key value, an 18 % grey; 1 when no surface is
+    /// seen): the inside view's, where sunlit patches next to shade would set the plain mean
+    /// ([`Self::auto_exposure`]) so high that the shade is all one sees and the sun washes out.
+    pub fn key_exposure(&self) -> f32 {
+        let (sum, n) = self
+            .radiance
+            .iter()
+            .zip(&self.surface)
+            .filter(|(_, s)| u32::from(**s) == SUBPIXELS * SUBPIXELS)
+            .fold((0.0f64, 0u64), |(sum, n), (c, _)| {
+                let l = f64::from(luminance_f32(c.to_array())).max(0.0);
+                (sum + (l + 1e-4).ln(), n + 1)
+            });
+        let average = (sum / n.max(1) as f64).exp() as f32;
+        if n > 0 && average.is_finite() && average > 1e-4 {
+            KEY / average
+        } else {
+            1.0
+        }
+    }
+
     /// Tone-mapped 8-bit sRGB rows.
     pub fn to_rgb8(&self, exposure: f32) -> Vec<u8> {
         self.radiance
@@ -738,6 +764,33 @@ mod tests {
         for d in sphere_directions(64) {
             assert!(matches!(stage.probe(e, d), Sight::Seen(_)), "{d}");
         }
+    }
+
+    #[test]
+    fn the_key_exposure_maps_the_log_average_of_surface_pixels_to_an_18_percent_grey() {
+        let full = (SUBPIXELS * SUBPIXELS) as u8;
+        let view = View {
+            width: 4,
+            height: 1,
+            // Luminances 0.1 and 10 (geometric mean 1), a sky pixel that does not count, and
+            // a pixel that is half sky.
+            radiance: vec![
+                Vec3::splat(0.1),
+                Vec3::splat(10.0),
+                Vec3::splat(1000.0),
+                Vec3::splat(500.0),
+            ],
+            surface: vec![full, full, 0, full / 2],
+        };
+        let e = view.key_exposure();
+        assert!((e - KEY).abs() < 1e-3 * KEY, "{e}");
+        // The plain mean would be 5.05: the shade at 0.1 would be nearly black.
+        assert!((view.auto_exposure() - 1.0 / 5.05).abs() < 1e-4);
+        let sky = View {
+            surface: vec![0; 4],
+            ..view
+        };
+        assert_eq!(sky.key_exposure(), 1.0);
     }
 
     #[test]

@@ -40,7 +40,8 @@ pub struct RenderArgs {
     /// view.
     #[arg(long, value_enum)]
     pub cutaway: Option<OnOff>,
-    /// Exposure before tone mapping (default: the mean surface luminance maps to ½).
+    /// Exposure before tone mapping (default: the mean surface luminance maps to ½; for the
+    /// inside view, the log-average luminance maps to an 18 % grey).
     #[arg(long)]
     pub exposure: Option<f32>,
     /// Sun and sky, replacing the scene file's (the sky is what rays that leave the scene
@@ -119,7 +120,13 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
             cutaway,
         },
     );
-    let exposure = args.exposure.unwrap_or_else(|| view.auto_exposure());
+    let exposure = args.exposure.unwrap_or_else(|| {
+        if inside.is_some() {
+            view.key_exposure()
+        } else {
+            view.auto_exposure()
+        }
+    });
     crate::preview::write_png_rgb8(&args.out, view.width, view.height, &view.to_rgb8(exposure))?;
     eprintln!(
         "{}: {}×{} from {}, exposure {exposure:.4}",
