@@ -119,8 +119,9 @@ pub enum SceneError {
         /// How many degenerate triangles were dropped.
         degenerate: usize,
     },
-    /// A texture image (OBJ `map_Kd`) is missing or cannot be decoded. glTF images are
-    /// [`SceneError::GltfResource`].
+    /// A texture image (OBJ `map_Kd`) is missing or cannot be decoded: the OBJ loader notes
+    /// it as a [`MissingTexture`] and goes on (module docs), so [`Scene::load`] does not
+    /// return it.
     #[error("{path}: texture {image}: {message}")]
     Texture {
         /// The scene (or MTL) file naming it.
