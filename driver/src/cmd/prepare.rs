@@ -17,12 +17,12 @@ use crate::scene::{
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct LightFlags {
     /// A sun: the direction towards it (+Y up) and optionally its irradiance on a plane
-    /// facing it, one value or R,G,B (default 3). Replaces a scene file's [sun]. Give
+    /// facing it, one value or R,G,B (default 3). Replaces a scene file's sun. Give
     /// prepare, bake and render the same.
     #[arg(long, value_name = "X,Y,Z[:IRRADIANCE]", value_parser = parse_sun, allow_hyphen_values = true)]
     pub sun: Option<SunSpec>,
     /// A sky: constant radiance R,G,B (one value for grey) or an equirectangular .exr
-    /// (+Y up). Replaces a scene file's [sky]. Give prepare, bake and render the same.
+    /// (+Y up). Replaces a scene file's sky. Give prepare, bake and render the same.
     #[arg(long, value_name = "R,G,B|SKY.exr", value_parser = parse_sky, allow_hyphen_values = true)]
     pub sky: Option<SkySpec>,
 }

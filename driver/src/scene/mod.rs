@@ -657,7 +657,8 @@ mod scene_file;
 pub mod texture;
 
 pub use scene_file::{
-    LightOverrides, SceneFile, SkySpec, SphereSpec, SunSpec, load_equirect, parse_sky, parse_sun,
+    DEFAULT_SUN_IRRADIANCE, LightOverrides, SUN_RADIUS_DEG, SceneFile, SkySpec, SphereSpec,
+    SunSpec, load_equirect, parse_sky, parse_sun,
 };
 pub use texture::{BaseColorTexture, TextureOptions};
 
