@@ -283,7 +283,16 @@ pub fn bake_pass_with_progress(
     drop(world);
     if !report.interrupted && job.shard.count == 1 && only_pass.is_none() {
         let clock = Instant::now();
-        let written = finish_with(&texels, std::slice::from_ref(&dir), &job.out, job.finish)?;
+        // The finish (dilation, EXR, preview) runs on --threads threads, as the gather does.
+        let finish = || finish_with(&texels, std::slice::from_ref(&dir), &job.out, job.finish);
+        let written = match rayon::ThreadPoolBuilder::new()
+            .num_threads(job.threads.max(1))
+            .thread_name(|i| format!("guidebake-finish-{i}"))
+            .build()
+        {
+            Ok(pool) => pool.install(finish),
+            Err(_) => finish(),
+        }?;
         report.seconds.write_pages = clock.elapsed().as_secs_f64();
         report.rho = written.rho;
         report.pages = written.pages;
