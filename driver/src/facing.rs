@@ -447,7 +447,7 @@ impl<'a> Probe<'a> {
     fn sample(&self, node: u32) -> SideRays {
         let t = (node / 2) as usize;
         let c = &self.corners[t];
-        let n = self.normals[t] * if node % 2 == 0 { 1.0 } else { -1.0 };
+        let n = self.normals[t] * if node.is_multiple_of(2) { 1.0 } else { -1.0 };
         let mut out = SideRays::default();
         if n == Vec3::ZERO {
             return out;
@@ -561,9 +561,7 @@ impl<'a> Probe<'a> {
         if power.is_empty() || !total.is_finite() {
             return None;
         }
-        let count = (LIGHT_RAYS * power.len())
-            .min(LIGHT_RAYS * 64)
-            .max(LIGHT_RAYS);
+        let count = (LIGHT_RAYS * power.len()).clamp(LIGHT_RAYS, LIGHT_RAYS * 64);
         let mut rays = Vec::with_capacity(count);
         let mut carried = Vec::with_capacity(count);
         for &(t, p) in &power {
