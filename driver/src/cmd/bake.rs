@@ -76,8 +76,10 @@ pub struct BakeArgs {
     /// next-event estimation alone, or hits alone (the bake before emitters were lights).
     #[arg(long, value_enum, default_value_t = EmitterSampling::default())]
     pub emitters: EmitterSampling,
-    /// How next-event estimation picks an emitter: by power, or by the light tree (which
-    /// prefers emitters that matter at the shading point).
+    /// How next-event estimation picks an emitter: `local` (the default) weighs each of a
+    /// world's emitters at the shading point (power, distance, both cosines; worlds of up to
+    /// 8 emitters, beyond by power), `power` in proportion to power alone, `tree` by the light
+    /// tree (which prefers emitters that matter at the shading point).
     #[arg(long, value_enum, default_value_t = EmitterSelection::default())]
     pub emitter_selection: EmitterSelection,
     /// The world-wide bias correction ρ (paper §2.5): `auto` applies it to the combinations
