@@ -604,18 +604,21 @@ fn shade(
 }
 
 impl View {
-    /// The exposure that maps the mean luminance of the pixels that see only surfaces to ½
-    /// after Reinhard
-    /// (1 when no surface is seen or the mean is not positive).
-    pub fn auto_exposure(&self) -> f32 {
-        let (sum, n) = self
-            .radiance
+    /// The luminance of each pixel that sees only surfaces (every subpixel hit one).
+    fn surface_luminances(&self) -> impl Iterator<Item = f64> + '_ {
+        self.radiance
             .iter()
             .zip(&self.surface)
             .filter(|(_, s)| u32::from(**s) == SUBPIXELS * SUBPIXELS)
-            .fold((0.0f64, 0u64), |(sum, n), (c, _)| {
-                (sum + f64::from(luminance_f32(c.to_array())), n + 1)
-            });
+            .map(|(c, _)| f64::from(luminance_f32(c.to_array())))
+    }
+
+    /// The exposure that maps the mean luminance of the pixels that see only surfaces to ½
+    /// after Reinhard (1 when no surface is seen or the mean is not positive).
+    pub fn auto_exposure(&self) -> f32 {
+        let (sum, n) = self
+            .surface_luminances()
+            .fold((0.0f64, 0u64), |(sum, n), l| (sum + l, n + 1));
         let mean = (sum / n.max(1) as f64) as f32;
         if mean > 0.0 && mean.is_finite() {
             1.0 / mean
@@ -630,13 +633,9 @@ impl View {
     /// ([`Self::auto_exposure`]) so high that the shade is all one sees and the sun washes out.
     pub fn key_exposure(&self) -> f32 {
         let (sum, n) = self
-            .radiance
-            .iter()
-            .zip(&self.surface)
-            .filter(|(_, s)| u32::from(**s) == SUBPIXELS * SUBPIXELS)
-            .fold((0.0f64, 0u64), |(sum, n), (c, _)| {
-                let l = f64::from(luminance_f32(c.to_array())).max(0.0);
-                (sum + (l + 1e-4).ln(), n + 1)
+            .surface_luminances()
+            .fold((0.0f64, 0u64), |(sum, n), l| {
+                (sum + (l.max(0.0) + 1e-4).ln(), n + 1)
             });
         let average = (sum / n.max(1) as f64).exp() as f32;
         if n > 0 && average.is_finite() && average > 1e-4 {

@@ -467,17 +467,7 @@ impl Writer<'_> {
             message,
         };
         let json = self.root.to_vec().map_err(|e| write_error(e.to_string()))?;
-        let glb = ::gltf::binary::Glb {
-            header: ::gltf::binary::Header {
-                magic: *b"glTF",
-                version: 2,
-                length: 0,
-            },
-            json: json.into(),
-            bin: Some(self.bin.into()),
-        };
-        let bytes = glb.to_vec().map_err(|e| write_error(e.to_string()))?;
-        crate::output::atomic::write(out, bytes).map_err(|e| write_error(e.to_string()))
+        glb_file(out, json, self.bin).map_err(write_error)
     }
 }
 
@@ -718,6 +708,12 @@ pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
         root["extensionsUsed"] = json!(["KHR_materials_emissive_strength"]);
     }
     let json = serde_json::to_vec(&root).map_err(|e| write_error(e.to_string()))?;
+    glb_file(out, json, bin).map_err(write_error)
+}
+
+/// A binary glTF of `json` and the buffer `bin`, written atomically to `out` (nothing is left
+/// there on failure); the error's message.
+fn glb_file(out: &Path, json: Vec<u8>, bin: Vec<u8>) -> Result<(), String> {
     let glb = ::gltf::binary::Glb {
         header: ::gltf::binary::Header {
             magic: *b"glTF",
@@ -727,6 +723,6 @@ pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
         json: json.into(),
         bin: Some(bin.into()),
     };
-    let bytes = glb.to_vec().map_err(|e| write_error(e.to_string()))?;
-    crate::output::atomic::write(out, bytes).map_err(|e| write_error(e.to_string()))
+    let bytes = glb.to_vec().map_err(|e| e.to_string())?;
+    crate::output::atomic::write(out, bytes).map_err(|e| e.to_string())
 }
