@@ -1659,13 +1659,17 @@ template<typename Key, typename Value, typename H = Hash<Key>, typename E = Equa
 class HashMap
 {
 public:
-	HashMap() : m_size(4096), m_numSlots(0), m_slots(nullptr)
+	// guidebake: the least size was 4096 (21 kB of slots and 4096 reserved keys, values and
+	// links, ~85 kB) for every map, also a chart's edge map of a few faces: 1.3 GB for the
+	// 16 209 charts of a 70 754-triangle level. 16 here; a lookup's result does not depend
+	// on the slot count (keys that are equal share a slot and keep their order).
+	HashMap() : m_size(16), m_numSlots(0), m_slots(nullptr)
 	{
 	}
 
 	HashMap(uint32_t size) : m_size(size), m_numSlots(0), m_slots(nullptr)
 	{
-		m_size = max(m_size, 4096u);
+		m_size = max(m_size, 16u);
 	}
 
 	~HashMap()
