@@ -1,19 +1,14 @@
 #!/usr/bin/env python3
 """Where the squared error of a bake comes from, by region of the Veach bidir room.
    regions.py TEXELS REF.exr RUN_A_seed1.exr RUN_A_seed2.exr [label] ...  (pairs of seeds)"""
-import struct, sys
-import numpy as np, OpenEXR
+import os
+import sys
 
-def texels(path):
-    b = open(path, "rb").read()
-    count = struct.unpack_from("<Q", b, 24)[0]
-    offset = struct.unpack_from("<Q", b, 72)[0]
-    rec = np.dtype([("pos", "<f4", 3), ("n", "<f4", 3), ("du", "<f4", 3), ("dv", "<f4", 3),
-                    ("page", "<u4"), ("px", "<u2", 2), ("tri", "<u4"), ("flags", "<u4")])
-    return np.frombuffer(b, dtype=rec, count=count, offset=offset)
+import numpy as np
 
-def rgb(p):
-    return np.asarray(OpenEXR.File(p).channels()["RGB"].pixels, dtype=np.float64)
+# The texel-file and EXR readers, one home: docs/bench/surfaces/error_maps.py.
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "surfaces"))
+from error_maps import rgb, texels  # noqa: E402
 
 t = texels(sys.argv[1])
 valid = (t["flags"] & 1) != 0
