@@ -16,6 +16,11 @@
 //! (front face towards it, above its horizon) — a proxy for the samples that are not
 //! wasted — and the tree's share of failed picks.
 //!
+//! Group `lights_pick_bidir` (picks/s): the same pick + pmf through `Emitters` (as next-event
+//! estimation calls it) in the Veach bidir room (`../shared/scenes/converted/
+//! bitterli_veach_bidir.glb`, 4 emissive triangles; skipped when absent), at random points
+//! of the room with random normals, for `power`, `tree` and `local` selection.
+//!
 //! Run: `cargo bench --bench lights -- --warm-up-time 1 --measurement-time 2`
 
 use std::hint::black_box;
@@ -27,6 +32,7 @@ use guidebake::scene::Scene;
 use guidebake::synth::{SynthOptions, synth_with};
 use guidebake::texels::TexelFile;
 use guidebake::transport::alias::AliasTable;
+use guidebake::transport::emitters::{EmitterSelection, Emitters};
 use guidebake::transport::light_tree::{EmitterBounds, LightTree};
 use guidebake_kernels::testing::Pcg32;
 
@@ -175,6 +181,55 @@ fn bench_lights(c: &mut Criterion) {
         });
     }
     pick.finish();
+    bench_bidir(c);
+}
+
+/// The Veach bidir room's emitters through [`Emitters::select`] and
+/// [`Emitters::selection_pmf`], by each selection.
+fn bench_bidir(c: &mut Criterion) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/scenes/converted/bitterli_veach_bidir.glb");
+    let Ok(scene) = Scene::load(&path) else {
+        eprintln!("lights_pick_bidir: {} not found, skipped", path.display());
+        return;
+    };
+    let triangles: Vec<([Vec3; 3], Vec3, Vec3)> = (0..scene.triangles.len())
+        .map(|i| {
+            let [a, b, c] = scene.triangles[i].positions;
+            let n = (b - a).cross(c - a).normalize_or_zero();
+            ([a, b, c], n, scene.triangle_material(i).emission)
+        })
+        .collect();
+    let mut rng = Pcg32::new(3, 5);
+    let points: Vec<(Vec3, Vec3, f32)> = (0..POINTS)
+        .map(|_| {
+            let mut r = || rng.next_f32();
+            let p = Vec3::new(8.0 * r() - 4.0, 8.0 * r(), 8.0 * r() - 4.0);
+            let n = Vec3::new(r() - 0.5, r() - 0.5, r() - 0.5).normalize_or(Vec3::Y);
+            (p, n, r())
+        })
+        .collect();
+    let mut group = c.benchmark_group("lights_pick_bidir");
+    group.throughput(Throughput::Elements(points.len() as u64));
+    for sel in [
+        EmitterSelection::Power,
+        EmitterSelection::Tree,
+        EmitterSelection::Local,
+    ] {
+        let emitters = Emitters::new(triangles.iter().copied(), sel).expect("emitters");
+        group.bench_function(BenchmarkId::new(sel.to_string(), emitters.len()), |b| {
+            b.iter(|| {
+                let mut sum = 0.0f32;
+                for &(p, n, u) in &points {
+                    if let Some((i, prob)) = emitters.select(black_box(p), n, u) {
+                        sum += prob + emitters.selection_pmf(p, n, i);
+                    }
+                }
+                sum
+            })
+        });
+    }
+    group.finish();
 }
 
 criterion_group!(benches, bench_lights);

@@ -1137,8 +1137,8 @@ criterion_main!(benches);
 
 /// Callgrind's `START_INSTRUMENTATION` / `STOP_INSTRUMENTATION` client requests (valgrind's
 /// `callgrind.h`), so that `--instr-atstart=no` counts only the passes of `TRAVERSE_ONLY`
-/// (instruction counts, simulated cache misses: docs/traverse.md, session 17). Natively the
-/// request is a sequence of rotations that leaves every register as it was.
+/// (instruction counts, simulated cache misses: docs/traverse.md, "How it is measured"). Natively
+/// the request is a sequence of rotations that leaves every register as it was.
 mod callgrind {
     /// Switches instrumentation on or off (no effect outside valgrind or off x86-64).
     pub fn instrument(on: bool) {

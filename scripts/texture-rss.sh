@@ -63,6 +63,6 @@ gltf = {
 json.dump(gltf, open(f"{out}/big.gltf", "w"))
 EOF
 for run in $(seq "$runs"); do
-    /usr/bin/time -f "run $run: max RSS %M KiB, %e s" "$bin" prepare "$dir/big.gltf" \
+    /usr/bin/time -f "run $run: max RSS %M KiB, %e s" "$bin" prepare "$dir/big.gltf" --sky 1 \
         -o "$dir/big.texels" >/dev/null
 done

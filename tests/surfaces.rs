@@ -14,8 +14,8 @@ use guidebake::bake::settings::{BakeSettings, Combine, Guiding, Transport};
 use guidebake::bake::shard::Shard;
 use guidebake::output::readback::read_lightmap;
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, Unwrap, prepare_with};
-use guidebake::scene::{Material, Scene, Sky, Sun, Triangle};
-use guidebake::test_support::quad;
+use guidebake::scene::{Scene, Sky, Sun, Triangle};
+use guidebake::test_support::{grey_and_lamp, outward_box_faces, quad};
 use guidebake::texels::{FLAG_INSIDE, TexelFile};
 
 /// Seeds of the default bake: the spread of their means gives each texel's standard error
@@ -26,21 +26,6 @@ const SPP: u32 = 64;
 /// Samples per texel of the path reference: 16× the default bakes' together, so its own
 /// noise adds a sixteenth to the variance of their difference.
 const REFERENCE_SPP: u32 = 16 * SEEDS * SPP;
-
-fn materials() -> Vec<Material> {
-    let grey = Material {
-        name: "grey".into(),
-        base_color_texture: None,
-        albedo: Vec3::splat(0.6),
-        emission: Vec3::ZERO,
-    };
-    let lamp = Material {
-        name: "lamp".into(),
-        emission: Vec3::splat(20.0),
-        ..grey.clone()
-    };
-    vec![grey, lamp]
-}
 
 /// `quads` (corner, u, v) as triangles of `material`, every third one wound the other way.
 fn scrambled(quads: &[(Vec3, Vec3, Vec3)], material: u32) -> Vec<Triangle> {
@@ -56,19 +41,6 @@ fn scrambled(quads: &[(Vec3, Vec3, Vec3)], material: u32) -> Vec<Triangle> {
         }
     }
     out
-}
-
-/// The six faces of the box `lo..lo + size` as quads whose `u × v` faces out.
-fn box_faces(lo: Vec3, size: Vec3) -> [(Vec3, Vec3, Vec3); 6] {
-    let (x, y, z) = (Vec3::X * size.x, Vec3::Y * size.y, Vec3::Z * size.z);
-    [
-        (lo, y, x),
-        (lo + z, x, y),
-        (lo, z, y),
-        (lo + x, y, z),
-        (lo, x, z),
-        (lo + y, z, x),
-    ]
 }
 
 /// Prepares `scene` (unwrapped by xatlas) into `dir`: the texel file.
@@ -163,14 +135,14 @@ fn compare(scene: &Scene, texels: &Path, dir: &Path) -> Compared {
 #[test]
 fn a_closed_box_in_a_room_open_on_one_side_bakes_its_outside() {
     let dir = tempfile::tempdir().unwrap();
-    let room: Vec<_> = box_faces(Vec3::new(-2.0, 0.0, -2.0), Vec3::new(4.0, 2.5, 4.0))
+    let room: Vec<_> = outward_box_faces(Vec3::new(-2.0, 0.0, -2.0), Vec3::new(4.0, 2.5, 4.0))
         .into_iter()
         .filter(|(c, u, v)| !(c.z == 2.0 && u.z == 0.0 && v.z == 0.0))
         .collect();
     let mut triangles = scrambled(&room, 0);
     let box_start = triangles.len();
     triangles.extend(scrambled(
-        &box_faces(Vec3::new(-0.5, 0.0, -0.8), Vec3::ONE),
+        &outward_box_faces(Vec3::new(-0.5, 0.0, -0.8), Vec3::ONE),
         0,
     ));
     let lamp_start = triangles.len();
@@ -184,7 +156,7 @@ fn a_closed_box_in_a_room_open_on_one_side_bakes_its_outside() {
             t.positions.swap(1, 2);
         }
     }
-    let mut scene = Scene::of_triangles("room with a box", triangles, materials());
+    let mut scene = Scene::of_triangles("room with a box", triangles, grey_and_lamp(0.6, 20.0));
     scene.meshes[0].has_lightmap_uvs = false;
     let texels = prepared(&scene, dir.path(), 6.0);
     let file = TexelFile::open(&texels).unwrap();
@@ -263,7 +235,7 @@ fn a_room_corner_bakes_as_path_transport_does() {
         (Vec3::new(-3.0, 0.0, 0.0), Vec3::X * 6.0, Vec3::Z * 4.0),
         (Vec3::new(-3.0, 0.0, 0.0), Vec3::Y * 3.0, Vec3::X * 6.0),
     ];
-    let mut scene = Scene::of_triangles("corner", scrambled(&quads, 0), materials());
+    let mut scene = Scene::of_triangles("corner", scrambled(&quads, 0), grey_and_lamp(0.6, 20.0));
     scene.meshes[0].has_lightmap_uvs = false;
     scene.sky = Sky::Constant(Vec3::new(0.3, 0.4, 0.6));
     scene.sun = Some(Sun {

@@ -7,8 +7,8 @@
 //! [`Node`]s (two child boxes per 64-byte node) over the triangles in leaf order ([`Tri`]s),
 //! collapses it into [`WideNode`]s (eight child boxes per node, same leaves, the wide nodes
 //! chosen by the least surface-area cost: [`collapse`]; [`Bvh::wide`]),
-//! which every ray the bake traces walks, single or in packets (docs/traverse.md, "Session 15:
-//! the bake's packets walk the wide tree on every world"), and writes each wide leaf's
+//! which every ray the bake traces walks, single or in packets (docs/traverse.md,
+//! "Whole bakes"), and writes each wide leaf's
 //! triangles as structure-of-arrays rows ([`leaf_rows`]), the wide tree's only copy of them.
 //! The binary tree and its `Tri`s are the collapse's input; [`Bvh::build`] drops them
 //! afterwards (the 1M-triangle city's resident tree: 53 MB, where it held 123 MB with them;

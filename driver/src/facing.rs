@@ -447,7 +447,7 @@ impl<'a> Probe<'a> {
     fn sample(&self, node: u32) -> SideRays {
         let t = (node / 2) as usize;
         let c = &self.corners[t];
-        let n = self.normals[t] * if node % 2 == 0 { 1.0 } else { -1.0 };
+        let n = self.normals[t] * if node.is_multiple_of(2) { 1.0 } else { -1.0 };
         let mut out = SideRays::default();
         if n == Vec3::ZERO {
             return out;
@@ -561,9 +561,7 @@ impl<'a> Probe<'a> {
         if power.is_empty() || !total.is_finite() {
             return None;
         }
-        let count = (LIGHT_RAYS * power.len())
-            .min(LIGHT_RAYS * 64)
-            .max(LIGHT_RAYS);
+        let count = (LIGHT_RAYS * power.len()).clamp(LIGHT_RAYS, LIGHT_RAYS * 64);
         let mut rays = Vec::with_capacity(count);
         let mut carried = Vec::with_capacity(count);
         for &(t, p) in &power {
@@ -662,7 +660,8 @@ mod tests {
     use glam::Vec2;
 
     use super::*;
-    use crate::scene::{Material, Sky, Triangle};
+    use crate::scene::{Sky, Triangle};
+    use crate::test_support::{grey_and_lamp, outward_box_faces};
 
     /// Two triangles per quad `(corner, u, v)`, wound so that `u × v` is their front.
     fn quads(quads: &[(Vec3, Vec3, Vec3)], material: u32) -> Vec<Triangle> {
@@ -679,34 +678,6 @@ mod tests {
             .iter()
             .flat_map(|&(c, u, v)| [tri([c, c + u, c + u + v]), tri([c, c + u + v, c + v])])
             .collect()
-    }
-
-    /// The six faces of the box `lo..lo + size`, wound to face out of it.
-    fn box_faces(lo: Vec3, size: Vec3) -> Vec<(Vec3, Vec3, Vec3)> {
-        let (x, y, z) = (Vec3::X * size.x, Vec3::Y * size.y, Vec3::Z * size.z);
-        vec![
-            (lo, y, x),
-            (lo + z, x, y),
-            (lo, z, y),
-            (lo + x, y, z),
-            (lo, x, z),
-            (lo + y, z, x),
-        ]
-    }
-
-    fn materials() -> Vec<Material> {
-        let grey = Material {
-            name: "grey".into(),
-            base_color_texture: None,
-            albedo: Vec3::splat(0.5),
-            emission: Vec3::ZERO,
-        };
-        let lamp = Material {
-            name: "lamp".into(),
-            emission: Vec3::splat(10.0),
-            ..grey.clone()
-        };
-        vec![grey, lamp]
     }
 
     /// Flips every other triangle's winding, as the converted Bitterli scenes' are arbitrary.
@@ -732,21 +703,21 @@ mod tests {
     /// from outside, whatever the winding.
     #[test]
     fn a_room_open_on_one_side_is_seen_from_inside_and_a_box_in_it_from_outside() {
-        let room = box_faces(Vec3::new(-5.0, 0.0, -5.0), Vec3::new(10.0, 4.0, 10.0));
+        let room = outward_box_faces(Vec3::new(-5.0, 0.0, -5.0), Vec3::new(10.0, 4.0, 10.0));
         // Drop the +z face (the one whose corner is at z = 5 and spans x, y).
         let walls: Vec<_> = room
             .into_iter()
             .filter(|(c, u, v)| !(c.z == 5.0 && u.z == 0.0 && v.z == 0.0))
             .collect();
         let mut triangles = quads(&walls, 0);
-        let cube = box_faces(Vec3::new(-1.0, 0.0, -1.0), Vec3::splat(2.0));
+        let cube = outward_box_faces(Vec3::new(-1.0, 0.0, -1.0), Vec3::splat(2.0));
         let box_start = triangles.len();
         triangles.extend(quads(&cube, 0));
         let lamp_start = triangles.len();
         // A lamp facing down, 0.1 below the ceiling.
         triangles.extend(quads(&[(Vec3::new(-0.5, 3.9, -0.5), Vec3::X, Vec3::Z)], 1));
         scramble(&mut triangles[..lamp_start]);
-        let scene = Scene::of_triangles("room", triangles, materials());
+        let scene = Scene::of_triangles("room", triangles, grey_and_lamp(0.5, 10.0));
         let (visibility, report) = seen_sides(&scene).unwrap();
         let sides = visibility.sides();
         for (i, t) in scene.triangles.iter().enumerate() {
@@ -782,12 +753,15 @@ mod tests {
     #[test]
     fn ground_under_a_sky_is_seen_from_above_and_a_thin_wall_from_both_sides() {
         let mut quads_ = vec![(Vec3::new(-20.0, 0.0, 20.0), Vec3::X * 40.0, Vec3::Z * -40.0)];
-        quads_.extend(box_faces(Vec3::new(-1.0, 0.0, -1.0), Vec3::splat(2.0)));
+        quads_.extend(outward_box_faces(
+            Vec3::new(-1.0, 0.0, -1.0),
+            Vec3::splat(2.0),
+        ));
         // A thin wall 4 m wide, 2 m tall, at x = 6.
         quads_.push((Vec3::new(6.0, 0.0, -2.0), Vec3::Y * 2.0, Vec3::Z * 4.0));
         let mut triangles = quads(&quads_, 0);
         scramble(&mut triangles);
-        let mut scene = Scene::of_triangles("ground", triangles, materials());
+        let mut scene = Scene::of_triangles("ground", triangles, grey_and_lamp(0.5, 10.0));
         scene.sky = Sky::Constant(Vec3::ONE);
         let (visibility, report) = seen_sides(&scene).unwrap();
         let sides = visibility.sides();
@@ -816,13 +790,14 @@ mod tests {
     /// the courtyard although its other side gets more light.
     #[test]
     fn a_consistently_wound_courtyard_keeps_its_winding() {
-        let faces: Vec<_> = box_faces(Vec3::new(-4.0, 0.0, -4.0), Vec3::new(8.0, 3.0, 8.0))
+        let faces: Vec<_> = outward_box_faces(Vec3::new(-4.0, 0.0, -4.0), Vec3::new(8.0, 3.0, 8.0))
             .into_iter()
             // Turned inwards, without the roof.
             .map(|(c, u, v)| (c, v, u))
             .filter(|(c, u, v)| !(c.y == 3.0 && u.y == 0.0 && v.y == 0.0))
             .collect();
-        let mut scene = Scene::of_triangles("courtyard", quads(&faces, 0), materials());
+        let mut scene =
+            Scene::of_triangles("courtyard", quads(&faces, 0), grey_and_lamp(0.5, 10.0));
         scene.sky = Sky::Constant(Vec3::splat(0.2));
         scene.sun = Some(crate::scene::Sun {
             direction: Vec3::new(-1.0, 0.15, 0.0).normalize(),
@@ -842,9 +817,9 @@ mod tests {
     /// wound outwards and with a consistent winding (the light, not the winding, decides).
     #[test]
     fn a_closed_lit_room_wound_outwards_is_seen_from_inside() {
-        let mut triangles = quads(&box_faces(Vec3::splat(-2.0), Vec3::splat(4.0)), 0);
+        let mut triangles = quads(&outward_box_faces(Vec3::splat(-2.0), Vec3::splat(4.0)), 0);
         triangles.extend(quads(&[(Vec3::new(-0.5, 1.9, -0.5), Vec3::X, Vec3::Z)], 1));
-        let scene = Scene::of_triangles("closed", triangles, materials());
+        let scene = Scene::of_triangles("closed", triangles, grey_and_lamp(0.5, 10.0));
         let (visibility, _) = seen_sides(&scene).unwrap();
         let sides = visibility.sides();
         assert!(

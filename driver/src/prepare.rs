@@ -40,6 +40,18 @@
 //! ([`prepare_with`], [`unwrap`]): their atlas and the other meshes' UV squares are packed
 //! onto pages, every triangle's UVs are rewritten as page UVs ([`Lightmap`]), and those are
 //! rasterised as above — the same UVs `--write-gltf` gives the engine.
+//!
+//! **A UV set that is not a lightmap atlas counts as missing** (docs/levels.md, "UV sets
+//! that are not lightmap atlases"): an OBJ's one UV set is usually the texture's, tiling
+//! far outside [0, 1] and mapping many faces onto the same texture space. Under
+//! `--unwrap missing` a mesh whose UVs leave [0, 1], have no area, or overlap themselves
+//! ([`uv_set_problem`]: more than [`SELF_OVERLAP_SHARE`] of the cells of a coarse
+//! [`ATLAS_TEST_SIZE`]² raster covered twice, each triangle counting only the cells whose
+//! centre lies inside it by a margin, so triangles sharing an edge never count twice) is
+//! unwrapped too; the report says why, per mesh ([`NotAtlas`]).
+//!
+//! An atlas that cannot fit says what would: the page size the charts packed into at the
+//! lowest density tried, or the density that fits the pages.
 
 use std::path::{Path, PathBuf};
 
@@ -127,6 +139,131 @@ pub struct PrepareReport {
     /// What the unwrapper did, when it ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unwrap: Option<UnwrapReport>,
+    /// Meshes whose UV set is not a lightmap atlas, and why ([`uv_set_problem`]).
+    pub not_atlas: Vec<NotAtlas>,
+    /// Textures the scene's loader could not read (filled in by the `prepare` command,
+    /// which loads the scene; [`crate::scene::LoadNotes`]).
+    pub missing_textures: Vec<crate::scene::MissingTexture>,
+}
+
+/// A mesh whose own UV set is not a lightmap atlas ([`uv_set_problem`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct NotAtlas {
+    /// The mesh.
+    pub mesh: String,
+    /// Why, e.g. "leaves [0, 1] (u -32.25..97.5, v -177..111.75)".
+    pub reason: String,
+    /// Whether it was unwrapped (under `--unwrap missing`; `never` keeps it as it is).
+    pub unwrapped: bool,
+}
+
+/// Edge of the coarse raster [`uv_set_problem`] tests a UV set for overlaps on.
+pub const ATLAS_TEST_SIZE: u32 = 256;
+/// A UV set overlaps itself when more than this share of the raster cells it covers are
+/// covered twice or more.
+pub const SELF_OVERLAP_SHARE: f64 = 0.01;
+/// How far outside [0, 1] an atlas's UVs may stray (rounding of exporters).
+const UV_RANGE_SLACK: f32 = 1e-3;
+/// How far inside a triangle, in cells, a cell centre must lie to count for it: a centre on
+/// the edge two triangles share counts for neither.
+const INSIDE_MARGIN: f32 = 1e-3;
+
+/// Why the UV set of the triangles `triangles` (one mesh's, all with UVs) is not a lightmap
+/// atlas, or `None` when it is one: its UVs leave [0, 1] (by more than rounding), it has no
+/// area, or it overlaps itself (module docs). Cost: the triangles' bounding boxes on an
+/// [`ATLAS_TEST_SIZE`]² raster (64 KiB).
+#[must_use]
+pub fn uv_set_problem(triangles: &[Triangle]) -> Option<String> {
+    let uvs = || triangles.iter().filter_map(|t| t.lightmap_uv);
+    let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+    let mut area = 0.0f64;
+    for uv in uvs() {
+        for v in uv {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        area += f64::from(uv_area(&uv).abs());
+    }
+    if lo.min_element() < -UV_RANGE_SLACK || hi.max_element() > 1.0 + UV_RANGE_SLACK {
+        return Some(format!(
+            "leaves [0, 1] (u {}..{}, v {}..{})",
+            lo.x, hi.x, lo.y, hi.y
+        ));
+    }
+    if !(area > 0.0) {
+        return Some("has no area".into());
+    }
+    const N: u32 = ATLAS_TEST_SIZE;
+    let mut count = vec![0u8; (N * N) as usize];
+    for uv in uvs() {
+        let q = uv.map(|v| v * N as f32);
+        let orientation = (q[1] - q[0]).perp_dot(q[2] - q[0]);
+        if orientation == 0.0 || !orientation.is_finite() {
+            continue;
+        }
+        let sign = orientation.signum();
+        // Per edge: the inward unit normal's distance function.
+        let edges = [0, 1, 2].map(|i| {
+            let (a, b) = (q[i], q[(i + 1) % 3]);
+            let len = (b - a).length();
+            (a, (b - a) * (sign / len))
+        });
+        let (x0, x1, y0, y1) = pixel_range(&q, (N, N));
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let c = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                if edges
+                    .iter()
+                    .all(|(a, e)| e.perp_dot(c - *a) > INSIDE_MARGIN)
+                {
+                    let n = &mut count[(y * N + x) as usize];
+                    *n = n.saturating_add(1);
+                }
+            }
+        }
+    }
+    let covered = count.iter().filter(|&&n| n > 0).count();
+    let twice = count.iter().filter(|&&n| n > 1).count();
+    if covered > 0 && twice as f64 > SELF_OVERLAP_SHARE * covered as f64 {
+        return Some(format!(
+            "overlaps itself ({:.1} % of the area it covers is covered twice or more)",
+            100.0 * twice as f64 / covered as f64
+        ));
+    }
+    None
+}
+
+/// The meshes of `scene` whose UV set is not a lightmap atlas; under [`Unwrap::Missing`]
+/// they are added to `selected` (the meshes to unwrap).
+fn not_atlas_meshes(scene: &Scene, unwrap: Unwrap, selected: &mut [bool]) -> Vec<NotAtlas> {
+    if unwrap == Unwrap::Always {
+        return Vec::new();
+    }
+    let problems: Vec<Option<String>> = scene
+        .meshes
+        .par_iter()
+        .enumerate()
+        .map(|(i, m)| {
+            if selected[i] || !m.has_lightmap_uvs || m.triangle_count == 0 {
+                return None;
+            }
+            let first = m.first_triangle as usize;
+            uv_set_problem(&scene.triangles[first..first + m.triangle_count as usize])
+        })
+        .collect();
+    let mut out = Vec::new();
+    for (i, problem) in problems.into_iter().enumerate() {
+        if let Some(reason) = problem {
+            let unwrapped = unwrap == Unwrap::Missing;
+            selected[i] |= unwrapped;
+            out.push(NotAtlas {
+                mesh: scene.meshes[i].name.clone(),
+                reason,
+                unwrapped,
+            });
+        }
+    }
+    out
 }
 
 /// What the unwrapper did ([`prepare_with`]).
@@ -297,7 +434,8 @@ pub fn prepare_with(
             ),
         });
     }
-    let selected = unwrap.meshes(scene);
+    let mut selected = unwrap.meshes(scene);
+    let not_atlas = not_atlas_meshes(scene, unwrap, &mut selected);
     if selected.iter().any(|&u| u) {
         let (unwrapped, pages, meshes, tpu, mut unwrap_report) =
             unwrap_layout(scene, opts.resolution, &selected)?;
@@ -309,6 +447,7 @@ pub fn prepare_with(
             .sum();
         unwrap_report.utilisation = report.texels as f64 / area;
         report.unwrap = Some(unwrap_report);
+        report.not_atlas = not_atlas;
         return Ok((report, lightmap));
     }
     let stats = mesh_uv_stats(scene);
@@ -328,7 +467,8 @@ pub fn prepare_with(
     } else {
         shared_layout(scene, &stats, opts.resolution)?
     };
-    let report = rasterise(scene, out, &pages, &meshes, tpu, per_mesh)?;
+    let mut report = rasterise(scene, out, &pages, &meshes, tpu, per_mesh)?;
+    report.not_atlas = not_atlas;
     Ok((report, Lightmap::of_records(scene, &pages, &meshes)))
 }
 
@@ -364,6 +504,8 @@ fn rasterise(
         flipped_triangles: triangles.iter().filter(|t| t.texels_face_back()).count() as u64,
         facing,
         unwrap: None,
+        not_atlas: Vec::new(),
+        missing_textures: Vec::new(),
     };
     for (page_index, page) in pages.iter().enumerate() {
         let raster = PageRaster::new(&triangles, page_index as u32, *page, &mut report);
@@ -519,7 +661,10 @@ fn per_mesh_layout(
     if n > 4096 {
         return Err(PrepareError::Resolution {
             path: scene.path.clone(),
-            message: format!("{n} pages needed; choose a smaller --texels-per-unit"),
+            message: format!(
+                "{n} pages needed at {d:.4} texels/unit; --texels-per-unit {:.4} or less fits 4096",
+                fitting_density(d, n)
+            ),
         });
     }
     let meshes = (0..scene.meshes.len())
@@ -622,8 +767,9 @@ fn unwrap_layout(
     let max_texels = 4096.0 * f64::from(PACK_PAGE) * f64::from(PACK_PAGE);
     if !(d.is_finite() && d > 0.0) || area * d * d / UNWRAP_FILL > max_texels {
         return Err(resolution_error(format!(
-            "{:.3e} m² at {d} texels/unit needs more than 4096 pages of {PACK_PAGE}²; choose a smaller --texels-per-unit",
-            area
+            "{:.3e} m² at {d} texels/unit needs more than 4096 pages of {PACK_PAGE}²; --texels-per-unit {:.4} or less fits",
+            area,
+            0.95 * (max_texels * UNWRAP_FILL / area).sqrt()
         )));
     }
     let max = page.0.min(page.1) - 2 * GUTTER;
@@ -632,21 +778,49 @@ fn unwrap_layout(
     let mut charted = unwrap::Charted::new(scene, &to_unwrap)?;
     let mut per_mesh_seconds = 0.0;
     let mut tries = 0;
+    // The smallest atlas packed so far (area, width, height, density, charts) and the tries
+    // since it last shrank by 3 %: past a point the charts' padding, not their area, sets the
+    // atlas's size, and the density drops faster to find that floor.
+    let mut smallest: Option<(u64, u32, u32, f64, u32)> = None;
+    let mut stalled = 0;
+    let lowest = d * 1e-4;
     let (atlases, cs, places, n) = loop {
         tries += 1;
-        if tries > 100 {
+        if tries > 100 || d < lowest {
+            let (_, w, h, at, charts) = smallest.unwrap_or((0, page.0, page.1, d, 0));
+            // 5 % spare: the packer's placement varies with the density.
+            let fit = |v: u32| {
+                ((f64::from(v) * 1.05).ceil() as u32 + 2 * GUTTER).next_multiple_of(TILE_SIZE)
+            };
             return Err(resolution_error(format!(
-                "the charts do not fit one {}x{} page at any density tried; choose a larger --size",
-                page.0, page.1
+                "the {} charts do not fit one {}x{} page at any density tried: at {at:.4} texels/unit they pack into {w}x{h} texels, so the smallest page that holds them is about {}x{} (--size {}x{}); or leave out --size and prepare picks pages for --texels-per-unit",
+                charts,
+                page.0,
+                page.1,
+                fit(w),
+                fit(h),
+                fit(w),
+                fit(h)
             )));
         }
         let one = charted.pack(scene, d as f32, max)?;
+        let area = u64::from(one.width) * u64::from(one.height);
+        match smallest {
+            Some((best, ..)) if area as f64 > 0.97 * best as f64 => stalled += 1,
+            _ => stalled = 0,
+        }
+        if smallest.is_none_or(|(best, ..)| area < best) {
+            smallest = Some((area, one.width, one.height, d, one.charts));
+        }
         let atlases = if fits(&one) {
             vec![one]
         } else if one_page {
             d *= 0.98
                 * (f64::from(page.0) / f64::from(one.width + 2 * GUTTER))
                     .min(f64::from(page.1) / f64::from(one.height + 2 * GUTTER));
+            if stalled >= 3 {
+                d *= 0.5;
+            }
             continue;
         } else {
             // Too big for one page: an atlas per mesh, each on one page.
@@ -656,9 +830,16 @@ fn unwrap_layout(
                 let a = c.pack(scene, d as f32, max)?;
                 per_mesh_seconds += c.seconds();
                 if !fits(&a) {
+                    let shrink = (f64::from(page.0) / f64::from(a.width + 2 * GUTTER))
+                        .min(f64::from(page.1) / f64::from(a.height + 2 * GUTTER));
                     return Err(resolution_error(format!(
-                        "mesh '{}' unwraps to {}x{} texels, more than a page of {}x{}; choose a smaller --texels-per-unit",
-                        scene.meshes[m].name, a.width, a.height, page.0, page.1
+                        "mesh '{}' unwraps to {}x{} texels at {d:.4} texels/unit, more than a page of {}x{}; --texels-per-unit {:.4} or less fits",
+                        scene.meshes[m].name,
+                        a.width,
+                        a.height,
+                        page.0,
+                        page.1,
+                        0.95 * d * shrink
                     )));
                 }
                 atlases.push(a);
@@ -678,7 +859,8 @@ fn unwrap_layout(
         }
         if n > 4096 {
             return Err(resolution_error(format!(
-                "{n} pages needed; choose a smaller --texels-per-unit"
+                "{n} pages needed at {d:.4} texels/unit; --texels-per-unit {:.4} or less fits 4096",
+                fitting_density(d, n)
             )));
         }
         break (atlases, cs, places, n);
@@ -783,6 +965,12 @@ fn unwrap_layout(
         utilisation: 0.0,
     };
     Ok((out, pages, records, d as f32, report))
+}
+
+/// A density at which what needed `n` pages at density `d` needs at most 4096 (pages hold
+/// area, which goes with the square of the density; 5 % spare for the packing).
+fn fitting_density(d: f64, n: u32) -> f64 {
+    0.95 * d * (4096.0 / f64::from(n)).sqrt()
 }
 
 /// `true` when texel centres of a 512² test grid are covered by triangles of two meshes.
@@ -1090,6 +1278,77 @@ fn clamp_barycentric(l: [f32; 3]) -> [f32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Triangles with these lightmap UVs (positions on a plane, irrelevant here).
+    fn with_uvs(uvs: &[[Vec2; 3]]) -> Vec<Triangle> {
+        uvs.iter()
+            .map(|&uv| Triangle {
+                positions: uv.map(|v| v.extend(0.0)),
+                normals: [Vec3::Z; 3],
+                lightmap_uv: Some(uv),
+                texture_uv: None,
+                colour: None,
+                mesh: 0,
+                material: 0,
+            })
+            .collect()
+    }
+
+    /// An n×n grid of quads over `cell(i, j)`'s UV square, two triangles each, split along
+    /// the diagonal (which runs through raster cell centres).
+    fn grid(n: u32, cell: impl Fn(u32, u32) -> (Vec2, f32)) -> Vec<[Vec2; 3]> {
+        let mut out = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let (o, s) = cell(i, j);
+                let [a, b, c, d] = [o, o + Vec2::X * s, o + Vec2::ONE * s, o + Vec2::Y * s];
+                out.push([a, b, c]);
+                out.push([a, c, d]);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_uv_set_is_an_atlas_unless_it_leaves_the_unit_square_overlaps_itself_or_has_no_area() {
+        let step = 1.0 / 16.0;
+        let atlas = grid(16, |i, j| (Vec2::new(i as f32, j as f32) * step, step));
+        assert_eq!(uv_set_problem(&with_uvs(&atlas)), None);
+        // Wound the other way (a mirrored chart) it is still one.
+        let mirrored: Vec<_> = atlas.iter().map(|&[a, b, c]| [a, c, b]).collect();
+        assert_eq!(uv_set_problem(&with_uvs(&mirrored)), None);
+        // One quad's worth of overlap in 256 quads (< 1 %) is tolerated.
+        let mut nearly = atlas.clone();
+        nearly.extend_from_slice(&atlas[..2]);
+        assert_eq!(uv_set_problem(&with_uvs(&nearly)), None);
+        // Every quad on the whole square: a tiling texture set squeezed into [0, 1].
+        let tiled = grid(16, |_, _| (Vec2::ZERO, 1.0));
+        let problem = uv_set_problem(&with_uvs(&tiled)).unwrap();
+        assert!(problem.starts_with("overlaps itself (100.0 %"), "{problem}");
+        // Half the quads twice: 50 %.
+        let mut doubled = grid(16, |i, j| (Vec2::new(i as f32, j as f32) * step, step));
+        doubled.extend(grid(16, |i, j| {
+            (Vec2::new((i / 2) as f32 * 2.0, j as f32) * step, step)
+        }));
+        let problem = uv_set_problem(&with_uvs(&doubled)).unwrap();
+        assert!(
+            problem.contains("(100.0 %") || problem.contains("overlaps itself"),
+            "{problem}"
+        );
+        // Texture coordinates tiling outside [0, 1].
+        let outside = grid(4, |i, j| (Vec2::new(i as f32 - 2.0, j as f32 * 3.0), 1.0));
+        let problem = uv_set_problem(&with_uvs(&outside)).unwrap();
+        assert_eq!(problem, "leaves [0, 1] (u -2..2, v 0..10)");
+        // Within rounding of [0, 1] is inside.
+        let edge = [[
+            Vec2::new(-1e-4, 0.0),
+            Vec2::new(1.0001, 0.0),
+            Vec2::new(0.0, 1.0),
+        ]];
+        assert_eq!(uv_set_problem(&with_uvs(&edge)), None);
+        let flat = [[Vec2::splat(0.5); 3]];
+        assert_eq!(uv_set_problem(&with_uvs(&flat)).unwrap(), "has no area");
+    }
 
     #[test]
     fn square_overlap_and_closest_point() {

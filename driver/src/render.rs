@@ -12,15 +12,24 @@
 //! Triangles without lightmap UVs show their emission only (they have no baked light).
 //!
 //! The camera is the glTF file's first camera node (perspective or orthographic; glTF
-//! cameras look along their local −Z with +Y up), or an automatic view that frames the
-//! scene's bounds from above one corner. A closed room seen from outside would show only its
-//! outer walls, so the automatic view is a *cutaway*: a lightmapped surface seen from the side
-//! its texels do not face ([`crate::facing`]) is passed through, as a dollhouse view
-//! (on by default for the automatic view, off for a glTF camera; `--cutaway`).
+//! cameras look along their local −Z with +Y up), or an automatic view. Where the scene
+//! encloses open space — a game level, a room — the automatic view stands inside it
+//! ([`Camera::inside`]; docs/levels.md, "Render from inside"): points of a grid over the
+//! bounds are probed with rays, a point counts as inside when no ray meets a side that faces
+//! no open space (it is not inside a wall), the rays downwards meet a floor and most
+//! horizontal ones meet walls; the point with the widest view is lowered towards its floor,
+//! looks along its longest horizontal sight line and steps back from it. Elsewhere (an
+//! object, an open scene) the *overview* frames the scene's bounds from above one corner. A
+//! closed room seen from outside would show only its outer walls, so the overview is a
+//! *cutaway*: a lightmapped surface seen from the side its texels do not face
+//! ([`crate::facing`]) is passed through, as a dollhouse view (on by default for the
+//! overview, off for a glTF camera and the inside view; `--cutaway`).
 //!
 //! Tone mapping: exposure, then Reinhard's `x / (1 + x)` and the sRGB curve
 //! ([`crate::preview::tonemap_reinhard`]); the automatic exposure maps the mean luminance of
-//! the surface pixels to ½, as the lightmap previews do. Views compared side by side (the
+//! the surface pixels to ½, as the lightmap previews do, and for the inside view their
+//! log-average to an 18 % grey ([`View::key_exposure`], Reinhard et al. 2002's key), which
+//! keeps both sunlit floors and the shade beside them readable. Views compared side by side (the
 //! demo's baseline and guided) share one exposure.
 
 use std::path::{Path, PathBuf};
@@ -43,6 +52,14 @@ use crate::transport::sky::sky_radiance;
 pub const SUBPIXELS: u32 = 2;
 /// Vertical field of view of the automatic view, radians.
 pub const AUTO_FOV: f32 = 0.75;
+/// The luminance [`View::key_exposure`] maps the log-average to.
+pub const KEY: f32 = 0.18;
+/// Vertical field of view of the inside view, radians (about 65°, a game's).
+pub const INSIDE_FOV: f32 = 1.13;
+/// Points per axis of the grid [`Camera::inside`] probes (1000 points).
+const INSIDE_GRID: usize = 10;
+/// Rays from each probed point.
+const INSIDE_RAYS: usize = 64;
 /// Surfaces a cutaway ray may pass through before it is taken to see the sky.
 const MAX_PASS_THROUGH: u32 = 64;
 
@@ -139,6 +156,90 @@ impl Camera {
         let distance = radius / (narrow / 2.0).sin();
         let direction = Vec3::new(0.55, 0.75, 1.0).normalize();
         Self::look_at(centre + direction * distance, centre, Vec3::Y, AUTO_FOV)
+    }
+
+    /// The automatic view from inside the open space `stage` encloses (module docs), or
+    /// `None` when no probed point is enclosed. Vertical field of view [`INSIDE_FOV`].
+    #[must_use]
+    pub fn inside(stage: &Stage<'_>) -> Option<Self> {
+        let (lo, hi) = stage.scene.bounds();
+        let size = hi - lo;
+        let reach = size.length().max(1e-3);
+        let g = INSIDE_GRID as f32;
+        let points: Vec<Vec3> = (0..INSIDE_GRID.pow(3))
+            .map(|i| {
+                let (x, y, z) = (
+                    i % INSIDE_GRID,
+                    (i / INSIDE_GRID) % INSIDE_GRID,
+                    i / INSIDE_GRID / INSIDE_GRID,
+                );
+                lo + size * Vec3::new(x as f32 + 0.5, y as f32 + 0.5, z as f32 + 0.5) / g
+            })
+            .collect();
+        let directions = sphere_directions(INSIDE_RAYS);
+        // (score, point index), the best first; ties keep the lower index (deterministic).
+        let best = points
+            .par_iter()
+            .enumerate()
+            .filter_map(|(i, &p)| {
+                let (mut horizontal, mut enclosed, mut width) = (0u32, 0u32, 0.0f32);
+                for &d in &directions {
+                    match stage.probe(p, d) {
+                        Sight::Unseen => return None,
+                        Sight::Escapes if d.y < -0.2 => return None,
+                        Sight::Escapes => {
+                            if d.y.abs() < 0.35 {
+                                horizontal += 1;
+                            }
+                        }
+                        Sight::Seen(t) => {
+                            if d.y.abs() < 0.35 {
+                                horizontal += 1;
+                                enclosed += 1;
+                                width += t.min(reach);
+                            }
+                        }
+                    }
+                }
+                (enclosed * 4 >= horizontal * 3 && horizontal > 0)
+                    .then(|| (width / horizontal as f32, i))
+            })
+            .reduce_with(|a, b| {
+                if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }
+            })?;
+        let (width, p) = (best.0, points[best.1]);
+        // Lower the point towards its floor: a third of the way up to the ceiling (or to the
+        // room's width where the sky is open above).
+        let down = match stage.probe(p, -Vec3::Y) {
+            Sight::Seen(t) => t,
+            _ => 0.0,
+        };
+        let up = match stage.probe(p, Vec3::Y) {
+            Sight::Seen(t) => t.min(width),
+            _ => width,
+        };
+        let mut eye = p - Vec3::Y * (down - 0.3 * (down + up).min(width)).max(0.0);
+        // Look along the longest horizontal sight line, from a step back.
+        let sight = |eye: Vec3, d: Vec3| match stage.probe(eye, d) {
+            Sight::Seen(t) => t,
+            _ => 0.0,
+        };
+        let (mut look, mut far) = (Vec3::X, -1.0f32);
+        for k in 0..32 {
+            let a = k as f32 * std::f32::consts::TAU / 32.0;
+            let d = Vec3::new(a.cos(), 0.0, a.sin());
+            let t = sight(eye, d);
+            if t > far {
+                (look, far) = (d, t);
+            }
+        }
+        eye -= look * 0.4 * sight(eye, -look);
+        let target = eye + look - Vec3::Y * 0.12;
+        Some(Self::look_at(eye, target, Vec3::Y, INSIDE_FOV))
     }
 
     /// The ray through normalised image coordinates `sx`, `sy` ∈ [−1, 1] (right, up) of an
@@ -359,6 +460,46 @@ impl<'s> Stage<'s> {
     }
 }
 
+/// What a probe ray from a point sees.
+enum Sight {
+    /// Nothing: it leaves the scene.
+    Escapes,
+    /// A side that faces open space, at this distance.
+    Seen(f32),
+    /// A side that faces no open space: the point is inside geometry.
+    Unseen,
+}
+
+impl Stage<'_> {
+    fn probe(&self, org: Vec3, dir: Vec3) -> Sight {
+        match intersect1(&self.bvh.wide(), &Ray::new(org, dir, 0.0, f32::INFINITY)) {
+            None => Sight::Escapes,
+            Some(hit) => {
+                let prim = hit.prim as usize;
+                let front = self.scene.triangles[prim].geometric_normal().dot(dir) < 0.0;
+                if self.triangles[prim].seen_from(front) {
+                    Sight::Seen(hit.t)
+                } else {
+                    Sight::Unseen
+                }
+            }
+        }
+    }
+}
+
+/// `n` directions spread evenly over the sphere (a Fibonacci lattice).
+fn sphere_directions(n: usize) -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            let a = golden * i as f32;
+            Vec3::new(r * a.cos(), y, r * a.sin())
+        })
+        .collect()
+}
+
 /// How to render a view.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewOptions {
@@ -463,21 +604,42 @@ fn shade(
 }
 
 impl View {
-    /// The exposure that maps the mean luminance of the pixels that see only surfaces to ½
-    /// after Reinhard
-    /// (1 when no surface is seen or the mean is not positive).
-    pub fn auto_exposure(&self) -> f32 {
-        let (sum, n) = self
-            .radiance
+    /// The luminance of each pixel that sees only surfaces (every subpixel hit one).
+    fn surface_luminances(&self) -> impl Iterator<Item = f64> + '_ {
+        self.radiance
             .iter()
             .zip(&self.surface)
             .filter(|(_, s)| u32::from(**s) == SUBPIXELS * SUBPIXELS)
-            .fold((0.0f64, 0u64), |(sum, n), (c, _)| {
-                (sum + f64::from(luminance_f32(c.to_array())), n + 1)
-            });
+            .map(|(c, _)| f64::from(luminance_f32(c.to_array())))
+    }
+
+    /// The exposure that maps the mean luminance of the pixels that see only surfaces to ½
+    /// after Reinhard (1 when no surface is seen or the mean is not positive).
+    pub fn auto_exposure(&self) -> f32 {
+        let (sum, n) = self
+            .surface_luminances()
+            .fold((0.0f64, 0u64), |(sum, n), l| (sum + l, n + 1));
         let mean = (sum / n.max(1) as f64) as f32;
         if mean > 0.0 && mean.is_finite() {
             1.0 / mean
+        } else {
+            1.0
+        }
+    }
+
+    /// The exposure that maps the log-average luminance of the pixels that see only surfaces
+    /// to [`KEY`] (Reinhard et al. 2002's key value, an 18 % grey; 1 when no surface is
+    /// seen): the inside view's, where sunlit patches next to shade would set the plain mean
+    /// ([`Self::auto_exposure`]) so high that the shade is all one sees and the sun washes out.
+    pub fn key_exposure(&self) -> f32 {
+        let (sum, n) = self
+            .surface_luminances()
+            .fold((0.0f64, 0u64), |(sum, n), l| {
+                (sum + (l.max(0.0) + 1e-4).ln(), n + 1)
+            });
+        let average = (sum / n.max(1) as f64).exp() as f32;
+        if n > 0 && average.is_finite() && average > 1e-4 {
+            KEY / average
         } else {
             1.0
         }
@@ -534,6 +696,116 @@ mod tests {
 
     const ALBEDO: f32 = 0.5;
     const SKY: Vec3 = Vec3::new(0.2, 0.4, 0.8);
+
+    /// A closed 4 m room (corner at the origin) lit by a sphere light, with a 1.5 m block
+    /// standing in it at its −x, −z corner; prepared (unwrapped) into `dir`.
+    fn room_with_a_block(dir: &Path) -> (Scene, TexelFile) {
+        use crate::test_support::{inward_box_faces, quad};
+        let mut triangles = Vec::new();
+        for (o, u, v) in inward_box_faces(Vec3::ZERO, 4.0) {
+            triangles.extend(quad(o, u, v, 0));
+        }
+        // The block's faces point out of it: swap the room's edges.
+        for (o, u, v) in inward_box_faces(Vec3::new(0.25, 0.0, 0.25), 1.5) {
+            triangles.extend(quad(o, v, u, 0));
+        }
+        let material = Material {
+            name: "grey".into(),
+            base_color_texture: None,
+            albedo: Vec3::splat(ALBEDO),
+            emission: Vec3::ZERO,
+        };
+        let mut scene = Scene::of_triangles("room", triangles, vec![material]);
+        scene.lights.push(crate::scene::SceneLight::Sphere {
+            center: Vec3::new(3.0, 3.0, 3.0),
+            radius: 0.2,
+            radiance: Vec3::splat(10.0),
+        });
+        let texels = dir.join("room.texels");
+        let options = PrepareOptions {
+            resolution: Resolution::Size(64, 64),
+            layout: Layout::Auto,
+        };
+        crate::prepare::prepare_with(&scene, &texels, options, crate::prepare::Unwrap::Always)
+            .unwrap();
+        (scene, TexelFile::open(&texels).unwrap())
+    }
+
+    #[test]
+    fn the_automatic_view_stands_inside_an_enclosed_room_and_looks_across_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let (scene, texels) = room_with_a_block(dir.path());
+        let stage = Stage::new(&scene, &texels).unwrap();
+        let camera = Camera::inside(&stage).expect("the room encloses open space");
+        let e = camera.eye;
+        assert!(
+            e.min_element() > 0.0 && e.max_element() < 4.0,
+            "the eye {e} is in the room"
+        );
+        let in_block = e.x < 1.75 && e.z < 1.75 && e.y < 1.5;
+        assert!(!in_block, "the eye {e} is not inside the block");
+        assert!(e.y < 2.0, "the eye {e} is in the lower half of the room");
+        assert!(
+            camera.forward.y.abs() < 0.2,
+            "{:?} looks across",
+            camera.forward
+        );
+        // It looks along a long sight line: at least half the room's width before a wall.
+        let ahead = match stage.probe(
+            e,
+            Vec3::new(camera.forward.x, 0.0, camera.forward.z).normalize(),
+        ) {
+            Sight::Seen(t) => t,
+            _ => 0.0,
+        };
+        assert!(ahead > 2.0, "{ahead}");
+        // From there every direction sees the room's walls from inside.
+        for d in sphere_directions(64) {
+            assert!(matches!(stage.probe(e, d), Sight::Seen(_)), "{d}");
+        }
+    }
+
+    #[test]
+    fn the_key_exposure_maps_the_log_average_of_surface_pixels_to_an_18_percent_grey() {
+        let full = (SUBPIXELS * SUBPIXELS) as u8;
+        let view = View {
+            width: 4,
+            height: 1,
+            // Luminances 0.1 and 10 (geometric mean 1), a sky pixel that does not count, and
+            // a pixel that is half sky.
+            radiance: vec![
+                Vec3::splat(0.1),
+                Vec3::splat(10.0),
+                Vec3::splat(1000.0),
+                Vec3::splat(500.0),
+            ],
+            surface: vec![full, full, 0, full / 2],
+        };
+        let e = view.key_exposure();
+        assert!((e - KEY).abs() < 1e-3 * KEY, "{e}");
+        // The plain mean would be 5.05: the shade at 0.1 would be nearly black.
+        assert!((view.auto_exposure() - 1.0 / 5.05).abs() < 1e-4);
+        let sky = View {
+            surface: vec![0; 4],
+            ..view
+        };
+        assert_eq!(sky.key_exposure(), 1.0);
+    }
+
+    #[test]
+    fn an_open_scene_has_no_inside_view() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = plane();
+        let texels = dir.path().join("plane.texels");
+        let options = PrepareOptions {
+            resolution: Resolution::Size(16, 16),
+            layout: Layout::Shared,
+        };
+        prepare(&scene, &texels, options).unwrap();
+        let texels = TexelFile::open(&texels).unwrap();
+        let stage = Stage::new(&scene, &texels).unwrap();
+        assert_eq!(Camera::inside(&stage), None);
+    }
 
     /// A 4 m square ground plane (y = 0, facing +y) under a constant sky, its lightmap UVs
     /// the unit square.

@@ -46,6 +46,37 @@ pub fn inward_box_faces(corner: Vec3, size: f32) -> [(Vec3, Vec3, Vec3); 6] {
     ]
 }
 
+/// The six faces of the box `lo..lo + size` as (corner, edge u, edge v) with `u × v` facing
+/// out of it: closed objects standing in the scenes of tests.
+pub fn outward_box_faces(lo: Vec3, size: Vec3) -> [(Vec3, Vec3, Vec3); 6] {
+    let (x, y, z) = (Vec3::X * size.x, Vec3::Y * size.y, Vec3::Z * size.z);
+    [
+        (lo, y, x),
+        (lo + z, x, y),
+        (lo, z, y),
+        (lo + x, y, z),
+        (lo, x, z),
+        (lo + y, z, x),
+    ]
+}
+
+/// Two materials: 0 a grey diffuse of `albedo`, 1 a lamp of the same albedo emitting
+/// `emission` (white).
+pub fn grey_and_lamp(albedo: f32, emission: f32) -> Vec<Material> {
+    let grey = Material {
+        name: "grey".into(),
+        base_color_texture: None,
+        albedo: Vec3::splat(albedo),
+        emission: Vec3::ZERO,
+    };
+    let lamp = Material {
+        name: "lamp".into(),
+        emission: Vec3::splat(emission),
+        ..grey.clone()
+    };
+    vec![grey, lamp]
+}
+
 /// A quad `origin + s·u + t·v`, s, t ∈ [0,1], as two triangles of mesh 0 facing `u × v`
 /// (lightmap UVs all zero: for scenes that are traced, not prepared).
 pub fn quad(origin: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {

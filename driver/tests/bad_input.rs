@@ -269,6 +269,8 @@ fn good_triangle_gltf_prepares() {
         out.to_str().unwrap(),
         "--size",
         "64x64",
+        "--sky",
+        "1",
     ]);
     assert_eq!(code, Some(0), "{err}");
     // UV area 0.32 of a 64² page = 1310.72 centre texels, plus the border's partial texels.
@@ -329,6 +331,8 @@ fn bad_scenes_are_clear_errors() {
             out_s,
             "--unwrap",
             "never",
+            "--sky",
+            "1",
         ],
         "no mesh has lightmap UVs (TEXCOORD_1); meshes without: tri",
     );
@@ -392,18 +396,25 @@ fn cli_fails(args: &[&str]) -> (i32, String) {
 /// A prepared one-triangle scene in `dir`: (scene, texel file).
 fn prepared_triangle(dir: &Path) -> (PathBuf, PathBuf) {
     let (json, bin) = triangle_gltf("tri", true, [0, 1, 2]);
-    let scene = write_gltf(dir, "tri", &json, Some(&bin));
+    write_gltf(dir, "tri", &json, Some(&bin));
     let texels = dir.join("tri.texels");
+    // Lit by a sky from a scene file: a scene nothing lights is refused.
+    let toml = dir.join("tri.toml");
+    std::fs::write(
+        &toml,
+        "geometry = \"tri.gltf\"\n[sky]\nconstant = [1, 1, 1]\n",
+    )
+    .unwrap();
     let (code, err) = cli(&[
         "prepare",
-        scene.to_str().unwrap(),
+        toml.to_str().unwrap(),
         "-o",
         texels.to_str().unwrap(),
         "--size",
         "32x32",
     ]);
     assert_eq!(code, Some(0), "{err}");
-    (scene, texels)
+    (toml, texels)
 }
 
 /// Nothing named like the output or its work directory exists in `dir`.
@@ -499,18 +510,8 @@ fn bad_bake_arguments_are_clear_errors() {
     assert!(err.contains("nothing.texels"), "{err}");
     assert_no_output(d, "lm.");
 
-    // A texture image that is missing is named with the scene, before any output; a
-    // texture cap of 0 is refused.
-    let obj = d.join("textured.obj");
-    std::fs::write(
-        &obj,
-        "mtllib textured.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl m\nf 1/1 2/2 3/3\n",
-    )
-    .unwrap();
-    std::fs::write(d.join("textured.mtl"), "newmtl m\nmap_Kd gone.png\n").unwrap();
-    let obj = obj.to_str().unwrap();
-    let (_, err) = cli_fails(&["bake", texels, "--scene", obj, "-o", out_s, "--spp", "32"]);
-    assert!(err.contains(&format!("{obj}: texture gone.png: ")), "{err}");
+    // A texture cap of 0 is refused. (A missing texture image is a warning:
+    // tests/levels.rs.)
     let (_, err) = fails(bake(&["--spp", "32", "--max-texture-size", "0"]));
     assert!(err.contains("--max-texture-size"), "{err}");
     assert_no_output(d, "lm.");
@@ -541,6 +542,8 @@ fn a_texel_file_of_another_scene_is_refused() {
         out.to_str().unwrap(),
         "--spp",
         "32",
+        "--sky",
+        "1",
     ]);
     assert!(
         err.contains("tri.texels") && err.contains("two.gltf") && err.contains("1 triangles"),

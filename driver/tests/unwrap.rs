@@ -556,27 +556,30 @@ fn the_cli_unwraps_and_writes_the_gltf() {
         "{err}"
     );
     assert!(!none.exists());
-    // `--write-gltf` of an OBJ scene: an error naming the file, and no texel file either.
-    let obj = dir.path().join("quad.obj");
-    let quad_obj =
-        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n";
-    std::fs::write(&obj, quad_obj).unwrap();
-    let quad = dir.path().join("quad.texels");
-    let o = run(&[
-        "prepare",
-        obj.to_str().unwrap(),
-        "-o",
-        quad.to_str().unwrap(),
-        "--write-gltf",
-        dir.path().join("quad.glb").to_str().unwrap(),
-    ]);
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        err.contains("quad.obj: --write-gltf needs a .gltf or .glb scene"),
-        "{err}"
-    );
-    assert!(!quad.exists());
+    // `--write-gltf` is checked before any work: a name that is not .glb, or a directory
+    // that does not exist, is an error naming it, and no texel file is written. (An OBJ scene
+    // is written back too: tests/levels.rs.)
+    for (bad, says) in [
+        (dir.path().join("quad.gltf"), "give it a .glb name"),
+        (dir.path().join("nowhere/quad.glb"), "does not exist"),
+    ] {
+        let quad = dir.path().join("quad.texels");
+        let o = run(&[
+            "prepare",
+            gltf.to_str().unwrap(),
+            "-o",
+            quad.to_str().unwrap(),
+            "--write-gltf",
+            bad.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(&*bad.to_string_lossy()) && err.contains(says),
+            "{err}"
+        );
+        assert!(!quad.exists());
+    }
 }
 
 /// The shared scenes re-unwrapped: every mesh gets texels, on its triangles, without

@@ -27,7 +27,7 @@
 //!   first by the direction's sign bits and a NaN plane distance (`0 · ∞`, a ray running inside
 //!   a box face) leaves the interval unconstrained, so rays along faces are kept. The wide
 //!   tree's walks compute the same slabs fused, `b · (1/d) − o · (1/d)` with the offsets
-//!   moved an ulp outwards (`scalar::slab`): as conservative, one operation fewer per plane.
+//!   moved an ulp outwards (`slab::slab`): as conservative, one operation fewer per plane.
 //! - **Packet traversal** ([`intersect8`], [`occluded8`]): one shared stack; a child is
 //!   visited when any lane's interval meets its box; in the binary tree, when both children
 //!   are hit the lanes vote on which is nearer and that one is visited first; in the wide
@@ -41,9 +41,10 @@
 //!   oracle.
 //! - **Sections**, as Embree keeps `bvh_node_*`, `*_intersector*` and `bvh_traverser*` apart:
 //!   `node` (binary layout), `triangle` (per-ray constants, the watertight test for one and
-//!   eight rays), `scalar` (slab test, single-ray walk), `packet` (8-lane slab test, packet
-//!   walk), `bvh8` (wide layout, collapse, both wide walks); this file holds the public API
-//!   and the oracle. Measured speeds: docs/traverse.md.
+//!   eight rays), `slab` (the slab tests' slack and the fused form's constants), `scalar` (slab
+//!   test, single-ray walk), `packet` (8-lane slab test, packet walk), `bvh8` (wide layout,
+//!   collapse, both wide walks); this file holds the public API and the oracle. Measured
+//!   speeds: docs/traverse.md.
 //!
 //! **Results are exact, not approximate.** The scalar and 8-wide triangle tests perform the
 //! same IEEE operations in the same order (no FMA contraction), so `t`, `u`, `v` agree bit for
@@ -106,11 +107,13 @@ mod bvh8;
 mod node;
 mod packet;
 mod scalar;
+mod slab;
 mod triangle;
 
 use bvh8::Ray1x8;
 use packet::{Closest, Occlusion, Visitor, start8, walk8};
-use scalar::{NEAR_DOWN, box1_at, slab, walk1, widened, widened8};
+use scalar::{box1_at, walk1};
+use slab::{NEAR_DOWN, slab, widened, widened8};
 use triangle::{
     Best8, Pre, Pre1x8, Pre8, accept, closest_rows, closest1, no_hit, occludes_rows, occludes1,
     traceable, tri1,
@@ -379,10 +382,10 @@ pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
 /// lanes that are not traced are never blocked. Equals [`occluded1`] lane for lane.
 ///
 /// On the wide layout the packet walk finishes a subtree that at most two live lanes reach
-/// lane by lane, as single rays (Embree's hybrid switch; docs/traverse.md, session 20). On a
+/// lane by lane, as single rays (Embree's hybrid switch; docs/traverse.md, "Wide layout"). On a
 /// tree larger than [`INTERLEAVE_BYTES`], a packet whose lanes do not share an origin (eight
 /// unrelated shadow rays) is traced as single rays from the root, interleaved, so that the
-/// lanes' cache misses overlap (docs/traverse.md, "Wide layout, session 9").
+/// lanes' cache misses overlap (docs/traverse.md, "Wide layout").
 pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
     let Some((pre, tmax)) = start8(rays) else {
         return 0;

@@ -1,5 +1,5 @@
 #!/bin/bash
-# BENCHMARKS.md "Guiding the last pass" (session 9): the baseline, the default (coherent
+# BENCHMARKS.md "Guiding the last pass": the baseline, the default (coherent
 # guiding of the last series pass only) and every pass guided, 64 and 256 spp, 2 seeds,
 # 128x128, against 4096-spp series references, with 5 interleaved Figure-5 repeats (the
 # bake's defaults). From the repository root, after `cargo build --release -p guidebake`.

@@ -1,5 +1,5 @@
 #!/bin/bash
-# BENCHMARKS.md "Guiding only where it pays" (session 10): the baseline, the default and
+# BENCHMARKS.md "Guiding only where it pays": the baseline, the default and
 # `--min-gain` levels, 64 and 256 spp, SEEDS (2) seeds, 128x128, against 4096-spp references
 # of the same transport, with 3 interleaved Figure-5 repeats (the bake's defaults). From the
 # repository root, after `cargo build --release -p guidebake`:

@@ -1,5 +1,5 @@
 #!/bin/bash
-# BENCHMARKS.md "The mixture folded into the guide" (session 12): the unguided baseline and
+# BENCHMARKS.md "The mixture folded into the guide": the unguided baseline and
 # the defaults, 64 and 256 spp, 4 seeds, 128x128, against 4096-spp references of the same
 # transport, with 5 interleaved Figure-5 repeats, for each build given (run one after the
 # other per scene). From the repository root:

@@ -51,4 +51,5 @@ def main():
         (out.shape[1] * scale, out.shape[0] * scale), Image.NEAREST).save(sys.argv[5])
 
 
-main()
+if __name__ == "__main__":
+    main()

@@ -31,26 +31,9 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use guidebake_kernels::estimator::{CombinationWeights, Welford};
 
-use crate::output::result_file::PerTexel;
-
-/// Whether a bake writes directional coefficients.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum Directional {
-    /// Irradiance only (the default).
-    #[default]
-    None,
-    /// L1 spherical harmonics of the incident radiance, world space ([`SH_CHANNELS`]).
-    ShL1,
-}
-
-impl std::fmt::Display for Directional {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Directional::None => "none",
-            Directional::ShL1 => "sh-l1",
-        })
-    }
-}
+pub use super::settings::Directional;
+use super::settings::MAX_ITERATIONS;
+use crate::output::result_file::{PerTexel, RecordFile};
 
 /// `Y0 = 1 / (2√π)`.
 pub const Y0: f32 = 0.282_094_8;
@@ -77,6 +60,11 @@ impl PerTexel for ShL1 {
     const VERSION: u32 = 1;
     const KIND: &'static str = "directional file";
 }
+
+/// The directional coefficients of every texel (`--directional sh-l1`): one [`ShL1`] per
+/// texel, or K (the iterations' means) with `--combine global`. Declared here, beside its
+/// record, so that the result-file module does not import the bake's modules.
+pub type DirectionalFile = RecordFile<ShL1>;
 
 impl ShL1 {
     /// The coefficients scaled by `s` (ρ), non-finite ones as zero.
@@ -161,7 +149,7 @@ impl ShSums {
 /// A texel's coefficients from its iterations' means, combined with the weights `weights`
 /// gives its `batches` (the irradiance's combination); zero without samples.
 pub fn combine(means: &[ShL1], batches: &[Welford], weights: &dyn CombinationWeights) -> ShL1 {
-    let mut w = [0.0f64; crate::bake::settings::MAX_ITERATIONS];
+    let mut w = [0.0f64; MAX_ITERATIONS];
     let k = batches.len().min(w.len());
     if !weights.weights(&batches[..k], &mut w[..k]) {
         return ShL1::default();

@@ -6,6 +6,7 @@
 //! tiles to the [result file and journal](crate::output).
 
 pub mod directional;
+pub mod error;
 pub mod finish;
 pub mod gather;
 pub mod grid;

@@ -23,10 +23,10 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use crossbeam::channel;
 
-use super::directional::ShL1;
+use super::directional::{DirectionalFile, ShL1};
 use crate::output::OutputFileError;
 use crate::output::journal::{Journal, TileRecord};
-use crate::output::result_file::{BatchFile, DirectionalFile, ResultFile, TexelResult};
+use crate::output::result_file::{BatchFile, ResultFile, TexelResult};
 use guidebake_kernels::estimator::Welford;
 
 /// One tile's output, in a buffer of the pool.

@@ -25,24 +25,23 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::directional::Directional;
+pub use super::error::BakeError;
+use super::error::file_error;
 use super::finish::{FinishOptions, finish_with};
 use super::gather::{GatherCounters, TileBaker};
-use super::pipeline::{self, PipelineConfig, PipelineError, TileBuffer, TileFiles};
-use super::settings::{BakeSettings, Combine, DIRECT_PASS, SettingsError};
+use super::pipeline::{self, PipelineConfig, TileBuffer, TileFiles};
+use super::settings::{BakeSettings, Combine, DIRECT_PASS, Directional, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::workdir::{
     Manifest, merged_results, open_batches, open_directional, open_pass, open_work, pass_files,
     pass_image, retire_work, work_dir,
 };
 use super::world::World;
-use crate::bvh::{BvhError, Preset};
-use crate::output::OutputFileError;
-use crate::output::exr_pages::PageWriteError;
+use crate::bvh::Preset;
 use crate::output::fnv1a64;
 use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
 use crate::scene::Scene;
-use crate::texels::{TexelFile, TexelFileError};
+use crate::texels::TexelFile;
 use crate::transport::series::{PreviousPass, PreviousPassWriter};
 
 /// What a bake run is asked to do.
@@ -119,55 +118,6 @@ pub struct PhaseSeconds {
     pub previous_pass_images: f64,
     /// Applying ρ and writing the pages.
     pub write_pages: f64,
-}
-
-/// Why a bake stopped; every variant names what it was working on.
-#[derive(Debug, thiserror::Error)]
-pub enum BakeError {
-    /// Bad settings.
-    #[error(transparent)]
-    Settings(#[from] SettingsError),
-    /// The texel file could not be opened or is invalid.
-    #[error(transparent)]
-    Texels(#[from] TexelFileError),
-    /// The BVH could not be built from the scene.
-    #[error("cannot build the BVH: {0}")]
-    Bvh(#[from] BvhError),
-    /// Writing, reading or syncing the result file or the journal failed.
-    #[error(transparent)]
-    Output(#[from] OutputFileError),
-    /// The pipeline failed.
-    #[error(transparent)]
-    Pipeline(#[from] PipelineError),
-    /// A page could not be written.
-    #[error(transparent)]
-    Page(#[from] PageWriteError),
-    /// A file or directory operation failed.
-    #[error("{path}: {what}")]
-    File {
-        /// The file or directory.
-        path: PathBuf,
-        /// What failed.
-        what: String,
-    },
-    /// A previous run's work exists and `--resume` was not given.
-    #[error(
-        "{dir}: a previous bake's work is here; pass --resume to continue it, or delete the directory to start over"
-    )]
-    WorkExists {
-        /// The work directory.
-        dir: PathBuf,
-    },
-    /// The scene and the texel file disagree.
-    #[error("{0}")]
-    Mismatch(String),
-}
-
-pub(super) fn file_error(path: &Path, what: impl std::fmt::Display) -> BakeError {
-    BakeError::File {
-        path: path.to_owned(),
-        what: what.to_string(),
-    }
 }
 
 /// Identity of a texel file: a hash of its header (sizes, counts, bounds, offsets).
@@ -333,7 +283,16 @@ pub fn bake_pass_with_progress(
     drop(world);
     if !report.interrupted && job.shard.count == 1 && only_pass.is_none() {
         let clock = Instant::now();
-        let written = finish_with(&texels, std::slice::from_ref(&dir), &job.out, job.finish)?;
+        // The finish (dilation, EXR, preview) runs on --threads threads, as the gather does.
+        let finish = || finish_with(&texels, std::slice::from_ref(&dir), &job.out, job.finish);
+        let written = match rayon::ThreadPoolBuilder::new()
+            .num_threads(job.threads.max(1))
+            .thread_name(|i| format!("guidebake-finish-{i}"))
+            .build()
+        {
+            Ok(pool) => pool.install(finish),
+            Err(_) => finish(),
+        }?;
         report.seconds.write_pages = clock.elapsed().as_secs_f64();
         report.rho = written.rho;
         report.pages = written.pages;

@@ -3,9 +3,30 @@
 
 use std::fmt;
 
-use super::directional::Directional;
 use crate::output::fnv1a64;
 use crate::transport::emitters::EmitterSelection;
+
+/// Whether a bake writes directional coefficients (`--directional`). A setting, so it lives
+/// here; [`super::directional`], which computes the coefficients, re-exports it and imports
+/// this module, not the other way round.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Directional {
+    /// Irradiance only (the default).
+    #[default]
+    None,
+    /// L1 spherical harmonics of the incident radiance, world space
+    /// ([`SH_CHANNELS`](super::directional::SH_CHANNELS)).
+    ShL1,
+}
+
+impl std::fmt::Display for Directional {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Directional::None => "none",
+            Directional::ShL1 => "sh-l1",
+        })
+    }
+}
 
 /// How gather directions are chosen (docs/ARCHITECTURE.md, "Comparators").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
@@ -37,9 +58,9 @@ pub enum Combine {
     /// texels of each texel's per-sample variance in the iteration over the sum of their
     /// squared means). The guide's quality is a property of the cluster, which 64 texels'
     /// samples estimate far better than one texel's; a firefly still lowers its own
-    /// iteration's weight, so use it with ρ. The default since session 8: level with
+    /// iteration's weight, so use it with ρ. The default: against 16× references level with
     /// `global` by RMSE at equal CPU time, ahead by relative MSE on four of the six runs and
-    /// level on the other two (docs/estimator.md, "The default since session 8"), and it
+    /// level on the other two (docs/estimator.md, "The default: cluster weights + ρ"), and it
     /// needs no batch file.
     Cluster,
 }

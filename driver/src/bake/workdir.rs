@@ -6,11 +6,12 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::run::{BakeError, file_error};
+use super::directional::DirectionalFile;
+use super::error::{BakeError, file_error};
 use super::shard::Shard;
 use crate::output::atomic::temporary_name;
 use crate::output::journal::{Journal, TileRecord, dedup_tiles};
-use crate::output::result_file::{BatchFile, DirectionalFile, ResultFile};
+use crate::output::result_file::{BatchFile, ResultFile};
 
 /// The work directory's manifest: what `--resume` and `merge` check before trusting it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

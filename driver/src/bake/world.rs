@@ -185,9 +185,9 @@ impl World {
 
     /// The BVH's wide view, which every ray the bake traces walks: single rays (shadow rays
     /// at hits, path continuations; 1.1–1.4× the binary single-ray walk in the duel, up to
-    /// 7 % less CPU for whole bakes, docs/traverse.md, "The bake's single rays") and 8-ray
+    /// 7 % less CPU for whole bakes, docs/traverse.md, "Whole bakes") and 8-ray
     /// packets (gather and next-event packets; whole bakes of the three converted rooms
-    /// level or faster than through the binary tree, docs/traverse.md, "Session 15").
+    /// level or faster than through the binary tree, docs/traverse.md, "Whole bakes").
     pub fn wide_bvh(&self) -> WideRef<'_> {
         self.bvh.wide()
     }

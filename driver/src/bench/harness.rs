@@ -106,14 +106,19 @@ impl Bench<'_> {
         })
     }
 
-    /// Bakes `settings` in the scratch directory, reads it back, and deletes its pages.
+    /// Bakes `settings` in the scratch directory (with `selection`, the method's emitter
+    /// selection where it sets one, else the bench's), reads it back, and deletes its pages.
     ///
     /// # Errors
     /// As [`Self::bake_to`].
-    pub fn bake_scratch(&self, settings: BakeSettings) -> Result<Baked, BenchError> {
+    pub fn bake_scratch(
+        &self,
+        settings: BakeSettings,
+        selection: Option<EmitterSelection>,
+    ) -> Result<Baked, BenchError> {
         let settings = BakeSettings {
             emitters: self.light.emitters,
-            emitter_selection: self.light.selection,
+            emitter_selection: selection.unwrap_or(self.light.selection),
             ..settings
         };
         let out = self.scratch.join("run.exr");
@@ -273,7 +278,7 @@ pub fn run_ladder(
                     ladder.bounces,
                     seed,
                 );
-                let baked = bench.bake_scratch(settings)?;
+                let baked = bench.bake_scratch(settings, method.levers.selection)?;
                 let error = compare(&baked.values, reference)?;
                 let record = RunRecord::new(method, &settings, &baked, error);
                 eprintln!(
@@ -342,7 +347,7 @@ pub fn run_overhead(
                 ..Method::default_bake()
             };
             let settings = method.settings(spp, iterations, transport, bounces, 1);
-            let baked = bench.bake_scratch(settings)?;
+            let baked = bench.bake_scratch(settings, None)?;
             let c = &baked.report.counters;
             let record = OverheadRecord {
                 guiding: value_name(&guiding),

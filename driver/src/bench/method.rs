@@ -8,6 +8,7 @@
 use clap::ValueEnum;
 
 use crate::bake::settings::{BakeSettings, Combine, GuidedPasses, Guiding, Schedule, Transport};
+use crate::transport::emitters::EmitterSelection;
 
 /// One way of baking: what the bake's `--guiding`, `--combine` and `--bias-correction` say,
 /// and the guiding levers (`--mix`, `--schedule`, `--min-split`, `--smooth`, `--min-gain`).
@@ -41,6 +42,9 @@ pub struct Levers {
     /// `--transport`, where the method sets its own (else the ladder's, `guidebake bench
     /// --transport`): so one run compares series and path transport at equal time.
     pub transport: Option<Transport>,
+    /// `--emitter-selection`, where the method sets its own (else the ladder's, `guidebake
+    /// bench --emitter-selection`): so one run compares emitter selections at equal time.
+    pub selection: Option<EmitterSelection>,
 }
 
 impl Default for Levers {
@@ -54,6 +58,7 @@ impl Default for Levers {
             guided_passes: d.guided_passes,
             min_gain: d.min_gain,
             transport: None,
+            selection: None,
         }
     }
 }
@@ -70,6 +75,7 @@ impl Levers {
             guided_passes: GuidedPasses::Every,
             min_gain: 0,
             transport: None,
+            selection: None,
         }
     }
 
@@ -97,6 +103,9 @@ impl Levers {
         }
         if let Some(t) = self.transport {
             s += &format!("+transport={}", value_name(&t));
+        }
+        if let Some(e) = self.selection {
+            s += &format!("+select={}", value_name(&e));
         }
         s
     }
@@ -162,7 +171,7 @@ impl Method {
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
     /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`,
-    /// `transport`); the
+    /// `transport`, `select`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -211,6 +220,12 @@ impl Method {
                 "transport" => {
                     levers.transport = Some(
                         Transport::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?,
+                    );
+                }
+                "select" => {
+                    levers.selection = Some(
+                        EmitterSelection::from_str(value, true)
+                            .map_err(|e| format!("{label:?}: {e}"))?,
                     );
                 }
                 _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
@@ -271,6 +286,7 @@ impl Method {
             smooth: self.levers.smooth,
             guided_passes: self.levers.guided_passes,
             min_gain: self.levers.min_gain,
+            emitter_selection: self.levers.selection.unwrap_or_default(),
             ..Default::default()
         }
     }
@@ -332,6 +348,14 @@ mod tests {
             Transport::Path
         );
         assert!(Method::parse("coherent/cluster/rho+transport=light").is_err());
+        let m = Method::parse("off/average/-+transport=path+select=tree").unwrap();
+        assert_eq!(m.label(), "off/average/-+transport=path+select=tree");
+        assert_eq!(
+            m.settings(256, 4, Transport::Series, 3, 1)
+                .emitter_selection,
+            EmitterSelection::Tree
+        );
+        assert!(Method::parse("off/average/-+select=nearest").is_err());
         assert!(Method::parse("coherent/texel").is_err());
         assert!(Method::parse("coherent/texel/rho+nope=1").is_err());
     }

@@ -33,7 +33,7 @@ use harness::{Bench, Ladder};
 use method::Method;
 use report::{EqualTimeSummary, Machine, OverheadSummary, Summary, Target};
 
-use crate::bake::run::BakeError;
+use crate::bake::error::BakeError;
 use crate::bake::settings::Transport;
 use crate::scene::Scene;
 use crate::texels::{FLAG_VALID, TexelFile, TexelFileError};
@@ -46,7 +46,7 @@ pub const NAIVE_VISIBLY_WORSE: f64 = 0.05;
 /// The reference has at least this many times the largest sample count of the ladder (the
 /// project's rule): its own variance, which adds to every measured MSE and pulls every
 /// method's factor toward 1, is then at most 1/16 of the baseline's at the top rung. At 4×
-/// (what the validation allowed before 2026-11-24, session 8) it was a quarter: on the Veach
+/// (what the validation allowed before 2026-11-24) it was a quarter: on the Veach
 /// ajar room a quarter of the baseline's relative MSE at 256 spp.
 pub const REFERENCE_FACTOR: u32 = 16;
 

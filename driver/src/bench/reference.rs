@@ -31,6 +31,7 @@ use crate::output::fnv1a64;
 use crate::output::readback::read_lightmap;
 use crate::scene::Scene;
 use crate::texels::TexelFile;
+use crate::transport::emitters::EmitterSelection;
 
 /// The seed of every reference bake (the measured runs use seeds from 1).
 pub const REFERENCE_SEED: u32 = 0x5eed_0000;
@@ -71,7 +72,12 @@ pub fn reference_settings(
     transport: Transport,
     bounces: u32,
 ) -> BakeSettings {
-    Method::baseline().settings(spp, iterations, transport, bounces, REFERENCE_SEED)
+    // Emitters picked in proportion to power, whatever the bake's default selection: every
+    // selection is unbiased, and the references cached before `local` keep their key.
+    BakeSettings {
+        emitter_selection: EmitterSelection::Power,
+        ..Method::baseline().settings(spp, iterations, transport, bounces, REFERENCE_SEED)
+    }
 }
 
 /// A hash of what the scene is, for the cache key (not of its path).

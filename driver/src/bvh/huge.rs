@@ -6,8 +6,8 @@
 //! reason (`os_malloc`); so do we. On Linux systems whose transparent huge pages are set to
 //! `madvise` (the common default) only memory so advised gets 2 MiB pages.
 //!
-//! Measured on the 1M-triangle city (docs/traverse.md, session 14): gather packets 7 % and
-//! shadow rays 16 % faster with huge pages.
+//! Measured on the 1M-triangle city (docs/traverse.md, "What each kept change bought"): gather
+//! packets 7 % and shadow rays 16 % faster with huge pages.
 
 use std::fmt;
 use std::marker::PhantomData;

@@ -76,8 +76,10 @@ pub struct BakeArgs {
     /// next-event estimation alone, or hits alone (the bake before emitters were lights).
     #[arg(long, value_enum, default_value_t = EmitterSampling::default())]
     pub emitters: EmitterSampling,
-    /// How next-event estimation picks an emitter: by power, or by the light tree (which
-    /// prefers emitters that matter at the shading point).
+    /// How next-event estimation picks an emitter: `local` (the default) weighs each of a
+    /// world's emitters at the shading point (power, distance, both cosines; worlds of up to
+    /// 8 emitters, beyond by power), `power` in proportion to power alone, `tree` by the light
+    /// tree (which prefers emitters that matter at the shading point).
     #[arg(long, value_enum, default_value_t = EmitterSelection::default())]
     pub emitter_selection: EmitterSelection,
     /// The world-wide bias correction ρ (paper §2.5): `auto` applies it to the combinations
@@ -117,6 +119,9 @@ pub struct BakeArgs {
     /// Continue an interrupted bake from its journal.
     #[arg(long)]
     pub resume: bool,
+    /// Sun and sky, replacing the scene file's: give the same as to `prepare`.
+    #[command(flatten)]
+    pub lights: super::prepare::LightFlags,
     /// Bake only shard I of N (I/N, 0-based); combine with `guidebake merge`.
     #[arg(long, default_value = "0/1")]
     pub shard: Shard,
@@ -180,7 +185,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
     let textures = TextureOptions {
         max_size: args.max_texture_size,
     };
-    let scene = Scene::load_with(&args.scene, textures)?;
+    let (scene, notes) = super::prepare::load_lit_scene(&args.scene, textures, &args.lights, true)?;
     let job = BakeJob {
         texels: args.texels.clone(),
         out: args.out.clone(),
@@ -198,7 +203,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
     };
     let report = run_with_progress(&job, args.pass, &scene)?;
     if let Some(path) = &args.stats {
-        write_stats(path, &report)?;
+        write_stats_noting(path, &report, &notes)?;
     }
     if report.interrupted {
         return Err(format!(
@@ -265,6 +270,33 @@ fn check_output(out: &std::path::Path) -> Result<(), super::CmdError> {
         )
         .into());
     }
+    Ok(())
+}
+
+/// [`write_stats`] with the textures the scene's loader could not read, counted
+/// (`missing_textures`) and listed (`missing_texture_files`: file and material).
+///
+/// # Errors
+/// When the file cannot be written; names it.
+pub fn write_stats_noting(
+    path: &std::path::Path,
+    report: &BakeReport,
+    notes: &crate::scene::LoadNotes,
+) -> Result<(), super::CmdError> {
+    let mut json = serde_json::to_value(report)?;
+    if let Some(object) = json.as_object_mut() {
+        object.insert(
+            "missing_textures".into(),
+            notes.missing_textures.len().into(),
+        );
+        object.insert(
+            "missing_texture_files".into(),
+            serde_json::to_value(&notes.missing_textures)?,
+        );
+    }
+    let json = serde_json::to_string_pretty(&json)?;
+    crate::output::atomic::write(path, json)
+        .map_err(|e| format!("{}: cannot write the stats: {e}", path.display()))?;
     Ok(())
 }
 

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use crate::render::{Camera, Lightmap, Stage, ViewOptions, render};
-use crate::scene::{Scene, TextureOptions};
+use crate::scene::TextureOptions;
 use crate::texels::TexelFile;
 
 use super::bake::OnOff;
@@ -29,17 +29,25 @@ pub struct RenderArgs {
     /// Height in pixels (default: from the glTF camera's aspect ratio, else 540).
     #[arg(long)]
     pub height: Option<u32>,
-    /// `gltf`: the file's first camera (an error if it has none); `auto`: frame the scene's
-    /// bounds from above a corner. Default: the glTF camera where there is one, else auto.
+    /// `gltf`: the file's first camera (an error if it has none); `auto`: from inside the
+    /// open space the scene encloses (a level, a room), else the overview; `overview`: the
+    /// scene's bounds framed from above a corner. Default: the glTF camera where there is
+    /// one, else auto.
     #[arg(long, value_enum)]
     pub camera: Option<CameraChoice>,
     /// Pass through lightmapped surfaces seen from their unlit side (a dollhouse view of a
-    /// closed room). Default: on for the automatic view, off for a glTF camera.
+    /// closed room). Default: on for the overview, off for a glTF camera and the inside
+    /// view.
     #[arg(long, value_enum)]
     pub cutaway: Option<OnOff>,
-    /// Exposure before tone mapping (default: the mean surface luminance maps to ½).
+    /// Exposure before tone mapping (default: the mean surface luminance maps to ½; for the
+    /// inside view, the log-average luminance maps to an 18 % grey).
     #[arg(long)]
     pub exposure: Option<f32>,
+    /// Sun and sky, replacing the scene file's (the sky is what rays that leave the scene
+    /// see): give the same as to `prepare` and `bake`.
+    #[command(flatten)]
+    pub lights: super::prepare::LightFlags,
     /// Largest width or height a base-colour texture is kept at (as `bake`'s).
     #[arg(long, default_value_t = TextureOptions::DEFAULT_MAX_SIZE, value_parser = clap::value_parser!(u32).range(1..=65536))]
     pub max_texture_size: u32,
@@ -50,8 +58,10 @@ pub struct RenderArgs {
 pub enum CameraChoice {
     /// The glTF file's first camera.
     Gltf,
-    /// An automatic view framing the bounds.
+    /// From inside the open space the scene encloses, else the overview.
     Auto,
+    /// The scene's bounds framed from above a corner, cut away.
+    Overview,
 }
 
 /// Runs `guidebake render`.
@@ -70,11 +80,11 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
     let textures = TextureOptions {
         max_size: args.max_texture_size,
     };
-    let scene = Scene::load_with(&args.scene, textures)?;
+    let (scene, _) = super::prepare::load_lit_scene(&args.scene, textures, &args.lights, false)?;
     let texels = TexelFile::open(&args.texels)?;
     let lightmap = Lightmap::load(&texels, &scene, &args.lightmap)?;
     let from_file = match args.camera {
-        Some(CameraChoice::Auto) => None,
+        Some(CameraChoice::Auto | CameraChoice::Overview) => None,
         Some(CameraChoice::Gltf) => {
             Some(crate::render::gltf_camera(&args.scene)?.ok_or_else(|| {
                 format!(
@@ -90,9 +100,16 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
         ((args.width as f32 / aspect).round() as u32).clamp(1, 16384)
     });
     let aspect = args.width as f32 / height as f32;
-    let camera = from_file.unwrap_or_else(|| Camera::framing(scene.bounds(), aspect));
-    let cutaway = args.cutaway.map_or(from_file.is_none(), |c| c == OnOff::On);
     let stage = Stage::new(&scene, &texels)?;
+    let inside = match (from_file, args.camera) {
+        (None, None | Some(CameraChoice::Auto)) => Camera::inside(&stage),
+        _ => None,
+    };
+    let camera = from_file
+        .or(inside)
+        .unwrap_or_else(|| Camera::framing(scene.bounds(), aspect));
+    let overview = from_file.is_none() && inside.is_none();
+    let cutaway = args.cutaway.map_or(overview, |c| c == OnOff::On);
     let view = render(
         &stage,
         &lightmap,
@@ -103,7 +120,13 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
             cutaway,
         },
     );
-    let exposure = args.exposure.unwrap_or_else(|| view.auto_exposure());
+    let exposure = args.exposure.unwrap_or_else(|| {
+        if inside.is_some() {
+            view.key_exposure()
+        } else {
+            view.auto_exposure()
+        }
+    });
     crate::preview::write_png_rgb8(&args.out, view.width, view.height, &view.to_rgb8(exposure))?;
     eprintln!(
         "{}: {}×{} from {}, exposure {exposure:.4}",
@@ -111,9 +134,15 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
         view.width,
         view.height,
         if from_file.is_some() {
-            "the glTF camera"
+            "the glTF camera".to_owned()
+        } else if inside.is_some() {
+            format!(
+                "inside, at {:.3?} looking {:.2?}",
+                camera.eye.to_array(),
+                camera.forward.to_array()
+            )
         } else {
-            "the automatic view"
+            "the overview".to_owned()
         }
     );
     Ok(())

@@ -523,46 +523,137 @@ impl PageStream {
     ///
     /// # Errors
     /// [`PageWriteError`] naming the file at fault; no partial page or preview is left.
+    ///
+    /// The dilation runs in bands in parallel; then the EXR and the preview, which only read
+    /// the dilated scratch file, are written side by side (the EXR's blocks compressed in
+    /// parallel by the exr crate, in increasing line order): the same bytes at any thread
+    /// count.
     pub fn finish(self, passes: u32, path: &Path, preview: &Path) -> Result<(), PageWriteError> {
         let luminance = self.dilate(passes)?;
         let tmp = temporary_name(path);
-        let written = self
-            .encode(&tmp)
-            .and_then(|()| {
-                std::fs::rename(&tmp, path).map_err(|e| format!("cannot rename into place: {e}"))
-            })
-            .map_err(|what| page_error(path, what));
+        let (written, previewed) = rayon::join(
+            || {
+                self.encode(&tmp)
+                    .and_then(|()| {
+                        std::fs::rename(&tmp, path)
+                            .map_err(|e| format!("cannot rename into place: {e}"))
+                    })
+                    .map_err(|what| page_error(path, what))
+            },
+            || self.write_preview(preview, luminance),
+        );
         if let Err(e) = written {
             let _ = std::fs::remove_file(&tmp);
+            // A page that failed leaves no preview either.
+            if previewed.is_ok() {
+                let _ = std::fs::remove_file(preview);
+            }
             return Err(e);
         }
-        self.write_preview(preview, luminance)
+        previewed
     }
 
-    /// Dilates the scratch file in place on a rolling window of rows; returns the sum and count
-    /// of the covered pixels' luminance (row-major, as [`PageImage::write_preview`] sums).
+    /// Dilates the scratch file in place, band by band in parallel (rayon's current pool);
+    /// returns the sum and count of the covered pixels' luminance (row-major, as
+    /// [`PageImage::write_preview`] sums).
+    ///
+    /// The page is cut into bands of [`DILATION_BAND_ROWS`] rows, dilated `threads` at a time.
+    /// Each band runs its own [`DilationWindow`] over its rows and `passes` rows of halo above
+    /// and below: after `passes` passes a row depends only on the rows within `passes` of it,
+    /// so the band's own rows come out as one window over the whole page makes them (the same
+    /// bits, tested). A band writes only its own rows; its halo rows are read by this thread
+    /// before any band of the batch starts (and the top halo of a batch's first band before
+    /// the previous batch starts), so no band reads a row another has dilated. Memory: per
+    /// band in flight its window, `2 passes` halo rows and its covered pixels' luminance —
+    /// whatever the page's height.
     fn dilate(&self, passes: u32) -> Result<(f32, usize), PageWriteError> {
-        let stride = self.stride();
-        let mut window =
-            DilationWindow::new(passes as usize, self.width, stride, self.dilated.clone());
+        use rayon::prelude::*;
+        let p = passes as usize;
+        let band_rows = DILATION_BAND_ROWS.max(p).max(1);
+        let bands: Vec<(usize, usize)> = (0..self.height)
+            .step_by(band_rows)
+            .map(|y0| (y0, (y0 + band_rows).min(self.height)))
+            .collect();
+        let threads = rayon::current_num_threads().max(1);
         let (mut sum, mut count) = (0.0f32, 0usize);
+        // The undilated rows above the next batch's first band.
+        let mut carry: Vec<Vec<f32>> = Vec::new();
+        for batch in bands.chunks(threads) {
+            let mut halos = Vec::with_capacity(batch.len());
+            for (i, &(y0, y1)) in batch.iter().enumerate() {
+                let top = if i == 0 {
+                    std::mem::take(&mut carry)
+                } else {
+                    self.read_rows(y0.saturating_sub(p)..y0)?
+                };
+                let bottom = self.read_rows(y1..(y1 + p).min(self.height))?;
+                halos.push((top, bottom));
+            }
+            let end = batch.last().map_or(0, |b| b.1);
+            if end < self.height {
+                carry = self.read_rows(end.saturating_sub(p)..end)?;
+            }
+            let luminances: Vec<Result<Vec<f32>, PageWriteError>> = batch
+                .par_iter()
+                .zip(halos)
+                .map(|(&(y0, y1), (top, bottom))| self.dilate_band(p, y0..y1, top, bottom))
+                .collect();
+            for band in luminances {
+                for l in band? {
+                    sum += l;
+                    count += 1;
+                }
+            }
+        }
+        Ok((sum, count))
+    }
+
+    /// Rows `rows` of the scratch file, one record vector each.
+    fn read_rows(&self, rows: std::ops::Range<usize>) -> Result<Vec<Vec<f32>>, PageWriteError> {
+        rows.map(|y| {
+            let mut row = vec![0.0f32; self.width * self.stride()];
+            self.read_records(y * self.width, &mut row).map(|()| row)
+        })
+        .collect()
+    }
+
+    /// Dilates rows `rows` in place, from them and the undilated halo rows `top` (just above)
+    /// and `bottom` (just below); returns the luminance of their covered pixels, row-major.
+    fn dilate_band(
+        &self,
+        passes: usize,
+        rows: std::ops::Range<usize>,
+        top: Vec<Vec<f32>>,
+        bottom: Vec<Vec<f32>>,
+    ) -> Result<Vec<f32>, PageWriteError> {
+        let stride = self.stride();
+        let first = rows.start - top.len();
+        let last = rows.end + bottom.len() - 1;
+        let mut window =
+            DilationWindow::starting_at(first, passes, self.width, stride, self.dilated.clone());
+        let mut luminance = Vec::new();
         let mut failure = None;
         let mut emit = |y: usize, row: &[f32], changed: bool| {
-            if changed && failure.is_none() {
+            if changed && rows.contains(&y) && failure.is_none() {
                 failure = self.write_records(y * self.width, row).err();
             }
         };
-        for y in 0..self.height {
+        for (k, row) in top.into_iter().enumerate() {
+            window.push(first + k, row, false, &mut emit);
+        }
+        for y in rows.clone() {
             let mut row = vec![0.0f32; self.width * stride];
             self.read_records(y * self.width, &mut row)?;
             for record in row.chunks_exact(stride).filter(|r| r[COVERED] != 0.0) {
-                let [r, g, b] = self.rgb.map(|s| record[s]);
-                sum += luminance_f32([r, g, b]);
-                count += 1;
+                luminance.push(luminance_f32(self.rgb.map(|s| record[s])));
             }
-            window.push(y, row, y + 1 == self.height, &mut emit);
+            window.push(y, row, y == last, &mut emit);
         }
-        failure.map_or(Ok((sum, count)), Err)
+        for (k, row) in bottom.into_iter().enumerate() {
+            let y = rows.end + k;
+            window.push(y, row, y == last, &mut emit);
+        }
+        failure.map_or(Ok(luminance), Err)
     }
 
     /// Writes the EXR to `tmp` as [`PageImage::encode`] does, its blocks read from the
@@ -652,12 +743,20 @@ fn page_error(path: &Path, what: String) -> PageWriteError {
 /// row of level k + 1 is made once level k has the row below it, so only `3 (passes + 1)`
 /// rows are held, whatever the page's height. Each pass fills an unfilled pixel with the mean
 /// of its filled 8-neighbours (summed in the same order as [`PageImage`], so the same bits).
+/// Rows per band of [`PageStream`]'s parallel dilation (its halo is `passes` rows each side).
+const DILATION_BAND_ROWS: usize = 64;
+
+/// Channels a [`DilationWindow`] fills at most (R, G, B and the 12 directional ones fit).
+const MAX_DILATED: usize = 32;
+
 struct DilationWindow {
     passes: usize,
     width: usize,
     stride: usize,
     /// Record indices filled: R, G, B, then the dilated auxiliary channels.
     slots: Vec<usize>,
+    /// The first row pushed: nothing lies above it.
+    first: usize,
     /// Per level below the last: (row index, records, filled, changed) of its last two rows.
     levels: Vec<std::collections::VecDeque<WindowRow>>,
 }
@@ -670,12 +769,24 @@ struct WindowRow {
 }
 
 impl DilationWindow {
-    fn new(passes: usize, width: usize, stride: usize, slots: Vec<usize>) -> Self {
+    /// A window whose first row is `first` (row 0 of the page, or the top of a band's halo).
+    fn starting_at(
+        first: usize,
+        passes: usize,
+        width: usize,
+        stride: usize,
+        slots: Vec<usize>,
+    ) -> Self {
+        assert!(
+            slots.len() <= MAX_DILATED,
+            "at most {MAX_DILATED} dilated channels"
+        );
         Self {
             passes,
             width,
             stride,
             slots,
+            first,
             levels: (0..passes)
                 .map(|_| std::collections::VecDeque::new())
                 .collect(),
@@ -722,7 +833,7 @@ impl DilationWindow {
         let y = row.y;
         self.levels[level].push_back(row);
         let mut ready = Vec::new();
-        if y >= 1 {
+        if y > self.first {
             ready.push(self.next_row(level, y - 1));
         }
         if last {
@@ -758,7 +869,8 @@ impl DilationWindow {
             if centre.filled[x] {
                 continue;
             }
-            let (mut sum, mut n) = (vec![0.0f32; self.slots.len()], 0u32);
+            let mut sums = [0.0f32; MAX_DILATED];
+            let (sum, mut n) = (&mut sums[..self.slots.len()], 0u32);
             for row in &rows {
                 for nx in x.saturating_sub(1)..=(x + 1).min(self.width - 1) {
                     if row.filled[nx] {
@@ -1030,6 +1142,21 @@ mod tests {
         dilated: &[&str],
         seed: u64,
     ) -> [(Vec<u8>, Vec<u8>); 2] {
+        let [a, b, _] = both_ways_on(1, 12, width, height, aux, dilated, seed);
+        [a, b]
+    }
+
+    /// [`both_ways`] with `rects` charts, the stream finished on a pool of `threads`; the
+    /// third pair is the stream's EXR and PNG file bytes.
+    fn both_ways_on(
+        threads: usize,
+        rects: usize,
+        width: u32,
+        height: u32,
+        aux: &[&str],
+        dilated: &[&str],
+        seed: u64,
+    ) -> [(Vec<u8>, Vec<u8>); 3] {
         let dir = tempfile::tempdir().unwrap();
         let mut rng = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
         let mut next = |n: u32| {
@@ -1052,7 +1179,7 @@ mod tests {
         let scratch = dir.path().join("scratch");
         let mut stream = PageStream::create(&scratch, width, height, aux, dilated).unwrap();
         let mut non_finite = 0;
-        for _ in 0..12 {
+        for _ in 0..rects {
             let (w, h) = (1 + next(width.min(40)), 1 + next(height.min(40)));
             let (x0, y0) = (next(width - w + 1), next(height - h + 1));
             let mut rect = stream.rect(x0, y0, w, h).unwrap();
@@ -1080,15 +1207,57 @@ mod tests {
         let (a, b) = (dir.path().join("a.exr"), dir.path().join("b.exr"));
         image.write_exr(&a).unwrap();
         image.write_preview(&a.with_extension("png")).unwrap();
-        stream
-            .finish(DILATION, &b, &b.with_extension("png"))
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| stream.finish(DILATION, &b, &b.with_extension("png")))
             .unwrap();
         assert!(
             !dir.path().join("scratch").exists(),
             "the scratch file is removed"
         );
         let pixels = |p: &Path| image::open(p).unwrap().to_rgb8().into_raw();
-        [a, b].map(|p| (std::fs::read(&p).unwrap(), pixels(&p.with_extension("png"))))
+        let files = (
+            std::fs::read(&b).unwrap(),
+            std::fs::read(b.with_extension("png")).unwrap(),
+        );
+        let [a, b] = [a, b].map(|p| (std::fs::read(&p).unwrap(), pixels(&p.with_extension("png"))));
+        [a, b, files]
+    }
+
+    #[test]
+    fn the_parallel_finish_writes_the_same_bytes_at_any_thread_count() {
+        // Tall pages: many dilation bands, charts across their borders, batches of bands
+        // (threads at a time) with a carried halo; wide rows with directional channels.
+        let aux = ["SH0.R", "SH1x.G", "samples"];
+        for (seed, (w, h), rects, aux, dilated) in [
+            (11, (70, 700), 80, &[][..], &[][..]),
+            (12, (33, 1031), 120, &aux[..], &aux[..2]),
+            (13, (300, 130), 40, &aux[..1], &aux[..1]),
+            (14, (9, 65), 10, &[][..], &[][..]),
+        ] {
+            let mut first = None;
+            for threads in [1, 2, 3, 7] {
+                let [(exr_a, png_a), (exr_b, png_b), files] =
+                    both_ways_on(threads, rects, w, h, aux, dilated, seed);
+                assert!(
+                    exr_a == exr_b,
+                    "EXR bytes differ from the page image: {w}x{h}, {threads} threads"
+                );
+                assert!(
+                    png_a == png_b,
+                    "preview pixels differ from the page image: {w}x{h}, {threads} threads"
+                );
+                match &first {
+                    None => first = Some(files),
+                    Some(one) => assert!(
+                        *one == files,
+                        "EXR or PNG bytes differ between 1 and {threads} threads: {w}x{h}"
+                    ),
+                }
+            }
+        }
     }
 
     const DILATION: u32 = 2;

@@ -127,11 +127,6 @@ pub type ResultFile = RecordFile<TexelResult>;
 /// The iterations' batches of every texel (`--combine global`): K [`Welford`]s per texel.
 pub type BatchFile = RecordFile<Welford>;
 
-/// The directional coefficients of every texel (`--directional sh-l1`): one
-/// [`ShL1`](crate::bake::directional::ShL1) per texel, or K (the iterations' means) with
-/// `--combine global`.
-pub type DirectionalFile = RecordFile<crate::bake::directional::ShL1>;
-
 impl<T: PerTexel> RecordFile<T> {
     /// Creates (or truncates) the file at `path` for `texel_count` texels of bake `bake_id`,
     /// one record each, preallocated sparse at its full size and synced.

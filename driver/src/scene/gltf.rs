@@ -4,9 +4,13 @@ use std::sync::Arc;
 use super::texture::{self, BaseColorTexture, TextureOptions};
 use super::*;
 
-pub(super) fn load(path: &Path, textures: TextureOptions) -> Result<Scene, SceneError> {
+pub(super) fn load(
+    path: &Path,
+    textures: TextureOptions,
+    notes: &mut LoadNotes,
+) -> Result<Scene, SceneError> {
     let (doc, buffers) = import(path)?;
-    let materials = read_materials(path, &doc, &buffers, textures)?;
+    let materials = read_materials(path, &doc, &buffers, textures, notes)?;
     let default_material = materials.len() as u32;
     let mut materials = materials;
     materials.push(Material::default_grey());
@@ -101,14 +105,16 @@ pub(super) fn import(
     Ok((doc, buffers))
 }
 
-/// Image `index` of the glTF at `path` (imported by [`import`]), decoded at full size, or
-/// an error naming it: its URI or buffer view checked first ([`check_uri`], [`check_view`]).
+/// Image `index` of the glTF at `path` (imported by [`import`]), decoded at full size:
+/// `Ok(Err(message))` when it cannot be read or decoded (a missing file: the material falls
+/// back to its factor, [`read_materials`]), `Err` naming it when the document itself is at
+/// fault — its URI or buffer view checked first ([`check_uri`], [`check_view`]).
 fn load_image(
     path: &Path,
     doc: &::gltf::Document,
     buffers: &[::gltf::buffer::Data],
     index: usize,
-) -> Result<::gltf::image::Data, SceneError> {
+) -> Result<Result<::gltf::image::Data, String>, SceneError> {
     let item = format!("images[{index}]");
     let resource = |message: String| SceneError::GltfResource {
         path: path.to_owned(),
@@ -124,15 +130,8 @@ fn load_image(
         ::gltf::image::Source::Uri { uri, .. } => check_uri(uri).map_err(resource)?,
         ::gltf::image::Source::View { view, .. } => check_view(view, buffers).map_err(resource)?,
     }
-    let named = match &source {
-        ::gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
-            format!("\"{uri}\": ")
-        }
-        _ => String::new(),
-    };
     let base = path.parent().unwrap_or_else(|| Path::new("./"));
-    ::gltf::image::Data::from_source(source, Some(base), buffers)
-        .map_err(|e| resource(format!("{named}{}", describe(&e))))
+    Ok(::gltf::image::Data::from_source(source, Some(base), buffers).map_err(|e| describe(&e)))
 }
 
 /// A URI the importer can resolve without panicking: gltf 1.4.1 (`import.rs`,
@@ -263,18 +262,23 @@ fn check_position_accessors(json: &::gltf::json::Root) -> ::gltf::Result<()> {
 /// [`texture::Image`]s, capped as `options` says) and shared. Images are decoded one at a
 /// time and capped at once, so the peak while loading is one image at full size beside the
 /// capped ones; an image no material uses is decoded too (one at a time, then dropped), so
-/// a broken one is still an error.
+/// a broken one is still noted. An image that cannot be read or decoded is noted in `notes`
+/// and its material falls back to its `baseColorFactor`, or [`MISSING_TEXTURE_ALBEDO`]
+/// grey where the factor is glTF's default white (module docs of [`super`]).
 fn read_materials(
     path: &Path,
     doc: &::gltf::Document,
     buffers: &[::gltf::buffer::Data],
     options: TextureOptions,
+    notes: &mut LoadNotes,
 ) -> Result<Vec<Material>, SceneError> {
-    let mut decoded: Vec<Option<Arc<texture::Image>>> = vec![None; doc.images().len()];
-    let mut image = |t: ::gltf::Texture| -> Result<Arc<texture::Image>, SceneError> {
+    /// An image decoded, or why not (its name, the message).
+    type Decoded = Result<Arc<texture::Image>, (String, String)>;
+    let mut decoded: Vec<Option<Decoded>> = vec![None; doc.images().len()];
+    let mut image = |t: ::gltf::Texture| -> Result<Decoded, SceneError> {
         let index = t.source().index();
         if let Some(done) = &decoded[index] {
-            return Ok(Arc::clone(done));
+            return Ok(done.clone());
         }
         let item = format!("images[{index}]");
         let source = match t.source().source() {
@@ -283,56 +287,82 @@ fn read_materials(
             }
             _ => item.clone(),
         };
-        let full = load_image(path, doc, buffers, index)?;
-        let img =
-            decode_image(&full, source, options).map_err(|message| SceneError::GltfResource {
-                path: path.to_owned(),
-                item,
-                message,
-            })?;
-        drop(full);
-        let img = Arc::new(img);
-        decoded[index] = Some(Arc::clone(&img));
-        Ok(img)
+        let result = load_image(path, doc, buffers, index)?
+            .and_then(|full| decode_image(&full, source.clone(), options))
+            .map(Arc::new)
+            .map_err(|message| (source, message));
+        decoded[index] = Some(result.clone());
+        Ok(result)
     };
     let mut materials = Vec::with_capacity(doc.materials().len());
     for (i, m) in doc.materials().enumerate() {
+        let name = m
+            .name()
+            .map_or_else(|| format!("material#{i}"), str::to_owned);
         let pbr = m.pbr_metallic_roughness();
         let f = pbr.base_color_factor();
         let factor = Vec3::new(f[0], f[1], f[2]).clamp(Vec3::ZERO, Vec3::ONE);
+        let mut albedo = factor;
         let base_color_texture = match pbr.base_color_texture() {
             Some(info) => {
                 let sampler = info.texture().sampler();
-                Some(BaseColorTexture {
-                    image: image(info.texture())?,
-                    wrap: [sampler.wrap_s(), sampler.wrap_t()].map(wrap),
-                    factor,
-                })
+                match image(info.texture())? {
+                    Ok(image) => {
+                        albedo = factor * image.average();
+                        Some(BaseColorTexture {
+                            image,
+                            wrap: [sampler.wrap_s(), sampler.wrap_t()].map(wrap),
+                            factor,
+                        })
+                    }
+                    Err((file, message)) => {
+                        if factor == Vec3::ONE {
+                            albedo = Vec3::splat(MISSING_TEXTURE_ALBEDO);
+                        }
+                        notes.missing_textures.push(MissingTexture {
+                            material: name.clone(),
+                            file,
+                            message,
+                            fallback: albedo.to_array(),
+                        });
+                        None
+                    }
+                }
             }
             None => None,
         };
-        let albedo = base_color_texture
-            .as_ref()
-            .map_or(factor, |t| factor * t.image.average());
         // An emissive texture is averaged: emitters are sampled as lights of uniform
-        // radiance (transport::emitters).
+        // radiance (transport::emitters). One that cannot be read leaves the factor.
         let mut e = Vec3::from(m.emissive_factor());
         if let Some(info) = m.emissive_texture() {
-            e *= image(info.texture())?.average();
+            match image(info.texture())? {
+                Ok(image) => e *= image.average(),
+                Err((file, message)) => notes.missing_textures.push(MissingTexture {
+                    material: name.clone(),
+                    file,
+                    message: format!("{message} (emissive; the emissive factor is kept)"),
+                    fallback: albedo.to_array(),
+                }),
+            }
         }
         let strength = m.emissive_strength().unwrap_or(1.0);
         materials.push(Material {
-            name: m
-                .name()
-                .map_or_else(|| format!("material#{i}"), str::to_owned),
+            name,
             albedo: albedo.clamp(Vec3::ZERO, Vec3::ONE),
             emission: (e * strength).max(Vec3::ZERO),
             base_color_texture,
         });
     }
     for (index, done) in decoded.iter().enumerate() {
-        if done.is_none() {
-            load_image(path, doc, buffers, index)?;
+        if done.is_none()
+            && let Err(message) = load_image(path, doc, buffers, index)?
+        {
+            notes.missing_textures.push(MissingTexture {
+                material: String::new(),
+                file: format!("images[{index}]"),
+                message,
+                fallback: [0.0; 3],
+            });
         }
     }
     Ok(materials)
@@ -945,26 +975,37 @@ mod tests {
     }
 
     #[test]
-    fn a_missing_or_undecodable_texture_image_is_an_error_naming_it() {
+    fn a_missing_or_undecodable_texture_image_is_noted_and_its_material_keeps_its_factor() {
         let dir = tempfile::tempdir().unwrap();
         let path = textured_triangle(dir.path(), "missing.png", false);
-        let e = Scene::load(&path).expect_err("a missing image is an error");
-        let message = e.to_string();
+        let (s, notes) = Scene::load_reporting(&path, TextureOptions::default()).unwrap();
+        let m = &s.materials[0];
+        assert!(m.base_color_texture.is_none());
+        assert_eq!(m.albedo, Vec3::new(0.5, 1.0, 1.0), "the factor");
+        assert!(s.triangles[0].texture_uv.is_some());
         assert!(
-            message.starts_with(&format!(
-                "{}: images[0]: \"missing.png\": cannot read",
-                path.display()
-            )),
-            "{message}"
+            matches!(s.hit_albedo(0), texture::HitAlbedo::Varying(_)),
+            "vertex colours stay"
         );
+        let [note] = notes.missing_textures.as_slice() else {
+            panic!("{notes:?}")
+        };
+        assert_eq!(
+            (note.material.as_str(), note.file.as_str()),
+            ("tex", "images[0] (missing.png)")
+        );
+        assert!(note.message.contains("cannot read"), "{}", note.message);
         std::fs::write(dir.path().join("broken.png"), b"not a png").unwrap();
         let path = textured_triangle(dir.path(), "broken.png", false);
-        let message = Scene::load(&path)
-            .expect_err("a broken image is an error")
-            .to_string();
-        assert!(
-            message.starts_with(&format!("{}: images[0]: \"broken.png\": ", path.display())),
-            "{message}"
-        );
+        let (_, notes) = Scene::load_reporting(&path, TextureOptions::default()).unwrap();
+        assert_eq!(notes.missing_textures[0].file, "images[0] (broken.png)");
+        // glTF's default white factor is no colour: the fallback is the grey.
+        let text = std::fs::read_to_string(&path)
+            .unwrap()
+            .replace("[0.5,1.0,1.0,1.0]", "[1.0,1.0,1.0,1.0]");
+        assert!(!text.contains("0.5,1.0,1.0"), "{text}");
+        std::fs::write(&path, text).unwrap();
+        let s = Scene::load(&path).unwrap();
+        assert_eq!(s.materials[0].albedo, Vec3::splat(MISSING_TEXTURE_ALBEDO));
     }
 }

@@ -18,6 +18,17 @@
 //!
 //! Loading the written file gives the same triangles in the same order with these UVs, so
 //! `prepare --unwrap never` of it rasterises the same texels (driver/tests/unwrap.rs).
+//!
+//! **A scene from an OBJ** (directly or through a TOML scene file) has no glTF document to
+//! keep: [`write_glb`] writes a new one ([`write_new`]; docs/levels.md, "Write the level
+//! back for the engine"): a node and a mesh per scene mesh, a primitive per run of
+//! triangles of one material, vertices welded where every attribute agrees — `POSITION`,
+//! `NORMAL` (the loader's, so reloading gives the same ones), `TEXCOORD_0` (the texture UVs,
+//! v down as glTF has them) where the material is textured, `TEXCOORD_1` the lightmap's page
+//! UVs; materials as `baseColorFactor` (the fallback colour where a texture was missing),
+//! the base-colour image embedded as it is (PNG or JPEG) and emission (with
+//! `KHR_materials_emissive_strength` above 1). The sun, the sky and sphere lights of a TOML
+//! file are not written: glTF has no sky; keep the scene file (or the flags) for them.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -31,8 +42,8 @@ use crate::prepare::Lightmap;
 /// Why the scene could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
-    /// The scene did not come from a glTF file.
-    #[error("{path}: --write-gltf needs a .gltf or .glb scene")]
+    /// The scene did not come from a glTF or OBJ file.
+    #[error("{path}: --write-gltf needs a .gltf, .glb or .obj scene")]
     NotGltf {
         /// The scene file.
         path: PathBuf,
@@ -71,8 +82,10 @@ pub fn write_glb(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
-    if !matches!(ext.as_deref(), Some("gltf" | "glb")) {
-        return Err(WriteError::NotGltf { path: path.clone() });
+    match ext.as_deref() {
+        Some("gltf" | "glb") => {}
+        Some("obj") => return write_new(scene, lightmap, out),
+        _ => return Err(WriteError::NotGltf { path: path.clone() }),
     }
     let (doc, buffers) = super::gltf::import(path)?;
     let mut w = Writer {
@@ -454,17 +467,7 @@ impl Writer<'_> {
             message,
         };
         let json = self.root.to_vec().map_err(|e| write_error(e.to_string()))?;
-        let glb = ::gltf::binary::Glb {
-            header: ::gltf::binary::Header {
-                magic: *b"glTF",
-                version: 2,
-                length: 0,
-            },
-            json: json.into(),
-            bin: Some(self.bin.into()),
-        };
-        let bytes = glb.to_vec().map_err(|e| write_error(e.to_string()))?;
-        crate::output::atomic::write(out, bytes).map_err(|e| write_error(e.to_string()))
+        glb_file(out, json, self.bin).map_err(write_error)
     }
 }
 
@@ -491,4 +494,235 @@ fn set_extra(extras: &mut json::Extras, value: serde_json::Value) {
         .unwrap_or_else(|| serde_json::json!({}));
     object["guidebake_lightmap"] = value;
     *extras = serde_json::value::to_raw_value(&object).ok();
+}
+
+/// Writes `scene` (from an OBJ: no source document to keep) as a new binary glTF with
+/// `lightmap`'s UVs as `TEXCOORD_1` (module docs). Nothing is left at `out` on failure.
+///
+/// # Errors
+/// [`WriteError::Write`] naming `out` (or a texture file that can no longer be read).
+pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), WriteError> {
+    use serde_json::{Value, json};
+    let write_error = |message: String| WriteError::Write {
+        path: out.to_owned(),
+        message,
+    };
+    let mut bin: Vec<u8> = Vec::new();
+    let mut views: Vec<Value> = Vec::new();
+    let mut accessors: Vec<Value> = Vec::new();
+    let mut push_view = |bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>| -> usize {
+        while !bin.len().is_multiple_of(4) {
+            bin.push(0);
+        }
+        let mut view = json!({ "buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len() });
+        if let Some(t) = target {
+            view["target"] = t.into();
+        }
+        bin.extend_from_slice(bytes);
+        views.push(view);
+        views.len() - 1
+    };
+    const ARRAY_BUFFER: u32 = 34962;
+    const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+    const FLOAT: u32 = 5126;
+    const UNSIGNED_INT: u32 = 5125;
+
+    // Materials, their base-colour images embedded once each.
+    let mut images: Vec<Value> = Vec::new();
+    let mut image_of: HashMap<String, usize> = HashMap::new();
+    let mut materials: Vec<Value> = Vec::new();
+    let mut emissive_strength = false;
+    for m in &scene.materials {
+        let mut pbr = json!({ "metallicFactor": 0.0, "roughnessFactor": 1.0 });
+        let colour = match &m.base_color_texture {
+            Some(t) => {
+                let source = &t.image.source;
+                let index = match image_of.get(source) {
+                    Some(&i) => i,
+                    None => {
+                        let bytes = std::fs::read(source)
+                            .map_err(|e| write_error(format!("texture {source}: {e}")))?;
+                        let mime = if bytes.starts_with(b"\x89PNG") {
+                            "image/png"
+                        } else if bytes.starts_with(&[0xFF, 0xD8]) {
+                            "image/jpeg"
+                        } else {
+                            return Err(write_error(format!(
+                                "texture {source}: neither PNG nor JPEG, which glTF needs"
+                            )));
+                        };
+                        let view = push_view(&mut bin, &bytes, None);
+                        images.push(json!({ "bufferView": view, "mimeType": mime }));
+                        image_of.insert(source.clone(), images.len() - 1);
+                        images.len() - 1
+                    }
+                };
+                pbr["baseColorTexture"] = json!({ "index": index, "texCoord": 0 });
+                t.factor.clamp(Vec3::ZERO, Vec3::ONE)
+            }
+            None => m.albedo,
+        };
+        pbr["baseColorFactor"] = json!([colour.x, colour.y, colour.z, 1.0]);
+        let mut material = json!({ "name": m.name, "pbrMetallicRoughness": pbr });
+        let e = m.emission;
+        if e.max_element() > 0.0 {
+            let strength = e.max_element().max(1.0);
+            let f = e / strength;
+            material["emissiveFactor"] = json!([f.x, f.y, f.z]);
+            if strength > 1.0 {
+                emissive_strength = true;
+                material["extensions"] = json!({
+                    "KHR_materials_emissive_strength": { "emissiveStrength": strength }
+                });
+            }
+        }
+        materials.push(material);
+    }
+    // One texture per image, repeating (OBJ textures tile).
+    let textures: Vec<Value> = (0..images.len())
+        .map(|i| json!({ "source": i, "sampler": 0 }))
+        .collect();
+
+    let mut meshes: Vec<Value> = Vec::new();
+    let mut nodes: Vec<Value> = Vec::new();
+    for (id, mesh) in scene.meshes.iter().enumerate() {
+        let first = mesh.first_triangle as usize;
+        let range = first..first + mesh.triangle_count as usize;
+        let with_texels = lightmap.uv[range.clone()].iter().any(Option::is_some);
+        let mut primitives: Vec<Value> = Vec::new();
+        let mut start = range.start;
+        while start < range.end {
+            let material = scene.triangles[start].material;
+            let mut end = start + 1;
+            while end < range.end && scene.triangles[end].material == material {
+                end += 1;
+            }
+            let run = &scene.triangles[start..end];
+            let textured = run.iter().all(|t| t.texture_uv.is_some());
+            // Vertices welded where every attribute written agrees (by bits).
+            let mut index_of: HashMap<[u32; 12], u32> = HashMap::new();
+            let (mut pos, mut nor, mut uv0, mut uv1) = (vec![], vec![], vec![], vec![]);
+            let mut indices: Vec<u32> = Vec::with_capacity(3 * run.len());
+            for (k, t) in run.iter().enumerate() {
+                let lm = lightmap.uv[start + k];
+                for c in 0..3 {
+                    let p = t.positions[c];
+                    let n = t.normals[c];
+                    let a = t.texture_uv.map_or(glam::Vec2::ZERO, |q| q[c]);
+                    let b = lm.map_or(glam::Vec2::ZERO, |q| q[c]);
+                    let key = [p.x, p.y, p.z, n.x, n.y, n.z, a.x, a.y, b.x, b.y, 0.0, 0.0]
+                        .map(f32::to_bits);
+                    let next = index_of.len() as u32;
+                    let i = *index_of.entry(key).or_insert_with(|| {
+                        pos.push(p);
+                        nor.push(n);
+                        uv0.push(a);
+                        uv1.push(b);
+                        next
+                    });
+                    indices.push(i);
+                }
+            }
+            let floats =
+                |v: &[f32]| -> Vec<u8> { v.iter().flat_map(|x| x.to_le_bytes()).collect() };
+            let (lo, hi) = pos.iter().fold(
+                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+            );
+            let count = pos.len();
+            let mut attribute = |bytes: Vec<u8>, kind: &str, minmax: Option<(Vec3, Vec3)>| {
+                let view = push_view(&mut bin, &bytes, Some(ARRAY_BUFFER));
+                let mut a = json!({ "bufferView": view, "componentType": FLOAT, "count": count, "type": kind });
+                if let Some((lo, hi)) = minmax {
+                    a["min"] = json!([lo.x, lo.y, lo.z]);
+                    a["max"] = json!([hi.x, hi.y, hi.z]);
+                }
+                accessors.push(a);
+                accessors.len() - 1
+            };
+            let flat3 =
+                |v: &[Vec3]| floats(&v.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
+            let flat2 =
+                |v: &[glam::Vec2]| floats(&v.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
+            let mut attributes = serde_json::Map::new();
+            attributes.insert(
+                "POSITION".into(),
+                attribute(flat3(&pos), "VEC3", Some((lo, hi))).into(),
+            );
+            attributes.insert("NORMAL".into(), attribute(flat3(&nor), "VEC3", None).into());
+            if textured {
+                attributes.insert(
+                    "TEXCOORD_0".into(),
+                    attribute(flat2(&uv0), "VEC2", None).into(),
+                );
+            }
+            if with_texels {
+                attributes.insert(
+                    "TEXCOORD_1".into(),
+                    attribute(flat2(&uv1), "VEC2", None).into(),
+                );
+            }
+            let bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+            let view = push_view(&mut bin, &bytes, Some(ELEMENT_ARRAY_BUFFER));
+            accessors.push(json!({
+                "bufferView": view, "componentType": UNSIGNED_INT, "count": indices.len(), "type": "SCALAR"
+            }));
+            primitives.push(json!({
+                "attributes": attributes,
+                "indices": accessors.len() - 1,
+                "material": material,
+                "mode": 4,
+            }));
+            start = end;
+        }
+        meshes.push(json!({ "name": mesh.name, "primitives": primitives }));
+        let mut node = json!({ "name": mesh.name, "mesh": id });
+        if with_texels {
+            let page = lightmap.mesh_page[id];
+            let (width, height) = lightmap.pages[page as usize];
+            node["extras"] =
+                json!({ "guidebake_lightmap": { "page": page, "width": width, "height": height } });
+        }
+        nodes.push(node);
+    }
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    let mut root = json!({
+        "asset": { "version": "2.0", "generator": "guidebake prepare --write-gltf" },
+        "scene": 0,
+        "scenes": [{ "nodes": (0..nodes.len()).collect::<Vec<_>>() }],
+        "nodes": nodes,
+        "meshes": meshes,
+        "materials": materials,
+        "accessors": accessors,
+        "bufferViews": views,
+        "buffers": [{ "byteLength": bin.len() }],
+    });
+    if !images.is_empty() {
+        root["images"] = images.into();
+        root["textures"] = textures.into();
+        root["samplers"] = json!([{ "wrapS": 10497, "wrapT": 10497 }]);
+    }
+    if emissive_strength {
+        root["extensionsUsed"] = json!(["KHR_materials_emissive_strength"]);
+    }
+    let json = serde_json::to_vec(&root).map_err(|e| write_error(e.to_string()))?;
+    glb_file(out, json, bin).map_err(write_error)
+}
+
+/// A binary glTF of `json` and the buffer `bin`, written atomically to `out` (nothing is left
+/// there on failure); the error's message.
+fn glb_file(out: &Path, json: Vec<u8>, bin: Vec<u8>) -> Result<(), String> {
+    let glb = ::gltf::binary::Glb {
+        header: ::gltf::binary::Header {
+            magic: *b"glTF",
+            version: 2,
+            length: 0,
+        },
+        json: json.into(),
+        bin: Some(bin.into()),
+    };
+    let bytes = glb.to_vec().map_err(|e| e.to_string())?;
+    crate::output::atomic::write(out, bytes).map_err(|e| e.to_string())
 }

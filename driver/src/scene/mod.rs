@@ -12,8 +12,16 @@
 //!   texture sampled at the hit's `TEXCOORD_n` (its `texCoord` set) × the vertex colour
 //!   `COLOR_0`; OBJ `Kd` × `map_Kd` ([`texture`]). [`Material::albedo`] is the factor × the
 //!   texture's average, used where the albedo does not vary. Metallic, roughness, alpha and
-//!   transmission are ignored. A texture image that is missing or cannot be decoded is an
-//!   error naming it.
+//!   transmission are ignored.
+//! - **Assets as they come** (docs/levels.md, "What guidebake does with a level as it
+//!   comes"): a texture image that is missing or cannot be decoded is not an error —
+//!   downloaded levels often come without their texture packs. The material falls back to
+//!   its colour factor (MTL `Kd`, glTF `baseColorFactor`) where the file gives one (a glTF
+//!   factor of exactly white is glTF's default, not a colour), else to
+//!   [`MISSING_TEXTURE_ALBEDO`] grey; [`Scene::load_reporting`] returns each such texture
+//!   ([`MissingTexture`], naming the file and the material) for the commands to warn about and
+//!   count. Structural faults of a glTF file (a malformed URI, a buffer view outside its
+//!   buffer) stay errors.
 //! - Emission is `emissiveFactor` × `KHR_materials_emissive_strength` (radiance, front face).
 //! - All geometry is flattened into one triangle soup in world space (node transforms
 //!   applied; normals by the inverse transpose; a mirroring transform swaps two vertices so
@@ -111,8 +119,9 @@ pub enum SceneError {
         /// How many degenerate triangles were dropped.
         degenerate: usize,
     },
-    /// A texture image (OBJ `map_Kd`) is missing or cannot be decoded. glTF images are
-    /// [`SceneError::GltfResource`].
+    /// A texture image (OBJ `map_Kd`) is missing or cannot be decoded: the OBJ loader notes
+    /// it as a [`MissingTexture`] and goes on (module docs), so [`Scene::load`] does not
+    /// return it.
     #[error("{path}: texture {image}: {message}")]
     Texture {
         /// The scene (or MTL) file naming it.
@@ -121,6 +130,14 @@ pub enum SceneError {
         image: String,
         /// What is wrong.
         message: String,
+    },
+    /// Nothing lights the scene: no sun, no sky, no punctual light, no emissive triangle.
+    #[error(
+        "{path}: nothing lights this scene (no lights, no emissive materials, no sky); add a sun and a sky on the command line, the same on prepare, bake and render, e.g. `--sun 0.3,1,0.2:3 --sky 0.5,0.6,0.8` (--sun X,Y,Z[:IRRADIANCE], towards the sun, +Y up; --sky R,G,B or an equirect .exr), or [sun] and [sky] in a TOML scene file (docs/levels.md)"
+    )]
+    Unlit {
+        /// The scene file.
+        path: PathBuf,
     },
     /// The equirectangular sky image could not be read.
     #[error("{path}: cannot read sky image: {message}")]
@@ -158,6 +175,57 @@ impl Material {
             emission: Vec3::ZERO,
             base_color_texture: None,
         }
+    }
+}
+
+/// The albedo of a textured material whose texture could not be read and whose file gives
+/// no colour factor (module docs).
+pub const MISSING_TEXTURE_ALBEDO: f32 = 0.5;
+
+/// A texture that could not be read; its material fell back to a colour (module docs).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MissingTexture {
+    /// The material that names it (`""` for a glTF image no material uses).
+    pub material: String,
+    /// The image as the file names it (path or URI, or `images[i]`).
+    pub file: String,
+    /// Why it could not be read.
+    pub message: String,
+    /// The albedo the material uses instead, linear RGB.
+    pub fallback: [f32; 3],
+}
+
+/// What [`Scene::load_reporting`] noticed and went on with.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct LoadNotes {
+    /// Textures that could not be read, in file order.
+    pub missing_textures: Vec<MissingTexture>,
+}
+
+impl LoadNotes {
+    /// One warning line per missing texture, naming the scene file, the image and the
+    /// material, for the commands to print.
+    #[must_use]
+    pub fn warnings(&self, scene: &Path) -> Vec<String> {
+        self.missing_textures
+            .iter()
+            .map(|m| {
+                let used = if m.material.is_empty() {
+                    "used by no material".to_owned()
+                } else {
+                    format!(
+                        "material '{}' uses its colour {:.3},{:.3},{:.3} instead",
+                        m.material, m.fallback[0], m.fallback[1], m.fallback[2]
+                    )
+                };
+                format!(
+                    "{}: texture {} cannot be read ({}); {used}",
+                    scene.display(),
+                    m.file,
+                    m.message
+                )
+            })
+            .collect()
     }
 }
 
@@ -341,14 +409,36 @@ impl Scene {
     /// # Errors
     /// As [`Scene::load`].
     pub fn load_with(path: &Path, textures: TextureOptions) -> Result<Scene, SceneError> {
+        Self::load_reporting(path, textures).map(|(scene, _)| scene)
+    }
+
+    /// [`Scene::load_with`], also returning what the loader went on with: the textures that
+    /// could not be read (module docs), for the commands to warn about and count.
+    ///
+    /// # Errors
+    /// As [`Scene::load`].
+    pub fn load_reporting(
+        path: &Path,
+        textures: TextureOptions,
+    ) -> Result<(Scene, LoadNotes), SceneError> {
+        let mut notes = LoadNotes::default();
+        let scene = Self::load_noting(path, textures, &mut notes)?;
+        Ok((scene, notes))
+    }
+
+    fn load_noting(
+        path: &Path,
+        textures: TextureOptions,
+        notes: &mut LoadNotes,
+    ) -> Result<Scene, SceneError> {
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
         let scene = match ext.as_deref() {
-            Some("gltf" | "glb") => gltf::load(path, textures)?,
-            Some("obj") => obj::load(path, textures)?,
-            Some("toml") => SceneFile::load(path, textures)?,
+            Some("gltf" | "glb") => gltf::load(path, textures, notes)?,
+            Some("obj") => obj::load(path, textures, notes)?,
+            Some("toml") => SceneFile::load_noting(path, textures, notes)?,
             _ => {
                 return Err(SceneError::UnknownFormat {
                     path: path.to_owned(),
@@ -362,6 +452,47 @@ impl Scene {
             });
         }
         Ok(scene)
+    }
+
+    /// Whether anything lights the scene: a sun, a sky that is not black, a punctual light,
+    /// or an emissive material on some triangle.
+    #[must_use]
+    pub fn is_lit(&self) -> bool {
+        let sky = match &self.sky {
+            Sky::None => false,
+            Sky::Constant(c) => c.max_element() > 0.0,
+            Sky::Equirect { pixels, .. } => pixels.iter().any(|p| p.max_element() > 0.0),
+        };
+        let sun = self
+            .sun
+            .as_ref()
+            .is_some_and(|s| s.irradiance.max_element() > 0.0);
+        let emitters = {
+            let mut used = vec![false; self.materials.len()];
+            for t in &self.triangles {
+                used[t.material as usize] = true;
+            }
+            self.materials
+                .iter()
+                .zip(&used)
+                .any(|(m, &u)| u && m.emission.max_element() > 0.0)
+        };
+        sky || sun || !self.lights.is_empty() || emitters
+    }
+
+    /// [`Scene::is_lit`] as a check for the commands that light a scene (`prepare`, whose
+    /// facing analysis needs the lights, and `bake`).
+    ///
+    /// # Errors
+    /// [`SceneError::Unlit`], which says how to add a sun and a sky from the command line.
+    pub fn check_lit(&self) -> Result<(), SceneError> {
+        if self.is_lit() {
+            Ok(())
+        } else {
+            Err(SceneError::Unlit {
+                path: self.path.clone(),
+            })
+        }
     }
 
     /// The flat triangle soup, world space, in [`Scene::triangles`] order (the order BVH
@@ -525,7 +656,10 @@ mod obj;
 mod scene_file;
 pub mod texture;
 
-pub use scene_file::{SceneFile, SkySpec, SphereSpec, SunSpec, load_equirect};
+pub use scene_file::{
+    DEFAULT_SUN_IRRADIANCE, LightOverrides, SUN_RADIUS_DEG, SceneFile, SkySpec, SphereSpec,
+    SunSpec, load_equirect, parse_sky, parse_sun,
+};
 pub use texture::{BaseColorTexture, TextureOptions};
 
 #[cfg(test)]

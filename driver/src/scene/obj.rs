@@ -4,7 +4,11 @@ use std::sync::Arc;
 use super::texture::{self, BaseColorTexture, TextureOptions};
 use super::*;
 
-pub(super) fn load(path: &Path, textures: TextureOptions) -> Result<Scene, SceneError> {
+pub(super) fn load(
+    path: &Path,
+    textures: TextureOptions,
+    notes: &mut LoadNotes,
+) -> Result<Scene, SceneError> {
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
@@ -23,7 +27,7 @@ pub(super) fn load(path: &Path, textures: TextureOptions) -> Result<Scene, Scene
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut materials: Vec<Material> = mtl
         .iter()
-        .map(|m| read_material(path, m, dir, textures))
+        .map(|m| read_material(path, m, dir, textures, notes))
         .collect::<Result<_, _>>()?;
     let default_material = materials.len() as u32;
     materials.push(Material::default_grey());
@@ -105,13 +109,15 @@ fn check_element_indices(path: &Path) -> Result<(), SceneError> {
 
 /// A material; its `map_Kd` is a texture sampled at the OBJ's one UV set (repeating; v
 /// flipped, as OBJ's v runs up the image), × `Kd`. An image that is missing or cannot be
-/// decoded is an error naming it. `map_Kd` options (`-s`, `-o`, ...) are not read: the
-/// rest of the line is taken as the file name.
+/// decoded is noted in `notes` and the material keeps its `Kd`, or
+/// [`MISSING_TEXTURE_ALBEDO`] grey without one (module docs of [`super`]). `map_Kd` options
+/// (`-s`, `-o`, ...) are not read: the rest of the line is taken as the file name.
 fn read_material(
     path: &Path,
     m: &tobj::Material,
     dir: &Path,
     options: TextureOptions,
+    notes: &mut LoadNotes,
 ) -> Result<Material, SceneError> {
     // Not clamped before the texture multiplies it (a Kd above 1 brightening a dark map is
     // kept, as when the texture was averaged); the albedo at a hit is clamped to [0, 1].
@@ -119,17 +125,34 @@ fn read_material(
         .diffuse
         .map_or(Vec3::splat(0.8), Vec3::from)
         .max(Vec3::ZERO);
+    let mut albedo = kd;
     let base_color_texture = match &m.diffuse_texture {
-        Some(name) => Some(BaseColorTexture {
-            image: Arc::new(read_image(path, dir, name, options)?),
-            wrap: [texture::Wrap::Repeat; 2],
-            factor: kd,
-        }),
+        Some(name) => match read_image(path, dir, name, options) {
+            Ok(image) => {
+                albedo = kd * image.average();
+                Some(BaseColorTexture {
+                    image: Arc::new(image),
+                    wrap: [texture::Wrap::Repeat; 2],
+                    factor: kd,
+                })
+            }
+            Err(SceneError::Texture { image, message, .. }) => {
+                albedo = m
+                    .diffuse
+                    .map_or(Vec3::splat(MISSING_TEXTURE_ALBEDO), Vec3::from)
+                    .clamp(Vec3::ZERO, Vec3::ONE);
+                notes.missing_textures.push(MissingTexture {
+                    material: m.name.clone(),
+                    file: image,
+                    message,
+                    fallback: albedo.to_array(),
+                });
+                None
+            }
+            Err(e) => return Err(e),
+        },
         None => None,
     };
-    let albedo = base_color_texture
-        .as_ref()
-        .map_or(kd, |t| kd * t.image.average());
     // tobj parses `Ke` into `emissive`; older files spell it as an unknown parameter.
     let ke = m
         .emissive
@@ -158,7 +181,7 @@ fn read_image(
         message,
     };
     let file = dir.join(name);
-    let img = image::open(&file).map_err(|e| fail(format!("{}: {e}", file.display())))?;
+    let img = image::open(&file).map_err(|e| fail(e.to_string()))?;
     let rgb = img.to_rgb8();
     texture::Image::from_srgb8(
         file.display().to_string(),
@@ -262,7 +285,7 @@ mod tests {
     }
 
     #[test]
-    fn obj_map_kd_is_sampled_and_a_missing_one_is_an_error_naming_it() {
+    fn obj_map_kd_is_sampled_and_a_missing_one_falls_back_to_kd_with_a_note() {
         let dir = tempfile::tempdir().unwrap();
         let obj = dir.path().join("quad.obj");
         std::fs::write(
@@ -275,13 +298,41 @@ mod tests {
             "newmtl wood\nKd 0.5 0.5 0.5\nmap_Kd wood.png\n",
         )
         .unwrap();
-        let e = Scene::load(&obj).expect_err("a missing map_Kd is an error");
-        let message = e.to_string();
+        let (s, notes) = Scene::load_reporting(&obj, TextureOptions::default()).unwrap();
+        assert_eq!(notes.missing_textures.len(), 1, "{notes:?}");
+        let m = &notes.missing_textures[0];
+        assert_eq!((m.material.as_str(), m.file.as_str()), ("wood", "wood.png"));
+        assert_eq!(m.fallback, [0.5; 3]);
+        assert!(s.materials[0].base_color_texture.is_none());
+        assert_eq!(s.materials[0].albedo, Vec3::splat(0.5));
+        assert!(s.triangles[0].texture_uv.is_none());
+        let warning = &notes.warnings(&obj)[0];
         assert!(
-            message.starts_with(&format!("{}: texture wood.png: ", obj.display()))
-                && message.contains("wood.png"),
-            "{message}"
+            warning.contains("texture wood.png cannot be read")
+                && warning.contains("material 'wood'"),
+            "{warning}"
         );
+        // Without Kd the fallback is the 0.5 grey; with one, Kd.
+        std::fs::write(
+            dir.path().join("quad.mtl"),
+            "newmtl wood\nmap_Kd wood.png\n",
+        )
+        .unwrap();
+        let (s, notes) = Scene::load_reporting(&obj, TextureOptions::default()).unwrap();
+        assert_eq!(s.materials[0].albedo, Vec3::splat(MISSING_TEXTURE_ALBEDO));
+        assert_eq!(notes.missing_textures[0].fallback, [0.5; 3]);
+        std::fs::write(
+            dir.path().join("quad.mtl"),
+            "newmtl wood\nKd 0.2 0.4 0.6\nmap_Kd wood.png\n",
+        )
+        .unwrap();
+        let s = Scene::load(&obj).unwrap();
+        assert_eq!(s.materials[0].albedo, Vec3::new(0.2, 0.4, 0.6));
+        std::fs::write(
+            dir.path().join("quad.mtl"),
+            "newmtl wood\nKd 0.5 0.5 0.5\nmap_Kd wood.png\n",
+        )
+        .unwrap();
         // A 1×2 image: black over white (rows top to bottom; v = 0 is the top row).
         image::RgbImage::from_raw(1, 2, vec![0, 0, 0, 255, 255, 255])
             .unwrap()

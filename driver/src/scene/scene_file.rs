@@ -1,4 +1,7 @@
-//! The TOML scene file: geometry plus sky and sun, and the equirectangular sky it may name.
+//! The TOML scene file: geometry plus sky and sun, and the equirectangular sky it may name;
+//! and the same sun and sky given on the command line ([`LightOverrides`], `--sun` and
+//! `--sky` of `prepare`, `bake` and `render`; docs/levels.md, "Lights from the command
+//! line").
 use super::*;
 
 /// The TOML scene file: geometry plus sky and sun.
@@ -75,7 +78,7 @@ impl SphereSpec {
 }
 
 /// `[sky]` of a [`SceneFile`]: exactly one of the two fields.
-#[derive(Debug, Default, serde::Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SkySpec {
     /// Constant radiance.
@@ -85,7 +88,7 @@ pub struct SkySpec {
 }
 
 /// `[sun]` of a [`SceneFile`].
-#[derive(Debug, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SunSpec {
     /// Direction towards the sun.
@@ -133,6 +136,15 @@ impl SceneFile {
     /// [`SceneError::SceneFile`] for a malformed file, otherwise whatever loading the
     /// geometry or the sky returns.
     pub fn load(path: &Path, textures: super::TextureOptions) -> Result<Scene, SceneError> {
+        Self::load_noting(path, textures, &mut LoadNotes::default())
+    }
+
+    /// [`SceneFile::load`], noting what the geometry's loader went on with.
+    pub(super) fn load_noting(
+        path: &Path,
+        textures: super::TextureOptions,
+        notes: &mut LoadNotes,
+    ) -> Result<Scene, SceneError> {
         let bad = |message: String| SceneError::SceneFile {
             path: path.to_owned(),
             message,
@@ -152,7 +164,7 @@ impl SceneFile {
                 "geometry must be .gltf, .glb or .obj, not another scene file".into(),
             ));
         }
-        let mut scene = Scene::load_with(&geometry, textures)?;
+        let mut scene = Scene::load_noting(&geometry, textures, notes)?;
         if let Some(sun) = &file.sun {
             scene.sun = Some(sun.to_sun().map_err(bad)?);
         }
@@ -161,30 +173,175 @@ impl SceneFile {
         }
         scene.sky = match &file.sky {
             None => Sky::None,
-            Some(SkySpec {
-                constant: Some(c),
-                equirect: None,
-            }) => {
-                let c = Vec3::from(*c);
-                if !c.is_finite() || c.min_element() < 0.0 {
-                    return Err(bad(format!(
-                        "sky constant {c} must be finite and non-negative"
-                    )));
-                }
-                Sky::Constant(c)
-            }
-            Some(SkySpec {
-                constant: None,
-                equirect: Some(p),
-            }) => load_equirect(&dir.join(p))?,
-            Some(_) => {
-                return Err(bad(
-                    "[sky] needs exactly one of `constant` or `equirect`".into()
-                ));
-            }
+            Some(spec) => spec.to_sky(dir).map_err(|e| match e {
+                SkyError::Spec(message) => bad(message),
+                SkyError::Scene(e) => e,
+            })?,
         };
         Ok(scene)
     }
+}
+
+/// Why a [`SkySpec`] gives no sky.
+enum SkyError {
+    /// The spec is invalid.
+    Spec(String),
+    /// The EXR it names cannot be read.
+    Scene(SceneError),
+}
+
+impl SkySpec {
+    /// Validates and converts; an `equirect` path is relative to `dir`.
+    fn to_sky(&self, dir: &Path) -> Result<Sky, SkyError> {
+        match self {
+            SkySpec {
+                constant: Some(c),
+                equirect: None,
+            } => {
+                let c = Vec3::from(*c);
+                if !c.is_finite() || c.min_element() < 0.0 {
+                    return Err(SkyError::Spec(format!(
+                        "sky constant {c} must be finite and non-negative"
+                    )));
+                }
+                Ok(Sky::Constant(c))
+            }
+            SkySpec {
+                constant: None,
+                equirect: Some(p),
+            } => load_equirect(&dir.join(p)).map_err(SkyError::Scene),
+            _ => Err(SkyError::Spec(
+                "[sky] needs exactly one of `constant` or `equirect`".into(),
+            )),
+        }
+    }
+}
+
+/// The irradiance of a `--sun` given without one (on a plane facing the sun, each channel):
+/// with a sky of radiance ~0.5 the sun then gives about twice the sky's irradiance
+/// (π · 0.5), a clear day's ratio within a few times.
+pub const DEFAULT_SUN_IRRADIANCE: f32 = 3.0;
+/// The angular radius of a `--sun`, degrees: the real sun's.
+pub const SUN_RADIUS_DEG: f32 = 0.267;
+
+/// A sun and a sky given on the command line (`--sun`, `--sky`), applied to a loaded scene.
+///
+/// **How they combine with a scene file**: `--sun` replaces the TOML file's `[sun]` (the one
+/// sun a scene has), `--sky` its `[sky]`; the scene's other lights (glTF
+/// `KHR_lights_punctual`, TOML sphere lights) and emissive materials are kept. `prepare`
+/// decides from the lights which side of every surface is seen ([`crate::facing`]), so
+/// `prepare`, `bake` and `render` must be given the same flags (docs/levels.md).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LightOverrides {
+    /// `--sun`, parsed by [`parse_sun`].
+    pub sun: Option<SunSpec>,
+    /// `--sky`, parsed by [`parse_sky`].
+    pub sky: Option<SkySpec>,
+}
+
+impl LightOverrides {
+    /// Whether either is given.
+    #[must_use]
+    pub fn any(&self) -> bool {
+        self.sun.is_some() || self.sky.is_some()
+    }
+
+    /// Replaces the scene's sun and sky with the ones given; an equirect path is relative to
+    /// the working directory.
+    ///
+    /// # Errors
+    /// [`SceneError::SceneFile`] naming the scene (`--sun`/`--sky` and what is wrong) for an
+    /// invalid value, [`SceneError::Sky`] when the sky EXR cannot be read.
+    pub fn apply(&self, scene: &mut Scene) -> Result<(), SceneError> {
+        let bad = |flag: &str, message: String| SceneError::SceneFile {
+            path: scene.path.clone(),
+            message: format!("{flag}: {message}"),
+        };
+        if let Some(sun) = &self.sun {
+            scene.sun = Some(sun.to_sun().map_err(|m| bad("--sun", m))?);
+        }
+        if let Some(sky) = &self.sky {
+            scene.sky = sky.to_sky(Path::new(".")).map_err(|e| match e {
+                SkyError::Spec(m) => bad("--sky", m),
+                SkyError::Scene(e) => e,
+            })?;
+        }
+        Ok(())
+    }
+}
+
+/// Parses `A,B,C` (or one value `A`, repeated) of finite numbers.
+fn parse_triple(s: &str, what: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|c| {
+            c.trim()
+                .parse::<f32>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("'{s}': {what} needs finite numbers, '{c}' is not one"))
+        })
+        .collect::<Result<_, _>>()?;
+    match v.as_slice() {
+        [a] => Ok([*a; 3]),
+        [a, b, c] => Ok([*a, *b, *c]),
+        _ => Err(format!("'{s}': {what} is one number or three (R,G,B)")),
+    }
+}
+
+/// Parses `--sun X,Y,Z[:IRRADIANCE]`: the direction towards the sun (+Y up, need not be
+/// unit) and its irradiance on a plane facing it, one value or `R,G,B` (default
+/// [`DEFAULT_SUN_IRRADIANCE`]); the angular radius is the real sun's ([`SUN_RADIUS_DEG`]).
+/// Validated as a TOML `[sun]` is ([`SunSpec::to_sun`]).
+///
+/// # Errors
+/// A message for clap's usage error.
+pub fn parse_sun(s: &str) -> Result<SunSpec, String> {
+    let (direction, irradiance) = match s.split_once(':') {
+        Some((d, i)) => (d, Some(i)),
+        None => (s, None),
+    };
+    let d: Vec<&str> = direction.split(',').collect();
+    if d.len() != 3 {
+        return Err(format!(
+            "'{s}' is not X,Y,Z[:IRRADIANCE] (the direction towards the sun, +Y up)"
+        ));
+    }
+    let spec = SunSpec {
+        direction: parse_triple(direction, "the sun's direction")?,
+        angular_radius_deg: SUN_RADIUS_DEG,
+        irradiance: match irradiance {
+            Some(i) => parse_triple(i, "the sun's irradiance")?,
+            None => [DEFAULT_SUN_IRRADIANCE; 3],
+        },
+    };
+    spec.to_sun().map_err(|m| format!("'{s}': {m}"))?;
+    Ok(spec)
+}
+
+/// Parses `--sky R,G,B` (constant radiance; one value for grey) or `--sky FILE.exr` (an
+/// equirectangular sky, +Y up), as a TOML `[sky]`'s `constant` or `equirect`.
+///
+/// # Errors
+/// A message for clap's usage error.
+pub fn parse_sky(s: &str) -> Result<SkySpec, String> {
+    if Path::new(s)
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
+        return Ok(SkySpec {
+            constant: None,
+            equirect: Some(PathBuf::from(s)),
+        });
+    }
+    let c = parse_triple(s, "--sky (R,G,B radiance, or an .exr file)")?;
+    if c.iter().any(|&x| x < 0.0) {
+        return Err(format!("'{s}': the sky's radiance must be non-negative"));
+    }
+    Ok(SkySpec {
+        constant: Some(c),
+        equirect: None,
+    })
 }
 
 /// Reads the first RGBA layer of an EXR as an equirectangular sky.
@@ -224,4 +381,96 @@ pub fn load_equirect(path: &Path) -> Result<Sky, SceneError> {
         height: size.1 as u32,
         pixels,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sun_and_sky_flags_parse_as_the_scene_file_spells_them() {
+        let sun = parse_sun("0,2,0").unwrap();
+        assert_eq!(sun.direction, [0.0, 2.0, 0.0]);
+        assert_eq!(sun.irradiance, [DEFAULT_SUN_IRRADIANCE; 3]);
+        assert_eq!(sun.angular_radius_deg, SUN_RADIUS_DEG);
+        let sun = parse_sun("-0.3, 1, 0.2:2.5").unwrap();
+        assert_eq!(
+            (sun.direction, sun.irradiance),
+            ([-0.3, 1.0, 0.2], [2.5; 3])
+        );
+        let sun = parse_sun("1,1,0:1,2,3").unwrap();
+        assert_eq!(sun.irradiance, [1.0, 2.0, 3.0]);
+        for (bad, says) in [
+            ("1,1", "X,Y,Z"),
+            ("0,0,0", "non-zero"),
+            ("1,x,0", "'x' is not one"),
+            ("0,1,0:-1", "non-negative"),
+            ("0,1,0:1,2", "one number or three"),
+            ("0,1,0:inf", "finite"),
+        ] {
+            let e = parse_sun(bad).expect_err(bad);
+            assert!(e.contains(says), "{bad}: {e}");
+        }
+        assert_eq!(parse_sky("0.5").unwrap().constant, Some([0.5; 3]));
+        assert_eq!(
+            parse_sky("0.1,0.2,0.3").unwrap().constant,
+            Some([0.1, 0.2, 0.3])
+        );
+        assert_eq!(
+            parse_sky("sky.EXR").unwrap().equirect,
+            Some(PathBuf::from("sky.EXR"))
+        );
+        assert!(parse_sky("-1").unwrap_err().contains("non-negative"));
+        assert!(parse_sky("sky.png").is_err());
+    }
+
+    /// The flags replace a scene file's sun and sky and keep its other lights; an unlit
+    /// scene is lit by either.
+    #[test]
+    fn flags_replace_the_scene_files_sun_and_sky_and_keep_its_other_lights() {
+        let dir = tempfile::tempdir().unwrap();
+        let obj = dir.path().join("tri.obj");
+        std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+        let bare = Scene::load(&obj).unwrap();
+        assert!(!bare.is_lit());
+        let e = bare.check_lit().unwrap_err().to_string();
+        assert!(
+            e.contains("--sun") && e.contains("--sky") && e.contains("tri.obj"),
+            "{e}"
+        );
+        let toml = dir.path().join("s.toml");
+        std::fs::write(
+            &toml,
+            "geometry = \"tri.obj\"\n[sky]\nconstant = [1, 1, 1]\n[sun]\ndirection = [1, 0, 0]\nangular_radius_deg = 1\nirradiance = [9, 9, 9]\n[[sphere_light]]\ncenter = [0, 5, 0]\nradius = 1\nradiance = [1, 1, 1]\n",
+        )
+        .unwrap();
+        let mut scene = Scene::load(&toml).unwrap();
+        LightOverrides {
+            sun: Some(parse_sun("0,1,0:2").unwrap()),
+            sky: None,
+        }
+        .apply(&mut scene)
+        .unwrap();
+        let sun = scene.sun.as_ref().unwrap();
+        assert_eq!((sun.direction, sun.irradiance), (Vec3::Y, Vec3::splat(2.0)));
+        assert_eq!(scene.sky, Sky::Constant(Vec3::ONE));
+        assert_eq!(scene.lights.len(), 1);
+        let mut lit = bare.clone();
+        LightOverrides {
+            sun: None,
+            sky: Some(parse_sky("0.2").unwrap()),
+        }
+        .apply(&mut lit)
+        .unwrap();
+        assert!(lit.is_lit());
+        // A black sky lights nothing.
+        let mut dark = bare;
+        LightOverrides {
+            sun: None,
+            sky: Some(parse_sky("0").unwrap()),
+        }
+        .apply(&mut dark)
+        .unwrap();
+        assert!(!dark.is_lit());
+    }
 }

@@ -427,7 +427,11 @@ mod tests {
             ("far below", Vec3::new(0.3, 0.2, -4.0), Vec3::Z),
         ];
         let n = 40_000;
-        let selections = [EmitterSelection::Power, EmitterSelection::Tree];
+        let selections = [
+            EmitterSelection::Power,
+            EmitterSelection::Tree,
+            EmitterSelection::Local,
+        ];
         for ((what, p, normal), sel) in cases.into_iter().flat_map(|c| selections.map(|s| (c, s))) {
             let what = format!("{what} ({sel})");
             let want = lambert(p, normal, &quad, l);
@@ -534,6 +538,8 @@ mod tests {
             (EmitterSampling::Nee, EmitterSelection::Power),
             (EmitterSampling::Nee, EmitterSelection::Tree),
             (EmitterSampling::Mis, EmitterSelection::Tree),
+            (EmitterSampling::Nee, EmitterSelection::Local),
+            (EmitterSampling::Mis, EmitterSelection::Local),
         ] {
             let mut world = World::new(&scene, Preset::DEFAULT).unwrap();
             world.set_emitters(sampling, sel);
@@ -568,13 +574,12 @@ mod tests {
             Vec3::new(2.0, 2.0, 2.0),
             Vec3::new(2.0, -2.0, 2.0),
         ];
-        for (offset, l, tolerance) in [(Vec3::ZERO, 1e5, 0.01), (far, 1e-4, 0.06)] {
-            let world = lamp(
-                quad.map(|v| v + offset),
-                l,
-                EmitterSampling::Nee,
-                EmitterSelection::Tree,
-            );
+        let cases = [(Vec3::ZERO, 1e5, 0.01), (far, 1e-4, 0.06)];
+        let selections = [EmitterSelection::Tree, EmitterSelection::Local];
+        for ((offset, l, tolerance), sel) in
+            cases.into_iter().flat_map(|c| selections.map(|s| (c, s)))
+        {
+            let world = lamp(quad.map(|v| v + offset), l, EmitterSampling::Nee, sel);
             let p = offset + Vec3::new(0.3, 0.0, 0.0);
             let want = lambert(p, Vec3::Z, &quad.map(|v| v + offset), l);
             let mut rng = Pcg32::new(4, 4);
@@ -600,7 +605,11 @@ mod tests {
     #[test]
     fn a_world_without_emitters_samples_none() {
         let quad = [Vec3::ZERO, Vec3::X, Vec3::X + Vec3::Y, Vec3::Y];
-        for sel in [EmitterSelection::Power, EmitterSelection::Tree] {
+        for sel in [
+            EmitterSelection::Power,
+            EmitterSelection::Tree,
+            EmitterSelection::Local,
+        ] {
             let dark = lamp(quad, 0.0, EmitterSampling::Mis, sel);
             assert!(dark.emitters().is_none() && !dark.has_direct_light());
             assert_eq!(dark.emitter_sampling(), EmitterSampling::Hits);

@@ -4,9 +4,10 @@
 //! irradiance arriving there: under `series` ([`super::series`]), the previous pass's total
 //! irradiance (pass 1 reads the direct pass 0) where the hit is on the side its texels bake
 //! and not within `NEAR_FIELD_TEXELS` of its texels of the ray's origin, else direct light by
-//! next-event estimation plus the previous pass's gather-only irradiance — or, on a side no
-//! texel describes (the far side of a thin wall, a triangle without lightmap UVs), plus one
-//! more bounce traced, whose hit is read as a gather hit's is;
+//! next-event estimation plus the previous pass's gather-only irradiance — or, where the
+//! texels cannot be read (a side no texel describes, padding or texels inside geometry, texels
+//! that disagree beyond `SMOOTH_RATIO`), a path traced on from the hit with as many bounces as
+//! the previous pass holds, as under `path` (docs/bake.md, "Where series reads the lightmap");
 //! under `path`, direct light by next-event estimation plus a path continued with
 //! cosine-weighted directions, next-event estimation and MIS at every vertex, and Russian
 //! roulette from the third vertex. A ray that leaves the scene sees the sky.

@@ -23,8 +23,8 @@
 //! of a thin wall, whose texels hold the light of the space behind it), over baked texels
 //! (not a chart's padding, not texels inside geometry, whose values are the dilation's),
 //! agreeing within [`SMOOTH_RATIO`] (not across a shadow edge or the doorway light enters
-//! by). Elsewhere the
-//! caller computes the light at the hit as path transport would (`transport/path.rs`).
+//! by). Elsewhere the caller computes the light at the hit as path transport would
+//! (`transport/path.rs`).
 //!
 //! [`PreviousPass`] holds one dense RGB image per atlas page, in a file of the work directory
 //! that is memory-mapped (file-backed pages, not anonymous memory), written by

@@ -24,7 +24,7 @@
 //! binary tree's leaves kept; [`SlotCosts`]). It replaced opening the inner child of largest
 //! surface area until eight slots were filled (Embree's collapse order): 30 % fewer wide nodes
 //! on the 1M city, whose gather packets went from 1.01× to 1.06–1.07× Embree's
-//! (docs/traverse.md, session 21).
+//! (docs/traverse.md, "What each kept change bought").
 //!
 //! The boxes and the triangle test are the binary traversal's. The slab test is as
 //! conservative as the binary traversal's, in the fused form `p·inv − o·inv` with the offsets
@@ -549,7 +549,7 @@ pub(super) struct Ray1x8 {
     c_far: [f32x8; 3],
     /// Axes whose near plane is `hi` (direction sign bit set). A branch per axis: picking
     /// the planes by row index, as the packet walk's lanes do, made the single-ray walks
-    /// 10 % slower (docs/traverse.md, session 14).
+    /// 10 % slower (docs/traverse.md, "Measured and dropped").
     neg: [bool; 3],
     tmin_down: f32x8,
 }
@@ -617,7 +617,8 @@ pub(super) fn walk1<'a>(
         let (bits, near) = ray.boxes(node, tmax);
         let n = bits.count_ones() as usize;
         // The nearest slot met is visited next; the others are pushed farthest first, sorted
-        // as the packet walk sorts them (+4–8 % on single gather rays, session 18).
+        // as the packet walk sorts them (+4–8 % on single gather rays,
+        // docs/traverse.md, "What each kept change bought").
         let mut next = match n {
             0 => None,
             1 => {
@@ -633,8 +634,8 @@ pub(super) fn walk1<'a>(
                     u32x8::ZERO,
                 ];
                 let (next, pushed) = stack.push_sorted(sorted_rows(near, hit, rows), n);
-                // The nearest slot pushed is prefetched (every slot pushed, before session
-                // 18: +4–5 % on the city's single rays, −1 % in cache on the room).
+                // The nearest slot pushed is prefetched (every slot pushed, as before the sorting
+                // network: +4–5 % on the city's single rays, −1 % in cache on the room).
                 prefetch_entry(bvh, pushed.entry());
                 Some((next.child, next.meta))
             }
@@ -687,7 +688,8 @@ pub(super) fn walk1_any<'a>(
             let (bits, _) = ray.boxes(node, tmax);
             if bits != 0 {
                 // [`slots_any_hit`] written out: through it (a closure pushing), the lanes of
-                // the room's shadow packets walked 5 % slower (docs/traverse.md, session 14).
+                // the room's shadow packets walked 5 % slower (docs/traverse.md,
+                // "Measured and dropped").
                 let entry = |slot: u32| {
                     u64::from(node.child[slot as usize]) | u64::from(node.meta[slot as usize]) << 32
                 };
@@ -763,14 +765,15 @@ fn slots_any_hit(node: &WideNode, bits: u8, mut push: impl FnMut(u64)) -> u64 {
 
 /// Layout size ([`WideRef::bytes`]) from which [`super::occluded8`] interleaves the
 /// single-ray walks of a packet whose lanes do not share an origin: 1 MiB, a core's L2 on the
-/// measuring machine. Measured on two trees only (docs/traverse.md, "Wide layout, session
-/// 9"): on the Veach room (0.27 MB, in cache) interleaving costs 30–37 %, on the 1M-triangle
+/// measuring machine. Measured on two trees only (docs/traverse.md, "What falls
+/// short"): on the Veach room (0.27 MB, in cache) interleaving costs 30–37 %, on the 1M-triangle
 /// city (59 MB) it gains 1.9×.
 pub const INTERLEAVE_BYTES: usize = 1 << 20;
 
 /// Asks the cache for the 256 bytes of the node, or the first rows of the leaf, of the entry
-/// `child | meta << 32`. The address is chosen without a branch: branching on the kind of
-/// entry mispredicted a third of the time in the packet walk (docs/traverse.md, session 18).
+/// `child | meta << 32`. The address is chosen without a branch: branching on the kind of entry
+/// mispredicted a third of the time in the packet walk (docs/traverse.md, "What each kept change
+/// bought").
 #[inline(always)]
 fn prefetch_entry(bvh: &WideRef<'_>, e: u64) {
     let (child, meta) = (e as usize & 0xffff_ffff, (e >> 32) as u32);
@@ -900,7 +903,7 @@ impl Lanes {
 
     /// The row of `node` at the byte offset `off`, one of [`Lanes::near`] or [`Lanes::far`].
     /// (Indexing the rows by row number took an `and` and a shift per plane and lane: 12 of
-    /// the 70 instructions of a lane's test, docs/traverse.md, session 17.)
+    /// the 70 instructions of a lane's test, docs/traverse.md, "What each kept change bought".)
     #[inline(always)]
     fn row(node: &WideNode, off: u32) -> f32x8 {
         debug_assert!(off.is_multiple_of(ROW_BYTES) && off < 6 * ROW_BYTES);
@@ -954,10 +957,10 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
         nearest = m.select(near, inf).fast_min(nearest);
         met |= bytemuck::cast::<f32x8, u32x8>(m) & u32x8::from(LANE_BIT[i]);
     };
-    // A node that all eight lanes reach is tested without the loop over set lanes, whose
-    // exit the branch predictor misses once a node (city gather 0.90–0.94× → 0.97–1.00×
-    // Embree, docs/traverse.md, session 19; the same for six or more lanes, the dead ones
-    // tested with `tmax = −∞`, was no faster).
+    // A node that all eight lanes reach is tested without the loop over set lanes, whose exit the
+    // branch predictor misses once a node (city gather 0.90–0.94× → 0.97–1.00× Embree,
+    // docs/traverse.md, "What each kept change bought"; the same for six or more lanes, the dead
+    // ones tested with `tmax = −∞`, was no faster).
     if live == 0xff {
         for i in 0..LANES {
             test(i);
@@ -977,9 +980,9 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
 /// eight slots at a time ([`boxes8`]): only the live lanes are tested, and a packet's lanes
 /// drift apart deeper in the tree. (Measured against testing slot by slot, eight lanes at a
 /// time, against one frustum test for a shared-origin packet, and against a frustum test
-/// choosing the slots then tested eight lanes at a time: docs/traverse.md, "Wide BVH" and
-/// "Session 13".) A popped inner node that at most [`Visitor::ALONE`] live lanes reach is
-/// handed to [`Visitor::alone`] (any-hit walks only: docs/traverse.md, session 20).
+/// choosing the slots then tested eight lanes at a time: docs/traverse.md,
+/// "Measured and dropped".) A popped inner node that at most [`Visitor::ALONE`] live lanes reach is
+/// handed to [`Visitor::alone`] (any-hit walks only: docs/traverse.md, "Wide layout").
 pub(super) fn walk8<'a, V: Visitor<'a>>(
     bvh: &WideRef<'a>,
     pre: &Pre8,
@@ -998,7 +1001,7 @@ pub(super) fn walk8<'a, V: Visitor<'a>>(
         // The slots met sorted farthest first without a branch: the first `n − 1` pushed,
         // the nearest visited next. (Sorted by insertion, the sort's and the pushes' branches
         // were two fifths of the walk's mispredictions on the city: callgrind's model,
-        // docs/traverse.md, session 18.)
+        // docs/traverse.md, "What each kept change bought".)
         let hit = !met.simd_eq(u32x8::ZERO);
         let n = hit.to_bitmask().count_ones() as usize;
         let mut next = (n > 0).then(|| {
@@ -1220,7 +1223,8 @@ fn rows_for(live: u8, meta: u32) -> bool {
 
 /// The widened far bound of the largest `tmax` among the lanes of `alive`, without a branch:
 /// a branch per lane on `alive` mispredicted wherever lanes finish at random, as shadow lanes
-/// do (the room's shadow packets 1.00× → 1.21–1.23× Embree, docs/traverse.md, session 20).
+/// do (the room's shadow packets 1.00× → 1.21–1.23× Embree, docs/traverse.md,
+/// "What each kept change bought").
 #[inline(always)]
 fn widened_largest(tmax: f32x8, alive: u8) -> f32 {
     let t = mask_of(alive)
@@ -1234,7 +1238,7 @@ fn widened_largest(tmax: f32x8, alive: u8) -> f32 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::scalar::slab8;
+    use super::super::slab::slab8;
     use super::*;
     use crate::packet::{Hit8, LANES, Ray, Ray8};
     use crate::testing::Pcg32;

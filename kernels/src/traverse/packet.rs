@@ -5,8 +5,11 @@
 //! the one visited first. Leaves are tested by a [`Visitor`] (closest hit or occlusion), which
 //! the wide walk ([`super::bvh8`]) shares.
 
+// The one import back into the wide walk, kept: the `Visitor` trait's hybrid switch hands a
+// subtree to the wide single-ray walk (docs/ARCHITECTURE.md, "Crates and what may depend on
+// what").
 use super::bvh8::WideRef;
-use super::scalar::widened8;
+use super::slab::widened8;
 use super::triangle::{
     Best8, Pre1x8, Pre8, TriAt, closest_rows, closest8, occludes_rows, occludes8, set_lane,
 };
@@ -16,7 +19,7 @@ use wide::{f32x8, u32x8};
 
 /// The lanes (or a node's slots) of `bits` as a mask vector: lane `i` all ones where bit `i`
 /// is set, zero elsewhere. Without a branch per lane (a branch per lane on the live lanes
-/// mispredicted where lanes finish at random: docs/traverse.md, session 20).
+/// mispredicted where lanes finish at random: docs/traverse.md, "What each kept change bought").
 #[inline(always)]
 pub(super) fn mask_of(bits: u8) -> f32x8 {
     const BITS: u32x8 = u32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
@@ -78,8 +81,8 @@ impl Pre8 {
 pub(super) trait Visitor<'a> {
     /// The live lanes at most from which the wide walk finishes the subtree of an inner
     /// node lane by lane ([`Visitor::alone`]); 0: never. (The closest-hit walk never does:
-    /// Embree's hybrid switch was measured and dropped there, docs/traverse.md, sessions 8,
-    /// 9, 15 and 20.)
+    /// Embree's hybrid switch was measured and dropped there four times, docs/traverse.md,
+    /// "Measured and dropped".)
     const ALONE: u32 = 0;
 
     /// Walks the subtree of the wide entry `entry` (`child | meta << 32`) for each lane of
@@ -139,7 +142,7 @@ pub(super) struct Occlusion<'p> {
 impl<'a> Visitor<'a> for Occlusion<'_> {
     /// Two: the room's shadow packets of unrelated lanes ran at 1.20–1.22× Embree's
     /// `rtcOccluded8` with the switch at two lanes and at 1.18–1.19× without it; T = 1, 3, 4
-    /// came within 0.02 of two (docs/traverse.md, session 20).
+    /// came within 0.02 of two (docs/traverse.md, "What each kept change bought").
     const ALONE: u32 = 2;
 
     #[inline(always)]
@@ -253,7 +256,7 @@ pub(super) fn walk8<'a>(
 /// A packet's constants and its starting `tmax` (`min(tmax, f32::MAX)`, −∞ in lanes not
 /// traced), or `None` when no lane is traced. Inlined with [`Pre8::new`], so the constants
 /// (about 800 bytes) are built in place rather than returned through memory: 2–4 % more room
-/// gather and shadow packets a second (docs/traverse.md, "Session 15").
+/// gather and shadow packets a second (docs/traverse.md, "What each kept change bought").
 #[inline(always)]
 pub(super) fn start8(rays: &Ray8) -> Option<(Pre8, f32x8)> {
     let pre = Pre8::new(rays);

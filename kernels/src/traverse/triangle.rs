@@ -5,7 +5,7 @@
 //! lane), with the closest-hit acceptance (tie rule) and occlusion tests built on them.
 
 use super::Tri;
-use super::scalar::{NEAR_DOWN, slab8};
+use super::slab::{NEAR_DOWN, slab8};
 use crate::packet::{Hit, LANES, NO_HIT, Ray, Ray8, set_lanes};
 use glam::Vec3;
 use wide::{f32x8, u32x8};
@@ -267,8 +267,8 @@ impl Pre8 {
     pub(super) fn rel(&self, v: impl Fn(usize) -> f32) -> [f32x8; 3] {
         match self.uniform {
             Some(k) => [0, 1, 2].map(|i| f32x8::splat(v(k[i])) - self.porg[i]),
-            // One lane-wise permute per axis (`vpermps`: each lane takes `v[k[i]]`) in
-            // place of two blends (docs/traverse.md, session 14); the same values.
+            // One lane-wise permute per axis (`vpermps`: each lane takes `v[k[i]]`) in place of two
+            // blends (docs/traverse.md, "What each kept change bought"); the same values.
             #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
             None => {
                 use core::arch::x86_64::{__m256, _mm256_permutevar8x32_ps};
@@ -472,7 +472,7 @@ impl TriAt for &Tri {
 
 /// Triangle `i` of the leaf of `n` triangles whose rows are `leaf` (`ROWS · n` values),
 /// its bounds checked once ([`RowTri::new`]) rather than per coordinate (nine checks a
-/// triangle in the packet walk's leaf test: docs/traverse.md, session 17).
+/// triangle in the packet walk's leaf test: docs/traverse.md, "What each kept change bought").
 #[derive(Clone, Copy)]
 pub(super) struct RowTri<'a> {
     leaf: &'a [f32],
@@ -576,7 +576,7 @@ impl Pre1x8 {
 /// rows of one ray's permuted axes, computed once a leaf. (Checked per load, the offsets and
 /// checks were 145 of the ~700 instructions a shadow ray of the Veach room executed; the
 /// axes' offsets and their checks computed per load, 39 of its ~543: docs/traverse.md,
-/// sessions 14 and 17.)
+/// "What each kept change bought".)
 #[derive(Clone, Copy)]
 pub(super) struct LeafRows<'a> {
     rows: &'a [f32],
@@ -635,7 +635,7 @@ fn first_lanes(n: usize) -> u8 {
 /// The single pass of a leaf of up to eight triangles (every leaf [`super::collapse`] makes)
 /// is written out of the loop, here and in [`occludes_rows`]: in the loop the nine rows'
 /// addresses were hoisted and spilled to the stack, and a pass shared by both as a closure
-/// was called out of line (docs/traverse.md, session 17).
+/// was called out of line (docs/traverse.md, "What each kept change bought").
 #[inline(always)]
 pub(super) fn closest_rows(
     pre: impl Fn() -> Pre,
