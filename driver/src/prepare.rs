@@ -791,7 +791,7 @@ fn unwrap_layout(
         let fit =
             |v: u32| ((f64::from(v) * 1.05).ceil() as u32 + 2 * GUTTER).next_multiple_of(TILE_SIZE);
         resolution_error(format!(
-            "the {} charts do not fit one {}x{} page at any density tried: at {at:.4} texels/unit they pack into {w}x{h} texels, so the smallest page that holds them is about {}x{} (--size {}x{}); or leave out --size and prepare picks pages for --texels-per-unit",
+            "the {} charts do not fit one {}x{} page at any density tried: at {at:.4e} texels/unit they pack into {w}x{h} texels, so the smallest page that holds them is about {}x{} (--size {}x{}); or leave out --size and prepare picks pages for --texels-per-unit",
             charts,
             page.0,
             page.1,
