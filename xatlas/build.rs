@@ -1,10 +1,12 @@
 //! Builds xatlas (vendor/, from the crates.io package xatlas-rs 0.1.3, MIT) and our C shim
 //! with the system C++ compiler. Single-threaded (`XA_MULTITHREADED=0`): the same input
-//! gives the same atlas, and xatlas starts no threads of its own.
+//! gives the same atlas, and xatlas starts no threads of its own (atlases may be used on
+//! several threads at once, one thread per atlas).
 fn main() {
     println!("cargo:rerun-if-changed=vendor/xatlas.cpp");
     println!("cargo:rerun-if-changed=vendor/xatlas.h");
     println!("cargo:rerun-if-changed=src/shim.cpp");
+    println!("cargo:rerun-if-changed=src/charts.cpp");
     let mut build = cc::Build::new();
     // Under AddressSanitizer (cargo-fuzz's default, `-Zsanitizer=address` in the rustflags)
     // the C++ is instrumented too, so a bad access inside xatlas is reported, not only bad
@@ -24,7 +26,8 @@ fn main() {
     build
         .cpp(true)
         .std("c++11")
-        .file("vendor/xatlas.cpp")
+        // charts.cpp includes vendor/xatlas.cpp (it reads xatlas's internal charts).
+        .file("src/charts.cpp")
         .file("src/shim.cpp")
         .define("XA_MULTITHREADED", "0")
         .define("NDEBUG", None)

@@ -487,6 +487,7 @@ fn rasterise(
     })?;
     let triangles = triangle_records(scene, meshes, visibility.sides());
     let mut w = TexelWriter::create(out, pages, &triangles, tpu)?;
+    w.set_lighting(scene.lighting_fingerprint());
     let mut report = PrepareReport {
         texels: 0,
         partial_texels: 0,
@@ -784,26 +785,40 @@ fn unwrap_layout(
     let mut smallest: Option<(u64, u32, u32, f64, u32)> = None;
     let mut stalled = 0;
     let lowest = d * 1e-4;
+    // The error when the charts fit no page of the size: the smallest atlas seen (`w`×`h` at
+    // density `at`) names the page that would hold them.
+    let no_fit = |w: u32, h: u32, at: f64, charts: u32| {
+        // 5 % spare: the packer's placement varies with the density.
+        let fit =
+            |v: u32| ((f64::from(v) * 1.05).ceil() as u32 + 2 * GUTTER).next_multiple_of(TILE_SIZE);
+        resolution_error(format!(
+            "the {} charts do not fit one {}x{} page at any density tried: at {at:.4e} texels/unit they pack into {w}x{h} texels, so the smallest page that holds them is about {}x{} (--size {}x{}); or leave out --size and prepare picks pages for --texels-per-unit",
+            charts,
+            page.0,
+            page.1,
+            fit(w),
+            fit(h),
+            fit(w),
+            fit(h)
+        ))
+    };
     let (atlases, cs, places, n) = loop {
         tries += 1;
         if tries > 100 || d < lowest {
             let (_, w, h, at, charts) = smallest.unwrap_or((0, page.0, page.1, d, 0));
-            // 5 % spare: the packer's placement varies with the density.
-            let fit = |v: u32| {
-                ((f64::from(v) * 1.05).ceil() as u32 + 2 * GUTTER).next_multiple_of(TILE_SIZE)
-            };
-            return Err(resolution_error(format!(
-                "the {} charts do not fit one {}x{} page at any density tried: at {at:.4} texels/unit they pack into {w}x{h} texels, so the smallest page that holds them is about {}x{} (--size {}x{}); or leave out --size and prepare picks pages for --texels-per-unit",
-                charts,
-                page.0,
-                page.1,
-                fit(w),
-                fit(h),
-                fit(w),
-                fit(h)
-            )));
+            return Err(no_fit(w, h, at, charts));
         }
         let one = charted.pack(scene, d as f32, max)?;
+        if one_page && tries == 1 && !fits(&one) {
+            // Before shrinking step by step: at the lowest density tried every chart is a
+            // texel or two and the padding alone sets the atlas's size. When even that atlas
+            // does not fit, no density will (a million-triangle level's charts at 1024²
+            // took 12 minutes of tries to say so).
+            let floor = charted.pack(scene, lowest as f32, max)?;
+            if !fits(&floor) {
+                return Err(no_fit(floor.width, floor.height, lowest, floor.charts));
+            }
+        }
         let area = u64::from(one.width) * u64::from(one.height);
         match smallest {
             Some((best, ..)) if area as f64 > 0.97 * best as f64 => stalled += 1,
@@ -1440,6 +1455,56 @@ mod tests {
         // 12 charts with padding and gutters cannot share a 12×12 page.
         let e = unwrap_layout(&s, Resolution::Size(12, 12), &[true, true]).unwrap_err();
         assert!(e.to_string().contains("do not fit one 12x12 page"), "{e}");
+    }
+
+    /// `n` loose squares (no shared vertices, each facing its own way: one chart each) as one
+    /// mesh without lightmap UVs.
+    fn loose_squares(n: usize) -> Scene {
+        let mut triangles = Vec::new();
+        for i in 0..n {
+            let c = Vec3::new((i % 32) as f32 * 2.0, (i / 32) as f32 * 2.0, 0.0);
+            let a = i as f32 * 0.37;
+            let (u, v) = (
+                Vec3::new(a.cos(), a.sin(), 0.3),
+                Vec3::new(-a.sin(), a.cos(), -0.2),
+            );
+            let nrm = u.cross(v).normalize();
+            for p in [[c, c + u, c + u + v], [c, c + u + v, c + v]] {
+                triangles.push(Triangle {
+                    positions: p,
+                    normals: [nrm; 3],
+                    lightmap_uv: None,
+                    texture_uv: None,
+                    colour: None,
+                    mesh: 0,
+                    material: 0,
+                });
+            }
+        }
+        Scene::of_triangles("squares", triangles, vec![])
+    }
+
+    #[test]
+    fn charts_too_many_for_the_page_at_any_density_are_an_error_naming_a_page_that_holds_them() {
+        // 600 charts of at least a texel each, more than `PADDING` texels apart: more than a
+        // 64×64 page holds at any density. The error comes from the first tries (the floor
+        // packed at the lowest density) and names a page size that does hold them.
+        let s = loose_squares(600);
+        let start = std::time::Instant::now();
+        let e = unwrap_layout(&s, Resolution::Size(64, 64), &[true]).unwrap_err();
+        let message = e.to_string();
+        assert!(message.contains("do not fit one 64x64 page"), "{message}");
+        let size = message
+            .split("--size ")
+            .nth(1)
+            .and_then(|r| r.split(')').next())
+            .expect("names a --size");
+        let (w, h) = size.split_once('x').unwrap();
+        let (w, h): (u32, u32) = (w.parse().unwrap(), h.parse().unwrap());
+        assert!(w > 64 || h > 64, "{message}");
+        assert!(start.elapsed().as_secs_f64() < 30.0);
+        unwrap_layout(&s, Resolution::Size(w, h), &[true])
+            .unwrap_or_else(|e| panic!("the page it names, {w}x{h}, holds them: {e}"));
     }
 
     #[test]

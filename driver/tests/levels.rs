@@ -387,6 +387,64 @@ fn a_scene_without_lights_names_the_flags() {
     }
 }
 
+/// `prepare` records the lights it decided the seen sides under (the texel header's
+/// `lighting`); a bake under other lights says so, naming the texel file, and bakes; a bake
+/// under the same lights does not.
+#[test]
+fn a_bake_under_other_lights_than_prepare_is_told() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let obj = corner_obj(d, tiling);
+    let texels = d.join("level.texels");
+    let sun = ["--sun", "0.3,1,0.2:3"];
+    succeeds(
+        &[
+            &["prepare", s(&obj), "-o", s(&texels), "--size", "64x64"][..],
+            &sun,
+            &["--sky", SKY],
+        ]
+        .concat(),
+    );
+    let header = TexelFile::open(&texels).unwrap().header().lighting;
+    assert_ne!(header, 0, "prepare records its lights");
+    let bake = |lights: &[&str]| {
+        let lightmap = d.join("level.exr");
+        let (_, err) = succeeds(
+            &[
+                &[
+                    "bake",
+                    s(&texels),
+                    "--scene",
+                    s(&obj),
+                    "-o",
+                    s(&lightmap),
+                    "--spp",
+                    "8",
+                    "--iterations",
+                    "1",
+                ][..],
+                lights,
+            ]
+            .concat(),
+        );
+        assert!(lightmap.exists());
+        err
+    };
+    let same = bake(&[&sun[..], &["--sky", SKY]].concat());
+    assert!(!same.contains("other lights"), "{same}");
+    for other in [
+        vec!["--sun", "0.3,1,0.2:4", "--sky", SKY],
+        vec!["--sun", "-0.3,1,0.2:3", "--sky", SKY],
+        vec!["--sun", "0.3,1,0.2:3"],
+    ] {
+        let err = bake(&other);
+        assert!(
+            err.contains("prepared under other lights") && err.contains(s(&texels)),
+            "{other:?}: {err}"
+        );
+    }
+}
+
 /// The Cube 2 level zdm2 as it comes — an OBJ with tiling texture UVs, its textures missing,
 /// no lights — prepared with the default options, baked cheaply and rendered from inside,
 /// with a sun and a sky from the command line.

@@ -4,7 +4,9 @@
 //!
 //! One [`Atlas`] takes meshes ([`Atlas::add_mesh`]), charts and parameterises them once
 //! ([`Atlas::compute_charts`]) and packs them ([`Atlas::pack`]), as often as wanted with
-//! other densities. Built single-threaded: the same input gives the same output.
+//! other densities, or hands out the charts unpacked ([`Atlas::charts`]) for a packer of
+//! the caller's. Built single-threaded: the same input gives the same output; separate
+//! atlases may be used on separate threads at once.
 
 use std::ffi::c_void;
 
@@ -20,6 +22,13 @@ unsafe extern "C" {
         index_count: u32,
     ) -> i32;
     fn gb_xatlas_compute_charts(atlas: *mut c_void);
+    fn gb_xatlas_chart_uvs(
+        atlas: *const c_void,
+        mesh: u32,
+        face_count: u32,
+        face_chart: *mut u32,
+        face_uv: *mut f32,
+    ) -> u32;
     fn gb_xatlas_pack_charts(
         atlas: *mut c_void,
         texels_per_unit: f32,
@@ -93,10 +102,28 @@ pub struct Packed {
     pub meshes: Vec<OutputMesh>,
 }
 
+/// One input mesh's charts before packing ([`Atlas::charts`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Charts {
+    /// Charts of the mesh.
+    pub count: u32,
+    /// Per input triangle: its chart (`0..count`), or `None` for a triangle in no chart
+    /// (xatlas ignores triangles of area ≤ `FLT_EPSILON`).
+    pub chart: Vec<Option<u32>>,
+    /// Per input triangle: its three corners' UVs at one texel per world unit, in its chart's
+    /// least-area bounding box (minimum corner at the origin) and scaled as xatlas's packer
+    /// scales a chart (surface area over parametric area) before its size limit; zeros for a
+    /// triangle in no chart. Not checked for being finite.
+    pub uv: Vec<[[f32; 2]; 3]>,
+}
+
 /// An xatlas atlas (owns the C++ object).
 #[derive(Debug)]
 pub struct Atlas {
     handle: *mut c_void,
+    /// Triangles per mesh added.
+    triangles: Vec<u32>,
+    charted: bool,
 }
 
 impl Default for Atlas {
@@ -112,6 +139,8 @@ impl Atlas {
         // SAFETY: xatlas::Create allocates and returns a fresh atlas.
         Self {
             handle: unsafe { gb_xatlas_create() },
+            triangles: Vec::new(),
+            charted: false,
         }
     }
 
@@ -143,7 +172,11 @@ impl Atlas {
             )
         };
         match e {
-            0 => Ok(()),
+            0 => {
+                self.triangles.push(ni / 3);
+                self.charted = false;
+                Ok(())
+            }
             1 => Err(AddMeshError::IndexOutOfRange),
             _ => Err(AddMeshError::InvalidIndexCount),
         }
@@ -154,6 +187,38 @@ impl Atlas {
     pub fn compute_charts(&mut self) {
         // SAFETY: a valid handle.
         unsafe { gb_xatlas_compute_charts(self.handle) }
+        self.charted = !self.triangles.is_empty();
+    }
+
+    /// The charts of mesh `mesh` (in [`Atlas::add_mesh`] order) before packing, or `None`
+    /// before [`Atlas::compute_charts`] or for a mesh not added.
+    #[must_use]
+    pub fn charts(&self, mesh: u32) -> Option<Charts> {
+        let &n = self.triangles.get(mesh as usize)?;
+        if !self.charted {
+            return None;
+        }
+        let mut chart = vec![u32::MAX; n as usize];
+        let mut uv = vec![[[0.0f32; 2]; 3]; n as usize];
+        // SAFETY: a valid handle, charted; `mesh` was added with `n` triangles, and the
+        // vectors hold `n` and `6 n` values, which is what gb_xatlas_chart_uvs writes.
+        let count = unsafe {
+            gb_xatlas_chart_uvs(
+                self.handle,
+                mesh,
+                n,
+                chart.as_mut_ptr(),
+                uv.as_mut_ptr().cast(),
+            )
+        };
+        Some(Charts {
+            count,
+            chart: chart
+                .into_iter()
+                .map(|c| (c < count).then_some(c))
+                .collect(),
+            uv,
+        })
     }
 
     /// Packs the charts into one atlas as large as needed and returns the output meshes.
@@ -263,6 +328,43 @@ mod tests {
         b.add_mesh(&p, None, &idx).unwrap();
         b.compute_charts();
         assert_eq!(b.pack(opts), packed);
+    }
+
+    #[test]
+    fn charts_before_packing_cover_every_face_at_one_texel_per_unit() {
+        let (p, idx) = cube();
+        let mut a = Atlas::new();
+        assert_eq!(a.charts(0), None);
+        a.add_mesh(&p, None, &idx).unwrap();
+        assert_eq!(a.charts(0), None, "not charted yet");
+        a.compute_charts();
+        assert_eq!(a.charts(1), None);
+        let c = a.charts(0).unwrap();
+        assert!(c.count >= 1);
+        assert_eq!(c.chart.len(), 12);
+        assert!(c.chart.iter().all(|k| k.is_some_and(|k| k < c.count)));
+        // Each chart starts at the origin; the cube's six unit faces keep area 6 at one
+        // texel per unit.
+        let mut area = 0.0;
+        for (k, uv) in c.uv.iter().enumerate() {
+            let [a, b, d] = uv.map(|t| [f64::from(t[0]), f64::from(t[1])]);
+            area += ((b[0] - a[0]) * (d[1] - a[1]) - (d[0] - a[0]) * (b[1] - a[1])).abs() / 2.0;
+            assert!(
+                uv.iter().flatten().all(|v| v.is_finite() && *v >= -1e-4),
+                "{k}: {uv:?}"
+            );
+        }
+        assert!((area - 6.0).abs() < 0.1, "{area}");
+        for chart in 0..c.count {
+            let lo = (0..12)
+                .filter(|&t| c.chart[t] == Some(chart))
+                .flat_map(|t| c.uv[t])
+                .fold([f32::INFINITY; 2], |m, v| [m[0].min(v[0]), m[1].min(v[1])]);
+            assert!(
+                lo[0].abs() < 1e-4 && lo[1].abs() < 1e-4,
+                "chart {chart}: {lo:?}"
+            );
+        }
     }
 
     #[test]

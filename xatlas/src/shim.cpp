@@ -20,10 +20,13 @@ static void *gb_realloc(void *ptr, size_t size) {
 }
 
 // xatlas prints warnings with printf by default; stdout belongs to the caller (e.g.
-// `prepare --json`), so printing is switched off before every atlas is made.
+// `prepare --json`), so printing is switched off before the first atlas is made. Once only
+// (a function-local static is initialised once, thread-safely, in C++11): atlases are made
+// on several threads at once (driver/src/prepare/unwrap.rs), and xatlas's globals are
+// otherwise read-only.
 void *gb_xatlas_create() {
-    xatlas::SetRealloc(gb_realloc);
-    xatlas::SetPrint(nullptr, false);
+    static const bool init = (xatlas::SetRealloc(gb_realloc), xatlas::SetPrint(nullptr, false), true);
+    (void)init;
     return xatlas::Create();
 }
 

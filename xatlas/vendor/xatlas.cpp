@@ -7797,6 +7797,14 @@ private:
 		output.pop_back();
 	}
 
+public:
+	// guidebake: public, for charts exported unpacked (src/charts.cpp, gb_xatlas_chart_uvs).
+	static void exportBoundingBox(const Chart *chart, Vector2 *majorAxis, Vector2 *minorAxis, Vector2 *minCorner, Vector2 *maxCorner)
+	{
+		computeBoundingBox(chart, majorAxis, minorAxis, minCorner, maxCorner);
+	}
+
+private:
 	// This should compute convex hull and use rotating calipers to find the best box. Currently it uses a brute force method.
 	static void computeBoundingBox(const Chart *chart, Vector2 *majorAxis, Vector2 *minorAxis, Vector2 *minCorner, Vector2 *maxCorner)
 	{

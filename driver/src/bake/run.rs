@@ -95,6 +95,9 @@ pub struct BakeReport {
     pub texture_bytes: usize,
     /// The pages written (empty for a shard).
     pub pages: Vec<PathBuf>,
+    /// Whether the texel file was prepared under other lights than this bake's (its seen
+    /// sides were decided under those; [`lights_differ`]).
+    pub prepared_under_other_lights: bool,
     /// Pixels with non-finite results replaced by zero when writing (should be 0).
     pub non_finite_pixels: u64,
     /// Mean relative jump between the two texels of each seam pair, before and after
@@ -192,6 +195,7 @@ pub fn bake_pass_with_progress(
     let texels = TexelFile::open(&job.texels)?;
     report.seconds.open_texels = clock.elapsed().as_secs_f64();
     check_scene_matches(&texels, scene)?;
+    report.prepared_under_other_lights = lights_differ(texels.header(), scene);
 
     let clock = Instant::now();
     let mut world = World::new(scene, run_preset(job, &texels, scene, &run_passes))?;
@@ -557,6 +561,14 @@ fn run_preset(
 /// Rays a gather sample traces, about: its gather ray and a shadow ray (series and path
 /// transport both trace at least these two; path tracing traces more).
 const RAYS_PER_SAMPLE: f64 = 2.0;
+
+/// Whether the texel file records the lights it was prepared under
+/// ([`Scene::lighting_fingerprint`]) and they are not `scene`'s: `prepare` decided which
+/// sides are seen, and which texels lie inside geometry, under those lights.
+#[must_use]
+pub fn lights_differ(header: &crate::texels::Header, scene: &Scene) -> bool {
+    header.lighting != 0 && header.lighting != scene.lighting_fingerprint()
+}
 
 /// The texel file must have been prepared from `scene`: the same triangles. Their lightmap
 /// UVs come from the file's triangle table, so the scene's own UV sets (or their absence, on a

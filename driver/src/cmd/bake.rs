@@ -7,13 +7,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::bake::directional::Directional;
 use crate::bake::finish::{Denoise, FinishOptions, Seams};
-use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress};
+use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress, lights_differ};
 use crate::bake::settings::{
     BakeSettings, Combine, EmitterSampling, GuidedPasses, Guiding, Schedule, Transport,
 };
 use crate::bake::shard::Shard;
 use crate::bake::workdir::work_dir;
 use crate::scene::{Scene, TextureOptions};
+use crate::texels::TexelFile;
 use crate::transport::emitters::EmitterSelection;
 
 /// Arguments of `guidebake bake`.
@@ -186,6 +187,12 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         max_size: args.max_texture_size,
     };
     let (scene, notes) = super::prepare::load_lit_scene(&args.scene, textures, &args.lights, true)?;
+    if TexelFile::peek_header(&args.texels).is_some_and(|h| lights_differ(&h, &scene)) {
+        eprintln!(
+            "guidebake: warning: {}: prepared under other lights than this bake's (--sun, --sky, the scene's lights or emission differ); prepare decided under those which sides of each surface are baked and which texels lie inside geometry: run prepare again with the same --sun and --sky",
+            args.texels.display()
+        );
+    }
     let job = BakeJob {
         texels: args.texels.clone(),
         out: args.out.clone(),

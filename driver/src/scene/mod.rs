@@ -480,6 +480,71 @@ impl Scene {
         sky || sun || !self.lights.is_empty() || emitters
     }
 
+    /// A fingerprint of everything that lights the scene — punctual and sphere lights, the
+    /// sun, the sky (an equirect map by its pixels) and the materials' emission — never 0.
+    /// `prepare` stores it in the texel file (it decides the seen sides under these lights,
+    /// `facing`), so a bake under other lights is told (docs/levels.md).
+    #[must_use]
+    pub fn lighting_fingerprint(&self) -> u64 {
+        let mut h = Fnv::default();
+        for light in &self.lights {
+            match light {
+                SceneLight::Directional {
+                    direction,
+                    irradiance,
+                } => h.tag(1).vec(*direction).vec(*irradiance),
+                SceneLight::Point {
+                    position,
+                    intensity,
+                } => h.tag(2).vec(*position).vec(*intensity),
+                SceneLight::Spot {
+                    position,
+                    direction,
+                    intensity,
+                    inner_cone,
+                    outer_cone,
+                } => h
+                    .tag(3)
+                    .vec(*position)
+                    .vec(*direction)
+                    .vec(*intensity)
+                    .f(*inner_cone)
+                    .f(*outer_cone),
+                SceneLight::Sphere {
+                    center,
+                    radius,
+                    radiance,
+                } => h.tag(4).vec(*center).f(*radius).vec(*radiance),
+            };
+        }
+        if let Some(sun) = &self.sun {
+            h.tag(5)
+                .vec(sun.direction)
+                .f(sun.angular_radius)
+                .vec(sun.irradiance);
+        }
+        match &self.sky {
+            Sky::None => h.tag(6),
+            Sky::Constant(c) => h.tag(7).vec(*c),
+            Sky::Equirect {
+                width,
+                height,
+                pixels,
+                ..
+            } => {
+                h.tag(8).tag(u64::from(*width)).tag(u64::from(*height));
+                for p in pixels {
+                    h.vec(*p);
+                }
+                &mut h
+            }
+        };
+        for m in &self.materials {
+            h.tag(9).vec(m.emission);
+        }
+        h.0.max(1)
+    }
+
     /// [`Scene::is_lit`] as a check for the commands that light a scene (`prepare`, whose
     /// facing analysis needs the lights, and `bake`).
     ///
@@ -661,6 +726,32 @@ pub use scene_file::{
     SunSpec, load_equirect, parse_sky, parse_sun,
 };
 pub use texture::{BaseColorTexture, TextureOptions};
+
+/// FNV-1a over 64-bit words, for [`Scene::lighting_fingerprint`].
+struct Fnv(u64);
+
+impl Default for Fnv {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv {
+    fn tag(&mut self, word: u64) -> &mut Self {
+        for byte in word.to_le_bytes() {
+            self.0 = (self.0 ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3);
+        }
+        self
+    }
+
+    fn f(&mut self, x: f32) -> &mut Self {
+        self.tag(u64::from(x.to_bits()))
+    }
+
+    fn vec(&mut self, v: Vec3) -> &mut Self {
+        self.f(v.x).f(v.y).f(v.z)
+    }
+}
 
 #[cfg(test)]
 mod tests {

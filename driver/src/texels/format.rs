@@ -84,8 +84,9 @@ pub struct Header {
     pub texels_per_unit: f32,
     /// Reserved, 0.
     pub flags: u32,
-    /// Reserved, 0.
-    pub reserved: [u8; 8],
+    /// [`Scene::lighting_fingerprint`](crate::scene::Scene::lighting_fingerprint) of the lights
+    /// `prepare` decided the seen sides under; 0 when not recorded.
+    pub lighting: u64,
 }
 
 /// One atlas page, 8 bytes.

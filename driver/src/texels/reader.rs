@@ -51,6 +51,18 @@ impl TexelFile {
         })
     }
 
+    /// The header of the texel file at `path` when it starts with a version-2 header (read
+    /// without mapping or validating the rest: a command's early checks; [`TexelFile::open`]
+    /// reports what is wrong with a file), else `None`.
+    #[must_use]
+    pub fn peek_header(path: &Path) -> Option<Header> {
+        use std::io::Read;
+        let mut bytes = [0u8; size_of::<Header>()];
+        File::open(path).ok()?.read_exact(&mut bytes).ok()?;
+        let header: Header = bytemuck::pod_read_unaligned(&bytes);
+        (header.magic == MAGIC && header.version == VERSION).then_some(header)
+    }
+
     /// The file's path.
     #[must_use]
     pub fn path(&self) -> &Path {
@@ -216,8 +228,8 @@ fn validate(
             header.tile_size
         )));
     }
-    if header.flags != 0 || header.reserved != [0; 8] {
-        return Err(bad("offset 116: reserved fields are not zero".into()));
+    if header.flags != 0 {
+        return Err(bad("offset 116: reserved field is not zero".into()));
     }
     if header.reserved0 != 0 {
         return Err(bad("offset 48: reserved field is not zero".into()));

@@ -176,6 +176,13 @@ impl TexelWriter {
         Ok(())
     }
 
+    /// Records the [`Scene::lighting_fingerprint`](crate::scene::Scene::lighting_fingerprint)
+    /// of the lights the seen sides were decided under (header offset 120; 0, the default,
+    /// when not recorded).
+    pub fn set_lighting(&mut self, fingerprint: u64) {
+        self.header.lighting = fingerprint;
+    }
+
     /// Appends one tile. `texels` must be non-empty, on `rect.page`, inside `rect`, in
     /// strictly increasing row-major pixel order, and pass the reader's checks.
     ///
