@@ -190,7 +190,7 @@ pub fn uv_set_problem(triangles: &[Triangle]) -> Option<String> {
             lo.x, hi.x, lo.y, hi.y
         ));
     }
-    if !(area > 0.0) {
+    if area.is_nan() || area <= 0.0 {
         return Some("has no area".into());
     }
     const N: u32 = ATLAS_TEST_SIZE;

@@ -80,7 +80,7 @@ pub fn pack(
     let mut out = vec![[Vec2::ZERO; 3]; uv.len()];
     let mut extent = vec![Vec2::ZERO; n];
     let limit = max_chart.max(1) as f32;
-    for c in 0..n {
+    for (c, extent) in extent.iter_mut().enumerate() {
         let mut lo = Vec2::INFINITY;
         let mut hi = Vec2::NEG_INFINITY;
         for &t in tris(c) {
@@ -90,7 +90,7 @@ pub fn pack(
             }
         }
         if !(lo.is_finite() && hi.is_finite()) {
-            extent[c] = Vec2::NAN; // not placed (the caller keeps such charts out)
+            *extent = Vec2::NAN; // not placed (the caller keeps such charts out)
             continue;
         }
         let mut ext = hi - lo;
@@ -111,7 +111,7 @@ pub fn pack(
         for &t in tris(c) {
             out[t as usize] = uv[t as usize].map(|v| (v - origin) * scale * stretch + 0.5);
         }
-        extent[c] = Vec2::select(ext.cmpgt(Vec2::ZERO), whole, Vec2::ZERO);
+        *extent = Vec2::select(ext.cmpgt(Vec2::ZERO), whole, Vec2::ZERO);
     }
 
     // Largest perimeter first, as xatlas sorts.
