@@ -95,7 +95,8 @@ pub(super) fn build(
             *node = *top;
             for slot in 0..WIDTH {
                 if node.meta[slot] != 0 && node.meta[slot] != LEAF {
-                    debug_assert_eq!(node.meta[slot], LEAF | 1, "a region per top leaf");
+                    // The collapse keeps the binary tree's leaves: one region each.
+                    assert_eq!(node.meta[slot], LEAF | 1, "a region per top leaf");
                     node.child[slot] = wide_at[node.child[slot] as usize];
                     node.meta[slot] = 0;
                 }
@@ -170,7 +171,7 @@ fn graft_binary(
     let mut nodes = top.to_vec();
     for node in &mut nodes {
         for slot in 0..2 {
-            if node.meta[slot] != 0 {
+            if node.meta[slot] == LEAF | 1 {
                 node.child[slot] = node_at[node.child[slot] as usize];
                 node.meta[slot] = 0;
             }
