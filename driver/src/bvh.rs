@@ -19,6 +19,27 @@
 //! The nodes and leaf rows are then moved to transparent huge pages (`bvh/huge.rs`),
 //! as Embree allocates its BVH: a big world's node visits miss the TLB far less.
 //!
+//! **Bounded scratch** (`bvh/regions.rs`): a soup of more than 2¹⁷ triangles is cut at
+//! centroid medians into regions of at most that many, each built (same preset), flattened
+//! and collapsed on its own, then joined under a top level over the cuts and written in
+//! place into the final arrays; the build's peak is the finished tree plus one region's
+//! scratch (≤ 50 MB measured), 4 bytes per triangle and a node per region. Whole, obvhs's
+//! scratch (PLOC's node and Morton buffers, its copy of the triangles: ~250 bytes per
+//! triangle) and our binary tree beside the wide one grew with the world. Measured
+//! 2026-11-28, 2-core AMD EPYC (shared, load average 7–10), `very_slow`, the build alone
+//! (`cargo run --release -p guidebake --example bvh_build -- city7.toml very_slow [--whole]
+//! [--tile 3] [--duel]`; peak RSS above the RSS before the build):
+//!
+//! | world | tree | build peak, whole → regions | build s, whole → regions | rays/s, regions ÷ whole |
+//! |---|---:|---:|---:|---:|
+//! | 10⁷-texel city, 312 448 triangles | 16 MB | +91 → +39–50 MB | 0.9–1.3 → 1.0–1.2 | 1.03 single, 1.05 packets |
+//! | 3 × 3 of it, 2 812 032 triangles | 140 MB | +816 → +179 MB | 21.7 → 8.9–10.3 | 1.15 single, 1.16 packets |
+//!
+//! The unsharded bake of the 10⁷-texel city (`--spp 16 --iterations 2 --bounces 1
+//! --transport path --threads 2`) peaks at 131 MB RSS (177 MB before), gathers at 1.02× the
+//! rays/s, and writes the same bytes (docs/farm.md, "The BVH build's memory"). Smaller soups
+//! are built whole, as before.
+//!
 //! Deviations: obvhs's own traversals ignore `tmin` in the node test; ours honour it. With the
 //! spatial-split presets a triangle can sit in several leaves; it is then copied once per leaf
 //! (same primitive id, so hits are unchanged).
