@@ -19,6 +19,27 @@
 //! The nodes and leaf rows are then moved to transparent huge pages (`bvh/huge.rs`),
 //! as Embree allocates its BVH: a big world's node visits miss the TLB far less.
 //!
+//! **Bounded scratch** (`bvh/regions.rs`): a soup of more than 2¹⁷ triangles is cut at
+//! centroid medians into regions of at most that many, each built (same preset), flattened
+//! and collapsed on its own, then joined under a top level over the cuts and written in
+//! place into the final arrays; the build's peak is the finished tree plus one region's
+//! scratch (≤ 50 MB measured), 4 bytes per triangle and a node per region. Whole, obvhs's
+//! scratch (PLOC's node and Morton buffers, its copy of the triangles: ~250 bytes per
+//! triangle) and our binary tree beside the wide one grew with the world. Measured
+//! 2026-11-28, 2-core AMD EPYC (shared, load average 7–10), `very_slow`, the build alone
+//! (`cargo run --release -p guidebake --example bvh_build -- city7.toml very_slow [--whole]
+//! [--tile 3] [--duel]`; peak RSS above the RSS before the build):
+//!
+//! | world | tree | build peak, whole → regions | build s, whole → regions | rays/s, regions ÷ whole |
+//! |---|---:|---:|---:|---:|
+//! | 10⁷-texel city, 312 448 triangles | 16 MB | +91 → +39–50 MB | 0.9–1.3 → 1.0–1.2 | 1.03 single, 1.05 packets |
+//! | 3 × 3 of it, 2 812 032 triangles | 140 MB | +816 → +179 MB | 21.7 → 8.9–10.3 | 1.15 single, 1.16 packets |
+//!
+//! The unsharded bake of the 10⁷-texel city (`--spp 16 --iterations 2 --bounces 1
+//! --transport path --threads 2`) peaks at 131 MB RSS (177 MB before), gathers at 1.02× the
+//! rays/s, and writes the same bytes (docs/farm.md, "The BVH build's memory"). Smaller soups
+//! are built whole, as before.
+//!
 //! Deviations: obvhs's own traversals ignore `tmin` in the node test; ours honour it. With the
 //! spatial-split presets a triangle can sit in several leaves; it is then copied once per leaf
 //! (same primitive id, so hits are unchanged).
@@ -32,6 +53,7 @@
 use std::time::{Duration, Instant};
 
 mod huge;
+mod regions;
 use huge::HugeSlice;
 
 use glam::{Vec3, Vec3A};
@@ -187,18 +209,43 @@ impl Bvh {
         preset: Preset,
         keep_binary: bool,
     ) -> Result<Self, BvhError> {
+        Self::build_in_regions(soup, preset, regions::REGION_TRIANGLES, keep_binary)
+    }
+
+    /// [`Bvh::build`] with regions of at most `region` triangles ([`regions`]; the bake's
+    /// size is `REGION_TRIANGLES`, 2¹⁷); `usize::MAX` builds the whole soup in one obvhs build,
+    /// as before regions: the comparator of the benches and measurements.
+    ///
+    /// # Errors
+    /// As [`Bvh::build`].
+    pub fn build_in_regions_of(
+        soup: &[[Vec3; 3]],
+        preset: Preset,
+        region: usize,
+    ) -> Result<Self, BvhError> {
+        Self::build_in_regions(soup, preset, region.max(16), false)
+    }
+
+    /// The build, cutting a soup of more than `region` triangles into regions of at most
+    /// that many ([`regions`]); a smaller soup is built whole.
+    fn build_in_regions(
+        soup: &[[Vec3; 3]],
+        preset: Preset,
+        region: usize,
+        keep_binary: bool,
+    ) -> Result<Self, BvhError> {
         check_soup(soup)?;
         let start = Instant::now();
-        // Each array is dropped, or moved to huge pages, as soon as the next step allows: a
-        // big world's build peaks at the sum of what is alive at once.
-        let (nodes, tris) = obvhs_flattened(soup, preset);
-        let tree = BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
-        let wide = collapse(&tree);
-        let rows = leaf_rows(&wide, &tris);
-        let binary = keep_binary.then(|| (HugeSlice::new(nodes), HugeSlice::new(tris)));
-        let wide = HugeSlice::new(wide);
-        let rows = HugeSlice::new(rows);
+        let (wide, rows, binary) = if soup.len() > region {
+            let built = regions::build(soup, preset, region, keep_binary)?;
+            (built.wide, built.rows, built.binary)
+        } else {
+            Self::build_whole(soup, preset, keep_binary)?
+        };
         WideRef::new(&wide, &rows).map_err(BvhError::Layout)?;
+        if let Some((nodes, tris)) = &binary {
+            BvhRef::new(nodes, tris).map_err(BvhError::Layout)?;
+        }
         Ok(Self {
             binary,
             wide,
@@ -206,6 +253,30 @@ impl Bvh {
             build_time: start.elapsed(),
             preset,
         })
+    }
+
+    /// One tree over the whole soup.
+    #[allow(clippy::type_complexity)]
+    fn build_whole(
+        soup: &[[Vec3; 3]],
+        preset: Preset,
+        keep_binary: bool,
+    ) -> Result<
+        (
+            HugeSlice<WideNode>,
+            HugeSlice<f32>,
+            Option<(HugeSlice<Node>, HugeSlice<Tri>)>,
+        ),
+        BvhError,
+    > {
+        // Each array is dropped, or moved to huge pages, as soon as the next step allows: a
+        // big world's build peaks at the sum of what is alive at once.
+        let (nodes, tris) = obvhs_flattened(soup, None, preset);
+        let tree = BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
+        let wide = HugeSlice::new(collapse(&tree));
+        let rows = HugeSlice::new(leaf_rows(&wide, &tris));
+        let binary = keep_binary.then(|| (HugeSlice::new(nodes), HugeSlice::new(tris)));
+        Ok((wide, rows, binary))
     }
 
     /// The binary view for [`guidebake_kernels::traverse`]'s functions (two child boxes per
@@ -267,44 +338,58 @@ fn check_soup(soup: &[[Vec3; 3]]) -> Result<(), BvhError> {
     Ok(())
 }
 
-/// obvhs's tree over `soup`, flattened ([`flatten`]); obvhs's tree and its copy of the
-/// triangles are dropped on return.
-fn obvhs_flattened(soup: &[[Vec3; 3]], preset: Preset) -> (Vec<Node>, Vec<Tri>) {
-    if soup.is_empty() {
+/// obvhs's tree over the triangles `ids` name in `soup` (all of them, in order, for
+/// `None`), flattened ([`flatten`]) with the ids as primitive ids; obvhs's tree and its copy
+/// of the triangles are dropped on return.
+fn obvhs_flattened(
+    soup: &[[Vec3; 3]],
+    ids: Option<&[u32]>,
+    preset: Preset,
+) -> (Vec<Node>, Vec<Tri>) {
+    let count = ids.map_or(soup.len(), <[u32]>::len);
+    if count == 0 {
         return (vec![Node::EMPTY], Vec::new());
     }
-    let triangles: Vec<Triangle> = soup
-        .iter()
-        .map(|t| Triangle {
-            v0: Vec3A::from(t[0]),
-            v1: Vec3A::from(t[1]),
-            v2: Vec3A::from(t[2]),
+    let id = |i: usize| ids.map_or(i, |ids| ids[i] as usize);
+    let triangles: Vec<Triangle> = (0..count)
+        .map(|i| {
+            let t = &soup[id(i)];
+            Triangle {
+                v0: Vec3A::from(t[0]),
+                v1: Vec3A::from(t[1]),
+                v2: Vec3A::from(t[2]),
+            }
         })
         .collect();
     let mut core = Duration::ZERO;
     let bvh2 = build_bvh2_from_tris(&triangles, preset.params(), &mut core);
     drop(triangles);
-    flatten(&bvh2, soup)
+    flatten(&bvh2, count, |prim| {
+        let global = id(prim as usize);
+        Tri::new(soup[global], global as u32)
+    })
 }
 
 /// Flattens obvhs's binary tree (children of inner node `i` at `first_index` and
-/// `first_index + 1`) into two-child-box nodes, depth first, triangles in leaf order.
-fn flatten(bvh2: &Bvh2, soup: &[[Vec3; 3]]) -> (Vec<Node>, Vec<Tri>) {
+/// `first_index + 1`) over `count` triangles into two-child-box nodes, depth first, triangles
+/// in leaf order (`tri` of obvhs's primitive index).
+fn flatten(bvh2: &Bvh2, count: usize, tri: impl Fn(u32) -> Tri) -> (Vec<Node>, Vec<Tri>) {
     let mut nodes = vec![Node::EMPTY];
-    let mut tris = Vec::with_capacity(soup.len());
+    let mut tris = Vec::with_capacity(count);
+    let mut fill = |nodes: &mut Vec<Node>, ours: usize, slot: usize, from: usize| {
+        fill_slot(nodes, ours, slot, bvh2, from, &tri, &mut tris)
+    };
     let root = &bvh2.nodes[0];
     if root.is_leaf() {
-        fill_slot(&mut nodes, 0, 0, bvh2, 0, soup, &mut tris);
-        return (nodes, tris);
-    }
-    // (obvhs index of the left child, our node index)
-    let mut pending = vec![(root.first_index as usize, 0usize)];
-    while let Some((left, ours)) = pending.pop() {
-        for slot in 0..2 {
-            if let Some(inner) =
-                fill_slot(&mut nodes, ours, slot, bvh2, left + slot, soup, &mut tris)
-            {
-                pending.push(inner);
+        fill(&mut nodes, 0, 0, 0);
+    } else {
+        // (obvhs index of the left child, our node index)
+        let mut pending = vec![(root.first_index as usize, 0usize)];
+        while let Some((left, ours)) = pending.pop() {
+            for slot in 0..2 {
+                if let Some(inner) = fill(&mut nodes, ours, slot, left + slot) {
+                    pending.push(inner);
+                }
             }
         }
     }
@@ -319,7 +404,7 @@ fn fill_slot(
     slot: usize,
     bvh2: &Bvh2,
     from: usize,
-    soup: &[[Vec3; 3]],
+    tri: &impl Fn(u32) -> Tri,
     tris: &mut Vec<Tri>,
 ) -> Option<(usize, usize)> {
     let src = &bvh2.nodes[from];
@@ -328,7 +413,7 @@ fn fill_slot(
         let first = tris.len();
         let range = src.first_index as usize..(src.first_index + src.prim_count) as usize;
         for &prim in &bvh2.primitive_indices[range] {
-            tris.push(Tri::new(soup[prim as usize], prim));
+            tris.push(tri(prim));
         }
         nodes[ours].child[slot] = first as u32;
         nodes[ours].meta[slot] = LEAF | src.prim_count;
@@ -509,6 +594,89 @@ mod tests {
             }
         }
         assert!(hit > 50 && missed > 50, "{hit} hits, {missed} misses");
+    }
+
+    /// A city-like soup of `n` triangles: grids of unit triangles on `levels` floors, some
+    /// of them slanted, some long thin ones across the whole world.
+    fn jumbled(n: usize) -> Vec<[Vec3; 3]> {
+        let mut rng = guidebake_kernels::testing::Pcg32::new(41, 7);
+        let mut f = || rng.next_f32();
+        (0..n)
+            .map(|i| {
+                if i % 97 == 0 {
+                    let p = Vec3::new(f() * 64.0, f() * 64.0, f() * 8.0);
+                    [p, Vec3::new(64.0 - p.x, p.y, p.z), p + Vec3::Z * 0.5]
+                } else {
+                    let p = Vec3::new(f() * 64.0, f() * 64.0, (f() * 8.0).floor());
+                    [
+                        p,
+                        p + Vec3::new(1.0, 0.0, f()),
+                        p + Vec3::new(0.0, 1.0, f() * 0.5),
+                    ]
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_tree_built_in_regions_covers_every_triangle_and_traces_as_the_whole_one() {
+        let soup = jumbled(6000);
+        let whole = Bvh::build_with_binary(&soup, Preset::MediumBuild).unwrap();
+        for preset in [Preset::MediumBuild, Preset::VerySlowBuild] {
+            // 6000 triangles in regions of at most 700: 16 regions.
+            let cut = Bvh::build_in_regions(&soup, preset, 700, true).unwrap();
+            let bake = Bvh::build_in_regions(&soup, preset, 700, false).unwrap();
+            assert_eq!(bake.wide_nodes(), cut.wide_nodes(), "{preset:?}");
+            assert!(bake.binary().is_none());
+            // Every triangle, bit for bit, in both layouts (spatial splits may repeat one).
+            let key = |t: &Tri| (t.prim, t.v.map(|v| v.map(f32::to_bits)));
+            let mut want: Vec<Tri> = soup
+                .iter()
+                .enumerate()
+                .map(|(i, t)| Tri::new(*t, i as u32))
+                .collect();
+            want.sort_by_key(key);
+            for mut got in [
+                bake.wide().tris().collect::<Vec<_>>(),
+                cut.binary().unwrap().tris().to_vec(),
+            ] {
+                got.sort_by_key(key);
+                got.dedup();
+                assert_eq!(got, want, "{preset:?}");
+            }
+            let mut rng = guidebake_kernels::testing::Pcg32::new(41, 8);
+            let mut f = || rng.next_f32();
+            for _ in 0..3000 {
+                let o = Vec3::new(f() * 80.0 - 8.0, f() * 80.0 - 8.0, f() * 12.0 - 2.0);
+                let d = Vec3::new(f() - 0.5, f() - 0.5, f() - 0.5);
+                let ray = Ray::new(o, d, 0.0, f32::INFINITY);
+                let brute = intersect_brute(&want, &ray);
+                assert_eq!(intersect1(&whole.wide(), &ray), brute);
+                assert_eq!(intersect1(&bake.wide(), &ray), brute);
+                assert_eq!(intersect1(&cut.binary().unwrap(), &ray), brute);
+            }
+            packets_match_brute_force(&cut, Vec3::new(30.5, 20.25, 12.0), 3.0);
+        }
+    }
+
+    #[test]
+    fn a_tree_built_in_regions_is_the_same_on_any_number_of_threads() {
+        let soup = jumbled(5000);
+        let on = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| Bvh::build_in_regions(&soup, Preset::VerySlowBuild, 600, false))
+                .unwrap()
+        };
+        let (one, three) = (on(1), on(3));
+        assert_eq!(one.wide_nodes(), three.wide_nodes());
+        assert_eq!(
+            one.wide().tris().collect::<Vec<_>>(),
+            three.wide().tris().collect::<Vec<_>>()
+        );
+        assert_eq!(one.bytes(), three.bytes());
     }
 
     #[test]

@@ -52,6 +52,49 @@ impl<T: Pod> HugeSlice<T> {
         }
     }
 
+    /// `len` values written by `fill` (given them zeroed) straight where they stay: on huge
+    /// pages when big enough, so the array is never held twice.
+    pub(super) fn filled(len: usize, fill: impl FnOnce(&mut [T])) -> Self {
+        let bytes = len * std::mem::size_of::<T>();
+        if bytes >= HUGE
+            && let Some(mut map) = Self::map(bytes)
+        {
+            let offset = Self::offset(&map);
+            fill(bytemuck::cast_slice_mut(&mut map[offset..offset + bytes]));
+            return Self {
+                store: Store::Mapped {
+                    map,
+                    offset,
+                    len,
+                    _values: PhantomData,
+                },
+            };
+        }
+        let mut values = vec![T::zeroed(); len];
+        fill(&mut values);
+        Self::heap(values)
+    }
+
+    /// An anonymous (zeroed) map of `bytes` and a huge page more, advised for huge pages from
+    /// its first huge page boundary ([`HugeSlice::offset`]) on.
+    fn map(bytes: usize) -> Option<MmapMut> {
+        let map = memmap2::MmapOptions::new()
+            .len(bytes.checked_add(HUGE)?)
+            .map_anon()
+            .ok()?;
+        #[cfg(target_os = "linux")]
+        {
+            // Advised before the first write, so the pages are faulted in huge.
+            let _ = map.advise_range(memmap2::Advice::HugePage, Self::offset(&map), bytes);
+        }
+        Some(map)
+    }
+
+    /// Where in `map` its first huge page starts.
+    fn offset(map: &MmapMut) -> usize {
+        (map.as_ptr() as usize).next_multiple_of(HUGE) - map.as_ptr() as usize
+    }
+
     fn heap(values: Vec<T>) -> Self {
         Self {
             store: Store::Heap(values),
@@ -59,16 +102,8 @@ impl<T: Pod> HugeSlice<T> {
     }
 
     fn mapped(values: &[T], bytes: usize) -> Option<Store<T>> {
-        let mut map = memmap2::MmapOptions::new()
-            .len(bytes.checked_add(HUGE)?)
-            .map_anon()
-            .ok()?;
-        let offset = (map.as_ptr() as usize).next_multiple_of(HUGE) - map.as_ptr() as usize;
-        #[cfg(target_os = "linux")]
-        {
-            // Advised before the first write, so the pages are faulted in huge.
-            let _ = map.advise_range(memmap2::Advice::HugePage, offset, bytes);
-        }
+        let mut map = Self::map(bytes)?;
+        let offset = Self::offset(&map);
         map[offset..offset + bytes].copy_from_slice(bytemuck::cast_slice(values));
         Some(Store::Mapped {
             map,
