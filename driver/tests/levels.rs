@@ -38,6 +38,9 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// A named plane of the small level: name, material, corner, two edges.
+type Plane<'a> = (&'a str, &'a str, [f32; 3], [f32; 3], [f32; 3]);
+
 /// A small level as an OBJ: a 4 × 4 floor and two walls (a corner open to the sky), each a
 /// grid of 2 × 2 quads whose UV set is `uv(quad, corner)`, the floor textured with
 /// `floor.png` (which may not exist), the walls of `Kd 0.6 0.5 0.4`.
@@ -45,7 +48,7 @@ fn corner_obj(dir: &Path, uv: impl Fn(usize, [f32; 2]) -> [f32; 2]) -> PathBuf {
     let mut obj = String::from("mtllib level.mtl\n");
     let (mut v, mut vt) = (0, 0);
     let mut faces = String::new();
-    let planes: [(&str, &str, [f32; 3], [f32; 3], [f32; 3]); 3] = [
+    let planes: [Plane; 3] = [
         ("floor", "stone", [0.0; 3], [0.0, 0.0, 4.0], [4.0, 0.0, 0.0]),
         (
             "west",

@@ -559,7 +559,8 @@ mod tests {
     fn a_triangle_bakes_the_side_its_texels_face() {
         let (scene, mut triangles, pages) = scene();
         let image = vec![None; 16];
-        let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image.clone()]);
+        let pass =
+            PreviousPass::from_pixels(&scene, &triangles, &pages, std::slice::from_ref(&image));
         assert!(pass.bakes_side(0, true) && !pass.bakes_side(0, false));
         assert!(
             !pass.bakes_side(1, true) && !pass.bakes_side(1, false),
@@ -567,11 +568,13 @@ mod tests {
         );
         // Seen from the back only: its texels describe the back.
         triangles[0].flags = LIGHTMAPPED | SEEN_BACK | TEXELS_BACK;
-        let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image.clone()]);
+        let pass =
+            PreviousPass::from_pixels(&scene, &triangles, &pages, std::slice::from_ref(&image));
         assert!(pass.bakes_side(0, false) && !pass.bakes_side(0, true));
         // Seen from both sides, its texels describing the front.
         triangles[0].flags = LIGHTMAPPED | SEEN_FRONT | SEEN_BACK;
-        let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image.clone()]);
+        let pass =
+            PreviousPass::from_pixels(&scene, &triangles, &pages, std::slice::from_ref(&image));
         assert!(pass.bakes_side(0, true) && !pass.bakes_side(0, false));
         // No lightmap UVs: no side is baked.
         triangles[0] = TriangleRecord::unmapped(SEEN_FRONT);
