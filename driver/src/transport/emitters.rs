@@ -16,7 +16,17 @@
 //! matter at the receiver and picks none where none can light it, or — in worlds of at most
 //! [`LOCAL_MAX`] emitters — by each emitter's own weight at the receiver (`local`: power over
 //! squared distance, its cosine and the receiver's, zero for one seen from behind or below
-//! the horizon; O(N), docs/bake.md "Next-event estimation on the bidir room").
+//! the horizon; docs/bake.md "Next-event estimation on the bidir room"). `local` weighs
+//! every emitter at once, one per lane of an `f32x8`, from structure-of-arrays rows built
+//! by [`Emitters::new`] (`LocalRows`; `Emitter::local_weight` is the scalar reference, equal
+//! bit for bit).
+//!
+//! [`Emitters::at`] makes the selection at one receiver once (`local`'s weights, running sums
+//! and probabilities) for every pick and density asked there: the eight next-event samples
+//! of a texel ([`super::direct`]), and a path vertex's sample and the MIS density of the ray
+//! that leaves it ([`super::path`]). The pick and the pmf read the same probabilities, so
+//! they agree bit for bit, as MIS needs. [`Emitters::sample`], [`Emitters::pdf`],
+//! [`Emitters::select`] and [`Emitters::selection_pmf`] make it for one call.
 //!
 //! A world without emitters builds none of this and traces no shadow rays for them.
 
@@ -37,8 +47,8 @@ pub enum EmitterSelection {
     /// Every emitter weighed at the receiver ([`LOCAL_MAX`] of them at most; beyond, as
     /// `power`): luminance × approximate solid angle × the receiver's cosine to its centroid,
     /// zero for an emitter seen from behind or wholly below the receiver's horizon. The
-    /// default: at equal time it beats `power` and `tree` on the converted scenes
-    /// (docs/bake.md, "Next-event estimation on the bidir room").
+    /// default: at equal time it beats `power` and `tree` on the bidir and ajar rooms and is
+    /// level on the Cornell box (docs/bake.md, "Next-event estimation on the bidir room").
     #[default]
     Local,
 }
@@ -312,6 +322,7 @@ impl Emitters {
     }
 
     /// Picks an emitter for receiver `(p, n)` with `u` in [0, 1) ([`EmittersAt::select`]).
+    #[inline]
     pub fn select(&self, p: Vec3, n: Vec3, u: f32) -> Option<(u32, f32)> {
         match &self.picker {
             Picker::Power(table) => Some(table.pick(u)),
@@ -322,6 +333,7 @@ impl Emitters {
 
     /// The probability that [`Self::select`] at `(p, n)` picks emitter `index`
     /// ([`EmittersAt::selection_pmf`]).
+    #[inline]
     pub fn selection_pmf(&self, p: Vec3, n: Vec3, index: u32) -> f32 {
         match &self.picker {
             Picker::Power(table) => table.pmf(index),
@@ -464,6 +476,7 @@ impl EmittersAt<'_> {
     /// Picks an emitter with `u` in [0, 1) by the selection in force: its index (in the
     /// order of [`Emitters::new`]'s emitters) and the probability of the pick; `None` when
     /// the selection finds none that can light the receiver.
+    #[inline]
     pub fn select(&self, u: f32) -> Option<(u32, f32)> {
         match (&self.emitters.picker, &self.local) {
             (_, Some(local)) => local.pick(u),
@@ -474,6 +487,7 @@ impl EmittersAt<'_> {
     }
 
     /// The probability that [`Self::select`] picks emitter `index`.
+    #[inline]
     pub fn selection_pmf(&self, index: u32) -> f32 {
         match (&self.emitters.picker, &self.local) {
             (_, Some(local)) => local.pmf(index),
