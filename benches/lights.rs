@@ -19,7 +19,10 @@
 //! Group `lights_pick_bidir` (picks/s): the same pick + pmf through `Emitters` (as next-event
 //! estimation calls it) in the Veach bidir room (`../shared/scenes/converted/
 //! bitterli_veach_bidir.glb`, 4 emissive triangles; skipped when absent), at random points
-//! of the room with random normals, for `power`, `tree` and `local` selection.
+//! of the room with random normals, for `power`, `tree` and `local` selection: `SEL/4` as two
+//! calls that each make the selection at the receiver (`Emitters::select`, then
+//! `Emitters::selection_pmf`), `SEL-at/4` with the selection made once (`Emitters::at`, as
+//! next-event estimation and the MIS density of the ray leaving a path vertex share it).
 //!
 //! Run: `cargo bench --bench lights -- --warm-up-time 1 --measurement-time 2`
 
@@ -185,7 +188,7 @@ fn bench_lights(c: &mut Criterion) {
 }
 
 /// The Veach bidir room's emitters through [`Emitters::select`] and
-/// [`Emitters::selection_pmf`], by each selection.
+/// [`Emitters::selection_pmf`], and through [`Emitters::at`], by each selection.
 fn bench_bidir(c: &mut Criterion) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/scenes/converted/bitterli_veach_bidir.glb");
@@ -223,6 +226,20 @@ fn bench_bidir(c: &mut Criterion) {
                 for &(p, n, u) in &points {
                     if let Some((i, prob)) = emitters.select(black_box(p), n, u) {
                         sum += prob + emitters.selection_pmf(p, n, i);
+                    }
+                }
+                sum
+            })
+        });
+        // As the bake asks at one receiver: the selection made once (`Emitters::at`), then
+        // its pick and the pmf of the picked emitter.
+        group.bench_function(BenchmarkId::new(format!("{sel}-at"), emitters.len()), |b| {
+            b.iter(|| {
+                let mut sum = 0.0f32;
+                for &(p, n, u) in &points {
+                    let at = emitters.at(black_box(p), n);
+                    if let Some((i, prob)) = at.select(u) {
+                        sum += prob + at.selection_pmf(i);
                     }
                 }
                 sum

@@ -18,7 +18,7 @@ use glam::Vec3;
 use guidebake_kernels::packet::{LANES, Ray, Ray8, set_lanes};
 use guidebake_kernels::traverse::{WideRef, occluded1, occluded8};
 
-use super::emitters::EmitterSample;
+use super::emitters::{EmitterSample, EmittersAt};
 use crate::bake::directional::{ShSample, add_irradiance_sample, hemisphere};
 use crate::bake::settings::EmitterSampling;
 use crate::bake::world::World;
@@ -80,6 +80,21 @@ impl World {
     /// emitter (`pick` chooses it, `u` the point on it), each with a single shadow ray.
     /// Returns it and the shadow rays traced.
     pub fn direct_irradiance(&self, at: &Receiver<'_>, u: [f32; 2], pick: f32) -> (Vec3, u32) {
+        let emitters = self.emitters().map(|e| e.at(at.point, at.normal));
+        self.direct_irradiance_at(at, emitters.as_ref(), u, pick)
+    }
+
+    /// [`Self::direct_irradiance`] with the emitter selection at `at` already made
+    /// ([`super::emitters::Emitters::at`] at `at`'s point and normal; `None` when the world samples no
+    /// emitter), so that the MIS density of the ray that leaves `at` reuses it.
+    pub fn direct_irradiance_at(
+        &self,
+        at: &Receiver<'_>,
+        emitters: Option<&EmittersAt<'_>>,
+        u: [f32; 2],
+        pick: f32,
+    ) -> (Vec3, u32) {
+        debug_assert!(emitters.is_none_or(|e| e.point() == at.point && e.normal() == at.normal));
         let bvh = self.wide_bvh();
         let (p, n) = (at.point, at.normal);
         let (mut e, mut rays) = (Vec3::ZERO, 0);
@@ -91,7 +106,7 @@ impl World {
                 }
             }
         }
-        if let Some(s) = self.sample_emitter(p, n, pick, u) {
+        if let Some(s) = emitters.and_then(|e| e.sample(pick, u)) {
             rays += 1;
             if !occluded1(&bvh, &self.emitter_shadow_ray(p, &s)) {
                 e += self.emitter_weight(at, &s);
@@ -161,11 +176,13 @@ impl World {
             }
             rays += traced;
         }
-        if self.emitters().is_some() {
+        if let Some(emitters) = self.emitters() {
+            // One selection for the eight lanes: they share the receiver.
+            let emitters = emitters.at(p, n);
             let mut packet = Ray8::INACTIVE;
             let mut samples = [None; LANES];
             for lane in 0..LANES {
-                if let Some(s) = self.sample_emitter(p, n, pick[lane], u[lane]) {
+                if let Some(s) = emitters.sample(pick[lane], u[lane]) {
                     packet.set_lane(lane, &self.emitter_shadow_ray(p, &s));
                     samples[lane] = Some(s);
                 }
@@ -208,11 +225,6 @@ impl World {
         let dirs = core::array::from_fn(|lane| samples[lane].map_or(Vec3::Z, |s| s.direction));
         let densities = other(&dirs, live);
         core::array::from_fn(|lane| (live >> lane & 1 == 1).then_some(densities[lane]))
-    }
-
-    /// A next-event sample of an emitter from `(p, n)`, unless the world samples none.
-    fn sample_emitter(&self, p: Vec3, n: Vec3, pick: f32, u: [f32; 2]) -> Option<EmitterSample> {
-        self.emitters()?.sample(p, n, pick, u)
     }
 
     /// `L cosθ / p · w_nee`: the emitter sample's irradiance if unoccluded.

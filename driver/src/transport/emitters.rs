@@ -16,11 +16,22 @@
 //! matter at the receiver and picks none where none can light it, or — in worlds of at most
 //! [`LOCAL_MAX`] emitters — by each emitter's own weight at the receiver (`local`: power over
 //! squared distance, its cosine and the receiver's, zero for one seen from behind or below
-//! the horizon; O(N), docs/bake.md "Next-event estimation on the bidir room").
+//! the horizon; docs/bake.md "Next-event estimation on the bidir room"). `local` weighs
+//! every emitter at once, one per lane of an `f32x8`, from structure-of-arrays rows built
+//! by [`Emitters::new`] (`LocalRows`; `Emitter::local_weight` is the scalar reference, equal
+//! bit for bit).
+//!
+//! [`Emitters::at`] makes the selection at one receiver once (`local`'s weights, running sums
+//! and probabilities) for every pick and density asked there: the eight next-event samples
+//! of a texel ([`super::direct`]), and a path vertex's sample and the MIS density of the ray
+//! that leaves it ([`super::path`]). The pick and the pmf read the same probabilities, so
+//! they agree bit for bit, as MIS needs. [`Emitters::sample`], [`Emitters::pdf`],
+//! [`Emitters::select`] and [`Emitters::selection_pmf`] make it for one call.
 //!
 //! A world without emitters builds none of this and traces no shadow rays for them.
 
 use glam::{DVec3, Vec3};
+use wide::f32x8;
 
 use super::alias::AliasTable;
 use super::light_tree::{EmitterBounds, LightTree};
@@ -36,8 +47,8 @@ pub enum EmitterSelection {
     /// Every emitter weighed at the receiver ([`LOCAL_MAX`] of them at most; beyond, as
     /// `power`): luminance × approximate solid angle × the receiver's cosine to its centroid,
     /// zero for an emitter seen from behind or wholly below the receiver's horizon. The
-    /// default: at equal time it beats `power` and `tree` on the converted scenes
-    /// (docs/bake.md, "Next-event estimation on the bidir room").
+    /// default: at equal time it beats `power` and `tree` on the bidir and ajar rooms and is
+    /// level on the Cornell box (docs/bake.md, "Next-event estimation on the bidir room").
     #[default]
     Local,
 }
@@ -79,13 +90,106 @@ pub const LOCAL_MAX: usize = 8;
 /// this share of the weight it would have facing the receiver.
 const LOCAL_COS_FLOOR: f32 = 0.05;
 
+/// Share of the distance from a receiver to an emitter's farthest corner by which a corner
+/// may lie below the receiver's horizon and still count as above it in
+/// [`EmitterSelection::Local`]'s horizon test (rounding of corners in the receiver's plane).
+const LOCAL_HORIZON_SLACK: f32 = 1e-5;
+
 /// The picker of [`EmitterSelection`].
 #[derive(Debug)]
 enum Picker {
     Power(AliasTable),
     Tree(LightTree),
-    /// [`EmitterSelection::Local`]: the luminance of each emitter's radiance.
-    Local(Vec<f32>),
+    /// [`EmitterSelection::Local`]: every emitter's data in one lane.
+    Local(Box<LocalRows>),
+}
+
+/// What [`EmitterSelection::Local`] weighs, one emitter per lane of an `f32x8` (structure of
+/// arrays, [`LOCAL_MAX`] lanes): every emitter is weighed at once. Lanes past the last
+/// emitter have a zero normal, so their height above the plane is 0 and their weight 0.
+#[derive(Debug)]
+struct LocalRows {
+    /// First corner (its plane's point for the behind test).
+    a: [f32x8; 3],
+    /// Unit front normal.
+    normal: [f32x8; 3],
+    /// Centroid: where the weight's distance and cosines are measured.
+    centroid: [f32x8; 3],
+    /// The three corners less the centroid (the horizon test).
+    corners: [[f32x8; 3]; 3],
+    /// Distance from the centroid to the farthest corner.
+    radius: f32x8,
+    area: f32x8,
+    /// Luminance of the radiance.
+    lum: f32x8,
+    /// Emitters (lanes in use).
+    len: usize,
+}
+
+/// One emitter as a lane of [`LocalRows`], and as [`Emitter::local_weight`] reads it: the
+/// same values in both, so the scalar and the 8-wide weight agree bit for bit.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct LocalLane {
+    a: Vec3,
+    normal: Vec3,
+    centroid: Vec3,
+    corners: [Vec3; 3],
+    radius: f32,
+    area: f32,
+    lum: f32,
+}
+
+impl LocalRows {
+    fn new(emitters: &[Emitter]) -> Self {
+        assert!(emitters.len() <= LOCAL_MAX);
+        let mut lanes = [LocalLane::default(); LOCAL_MAX];
+        for (lane, e) in lanes.iter_mut().zip(emitters) {
+            *lane = e.local_lane();
+        }
+        let row = |f: &dyn Fn(&LocalLane) -> f32| f32x8::new(lanes.map(|l| f(&l)));
+        let row3 =
+            |f: &dyn Fn(&LocalLane) -> Vec3| [row(&|l| f(l).x), row(&|l| f(l).y), row(&|l| f(l).z)];
+        Self {
+            a: row3(&|l| l.a),
+            normal: row3(&|l| l.normal),
+            centroid: row3(&|l| l.centroid),
+            corners: [0, 1, 2].map(|k| row3(&|l| l.corners[k])),
+            radius: row(&|l| l.radius),
+            area: row(&|l| l.area),
+            lum: row(&|l| l.lum),
+            len: emitters.len(),
+        }
+    }
+
+    /// Every emitter's weight at receiver `(p, n)` at once: [`Emitter::local_weight`] lane
+    /// by lane, the same operations in the same order (no fused multiply-add), so the same
+    /// bits; 0 in the lanes past the last emitter.
+    fn weights(&self, p: Vec3, n: Vec3) -> [f32; LOCAL_MAX] {
+        let [px, py, pz] = p.to_array().map(f32x8::splat);
+        let [nx, ny, nz] = n.to_array().map(f32x8::splat);
+        let dot = |x: f32x8, y: f32x8, z: f32x8, v: &[f32x8; 3]| x * v[0] + y * v[1] + z * v[2];
+        let height = dot(px - self.a[0], py - self.a[1], pz - self.a[2], &self.normal);
+        let (tx, ty, tz) = (
+            self.centroid[0] - px,
+            self.centroid[1] - py,
+            self.centroid[2] - pz,
+        );
+        let d2 = tx * tx + ty * ty + tz * tz;
+        let d = d2.sqrt();
+        let cn = nx * tx + ny * ty + nz * tz;
+        let [c0, c1, c2] = self.corners.each_ref().map(|c| dot(nx, ny, nz, c) + cn);
+        let highest = c0.fast_max(c1).fast_max(c2);
+        let slack = (d + self.radius) * f32x8::splat(-LOCAL_HORIZON_SLACK);
+        // A cos θ_e / d² = A h / d³ and cos θ_r = (n · to) d² / d³: one division.
+        let r = f32x8::ONE / (d2 * d);
+        let omega = (self.area * height * r).fast_min(f32x8::splat(core::f32::consts::TAU));
+        let cos_r = (cn * d2 * r).fast_max(f32x8::splat(LOCAL_COS_FLOOR));
+        let w = (self.lum * omega * cos_r)
+            .fast_max(f32x8::splat(f32::MIN_POSITIVE))
+            .fast_min(f32x8::splat(f32::MAX));
+        let lit = height.simd_gt(f32x8::ZERO) & highest.simd_gt(slack);
+        lit.select(w, f32x8::ZERO).to_array()
+    }
 }
 
 /// The emissive triangles of a world and how to sample them.
@@ -160,7 +264,7 @@ impl Emitters {
                 Picker::Tree(LightTree::build(&bounds)?)
             }
             EmitterSelection::Local if emitters.len() <= LOCAL_MAX => {
-                Picker::Local(emitters.iter().map(|e| luminance(e.radiance)).collect())
+                Picker::Local(Box::new(LocalRows::new(&emitters)))
             }
             EmitterSelection::Local => {
                 let powers: Vec<f32> = emitters.iter().map(Emitter::power).collect();
@@ -184,13 +288,163 @@ impl Emitters {
         self.emitters.is_empty()
     }
 
-    /// Samples a direction towards an emitter from receiver `p` with unit normal `n`: `pick`
-    /// chooses the emitter, `u` the point on it. `None` when the sample cannot light the
-    /// receiver (the emitter faces away, the point is below the receiver's horizon, or no
-    /// emitter can reach it): it contributes zero and needs no shadow ray.
+    /// Emitter selection at receiver `(p, n)`: what [`EmittersAt::sample`],
+    /// [`EmittersAt::pdf`], [`EmittersAt::select`] and [`EmittersAt::selection_pmf`] need
+    /// there, computed once (`local`'s weights of every emitter) for any number of picks and
+    /// densities at the same receiver.
+    pub fn at(&self, p: Vec3, n: Vec3) -> EmittersAt<'_> {
+        let local = match &self.picker {
+            Picker::Local(rows) => Some(LocalWeights::new(rows, p, n)),
+            Picker::Power(_) | Picker::Tree(_) => None,
+        };
+        EmittersAt {
+            emitters: self,
+            p,
+            n,
+            local,
+        }
+    }
+
+    /// Samples a direction towards an emitter from receiver `p` with unit normal `n`
+    /// ([`EmittersAt::sample`]; several samples at one receiver: [`Self::at`] once).
     pub fn sample(&self, p: Vec3, n: Vec3, pick: f32, u: [f32; 2]) -> Option<EmitterSample> {
-        let (index, pmf) = self.select(p, n, pick)?;
-        let e = &self.emitters[index as usize];
+        self.at(p, n).sample(pick, u)
+    }
+
+    /// The solid-angle density with which [`Self::sample`] at receiver `(p, n)` picks the
+    /// direction `direction` that meets triangle `prim` at distance `t`
+    /// ([`EmittersAt::pdf`]); weighs no emitter where `prim` cannot be sampled.
+    pub fn pdf(&self, p: Vec3, n: Vec3, prim: u32, direction: Vec3, t: f32) -> f32 {
+        if self.front_emitter(prim, direction).is_none() {
+            return 0.0;
+        }
+        self.at(p, n).pdf(prim, direction, t)
+    }
+
+    /// Picks an emitter for receiver `(p, n)` with `u` in [0, 1) ([`EmittersAt::select`]).
+    #[inline]
+    pub fn select(&self, p: Vec3, n: Vec3, u: f32) -> Option<(u32, f32)> {
+        match &self.picker {
+            Picker::Power(table) => Some(table.pick(u)),
+            Picker::Tree(tree) => tree.pick(p, n, u),
+            Picker::Local(_) => self.at(p, n).select(u),
+        }
+    }
+
+    /// The probability that [`Self::select`] at `(p, n)` picks emitter `index`
+    /// ([`EmittersAt::selection_pmf`]).
+    #[inline]
+    pub fn selection_pmf(&self, p: Vec3, n: Vec3, index: u32) -> f32 {
+        match &self.picker {
+            Picker::Power(table) => table.pmf(index),
+            Picker::Tree(tree) => tree.pmf(p, n, index),
+            Picker::Local(_) => self.at(p, n).selection_pmf(index),
+        }
+    }
+
+    /// The emitter index of triangle `prim` and the emitter, if it is one and `direction`
+    /// meets its front face.
+    fn front_emitter(&self, prim: u32, direction: Vec3) -> Option<(u32, &Emitter)> {
+        let &index = self.of_prim.get(prim as usize)?;
+        let e = self.emitters.get(index as usize)?;
+        (-e.normal.dot(direction) > 0.0).then_some((index, e))
+    }
+}
+
+/// [`EmitterSelection::Local`]'s selection at one receiver: the running sums of its
+/// weights (the pick) and each emitter's probability (the pick's and the pmf's: the same
+/// numbers, so they agree bit for bit, as MIS needs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LocalWeights {
+    /// Running sums of the weights ([`LocalRows::weights`]) in emitter order; lanes past the
+    /// last emitter are never read.
+    cdf: f32x8,
+    /// Each emitter's weight over their sum; 0 past the last emitter, and everywhere when
+    /// none can light the receiver.
+    pmf: [f32; LOCAL_MAX],
+    /// The weights' sum; 0 when none can light the receiver (or it overflows).
+    sum: f32,
+    /// Emitters.
+    len: u32,
+}
+
+impl LocalWeights {
+    fn new(rows: &LocalRows, p: Vec3, n: Vec3) -> Self {
+        let w = rows.weights(p, n);
+        let mut cdf = [0.0; LOCAL_MAX];
+        let mut sum = 0.0;
+        for (c, &wi) in cdf.iter_mut().zip(&w).take(rows.len) {
+            sum += wi;
+            *c = sum;
+        }
+        let (pmf, sum) = if sum > 0.0 && sum < f32::INFINITY {
+            ((f32x8::new(w) / f32x8::splat(sum)).to_array(), sum)
+        } else {
+            ([0.0; LOCAL_MAX], 0.0)
+        };
+        Self {
+            cdf: f32x8::new(cdf),
+            pmf,
+            sum,
+            len: rows.len as u32,
+        }
+    }
+
+    /// Picks an emitter in proportion to the weights with `u` in [0, 1): the first whose
+    /// running sum exceeds `u · sum` (never one of weight 0), its index and probability;
+    /// `None` when none can light the receiver.
+    fn pick(&self, u: f32) -> Option<(u32, f32)> {
+        if self.sum <= 0.0 {
+            return None;
+        }
+        let target = f32x8::splat(u * self.sum);
+        let below = self.cdf.simd_le(target).to_bitmask() & ((1 << self.len) - 1);
+        let mut i = below.count_ones() as usize;
+        if i == self.len as usize {
+            // Rounding can leave `u · sum` at or above the last sum: the last emitter of
+            // weight.
+            i = self.pmf.iter().rposition(|&q| q > 0.0)?;
+        }
+        Some((i as u32, self.pmf[i]))
+    }
+
+    /// The probability that [`Self::pick`] picks emitter `index`.
+    fn pmf(&self, index: u32) -> f32 {
+        self.pmf.get(index as usize).copied().unwrap_or(0.0)
+    }
+}
+
+/// Emitter selection at one receiver ([`Emitters::at`]): `local`'s weights computed once,
+/// for the eight next-event samples of a texel or a path vertex's sample and the MIS
+/// density of the ray that leaves it.
+#[derive(Clone, Copy, Debug)]
+pub struct EmittersAt<'a> {
+    emitters: &'a Emitters,
+    p: Vec3,
+    n: Vec3,
+    /// `Some` under [`Picker::Local`].
+    local: Option<LocalWeights>,
+}
+
+impl EmittersAt<'_> {
+    /// The receiver's point.
+    pub fn point(&self) -> Vec3 {
+        self.p
+    }
+
+    /// The receiver's unit normal.
+    pub fn normal(&self) -> Vec3 {
+        self.n
+    }
+
+    /// Samples a direction towards an emitter from the receiver: `pick` chooses the emitter,
+    /// `u` the point on it. `None` when the sample cannot light the receiver (the emitter
+    /// faces away, the point is below the receiver's horizon, or no emitter can reach it):
+    /// it contributes zero and needs no shadow ray.
+    pub fn sample(&self, pick: f32, u: [f32; 2]) -> Option<EmitterSample> {
+        let (p, n) = (self.p, self.n);
+        let (index, pmf) = self.select(pick)?;
+        let e = &self.emitters.emitters[index as usize];
         let (point, density) = e.sample_point(p, u)?;
         let to = point - p;
         let direction = to.normalize_or_zero();
@@ -208,84 +462,50 @@ impl Emitters {
         })
     }
 
-    /// The solid-angle density with which [`Self::sample`] at receiver `(p, n)` picks the
-    /// direction `direction` that meets triangle `prim` at distance `t`: 0 when `prim` is not
-    /// an emitter or is seen from behind.
-    pub fn pdf(&self, p: Vec3, n: Vec3, prim: u32, direction: Vec3, t: f32) -> f32 {
-        let Some(&index) = self.of_prim.get(prim as usize) else {
+    /// The solid-angle density with which [`Self::sample`] picks the direction `direction`
+    /// that meets triangle `prim` at distance `t`: 0 when `prim` is not an emitter or is
+    /// seen from behind.
+    pub fn pdf(&self, prim: u32, direction: Vec3, t: f32) -> f32 {
+        let Some((index, e)) = self.emitters.front_emitter(prim, direction) else {
             return 0.0;
         };
-        let Some(e) = self.emitters.get(index as usize) else {
-            return 0.0;
-        };
-        if -e.normal.dot(direction) <= 0.0 {
-            return 0.0;
-        }
-        let pdf = self.selection_pmf(p, n, index) * e.density(p, direction, t);
+        let pdf = self.selection_pmf(index) * e.density(self.p, direction, t);
         if pdf.is_finite() { pdf } else { f32::MAX }
     }
 
-    /// Picks an emitter for receiver `(p, n)` with `u` in [0, 1) by the selection in force:
-    /// its index (in the order of [`Self::new`]'s emitters) and the probability of the pick;
-    /// `None` when the selection finds none that can light the receiver.
-    pub fn select(&self, p: Vec3, n: Vec3, u: f32) -> Option<(u32, f32)> {
-        match &self.picker {
-            Picker::Power(table) => Some(table.pick(u)),
-            Picker::Tree(tree) => tree.pick(p, n, u),
-            Picker::Local(lum) => self.local_pick(lum, p, n, u),
+    /// Picks an emitter with `u` in [0, 1) by the selection in force: its index (in the
+    /// order of [`Emitters::new`]'s emitters) and the probability of the pick; `None` when
+    /// the selection finds none that can light the receiver.
+    #[inline]
+    pub fn select(&self, u: f32) -> Option<(u32, f32)> {
+        match (&self.emitters.picker, &self.local) {
+            (_, Some(local)) => local.pick(u),
+            (Picker::Power(table), None) => Some(table.pick(u)),
+            (Picker::Tree(tree), None) => tree.pick(self.p, self.n, u),
+            (Picker::Local(_), None) => unreachable!("Emitters::at weighs local emitters"),
         }
     }
 
-    /// The probability that [`Self::select`] at `(p, n)` picks emitter `index`.
-    pub fn selection_pmf(&self, p: Vec3, n: Vec3, index: u32) -> f32 {
-        match &self.picker {
-            Picker::Power(table) => table.pmf(index),
-            Picker::Tree(tree) => tree.pmf(p, n, index),
-            Picker::Local(lum) => {
-                let (w, sum) = self.local_weights(lum, p, n);
-                match w.get(index as usize) {
-                    Some(&wi) if sum > 0.0 => wi / sum,
-                    _ => 0.0,
-                }
-            }
+    /// The probability that [`Self::select`] picks emitter `index`.
+    #[inline]
+    pub fn selection_pmf(&self, index: u32) -> f32 {
+        match (&self.emitters.picker, &self.local) {
+            (_, Some(local)) => local.pmf(index),
+            (Picker::Power(table), None) => table.pmf(index),
+            (Picker::Tree(tree), None) => tree.pmf(self.p, self.n, index),
+            (Picker::Local(_), None) => unreachable!("Emitters::at weighs local emitters"),
         }
     }
+}
 
-    /// [`EmitterSelection::Local`]'s weight of every emitter at receiver `(p, n)`, and their
-    /// sum (the same arithmetic in [`Self::sample`] and [`Self::pdf`], so the pick's
-    /// probability and the pmf agree bit for bit).
-    fn local_weights(&self, lum: &[f32], p: Vec3, n: Vec3) -> ([f32; LOCAL_MAX], f32) {
-        let mut w = [0.0; LOCAL_MAX];
-        let mut sum = 0.0;
-        for ((w, e), &l) in w.iter_mut().zip(&self.emitters).zip(lum) {
-            *w = e.local_weight(l, p, n);
-            sum += *w;
-        }
-        (w, sum)
-    }
+/// `a > b ? a : b`, as `maxps` (and `f32x8::fast_max`) computes it, NaN included.
+fn max_ps(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
 
-    /// Picks an emitter in proportion to [`Self::local_weights`] with `u` in [0, 1): its
-    /// index and probability; `None` when none can light the receiver.
-    fn local_pick(&self, lum: &[f32], p: Vec3, n: Vec3, u: f32) -> Option<(u32, f32)> {
-        let (w, sum) = self.local_weights(lum, p, n);
-        if !(sum > 0.0 && sum.is_finite()) {
-            return None;
-        }
-        let target = u * sum;
-        let mut acc = 0.0;
-        let mut last = None;
-        for (i, &wi) in w.iter().enumerate().take(lum.len()) {
-            if wi > 0.0 {
-                acc += wi;
-                last = Some(i);
-                if target < acc {
-                    break;
-                }
-            }
-        }
-        // Rounding can leave `target` at or above the last sum: the last emitter of weight.
-        last.map(|i| (i as u32, w[i] / sum))
-    }
+/// `a < b ? a : b`, as `minps` (and `f32x8::fast_min`) computes it, NaN included.
+fn min_ps(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
 }
 
 /// Solid angles (sr) within which an emitter is sampled by solid angle: below, the
@@ -326,33 +546,49 @@ impl Emitter {
         [self.a, self.a + self.ab, self.a + self.ac]
     }
 
-    /// [`EmitterSelection::Local`]'s weight of this emitter (luminance `lum`) at receiver
-    /// `(p, n)`: `lum · min(A cos θ_e / d², 2π) · max(cos θ_r, floor)` to its centroid at
-    /// distance d. Zero only where nothing it emits can reach the receiver: `p` behind its
-    /// plane (as [`Self::point_sampling`] decides), or every corner below `p`'s horizon (then
-    /// the whole triangle is). Positive otherwise, so the selection stays unbiased.
-    fn local_weight(&self, lum: f32, p: Vec3, n: Vec3) -> f32 {
-        let height = (p - self.a).dot(self.normal);
-        if !(height > 0.0) {
-            return 0.0;
+    /// This emitter as a lane of [`LocalRows`].
+    fn local_lane(&self) -> LocalLane {
+        let centroid = self.a + (self.ab + self.ac) * (1.0 / 3.0);
+        let corners = self.corners().map(|v| v - centroid);
+        LocalLane {
+            a: self.a,
+            normal: self.normal,
+            centroid,
+            corners,
+            radius: corners.map(Vec3::length).into_iter().fold(0.0, f32::max),
+            area: self.area,
+            lum: luminance(self.radiance),
         }
-        let above = self.corners().into_iter().any(|v| {
-            let to = v - p;
-            to.dot(n) > -1e-5 * to.abs().max_element()
-        });
-        if !above {
-            return 0.0;
-        }
-        let to = self.a + (self.ab + self.ac) * (1.0 / 3.0) - p;
-        let d2 = to.length_squared();
+    }
+
+    /// [`EmitterSelection::Local`]'s weight of this emitter at receiver `(p, n)`, the scalar
+    /// reference of [`LocalRows::weights`]: `lum · min(A cos θ_e / d², 2π) · max(cos θ_r,
+    /// floor)` to its centroid at distance d. Zero only where nothing it emits can reach the
+    /// receiver: `p` behind its plane (as [`Self::point_sampling`] decides), or every corner
+    /// below `p`'s horizon (then the whole triangle is; a corner may dip below it by
+    /// [`LOCAL_HORIZON_SLACK`] of the distance to the farthest corner, a bound on the
+    /// rounding). Positive otherwise, so the selection stays unbiased.
+    #[cfg_attr(not(test), allow(dead_code))]
+    fn local_weight(&self, p: Vec3, n: Vec3) -> f32 {
+        let l = self.local_lane();
+        let dot = |x: f32, y: f32, z: f32, v: Vec3| x * v.x + y * v.y + z * v.z;
+        let height = dot(p.x - l.a.x, p.y - l.a.y, p.z - l.a.z, l.normal);
+        let to = l.centroid - p;
+        let d2 = to.x * to.x + to.y * to.y + to.z * to.z;
         let d = d2.sqrt();
-        let omega = (self.area * height / (d2 * d)).min(core::f32::consts::TAU);
-        let cos_r = (n.dot(to) / d).max(LOCAL_COS_FLOOR);
-        let w = lum * omega * cos_r;
-        if w.is_finite() {
-            w.max(f32::MIN_POSITIVE)
+        let cn = dot(n.x, n.y, n.z, to);
+        let [c0, c1, c2] = l.corners.map(|c| dot(n.x, n.y, n.z, c) + cn);
+        let highest = max_ps(max_ps(c0, c1), c2);
+        let slack = (d + l.radius) * -LOCAL_HORIZON_SLACK;
+        let r = 1.0 / (d2 * d);
+        let omega = min_ps(l.area * height * r, core::f32::consts::TAU);
+        let cos_r = max_ps(cn * d2 * r, LOCAL_COS_FLOOR);
+        // Never 0 where it can light the receiver, never infinite.
+        let w = min_ps(max_ps(l.lum * omega * cos_r, f32::MIN_POSITIVE), f32::MAX);
+        if height > 0.0 && highest > slack {
+            w
         } else {
-            f32::MAX
+            0.0
         }
     }
 
@@ -599,9 +835,10 @@ mod tests {
             ],
         ];
         let world = world_of(&tris, EmitterSelection::Local);
-        let Picker::Local(lum) = &world.picker else {
-            panic!("six emitters are weighed locally");
-        };
+        assert!(
+            matches!(world.picker, Picker::Local(_)),
+            "six emitters are weighed locally"
+        );
         for (p, n) in [
             (Vec3::ZERO, Vec3::Z),
             (
@@ -610,9 +847,9 @@ mod tests {
             ),
             (Vec3::new(1.0, 0.0, 0.0), Vec3::X),
         ] {
-            let (w, sum) = world.local_weights(lum, p, n);
+            let at = world.at(p, n);
             let pmf: Vec<f64> = (0..tris.len())
-                .map(|i| f64::from(w[i]) / f64::from(sum))
+                .map(|i| f64::from(at.selection_pmf(i as u32)))
                 .collect();
             assert!((pmf.iter().sum::<f64>() - 1.0).abs() < 1e-5, "{p}: {pmf:?}");
             for (i, [a, b, c]) in tris.iter().enumerate() {
@@ -624,13 +861,14 @@ mod tests {
             let mut counts = vec![0u32; tris.len()];
             let mut rng = Pcg32::new(11, 3);
             for _ in 0..draws {
-                let (i, q) = world.local_pick(lum, p, n, rng.next_f32()).unwrap();
+                let (i, q) = at.select(rng.next_f32()).unwrap();
                 assert!(pmf[i as usize] > 0.0);
                 assert_eq!(
-                    q,
-                    w[i as usize] / sum,
+                    q.to_bits(),
+                    at.selection_pmf(i).to_bits(),
                     "the pick's probability is the pmf's"
                 );
+                assert_eq!(q.to_bits(), world.selection_pmf(p, n, i).to_bits());
                 counts[i as usize] += 1;
             }
             let live: Vec<usize> = (0..tris.len()).filter(|&i| pmf[i] > 0.0).collect();
@@ -646,6 +884,78 @@ mod tests {
                 chi2 < 20.5,
                 "{p}: χ² = {chi2}, counts {counts:?}, pmf {pmf:?}"
             );
+        }
+    }
+
+    /// The 8-wide weights are the scalar reference's, bit for bit, at random receivers
+    /// around eight emitters of every orientation (some far, tiny, huge, or in the
+    /// receiver's plane), and at receivers on an emitter's plane, at its centroid and its
+    /// corners; and the pick's probability is the pmf's.
+    #[test]
+    fn wide_local_weights_are_the_scalar_ones_bit_for_bit() {
+        let mut rng = Pcg32::new(7, 21);
+        let mut r = move || 4.0 * rng.next_f32() - 2.0;
+        for world in 0..40 {
+            let count = 1 + world % LOCAL_MAX;
+            let mut tris: Vec<[Vec3; 3]> = (0..count)
+                .map(|_| {
+                    let a = Vec3::new(r(), r(), r());
+                    let s = [1e-3, 0.3, 1.0, 40.0][world % 4];
+                    [
+                        a,
+                        a + Vec3::new(r(), r(), r()) * s,
+                        a + Vec3::new(r(), r(), r()) * s,
+                    ]
+                })
+                .collect();
+            // One emitter in the plane z = 0 of the receivers below.
+            tris[0] = [
+                Vec3::new(-1.0, -1.0, 0.0),
+                Vec3::new(1.0, -1.0, 0.0),
+                Vec3::new(0.0, 1.0, 0.0),
+            ];
+            let it = tris.iter().map(|&[a, b, c]| {
+                let n = (b - a).cross(c - a).normalize();
+                ([a, b, c], n, Vec3::new(1.0 + r().abs(), 2.0, 0.5))
+            });
+            let emitters =
+                Emitters::new(it.collect::<Vec<_>>().into_iter(), EmitterSelection::Local).unwrap();
+            let Picker::Local(rows) = &emitters.picker else {
+                panic!("{count} emitters are weighed locally");
+            };
+            let mut receivers: Vec<(Vec3, Vec3)> = (0..200)
+                .map(|_| {
+                    (
+                        Vec3::new(r(), r(), r()) * 3.0,
+                        Vec3::new(r(), r(), r()).normalize_or(Vec3::Z),
+                    )
+                })
+                .collect();
+            for e in &emitters.emitters {
+                let c = e.a + (e.ab + e.ac) * (1.0 / 3.0);
+                receivers.extend(e.corners().map(|v| (v, e.normal)));
+                receivers.push((c, -e.normal));
+                receivers.push((c + e.normal * 1e-4, Vec3::Z));
+            }
+            receivers.push((Vec3::new(0.2, 0.0, 0.0), Vec3::Z));
+            receivers.push((Vec3::new(0.2, 0.0, 1e-3), Vec3::X));
+            for (p, n) in receivers {
+                let wide = rows.weights(p, n);
+                for (i, e) in emitters.emitters.iter().enumerate() {
+                    assert_eq!(
+                        wide[i].to_bits(),
+                        e.local_weight(p, n).to_bits(),
+                        "emitter {i} of {count} at {p}, {n}"
+                    );
+                }
+                assert!(wide[count..].iter().all(|&w| w == 0.0));
+                let at = emitters.at(p, n);
+                if let Some((i, q)) = at.select(0.5 * (r() + 2.0) / 2.0) {
+                    assert!(wide[i as usize] > 0.0);
+                    assert_eq!(q.to_bits(), at.selection_pmf(i).to_bits());
+                    assert_eq!(q.to_bits(), emitters.selection_pmf(p, n, i).to_bits());
+                }
+            }
         }
     }
 

@@ -27,6 +27,7 @@ use guidebake_kernels::packet::Ray;
 use guidebake_kernels::traverse::intersect1;
 
 use super::direct::{Receiver, power_heuristic};
+use super::emitters::EmittersAt;
 use super::rng::SampleRng;
 use crate::bake::settings::{EmitterSampling, Transport};
 use crate::bake::world::{SurfaceHit, World};
@@ -78,13 +79,18 @@ impl World {
         // Series: the vertices a path traced from a gather hit that could not be read may
         // have (the passes the previous one holds, plus the hit itself), once it is traced.
         let mut traced: Option<u32> = None;
+        // The emitter selection at `from` when next-event estimation made it there (a path
+        // vertex), for the MIS weight of the emission its ray hits; the gather's texel made
+        // its own.
+        let mut from_emitters: Option<EmittersAt<'_>> = None;
         for vertex in 1.. {
             let Some(s) = self.surfaces().get(hit.prim as usize) else {
                 break;
             };
             let front = s.normal.dot(dir) < 0.0;
             if front && s.emission != Vec3::ZERO {
-                let emitted = throughput * s.emission * self.hit_weight(&from, dir, hit);
+                let emitted =
+                    throughput * s.emission * self.hit_weight(&from, from_emitters, dir, hit);
                 if vertex == 1 {
                     out.emitted = emitted;
                 } else {
@@ -132,6 +138,7 @@ impl World {
                 other: continues.then_some(&cosine_pdf as &dyn Fn(Vec3) -> f32),
             };
             let mut irradiance = Vec3::ZERO;
+            let mut emitters_here = None;
             match lookup {
                 Some(l) if reads_total => {
                     irradiance += l.total;
@@ -139,7 +146,13 @@ impl World {
                 }
                 _ => {
                     if self.has_direct_light() {
-                        let (direct, rays) = self.direct_irradiance(&at, rng.pair(), rng.unit());
+                        emitters_here = self.emitters().map(|e| e.at(p, facing));
+                        let (direct, rays) = self.direct_irradiance_at(
+                            &at,
+                            emitters_here.as_ref(),
+                            rng.pair(),
+                            rng.unit(),
+                        );
                         irradiance += direct;
                         out.shadow_rays += rays;
                     }
@@ -176,6 +189,7 @@ impl World {
                         normal: facing,
                         pdf: cosine_pdf(next),
                     };
+                    from_emitters = emitters_here;
                     dir = next;
                     hit = SurfaceHit {
                         prim: h.prim,
@@ -192,7 +206,14 @@ impl World {
     /// The weight of emission that a ray from `from` along `dir` finds at `hit` (a front
     /// face): 1 when emitters are not sampled by next-event estimation, 0 when they are
     /// alone, else the power heuristic against the emitter sampling of `from`.
-    fn hit_weight(&self, from: &Departure, dir: Vec3, hit: SurfaceHit) -> f32 {
+    /// `at_from` is the emitter selection next-event estimation made at `from`, if any.
+    fn hit_weight(
+        &self,
+        from: &Departure,
+        at_from: Option<EmittersAt<'_>>,
+        dir: Vec3,
+        hit: SurfaceHit,
+    ) -> f32 {
         let Some(emitters) = self.emitters() else {
             return 1.0;
         };
@@ -200,7 +221,10 @@ impl World {
             EmitterSampling::Hits => 1.0,
             EmitterSampling::Nee => 0.0,
             EmitterSampling::Mis => {
-                let nee = emitters.pdf(from.point, from.normal, hit.prim, dir, hit.t);
+                let nee = match at_from {
+                    Some(at) => at.pdf(hit.prim, dir, hit.t),
+                    None => emitters.pdf(from.point, from.normal, hit.prim, dir, hit.t),
+                };
                 power_heuristic(from.pdf, nee)
             }
         }
