@@ -55,6 +55,7 @@ use std::time::{Duration, Instant};
 mod huge;
 mod regions;
 use huge::HugeSlice;
+pub(crate) use regions::split_at_median;
 
 use glam::{Vec3, Vec3A};
 use guidebake_kernels::traverse::{

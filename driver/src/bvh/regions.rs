@@ -199,6 +199,10 @@ fn graft_binary(
 /// triangles: the top level's binary nodes (a leaf slot `LEAF | 1` at region `r`, its box the
 /// region's triangles' bounds) and each region's range of `ids`.
 fn cut(soup: &[[Vec3; 3]], ids: &mut [u32], region: usize) -> (Vec<Node>, Vec<Range<usize>>) {
+    let centroid = |i: u32| {
+        let t = &soup[i as usize];
+        (t[0] + t[1] + t[2]) / 3.0
+    };
     let mut nodes = vec![Node::EMPTY];
     let mut ranges = Vec::new();
     // (range of ids, our node, slot)
@@ -225,7 +229,7 @@ fn cut(soup: &[[Vec3; 3]], ids: &mut [u32], region: usize) -> (Vec<Node>, Vec<Ra
             index
         };
         let mid = range.start + range.len() / 2;
-        split_at_median(soup, &mut ids[range.clone()], mid - range.start);
+        split_at_median(centroid, &mut ids[range.clone()], mid - range.start);
         // Right pushed first: the left half is cut (and numbered) first.
         pending.push((mid..range.end, ours, 1));
         pending.push((range.start..mid, ours, 0));
@@ -234,12 +238,9 @@ fn cut(soup: &[[Vec3; 3]], ids: &mut [u32], region: usize) -> (Vec<Node>, Vec<Ra
 }
 
 /// Orders `ids` so the first `k` have the smallest centroids along the longest axis of their
-/// centroids' bounds (ties by index).
-fn split_at_median(soup: &[[Vec3; 3]], ids: &mut [u32], k: usize) {
-    let centroid = |i: u32| {
-        let t = &soup[i as usize];
-        (t[0] + t[1] + t[2]) / 3.0
-    };
+/// centroids' bounds (ties by index): the median cut of the regions, and of the spatial chunks
+/// `prepare` charts a big mesh in (`prepare::unwrap::chunk`). `centroid(i)` is triangle `i`'s.
+pub(crate) fn split_at_median(centroid: impl Fn(u32) -> Vec3, ids: &mut [u32], k: usize) {
     let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
     for &i in ids.iter() {
         let c = centroid(i);

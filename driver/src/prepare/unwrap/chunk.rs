@@ -2,7 +2,10 @@
 //! [`super`]): a median cut over triangle centroids, as a BVH builder's object split
 //! (Wald 2007, "On fast construction of SAH-based bounding volume hierarchies", §3 — here
 //! the plain median, no SAH), halving along the widest axis of the centroids until every
-//! chunk holds at most the budget. Edges between two chunks become chart seams.
+//! chunk holds at most the budget: the cut the BVH's regions are made by
+//! ([`crate::bvh::split_at_median`]). Edges between two chunks become chart seams.
+
+use glam::Vec3;
 
 /// Splits triangles `0..centroids.len()` into chunks of at most `budget` triangles
 /// (`budget` ≥ 1), spatially coherent, each in ascending triangle order. The chunks come
@@ -22,23 +25,8 @@ pub fn median_cut(centroids: &[[f32; 3]], budget: usize) -> Vec<Vec<u32>> {
             chunks.push(chunk);
             continue;
         }
-        let mut min = [f32::INFINITY; 3];
-        let mut max = [f32::NEG_INFINITY; 3];
-        for &t in part.iter() {
-            for a in 0..3 {
-                min[a] = min[a].min(centroids[t as usize][a]);
-                max[a] = max[a].max(centroids[t as usize][a]);
-            }
-        }
-        let axis = (0..3)
-            .max_by(|&a, &b| (max[a] - min[a]).total_cmp(&(max[b] - min[b])))
-            .unwrap_or(0);
         let mid = part.len() / 2;
-        part.select_nth_unstable_by(mid, |&a, &b| {
-            centroids[a as usize][axis]
-                .total_cmp(&centroids[b as usize][axis])
-                .then(a.cmp(&b))
-        });
+        crate::bvh::split_at_median(|t| Vec3::from(centroids[t as usize]), part, mid);
         stack.push((lo + mid, hi));
         stack.push((lo, lo + mid));
     }
