@@ -569,7 +569,7 @@ pub fn traverse(data: &[u8]) {
     let tris = input.tris();
     for packet in input.rays.chunks(LANES) {
         let lanes = std::array::from_fn(|l| packet.get(l).map(|r| (*r, Brute::of(&tris, r))));
-        lanes_keep_to_the_contract(&view, &lanes, true, None);
+        lanes_keep_to_the_contract(&view, &lanes, true);
     }
 }
 
@@ -619,7 +619,6 @@ pub fn wide(data: &[u8]) {
                 &wide,
                 &std::array::from_fn(|l| (l < packet.len()).then(|| lane(l)).flatten()),
                 true,
-                Some(&tris),
             );
             // Pairs of lanes and lone lanes, at their own lane positions: the hybrid switch.
             let pairs = (0..packet.len())
@@ -627,10 +626,18 @@ pub fn wide(data: &[u8]) {
                 .map(|l| l..(l + 2).min(packet.len()));
             for used in pairs.chain((0..packet.len()).map(|l| l..l + 1)) {
                 let lanes = std::array::from_fn(|l| used.contains(&l).then(|| lane(l)).flatten());
-                lanes_keep_to_the_contract(&wide, &lanes, false, Some(&tris));
+                lanes_keep_to_the_contract(&wide, &lanes, false);
             }
         }
     }
+}
+
+/// [`traverse`]'s (and [`wide`]'s) input decoded as those bodies read it: the triangles'
+/// corners (primitive id = index) and the rays, for tests that replay a corpus input through
+/// other checks (`tests/fuzz_corpus.rs`).
+pub fn traverse_input(data: &[u8]) -> (Vec<[Vec3; 3]>, Vec<Ray>) {
+    let input = TraverseInput::decode(data);
+    (input.corners(), input.rays)
 }
 
 /// [`traverse`]'s input, decoded.
@@ -722,14 +729,10 @@ impl Brute {
 /// to the kernels' contract (`traverse`'s docs, "Hits outside their own box"; in the
 /// corpus: `contract-*`); a lane without a hit comes back untouched, an inactive lane never
 /// hits and is never blocked.
-///
-/// `far_open`: the wide tree's triangles, where its walks' open deviation is tolerated
-/// (see [`beyond_the_stand_in`]); `None` for the binary tree.
 fn lanes_keep_to_the_contract(
     tree: &impl Tree,
     lanes: &[Option<(Ray, Brute)>; LANES],
     single: bool,
-    far_open: Option<&[Tri]>,
 ) {
     let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim));
     let sentinel = Hit {
@@ -755,19 +758,9 @@ fn lanes_keep_to_the_contract(
             continue;
         };
         // Bit for bit brute force, else the contract.
-        let open = far_open.filter(|_| beyond_the_stand_in(ray, brute));
-        let own = |h: Hit| {
-            let tri = open.and_then(|tris| tris.get(h.prim as usize));
-            tri.is_some_and(|tri| bits(intersect_brute(&[*tri], ray)) == bits(Some(h)))
-        };
-        let allowed = |h: Option<Hit>| {
-            bits(h) == bits(brute.hit)
-                || closest_hit_allowed(tree, ray, h)
-                || (open.is_some() && h.is_none_or(|h| h.t > STAND_IN_REACH && own(h)))
-        };
-        let occlusion_ok = |got: bool| {
-            got == brute.occluded || occlusion_allowed(tree, ray, got) || (open.is_some() && !got)
-        };
+        let allowed =
+            |h: Option<Hit>| bits(h) == bits(brute.hit) || closest_hit_allowed(tree, ray, h);
+        let occlusion_ok = |got: bool| got == brute.occluded || occlusion_allowed(tree, ray, got);
         if single {
             let scalar = intersect1(tree, ray);
             assert!(
@@ -799,23 +792,6 @@ fn lanes_keep_to_the_contract(
             rays8_lanes(lanes)
         );
     }
-}
-
-/// How far the wide walks' fused slab test reaches along an axis whose inverse direction is
-/// infinite (a zero or subnormal component): `bvh8`'s stand-in `2¹⁰⁰` for the inverse and its
-/// slack `2⁶⁰` (`scalar::HUGE_SLACK`) give that axis a finite far distance of at least
-/// `2⁶⁰` for a ray inside the slab, where the binary test's `(p − o)·∞` leaves it open.
-const STAND_IN_REACH: f32 = (1u64 << 60) as f32;
-
-/// **Open, not fixed** (2026-11-28, `fuzz/open-crashes/wide/`): whether `ray` is one on
-/// which the wide walks may cull a leaf that the binary slab test (the contract's) meets: a
-/// direction component whose inverse overflows, and brute force's closest hit farther than
-/// [`STAND_IN_REACH`] (10¹⁸; the campaign found t of 10²⁷–10³⁸, from origins of 10³⁸ or
-/// directions of 10⁻³³). On such rays the `wide` body accepts a miss, or any triangle's own
-/// hit beyond that reach, and `false` for occlusion; everything else is checked as before.
-fn beyond_the_stand_in(ray: &Ray, brute: &Brute) -> bool {
-    let infinite_axis = ray.dir.to_array().iter().any(|d| (1.0 / d).is_infinite());
-    infinite_axis && brute.hit.is_some_and(|h| h.t > STAND_IN_REACH)
 }
 
 /// The live lanes of a packet, as a mask (for messages).

@@ -66,20 +66,81 @@ fn replay_one() {
     println!("{target} {input}: {:.3} s", start.elapsed().as_secs_f64());
 }
 
-/// **Open** (2026-11-28): the wide walks' fused slab test replaces an infinite inverse
-/// direction by `2¹⁰⁰` with a slack of `2⁶⁰`, so along such an axis a ray inside a box's slab
-/// gets a finite far distance, `(hi − o)·2¹⁰⁰ + 2⁶⁰`, where the binary test's `(hi − o)·∞`
-/// is unbounded: a hit farther than that is culled. The `wide` fuzz target found it at once
-/// (inputs in `fuzz/open-crashes/wide/`) and now tolerates exactly this case
-/// (`fuzzing::beyond_the_stand_in`). Here: a hit at t = 10³⁸ beyond the reach
-/// `(0.25 − 0.1)·2¹⁰⁰ + 2⁶⁰ ≈ 2·10²⁹` on the y axis. This test pins the deviation down: when it fails, the
-/// kernels were fixed, and the tolerance and the open crashes should go.
+/// Issue 43 (fixed): the wide walks' fused slab test replaced an infinite inverse direction
+/// by `2¹⁰⁰` with a slack of `2⁶⁰`, so along such an axis a ray inside a box's slab got a
+/// finite far distance, `(hi − o)·2¹⁰⁰ + 2⁶⁰`, where the binary test's `(hi − o)·∞` is
+/// unbounded: a hit farther than that was culled (the `wide` fuzz target found it at once).
+/// Rays with an infinite inverse now take the exact slab test (`traverse::slab`). Here: the
+/// four inputs the target found (`fuzz/corpus/wide/stand-in-*`), every preset, and a hit at
+/// t = 10³⁸ beyond the old reach `(0.25 − 0.1)·2¹⁰⁰ + 2⁶⁰ ≈ 2·10²⁹` on the y axis: the wide
+/// walks, single ray and packet, equal the binary walk bit for bit.
 #[test]
-fn wide_walks_cull_hits_beyond_the_stand_in_reach_open() {
+fn wide_walks_keep_hits_beyond_any_finite_reach_of_an_infinite_inverse() {
     use glam::Vec3;
     use guidebake::bvh::{Bvh, Preset};
-    use guidebake_kernels::packet::Ray;
-    use guidebake_kernels::traverse::{closest_hit_allowed, intersect1, occluded1};
+    use guidebake_kernels::packet::{Hit, Hit8, LANES, Ray, Ray8};
+    use guidebake_kernels::traverse::{Tree, intersect1, intersect8, occluded1, occluded8};
+
+    type Bits = Option<(u32, u32, u32, u32)>;
+    fn bits(h: Option<Hit>) -> Bits {
+        h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim))
+    }
+    /// A packet through `tree`: the lanes hit, each lane's hit, the lanes blocked.
+    fn packet(tree: &impl Tree, rays: &Ray8) -> (u8, Vec<Bits>, u8) {
+        let mut hits = Hit8::NONE;
+        let mask = intersect8(tree, rays, &mut hits);
+        let lanes = (0..LANES).map(|l| bits(hits.lane(l))).collect();
+        (mask, lanes, occluded8(tree, rays))
+    }
+    /// Every ray through `bvh`'s wide tree, single and in packets of eight, gets the binary
+    /// tree's answers bit for bit; returns how many of them hit.
+    fn wide_equals_binary(bvh: &Bvh, rays: &[Ray], what: &str) -> usize {
+        let (binary, wide) = (
+            bvh.binary().expect("built with the binary tree"),
+            bvh.wide(),
+        );
+        let mut hits = 0;
+        for lanes in rays.chunks(LANES) {
+            let rays8 = Ray8::from_rays(lanes);
+            assert_eq!(
+                packet(&wide, &rays8),
+                packet(&binary, &rays8),
+                "{what}: {lanes:?}"
+            );
+            for ray in lanes {
+                let got = intersect1(&wide, ray);
+                assert_eq!(bits(got), bits(intersect1(&binary, ray)), "{what}: {ray:?}");
+                assert_eq!(
+                    occluded1(&wide, ray),
+                    occluded1(&binary, ray),
+                    "{what}: {ray:?}"
+                );
+                hits += usize::from(got.is_some());
+            }
+        }
+        hits
+    }
+
+    let dir = corpus_dir().join("wide");
+    let mut inputs = 0;
+    for name in [
+        "stand-in-far-origin-1.7e38-y",
+        "stand-in-far-origin-1.7e38-z",
+        "stand-in-far-origin-3e38",
+        "stand-in-tiny-direction-1.5e-33",
+    ] {
+        let bytes = std::fs::read(dir.join(name)).expect("the issue's inputs are in the corpus");
+        let (corners, rays) = guidebake_suite::fuzzing::traverse_input(&bytes);
+        let mut hits = 0;
+        for preset in Preset::ALL {
+            let bvh = Bvh::build_with_binary(&corners, preset).expect("finite triangles");
+            hits += wide_equals_binary(&bvh, &rays, &format!("{name} {preset:?}"));
+        }
+        assert!(hits > 0, "{name}: its rays hit");
+        inputs += 1;
+    }
+    assert_eq!(inputs, 4);
+
     // A square of side 0.5 in the plane x = 0; a ray from x = −10³⁸ along +x, inside the
     // square's slabs in y and z, with dy = 3·10⁻⁴⁵ and dz = 0 (both inverses overflow).
     let (a, b, c, d) = (
@@ -88,25 +149,16 @@ fn wide_walks_cull_hits_beyond_the_stand_in_reach_open() {
         Vec3::new(0.0, 0.25, 0.25),
         Vec3::new(0.0, -0.25, 0.25),
     );
-    let square = [[a, b, c], [a, c, d]];
-    let bvh = Bvh::build_with_binary(&square, Preset::FastBuild).unwrap();
+    let bvh = Bvh::build_with_binary(&[[a, b, c], [a, c, d]], Preset::FastBuild).unwrap();
     let org = |x: f32| Vec3::new(x, 0.1, 0.05);
     let dir = Vec3::new(1.0, 3e-45, 0.0);
-    let ray = Ray::new(org(-1e38), dir, 0.0, f32::MAX);
-    let binary = intersect1(&bvh.binary().unwrap(), &ray).expect("the binary walk hits");
-    assert!(binary.t > 9e37, "{binary:?}");
-    assert!(occluded1(&bvh.binary().unwrap(), &ray));
-    // Near: the same ray 10¹⁵ away is within the stand-in's reach, and both agree.
-    let near = Ray::new(org(-1e15), dir, 0.0, f32::MAX);
-    assert_eq!(
-        intersect1(&bvh.wide(), &near),
-        intersect1(&bvh.binary().unwrap(), &near)
-    );
-    // Far: the wide walks miss what the contract (the binary slab test) requires.
-    let wide = intersect1(&bvh.wide(), &ray);
-    assert_eq!(wide, None, "fixed? drop fuzzing::beyond_the_stand_in");
-    assert!(!occluded1(&bvh.wide(), &ray));
-    assert!(!closest_hit_allowed(&bvh.wide(), &ray, wide));
+    let rays: Vec<Ray> = [-1e15, -1e30, -1e38, -3e38]
+        .map(|x| Ray::new(org(x), dir, 0.0, f32::MAX))
+        .to_vec();
+    let far = intersect1(&bvh.wide(), &rays[2]).expect("the wide walk hits at 10³⁸");
+    assert!(far.t > 9e37, "{far:?}");
+    assert!(occluded1(&bvh.wide(), &rays[2]));
+    assert_eq!(wide_equals_binary(&bvh, &rays, "square"), rays.len());
 }
 
 /// The fuzz/Cargo.toml lists one `[[bin]]` per body here, and every wrapper calls its body:

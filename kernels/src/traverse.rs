@@ -110,10 +110,9 @@ mod scalar;
 mod slab;
 mod triangle;
 
-use bvh8::Ray1x8;
 use packet::{Closest, Occlusion, Visitor, start8, walk8};
 use scalar::{box1_at, walk1};
-use slab::{NEAR_DOWN, slab, widened, widened8};
+use slab::{NEAR_DOWN, widened};
 use triangle::{
     Best8, Pre, Pre1x8, Pre8, accept, closest_rows, closest1, no_hit, occludes_rows, occludes1,
     traceable, tri1,
@@ -307,7 +306,7 @@ pub fn intersect1(bvh: &impl Tree, ray: &Ray) -> Option<Hit> {
         }),
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            bvh8::walk1(&w, &Ray1x8::new(&pre), |rows, n| {
+            bvh8::walk1(&w, &pre, |rows, n| {
                 closest_rows(|| pre, &pre8, rows, n, &mut best);
                 best.t
             })
@@ -337,7 +336,7 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
         }
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            bvh8::walk1_any(&w, &Ray1x8::new(&pre), tmax, 0, |rows, n| {
+            bvh8::walk1_any(&w, &pre, tmax, |rows, n| {
                 occludes_rows(|| pre, &pre8, rows, n, tmax)
             })
         }

@@ -27,16 +27,20 @@
 //! (docs/traverse.md, "What each kept change bought").
 //!
 //! The boxes and the triangle test are the binary traversal's. The slab test is as
-//! conservative as the binary traversal's, in the fused form `p·inv − o·inv` with the offsets
-//! moved by an ulp ([`super::slab`]), so it may meet a box the binary traversal culls but
-//! never culls one it meets; the results equal the binary traversal's and brute force bit for
-//! bit (wherever every hit lies inside its leaf's box: `traverse`'s module docs).
+//! conservative as the binary traversal's: in the fused form `p·inv − o·inv` with the offsets
+//! moved by an ulp for rays whose inverse direction is finite, so it may meet a box the binary
+//! traversal culls but never culls one it meets, and in the binary traversal's exact form
+//! `(p − o)·inv` for rays with an infinite inverse component ([`super::slab`]; every walk is
+//! compiled for both, `const EXACT: bool`, and chooses once a ray or packet). The results
+//! equal the binary traversal's and brute force bit for bit (wherever every hit lies inside
+//! its leaf's box: `traverse`'s module docs).
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
 use super::packet::mask_of;
+use super::slab::{exact, met8, plane8, slab_of};
 use super::triangle::{Pre1x8, ROWS, RowTri, TriAt, occludes_rows};
-use super::{LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor, slab, widened8};
+use super::{LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor};
 use crate::packet::{LANES, set_lanes};
 use bytemuck::{Pod, Zeroable};
 use core::mem::MaybeUninit;
@@ -542,8 +546,10 @@ pub fn leaf_rows(nodes: &[WideNode], tris: &[Tri]) -> alloc::vec::Vec<f32> {
 // ---------------------------------------------------------------------------------------------
 // Single ray.
 
-/// One ray's box-test constants ([`super::slab`]) splatted over the eight children of a node.
-pub(super) struct Ray1x8 {
+/// One ray's box-test constants ([`super::slab`]) splatted over the eight children of a node,
+/// for the slab test's fused form (`EXACT = false`) or its exact one (a ray with an infinite
+/// inverse direction component, [`super::slab::exact`]).
+pub(super) struct Ray1x8<const EXACT: bool> {
     inv: [f32x8; 3],
     c_near: [f32x8; 3],
     c_far: [f32x8; 3],
@@ -554,9 +560,13 @@ pub(super) struct Ray1x8 {
     tmin_down: f32x8,
 }
 
-impl Ray1x8 {
+impl<const EXACT: bool> Ray1x8<EXACT> {
     pub(super) fn new(pre: &Pre) -> Self {
-        let axes = [0, 1, 2].map(|a| slab(pre.org[a], pre.inv[a]).map(f32x8::splat));
+        debug_assert!(
+            EXACT || !exact(&pre.inv),
+            "an infinite inverse takes the exact form"
+        );
+        let axes = [0, 1, 2].map(|a| slab_of::<EXACT>(pre.org[a], pre.inv[a]).map(f32x8::splat));
         Self {
             inv: axes.map(|[inv, _, _]| inv),
             c_near: axes.map(|[_, near, _]| near),
@@ -570,18 +580,28 @@ impl Ray1x8 {
     /// equal the lane's scalar ones bit for bit ([`super::slab8`]): no divisions.
     #[inline(always)]
     pub(super) fn lane(pre: &Pre8, i: usize) -> Self {
+        debug_assert!(
+            EXACT || pre.exact >> i & 1 == 0,
+            "an infinite inverse: exact"
+        );
         let at = |v: &f32x8| f32x8::splat(v.as_array()[i]);
+        let (inv, c_near, c_far) = if EXACT {
+            (&pre.inv, &pre.org, &pre.org)
+        } else {
+            (&pre.slab_inv, &pre.c_near, &pre.c_far)
+        };
         Self {
-            inv: pre.slab_inv.each_ref().map(at),
-            c_near: pre.c_near.each_ref().map(at),
-            c_far: pre.c_far.each_ref().map(at),
+            inv: inv.each_ref().map(at),
+            c_near: c_near.each_ref().map(at),
+            c_far: c_far.each_ref().map(at),
             neg: pre.neg.map(|m| m.to_bitmask() >> i & 1 == 1),
             tmin_down: at(&pre.tmin_down),
         }
     }
 
-    /// The fused slab test ([`super::slab`]) of the eight slots of `node` at once, the far bound
-    /// widened by [`super::widened8`]: the mask of slots met and their entry distances.
+    /// The slab test ([`super::slab`]) of the eight slots of `node` at once, the far bound
+    /// widened ([`super::slab::met8`]): the mask of slots met and their entry distances. In
+    /// the exact form, [`box1`](super::scalar::box1)'s slots and distances bit for bit.
     #[inline(always)]
     fn boxes(&self, node: &WideNode, tmax: f32) -> (u8, f32x8) {
         let mut near = self.tmin_down;
@@ -589,12 +609,41 @@ impl Ray1x8 {
         for axis in 0..3 {
             let (lo, hi) = (f32x8::from(node.lo[axis]), f32x8::from(node.hi[axis]));
             let (pn, pf) = if self.neg[axis] { (hi, lo) } else { (lo, hi) };
-            let tn = pn.mul_sub(self.inv[axis], self.c_near[axis]);
-            let tf = pf.mul_sub(self.inv[axis], self.c_far[axis]);
+            let tn = plane8::<EXACT>(pn, self.inv[axis], self.c_near[axis]);
+            let tf = plane8::<EXACT>(pf, self.inv[axis], self.c_far[axis]);
             near = tn.fast_max(near);
             far = tf.fast_min(far);
         }
-        (near.simd_le(widened8(far)).to_bitmask() as u8, near)
+        (met8::<EXACT>(near, far).to_bitmask() as u8, near)
+    }
+}
+
+/// [`walk1_with`] for the ray `pre`, in the slab test's form it needs
+/// ([`super::slab::exact`]): the closest-hit walk of a single ray.
+pub(super) fn walk1<'a>(
+    bvh: &WideRef<'a>,
+    pre: &Pre,
+    visit: impl FnMut(&'a [f32], usize) -> f32,
+) -> f32 {
+    if exact(&pre.inv) {
+        walk1_with(bvh, &Ray1x8::<true>::new(pre), visit)
+    } else {
+        walk1_with(bvh, &Ray1x8::<false>::new(pre), visit)
+    }
+}
+
+/// [`walk1_any_with`] for the ray `pre` from the root, in the slab test's form it needs
+/// ([`super::slab::exact`]): the any-hit walk of a single ray.
+pub(super) fn walk1_any<'a>(
+    bvh: &WideRef<'a>,
+    pre: &Pre,
+    tmax: f32,
+    blocked: impl FnMut(&'a [f32], usize) -> bool,
+) -> bool {
+    if exact(&pre.inv) {
+        walk1_any_with(bvh, &Ray1x8::<true>::new(pre), tmax, 0, blocked)
+    } else {
+        walk1_any_with(bvh, &Ray1x8::<false>::new(pre), tmax, 0, blocked)
     }
 }
 
@@ -604,9 +653,9 @@ impl Ray1x8 {
 /// The stack ([`Stack8`]) holds each slot's child and meta with its entry distance beside
 /// it, so a pop never reads the parent node again; a popped entry whose entry distance lies
 /// beyond the widened `tmax` is skipped: exactly the slab test repeated with the new `tmax`.
-pub(super) fn walk1<'a>(
+pub(super) fn walk1_with<'a, const EXACT: bool>(
     bvh: &WideRef<'a>,
-    ray: &Ray1x8,
+    ray: &Ray1x8<EXACT>,
     mut visit: impl FnMut(&'a [f32], usize) -> f32,
 ) -> f32 {
     let mut tmax = visit(&[], 0);
@@ -671,9 +720,9 @@ pub(super) fn walk1<'a>(
 /// The slots met are taken in storage order, without a sort and without entry distances
 /// on the stack: `tmax` never shrinks, so a popped entry is always still met (Embree's
 /// any-hit traversal, `traverseAnyHit`). Returns whether a leaf blocked the ray.
-pub(super) fn walk1_any<'a>(
+pub(super) fn walk1_any_with<'a, const EXACT: bool>(
     bvh: &WideRef<'a>,
-    ray: &Ray1x8,
+    ray: &Ray1x8<EXACT>,
     tmax: f32,
     start: u64,
     mut blocked: impl FnMut(&'a [f32], usize) -> bool,
@@ -719,9 +768,9 @@ pub(super) fn walk1_any<'a>(
     }
 }
 
-/// The lanes `lanes` of a packet as single rays looking for any hit ([`walk1_any`]), one
-/// after another, each from the entry `entry` (`child | meta << 32`; 0 for the root): the
-/// lanes blocked.
+/// The lanes `lanes` of a packet as single rays looking for any hit ([`walk1_any_with`]), one
+/// after another, each from the entry `entry` (`child | meta << 32`; 0 for the root), each in
+/// the slab test's form it needs as a single ray ([`Pre8::exact`]): the lanes blocked.
 pub(super) fn occluded_alone(
     bvh: &WideRef<'_>,
     pre: &Pre8,
@@ -730,13 +779,34 @@ pub(super) fn occluded_alone(
     entry: u64,
 ) -> u8 {
     set_lanes(lanes).fold(0, |blocked, i| {
-        let pre1 = Pre1x8::lane(pre, i);
-        let tmax = tmax.as_array()[i];
-        let end = walk1_any(bvh, &Ray1x8::lane(pre, i), tmax, entry, |rows, n| {
-            occludes_rows(|| pre.lane(i), &pre1, rows, n, tmax)
-        });
+        let end = if pre.exact >> i & 1 == 1 {
+            lane_any::<true>(bvh, pre, tmax, i, entry)
+        } else {
+            lane_any::<false>(bvh, pre, tmax, i, entry)
+        };
         blocked | u8::from(end) << i
     })
+}
+
+/// Lane `i` of a packet as a single ray looking for any hit from the entry `entry`, in the
+/// slab test's form `EXACT`: whether it is blocked.
+#[inline(always)]
+fn lane_any<const EXACT: bool>(
+    bvh: &WideRef<'_>,
+    pre: &Pre8,
+    tmax: f32x8,
+    i: usize,
+    entry: u64,
+) -> bool {
+    let pre1 = Pre1x8::lane(pre, i);
+    let tmax = tmax.as_array()[i];
+    walk1_any_with(
+        bvh,
+        &Ray1x8::<EXACT>::lane(pre, i),
+        tmax,
+        entry,
+        |rows, n| occludes_rows(|| pre.lane(i), &pre1, rows, n, tmax),
+    )
 }
 
 /// The slots `bits` (one or more) of `node` in the order an any-hit walk takes them: inner
@@ -804,15 +874,31 @@ fn prefetch_entry(bvh: &WideRef<'_>, e: u64) {
 /// what that lane visits next, so the cache misses of the independent walks overlap (a single
 /// walk waits for each node in turn). Each lane's walk is [`walk1_any`]'s: the slots met in
 /// storage order, leaves first. `blocked(lane, pre, rows, n)` tests a leaf for one lane;
-/// the lanes it blocks are returned as a bit mask.
+/// the lanes it blocks are returned as a bit mask. All lanes take the exact slab test when
+/// one needs it ([`Pre8::exact`]), the fused one otherwise.
 pub(super) fn walk_interleaved_any(
+    bvh: &WideRef<'_>,
+    pre: &Pre8,
+    tmax: f32x8,
+    lanes: u8,
+    blocked: impl FnMut(usize, &Pre1x8, &[f32], usize) -> bool,
+) -> u8 {
+    if pre.exact & lanes != 0 {
+        interleaved_any::<true>(bvh, pre, tmax, lanes, blocked)
+    } else {
+        interleaved_any::<false>(bvh, pre, tmax, lanes, blocked)
+    }
+}
+
+/// [`walk_interleaved_any`] in the slab test's form `EXACT`.
+fn interleaved_any<const EXACT: bool>(
     bvh: &WideRef<'_>,
     pre: &Pre8,
     tmax: f32x8,
     lanes: u8,
     mut blocked: impl FnMut(usize, &Pre1x8, &[f32], usize) -> bool,
 ) -> u8 {
-    let ray: [Option<(Ray1x8, Pre1x8)>; LANES] = core::array::from_fn(|i| {
+    let ray: [Option<(Ray1x8<EXACT>, Pre1x8)>; LANES] = core::array::from_fn(|i| {
         (lanes >> i & 1 == 1).then(|| (Ray1x8::lane(pre, i), Pre1x8::lane(pre, i)))
     });
     let tmax = tmax.to_array();
@@ -864,9 +950,10 @@ pub(super) fn walk_interleaved_any(
 // Eight rays.
 
 /// The box-test constants of a packet's lanes, read from its [`Pre8`], by lane (lane `i` at
-/// index `i`), so a lane's test loads each of them with one scaled index.
-struct Lanes {
-    /// [`super::slab`]'s constants per axis.
+/// index `i`), so a lane's test loads each of them with one scaled index; in the slab test's
+/// form `EXACT` ([`super::slab`]), the same for every lane.
+struct Lanes<const EXACT: bool> {
+    /// [`super::slab::slab_of`]'s constants per axis.
     inv: [[f32; LANES]; 3],
     c_near: [[f32; LANES]; 3],
     c_far: [[f32; LANES]; 3],
@@ -881,7 +968,7 @@ struct Lanes {
 /// Bytes of one row of a [`WideNode`]: the eight `lo` or `hi` values of one axis.
 const ROW_BYTES: u32 = 4 * WIDTH as u32;
 
-impl Lanes {
+impl<const EXACT: bool> Lanes<EXACT> {
     fn new(pre: &Pre8) -> Self {
         let offsets = |far: bool| {
             [0, 1, 2].map(|a| {
@@ -891,10 +978,15 @@ impl Lanes {
                 (u32x8::splat(a as u32) + hi * u32x8::splat(3)) * u32x8::splat(ROW_BYTES)
             })
         };
+        let (inv, c_near, c_far) = if EXACT {
+            (pre.inv, pre.org, pre.org)
+        } else {
+            (pre.slab_inv, pre.c_near, pre.c_far)
+        };
         Self {
-            inv: pre.slab_inv.map(f32x8::to_array),
-            c_near: pre.c_near.map(f32x8::to_array),
-            c_far: pre.c_far.map(f32x8::to_array),
+            inv: inv.map(f32x8::to_array),
+            c_near: c_near.map(f32x8::to_array),
+            c_far: c_far.map(f32x8::to_array),
             near: offsets(false).map(u32x8::to_array),
             far: offsets(true).map(u32x8::to_array),
             tmin_down: pre.tmin_down.to_array(),
@@ -935,7 +1027,12 @@ const LANE_BIT: [[u32; WIDTH]; LANES] = {
 /// test per lane, [`Ray1x8::boxes`]' operations): per slot, the mask of lanes that meet it
 /// (`u32` lanes) and the nearest of their entry distances (+∞ where none does).
 #[inline(always)]
-fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32x8, f32x8) {
+fn boxes8<const EXACT: bool>(
+    node: &WideNode,
+    lanes: &Lanes<EXACT>,
+    live: u8,
+    tmax: &[f32; LANES],
+) -> (u32x8, f32x8) {
     let inf = f32x8::splat(f32::INFINITY);
     let mut met = u32x8::ZERO;
     let mut nearest = inf;
@@ -943,17 +1040,13 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
         let mut near = f32x8::splat(lanes.tmin_down[i]);
         let mut far = f32x8::splat(tmax[i]);
         for axis in 0..3 {
-            let pn = Lanes::row(node, lanes.near[axis][i]);
-            let pf = Lanes::row(node, lanes.far[axis][i]);
+            let pn = Lanes::<EXACT>::row(node, lanes.near[axis][i]);
+            let pf = Lanes::<EXACT>::row(node, lanes.far[axis][i]);
             let inv = f32x8::splat(lanes.inv[axis][i]);
-            near = pn
-                .mul_sub(inv, f32x8::splat(lanes.c_near[axis][i]))
-                .fast_max(near);
-            far = pf
-                .mul_sub(inv, f32x8::splat(lanes.c_far[axis][i]))
-                .fast_min(far);
+            near = plane8::<EXACT>(pn, inv, f32x8::splat(lanes.c_near[axis][i])).fast_max(near);
+            far = plane8::<EXACT>(pf, inv, f32x8::splat(lanes.c_far[axis][i])).fast_min(far);
         }
-        let m = near.simd_le(widened8(far));
+        let m = met8::<EXACT>(near, far);
         nearest = m.select(near, inf).fast_min(nearest);
         met |= bytemuck::cast::<f32x8, u32x8>(m) & u32x8::from(LANE_BIT[i]);
     };
@@ -986,10 +1079,27 @@ fn boxes8(node: &WideNode, lanes: &Lanes, live: u8, tmax: &[f32; LANES]) -> (u32
 pub(super) fn walk8<'a, V: Visitor<'a>>(
     bvh: &WideRef<'a>,
     pre: &Pre8,
+    tmax: f32x8,
+    visitor: &mut V,
+) {
+    // A packet with a lane that needs the exact slab test takes it in every lane (lanes of a
+    // packet are tested alike; the exact test keeps a subset of the fused one's boxes, and
+    // both keep every box `box1` keeps).
+    if pre.exact != 0 {
+        walk8_with::<V, true>(bvh, pre, tmax, visitor);
+    } else {
+        walk8_with::<V, false>(bvh, pre, tmax, visitor);
+    }
+}
+
+/// [`walk8`] in the slab test's form `EXACT`.
+fn walk8_with<'a, V: Visitor<'a>, const EXACT: bool>(
+    bvh: &WideRef<'a>,
+    pre: &Pre8,
     mut tmax: f32x8,
     visitor: &mut V,
 ) {
-    let lanes = Lanes::new(pre);
+    let lanes = Lanes::<EXACT>::new(pre);
     let mut stack = Stack8::new();
     let mut alive = pre.traced;
     let mut index = 0usize;
@@ -1238,7 +1348,7 @@ fn widened_largest(tmax: f32x8, alive: u8) -> f32 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::slab::slab8;
+    use super::super::slab::{slab, slab8};
     use super::*;
     use crate::packet::{Hit8, LANES, Ray, Ray8};
     use crate::testing::Pcg32;
@@ -1297,12 +1407,14 @@ mod tests {
         })
     }
 
-    /// The fused test's slots met for `ray`: as a single ray ([`Ray1x8::boxes`]) and as lane
-    /// `lane` of a packet of copies ([`boxes8`]), which must agree.
-    fn fused_bits(node: &WideNode, ray: &Ray, lane: usize) -> u8 {
-        let (single, _) = Ray1x8::new(&Pre::new(ray)).boxes(node, ray.tmax);
+    /// The wide test's slots met for `ray` in the form `EXACT`, and their entry distances: as
+    /// a single ray ([`Ray1x8::boxes`]) and as lane `lane` of a packet of copies ([`boxes8`]),
+    /// which must agree.
+    fn wide_bits_in<const EXACT: bool>(node: &WideNode, ray: &Ray, lane: usize) -> (u8, f32x8) {
+        let (single, near) = Ray1x8::<EXACT>::new(&Pre::new(ray)).boxes(node, ray.tmax);
         let pre8 = Pre8::new(&Ray8::from_rays(&[*ray; LANES]));
-        let (met, _) = boxes8(node, &Lanes::new(&pre8), 1 << lane, &[ray.tmax; LANES]);
+        let lanes = Lanes::<EXACT>::new(&pre8);
+        let (met, nearest) = boxes8(node, &lanes, 1 << lane, &[ray.tmax; LANES]);
         let packet = met
             .to_array()
             .iter()
@@ -1311,7 +1423,23 @@ mod tests {
                 bits | u8::from(m >> lane & 1 == 1) << k
             });
         assert_eq!(single, packet, "{ray:?}");
-        single
+        let inf = f32x8::splat(f32::INFINITY);
+        let near = mask_of(single).select(near, inf);
+        assert_eq!(
+            near.to_array().map(f32::to_bits),
+            nearest.to_array().map(f32::to_bits)
+        );
+        (single, near)
+    }
+
+    /// The wide test's slots met for `ray`, in the form the walks take for it
+    /// ([`super::super::slab::exact`]).
+    fn fused_bits(node: &WideNode, ray: &Ray, lane: usize) -> u8 {
+        if exact(&Pre::new(ray).inv) {
+            wide_bits_in::<true>(node, ray, lane).0
+        } else {
+            wide_bits_in::<false>(node, ray, lane).0
+        }
     }
 
     #[test]
@@ -1364,12 +1492,116 @@ mod tests {
                 fused_bits(&node, &ray, trial % LANES),
             );
             assert_eq!(reference & !fused, 0, "a box culled: {ray:?} {node:?}");
+            if exact(&Pre::new(&ray).inv) {
+                assert_eq!(
+                    reference, fused,
+                    "the exact form is box1's: {ray:?} {node:?}"
+                );
+            }
             kept += reference.count_ones();
             extra += (fused & !reference).count_ones();
         }
         assert!(kept > 5_000, "the test must keep boxes ({kept})");
         // Conservative, not loose: the fused test meets few boxes the reference culls.
         assert!(extra * 100 < kept, "{extra} extra of {kept}");
+    }
+
+    /// The exact form ([`super::super::slab::plane8`] with `EXACT`), single ray and packet
+    /// lane, is [`box1`](super::super::scalar::box1) bit for bit: the same slots met and the
+    /// same entry distances, for rays with infinite inverse components (which take it) and
+    /// for generic ones (which do not, but may: a packet with one such lane tests all lanes
+    /// so); and `Pre8::exact` marks exactly the traced lanes that take it as single rays.
+    #[test]
+    fn the_exact_slab_test_is_box1_bit_for_bit() {
+        let mut rng = crate::testing::Pcg32::new(41, 3);
+        let mut unit = || rng.next_f32();
+        let mut kept = 0u32;
+        for trial in 0..20_000 {
+            let scale = [1.0, 1e3, 1e6, 1e30][trial % 4];
+            let mut node = WideNode::EMPTY;
+            for k in 0..WIDTH - trial % 3 {
+                let c = Vec3::new(unit() - 0.5, unit() - 0.5, unit() - 0.5) * scale;
+                let h = Vec3::new(unit(), unit(), unit()) * scale * 0.3 * unit();
+                node.set_slot(k, (c - h).to_array(), (c + h).to_array(), 0, 0);
+            }
+            let (lo, hi) = node.slot_box(trial % (WIDTH - 2));
+            let mut org = Vec3::new(unit() - 0.5, unit() - 0.5, unit() - 0.5) * scale * 4.0;
+            // Towards the aimed box's centre, give or take.
+            let jitter = Vec3::new(unit() - 0.5, unit() - 0.5, unit() - 0.5) * 0.3;
+            let mut dir = ((Vec3::from(lo) + Vec3::from(hi)) * 0.5 - org) / scale;
+            dir = dir.normalize_or(Vec3::X) + jitter;
+            let axis = trial / 4 % 3;
+            let tiny = [0.0, -0.0, f32::from_bits(1), -1e-40, 3e-39][trial / 12 % 5];
+            match trial / 60 % 4 {
+                0 => {}
+                // Inside the aimed box's slab, the axis's component tiny or ±0.
+                1 => {
+                    org[axis] = lo[axis] + (hi[axis] - lo[axis]) * unit();
+                    dir[axis] = tiny;
+                }
+                // In a face's plane, the component tiny or ±0 (`(p − o)·∞` is NaN).
+                2 => {
+                    org[axis] = if trial % 2 == 0 { lo[axis] } else { hi[axis] };
+                    dir[axis] = tiny;
+                }
+                // Two components tiny: along an axis, far away.
+                _ => {
+                    org = Vec3::from(lo.map(|l| l * 0.5)) - Vec3::AXES[axis] * 1e38;
+                    dir = Vec3::AXES[axis] + Vec3::AXES[(axis + 1) % 3] * tiny;
+                }
+            }
+            let tmin = [0.0, scale * unit()][trial / 2 % 2];
+            let tmax = [f32::INFINITY, f32::MAX, scale * 8.0 * unit()][trial % 3];
+            let ray = Ray::new(org, dir, tmin, tmax);
+            if !crate::traverse::triangle::traceable(&ray) {
+                continue;
+            }
+            let pre = Pre::new(&ray);
+            let (bits, near) = wide_bits_in::<true>(&node, &ray, trial % LANES);
+            for k in 0..WIDTH {
+                let reference = super::super::box1_at(node.slot_box(k), &pre, ray.tmax);
+                assert_eq!(
+                    reference.map(f32::to_bits),
+                    (bits >> k & 1 == 1).then(|| near.as_array()[k].to_bits()),
+                    "slot {k}: {ray:?} {node:?}"
+                );
+                kept += u32::from(reference.is_some());
+            }
+            // The packet's mark of lanes that need the exact form: this lane and no other.
+            let mut rays = [Ray::new(Vec3::ZERO, Vec3::ONE, 0.0, 1.0); LANES];
+            rays[trial % LANES] = ray;
+            let pre8 = Pre8::new(&Ray8::from_rays(&rays));
+            assert_eq!(
+                pre8.exact,
+                u8::from(exact(&pre.inv)) << (trial % LANES),
+                "{ray:?}"
+            );
+        }
+        assert!(kept > 5_000, "the test must keep boxes ({kept})");
+    }
+
+    /// Issue 43: along an axis of infinite inverse direction, a ray inside a box's slab meets
+    /// the box at any distance along the others, as [`box1`](super::super::scalar::box1)
+    /// (`(hi − o)·∞ = ∞`) does; the fused test's former stand-in `2¹⁰⁰` (slack `2⁶⁰`) culled
+    /// it beyond `(hi − o)·2¹⁰⁰ + 2⁶⁰`.
+    #[test]
+    fn an_infinite_inverse_meets_boxes_at_any_distance() {
+        let mut node = WideNode::EMPTY;
+        node.set_slot(0, [0.0, -0.25, -0.25], [0.0, 0.25, 0.25], 0, LEAF | 1);
+        for x in [-1e15, -1e30, -1e38, -3e38] {
+            for dy in [0.0, -0.0, 3e-45, -1.5e-40] {
+                let ray = Ray::new(
+                    Vec3::new(x, 0.1, 0.05),
+                    Vec3::new(1.0, dy, 0.0),
+                    0.0,
+                    f32::MAX,
+                );
+                assert_eq!(reference_bits(&node, &ray), 1, "{ray:?}");
+                for lane in [0, 5] {
+                    assert_eq!(fused_bits(&node, &ray, lane), 1, "{ray:?}");
+                }
+            }
+        }
     }
 
     #[test]
@@ -1417,7 +1649,7 @@ mod tests {
         for trial in 0..4000 {
             let pick = |rng: &mut crate::testing::Pcg32, k: usize| {
                 let x = (rng.next_f32() - 0.5) * [1.0, 1e6, 1e-3][k % 3];
-                if k % 5 == 0 {
+                if k.is_multiple_of(5) {
                     special[k / 5 % special.len()] * x.signum()
                 } else {
                     x

@@ -1,11 +1,21 @@
 //! # traverse::slab: the slack that keeps every slab test conservative
 //!
 //! The widened interval `[tmin · (1 − 2⁻¹⁸), far · (1 + 2⁻¹⁸) + 2⁻¹²⁶]` that
-//! [`box1`](super::scalar::box1) and the 8-wide box tests share, and the fused form's per-ray
-//! constants ([`slab`], [`slab8`]): the plane offsets `o·(1/d)` moved an ulp outwards
-//! (docs/traverse.md, "Wide layout", "The fused slab test"). A module of its own because the
-//! per-ray constants of the triangle test ([`super::triangle`]) and the walks ([`super::scalar`],
-//! [`super::packet`], [`super::bvh8`]) all need it, and none of them needs the others for it.
+//! [`box1`](super::scalar::box1) and the 8-wide box tests share, and the two forms of the wide
+//! walks' slab test (docs/traverse.md, "Wide layout", "The fused slab test"):
+//!
+//! - **fused** ([`slab`], [`slab8`]), for rays whose inverse direction is finite: `p·inv − c`,
+//!   one multiply-subtract a plane, the offsets `c = o·inv` moved an ulp outwards;
+//! - **exact** ([`exact`]), for rays with an infinite inverse direction component:
+//!   [`box1`](super::scalar::box1)'s `(p − o)·inv` with the true `±∞`, bit for bit, so the
+//!   wide walks keep every box the binary walk keeps. (A finite stand-in for `∞` culled hits
+//!   beyond its reach, issue 43.)
+//!
+//! [`slab_of`], [`plane8`] and [`met8`] take the form as a `const` parameter, so each walk is
+//! compiled once per form and chooses once a ray (or packet). A module of its own because the
+//! per-ray constants of the triangle test ([`super::triangle`]) and the walks
+//! ([`super::scalar`], [`super::packet`], [`super::bvh8`]) all need it, and none of them needs
+//! the others for it.
 
 use wide::f32x8;
 
@@ -33,47 +43,79 @@ pub(super) const FAR_FLOOR: f32 = f32::MIN_POSITIVE;
 const OFFSET_SLACK: f32 = 1.0 / (1u32 << 24) as f32 + 1.0 / (1u32 << 30) as f32;
 #[cfg(not(all(target_feature = "avx", target_feature = "fma")))]
 const OFFSET_SLACK: f32 = 1.0 / (1u32 << 22) as f32;
-/// Stand-in for an infinite inverse direction (a direction component of ±0, or so small that
-/// its inverse overflows): `p·2¹⁰⁰ − o·2¹⁰⁰` has the sign of `p − o`, and `o·2¹⁰⁰` is exact
-/// for `|o| < 2²⁸`.
-const INV_HUGE: f32 = (1u128 << 100) as f32;
-/// Offset slack on such an axis, `2⁻⁴⁰·2¹⁰⁰`: a ray lying in a box face's plane (`p = o`, even at
-/// `o = 0`, where `o·inv` has no ulp to move by) is kept, as [`box1`](super::scalar::box1) keeps it
-/// (`(p − o)·∞` is NaN there).
-const HUGE_SLACK: f32 = (1u64 << 60) as f32;
-
 /// One axis of the wide walks' fused slab test: the plane distances are `t = p·inv − c`, one fused
 /// multiply-subtract per plane where [`box1`](super::scalar::box1)'s `(p − o)·inv` takes a
 /// subtraction and a product (Embree's fast kernels precompute `o·inv` so; it saved a fifth of the
 /// wide packet walk's lane test, docs/traverse.md, "What each kept change bought"). Returns
 /// `[inv, c_near, c_far]`: `c_near = o·inv + s` and `c_far = o·inv − s`, `s` =
-/// [`OFFSET_SLACK`]`·|o·inv|`, so the near distance never exceeds `(p − o)·inv` and the far one never falls below it, but for
-/// the rounding of the result, which [`FAR_UP`] covers. The test stays conservative at any origin;
-/// its boxes grow by one to two ulps of the origin's coordinate (four unfused). An infinite `inv`
-/// becomes ±[`INV_HUGE`] with [`HUGE_SLACK`] added to `s`; where `o·inv` overflows, `c_near` or
-/// `c_far` is NaN and the axis culls nothing (the max and min keep the other operand), as in
+/// [`OFFSET_SLACK`]`·|o·inv|`, so the near distance never exceeds `(p − o)·inv` and the far
+/// one never falls below it, but for the rounding of the result, which [`FAR_UP`] covers. The
+/// test stays conservative at any origin; its boxes grow by one to two ulps of the origin's
+/// coordinate (four unfused). Where `o·inv` overflows, `c_far` (or `c_near`) is NaN and the
+/// axis culls nothing (the max and min keep the other operand), as in
 /// [`box1`](super::scalar::box1) at `0·∞`.
+///
+/// For a finite `inv` only: a ray with an infinite inverse (a direction component ±0, or so
+/// small that its inverse overflows) takes the exact test ([`exact`], [`plane8`]), since no
+/// finite stand-in for `∞` can be exact — `(p − o)·∞` is unbounded for any `p ≠ o`, a finite
+/// scale times a tiny `p − o` is not (a stand-in `2¹⁰⁰` with a slack `2⁶⁰` culled hits beyond
+/// `(hi − o)·2¹⁰⁰ + 2⁶⁰`, issue 43). Here an infinite `inv` gives NaN or infinite offsets.
 #[inline(always)]
 pub(super) fn slab(o: f32, inv: f32) -> [f32; 3] {
-    let infinite = inv.abs() == f32::INFINITY;
-    let inv = if infinite {
-        INV_HUGE.copysign(inv)
-    } else {
-        inv
-    };
     let c = o * inv;
-    let s = c.abs() * OFFSET_SLACK + if infinite { HUGE_SLACK } else { 0.0 };
+    let s = c.abs() * OFFSET_SLACK;
     [inv, c + s, c - s]
 }
 
 /// [`slab`] for eight rays, the same operations lane for lane.
 #[inline(always)]
 pub(super) fn slab8(o: f32x8, inv: f32x8) -> [f32x8; 3] {
-    let infinite = inv.abs().simd_eq(f32x8::splat(f32::INFINITY));
-    let inv = infinite.select(f32x8::splat(INV_HUGE).copysign(inv), inv);
     let c = o * inv;
-    let s = c.abs() * f32x8::splat(OFFSET_SLACK) + (infinite & f32x8::splat(HUGE_SLACK));
+    let s = c.abs() * f32x8::splat(OFFSET_SLACK);
     [inv, c + s, c - s]
+}
+
+/// Whether a ray whose inverse direction is `inv` takes the exact slab test: some component
+/// is infinite. Such rays are rare in a bake (a sampled direction component is seldom ±0), so
+/// the walks are monomorphised over the form (`const EXACT: bool`), chosen once a ray or
+/// packet, and the fused form's code is what it was without the choice.
+#[inline(always)]
+pub(super) fn exact(inv: &[f32; 3]) -> bool {
+    inv.iter().any(|i| i.abs() == f32::INFINITY)
+}
+
+/// One axis's constants for the slab test of the form `EXACT`: [`slab`]'s `[inv, c_near,
+/// c_far]`, or for the exact form `[inv, o, o]`.
+#[inline(always)]
+pub(super) fn slab_of<const EXACT: bool>(o: f32, inv: f32) -> [f32; 3] {
+    if EXACT { [inv, o, o] } else { slab(o, inv) }
+}
+
+/// The distances of eight planes `p` along one axis from the constants `inv`, `c` of
+/// [`slab_of`]: fused `p·inv − c`, or exact `(p − o)·inv` ([`box1`](super::scalar::box1)'s
+/// operations, so its values bit for bit: with `inv = ±∞`, `±∞` for `p ≠ o` and NaN at `p = o`,
+/// which the walks' `fast_max`/`fast_min` (`maxps`/`minps`: the second operand where either
+/// is NaN) pass over as `box1`'s `if t > near` does).
+#[inline(always)]
+pub(super) fn plane8<const EXACT: bool>(p: f32x8, inv: f32x8, c: f32x8) -> f32x8 {
+    if EXACT {
+        (p - c) * inv
+    } else {
+        p.mul_sub(inv, c)
+    }
+}
+
+/// Whether the entry distances `near` lie within the widened far bounds `far`: fused
+/// ([`widened8`]) in the fused form, unfused ([`widened`], `box1`'s rounding) in the exact one,
+/// so that the exact form keeps exactly the boxes [`box1`](super::scalar::box1) keeps.
+#[inline(always)]
+pub(super) fn met8<const EXACT: bool>(near: f32x8, far: f32x8) -> f32x8 {
+    let far = if EXACT {
+        far * f32x8::splat(FAR_UP) + f32x8::splat(FAR_FLOOR)
+    } else {
+        widened8(far)
+    };
+    near.simd_le(far)
 }
 
 /// The far end of the conservative slab interval: `far · (1 + 2⁻¹⁸) + 2⁻¹²⁶`.

@@ -152,7 +152,8 @@ pub(super) struct Pre8 {
     pub(super) org: [f32x8; 3],
     pub(super) inv: [f32x8; 3],
     /// The wide walks' fused slab test per axis ([`slab8`]): the inverse direction and the
-    /// near and far planes' offsets.
+    /// near and far planes' offsets (of no use in the lanes of [`Pre8::exact`], where an
+    /// inverse is infinite).
     pub(super) slab_inv: [f32x8; 3],
     pub(super) c_near: [f32x8; 3],
     pub(super) c_far: [f32x8; 3],
@@ -175,6 +176,9 @@ pub(super) struct Pre8 {
     pub(super) dir: [f32x8; 3],
     /// Bit mask of traced lanes.
     pub(super) traced: u8,
+    /// Traced lanes that need the wide walks' exact slab test (an infinite inverse direction
+    /// component, [`exact`](super::slab::exact)).
+    pub(super) exact: u8,
 }
 
 impl Pre8 {
@@ -212,6 +216,8 @@ impl Pre8 {
         let (dx, dy, dz) = (pick(&d, 0), pick(&d, 1), pick(&d, 2));
         let neg = inv.map(f32x8::is_sign_negative);
         let slabs = [0, 1, 2].map(|a| slab8(org[a], inv[a]));
+        let infinite = inv.map(|x| x.abs().simd_eq(f32x8::splat(f32::INFINITY)));
+        let exact = (infinite[0] | infinite[1] | infinite[2]).to_bitmask() as u8 & traced;
         // Lanes agree when a mask is all-traced or none-traced.
         let same = |m: f32x8| {
             let bits = m.to_bitmask() as u8 & traced;
@@ -251,6 +257,7 @@ impl Pre8 {
             tmin_down: tmin * f32x8::splat(NEAR_DOWN),
             dir: d,
             traced,
+            exact,
         }
     }
 
