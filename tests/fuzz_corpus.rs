@@ -611,8 +611,12 @@ impl PrepareSeed {
     }
 }
 
+/// A `prepare` input's triangle: vertex indices, selector and the selector's extra bytes
+/// (`PrepareSeed::tris`).
+type FuzzTriangle = ([u8; 3], u8, &'static [u8]);
+
 /// The unit cube's corners (times `s`) and its 12 triangles, welded, wound outwards.
-fn cube_mesh(s: i16, sel: u8) -> (Vec<[i16; 3]>, Vec<([u8; 3], u8, &'static [u8])>) {
+fn cube_mesh(s: i16, sel: u8) -> (Vec<[i16; 3]>, Vec<FuzzTriangle>) {
     let verts: Vec<[i16; 3]> = (0..8)
         .map(|i| {
             [
