@@ -629,38 +629,8 @@ mod tests {
             let p = c.pack(&s, 8.0, 4096).unwrap();
             (c, p)
         });
-        let mut owner = std::collections::HashMap::<(i32, i32), u32>::new();
-        let mut at = 0;
-        for (_, uvs) in &p.meshes {
-            for q in uvs {
-                let chart = c.chart[at];
-                at += 1;
-                let q = q.unwrap();
-                let lo = q[0].min(q[1]).min(q[2]).floor().as_ivec2() - 1;
-                let hi = q[0].max(q[1]).max(q[2]).floor().as_ivec2() + 1;
-                for y in lo.y..=hi.y {
-                    for x in lo.x..=hi.x {
-                        if pack::tests::touches(q, x, y) {
-                            let o = *owner.entry((x, y)).or_insert(chart);
-                            assert_eq!(o, chart, "charts {o} and {chart} share ({x},{y})");
-                        }
-                    }
-                }
-            }
-        }
-        let r = PADDING as i32;
-        for (&(x, y), &k) in &owner {
-            for dy in -r..=r {
-                for dx in -r..=r {
-                    if let Some(&o) = owner.get(&(x + dx, y + dy)) {
-                        assert_eq!(
-                            o, k,
-                            "charts {k} and {o} within {PADDING} texels at ({x},{y})"
-                        );
-                    }
-                }
-            }
-        }
+        let uvs = p.meshes.iter().flat_map(|(_, uvs)| uvs).map(|q| q.unwrap());
+        pack::tests::assert_charts_apart(c.chart.iter().copied().zip(uvs), PADDING, "chunked");
         assert!(c.charts() > 10, "{} charts", c.charts());
     }
 

@@ -371,6 +371,39 @@ pub(crate) mod tests {
         true
     }
 
+    /// The texels each chart's triangles touch ([`touches`]): no texel is touched by two
+    /// charts, and every texel of one chart is more than `padding` texels (Chebyshev) from
+    /// another chart's. `triangles` are (chart, atlas UVs); `label` prefixes the messages.
+    pub(crate) fn assert_charts_apart(
+        triangles: impl IntoIterator<Item = (u32, [Vec2; 3])>,
+        padding: u32,
+        label: &str,
+    ) {
+        let mut owner = std::collections::HashMap::<(i32, i32), u32>::new();
+        for (c, q) in triangles {
+            let lo = q[0].min(q[1]).min(q[2]).floor().as_ivec2() - 1;
+            let hi = q[0].max(q[1]).max(q[2]).floor().as_ivec2() + 1;
+            for y in lo.y..=hi.y {
+                for x in lo.x..=hi.x {
+                    if touches(q, x, y) {
+                        let o = *owner.entry((x, y)).or_insert(c);
+                        assert_eq!(o, c, "{label}: charts {o} and {c} share texel ({x},{y})");
+                    }
+                }
+            }
+        }
+        let r = padding as i32;
+        for (&(x, y), &c) in &owner {
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    if let Some(&d) = owner.get(&(x + dx, y + dy)) {
+                        assert_eq!(d, c, "{label}: charts {c} and {d} at ({x},{y})+({dx},{dy})");
+                    }
+                }
+            }
+        }
+    }
+
     /// Charts of random triangles: small fans around random centres, at one texel per unit.
     fn random_charts(seed: u64, count: usize) -> (Vec<[Vec2; 3]>, Vec<u32>) {
         let mut s = seed;
@@ -411,7 +444,6 @@ pub(crate) mod tests {
             let (uv, chart) = random_charts(seed, 120);
             let charts = 120;
             let l = pack(&uv, &chart, charts, density, 4096, padding);
-            let mut owner = std::collections::HashMap::<(i32, i32), u32>::new();
             for (t, (q, &c)) in l.uv.iter().zip(&chart).enumerate() {
                 if c == u32::MAX {
                     continue;
@@ -423,28 +455,14 @@ pub(crate) mod tests {
                         "{seed}: {v}"
                     );
                 }
-                let lo = q[0].min(q[1]).min(q[2]).floor().as_ivec2() - 1;
-                let hi = q[0].max(q[1]).max(q[2]).floor().as_ivec2() + 1;
-                for y in lo.y..=hi.y {
-                    for x in lo.x..=hi.x {
-                        if touches(*q, x, y) {
-                            let o = *owner.entry((x, y)).or_insert(c);
-                            assert_eq!(o, c, "{seed}: charts {o} and {c} share texel ({x},{y})");
-                        }
-                    }
-                }
             }
             // Every texel of one chart is more than `padding` texels from another chart's.
-            let r = padding as i32;
-            for (&(x, y), &c) in &owner {
-                for dy in -r..=r {
-                    for dx in -r..=r {
-                        if let Some(&d) = owner.get(&(x + dx, y + dy)) {
-                            assert_eq!(d, c, "{seed}: charts {c} and {d} at ({x},{y})+({dx},{dy})");
-                        }
-                    }
-                }
-            }
+            let placed = l.uv.iter().zip(&chart).filter(|(_, c)| **c != u32::MAX);
+            assert_charts_apart(
+                placed.map(|(q, &c)| (c, *q)),
+                padding,
+                &format!("seed {seed}"),
+            );
         }
     }
 
