@@ -727,20 +727,19 @@ pub use scene_file::{
 };
 pub use texture::{BaseColorTexture, TextureOptions};
 
-/// FNV-1a over 64-bit words, for [`Scene::lighting_fingerprint`].
+/// [`crate::output::fnv1a64`] built word by word (little-endian bytes), for
+/// [`Scene::lighting_fingerprint`].
 struct Fnv(u64);
 
 impl Default for Fnv {
     fn default() -> Self {
-        Self(0xcbf2_9ce4_8422_2325)
+        Self(crate::output::FNV1A64_EMPTY)
     }
 }
 
 impl Fnv {
     fn tag(&mut self, word: u64) -> &mut Self {
-        for byte in word.to_le_bytes() {
-            self.0 = (self.0 ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3);
-        }
+        self.0 = crate::output::fnv1a64_more(self.0, &word.to_le_bytes());
         self
     }
 
