@@ -1400,18 +1400,11 @@ mod tests {
         let mut triangles = Vec::new();
         for (mesh, corner) in [(0, Vec3::splat(-2.0)), (1, Vec3::new(8.0, -2.0, -2.0))] {
             for (c, u, v) in crate::test_support::inward_box_faces(corner, 4.0) {
-                let n = u.cross(v).normalize();
-                for p in [[c, c + u, c + u + v], [c, c + u + v, c + v]] {
-                    triangles.push(Triangle {
-                        positions: p,
-                        normals: [n; 3],
-                        lightmap_uv: None,
-                        texture_uv: None,
-                        colour: None,
-                        mesh,
-                        material: 0,
-                    });
-                }
+                triangles.extend(crate::test_support::quad(c, u, v, 0).map(|t| Triangle {
+                    lightmap_uv: None,
+                    mesh,
+                    ..t
+                }));
             }
         }
         let mut s = Scene::of_triangles("room", triangles, vec![]);
@@ -1468,18 +1461,10 @@ mod tests {
                 Vec3::new(a.cos(), a.sin(), 0.3),
                 Vec3::new(-a.sin(), a.cos(), -0.2),
             );
-            let nrm = u.cross(v).normalize();
-            for p in [[c, c + u, c + u + v], [c, c + u + v, c + v]] {
-                triangles.push(Triangle {
-                    positions: p,
-                    normals: [nrm; 3],
-                    lightmap_uv: None,
-                    texture_uv: None,
-                    colour: None,
-                    mesh: 0,
-                    material: 0,
-                });
-            }
+            triangles.extend(crate::test_support::quad(c, u, v, 0).map(|t| Triangle {
+                lightmap_uv: None,
+                ..t
+            }));
         }
         Scene::of_triangles("squares", triangles, vec![])
     }
