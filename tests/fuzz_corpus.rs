@@ -654,11 +654,11 @@ fn write_prepare_seeds() {
         "cube-unwrapped",
         &PrepareSeed::new(0, 1, 9, -10, 0, &verts).tris(&tris).bytes,
     );
-    // The same cube 10⁶ from the origin, every mesh unwrapped, default resolution.
+    // The same cube 10⁶ from the origin, every mesh unwrapped at 1024 texels for its area.
     write(
         "prepare",
         "cube-far-away",
-        &PrepareSeed::new(1, 0, 0, 0, 3, &verts).tris(&tris).bytes,
+        &PrepareSeed::new(1, 1, 10, 0, 3, &verts).tris(&tris).bytes,
     );
     // A quad with projected lightmap UVs beside the cube without (shared layout, a 32² page).
     let mut mixed = tris.clone();
@@ -719,7 +719,7 @@ fn write_prepare_seeds() {
     write(
         "prepare",
         "tiny-loose-triangles",
-        &PrepareSeed::new(16 | 32, 0, 0, -10, 0, &[])
+        &PrepareSeed::new(16 | 32, 1, 10, -10, 0, &[])
             .tris(&[])
             .swarm(2000, 12, 50)
             .bytes,
