@@ -21,6 +21,7 @@
 //! from (seed, texel id, iteration, sample index), so a tile's bits never depend on the thread
 //! that baked it.
 
+use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -43,6 +44,7 @@ use guidebake_kernels::traverse::{intersect1, intersect8};
 use guidebake_kernels::warp;
 use wide::{f32x8, u32x8};
 
+use super::budget;
 use super::directional::{self, Directional, ShL1, ShSample, ShSums};
 use super::grid::{self as grid_guide, GridGuide};
 use super::pipeline::{TileBaked, TileBuffer};
@@ -154,8 +156,11 @@ impl GatherCounters {
 pub struct TileBaker<'w> {
     world: &'w World,
     settings: BakeSettings,
-    /// The presorted Sobol order of each iteration's samples.
-    orders: Vec<Vec<u32>>,
+    /// The presorted Sobol order of each sample count a texel's iteration takes (the
+    /// iterations' own, and those the spatial budget scales them to).
+    orders: HashMap<u32, Vec<u32>>,
+    /// Per valid texel: the spatial budget's factor ([`World::budget_factor`]).
+    factors: Vec<f32>,
     rotated: Vec<u32>,
     /// The cluster's learning records of the current iteration.
     learning: Learning,
@@ -202,15 +207,14 @@ impl<'w> TileBaker<'w> {
     /// A baker for `world` with `settings` (already validated).
     pub fn new(world: &'w World, settings: BakeSettings) -> Self {
         let orders = (0..settings.iterations)
-            .map(|k| match settings.samples_in_iteration(k) {
-                0 => Vec::new(),
-                n => presorted(n),
-            })
+            .map(|k| settings.samples_in_iteration(k))
+            .map(|n| (n, if n == 0 { Vec::new() } else { presorted(n) }))
             .collect();
         Self {
             world,
             settings,
             orders,
+            factors: Vec::new(),
             rotated: Vec::new(),
             learning: Learning::default(),
             nodes: vec![Node::default(); GUIDE_CAPACITY],
@@ -323,6 +327,7 @@ impl<'w> TileBaker<'w> {
 
     fn collect_valid(&mut self, texels: &[TexelRecord]) {
         self.valid.clear();
+        self.factors.clear();
         self.positions.clear();
         self.normals.clear();
         for (i, t) in texels.iter().enumerate() {
@@ -330,6 +335,14 @@ impl<'w> TileBaker<'w> {
                 self.valid.push(i as u32);
                 self.positions.push(t.position);
                 self.normals.push(t.normal);
+                let factor = self.world.budget_factor(t.page, t.pixel.map(u32::from));
+                self.factors.push(factor);
+                if factor != 1.0 {
+                    for k in 0..self.settings.iterations {
+                        let n = budget::scaled(self.settings.samples_in_iteration(k), factor);
+                        self.orders.entry(n).or_insert_with(|| presorted(n));
+                    }
+                }
             } else {
                 self.counters.texels_invalid_skipped += 1;
                 self.counters.texels_inside_geometry += u64::from(t.flags & TEXEL_INSIDE != 0);
@@ -409,6 +422,7 @@ impl<'w> TileBaker<'w> {
             gathered,
             sh,
             valid,
+            factors,
             unguided,
             counters,
             texel_direct,
@@ -465,10 +479,11 @@ impl<'w> TileBaker<'w> {
                     texel_direct: *texel_direct,
                     ..IterationCtx::new(world, settings, k, learned)
                 };
+                let n = budget::scaled(settings.samples_in_iteration(k), factors[m as usize]);
                 match settings.guiding {
-                    Guiding::Naive => ctx.gather_naive(&t, &mut sinks, counters),
+                    Guiding::Naive => ctx.gather_naive(&t, n, &mut sinks, counters),
                     Guiding::Off | Guiding::Coherent | Guiding::Grid => {
-                        ctx.gather_packets(&t, &orders[k as usize], rotated, &mut sinks, counters);
+                        ctx.gather_packets(&t, &orders[&n], rotated, &mut sinks, counters);
                     }
                 }
             }
@@ -1014,9 +1029,14 @@ impl<'a> IterationCtx<'a> {
         }
     }
 
-    /// Unsorted points in index order, scalar warp, single rays: the naive comparator.
-    fn gather_naive(&self, t: &GatherTexel, sinks: &mut Sinks<'_>, counters: &mut GatherCounters) {
-        let n = self.settings.samples_in_iteration(self.k);
+    /// `n` unsorted points in index order, scalar warp, single rays: the naive comparator.
+    fn gather_naive(
+        &self,
+        t: &GatherTexel,
+        n: u32,
+        sinks: &mut Sinks<'_>,
+        counters: &mut GatherCounters,
+    ) {
         let rot = rotation(self.settings.seed, t.id, self.k);
         let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
         let bvh = self.world.wide_bvh();

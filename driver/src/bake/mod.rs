@@ -5,6 +5,7 @@
 //! run bakes ([`shard`]), and the bounded worker/writer [`pipeline`] that commits finished
 //! tiles to the [result file and journal](crate::output).
 
+pub mod budget;
 pub mod directional;
 pub mod error;
 pub mod finish;

@@ -25,12 +25,13 @@ use std::time::Instant;
 
 use serde::Serialize;
 
+use super::budget::SpatialBudget;
 pub use super::error::BakeError;
 use super::error::file_error;
 use super::finish::{FinishOptions, finish_with};
 use super::gather::{GatherCounters, TileBaker};
 use super::pipeline::{self, PipelineConfig, TileBuffer, TileFiles};
-use super::settings::{BakeSettings, Combine, DIRECT_PASS, Directional, SettingsError};
+use super::settings::{BakeSettings, Budget, Combine, DIRECT_PASS, Directional, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::workdir::{
     Manifest, merged_results, open_batches, open_directional, open_pass, open_work, pass_files,
@@ -257,6 +258,17 @@ pub fn bake_pass_with_progress(
             let previous = previous_pass(&texels, scene, sources, &image, bake_id, &mut report)
                 .map_err(|e| not_merged_hint(e, &source, pass - 1))?;
             world.set_previous_pass(Some(previous.of_pass(pass - 1)));
+            // The last pass, after a gather pass, spends its samples by the passes' error (a
+            // budgeted middle pass makes the last one's lookups noisier: docs/estimator.md).
+            world.set_budget(None);
+            if pass - 1 > DIRECT_PASS && pass == job.settings.last_pass() {
+                world.set_budget(spatial_budget(
+                    &texels,
+                    job.settings.budget,
+                    sources,
+                    bake_id,
+                )?);
+            }
         }
         let run = bake_pass(
             job,
@@ -481,6 +493,7 @@ fn bake_pass(
 
 /// The result files a previous-pass image is built from: the pass's, and the direct pass's
 /// when the pass borrowed its direct light ([`BakeSettings::borrows_direct`]).
+#[derive(Clone, Copy)]
 struct PassSources<'p> {
     results: &'p Path,
     direct: Option<&'p Path>,
@@ -529,6 +542,30 @@ fn previous_pass(
         .map_err(|e| file_error(&e.path, e.what))?;
     report.seconds.previous_pass_images += clock.elapsed().as_secs_f64();
     Ok(previous)
+}
+
+/// The spatial budget of a pass after `sources`' gather pass ([`SpatialBudget`]).
+fn spatial_budget(
+    texels: &TexelFile,
+    budget: Budget,
+    sources: PassSources<'_>,
+    bake_id: u64,
+) -> Result<Option<SpatialBudget>, BakeError> {
+    if budget == Budget::Uniform {
+        return Ok(None);
+    }
+    let open = |path: &Path| {
+        ResultFile::open(path, false, Some((texels.header().texel_count, bake_id)))
+            .map(|(results, _)| results)
+    };
+    let results = open(sources.results)?;
+    let direct = sources.direct.map(open).transpose()?;
+    Ok(SpatialBudget::from_results(
+        budget,
+        texels,
+        &results,
+        direct.as_ref(),
+    )?)
 }
 
 /// A worker's baker whose counters join the bake's when the worker ends.

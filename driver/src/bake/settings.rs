@@ -99,6 +99,23 @@ pub enum Schedule {
     Doubling,
 }
 
+/// How the last pass of a series bake spends its samples over the texels (`--budget`, module
+/// [`super::budget`]): every texel the same, or by the error the previous passes measured.
+/// Uniform by default: no allocation wins by both relative MSE and MSE on every scene
+/// (docs/estimator.md, "The spatial budget").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Budget {
+    /// `--spp` samples at every texel.
+    #[default]
+    Uniform,
+    /// n ∝ σ / √(μ·μ̄): between the two below.
+    Balanced,
+    /// n ∝ σ: least squared error (MSE), more samples where the light is bright and noisy.
+    Mse,
+    /// n ∝ σ / √(μ² + ε), ε = 10⁻²·μ̄²: least relative squared error.
+    Relative,
+}
+
 /// The series transport's pass 0: each texel's direct light alone, by next-event estimation
 /// (no gather rays), which pass 1's gather hits read as the previous pass's total instead of
 /// tracing a shadow ray each (docs/bake.md, "The direct pass").
@@ -136,7 +153,7 @@ pub enum EmitterSampling {
 }
 
 /// The bake's settings; everything that changes its bits is part of [`Self::bake_id`].
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, PartialEq)]
 pub struct BakeSettings {
     /// Final-gather rays per texel, all learning iterations together.
     pub spp: u32,
@@ -184,6 +201,39 @@ pub struct BakeSettings {
     pub directional: Directional,
     /// Which series passes sample a learned guide (`--guided-passes`).
     pub guided_passes: GuidedPasses,
+    /// How the last pass of a series bake of 2 or more bounces spreads its samples over the
+    /// texels (`--budget`).
+    pub budget: Budget,
+}
+
+/// The fields in order, as `derive(Debug)` would print them, but `budget` only when it is not
+/// [`Budget::Uniform`]: a uniform bake keeps the identity ([`BakeSettings::bake_id`]) and the
+/// bench's reference keys it had before budgets existed.
+impl fmt::Debug for BakeSettings {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut d = f.debug_struct("BakeSettings");
+        d.field("spp", &self.spp)
+            .field("iterations", &self.iterations)
+            .field("guiding", &self.guiding)
+            .field("combine", &self.combine)
+            .field("bias_correction", &self.bias_correction)
+            .field("seed", &self.seed)
+            .field("transport", &self.transport)
+            .field("bounces", &self.bounces)
+            .field("mix", &self.mix)
+            .field("schedule", &self.schedule)
+            .field("min_split", &self.min_split)
+            .field("smooth", &self.smooth)
+            .field("min_gain", &self.min_gain)
+            .field("emitters", &self.emitters)
+            .field("emitter_selection", &self.emitter_selection)
+            .field("directional", &self.directional)
+            .field("guided_passes", &self.guided_passes);
+        if self.budget != Budget::Uniform {
+            d.field("budget", &self.budget);
+        }
+        d.finish()
+    }
 }
 
 /// Most learning iterations a bake may ask for.
@@ -212,6 +262,7 @@ impl Default for BakeSettings {
             emitter_selection: EmitterSelection::default(),
             directional: Directional::None,
             guided_passes: GuidedPasses::default(),
+            budget: Budget::default(),
         }
     }
 }
@@ -475,6 +526,24 @@ mod tests {
                 .to_string()
                 .contains("--bounces 0")
         );
+    }
+
+    #[test]
+    fn a_uniform_budget_keeps_the_identity_bakes_had_before_budgets() {
+        let d = BakeSettings::default();
+        assert_eq!(
+            format!("{d:?}"),
+            "BakeSettings { spp: 256, iterations: 4, guiding: Coherent, combine: Cluster, \
+             bias_correction: true, seed: 0, transport: Series, bounces: 3, mix: 25, \
+             schedule: Doubling, min_split: 64, smooth: 10, min_gain: 150, emitters: Mis, \
+             emitter_selection: Local, directional: None, guided_passes: Last }"
+        );
+        let balanced = BakeSettings {
+            budget: Budget::Balanced,
+            ..d
+        };
+        assert!(format!("{balanced:?}").ends_with("guided_passes: Last, budget: Balanced }"));
+        assert_ne!(balanced.bake_id(1), d.bake_id(1));
     }
 
     #[test]

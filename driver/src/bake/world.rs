@@ -20,6 +20,8 @@ use crate::scene::{Scene, Sky};
 use crate::transport::emitters::{EmitterSelection, Emitters};
 use crate::transport::lights::{AnalyticLight, analytic_lights};
 use crate::transport::series::PreviousPass;
+
+use super::budget::SpatialBudget;
 use crate::transport::sky::{sky_is_black, sky_radiance};
 
 /// Shading data of one triangle, indexed by BVH primitive id.
@@ -54,6 +56,7 @@ pub struct World {
     transport: Transport,
     bounces: u32,
     previous: Option<PreviousPass>,
+    budget: Option<SpatialBudget>,
 }
 
 /// Where a gather ray hit: the primitive, the ray parameter and the barycentric weights of
@@ -114,6 +117,7 @@ impl World {
             transport: Transport::Series,
             bounces: 1,
             previous: None,
+            budget: None,
         };
         world.set_emitters(EmitterSampling::default(), EmitterSelection::default());
         Ok(world)
@@ -249,6 +253,16 @@ impl World {
     /// The previous series pass, if any.
     pub fn previous_pass(&self) -> Option<&PreviousPass> {
         self.previous.as_ref()
+    }
+
+    /// The spatial budget this pass spends its samples by (`None`: every texel the same).
+    pub fn set_budget(&mut self, budget: Option<SpatialBudget>) {
+        self.budget = budget;
+    }
+
+    /// How many times the uniform count of samples the texel at `pixel` of `page` takes.
+    pub fn budget_factor(&self, page: u32, pixel: [u32; 2]) -> f32 {
+        self.budget.as_ref().map_or(1.0, |b| b.factor(page, pixel))
     }
 
     /// Radiance of the sky along `dir` (zero without a lookup when the sky is black).

@@ -7,7 +7,9 @@
 
 use clap::ValueEnum;
 
-use crate::bake::settings::{BakeSettings, Combine, GuidedPasses, Guiding, Schedule, Transport};
+use crate::bake::settings::{
+    BakeSettings, Budget, Combine, GuidedPasses, Guiding, Schedule, Transport,
+};
 use crate::transport::emitters::EmitterSelection;
 
 /// One way of baking: what the bake's `--guiding`, `--combine` and `--bias-correction` say,
@@ -45,6 +47,8 @@ pub struct Levers {
     /// `--emitter-selection`, where the method sets its own (else the ladder's, `guidebake
     /// bench --emitter-selection`): so one run compares emitter selections at equal time.
     pub selection: Option<EmitterSelection>,
+    /// `--budget`.
+    pub budget: Budget,
 }
 
 impl Default for Levers {
@@ -59,6 +63,7 @@ impl Default for Levers {
             min_gain: d.min_gain,
             transport: None,
             selection: None,
+            budget: d.budget,
         }
     }
 }
@@ -76,6 +81,7 @@ impl Levers {
             min_gain: 0,
             transport: None,
             selection: None,
+            budget: Budget::Uniform,
         }
     }
 
@@ -106,6 +112,9 @@ impl Levers {
         }
         if let Some(e) = self.selection {
             s += &format!("+select={}", value_name(&e));
+        }
+        if self.budget != d.budget {
+            s += &format!("+budget={}", value_name(&self.budget));
         }
         s
     }
@@ -228,6 +237,10 @@ impl Method {
                             .map_err(|e| format!("{label:?}: {e}"))?,
                     );
                 }
+                "budget" => {
+                    levers.budget =
+                        Budget::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
+                }
                 _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
             }
         }
@@ -287,6 +300,7 @@ impl Method {
             guided_passes: self.levers.guided_passes,
             min_gain: self.levers.min_gain,
             emitter_selection: self.levers.selection.unwrap_or_default(),
+            budget: self.levers.budget,
             ..Default::default()
         }
     }
@@ -348,6 +362,10 @@ mod tests {
             Transport::Path
         );
         assert!(Method::parse("coherent/cluster/rho+transport=light").is_err());
+        let m = Method::parse("coherent/cluster/rho+budget=balanced").unwrap();
+        assert_eq!(m.levers.budget, Budget::Balanced);
+        assert_eq!(m.label(), "coherent/cluster/rho+budget=balanced");
+        assert!(Method::parse("coherent/cluster/rho+budget=most").is_err());
         let m = Method::parse("off/average/-+transport=path+select=tree").unwrap();
         assert_eq!(m.label(), "off/average/-+transport=path+select=tree");
         assert_eq!(

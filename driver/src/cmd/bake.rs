@@ -9,7 +9,7 @@ use crate::bake::directional::Directional;
 use crate::bake::finish::{Denoise, FinishOptions, Seams};
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress, lights_differ};
 use crate::bake::settings::{
-    BakeSettings, Combine, EmitterSampling, GuidedPasses, Guiding, Schedule, Transport,
+    BakeSettings, Budget, Combine, EmitterSampling, GuidedPasses, Guiding, Schedule, Transport,
 };
 use crate::bake::shard::Shard;
 use crate::bake::workdir::work_dir;
@@ -49,6 +49,13 @@ pub struct BakeArgs {
     /// before it gather with cosine sampling) or `every` gather pass.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().guided_passes)]
     pub guided_passes: GuidedPasses,
+    /// How the last pass of a series bake of 2 or more bounces spreads its samples over the
+    /// texels: `uniform` (`--spp` everywhere, the default), or by the error the previous passes
+    /// measured, in 8×8-texel blocks
+    /// (¼ to 4 times `--spp`, about `--spp` in all): `mse` (n ∝ σ), `relative` (n ∝ σ/μ),
+    /// `balanced` (n ∝ σ/√(μ·μ̄)).
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().budget)]
+    pub budget: Budget,
     /// How the samples are split over the learning iterations.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
     pub schedule: Schedule,
@@ -174,6 +181,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         mix: args.mix,
         schedule: args.schedule,
         guided_passes: args.guided_passes,
+        budget: args.budget,
         min_split: args.min_split,
         smooth: args.smooth,
         min_gain: args.min_gain,

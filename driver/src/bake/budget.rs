@@ -1,0 +1,313 @@
+//! The spatial budget (`--budget`): how many gather samples each texel of the last pass of a
+//! series bake gets, from the error the previous passes measured there. Paper §2.5 weighs a texel's iterations
+//! by their variance; this spends the samples themselves by it, as production bakers spend
+//! them where the error is (docs/estimator.md, "The spatial budget").
+//!
+//! The last pass b ≥ 2 of a series bake reads, per texel, the previous gather pass's result (and the
+//! direct pass's, when that pass borrowed its direct light): the per-sample luminance
+//! variance σ² = (relative standard error × mean)² × samples, summed over the two, and the
+//! mean μ. Each 8×8-texel block of a page gets the root mean square over its baked texels of
+//! the allocation's `a` — σ ([`Budget::Mse`]), σ/√(μ·μ̄) ([`Budget::Balanced`]) or
+//! σ/√(μ² + 10⁻²·μ̄²) ([`Budget::Relative`]), μ̄ the world's mean — and its texels take
+//! `a_block / ā` times the iteration's samples, ā the texel-weighted mean over the world's
+//! blocks, clamped to [¼, 4] and normalised again, so the pass spends about `--spp` samples
+//! a texel in all. The blocks are computed once, before the pass, from the merged previous
+//! pass: every tile's factors are fixed whatever thread, shard or resume bakes it.
+
+use crate::output::OutputFileError;
+use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
+use crate::texels::TexelFile;
+
+use super::settings::Budget;
+
+/// Edge of a block of texels that shares one factor (about a cluster's extent).
+pub const BLOCK: u32 = 8;
+/// Fewest samples a texel gets, as a fraction of the uniform count.
+pub const MIN_FACTOR: f32 = 0.25;
+/// Most samples a texel gets, as a multiple of the uniform count.
+pub const MAX_FACTOR: f32 = 4.0;
+/// The relative allocation's floor on μ², as a fraction of μ̄² (the bench's relative MSE's ε).
+const RELATIVE_EPSILON: f64 = 1e-2;
+
+/// Each page's block factors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpatialBudget {
+    pages: Vec<Blocks>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+struct Blocks {
+    columns: u32,
+    factors: Vec<f32>,
+}
+
+/// One texel of the previous passes, as the budget reads it.
+#[derive(Clone, Copy, Debug)]
+pub struct Measured {
+    /// Page and pixel of the texel.
+    pub page: u32,
+    /// Pixel (x, y) on the page.
+    pub pixel: [u32; 2],
+    /// Per-sample luminance variance.
+    pub variance: f64,
+    /// Mean luminance.
+    pub mean: f64,
+}
+
+impl SpatialBudget {
+    /// The factor of the texel at `pixel` of `page` (1 outside the pages).
+    pub fn factor(&self, page: u32, [x, y]: [u32; 2]) -> f32 {
+        self.pages.get(page as usize).map_or(1.0, |b| {
+            let i = (y / BLOCK) as usize * b.columns as usize + (x / BLOCK) as usize;
+            b.factors.get(i).copied().unwrap_or(1.0)
+        })
+    }
+
+    /// The budget of `budget` for pages of `sizes` (width, height) from the texels
+    /// `for_each` hands its callback — called twice, first for the world's mean, then for the
+    /// blocks, so nothing per texel is held; `None` for [`Budget::Uniform`] or when nothing
+    /// lit was measured.
+    ///
+    /// # Errors
+    /// `for_each`'s.
+    pub fn from_measured<E>(
+        budget: Budget,
+        sizes: &[(u32, u32)],
+        for_each: impl Fn(&mut dyn FnMut(Measured)) -> Result<(), E>,
+    ) -> Result<Option<Self>, E> {
+        if budget == Budget::Uniform {
+            return Ok(None);
+        }
+        let usable = |m: &Measured| m.mean.is_finite() && m.variance.is_finite();
+        let (mut sum, mut count) = (0.0, 0u64);
+        for_each(&mut |m| {
+            if usable(&m) {
+                sum += m.mean.max(0.0);
+                count += 1;
+            }
+        })?;
+        let world_mean = sum / count.max(1) as f64;
+        if count == 0 || world_mean.is_nan() || world_mean <= 0.0 {
+            return Ok(None);
+        }
+        let columns = |w: u32| w.div_ceil(BLOCK);
+        // Per block: Σ a², texels.
+        let mut sums: Vec<Vec<(f64, u32)>> = sizes
+            .iter()
+            .map(|&(w, h)| vec![(0.0, 0); (columns(w) * h.div_ceil(BLOCK)) as usize])
+            .collect();
+        for_each(&mut |m| {
+            let Some(page) = sums.get_mut(m.page as usize).filter(|_| usable(&m)) else {
+                return;
+            };
+            let i = (m.pixel[1] / BLOCK * columns(sizes[m.page as usize].0) + m.pixel[0] / BLOCK)
+                as usize;
+            if let Some(block) = page.get_mut(i) {
+                block.0 += allocation(budget, m.variance.max(0.0), m.mean.max(0.0), world_mean);
+                block.1 += 1;
+            }
+        })?;
+        let a = |&(s, n): &(f64, u32)| {
+            if n > 0 {
+                (s / f64::from(n)).sqrt()
+            } else {
+                0.0
+            }
+        };
+        let weighted = |f: &dyn Fn(&(f64, u32)) -> f64| -> f64 {
+            let (mut total, mut texels) = (0.0, 0u64);
+            for block in sums.iter().flatten() {
+                total += f(block) * f64::from(block.1);
+                texels += u64::from(block.1);
+            }
+            total / texels.max(1) as f64
+        };
+        let mean_a = weighted(&a);
+        if !(mean_a.is_finite() && mean_a > 0.0) {
+            return Ok(None);
+        }
+        let clamp = |f: f64| f.clamp(f64::from(MIN_FACTOR), f64::from(MAX_FACTOR));
+        let first = |b: &(f64, u32)| clamp(a(b) / mean_a);
+        let renormalise = weighted(&first);
+        let pages = sums
+            .iter()
+            .zip(sizes)
+            .map(|(blocks, &(w, _))| Blocks {
+                columns: columns(w),
+                factors: blocks
+                    .iter()
+                    .map(|b| clamp(first(b) / renormalise) as f32)
+                    .collect(),
+            })
+            .collect();
+        Ok(Some(Self { pages }))
+    }
+
+    /// The budget from the previous gather pass's results (and the direct pass's, when that
+    /// pass borrowed its direct light), reading the result files tile by tile, twice.
+    ///
+    /// # Errors
+    /// A result file that cannot be read, with its path.
+    pub fn from_results(
+        budget: Budget,
+        texels: &TexelFile,
+        results: &ResultFile,
+        direct: Option<&ResultFile>,
+    ) -> Result<Option<Self>, OutputFileError> {
+        let sizes: Vec<(u32, u32)> = texels.pages().iter().map(|p| (p.width, p.height)).collect();
+        Self::from_measured(budget, &sizes, |visit| {
+            let (mut buffer, mut direct_buffer) = (Vec::new(), Vec::new());
+            for (t, tile) in texels.tiles().iter().enumerate() {
+                let n = tile.texel_count as usize;
+                buffer.resize(n, TexelResult::default());
+                results.read(tile.first_texel, &mut buffer)?;
+                direct_buffer.resize(n, TexelResult::default());
+                if let Some(direct) = direct {
+                    direct.read(tile.first_texel, &mut direct_buffer)?;
+                }
+                let each = texels
+                    .tile_texels(t)
+                    .iter()
+                    .zip(&buffer)
+                    .zip(&direct_buffer);
+                for ((texel, r), d) in each {
+                    if r.flags & FLAG_BAKED == 0 {
+                        continue;
+                    }
+                    let (variance, mean) = per_sample(r);
+                    let (dv, dm) = if direct.is_some() {
+                        per_sample(d)
+                    } else {
+                        (0.0, 0.0)
+                    };
+                    visit(Measured {
+                        page: texel.page,
+                        pixel: texel.pixel.map(u32::from),
+                        variance: variance + dv,
+                        mean: mean + dm,
+                    });
+                }
+                texels.release_tile(t);
+            }
+            Ok(())
+        })
+    }
+}
+
+/// A texel result's per-sample luminance variance and mean luminance (of its plain average,
+/// which its relative standard error is of).
+fn per_sample(r: &TexelResult) -> (f64, f64) {
+    let mean = f64::from(guidebake_kernels::estimator::luminance_f32(r.total));
+    let se = f64::from(r.rel_std_error) * mean;
+    (se * se * f64::from(r.samples), mean)
+}
+
+/// The allocation's `a²` for a texel of per-sample variance `variance` and mean `mean`, in a
+/// world of mean `world_mean` (> 0).
+fn allocation(budget: Budget, variance: f64, mean: f64, world_mean: f64) -> f64 {
+    match budget {
+        Budget::Uniform => 1.0,
+        Budget::Mse => variance,
+        Budget::Balanced => {
+            variance / (mean.max(RELATIVE_EPSILON.sqrt() * world_mean) * world_mean)
+        }
+        Budget::Relative => variance / (mean * mean + RELATIVE_EPSILON * world_mean * world_mean),
+    }
+}
+
+/// Samples a texel of factor `factor` takes where the uniform budget takes `n` (whole
+/// packets of 8, at least one).
+pub fn scaled(n: u32, factor: f32) -> u32 {
+    if n == 0 {
+        return 0;
+    }
+    let packets = (f64::from(n) / 8.0 * f64::from(factor)).round().max(1.0);
+    packets as u32 * 8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn texel(x: u32, y: u32, variance: f64, mean: f64) -> Measured {
+        Measured {
+            page: 0,
+            pixel: [x, y],
+            variance,
+            mean,
+        }
+    }
+
+    fn of(budget: Budget, sizes: &[(u32, u32)], texels: &[Measured]) -> Option<SpatialBudget> {
+        let each = |visit: &mut dyn FnMut(Measured)| {
+            texels.iter().copied().for_each(&mut *visit);
+            Ok::<(), ()>(())
+        };
+        SpatialBudget::from_measured(budget, sizes, each).unwrap()
+    }
+
+    /// A 16×8 page: the left block's texels four times as noisy (σ) as the right block's.
+    fn two_blocks(budget: Budget) -> SpatialBudget {
+        let texels: Vec<Measured> = (0..16)
+            .flat_map(|x| (0..8).map(move |y| (x, y)))
+            .map(|(x, y)| texel(x, y, if x < 8 { 16.0 } else { 1.0 }, 1.0))
+            .collect();
+        of(budget, &[(16, 8)], &texels).unwrap()
+    }
+
+    #[test]
+    fn noisier_blocks_get_more_samples_and_the_total_stays() {
+        for budget in [Budget::Mse, Budget::Balanced, Budget::Relative] {
+            let b = two_blocks(budget);
+            let (left, right) = (b.factor(0, [3, 3]), b.factor(0, [12, 7]));
+            // a = 4 and 1, ā = 2.5: 1.6 and 0.4, which average 1.
+            assert!((left - 1.6).abs() < 1e-6, "{budget:?}: {left}");
+            assert!((right - 0.4).abs() < 1e-6, "{budget:?}: {right}");
+            assert_eq!(b.factor(1, [0, 0]), 1.0, "outside the pages");
+        }
+    }
+
+    #[test]
+    fn the_allocations_weigh_bright_and_dark_texels_as_their_errors_do() {
+        // Two texels of the same relative noise (σ = μ), one 4× brighter; μ̄ = 2.5.
+        let texels = [texel(0, 0, 16.0, 4.0), texel(8, 0, 1.0, 1.0)];
+        let ratio = |budget| {
+            let b = of(budget, &[(16, 8)], &texels).unwrap();
+            let (bright, dark) = (b.factor(0, [0, 0]), b.factor(0, [8, 0]));
+            assert!(
+                ((bright + dark) / 2.0 - 1.0).abs() < 1e-6,
+                "{budget:?}: about --spp"
+            );
+            bright / dark
+        };
+        // n ∝ σ: 4 to 1; σ/√(μ·μ̄): 2 to 1; σ/√(μ² + ε), ε = 0.0625: √(16.0625 / 17) to 1.
+        assert!((ratio(Budget::Mse) - 4.0).abs() < 1e-5);
+        assert!((ratio(Budget::Balanced) - 2.0).abs() < 1e-5);
+        assert!((ratio(Budget::Relative) - (17.0f32 / 16.0625).sqrt()).abs() < 1e-5);
+    }
+
+    #[test]
+    fn nothing_measured_or_no_light_is_no_budget() {
+        assert!(of(Budget::Mse, &[(8, 8)], &[]).is_none());
+        let dark = [texel(0, 0, 0.0, 0.0)];
+        assert!(of(Budget::Mse, &[(8, 8)], &dark).is_none());
+        let nan = [texel(0, 0, f64::NAN, 1.0), texel(1, 0, 1.0, f64::INFINITY)];
+        assert!(of(Budget::Mse, &[(8, 8)], &nan).is_none());
+        let lit = [texel(0, 0, 1.0, 1.0)];
+        assert!(of(Budget::Uniform, &[(8, 8)], &lit).is_none());
+        assert_eq!(
+            of(Budget::Mse, &[(8, 8)], &lit).unwrap().factor(0, [7, 7]),
+            1.0
+        );
+    }
+
+    #[test]
+    fn scaled_counts_are_whole_packets() {
+        assert_eq!(scaled(32, 1.0), 32);
+        assert_eq!(scaled(32, 0.25), 8);
+        assert_eq!(scaled(8, 0.25), 8);
+        assert_eq!(scaled(32, 4.0), 128);
+        assert_eq!(scaled(64, 1.3), 80);
+        assert_eq!(scaled(0, 4.0), 0);
+    }
+}
