@@ -12,6 +12,7 @@ use glam::Vec3;
 use guidebake_kernels::packet::{offset_origin, triangle_extent};
 use guidebake_kernels::traverse::WideRef;
 
+use super::budget::SpatialBudget;
 use super::settings::{EmitterSampling, Transport};
 
 use crate::bvh::{Bvh, BvhError, Preset};
@@ -20,8 +21,6 @@ use crate::scene::{Scene, Sky};
 use crate::transport::emitters::{EmitterSelection, Emitters};
 use crate::transport::lights::{AnalyticLight, analytic_lights};
 use crate::transport::series::PreviousPass;
-
-use super::budget::SpatialBudget;
 use crate::transport::sky::{sky_is_black, sky_radiance};
 
 /// Shading data of one triangle, indexed by BVH primitive id.
