@@ -44,7 +44,7 @@ struct Blocks {
 /// One texel of the previous passes, as the budget reads it.
 #[derive(Clone, Copy, Debug)]
 pub struct Measured {
-    /// Page and pixel of the texel.
+    /// Page of the texel.
     pub page: u32,
     /// Pixel (x, y) on the page.
     pub pixel: [u32; 2],
