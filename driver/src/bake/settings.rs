@@ -208,29 +208,50 @@ pub struct BakeSettings {
 
 /// The fields in order, as `derive(Debug)` would print them, but `budget` only when it is not
 /// [`Budget::Uniform`]: a uniform bake keeps the identity ([`BakeSettings::bake_id`]) and the
-/// bench's reference keys it had before budgets existed.
+/// bench's reference keys it had before budgets existed. The destructuring names every field,
+/// so a field added to the settings cannot be left out of the identity unnoticed.
 impl fmt::Debug for BakeSettings {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let BakeSettings {
+            spp,
+            iterations,
+            guiding,
+            combine,
+            bias_correction,
+            seed,
+            transport,
+            bounces,
+            mix,
+            schedule,
+            min_split,
+            smooth,
+            min_gain,
+            emitters,
+            emitter_selection,
+            directional,
+            guided_passes,
+            budget,
+        } = self;
         let mut d = f.debug_struct("BakeSettings");
-        d.field("spp", &self.spp)
-            .field("iterations", &self.iterations)
-            .field("guiding", &self.guiding)
-            .field("combine", &self.combine)
-            .field("bias_correction", &self.bias_correction)
-            .field("seed", &self.seed)
-            .field("transport", &self.transport)
-            .field("bounces", &self.bounces)
-            .field("mix", &self.mix)
-            .field("schedule", &self.schedule)
-            .field("min_split", &self.min_split)
-            .field("smooth", &self.smooth)
-            .field("min_gain", &self.min_gain)
-            .field("emitters", &self.emitters)
-            .field("emitter_selection", &self.emitter_selection)
-            .field("directional", &self.directional)
-            .field("guided_passes", &self.guided_passes);
-        if self.budget != Budget::Uniform {
-            d.field("budget", &self.budget);
+        d.field("spp", spp)
+            .field("iterations", iterations)
+            .field("guiding", guiding)
+            .field("combine", combine)
+            .field("bias_correction", bias_correction)
+            .field("seed", seed)
+            .field("transport", transport)
+            .field("bounces", bounces)
+            .field("mix", mix)
+            .field("schedule", schedule)
+            .field("min_split", min_split)
+            .field("smooth", smooth)
+            .field("min_gain", min_gain)
+            .field("emitters", emitters)
+            .field("emitter_selection", emitter_selection)
+            .field("directional", directional)
+            .field("guided_passes", guided_passes);
+        if *budget != Budget::Uniform {
+            d.field("budget", budget);
         }
         d.finish()
     }

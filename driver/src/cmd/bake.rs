@@ -51,9 +51,8 @@ pub struct BakeArgs {
     pub guided_passes: GuidedPasses,
     /// How the last pass of a series bake of 2 or more bounces spreads its samples over the
     /// texels: `uniform` (`--spp` everywhere, the default), or by the error the previous passes
-    /// measured, in 8×8-texel blocks
-    /// (¼ to 4 times `--spp`, about `--spp` in all): `mse` (n ∝ σ), `relative` (n ∝ σ/μ),
-    /// `balanced` (n ∝ σ/√(μ·μ̄)).
+    /// measured, per 8×8-texel block (¼ to 4 times `--spp`, about `--spp` in all): `mse`
+    /// (n ∝ σ), `relative` (n ∝ σ/√(μ² + ε)), `balanced` (n ∝ σ/√(μ·μ̄)).
     #[arg(long, value_enum, default_value_t = BakeSettings::default().budget)]
     pub budget: Budget,
     /// How the samples are split over the learning iterations.
