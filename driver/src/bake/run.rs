@@ -499,6 +499,21 @@ struct PassSources<'p> {
     direct: Option<&'p Path>,
 }
 
+impl PassSources<'_> {
+    /// The pass's result file and the direct pass's, opened for `texels`' bake `bake_id`.
+    fn open(
+        self,
+        texels: &TexelFile,
+        bake_id: u64,
+    ) -> Result<(ResultFile, Option<ResultFile>), BakeError> {
+        let open = |path: &Path| {
+            ResultFile::open(path, false, Some((texels.header().texel_count, bake_id)))
+                .map(|(results, _)| results)
+        };
+        Ok((open(self.results)?, self.direct.map(open).transpose()?))
+    }
+}
+
 /// Writes the image (at `image_path`) of the gather-only and total irradiance in a pass's
 /// result file (plus the direct pass's total, when the pass borrowed it), and which side of
 /// each triangle its texels bake, and maps it for the next pass (series transport).
@@ -511,12 +526,7 @@ fn previous_pass(
     report: &mut BakeReport,
 ) -> Result<PreviousPass, BakeError> {
     let clock = Instant::now();
-    let open = |path: &Path| {
-        ResultFile::open(path, false, Some((texels.header().texel_count, bake_id)))
-            .map(|(results, _)| results)
-    };
-    let results = open(sources.results)?;
-    let direct = sources.direct.map(open).transpose()?;
+    let (results, direct) = sources.open(texels, bake_id)?;
     let mut image = PreviousPassWriter::create(image_path, texels.pages())
         .map_err(|e| file_error(&e.path, e.what))?;
     let (mut buffer, mut direct_buffer) = (Vec::new(), Vec::new());
@@ -554,12 +564,7 @@ fn spatial_budget(
     if budget == Budget::Uniform {
         return Ok(None);
     }
-    let open = |path: &Path| {
-        ResultFile::open(path, false, Some((texels.header().texel_count, bake_id)))
-            .map(|(results, _)| results)
-    };
-    let results = open(sources.results)?;
-    let direct = sources.direct.map(open).transpose()?;
+    let (results, direct) = sources.open(texels, bake_id)?;
     Ok(SpatialBudget::from_results(
         budget,
         texels,
