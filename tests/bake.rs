@@ -650,6 +650,65 @@ fn a_spatial_budget_moves_samples_and_bakes_the_same_bits_however_it_is_split() 
     assert!((got / want - 1.0).abs() < 0.02, "{got} against {want}");
 }
 
+/// `--direct-spp`: the lightmap takes its texels' direct light from the direct pass (at twice
+/// the gather's samples here) and its last pass gathers the indirect light alone. In a
+/// closed glowing box it still receives π·Le times the bounce series, and it is the same bits
+/// on one or two threads and sharded pass by pass (the finish then reads the merged pass 0);
+/// its relative standard error is of the sum.
+#[test]
+fn a_lightmap_that_takes_its_direct_light_from_the_direct_pass_keeps_its_mean_and_bits() {
+    let (albedo, le) = (0.5f32, 1.5f32);
+    let dir = tempfile::tempdir().unwrap();
+    let texels = dir.path().join("box.texels");
+    let scene = emissive_box(&texels, albedo, le);
+    let bounces = 3;
+    let job = |out: &str, threads: usize, direct_spp: Option<u32>| BakeJob {
+        texels: texels.clone(),
+        out: dir.path().join(out),
+        settings: BakeSettings {
+            spp: 128,
+            iterations: 2,
+            bounces,
+            direct_spp,
+            ..Default::default()
+        },
+        threads,
+        shard: Shard::WHOLE,
+        resume: false,
+        aux: true,
+        finish: FinishOptions::default(),
+    };
+    let run = |job: &BakeJob| bake(job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+    let (one, two) = (job("one.exr", 1, Some(256)), job("two.exr", 2, Some(256)));
+    run(&one);
+    run(&two);
+    assert_eq!(exr_bytes(&one.out), exr_bytes(&two.out));
+    let sharded = bake_sharded_passes(&job("sharded.exr", 2, Some(256)), 3, &scene);
+    assert_eq!(exr_bytes(&one.out), exr_bytes(&sharded));
+
+    let values = red_channel(&one.out);
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let want = closed_box_irradiance(le, albedo, bounces);
+    // As in the test below: every texel reads the same previous passes, whose shared error
+    // the texels' spread misses.
+    let shared = (0..bounces)
+        .map(|j| f64::from(albedo).powi(2 * j as i32))
+        .sum::<f64>()
+        .sqrt();
+    let tolerance = 3.5 * (var / n).sqrt() * shared + 1e-4 * want;
+    assert!(
+        (mean - want).abs() < tolerance,
+        "{mean}, want {want} ± {tolerance}"
+    );
+    let errors = channel(&one.out, "rel_std_error");
+    assert!(
+        errors.iter().all(|e| e.is_finite() && *e > 0.0 && *e < 0.1),
+        "{errors:?}"
+    );
+}
+
 #[test]
 fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transports() {
     let (albedo, le) = (0.5f32, 1.5f32);

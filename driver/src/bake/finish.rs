@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use super::directional::{self, DirectionalFile, SH_CHANNELS, ShL1};
 use super::error::{BakeError, file_error};
-use super::settings::{MAX_ITERATIONS, SettingsError};
+use super::settings::{DIRECT_PASS, MAX_ITERATIONS, SettingsError};
 use super::shard::Split;
 use super::workdir::{
     Manifest, directional_file, merged_dir, merged_results, pass_files, read_manifest,
@@ -143,12 +143,14 @@ pub fn finish_filtered(
         ..Default::default()
     };
     let directional = open_directional_files(texels, &shards)?;
+    let direct = open_direct_results(texels, &shards, out)?;
     let source = TileSource {
         texels,
         shards: &shards,
         split: &split,
         batches: batches.as_deref(),
         directional: directional.as_deref(),
+        direct: direct.as_ref(),
         global: global.as_ref(),
         rho,
         k: first.iterations as usize,
@@ -463,6 +465,9 @@ struct TileSource<'a> {
     global: Option<&'a GlobalWeights>,
     /// The shards' directional files, if the bake kept them.
     directional: Option<&'a [DirectionalFile]>,
+    /// The direct pass's results, when the lightmap takes its direct light from them
+    /// ([`open_direct_results`]).
+    direct: Option<&'a ResultFile>,
     rho: f64,
     k: usize,
 }
@@ -471,7 +476,9 @@ struct TileSource<'a> {
 type TexelValue = Option<([f32; 3], TexelResult)>;
 
 impl TileSource<'_> {
-    /// Tile `t`'s texels in file order: irradiance × ρ and the result, `None` if not baked.
+    /// Tile `t`'s texels in file order: irradiance × ρ and the result, `None` if not baked;
+    /// plus the direct pass's estimate when the lightmap takes its direct light from it
+    /// ([`with_direct`]).
     fn values(&self, t: usize) -> Result<Vec<TexelValue>, BakeError> {
         let tile = &self.texels.tiles()[t];
         let mut results = vec![TexelResult::default(); tile.texel_count as usize];
@@ -479,6 +486,11 @@ impl TileSource<'_> {
         self.shards[owner]
             .results
             .read(tile.first_texel, &mut results)?;
+        let mut direct = Vec::new();
+        if let Some(file) = self.direct {
+            direct.resize(results.len(), TexelResult::default());
+            file.read(tile.first_texel, &mut direct)?;
+        }
         let mut batches = Vec::new();
         if let (Some(files), Some(_)) = (self.batches, self.global) {
             batches.resize(results.len() * self.k, Welford::new());
@@ -496,10 +508,67 @@ impl TileSource<'_> {
                     Some(g) => g.combine(&batches[i * k..(i + 1) * k]),
                     None => r.irradiance.map(f64::from),
                 };
-                Some((irradiance.map(|c| (c * self.rho) as f32), r))
+                let rgb = irradiance.map(|c| (c * self.rho) as f32);
+                Some(match direct.get(i) {
+                    Some(d) => with_direct(rgb, r, d),
+                    None => (rgb, r),
+                })
             })
             .collect())
     }
+}
+
+/// A texel of a lightmap that takes its direct light from the direct pass (`--direct-spp`):
+/// the last pass's gathered light (`rgb`, after ρ, which corrects that pass's combination
+/// alone) plus the direct pass's plain average, which needs no correction. The two
+/// estimates are independent, so their variances add: the relative standard error is of the
+/// sum, `total` the sum's plain average and `samples` the gather's.
+fn with_direct(rgb: [f32; 3], r: TexelResult, d: &TexelResult) -> ([f32; 3], TexelResult) {
+    if d.flags & FLAG_BAKED == 0 {
+        return (rgb, r);
+    }
+    let sum = |a: [f32; 3], b: [f32; 3]| core::array::from_fn(|c| a[c] + b[c]);
+    let sd = |e: f32, v: [f32; 3]| f64::from(e) * f64::from(luminance_f32(v));
+    let total = sum(r.total, d.total);
+    let variance = sd(r.rel_std_error, r.total).powi(2) + sd(d.rel_std_error, d.total).powi(2);
+    let mean = f64::from(luminance_f32(total));
+    let rel_std_error = if mean > 0.0 {
+        (variance.sqrt() / mean) as f32
+    } else {
+        0.0
+    };
+    let result = TexelResult {
+        total,
+        rel_std_error: if rel_std_error.is_finite() {
+            rel_std_error
+        } else {
+            0.0
+        },
+        ..r
+    };
+    (sum(rgb, d.total), result)
+}
+
+/// The direct pass's results, when the shards' manifests say the lightmap takes its direct
+/// light from them (`--direct-spp`, [`Manifest::direct_apart`]): a bake of one work directory
+/// reads its own pass 0, a sharded one the merged pass 0 that its pass 1 read.
+fn open_direct_results(
+    texels: &TexelFile,
+    shards: &[ShardWork],
+    out: &Path,
+) -> Result<Option<ResultFile>, BakeError> {
+    let first = &shards[0].manifest;
+    if !first.direct_apart {
+        return Ok(None);
+    }
+    let own = pass_files(&shards[0].dir, DIRECT_PASS).0;
+    let path = if shards.len() == 1 && own.exists() {
+        own
+    } else {
+        merged_results(out, DIRECT_PASS)
+    };
+    let expected = Some((texels.header().texel_count, first.bake_id));
+    Ok(Some(ResultFile::open(&path, false, expected)?.0))
 }
 
 impl TileSource<'_> {

@@ -1099,10 +1099,11 @@ impl<'a> IterationCtx<'a> {
     /// The direct pass's samples of this iteration at texel `t` into `batch`: next-event
     /// estimates alone, weighing 1 (no gather ray leaves the texel to weigh them against), from
     /// the origins and light samples the gather's packet `j` would use, sample `i` of the
-    /// iteration taking the light sample of Sobol point `i`.
+    /// iteration taking the light sample of Sobol point `i`; `--direct-spp` of them over the
+    /// iterations when set ([`BakeSettings::direct_samples_in_iteration`]).
     fn direct_alone(&self, t: &GatherTexel, batch: &mut Welford, counters: &mut GatherCounters) {
         let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
-        for j in 0..self.settings.samples_in_iteration(self.k) / LANES as u32 {
+        for j in 0..self.settings.direct_samples_in_iteration(self.k) / LANES as u32 {
             let samples: [u32; LANES] = core::array::from_fn(|lane| j * LANES as u32 + lane as u32);
             let lu = rotate_x8(sobol_2d_x8(u32x8::new(samples)), light_rot);
             let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());
@@ -1266,7 +1267,15 @@ impl<'a> IterationCtx<'a> {
             directional::add_irradiance_sample(&mut projected, radiance * scale, dir, cos);
             sh.add(&projected);
         }
-        let flux = luminance_f32(radiance.to_array()) / q;
+        // The guide learns what the sample estimates: without the texel's next-event
+        // estimate, the emission the rays hit is not part of it, and sampling towards it
+        // would be wasted.
+        let learned = if self.texel_direct {
+            radiance
+        } else {
+            indirect
+        };
+        let flux = luminance_f32(learned.to_array()) / q;
         if let Some(learning) = sinks.learning.as_deref_mut()
             && flux.is_finite()
         {
@@ -1501,6 +1510,19 @@ mod tests {
             let (mean, se, _) = bake_mean_of(direct(&boxed), &texels_on_plane(32, -0.999));
             let want = Vec3::splat(le * core::f32::consts::PI);
             assert_within_3_sigma(&format!("{mode}, box"), (mean, se), want);
+            // `--direct-spp`: that many next-event samples, the gather's 128 notwithstanding.
+            let more = BakeSettings {
+                direct_spp: Some(320),
+                ..settings(mode)
+            };
+            let baker = TileBaker::new(&open, more).direct_only(true);
+            let (mean, se, counters) = bake_mean_of(baker, &texels_on_plane(64, 0.0));
+            assert_within_3_sigma(
+                &format!("{mode}, 320"),
+                (mean, se),
+                sun.irradiance * to_sun.z,
+            );
+            assert_eq!(counters.shadow_rays, 64 * 320, "{mode}: --direct-spp 320");
         }
     }
 

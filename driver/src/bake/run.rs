@@ -222,6 +222,7 @@ pub fn bake_pass_with_progress(
         combine_global: job.settings.combine == Combine::Global,
         iterations: job.settings.iterations,
         directional: job.settings.directional == Directional::ShL1,
+        direct_apart: job.settings.lightmap_borrows_direct(),
         settings: format!("{:?}", job.settings),
     };
     open_work(&dir, &manifest, job.resume, only_pass)?;
@@ -260,8 +261,15 @@ pub fn bake_pass_with_progress(
             world.set_previous_pass(Some(previous.of_pass(pass - 1)));
             // The last pass, after a gather pass, spends its samples by the passes' error (a
             // budgeted middle pass makes the last one's lookups noisier: docs/estimator.md).
+            // Its noise holds the direct light's only when it estimates that light itself.
             world.set_budget(None);
             if pass - 1 > DIRECT_PASS && pass == job.settings.last_pass() {
+                let sources = PassSources {
+                    direct: sources
+                        .direct
+                        .filter(|_| !job.settings.lightmap_borrows_direct()),
+                    ..sources
+                };
                 world.set_budget(spatial_budget(
                     &texels,
                     job.settings.budget,

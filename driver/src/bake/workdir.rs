@@ -43,6 +43,11 @@ pub struct Manifest {
     /// [`directional_file`]).
     #[serde(default)]
     pub directional: bool,
+    /// Whether the lightmap takes its direct light from the direct pass (`--direct-spp`,
+    /// [`BakeSettings::lightmap_borrows_direct`](super::settings::BakeSettings::lightmap_borrows_direct)):
+    /// the finish adds that pass's estimate to the last pass's.
+    #[serde(default)]
+    pub direct_apart: bool,
     /// The settings, for people.
     pub settings: String,
 }

@@ -49,6 +49,9 @@ pub struct Levers {
     pub selection: Option<EmitterSelection>,
     /// `--budget`.
     pub budget: Budget,
+    /// `--direct-spp` as a percentage of the rung's `--spp` (`+direct=P`), for series
+    /// transport; `None`: unset, the lightmap estimates its direct light itself.
+    pub direct_percent: Option<u32>,
 }
 
 impl Default for Levers {
@@ -64,6 +67,7 @@ impl Default for Levers {
             transport: None,
             selection: None,
             budget: d.budget,
+            direct_percent: None,
         }
     }
 }
@@ -82,6 +86,7 @@ impl Levers {
             transport: None,
             selection: None,
             budget: Budget::Uniform,
+            direct_percent: None,
         }
     }
 
@@ -115,6 +120,9 @@ impl Levers {
         }
         if self.budget != d.budget {
             s += &format!("+budget={}", value_name(&self.budget));
+        }
+        if let Some(p) = self.direct_percent {
+            s += &format!("+direct={p}");
         }
         s
     }
@@ -180,7 +188,7 @@ impl Method {
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
     /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`,
-    /// `transport`, `select`); the
+    /// `transport`, `select`, `budget`, `direct`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -241,6 +249,7 @@ impl Method {
                     levers.budget =
                         Budget::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
                 }
+                "direct" => levers.direct_percent = Some(number()?),
                 _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
             }
         }
@@ -284,10 +293,16 @@ impl Method {
         bounces: u32,
         seed: u32,
     ) -> BakeSettings {
+        let transport = self.levers.transport.unwrap_or(transport);
+        let direct_spp = self
+            .levers
+            .direct_percent
+            .filter(|_| transport == Transport::Series)
+            .map(|p| (u64::from(spp) * u64::from(p) / 100).min(u64::from(u32::MAX)) as u32);
         BakeSettings {
             spp,
             iterations,
-            transport: self.levers.transport.unwrap_or(transport),
+            transport,
             bounces,
             guiding: self.guiding,
             combine: self.combine,
@@ -301,6 +316,7 @@ impl Method {
             min_gain: self.levers.min_gain,
             emitter_selection: self.levers.selection.unwrap_or_default(),
             budget: self.levers.budget,
+            direct_spp,
             ..Default::default()
         }
     }

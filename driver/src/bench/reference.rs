@@ -107,9 +107,10 @@ pub fn reference(
 ) -> Result<Reference, BenchError> {
     // The version changes with what a bake computes for the same settings (v3: series
     // passes read the previous pass's total irradiance on the side its texels bake; v4,
-    // series only — path references stay valid: pass 1 reads a direct pass 0).
+    // series only — path references stay valid: pass 1 reads a direct pass 0; v5, series
+    // only: the lightmap takes its direct light from pass 0).
     let version = match settings.transport {
-        Transport::Series => 4,
+        Transport::Series => 5,
         Transport::Path => 3,
     };
     let key = format!(

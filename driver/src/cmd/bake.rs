@@ -55,6 +55,12 @@ pub struct BakeArgs {
     /// (n ∝ σ), `relative` (n ∝ σ/√(μ² + ε)), `balanced` (n ∝ σ/√(μ·μ̄)).
     #[arg(long, value_enum, default_value_t = BakeSettings::default().budget)]
     pub budget: Budget,
+    /// Next-event samples per texel of a series bake's direct pass (default: `--spp`), whose
+    /// estimate the lightmap takes as its direct light: its last pass gathers the indirect
+    /// light alone. With `--directional sh-l1` or `--combine global` the last pass estimates
+    /// the direct light itself (weighted against its gather), and this is refused.
+    #[arg(long, value_name = "N")]
+    pub direct_spp: Option<u32>,
     /// How the samples are split over the learning iterations.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
     pub schedule: Schedule,
@@ -181,6 +187,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         schedule: args.schedule,
         guided_passes: args.guided_passes,
         budget: args.budget,
+        direct_spp: args.direct_spp,
         min_split: args.min_split,
         smooth: args.smooth,
         min_gain: args.min_gain,
