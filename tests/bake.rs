@@ -654,7 +654,7 @@ fn a_spatial_budget_moves_samples_and_bakes_the_same_bits_however_it_is_split() 
 /// the gather's samples here) and its last pass gathers the indirect light alone. In a
 /// closed glowing box it still receives π·Le times the bounce series, and it is the same bits
 /// on one or two threads and sharded pass by pass (the finish then reads the merged pass 0);
-/// its relative standard error is of the sum.
+/// its relative standard error is of the sum. With `--lookup-spp` it keeps its mean too.
 #[test]
 fn a_lightmap_that_takes_its_direct_light_from_the_direct_pass_keeps_its_mean_and_bits() {
     let (albedo, le) = (0.5f32, 1.5f32);
@@ -706,6 +706,19 @@ fn a_lightmap_that_takes_its_direct_light_from_the_direct_pass_keeps_its_mean_an
     assert!(
         errors.iter().all(|e| e.is_finite() && *e > 0.0 && *e < 0.1),
         "{errors:?}"
+    );
+
+    // `--lookup-spp`: fewer rays in the passes that only feed lookups, the same mean.
+    let mut fewer = job("fewer.exr", 2, None);
+    fewer.settings.lookup_spp = Some(32);
+    run(&fewer);
+    let values = red_channel(&fewer.out);
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let tolerance = 3.5 * (var / n).sqrt() * shared + 1e-4 * want;
+    assert!(
+        (mean - want).abs() < tolerance,
+        "{mean}, want {want} ± {tolerance}"
     );
 }
 

@@ -209,6 +209,9 @@ pub struct BakeSettings {
     /// `None`: `--spp`), whose estimate the lightmap takes as its texels' direct light
     /// ([`Self::lightmap_borrows_direct`]).
     pub direct_spp: Option<u32>,
+    /// Gather rays per texel of the series passes between the direct pass and the last,
+    /// whose results only feed the next pass's lookups (`--lookup-spp`; `None`: `--spp`).
+    pub lookup_spp: Option<u32>,
 }
 
 /// The fields in order, as `derive(Debug)` would print them, but `budget` only when it is not
@@ -238,6 +241,7 @@ impl fmt::Debug for BakeSettings {
             guided_passes,
             budget,
             direct_spp,
+            lookup_spp,
         } = self;
         let mut d = f.debug_struct("BakeSettings");
         d.field("spp", spp)
@@ -262,6 +266,9 @@ impl fmt::Debug for BakeSettings {
         }
         if let Some(direct_spp) = direct_spp {
             d.field("direct_spp", direct_spp);
+        }
+        if let Some(lookup_spp) = lookup_spp {
+            d.field("lookup_spp", lookup_spp);
         }
         d.finish()
     }
@@ -295,6 +302,7 @@ impl Default for BakeSettings {
             guided_passes: GuidedPasses::default(),
             budget: Budget::default(),
             direct_spp: None,
+            lookup_spp: None,
         }
     }
 }
@@ -357,6 +365,21 @@ impl BakeSettings {
         }
         if let Some(n) = self.direct_spp {
             self.validate_direct_spp(n)?;
+        }
+        if let Some(n) = self.lookup_spp {
+            if self.transport != Transport::Series {
+                return Err(SettingsError(format!(
+                    "--lookup-spp {n}: the passes before the last are series transport's \
+                     (--transport series)"
+                )));
+            }
+            if !(8 * self.iterations..=self.iterations << 20).contains(&n) {
+                return Err(SettingsError(format!(
+                    "--lookup-spp {n}: give at least 8 rays (one packet) and at most 2^20 per \
+                     iteration, {} iterations",
+                    self.iterations
+                )));
+            }
         }
         Ok(())
     }
@@ -443,14 +466,20 @@ impl BakeSettings {
 
     /// The settings pass `pass` bakes with: these, with `--guiding off` for a pass
     /// [`GuidedPasses`] leaves unguided (a pass before the last under
-    /// [`GuidedPasses::Last`]).
+    /// [`GuidedPasses::Last`]) and `--lookup-spp` rays for a gather pass before the last.
     pub fn for_pass(&self, pass: u32) -> BakeSettings {
         let guided = match self.guided_passes {
             GuidedPasses::Last => pass == self.last_pass(),
             GuidedPasses::Every => true,
         };
+        let lookup =
+            self.transport == Transport::Series && pass > DIRECT_PASS && pass < self.last_pass();
         BakeSettings {
             guiding: if guided { self.guiding } else { Guiding::Off },
+            spp: match self.lookup_spp {
+                Some(n) if lookup => n,
+                _ => self.spp,
+            },
             ..*self
         }
     }
@@ -629,6 +658,42 @@ mod tests {
         let odd: Vec<u32> = per(&odd);
         assert!(odd.iter().all(|&n| n >= 8 && n % 8 == 0), "{odd:?}");
         assert_eq!(odd.iter().sum::<u32>(), 104, "{odd:?}: 2, 2, 3, 6 packets");
+    }
+
+    #[test]
+    fn lookup_spp_is_the_gather_of_the_passes_between_the_direct_pass_and_the_last() {
+        let s = BakeSettings {
+            lookup_spp: Some(64),
+            ..Default::default()
+        };
+        assert!(s.validate().is_ok());
+        let spp: Vec<u32> = (0..=3).map(|pass| s.for_pass(pass).spp).collect();
+        assert_eq!(
+            spp,
+            [256, 64, 64, 256],
+            "pass 0 and the lightmap keep --spp"
+        );
+        assert_eq!(s.for_pass(1).samples_in_iteration(3), 32);
+        let path = BakeSettings {
+            transport: Transport::Path,
+            ..s
+        };
+        let err = path.validate().unwrap_err().to_string();
+        assert!(
+            err.contains("--lookup-spp 64") && err.contains("series"),
+            "{err}"
+        );
+        let few = BakeSettings {
+            lookup_spp: Some(24),
+            ..s
+        };
+        let err = few.validate().unwrap_err().to_string();
+        assert!(
+            err.contains("--lookup-spp 24") && err.contains("at least 8"),
+            "{err}"
+        );
+        assert!(format!("{s:?}").contains("lookup_spp: 64"));
+        assert!(!format!("{:?}", BakeSettings::default()).contains("lookup_spp"));
     }
 
     #[test]

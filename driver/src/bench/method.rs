@@ -52,6 +52,9 @@ pub struct Levers {
     /// `--direct-spp` as a percentage of the rung's `--spp` (`+direct=P`), for series
     /// transport; `None`: unset, the lightmap estimates its direct light itself.
     pub direct_percent: Option<u32>,
+    /// `--lookup-spp` as a percentage of the rung's `--spp` (`+lookup=P`), for series
+    /// transport; `None`: unset, every gather pass takes `--spp`.
+    pub lookup_percent: Option<u32>,
 }
 
 impl Default for Levers {
@@ -68,6 +71,7 @@ impl Default for Levers {
             selection: None,
             budget: d.budget,
             direct_percent: None,
+            lookup_percent: None,
         }
     }
 }
@@ -87,6 +91,7 @@ impl Levers {
             selection: None,
             budget: Budget::Uniform,
             direct_percent: None,
+            lookup_percent: None,
         }
     }
 
@@ -123,6 +128,9 @@ impl Levers {
         }
         if let Some(p) = self.direct_percent {
             s += &format!("+direct={p}");
+        }
+        if let Some(p) = self.lookup_percent {
+            s += &format!("+lookup={p}");
         }
         s
     }
@@ -188,7 +196,7 @@ impl Method {
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
     /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`,
-    /// `transport`, `select`, `budget`, `direct`); the
+    /// `transport`, `select`, `budget`, `direct`, `lookup`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -250,6 +258,7 @@ impl Method {
                         Budget::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
                 }
                 "direct" => levers.direct_percent = Some(number()?),
+                "lookup" => levers.lookup_percent = Some(number()?),
                 _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
             }
         }
@@ -294,11 +303,14 @@ impl Method {
         seed: u32,
     ) -> BakeSettings {
         let transport = self.levers.transport.unwrap_or(transport);
-        let direct_spp = self
-            .levers
-            .direct_percent
-            .filter(|_| transport == Transport::Series)
-            .map(|p| (u64::from(spp) * u64::from(p) / 100).min(u64::from(u32::MAX)) as u32);
+        let percent = |p: Option<u32>| {
+            p.filter(|_| transport == Transport::Series)
+                .map(|p| (u64::from(spp) * u64::from(p) / 100).min(u64::from(u32::MAX)) as u32)
+        };
+        let (direct_spp, lookup_spp) = (
+            percent(self.levers.direct_percent),
+            percent(self.levers.lookup_percent),
+        );
         BakeSettings {
             spp,
             iterations,
@@ -317,6 +329,7 @@ impl Method {
             emitter_selection: self.levers.selection.unwrap_or_default(),
             budget: self.levers.budget,
             direct_spp,
+            lookup_spp,
             ..Default::default()
         }
     }

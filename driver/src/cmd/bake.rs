@@ -61,6 +61,10 @@ pub struct BakeArgs {
     /// the direct light itself (weighted against its gather), and this is refused.
     #[arg(long, value_name = "N")]
     pub direct_spp: Option<u32>,
+    /// Gather rays per texel of the series passes between the direct pass and the last, whose
+    /// results only feed the next pass's lookups (default: `--spp`).
+    #[arg(long, value_name = "N")]
+    pub lookup_spp: Option<u32>,
     /// How the samples are split over the learning iterations.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
     pub schedule: Schedule,
@@ -188,6 +192,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         guided_passes: args.guided_passes,
         budget: args.budget,
         direct_spp: args.direct_spp,
+        lookup_spp: args.lookup_spp,
         min_split: args.min_split,
         smooth: args.smooth,
         min_gain: args.min_gain,
