@@ -375,9 +375,10 @@ impl BakeSettings {
             }
             if !(8 * self.iterations..=self.iterations << 20).contains(&n) {
                 return Err(SettingsError(format!(
-                    "--lookup-spp {n}: give at least 8 rays (one packet) and at most 2^20 per \
-                     iteration, {} iterations",
-                    self.iterations
+                    "--lookup-spp {n} over {} iterations leaves {} rays per iteration: give at \
+                     least 8 (one packet) and at most 2^20 per iteration",
+                    self.iterations,
+                    n / self.iterations
                 )));
             }
         }
@@ -394,9 +395,10 @@ impl BakeSettings {
         }
         if !(8 * self.iterations..=self.iterations << 20).contains(&n) {
             return refuse(&format!(
-                "give at least 8 next-event samples (one packet) and at most 2^20 per \
-                 iteration, {} iterations",
-                self.iterations
+                "over {} iterations that leaves {} samples per iteration: give at least 8 \
+                 (one packet) and at most 2^20 per iteration",
+                self.iterations,
+                n / self.iterations
             ));
         }
         if !self.lightmap_borrows_direct() {
