@@ -300,6 +300,33 @@ fn bake_pass(
 
 /// Bakes `job` pass by pass in `count` shards (shards in a scrambled order), merging each
 /// pass, and returns the final lightmap's path.
+/// An unsharded bake of `texels` into `out` on `threads` threads, with the auxiliary channels.
+fn whole_job(texels: &Path, out: PathBuf, threads: usize, settings: BakeSettings) -> BakeJob {
+    BakeJob {
+        texels: texels.to_path_buf(),
+        out,
+        settings,
+        threads,
+        shard: Shard::WHOLE,
+        resume: false,
+        aux: true,
+        finish: FinishOptions::default(),
+    }
+}
+
+/// Bakes `job(out, threads)` on one thread, on two, and in three shards pass by pass, asserts
+/// the three lightmaps are the same bytes and returns the one-thread job (baked).
+fn same_bits_however_split(job: impl Fn(&str, usize) -> BakeJob, scene: &Scene) -> BakeJob {
+    let run = |job: &BakeJob| bake(job, scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+    let (one, two) = (job("one.exr", 1), job("two.exr", 2));
+    run(&one);
+    run(&two);
+    assert_eq!(exr_bytes(&one.out), exr_bytes(&two.out));
+    let sharded = bake_sharded_passes(&job("sharded.exr", 2), 3, scene);
+    assert_eq!(exr_bytes(&one.out), exr_bytes(&sharded));
+    one
+}
+
 fn bake_sharded_passes(job: &BakeJob, count: u32, scene: &Scene) -> PathBuf {
     let texels = TexelFile::open(&job.texels).unwrap();
     let passes = job.settings.last_pass();
@@ -603,32 +630,18 @@ fn a_spatial_budget_moves_samples_and_bakes_the_same_bits_however_it_is_split() 
     for t in &mut scene.triangles[2..] {
         t.material = 1;
     }
-    let job = |out: &str, threads: usize, budget: Budget| BakeJob {
-        texels: texels.clone(),
-        out: dir.path().join(out),
-        settings: BakeSettings {
+    let job = |out: &str, threads: usize, budget: Budget| {
+        let settings = BakeSettings {
             spp: 128,
             transport: Transport::Series,
             bounces: 3,
             budget,
             ..Default::default()
-        },
-        threads,
-        shard: Shard::WHOLE,
-        resume: false,
-        aux: true,
-        finish: FinishOptions::default(),
+        };
+        whole_job(&texels, dir.path().join(out), threads, settings)
     };
     let run = |job: &BakeJob| bake(job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
-    let (one, two) = (
-        job("one.exr", 1, Budget::Mse),
-        job("two.exr", 2, Budget::Mse),
-    );
-    run(&one);
-    run(&two);
-    assert_eq!(exr_bytes(&one.out), exr_bytes(&two.out));
-    let sharded = bake_sharded_passes(&job("sharded.exr", 2, Budget::Mse), 3, &scene);
-    assert_eq!(exr_bytes(&one.out), exr_bytes(&sharded));
+    let one = same_bits_however_split(|out, threads| job(out, threads, Budget::Mse), &scene);
     let samples = channel(&one.out, "samples");
     let (least, most) = samples
         .iter()
@@ -662,29 +675,18 @@ fn a_lightmap_that_takes_its_direct_light_from_the_direct_pass_keeps_its_mean_an
     let texels = dir.path().join("box.texels");
     let scene = emissive_box(&texels, albedo, le);
     let bounces = 3;
-    let job = |out: &str, threads: usize, direct_spp: Option<u32>| BakeJob {
-        texels: texels.clone(),
-        out: dir.path().join(out),
-        settings: BakeSettings {
+    let job = |out: &str, threads: usize, direct_spp: Option<u32>| {
+        let settings = BakeSettings {
             spp: 128,
             iterations: 2,
             bounces,
             direct_spp,
             ..Default::default()
-        },
-        threads,
-        shard: Shard::WHOLE,
-        resume: false,
-        aux: true,
-        finish: FinishOptions::default(),
+        };
+        whole_job(&texels, dir.path().join(out), threads, settings)
     };
     let run = |job: &BakeJob| bake(job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
-    let (one, two) = (job("one.exr", 1, Some(256)), job("two.exr", 2, Some(256)));
-    run(&one);
-    run(&two);
-    assert_eq!(exr_bytes(&one.out), exr_bytes(&two.out));
-    let sharded = bake_sharded_passes(&job("sharded.exr", 2, Some(256)), 3, &scene);
-    assert_eq!(exr_bytes(&one.out), exr_bytes(&sharded));
+    let one = same_bits_however_split(|out, threads| job(out, threads, Some(256)), &scene);
 
     let values = red_channel(&one.out);
     let n = values.len() as f64;
