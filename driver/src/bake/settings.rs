@@ -215,7 +215,7 @@ pub struct BakeSettings {
 }
 
 /// The fields in order, as `derive(Debug)` would print them, but `budget` only when it is not
-/// [`Budget::Uniform`] and `direct_spp` only when it is set: a bake without them keeps the
+/// [`Budget::Uniform`] and `direct_spp` and `lookup_spp` only when they are set: a bake without them keeps the
 /// identity ([`BakeSettings::bake_id`]) and the bench's reference keys it had before they
 /// existed. The destructuring names every field,
 /// so a field added to the settings cannot be left out of the identity unnoticed.
@@ -331,14 +331,7 @@ impl BakeSettings {
                 self.iterations
             )));
         }
-        let per_iteration = self.spp / self.iterations;
-        if !(8..=1 << 20).contains(&per_iteration) {
-            return Err(SettingsError(format!(
-                "--spp {} over {} iterations leaves {per_iteration} rays per iteration: \
-                 give at least 8 (one packet) and at most 2^20 per iteration",
-                self.spp, self.iterations
-            )));
-        }
+        self.check_per_iteration("--spp", self.spp)?;
         if self.mix > 100 {
             return Err(SettingsError(format!(
                 "--mix {}: a percentage of the packets, between 0 and 100",
@@ -373,16 +366,23 @@ impl BakeSettings {
                      (--transport series)"
                 )));
             }
-            if !(8 * self.iterations..=self.iterations << 20).contains(&n) {
-                return Err(SettingsError(format!(
-                    "--lookup-spp {n} over {} iterations leaves {} rays per iteration: give at \
-                     least 8 (one packet) and at most 2^20 per iteration",
-                    self.iterations,
-                    n / self.iterations
-                )));
-            }
+            self.check_per_iteration("--lookup-spp", n)?;
         }
         Ok(())
+    }
+
+    /// `option`'s `n` samples per texel, split over the iterations, must give each at least
+    /// one packet of 8 and at most 2^20.
+    fn check_per_iteration(&self, option: &str, n: u32) -> Result<(), SettingsError> {
+        let per_iteration = n / self.iterations;
+        if (8..=1 << 20).contains(&per_iteration) {
+            return Ok(());
+        }
+        Err(SettingsError(format!(
+            "{option} {n} over {} iterations leaves {per_iteration} per iteration: give at least \
+             8 (one packet) and at most 2^20 per iteration",
+            self.iterations
+        )))
     }
 
     /// `--direct-spp N` needs a direct pass (series transport), a packet per iteration and
@@ -393,14 +393,7 @@ impl BakeSettings {
         if self.transport != Transport::Series {
             return refuse("the direct pass is series transport's (--transport series)");
         }
-        if !(8 * self.iterations..=self.iterations << 20).contains(&n) {
-            return refuse(&format!(
-                "over {} iterations that leaves {} samples per iteration: give at least 8 \
-                 (one packet) and at most 2^20 per iteration",
-                self.iterations,
-                n / self.iterations
-            ));
-        }
+        self.check_per_iteration("--direct-spp", n)?;
         if !self.lightmap_borrows_direct() {
             return refuse(
                 "with --directional sh-l1 or --combine global the lightmap estimates its \
@@ -434,9 +427,16 @@ impl BakeSettings {
     /// last the two are added when the next pass's image is built, for the last (the
     /// lightmap) by the finish ([`Self::lightmap_borrows_direct`]).
     pub fn borrows_direct(&self, pass: u32) -> bool {
-        self.transport == Transport::Series
-            && pass > DIRECT_PASS
-            && (pass < self.last_pass() || self.lightmap_borrows_direct())
+        self.feeds_lookups(pass)
+            || (self.transport == Transport::Series
+                && pass == self.last_pass()
+                && self.lightmap_borrows_direct())
+    }
+
+    /// Whether pass `pass` is a series pass between the direct pass and the last, whose
+    /// results only feed the next pass's lookups.
+    pub fn feeds_lookups(&self, pass: u32) -> bool {
+        self.transport == Transport::Series && pass > DIRECT_PASS && pass < self.last_pass()
     }
 
     /// Whether the lightmap takes its texels' direct light from the direct pass (series
@@ -444,8 +444,8 @@ impl BakeSettings {
     /// Not when the last pass keeps directional coefficients (`--directional sh-l1`: the
     /// direct pass projects none) or its batches for the global weights (`--combine global`):
     /// there its texels estimate the direct light again, weighted against their gather (MIS).
-    /// Taking it from the direct pass was 1.04–1.19× as efficient by relative MSE and
-    /// 1.05–1.28× by MSE at equal time (docs/estimator.md, "The lightmap's direct light").
+    /// Taking it from the direct pass was 1.08–1.18× as efficient by relative MSE and
+    /// 1.07–1.27× by MSE at equal time (docs/estimator.md, "The lightmap's direct light").
     pub fn lightmap_borrows_direct(&self) -> bool {
         self.transport == Transport::Series
             && self.directional == Directional::None
@@ -474,8 +474,7 @@ impl BakeSettings {
             GuidedPasses::Last => pass == self.last_pass(),
             GuidedPasses::Every => true,
         };
-        let lookup =
-            self.transport == Transport::Series && pass > DIRECT_PASS && pass < self.last_pass();
+        let lookup = self.feeds_lookups(pass);
         BakeSettings {
             guiding: if guided { self.guiding } else { Guiding::Off },
             spp: match self.lookup_spp {
