@@ -610,6 +610,24 @@ fn red_channel(path: &Path) -> Vec<f64> {
 /// E = π Le (1 + ρ + … + ρ^reflections) = π Le (1 − ρ^(reflections+1)) / (1 − ρ), at every
 /// point. A bake of B bounces reflects emitters' light B times when emitters are lights
 /// (next-event estimation at the last hit), B − 1 times when only rays find them.
+/// The mean of `values` and its standard error.
+fn mean_and_se(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+/// How much more a series bake's mean errs than its texels' spread says: every texel of a
+/// pass reads the same previous pass, whose error (ρ times its own, and so on back) all
+/// texels share, √(Σ_j albedo^{2j}) over the `bounces` passes.
+fn series_shared_error(albedo: f32, bounces: u32) -> f64 {
+    (0..bounces)
+        .map(|j| f64::from(albedo).powi(2 * j as i32))
+        .sum::<f64>()
+        .sqrt()
+}
+
 fn closed_box_irradiance(le: f32, albedo: f32, reflections: u32) -> f64 {
     let rho = f64::from(albedo);
     std::f64::consts::PI * f64::from(le) * (1.0 - rho.powi(reflections as i32 + 1)) / (1.0 - rho)
@@ -688,18 +706,9 @@ fn a_lightmap_that_takes_its_direct_light_from_the_direct_pass_keeps_its_mean_an
     let run = |job: &BakeJob| bake(job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
     let one = same_bits_however_split(|out, threads| job(out, threads, Some(256)), &scene);
 
-    let values = red_channel(&one.out);
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
     let want = closed_box_irradiance(le, albedo, bounces);
-    // As in the test below: every texel reads the same previous passes, whose shared error
-    // the texels' spread misses.
-    let shared = (0..bounces)
-        .map(|j| f64::from(albedo).powi(2 * j as i32))
-        .sum::<f64>()
-        .sqrt();
-    let tolerance = 3.5 * (var / n).sqrt() * shared + 1e-4 * want;
+    let (mean, se) = mean_and_se(&red_channel(&one.out));
+    let tolerance = 3.5 * se * series_shared_error(albedo, bounces) + 1e-4 * want;
     assert!(
         (mean - want).abs() < tolerance,
         "{mean}, want {want} ± {tolerance}"
@@ -714,10 +723,8 @@ fn a_lightmap_that_takes_its_direct_light_from_the_direct_pass_keeps_its_mean_an
     let mut fewer = job("fewer.exr", 2, None);
     fewer.settings.lookup_spp = Some(32);
     run(&fewer);
-    let values = red_channel(&fewer.out);
-    let mean = values.iter().sum::<f64>() / n;
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    let tolerance = 3.5 * (var / n).sqrt() * shared + 1e-4 * want;
+    let (mean, se) = mean_and_se(&red_channel(&fewer.out));
+    let tolerance = 3.5 * se * series_shared_error(albedo, bounces) + 1e-4 * want;
     assert!(
         (mean - want).abs() < tolerance,
         "{mean}, want {want} ± {tolerance}"
@@ -829,15 +836,12 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
         let report = bake(&job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
         let values = red_channel(&out);
         assert_eq!(values.len(), (6 * FACE * FACE) as usize);
-        let n = values.len() as f64;
-        let mean = values.iter().sum::<f64>() / n;
-        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        let (mean, se) = mean_and_se(&values);
         let reflections = match emitters {
             EmitterSampling::Hits => bounces - 1,
             EmitterSampling::Mis | EmitterSampling::Nee => bounces,
         };
         let want = closed_box_irradiance(le, albedo, reflections);
-        let se = (var / n).sqrt();
         let what = format!(
             "{transport} B={bounces} {guiding} {emitters} {guided_passes:?}: {mean} ± {se}, \
              want {want}"
@@ -858,10 +862,7 @@ fn a_closed_emissive_box_receives_pi_le_times_the_bounce_series_in_both_transpor
             // its own, and so on back) all texels share: the texels' spread alone misses it.
             // Six seeds of series B = 4 (coherent and off) spread 1.27× the texels' `se`.
             let shared = match transport {
-                Transport::Series => (0..bounces)
-                    .map(|j| f64::from(albedo).powi(2 * j as i32))
-                    .sum::<f64>()
-                    .sqrt(),
+                Transport::Series => series_shared_error(albedo, bounces),
                 Transport::Path => 1.0,
             };
             let tolerance = 3.5 * se * shared + 1e-4 * want;
@@ -930,10 +931,7 @@ fn global_weights_bake_the_closed_form_and_merge_shards_to_the_same_bits() {
         "global weights are unbiased: ρ = {}",
         report.rho
     );
-    let values = red_channel(&whole.out);
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let se = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    let (mean, se) = mean_and_se(&red_channel(&whole.out));
     assert!((mean - want).abs() < 3.0 * se, "{mean} ± {se}, want {want}");
     // The same radiance E/π from every direction of a texel's hemisphere: L0 = E/√π, and
     // the L1 reconstruction at the texel's normal gives E back (docs/lightmaps.md).
@@ -941,8 +939,7 @@ fn global_weights_bake_the_closed_form_and_merge_shards_to_the_same_bits() {
         .into_iter()
         .map(f64::from)
         .collect();
-    let mean0 = sh0.iter().sum::<f64>() / n;
-    let se0 = (sh0.iter().map(|v| (v - mean0).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    let (mean0, se0) = mean_and_se(&sh0);
     let want0 = want / std::f64::consts::PI.sqrt();
     assert!(
         (mean0 - want0).abs() < 3.0 * se0 + 1e-3 * want0,
