@@ -570,19 +570,53 @@ fn check_side(scene: &Scene, side: f64) -> Result<(), PrepareError> {
     Ok(())
 }
 
-/// Cell edge of each mesh at density `d`, `None` for meshes without UVs.
+/// Edge in texels of the square that holds mesh `s`'s own UVs at density `d`.
+fn cell_side(s: &MeshUv, d: f64) -> f64 {
+    let ext = f64::from((s.hi - s.lo).max_element().max(1e-12));
+    // The UV bounding square scaled to `side` texels holds uv_area·side²/ext² texels.
+    d * (s.world_area / s.uv_area.max(1e-30)).sqrt() * ext
+}
+
+/// Cell edge of each mesh at density `d`, `None` for meshes without UVs; clamped to what a
+/// page of edge `max` holds (an asked-for density is checked first, by [`check_cells`]).
 fn cells(stats: &[Option<MeshUv>], d: f64, max: u32) -> Vec<Option<u32>> {
     stats
         .iter()
-        .map(|s| {
-            s.map(|s| {
-                let ext = f64::from((s.hi - s.lo).max_element().max(1e-12));
-                // The UV bounding square scaled to `side` texels holds uv_area·side²/ext² texels.
-                let side = d * (s.world_area / s.uv_area.max(1e-30)).sqrt() * ext;
-                (side.ceil() as u32).clamp(2, max - 2 * GUTTER)
-            })
-        })
+        .map(|s| s.map(|s| (cell_side(&s, d).ceil() as u32).clamp(2, max - 2 * GUTTER)))
         .collect()
+}
+
+/// Refuses an asked-for density at which a mesh's own UVs need a square larger than a page of
+/// edge `max`: [`cells`] would clamp it and bake that mesh at a lower density than asked,
+/// silently — and at `--texels-per-unit 1e30` fill a 4096² page per mesh.
+fn check_cells(
+    scene: &Scene,
+    stats: &[Option<MeshUv>],
+    d: f64,
+    max: u32,
+) -> Result<(), PrepareError> {
+    if !(d.is_finite() && d > 0.0) {
+        return Err(PrepareError::Resolution {
+            path: scene.path.clone(),
+            message: format!("{d} texels/unit is not a positive density"),
+        });
+    }
+    let room = f64::from(max - 2 * GUTTER);
+    for (mesh, s) in scene.meshes.iter().zip(stats) {
+        let Some(s) = s else { continue };
+        let side = cell_side(s, d);
+        if side.is_nan() || side > room {
+            return Err(PrepareError::Resolution {
+                path: scene.path.clone(),
+                message: format!(
+                    "mesh '{}' needs a square of {side:.4e} texels at {d:.4e} texels/unit, more than a page of {max}x{max}; --texels-per-unit {:.4} or less fits",
+                    mesh.name,
+                    0.95 * d * room / side
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// A cell's place: (page, x, y).
@@ -651,6 +685,9 @@ fn per_mesh_layout(
         });
     }
     let max = page.0.min(page.1);
+    if let Resolution::TexelsPerUnit(_) = res {
+        check_cells(scene, stats, d, max)?;
+    }
     let (places, cs, n) = loop {
         let cs = cells(stats, d, max);
         let (places, n) = shelf_pack(&cs, page);
@@ -776,6 +813,9 @@ fn unwrap_layout(
     let max = page.0.min(page.1) - 2 * GUTTER;
     let fits =
         |a: &unwrap::Packed| a.width + 2 * GUTTER <= page.0 && a.height + 2 * GUTTER <= page.1;
+    if let Resolution::TexelsPerUnit(_) = res {
+        check_cells(scene, &kept, d, max)?;
+    }
     let mut charted = unwrap::Charted::new(scene, &to_unwrap)?;
     let mut per_mesh_seconds = 0.0;
     let mut tries = 0;
@@ -1440,6 +1480,68 @@ mod tests {
         // A room alone too big for a page is an error naming it.
         let e = unwrap_layout(&s, Resolution::TexelsPerUnit(450.0), &[true, true]).unwrap_err();
         assert!(e.to_string().contains("mesh 'room' unwraps to"), "{e}");
+    }
+
+    /// Two 10 m squares with their own UVs over the unit square, as two meshes.
+    fn two_uv_squares() -> Scene {
+        let mut triangles = Vec::new();
+        for mesh in 0..2 {
+            let c = Vec3::new(20.0 * mesh as f32, 0.0, 0.0);
+            let [a, b] = crate::test_support::quad(c, Vec3::X * 10.0, Vec3::Y * 10.0, 0);
+            let uv = |t: &Triangle| t.positions.map(|p| Vec2::new(p.x - c.x, p.y) / 10.0);
+            triangles.extend([a, b].map(|t| Triangle {
+                lightmap_uv: Some(uv(&t)),
+                mesh,
+                ..t
+            }));
+        }
+        let mut s = Scene::of_triangles("squares", triangles, vec![]);
+        s.meshes[0].triangle_count = 2;
+        s.meshes[0].has_lightmap_uvs = true;
+        s.meshes.push(crate::scene::Mesh {
+            name: "second".into(),
+            first_triangle: 2,
+            triangle_count: 2,
+            has_lightmap_uvs: true,
+        });
+        s
+    }
+
+    #[test]
+    fn a_density_past_what_a_page_holds_for_a_mesh_is_an_error_naming_one_that_fits() {
+        // The per-mesh layout clamped each mesh's square to a page: at 10³⁰ texels per unit
+        // every mesh silently filled a 4096² page (a fuzz input took 18 s without a sanitizer).
+        let s = two_uv_squares();
+        let stats = mesh_uv_stats(&s);
+        let (_, meshes, tpu) =
+            per_mesh_layout(&s, &stats, Resolution::TexelsPerUnit(40.0)).unwrap();
+        assert_eq!(tpu, 40.0);
+        assert_eq!(meshes[1].uv_scale, [400.0; 2], "10 m at 40 texels/unit");
+        for d in [500.0, 1e30, f32::MAX, f32::NAN, 0.0, -1.0] {
+            let e = per_mesh_layout(&s, &stats, Resolution::TexelsPerUnit(d)).unwrap_err();
+            let message = e.to_string();
+            assert!(message.contains("squares"), "names the scene: {message}");
+            if !(d > 0.0 && d.is_finite()) {
+                assert!(message.contains("not a positive density"), "{message}");
+                continue;
+            }
+            assert!(
+                message.contains("mesh 'squares' needs a square of"),
+                "{message}"
+            );
+            let fit: f32 = message
+                .rsplit("--texels-per-unit ")
+                .next()
+                .and_then(|r| r.split(' ').next())
+                .and_then(|f| f.parse().ok())
+                .unwrap_or_else(|| panic!("names a density: {message}"));
+            let (_, meshes, _) = per_mesh_layout(&s, &stats, Resolution::TexelsPerUnit(fit))
+                .unwrap_or_else(|e| panic!("the density it names, {fit}, fits: {e}"));
+            assert!(meshes[0].uv_scale[0] > 0.9 * 4092.0, "{:?}", meshes[0]);
+        }
+        // The default and a page size still pick a density that fits.
+        per_mesh_layout(&s, &stats, Resolution::Default).unwrap();
+        per_mesh_layout(&s, &stats, Resolution::Size(64, 64)).unwrap();
     }
 
     #[test]
