@@ -308,6 +308,9 @@ pub fn guide(data: &[u8]) {
         // The defensive mixture's share, from flag bits 4–6 (no input byte of its own, so
         // older inputs keep their meaning): out-of-range and NaN shares must be clamped.
         uniform: [0.0, 0.25, 0.5, 1.0, -0.5, f32::NAN, 2.0, 0.02][usize::from(flags >> 4 & 7)],
+        // Flag bit 3 (unused before, so older inputs keep their meaning): the records are
+        // second moments and the leaves take their roots.
+        second_moment: flags & 8 != 0,
     };
     let capacity = 1 + usize::from(b.u16() % 4096);
     let count = usize::from(b.u16()).min(b.remaining() / 12);

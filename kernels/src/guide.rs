@@ -21,7 +21,10 @@
 //!    finds its children's ranges by binary search and sums their fluxes (f64) — no
 //!    per-level partitioning (the tree is the one the partitioning build gave,
 //!    kept as the test oracle `reference`);
-//! 3. gives every leaf `max(flux, ambient · total · area)`: the **ambient floor** is a floor
+//! 3. gives every leaf `max(flux, ambient · total · area)` (with
+//!    [`GuideParams::second_moment`], the records' flux is `L²/q` and a leaf's flux is first
+//!    `√(total · area · flux)`: the density ∝ `√E[L²]` of variance-aware guiding, Rath et al.
+//!    2020): the **ambient floor** is a floor
 //!    on the density relative to its mean, so no direction has zero probability (default
 //!    [`DEFAULT_AMBIENT`] = 0.1: no leaf below a tenth of the uniform density, which bounds
 //!    the variance cost in directions the learning missed);
@@ -149,6 +152,14 @@ pub struct GuideParams {
     /// density: the bake's presorted points stay one coherent set, none is set aside for the
     /// uniform part, and no sample needs a second density.
     pub uniform: f32,
+    /// Learn the **square root of the second moment** instead of the flux (default false):
+    /// the records carry `L²/q` (the sampled quantity squared over the density that drew
+    /// it), whose sum over a leaf estimates `∫ L²` there, and each leaf's mass before the
+    /// floor is `√(area · share)`: the density ∝ `√E[L²]` over the records' texels, which
+    /// minimises their summed variance (variance-aware guiding, Rath et al. 2020) where the
+    /// flux target ∝ `E[L]` minimises it only for one texel. With one value per direction
+    /// the two targets are the same density.
+    pub second_moment: bool,
 }
 
 impl Default for GuideParams {
@@ -160,6 +171,7 @@ impl Default for GuideParams {
             ambient: DEFAULT_AMBIENT,
             alpha: DEFAULT_ALPHA,
             uniform: 0.0,
+            second_moment: false,
         }
     }
 }
@@ -466,7 +478,11 @@ fn build_with<'a>(
     storage[0] = root_leaf(stats.accepted);
     subdivide(records, params, &mut storage[..capacity], &mut stats, split);
     let (nodes, rest) = storage.split_at_mut(stats.nodes as usize);
-    set_masses(nodes, f64::from(sanitize(params.ambient, 0.0, f32::MAX)));
+    set_masses(
+        nodes,
+        f64::from(sanitize(params.ambient, 0.0, f32::MAX)),
+        params.second_moment,
+    );
     smooth(
         nodes,
         f64::from(sanitize(params.alpha, 0.0, 1.0)),
@@ -769,15 +785,23 @@ fn child(n: &Node, q: usize, first: usize, count: usize, share: f64) -> Node {
 /// Floors the leaves at `floor` times their area, sums masses bottom-up and normalizes.
 /// Children always follow their parent in breadth-first order, so one reverse pass sums
 /// every node after its children. On entry a leaf's `mass` holds its share of the accepted
-/// flux (so the floor is the ambient fraction itself). Masses are stored
+/// flux (so the floor is the ambient fraction itself); with `second_moment` its share of the
+/// second moment, which becomes `√(area · share)` before the floor (a uniform share stays
+/// `area`; the roots sum to at most 1, the normalization restores it). Masses are stored
 /// in f32 between passes (relative error ~1e-7, far below the sampling noise).
-fn set_masses(nodes: &mut [Node], floor: f64) {
+fn set_masses(nodes: &mut [Node], floor: f64, second_moment: bool) {
     for i in (0..nodes.len()).rev() {
         let n = nodes[i];
         let m = match n.first_child() {
             None => {
                 let area = f64::from(n.size) * f64::from(n.size);
-                f64::from(n.mass).max(floor * area)
+                let share = f64::from(n.mass);
+                let mass = if second_moment {
+                    libm::sqrt(area * share)
+                } else {
+                    share
+                };
+                mass.max(floor * area)
             }
             Some(c) => (c..c + 4).map(|k| f64::from(nodes[k].mass)).sum(),
         };
@@ -1047,6 +1071,54 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_second_moment_guide_is_the_root_of_the_second_moment() {
+        // Records on a 16×16 grid: the left half's second moment 16× the right half's. The
+        // flux target gives the left half 16× the right's density, the second-moment target
+        // √16 = 4×; both stay normalized. The depth cap (1) leaves four leaves, one per
+        // quadrant, so each leaf's density is exact.
+        let records = || -> Vec<Record> {
+            (0..256)
+                .map(|i| {
+                    let (x, y) = ((i % 16) as f32 / 16.0 + 0.03, (i / 16) as f32 / 16.0 + 0.03);
+                    rec(x, y, if x < 0.5 { 16.0 } else { 1.0 })
+                })
+                .collect()
+        };
+        let density_ratio = |second_moment: bool| {
+            let p = GuideParams {
+                max_depth: 1,
+                alpha: 0.0,
+                ambient: 0.0,
+                second_moment,
+                ..GuideParams::default()
+            };
+            let mut r = records();
+            let mut storage = [Node::default(); 64];
+            let (g, _) = build(&mut r, &p, &mut storage);
+            let (mut left, mut right, mut mass) = (Vec::new(), Vec::new(), 0.0);
+            g.for_each_leaf(|leaf| {
+                mass += leaf.pdf * leaf.size * leaf.size;
+                if leaf.origin[0] < 0.5 {
+                    &mut left
+                } else {
+                    &mut right
+                }
+                .push(leaf.pdf);
+            });
+            assert_eq!((left.len(), right.len()), (2, 2));
+            assert!((mass - 1.0).abs() < 1e-6, "{mass}");
+            assert!(
+                left.iter()
+                    .chain(&right)
+                    .all(|&p| p == left[0] || p == right[0])
+            );
+            left[0] / right[0]
+        };
+        assert!((density_ratio(false) - 16.0).abs() < 1e-4);
+        assert!((density_ratio(true) - 4.0).abs() < 1e-5);
     }
 
     #[test]

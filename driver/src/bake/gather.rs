@@ -48,7 +48,7 @@ use super::budget;
 use super::directional::{self, Directional, ShL1, ShSample, ShSums};
 use super::grid::{self as grid_guide, GridGuide};
 use super::pipeline::{TileBaked, TileBuffer};
-use super::settings::{BakeSettings, Combine, Guiding};
+use super::settings::{BakeSettings, Combine, GuideTarget, Guiding};
 use super::world::{SurfaceHit, World};
 use crate::output::journal::TileRecord;
 use crate::output::result_file::{
@@ -446,6 +446,7 @@ impl<'w> TileBaker<'w> {
                 guide::DEFAULT_AMBIENT
             },
             uniform: settings.uniform_share(),
+            second_moment: settings.guide_target == GuideTarget::SecondMoment,
             ..GuideParams::default()
         };
         // Once the guide a cluster sampled shows too little gain (`--min-gain`), the cluster
@@ -505,6 +506,9 @@ impl<'w> TileBaker<'w> {
                             guide = None;
                             stopped = true;
                         } else {
+                            if params.second_moment {
+                                learning.square_fluxes();
+                            }
                             guide = learn(&mut learning.records, &params, nodes, counters);
                         }
                     }
@@ -810,6 +814,18 @@ impl Learning {
     fn push(&mut self, record: Record, density: f32) {
         self.records.push(record);
         self.densities.push(density);
+    }
+
+    /// Turns each record's flux `g/q` into `g²/q`, what a guide of the second moment learns
+    /// from ([`GuideParams::second_moment`]): `∫ g²` over a region is the mean of `g²/q` over
+    /// the records there, whatever density drew them. After [`Self::gain`], which reads the
+    /// fluxes as `g/q`. A square past `f32::MAX` is kept at it: the brightest record must not
+    /// become ∞, which the build would drop.
+    fn square_fluxes(&mut self) {
+        for (r, &q) in self.records.iter_mut().zip(&self.densities) {
+            let flux = f64::from(r.flux);
+            r.flux = (flux * flux * f64::from(q)).min(f64::from(f32::MAX)) as f32;
+        }
     }
 
     /// How many times less variance per sample the density that drew the records had than
@@ -1970,6 +1986,38 @@ mod tests {
     /// (1/1024)/768.25 − 1/1024². Records drawn from the mixture (its mass 0.7502 on the spike
     /// as 55 × 55 grid points there, the rest as the 1 023 points of a 32 × 32 grid outside
     /// it) measure that gain; records of cosine points never beat stratified cosine points.
+    #[test]
+    fn a_second_moment_guide_learns_each_records_square_over_its_density() {
+        // g = 3 drawn with q = 2: flux g/q = 1.5 becomes g²/q = 4.5; a square past f32::MAX
+        // stays finite (the build drops non-finite records), at f32::MAX.
+        let mut learning = Learning::default();
+        learning.push(
+            Record {
+                u: [0.1, 0.2],
+                flux: 1.5,
+            },
+            2.0,
+        );
+        learning.push(
+            Record {
+                u: [0.3, 0.4],
+                flux: 1e30,
+            },
+            0.5,
+        );
+        learning.push(
+            Record {
+                u: [0.5, 0.6],
+                flux: 0.0,
+            },
+            1.0,
+        );
+        learning.square_fluxes();
+        let fluxes: Vec<f32> = learning.records.iter().map(|r| r.flux).collect();
+        assert_eq!(fluxes, [4.5, f32::MAX, 0.0]);
+        assert_eq!(learning.records[1].u, [0.3, 0.4]);
+    }
+
     #[test]
     fn the_gain_is_the_variance_ratio_to_stratified_cosine_points() {
         let grid = |n: usize, scale: f32| -> Vec<[f32; 2]> {

@@ -8,7 +8,7 @@
 use clap::ValueEnum;
 
 use crate::bake::settings::{
-    BakeSettings, Budget, Combine, GuidedPasses, Guiding, Schedule, Transport,
+    BakeSettings, Budget, Combine, GuideTarget, GuidedPasses, Guiding, Schedule, Transport,
 };
 use crate::transport::emitters::EmitterSelection;
 
@@ -55,6 +55,8 @@ pub struct Levers {
     /// `--lookup-spp` as a percentage of the rung's `--spp` (`+lookup=P`), for series
     /// transport; `None`: unset, every gather pass takes `--spp`.
     pub lookup_percent: Option<u32>,
+    /// `--guide-target` (`+target=`).
+    pub guide_target: GuideTarget,
 }
 
 impl Default for Levers {
@@ -72,6 +74,7 @@ impl Default for Levers {
             budget: d.budget,
             direct_percent: None,
             lookup_percent: None,
+            guide_target: d.guide_target,
         }
     }
 }
@@ -92,6 +95,7 @@ impl Levers {
             budget: Budget::Uniform,
             direct_percent: None,
             lookup_percent: None,
+            guide_target: GuideTarget::Radiance,
         }
     }
 
@@ -131,6 +135,9 @@ impl Levers {
         }
         if let Some(p) = self.lookup_percent {
             s += &format!("+lookup={p}");
+        }
+        if self.guide_target != d.guide_target {
+            s += &format!("+target={}", value_name(&self.guide_target));
         }
         s
     }
@@ -196,7 +203,7 @@ impl Method {
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
     /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`,
-    /// `transport`, `select`, `budget`, `direct`, `lookup`); the
+    /// `transport`, `select`, `budget`, `direct`, `lookup`, `target`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -259,6 +266,10 @@ impl Method {
                 }
                 "direct" => levers.direct_percent = Some(number()?),
                 "lookup" => levers.lookup_percent = Some(number()?),
+                "target" => {
+                    levers.guide_target = GuideTarget::from_str(value, true)
+                        .map_err(|e| format!("{label:?}: {e}"))?;
+                }
                 _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
             }
         }
@@ -330,6 +341,7 @@ impl Method {
             budget: self.levers.budget,
             direct_spp,
             lookup_spp,
+            guide_target: self.levers.guide_target,
             ..Default::default()
         }
     }
@@ -395,6 +407,13 @@ mod tests {
         assert_eq!(m.levers.budget, Budget::Balanced);
         assert_eq!(m.label(), "coherent/cluster/rho+budget=balanced");
         assert!(Method::parse("coherent/cluster/rho+budget=most").is_err());
+        let m = Method::parse("coherent/cluster/rho+target=radiance").unwrap();
+        assert_eq!(m.label(), "coherent/cluster/rho+target=radiance");
+        assert_eq!(
+            m.settings(256, 4, Transport::Series, 3, 1).guide_target,
+            GuideTarget::Radiance
+        );
+        assert!(Method::parse("coherent/cluster/rho+target=mean").is_err());
         let m = Method::parse("off/average/-+transport=path+select=tree").unwrap();
         assert_eq!(m.label(), "off/average/-+transport=path+select=tree");
         assert_eq!(

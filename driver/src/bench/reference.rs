@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use super::BenchError;
 use super::harness::Bench;
 use super::method::Method;
-use crate::bake::settings::{BakeSettings, Transport};
+use crate::bake::settings::{BakeSettings, GuideTarget, Transport};
 use crate::output::atomic;
 use crate::output::fnv1a64;
 use crate::output::readback::read_lightmap;
@@ -73,9 +73,11 @@ pub fn reference_settings(
     bounces: u32,
 ) -> BakeSettings {
     // Emitters picked in proportion to power, whatever the bake's default selection: every
-    // selection is unbiased, and the references cached before `local` keep their key.
+    // selection is unbiased, and the references cached before `local` keep their key. The
+    // baseline learns no guide: the guide's target is the one its key has always had.
     BakeSettings {
         emitter_selection: EmitterSelection::Power,
+        guide_target: GuideTarget::Radiance,
         ..Method::baseline().settings(spp, iterations, transport, bounces, REFERENCE_SEED)
     }
 }

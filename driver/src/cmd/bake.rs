@@ -9,7 +9,8 @@ use crate::bake::directional::Directional;
 use crate::bake::finish::{Denoise, FinishOptions, Seams};
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress, lights_differ};
 use crate::bake::settings::{
-    BakeSettings, Budget, Combine, EmitterSampling, GuidedPasses, Guiding, Schedule, Transport,
+    BakeSettings, Budget, Combine, EmitterSampling, GuideTarget, GuidedPasses, Guiding, Schedule,
+    Transport,
 };
 use crate::bake::shard::Shard;
 use crate::bake::workdir::work_dir;
@@ -65,6 +66,11 @@ pub struct BakeArgs {
     /// results only feed the next pass's lookups (default: `--spp`).
     #[arg(long, value_name = "N")]
     pub lookup_spp: Option<u32>,
+    /// What each cluster's guide learns: `second-moment` (the density ∝ √E[L²] over the
+    /// cluster's texels: the least summed variance, Rath et al. 2020) or `radiance` (∝ E[L],
+    /// the paper's).
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().guide_target)]
+    pub guide_target: GuideTarget,
     /// How the samples are split over the learning iterations.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
     pub schedule: Schedule,
@@ -193,6 +199,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         budget: args.budget,
         direct_spp: args.direct_spp,
         lookup_spp: args.lookup_spp,
+        guide_target: args.guide_target,
         min_split: args.min_split,
         smooth: args.smooth,
         min_gain: args.min_gain,
