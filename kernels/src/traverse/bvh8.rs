@@ -305,6 +305,7 @@ struct BinSlot {
 }
 
 /// Least costs per slot count, `[k − 1]` for at most `k` slots (`k = 1 ..= WIDTH`).
+#[cfg(any(feature = "alloc", test))]
 type Costs = [f32; WIDTH];
 
 /// The surface area costs of a binary tree's subtrees laid out as wide slots ([`collapse`]):
