@@ -4,9 +4,8 @@
 other method's error over the default's, alone and divided by the time ratio (> 1: the default
 is ahead at equal time), by relative MSE and MSE, and each method's relative bias; means over
 the seeds.   compare.py OUT"""
-import collections
-import csv
 import glob
+import importlib.util
 import os
 import sys
 
@@ -14,20 +13,17 @@ DEFAULT = "coherent/cluster/rho"
 OTHERS = ["coherent/cluster/rho+target=radiance", "off/average/-"]
 
 
-def table(path):
-    agg = collections.defaultdict(list)
-    for r in csv.DictReader(open(path)):
-        agg[(r["method"], int(r["spp"]))].append(r)
-    mean = lambda rows, f: sum(f(r) for r in rows) / len(rows)
-    return {
-        k: {
-            "cpu": mean(v, lambda r: float(r["cpu_s"])),
-            "rel": mean(v, lambda r: float(r["rel_mse"])),
-            "mse": mean(v, lambda r: float(r["rmse"]) ** 2),
-            "bias": mean(v, lambda r: float(r["rel_bias"])),
-        }
-        for k, v in agg.items()
-    }
+def load_table():
+    """`table(runs.csv)` of lightmap-direct/compare.py: per (method, spp) the seeds' mean
+    CPU time, relative MSE, MSE and relative bias."""
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "lightmap-direct", "compare.py")
+    spec = importlib.util.spec_from_file_location("lightmap_direct_compare", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.table
+
+
+table = load_table()
 
 
 for path in sorted(glob.glob(os.path.join(sys.argv[1], "*", "runs.csv"))):
