@@ -1979,13 +1979,6 @@ mod tests {
         }
     }
 
-    /// [`Learning::gain`] against the closed form. An integrand 1 on a spike [0, 1/32)²
-    /// inside one stratum and 0 elsewhere: stratified cosine points leave the variance inside
-    /// that stratum, a_c·p(1 − p) with a_c = 1/64, p = 1/16; a 25 % mixture with a guide of
-    /// density 1024 on the spike samples it with density 768.25, variance
-    /// (1/1024)/768.25 − 1/1024². Records drawn from the mixture (its mass 0.7502 on the spike
-    /// as 55 × 55 grid points there, the rest as the 1 023 points of a 32 × 32 grid outside
-    /// it) measure that gain; records of cosine points never beat stratified cosine points.
     #[test]
     fn a_second_moment_guide_learns_each_records_square_over_its_density() {
         // g = 3 drawn with q = 2: flux g/q = 1.5 becomes g²/q = 4.5; a square past f32::MAX
@@ -2018,6 +2011,13 @@ mod tests {
         assert_eq!(learning.records[1].u, [0.3, 0.4]);
     }
 
+    /// [`Learning::gain`] against the closed form. An integrand 1 on a spike [0, 1/32)²
+    /// inside one stratum and 0 elsewhere: stratified cosine points leave the variance inside
+    /// that stratum, a_c·p(1 − p) with a_c = 1/64, p = 1/16; a 25 % mixture with a guide of
+    /// density 1024 on the spike samples it with density 768.25, variance
+    /// (1/1024)/768.25 − 1/1024². Records drawn from the mixture (its mass 0.7502 on the spike
+    /// as 55 × 55 grid points there, the rest as the 1 023 points of a 32 × 32 grid outside
+    /// it) measure that gain; records of cosine points never beat stratified cosine points.
     #[test]
     fn the_gain_is_the_variance_ratio_to_stratified_cosine_points() {
         let grid = |n: usize, scale: f32| -> Vec<[f32; 2]> {
