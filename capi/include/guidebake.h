@@ -239,6 +239,15 @@ typedef struct GuidebakeGuideParams {
    * without it get 0.
    */
   float uniform;
+  /**
+   * The guide's target: 0 (default) learns a density ∝ the records' flux `L/q`, the
+   * paper's; 1 learns a density ∝ `√E[L²]` over the records (variance-aware guiding, Rath
+   * et al. 2020: least summed variance over the texels that share the guide), and each
+   * record's `flux` must then carry `L²/q` (the bake's default, `--guide-target
+   * second-moment`). Other values are refused. Added after `uniform`: callers compiled
+   * without it get 0.
+   */
+  uint32_t second_moment;
 } GuidebakeGuideParams;
 
 /**

@@ -67,6 +67,13 @@ pub struct GuidebakeGuideParams {
     /// the mixture and its pdf is the mixture's. Added after `alpha`: callers compiled
     /// without it get 0.
     pub uniform: f32,
+    /// The guide's target: 0 (default) learns a density ∝ the records' flux `L/q`, the
+    /// paper's; 1 learns a density ∝ `√E[L²]` over the records (variance-aware guiding, Rath
+    /// et al. 2020: least summed variance over the texels that share the guide), and each
+    /// record's `flux` must then carry `L²/q` (the bake's default, `--guide-target
+    /// second-moment`). Other values are refused. Added after `uniform`: callers compiled
+    /// without it get 0.
+    pub second_moment: u32,
 }
 
 impl GuidebakeGuideParams {
@@ -80,21 +87,32 @@ impl GuidebakeGuideParams {
             ambient: d.ambient,
             alpha: d.alpha,
             uniform: d.uniform,
+            second_moment: u32::from(d.second_moment),
         }
     }
 
     // Fields the kernels' `GuideParams` gains later keep their defaults.
     #[allow(clippy::needless_update)]
-    fn to_kernel(self) -> GuideParams {
-        GuideParams {
+    fn to_kernel(self) -> Result<GuideParams, Fail> {
+        if self.second_moment > 1 {
+            return Err(fail(
+                GuidebakeStatus::InvalidArgument,
+                format_args!(
+                    "`params->second_moment` is {}: 0 (the flux) or 1 (the second moment)",
+                    self.second_moment
+                ),
+            ));
+        }
+        Ok(GuideParams {
             min_records: self.min_records,
             min_flux_fraction: self.min_flux_fraction,
             max_depth: self.max_depth,
             ambient: self.ambient,
             alpha: self.alpha,
             uniform: self.uniform,
+            second_moment: self.second_moment == 1,
             ..GuideParams::default()
-        }
+        })
     }
 }
 
@@ -288,7 +306,8 @@ pub unsafe extern "C" fn guidebake_guide_build(
     guard("guidebake_guide_build", || {
         // SAFETY: the caller's contract for `params`.
         let p =
-            unsafe { read_versioned(params, GuidebakeGuideParams::kernel_defaults(), "params") }?;
+            unsafe { read_versioned(params, GuidebakeGuideParams::kernel_defaults(), "params") }?
+                .to_kernel()?;
         check_one(out, "out")?;
         let storage = storage.cast::<u8>();
         disjoint(
@@ -320,7 +339,7 @@ pub unsafe extern "C" fn guidebake_guide_build(
         let records = unsafe { slice_mut(records.cast::<Record>(), record_count, "records") }?;
         // SAFETY: the caller's contract (module docs).
         let nodes = unsafe { nodes(storage, storage_bytes) }?;
-        let (g, s) = guide::build(records, &p.to_kernel(), nodes);
+        let (g, s) = guide::build(records, &p, nodes);
         if stats_size > 0 {
             let full = GuidebakeGuideStats {
                 size: stats_size as u32,

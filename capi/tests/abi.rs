@@ -247,8 +247,9 @@ fn guide_calls_stay_in_their_buffers() {
         // Storage claimed in bytes: sometimes not a whole number of nodes.
         let bytes = (lines * node).saturating_sub(rng.next_u32() as usize % 3 * 17);
         let mut params = guidebake_guide_params_default();
-        match rng.next_u32() % 7 {
+        match rng.next_u32() % 8 {
             0 => params.size = rng.next_u32() % 40,
+            6 => params.second_moment = rng.next_u32() % 3,
             5 => params.uniform = any_f32(&mut rng),
             1 => params.max_depth = rng.next_u32() % 40,
             2 => params.alpha = any_f32(&mut rng),

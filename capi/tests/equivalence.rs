@@ -81,24 +81,27 @@ fn c_build(
 
 #[test]
 fn guide_build_sample8_and_pdf8_match_the_kernels() {
-    // The defaults (null params), then the defensive mixture through `params->uniform`.
-    for uniform in [None, Some(0.25f32)] {
-        guide_matches_the_kernels(uniform);
+    // The defaults (null params), the defensive mixture through `params->uniform`, the
+    // second-moment target through `params->second_moment`.
+    for (uniform, second_moment) in [(None, false), (Some(0.25f32), false), (Some(0.0), true)] {
+        guide_matches_the_kernels(uniform, second_moment);
     }
 }
 
-fn guide_matches_the_kernels(uniform: Option<f32>) {
+fn guide_matches_the_kernels(uniform: Option<f32>, second_moment: bool) {
     let mut rng = Pcg32::new(1, 20);
     let recs = records(&mut rng, 2000);
     let mut storage = vec![Node::default(); 1024];
     let kernel_params = GuideParams {
         uniform: uniform.unwrap_or(0.0),
+        second_moment,
         ..GuideParams::default()
     };
     let (g, stats) = guide::build(&mut recs.clone(), &kernel_params, &mut storage);
     let mut c_storage = vec![Node::default(); 1024];
     let mut p = guidebake_guide_params_default();
     p.uniform = uniform.unwrap_or(0.0);
+    p.second_moment = u32::from(second_moment);
     let params = if uniform.is_some() {
         &raw const p
     } else {
@@ -226,6 +229,18 @@ fn versioned_params_read_only_what_the_caller_knows() {
     );
     p.size = 0;
     assert_eq!(build(&p).0, S::InvalidArgument);
+    // The target flag: anything but 0 or 1 is refused, naming the field; a caller compiled
+    // before it (its `size` ends at `uniform`) gets the flux target whatever lies beyond.
+    let mut p = guidebake_guide_params_default();
+    p.second_moment = 2;
+    assert_eq!(build(&p).0, S::InvalidArgument);
+    assert!(
+        last_error().contains("`params->second_moment` is 2"),
+        "{}",
+        last_error()
+    );
+    p.size = std::mem::offset_of!(GuidebakeGuideParams, second_moment) as u32;
+    assert_eq!(build(&p).0, S::Ok);
 }
 
 #[test]
