@@ -681,6 +681,71 @@ fn a_spatial_budget_moves_samples_and_bakes_the_same_bits_however_it_is_split() 
     assert!((got / want - 1.0).abs() < 0.02, "{got} against {want}");
 }
 
+/// The stopping rule (`--target-error`): in a closed box lit by one glowing wall, clusters
+/// and direct-pass texels stop where their estimate is within the target, so the bake traces
+/// fewer rays (counted: `texel_iterations_stopped`) and some texels take fewer samples than
+/// the cap, with the uniform bake's mean; and it is the same bits on one or two threads,
+/// sharded pass by pass, and cut and resumed (each stop reads only its cluster's or tile's
+/// own samples).
+#[test]
+fn the_stopping_rule_skips_converged_work_and_bakes_the_same_bits_however_it_is_split() {
+    let dir = tempfile::tempdir().unwrap();
+    let texels = dir.path().join("box.texels");
+    let mut scene = emissive_box(&texels, 0.5, 1.5);
+    let mut grey = scene.materials[0].clone();
+    grey.emission = Vec3::ZERO;
+    scene.materials.push(grey);
+    for t in &mut scene.triangles[2..] {
+        t.material = 1;
+    }
+    let (spp, iterations) = (512, 6);
+    let job = |out: &str, threads: usize, target_error: Option<f32>| {
+        let settings = BakeSettings {
+            spp,
+            iterations,
+            bounces: 2,
+            target_error,
+            ..Default::default()
+        };
+        whole_job(&texels, dir.path().join(out), threads, settings)
+    };
+    let run = |job: &BakeJob| bake(job, &scene, &AtomicBool::new(false), &mut |_, _| {}).unwrap();
+    let one = same_bits_however_split(|out, threads| job(out, threads, Some(0.1)), &scene);
+
+    // Cut after the first tiles of a pass, then resumed: the same bytes.
+    let mut cut = job("cut.exr", 1, Some(0.1));
+    let cancel = AtomicBool::new(false);
+    let first = bake(&cut, &scene, &cancel, &mut |done, _| {
+        cancel.store(done >= 64, Ordering::Relaxed);
+    })
+    .unwrap();
+    assert!(first.interrupted, "{first:?}");
+    cut.resume = true;
+    run(&cut);
+    assert_eq!(exr_bytes(&one.out), exr_bytes(&cut.out), "cut and resumed");
+
+    let stopping = run(&job("stopping.exr", 2, Some(0.1)));
+    let uniform = run(&job("uniform.exr", 2, None));
+    assert!(stopping.counters.texel_iterations_stopped > 0);
+    assert_eq!(uniform.counters.texel_iterations_stopped, 0);
+    assert!(
+        stopping.counters.gather_rays < uniform.counters.gather_rays
+            && stopping.counters.shadow_rays < uniform.counters.shadow_rays,
+        "{:?} against {:?}",
+        stopping.counters,
+        uniform.counters
+    );
+    let samples = channel(&one.out, "samples");
+    assert!(samples.iter().all(|&s| s <= spp as f32));
+    assert!(samples.iter().any(|&s| s < spp as f32), "no texel stopped");
+    let average = |path: &Path| {
+        let red = red_channel(path);
+        red.iter().sum::<f64>() / red.len() as f64
+    };
+    let (got, want) = (average(&one.out), average(&dir.path().join("uniform.exr")));
+    assert!((got / want - 1.0).abs() < 0.02, "{got} against {want}");
+}
+
 /// `--direct-spp`: the lightmap takes its texels' direct light from the direct pass (at twice
 /// the gather's samples here) and its last pass gathers the indirect light alone. In a
 /// closed glowing box it still receives π·Le times the bounce series, and it is the same bits

@@ -49,6 +49,7 @@ use super::directional::{self, Directional, ShL1, ShSample, ShSums};
 use super::grid::{self as grid_guide, GridGuide};
 use super::pipeline::{TileBaked, TileBuffer};
 use super::settings::{BakeSettings, Combine, GuideTarget, Guiding};
+use super::stopping;
 use super::world::{SurfaceHit, World};
 use crate::output::journal::TileRecord;
 use crate::output::result_file::{
@@ -108,6 +109,9 @@ pub struct GatherCounters {
     pub iterations_unguided_no_gain: u64,
     /// Guided iterations that sampled a learned guide.
     pub iterations_guided: u64,
+    /// Texel-iterations the stopping rule skipped (`--target-error`): each iteration a
+    /// stopped cluster's texel, or a stopped texel of the direct pass, did not take.
+    pub texel_iterations_stopped: u64,
     /// Nanoseconds spent building guides (summed over workers: CPU time, not wall time).
     pub guide_build_ns: u64,
     /// Nanoseconds spent warping samples through guides (summed over workers): every
@@ -147,6 +151,7 @@ impl GatherCounters {
         self.iterations_unguided_uniform_guide += o.iterations_unguided_uniform_guide;
         self.iterations_unguided_no_gain += o.iterations_unguided_no_gain;
         self.iterations_guided += o.iterations_guided;
+        self.texel_iterations_stopped += o.texel_iterations_stopped;
         self.guide_build_ns += o.guide_build_ns;
         self.warp_ns += o.warp_ns;
     }
@@ -488,6 +493,20 @@ impl<'w> TileBaker<'w> {
                     }
                 }
             }
+            if let Some(target) = settings
+                .target_error
+                .filter(|_| k > 0 && k + 1 < iterations)
+            {
+                let n = iterations as usize;
+                let rows = members
+                    .iter()
+                    .map(|&m| &batches[m as usize * n..(m as usize + 1) * n]);
+                if stopping::cluster_converged(rows, k as usize, target) {
+                    counters.texel_iterations_stopped +=
+                        members.len() as u64 * u64::from(iterations - k - 1);
+                    break;
+                }
+            }
             if learns {
                 let clock = Instant::now();
                 match settings.guiding {
@@ -522,20 +541,37 @@ impl<'w> TileBaker<'w> {
     }
 
     /// The direct pass over the tile's valid texels ([`Self::direct_only`]): each iteration's
-    /// samples are next-event estimates alone, in the batch a gather's would fill.
+    /// samples are next-event estimates alone, in the batch a gather's would fill; with
+    /// `--target-error` a texel stops once its own estimate is within it ([`stopping`]).
     fn bake_direct(&mut self, texels: &[TexelRecord], first_texel: u64) {
-        let iterations = self.settings.iterations;
-        for (m, &i) in self.valid.iter().enumerate() {
-            let record = &texels[i as usize];
-            let frame = cluster_frame(std::iter::once(Vec3::from(record.normal)));
-            let t = gather_texel(record, first_texel + u64::from(i), frame);
-            for k in 0..iterations {
-                let batch = &mut self.batches[m * iterations as usize + k as usize];
-                IterationCtx::new(self.world, &self.settings, k, None).direct_alone(
-                    &t,
-                    batch,
-                    &mut self.counters,
-                );
+        let settings = self.settings;
+        let n = settings.iterations as usize;
+        let targets: Vec<GatherTexel> = self
+            .valid
+            .iter()
+            .map(|&i| {
+                let record = &texels[i as usize];
+                let frame = cluster_frame(std::iter::once(Vec3::from(record.normal)));
+                gather_texel(record, first_texel + u64::from(i), frame)
+            })
+            .collect();
+        let mut live = vec![true; targets.len()];
+        for k in 0..n {
+            let ctx = IterationCtx::new(self.world, &settings, k as u32, None);
+            for (m, t) in targets.iter().enumerate() {
+                if live[m] {
+                    ctx.direct_alone(t, &mut self.batches[m * n + k], &mut self.counters);
+                }
+            }
+            let Some(target) = settings.target_error.filter(|_| k > 0 && k + 1 < n) else {
+                continue;
+            };
+            let floor = stopping::tile_floor(self.batches.chunks_exact(n), k);
+            for (m, row) in self.batches.chunks_exact(n).enumerate() {
+                if live[m] && stopping::texel_converged(row, k, floor, target) {
+                    live[m] = false;
+                    self.counters.texel_iterations_stopped += (n - k - 1) as u64;
+                }
             }
         }
     }

@@ -15,5 +15,6 @@ pub mod pipeline;
 pub mod run;
 pub mod settings;
 pub mod shard;
+pub mod stopping;
 pub mod workdir;
 pub mod world;

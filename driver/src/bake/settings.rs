@@ -229,11 +229,20 @@ pub struct BakeSettings {
     pub lookup_spp: Option<u32>,
     /// What the learned guides learn (`--guide-target`).
     pub guide_target: GuideTarget,
+    /// The stopping rule (`--target-error`; `None`: every texel takes every iteration): the
+    /// relative standard error a texel's estimate may stop at, `--spp` (and `--direct-spp`,
+    /// `--lookup-spp`) the cap. After each iteration but the last, a gather cluster whose
+    /// texels' root-mean-square relative standard error is within it skips its remaining
+    /// iterations, and so does a texel of the direct pass; decided from their own
+    /// iterations so far (and the tile's, for the direct pass), so the bits do not depend on
+    /// threads, shards or resumes ([`crate::bake::gather`], `stopping`).
+    pub target_error: Option<f32>,
 }
 
 /// The fields in order, as `derive(Debug)` would print them, but `budget` only when it is not
 /// [`Budget::Uniform`], `direct_spp` and `lookup_spp` only when they are set and
-/// `guide_target` only when it is not [`GuideTarget::Radiance`]: a bake without them keeps the
+/// `guide_target` only when it is not [`GuideTarget::Radiance`] and `target_error` only when it
+/// is set: a bake without them keeps the
 /// identity ([`BakeSettings::bake_id`]) and the bench's reference keys it had before they
 /// existed. The destructuring names every field,
 /// so a field added to the settings cannot be left out of the identity unnoticed.
@@ -261,6 +270,7 @@ impl fmt::Debug for BakeSettings {
             direct_spp,
             lookup_spp,
             guide_target,
+            target_error,
         } = self;
         let mut d = f.debug_struct("BakeSettings");
         d.field("spp", spp)
@@ -291,6 +301,9 @@ impl fmt::Debug for BakeSettings {
         }
         if *guide_target != GuideTarget::Radiance {
             d.field("guide_target", guide_target);
+        }
+        if let Some(target_error) = target_error {
+            d.field("target_error", target_error);
         }
         d.finish()
     }
@@ -326,6 +339,7 @@ impl Default for BakeSettings {
             direct_spp: None,
             lookup_spp: None,
             guide_target: GuideTarget::default(),
+            target_error: None,
         }
     }
 }
@@ -390,6 +404,28 @@ impl BakeSettings {
                 )));
             }
             self.check_per_iteration("--lookup-spp", n)?;
+        }
+        if let Some(t) = self.target_error {
+            if !(t > 0.0 && t < 1.0) {
+                return Err(SettingsError(format!(
+                    "--target-error {t}: a relative standard error per texel, above 0 and \
+                     below 1 (0.02 is 2 %)"
+                )));
+            }
+            if self.combine == Combine::Global {
+                return Err(SettingsError(format!(
+                    "--target-error {t}: --combine global weighs every texel's iterations alike, \
+                     which a texel that stopped early did not take; use --combine cluster"
+                )));
+            }
+            if self.iterations < 3 {
+                return Err(SettingsError(format!(
+                    "--target-error {t}: a texel stops after its second iteration at the \
+                     earliest and before its last, so give at least 3 (--iterations {}; 8 stops \
+                     at every doubling of the samples)",
+                    self.iterations
+                )));
+            }
         }
         Ok(())
     }
@@ -834,6 +870,39 @@ mod tests {
             format!("{second:?}").ends_with("guided_passes: Last, guide_target: SecondMoment }")
         );
         assert_ne!(second.bake_id(1), d.bake_id(1));
+        // The stopping rule, set, is another bake too.
+        let stopping = BakeSettings {
+            target_error: Some(0.02),
+            ..second
+        };
+        assert!(
+            format!("{stopping:?}").ends_with("guide_target: SecondMoment, target_error: 0.02 }")
+        );
+        assert_ne!(stopping.bake_id(1), second.bake_id(1));
+    }
+
+    #[test]
+    fn a_target_error_is_a_fraction_with_iterations_to_stop_between() {
+        let with = |target_error: f32, iterations: u32, combine: Combine| {
+            BakeSettings {
+                target_error: Some(target_error),
+                iterations,
+                spp: 1024,
+                combine,
+                ..BakeSettings::default()
+            }
+            .validate()
+            .map_err(|e| e.to_string())
+        };
+        assert_eq!(with(0.02, 8, Combine::Cluster), Ok(()));
+        for bad in [0.0, -0.1, 1.0, f32::NAN, f32::INFINITY] {
+            let e = with(bad, 8, Combine::Cluster).unwrap_err();
+            assert!(e.starts_with(&format!("--target-error {bad}: ")), "{e}");
+        }
+        let e = with(0.02, 2, Combine::Cluster).unwrap_err();
+        assert!(e.contains("at least 3 (--iterations 2"), "{e}");
+        let e = with(0.02, 8, Combine::Global).unwrap_err();
+        assert!(e.contains("--combine global"), "{e}");
     }
 
     #[test]

@@ -57,6 +57,9 @@ pub struct Levers {
     pub lookup_percent: Option<u32>,
     /// `--guide-target` (`+target=`).
     pub guide_target: GuideTarget,
+    /// `--target-error` in thousandths (`+stop=20` is 0.02): the stopping rule, the rung's
+    /// spp its cap; `None`: off.
+    pub stop_permille: Option<u32>,
 }
 
 impl Default for Levers {
@@ -75,6 +78,7 @@ impl Default for Levers {
             direct_percent: None,
             lookup_percent: None,
             guide_target: d.guide_target,
+            stop_permille: None,
         }
     }
 }
@@ -96,6 +100,7 @@ impl Levers {
             direct_percent: None,
             lookup_percent: None,
             guide_target: GuideTarget::Radiance,
+            stop_permille: None,
         }
     }
 
@@ -138,6 +143,9 @@ impl Levers {
         }
         if self.guide_target != d.guide_target {
             s += &format!("+target={}", value_name(&self.guide_target));
+        }
+        if let Some(p) = self.stop_permille {
+            s += &format!("+stop={p}");
         }
         s
     }
@@ -266,6 +274,7 @@ impl Method {
                 }
                 "direct" => levers.direct_percent = Some(number()?),
                 "lookup" => levers.lookup_percent = Some(number()?),
+                "stop" => levers.stop_permille = Some(number()?),
                 "target" => {
                     levers.guide_target = GuideTarget::from_str(value, true)
                         .map_err(|e| format!("{label:?}: {e}"))?;
@@ -342,6 +351,7 @@ impl Method {
             direct_spp,
             lookup_spp,
             guide_target: self.levers.guide_target,
+            target_error: self.levers.stop_permille.map(|p| p as f32 / 1000.0),
             ..Default::default()
         }
     }

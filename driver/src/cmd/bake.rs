@@ -71,6 +71,11 @@ pub struct BakeArgs {
     /// the paper's).
     #[arg(long, value_enum, default_value_t = BakeSettings::default().guide_target)]
     pub guide_target: GuideTarget,
+    /// Stop where the estimate is good enough: a cluster (a texel of the direct pass) skips
+    /// its remaining iterations once its texels' relative standard error is at most this
+    /// (0.02: 2 %); `--spp` is then the cap. Use `--iterations 8` to stop at every doubling.
+    #[arg(long, value_name = "ERROR")]
+    pub target_error: Option<f32>,
     /// How the samples are split over the learning iterations.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
     pub schedule: Schedule,
@@ -200,6 +205,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         direct_spp: args.direct_spp,
         lookup_spp: args.lookup_spp,
         guide_target: args.guide_target,
+        target_error: args.target_error,
         min_split: args.min_split,
         smooth: args.smooth,
         min_gain: args.min_gain,

@@ -76,7 +76,8 @@ pub struct BenchArgs {
     /// (`guiding/combine/rho|-`, optional `+mix=N+schedule=even|doubling+split=N+smooth=N`,
     /// `+passes=last|every+gain=N+transport=series|path+select=…+budget=uniform|balanced|mse|relative`,
     /// `+direct=P` and `+lookup=P` for `--direct-spp` and `--lookup-spp` at P % of the rung's
-    /// spp, or `+before` for every lever as before issue 14);
+    /// spp, `+target=radiance` for `--guide-target`, `+stop=N` for `--target-error` N/1000
+    /// (the rung its cap), or `+before` for every lever as before issue 14);
     /// default every guiding × combine × ρ with the bake's levers. The baseline
     /// (`off/average/-`) is always run, first.
     #[arg(long, value_delimiter = ',')]
