@@ -498,9 +498,19 @@ impl<'w> TileBaker<'w> {
                 .filter(|_| k > 0 && k + 1 < iterations)
             {
                 let n = iterations as usize;
-                let rows = members
-                    .iter()
-                    .map(|&m| &batches[m as usize * n..(m as usize + 1) * n]);
+                // A texel that borrows its direct light holds it besides its samples.
+                let borrowed = world.previous_pass().filter(|_| !*texel_direct);
+                let target = stopping::share_of(target, borrowed.is_some());
+                let rows = members.iter().map(|&m| {
+                    let t = &texels[valid[m as usize] as usize];
+                    let besides = borrowed.map_or(0.0, |p| {
+                        p.direct_luminance_at(t.page, t.pixel.map(u32::from))
+                    });
+                    (
+                        &batches[m as usize * n..(m as usize + 1) * n],
+                        f64::from(besides),
+                    )
+                });
                 if stopping::cluster_converged(rows, k as usize, target) {
                     counters.texel_iterations_stopped +=
                         members.len() as u64 * u64::from(iterations - k - 1);
@@ -566,6 +576,7 @@ impl<'w> TileBaker<'w> {
             let Some(target) = settings.target_error.filter(|_| k > 0 && k + 1 < n) else {
                 continue;
             };
+            let target = stopping::share_of(target, settings.lightmap_borrows_direct());
             let floor = stopping::tile_floor(self.batches.chunks_exact(n), k);
             for (m, row) in self.batches.chunks_exact(n).enumerate() {
                 if live[m] && stopping::texel_converged(row, k, floor, target) {

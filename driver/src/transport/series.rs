@@ -237,6 +237,25 @@ impl PreviousPass {
         self.lookup(prim, b1, b2).total
     }
 
+    /// The luminance of the direct light the previous pass held at texel `pixel` of page
+    /// `page` (its total less its gather-only layer: the direct pass's estimate, which every
+    /// later pass borrows); 0 where no texel was baked there.
+    pub fn direct_luminance_at(&self, page: u32, pixel: [u32; 2]) -> f32 {
+        let Some(size) = self.pages.get(page as usize) else {
+            return 0.0;
+        };
+        let [x, y] = pixel;
+        if x >= size.width || y >= size.height {
+            return 0.0;
+        }
+        let px = self.pixels()[self.offsets[page as usize] + (y * size.width + x) as usize];
+        if px[GENERATION] != 1.0 {
+            return 0.0;
+        }
+        let direct = Vec3::new(px[4] - px[0], px[5] - px[1], px[6] - px[2]);
+        luminance(direct).max(0.0)
+    }
+
     /// Whether triangle `prim`'s texels bake its winding's `front` side (or its back, when
     /// `front` is false): then its total irradiance holds the direct light arriving there.
     pub fn bakes_side(&self, prim: u32, front: bool) -> bool {
@@ -509,6 +528,14 @@ mod tests {
             );
             assert!(b.gathered.is_finite() && b.total.is_finite());
         }
+        // The direct light at a texel: its total less its gather-only layer (pixel (1, 1)
+        // holds 1 and 2); none off the page, none where no texel was baked (the rejected
+        // (0, 0)), none in the memory image, whose layers are the same.
+        assert!((file.direct_luminance_at(0, [1, 1]) - 1.0).abs() < 1e-5);
+        assert_eq!(file.direct_luminance_at(0, [0, 0]), 0.0);
+        assert_eq!(file.direct_luminance_at(0, [9, 9]), 0.0);
+        assert_eq!(file.direct_luminance_at(3, [0, 0]), 0.0);
+        assert_eq!(mem.direct_luminance_at(0, [1, 1]), 0.0);
     }
 
     #[test]
