@@ -511,7 +511,7 @@ impl<'w> TileBaker<'w> {
                         f64::from(besides),
                     )
                 });
-                if stopping::cluster_converged(rows, k as usize, target) {
+                if stopping::converged(rows, k as usize, target) {
                     counters.texel_iterations_stopped +=
                         members.len() as u64 * u64::from(iterations - k - 1);
                     break;
@@ -552,7 +552,8 @@ impl<'w> TileBaker<'w> {
 
     /// The direct pass over the tile's valid texels ([`Self::direct_only`]): each iteration's
     /// samples are next-event estimates alone, in the batch a gather's would fill; with
-    /// `--target-error` a texel stops once its own estimate is within it ([`stopping`]).
+    /// `--target-error` the tile's texels stop together once their estimates are within it
+    /// ([`stopping`]).
     fn bake_direct(&mut self, texels: &[TexelRecord], first_texel: u64) {
         let settings = self.settings;
         let n = settings.iterations as usize;
@@ -565,24 +566,19 @@ impl<'w> TileBaker<'w> {
                 gather_texel(record, first_texel + u64::from(i), frame)
             })
             .collect();
-        let mut live = vec![true; targets.len()];
         for k in 0..n {
             let ctx = IterationCtx::new(self.world, &settings, k as u32, None);
             for (m, t) in targets.iter().enumerate() {
-                if live[m] {
-                    ctx.direct_alone(t, &mut self.batches[m * n + k], &mut self.counters);
-                }
+                ctx.direct_alone(t, &mut self.batches[m * n + k], &mut self.counters);
             }
             let Some(target) = settings.target_error.filter(|_| k > 0 && k + 1 < n) else {
                 continue;
             };
             let target = stopping::share_of(target, settings.lightmap_borrows_direct());
-            let floor = stopping::tile_floor(self.batches.chunks_exact(n), k);
-            for (m, row) in self.batches.chunks_exact(n).enumerate() {
-                if live[m] && stopping::texel_converged(row, k, floor, target) {
-                    live[m] = false;
-                    self.counters.texel_iterations_stopped += (n - k - 1) as u64;
-                }
+            let rows = self.batches.chunks_exact(n).map(|row| (row, 0.0));
+            if stopping::converged(rows, k, target) {
+                self.counters.texel_iterations_stopped += (targets.len() * (n - k - 1)) as u64;
+                break;
             }
         }
     }

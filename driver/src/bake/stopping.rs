@@ -4,30 +4,37 @@
 //! bake can stop, so `--iterations 8` with the doubling schedule stops at every doubling of
 //! the samples.
 //!
-//! **The error a texel has.** After iterations `0..=k`, a texel's samples pooled over them
-//! give the variance of its mean, `σ²/n`, of the luminance. Its *relative* error is that over
-//! `μ² + ε`, with `μ` the texel's value — its mean, plus the direct light a series pass
-//! borrows from the direct pass (its samples are the gathered light alone, its value the
-//! sum) — and `ε` a hundredth of the squared value over its neighbours (the cluster's texels,
-//! or the direct pass's tile): the bench's relative MSE regularises dark texels the same way
-//! (docs/BENCHMARKS.md), so a texel in shadow, whose relative error has no bound, does not
-//! keep its cluster sampling to the cap.
+//! **The error a texel has.** Each iteration draws its samples from its own Cranley–Patterson
+//! rotation of the Sobol points (§2.4): the iterations are independent randomised
+//! quasi-Monte Carlo replicates of the texel's value. The spread of the samples within an
+//! iteration (`σ²/n`) is no measure of such an estimate's error — stratified points err less,
+//! 1.7–2× less on the Cornell box at 1024 spp, so a rule on it sampled about 4× too long —
+//! but the difference between two replicates is: `d = m_k − m_{k−1}` of the last two
+//! iterations' means (`n_{k−1}`, `n_k` samples) has the variance of both, and the mean over
+//! iterations `0..=k` (`N` samples) has about `d² · n_{k−1} n_k / ((n_{k−1} + n_k) N)`
+//! (exact for independent samples, and falling as fast as the points converge). Its
+//! *relative* error is that over `μ² + ε`, with `μ` the texel's value — its mean, plus the
+//! direct light a series pass borrows from the direct pass (its samples are the gathered
+//! light alone, its value the sum) — and `ε` a hundredth of the squared value over its group:
+//! the bench's relative MSE regularises dark texels the same way (docs/BENCHMARKS.md), so a
+//! texel in shadow, whose relative error has no bound, does not keep its group sampling to
+//! the cap.
 //!
-//! **Who stops.** A gather cluster, once the root mean square of its texels' relative errors
-//! is within the target: its texels share the guide and stop together, and the mean over them
-//! (not the worst) makes the bake's error per texel, measured over every texel, the target. A
-//! texel of the direct pass (no clusters, no guide), once its own is within it. Where the
-//! lightmap sums the two (series transport borrowing the direct pass's light), each stops at
-//! `target/√2` ([`share_of`]): their errors add in squares.
+//! **Who stops.** A group of texels, once the mean of their squared relative errors is
+//! within the target's square: a gather cluster (its texels share the guide), or a tile of
+//! the direct pass. One `d` per texel is a noisy estimate; the mean over a group is not, and
+//! the mean (not the worst) makes the bake's error per texel, measured over every texel, the
+//! target. Where the lightmap sums the two (series transport borrowing the direct pass's
+//! light), each stops at `target/√2` ([`share_of`]): their errors add in squares.
 //!
-//! Only the cluster's (or the tile's) own samples decide, so a bake is the same bits on any
-//! thread count, shard split or resume. What a texel's estimate cannot see, it cannot stop
-//! for: a series pass's lookups read the previous pass's noise at every hit, which no texel's
-//! own variance holds (docs/estimator.md, "The stopping rule").
+//! Only the group's own samples decide, so a bake is the same bits on any thread count,
+//! shard split or resume. What a texel's estimate cannot see, it cannot stop for: a series
+//! pass's lookups read the previous pass's noise at every hit, which no texel's own
+//! iterations hold (docs/estimator.md, "The stopping rule").
 
 use guidebake_kernels::estimator::Welford;
 
-/// `ε` over the squared mean of a texel's neighbours (the bench's regulariser).
+/// `ε` over the squared mean of a texel's group (the bench's regulariser).
 const DARK_FLOOR: f64 = 1e-2;
 
 /// The target one estimate of a texel's value stops at, of the bake's `target`: all of it
@@ -42,21 +49,6 @@ pub fn share_of(target: f32, split: bool) -> f32 {
     }
 }
 
-/// The squared relative standard error of the luminance mean of `batches` pooled, over
-/// `(μ + besides)² + floor`; `None` without two samples or a finite value. Samples that are
-/// all the same (all zero, in an unlit tile too) have none.
-fn relative_variance(batches: &[Welford], besides: f64, floor: f64) -> Option<f64> {
-    let mut pooled = Welford::new();
-    batches.iter().for_each(|b| pooled.merge(b));
-    let (var, mean) = (pooled.luminance_variance()?, pooled.mean_luminance()?);
-    if var == 0.0 {
-        return Some(0.0);
-    }
-    let level = mean + besides;
-    let r = var / pooled.count() as f64 / (level * level + floor);
-    r.is_finite().then_some(r)
-}
-
 /// The mean luminance of `batches` pooled (0 without samples).
 fn mean_luminance(batches: &[Welford]) -> f64 {
     let mut pooled = Welford::new();
@@ -67,61 +59,57 @@ fn mean_luminance(batches: &[Welford]) -> f64 {
         .unwrap_or(0.0)
 }
 
-/// Whether a cluster may skip its iterations after `k`: `texels` are its texels' batch rows
-/// (each the texel's iterations, `0..=k` filled) and the light each texel's value holds
-/// besides them (the direct light a series pass borrows from the direct pass, which its
-/// samples do not hold; 0 where they hold it all), and the root mean square of their
-/// relative standard errors is within `target`. A texel without two finite samples counts
-/// as unknown: the cluster goes on.
-pub fn cluster_converged<'b>(
+/// The squared error of the luminance mean over iterations `0..=k` of a texel's `row`, from
+/// the difference of its last two iterations (module docs); `None` where either has no
+/// sample or the value is not finite.
+fn squared_error(row: &[Welford], k: usize) -> Option<f64> {
+    let (a, b) = (&row[k - 1], &row[k]);
+    let (ma, mb) = (a.mean_luminance()?, b.mean_luminance()?);
+    let (na, nb) = (a.count() as f64, b.count() as f64);
+    let total: f64 = row[..=k].iter().map(|w| w.count() as f64).sum();
+    let d = mb - ma;
+    let e = d * d * na * nb / ((na + nb) * total);
+    e.is_finite().then_some(e)
+}
+
+/// Whether a group of texels may skip its iterations after `k` (≥ 1): its
+/// [`relative_error`] is within `target`.
+pub fn converged<'b>(
     texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
     k: usize,
     target: f32,
 ) -> bool {
+    relative_error(texels, k).is_some_and(|e| e <= f64::from(target))
+}
+
+/// The root mean square relative error of a group of texels after iteration `k` (≥ 1):
+/// `texels` are each texel's iterations (`0..=k` filled) and the light its value holds
+/// besides them (the direct light a series pass borrows, which its samples do not hold; else
+/// 0). `None` while a texel's last two iterations are not both sampled; 0 for no texel.
+pub fn relative_error<'b>(
+    texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
+    k: usize,
+) -> Option<f64> {
+    debug_assert!(k >= 1, "a replicate difference needs two iterations");
     let (mut sum, mut n) = (0.0f64, 0usize);
     for (row, besides) in texels.clone() {
-        let m = mean_luminance(&row[..=k]) + besides;
-        sum += m * m;
+        let level = mean_luminance(&row[..=k]) + besides;
+        sum += level * level;
         n += 1;
     }
     if n == 0 {
-        return true;
+        return Some(0.0);
     }
     let floor = DARK_FLOOR * sum / n as f64;
-    let mut squared = 0.0f64;
+    let mut relative = 0.0f64;
     for (row, besides) in texels {
-        match relative_variance(&row[..=k], besides, floor) {
-            Some(r) => squared += r,
-            None => return false,
+        let e = squared_error(row, k)?;
+        if e > 0.0 {
+            let level = mean_luminance(&row[..=k]) + besides;
+            relative += e / (level * level + floor);
         }
     }
-    squared / n as f64 <= f64::from(target) * f64::from(target)
-}
-
-/// The direct pass's stopping floor for a tile: `ε` from its texels' mean luminance over
-/// iterations `0..=k` (`rows`: each texel's iterations).
-pub fn tile_floor<'b>(rows: impl Iterator<Item = &'b [Welford]>, k: usize) -> f64 {
-    let (mut sum, mut n) = (0.0f64, 0usize);
-    for row in rows {
-        let m = mean_luminance(&row[..=k]);
-        sum += m * m;
-        n += 1;
-    }
-    if n == 0 {
-        0.0
-    } else {
-        DARK_FLOOR * sum / n as f64
-    }
-}
-
-/// Whether a texel of the direct pass may skip its iterations after `k`: its relative
-/// standard error over `0..=k`, with the tile's `floor`, is within `target`. A texel whose
-/// every sample so far was zero (in shadow, or facing no light) stops: it has no variance.
-pub fn texel_converged(row: &[Welford], k: usize, floor: f64, target: f32) -> bool {
-    match relative_variance(&row[..=k], 0.0, floor) {
-        Some(r) => r <= f64::from(target) * f64::from(target),
-        None => false,
-    }
+    Some((relative / n as f64).sqrt())
 }
 
 #[cfg(test)]
@@ -129,7 +117,7 @@ mod tests {
     use super::*;
     use guidebake_kernels::testing::Pcg32;
 
-    /// A batch of `n` samples of mean `mean` and standard deviation `sd` (uniform noise).
+    /// A batch of `n` independent samples of mean `mean` and standard deviation `sd`.
     fn batch(rng: &mut Pcg32, n: usize, mean: f32, sd: f32) -> Welford {
         let mut w = Welford::new();
         for _ in 0..n {
@@ -139,74 +127,102 @@ mod tests {
         w
     }
 
-    #[test]
-    fn a_cluster_stops_once_its_root_mean_square_relative_error_is_within_the_target() {
-        // Per-sample relative sd 1: after n samples the relative error is 1/√n (the floor,
-        // a hundredth of μ², shrinks it by √1.01). 64 + 64 samples: 0.088; 0.09 stops,
-        // 0.08 does not; a third batch of 128 (0.062) then does.
-        let mut rng = Pcg32::new(3, 7);
-        let rows: Vec<Vec<Welford>> = (0..16)
+    /// Texels of independent samples (relative sd 1 per sample) in doubling iterations of
+    /// 32, 32, 64, 128 samples, and the last empty.
+    fn texels(rng: &mut Pcg32, count: usize, mean: f32) -> Vec<Vec<Welford>> {
+        (0..count)
             .map(|_| {
-                vec![
-                    batch(&mut rng, 64, 2.0, 2.0),
-                    batch(&mut rng, 64, 2.0, 2.0),
-                    batch(&mut rng, 128, 2.0, 2.0),
-                    Welford::new(),
-                ]
+                [32, 32, 64, 128]
+                    .map(|n| batch(rng, n, mean, mean))
+                    .into_iter()
+                    .chain([Welford::new()])
+                    .collect()
             })
-            .collect();
-        let texels = || rows.iter().map(|r| (r.as_slice(), 0.0));
-        assert!(cluster_converged(texels(), 1, 0.095));
-        assert!(!cluster_converged(texels(), 1, 0.08));
-        assert!(cluster_converged(texels(), 2, 0.08));
-        assert!(!cluster_converged(texels(), 2, 0.05));
+            .collect()
+    }
+
+    #[test]
+    fn the_replicates_difference_measures_the_error_of_independent_samples() {
+        // Independent samples: the relative error of the mean of N samples is 1/√N (the
+        // floor, a hundredth of μ², shrinks it by √1.01): after 64 samples 0.125, after 128
+        // 0.088, after 256 0.0625. Over 400 texels the estimate is within 8 %.
+        let mut rng = Pcg32::new(3, 7);
+        let rows = texels(&mut rng, 400, 2.0);
+        let group = || rows.iter().map(|r| (r.as_slice(), 0.0));
+        for (k, want) in [(1, 0.125), (2, 0.0884), (3, 0.0625)] {
+            let e = relative_error(group(), k).unwrap();
+            let got = e * 1.01f64.sqrt();
+            assert!((got / want - 1.0).abs() < 0.08, "k {k}: {got} for {want}");
+            assert!(converged(group(), k, (e * 1.001) as f32));
+            assert!(!converged(group(), k, (e * 0.999) as f32));
+        }
         // The same samples beside as much light again (the borrowed direct light): half the
         // relative error.
-        let beside = || rows.iter().map(|r| (r.as_slice(), 2.0));
-        assert!(cluster_converged(beside(), 1, 0.05));
-        assert!(!cluster_converged(beside(), 1, 0.04));
+        let alone = relative_error(group(), 3).unwrap();
+        let beside = relative_error(rows.iter().map(|r| (r.as_slice(), 2.0)), 3).unwrap();
+        assert!(
+            (beside / alone - 0.5).abs() < 0.01,
+            "{beside} against {alone}"
+        );
     }
 
     #[test]
-    fn a_dark_texel_is_judged_against_its_neighbours_not_its_own_mean() {
-        // One texel of mean 10⁻⁴ beside bright ones: alone its relative error is ~0.09/10⁻⁴,
-        // against a hundredth of its neighbours' squared mean it is small; one texel without
-        // two samples keeps the cluster going.
-        let mut rng = Pcg32::new(5, 9);
-        let mut rows: Vec<Vec<Welford>> = (0..8)
-            .map(|_| vec![batch(&mut rng, 256, 1.0, 0.5), Welford::new()])
+    fn replicates_that_agree_better_than_their_spread_say_so() {
+        // Stratified samples: each iteration's mean is exact up to 10⁻³ relative, whatever
+        // its samples' spread (a relative sd of 1 per sample: 0.088 after 128 if they were
+        // independent); the rule measures at most 10⁻³.
+        let rows: Vec<Vec<Welford>> = (0..16)
+            .map(|i| {
+                let mut rng = Pcg32::new(i, 1);
+                (0..3)
+                    .map(|j| {
+                        let mut w = Welford::new();
+                        let shift = 1e-3 * (2.0 * rng.next_f32() - 1.0);
+                        for s in 0..64 {
+                            let x = if (s + j) % 2 == 0 { 0.0 } else { 2.0 };
+                            w.push([x + shift; 3]);
+                        }
+                        w
+                    })
+                    .collect()
+            })
             .collect();
-        rows.push(vec![batch(&mut rng, 256, 1e-4, 1e-4), Welford::new()]);
-        assert!(cluster_converged(
-            rows.iter().map(|r| (r.as_slice(), 0.0)),
-            0,
-            0.05
-        ));
-        let floor = tile_floor(rows.iter().map(Vec::as_slice), 0);
-        assert!(texel_converged(&rows[8], 0, floor, 0.01));
-        assert!(!texel_converged(&rows[8], 0, 0.0, 0.01));
-        rows.push(vec![Welford::new(), Welford::new()]);
-        assert!(!cluster_converged(
-            rows.iter().map(|r| (r.as_slice(), 0.0)),
-            0,
-            0.5
-        ));
+        let e = relative_error(rows.iter().map(|r| (r.as_slice(), 0.0)), 1).unwrap();
+        assert!(e <= 1e-3, "{e}");
     }
 
     #[test]
-    fn a_texel_of_zeros_stops_on_a_lit_tile_and_an_unlit_tile_stops() {
-        let mut rng = Pcg32::new(1, 1);
-        let lit = [batch(&mut rng, 64, 3.0, 1.0)];
-        let dark = [batch(&mut rng, 64, 0.0, 0.0)];
-        let floor = tile_floor([&lit[..], &dark[..]].into_iter(), 0);
-        assert!(floor > 0.0);
-        assert!(texel_converged(&dark, 0, floor, 0.01));
-        // A tile with no light at all: zeros have no error to wait for.
-        let floor = tile_floor([&dark[..]].into_iter(), 0);
-        assert_eq!(floor, 0.0);
-        assert!(texel_converged(&dark, 0, floor, 0.01));
-        // One sample is no estimate of the error.
-        let one = [batch(&mut rng, 1, 3.0, 1.0)];
-        assert!(!texel_converged(&one, 0, floor, 0.5));
+    fn a_dark_texel_is_judged_against_its_group_and_an_unsampled_one_waits() {
+        // Texels of mean 10⁻⁴ beside as many of mean 1: alone their relative error is
+        // ~0.0625, against a hundredth of the group's squared value next to none.
+        let mut rng = Pcg32::new(5, 9);
+        let bright = texels(&mut rng, 200, 1.0);
+        let dark = texels(&mut rng, 200, 1e-4);
+        let error = |rows: &[&Vec<Welford>]| {
+            relative_error(rows.iter().map(|r| (r.as_slice(), 0.0)), 3).unwrap()
+        };
+        let (b, d) = (
+            error(&bright.iter().collect::<Vec<_>>()),
+            error(&dark.iter().collect::<Vec<_>>()),
+        );
+        let both = error(&bright.iter().chain(&dark).collect::<Vec<_>>());
+        assert!((d / 0.0625 - 1.0).abs() < 0.1, "{d}");
+        // Half the texels bright, the other half next to no error: b/√2 (the floor is
+        // then half of a bright texel's hundredth).
+        assert!(
+            (both / (b / 2f64.sqrt()) - 1.0).abs() < 0.01,
+            "{both} against {b}"
+        );
+        // A texel whose last iteration took no sample waits; so does its group.
+        let mut rows: Vec<&Vec<Welford>> = bright.iter().collect();
+        let unsampled = vec![Welford::new(); 5];
+        rows.push(&unsampled);
+        assert!(relative_error(rows.iter().map(|r| (r.as_slice(), 0.0)), 3).is_none());
+        assert!(!converged(rows.iter().map(|r| (r.as_slice(), 0.0)), 3, 0.5));
+        // A group of zeros (an unlit tile) has no error to wait for.
+        let mut zeros = Welford::new();
+        zeros.push([0.0; 3]);
+        let unlit = [zeros, zeros];
+        assert!(converged([(&unlit[..], 0.0)].into_iter(), 1, 0.01));
     }
 }
