@@ -49,7 +49,7 @@ use super::directional::{self, Directional, ShL1, ShSample, ShSums};
 use super::grid::{self as grid_guide, GridGuide};
 use super::pipeline::{TileBaked, TileBuffer};
 use super::settings::{BakeSettings, Combine, GuideTarget, Guiding};
-use super::stopping;
+use super::stopping::{self, Plan};
 use super::world::{SurfaceHit, World};
 use crate::output::journal::TileRecord;
 use crate::output::result_file::{
@@ -457,12 +457,16 @@ impl<'w> TileBaker<'w> {
         // Once the guide a cluster sampled shows too little gain (`--min-gain`), the cluster
         // gathers with cosine points for the rest of its iterations and stops learning.
         let mut stopped = false;
+        // The stopping rule's last iteration, cut to the samples it still needs (`--target-error`).
+        let mut cut: Option<u32> = None;
         for k in 0..iterations {
             learning.clear();
             if stopped {
                 counters.iterations_unguided_no_gain += 1;
             }
-            let learns = !stopped && k + 1 < iterations && settings.guiding != Guiding::Off;
+            let learns =
+                !stopped && cut.is_none() && k + 1 < iterations && settings.guiding != Guiding::Off;
+            let nominal = cut.unwrap_or_else(|| settings.samples_in_iteration(k));
             for &m in members {
                 let i = valid[m as usize];
                 let t = gather_texel(&texels[i as usize], first_texel + u64::from(i), frame);
@@ -485,13 +489,19 @@ impl<'w> TileBaker<'w> {
                     texel_direct: *texel_direct,
                     ..IterationCtx::new(world, settings, k, learned)
                 };
-                let n = budget::scaled(settings.samples_in_iteration(k), factors[m as usize]);
+                let n = budget::scaled(nominal, factors[m as usize]);
                 match settings.guiding {
                     Guiding::Naive => ctx.gather_naive(&t, n, &mut sinks, counters),
                     Guiding::Off | Guiding::Coherent | Guiding::Grid => {
-                        ctx.gather_packets(&t, &orders[&n], rotated, &mut sinks, counters);
+                        let order = orders.entry(n).or_insert_with(|| presorted(n));
+                        ctx.gather_packets(&t, order, rotated, &mut sinks, counters);
                     }
                 }
+            }
+            if cut.is_some() {
+                counters.texel_iterations_stopped +=
+                    members.len() as u64 * u64::from(iterations - k - 1);
+                break;
             }
             if let Some(target) = settings
                 .target_error
@@ -500,7 +510,6 @@ impl<'w> TileBaker<'w> {
                 let n = iterations as usize;
                 // A texel that borrows its direct light holds it besides its samples.
                 let borrowed = world.previous_pass().filter(|_| !*texel_direct);
-                let target = stopping::share_of(target, borrowed.is_some());
                 let rows = members.iter().map(|&m| {
                     let t = &texels[valid[m as usize] as usize];
                     let besides = borrowed.map_or(0.0, |p| {
@@ -511,10 +520,16 @@ impl<'w> TileBaker<'w> {
                         f64::from(besides),
                     )
                 });
-                if stopping::converged(rows, k as usize, target) {
-                    counters.texel_iterations_stopped +=
-                        members.len() as u64 * u64::from(iterations - k - 1);
-                    break;
+                let taken = (0..=k).map(|j| settings.samples_in_iteration(j)).sum();
+                let next = settings.samples_in_iteration(k + 1);
+                match stopping::plan(rows, k as usize, target, taken, next) {
+                    Plan::Stop => {
+                        counters.texel_iterations_stopped +=
+                            members.len() as u64 * u64::from(iterations - k - 1);
+                        break;
+                    }
+                    Plan::Last(n) => cut = Some(n),
+                    Plan::Go => {}
                 }
             }
             if learns {
@@ -566,19 +581,34 @@ impl<'w> TileBaker<'w> {
                 gather_texel(record, first_texel + u64::from(i), frame)
             })
             .collect();
+        let mut cut: Option<u32> = None;
         for k in 0..n {
             let ctx = IterationCtx::new(self.world, &settings, k as u32, None);
+            let samples = cut.unwrap_or_else(|| settings.direct_samples_in_iteration(k as u32));
             for (m, t) in targets.iter().enumerate() {
-                ctx.direct_alone(t, &mut self.batches[m * n + k], &mut self.counters);
+                let batch = &mut self.batches[m * n + k];
+                ctx.direct_alone(t, samples, batch, &mut self.counters);
             }
-            let Some(target) = settings.target_error.filter(|_| k > 0 && k + 1 < n) else {
-                continue;
+            let stop = match settings.target_error.filter(|_| k > 0 && k + 1 < n) {
+                _ if cut.is_some() => Plan::Stop,
+                None => Plan::Go,
+                Some(target) => {
+                    let target = stopping::share_of(target, settings.lightmap_borrows_direct());
+                    let rows = self.batches.chunks_exact(n).map(|row| (row, 0.0));
+                    let taken = (0..=k as u32)
+                        .map(|j| settings.direct_samples_in_iteration(j))
+                        .sum();
+                    let next = settings.direct_samples_in_iteration(k as u32 + 1);
+                    stopping::plan(rows, k, target, taken, next)
+                }
             };
-            let target = stopping::share_of(target, settings.lightmap_borrows_direct());
-            let rows = self.batches.chunks_exact(n).map(|row| (row, 0.0));
-            if stopping::converged(rows, k, target) {
-                self.counters.texel_iterations_stopped += (targets.len() * (n - k - 1)) as u64;
-                break;
+            match stop {
+                Plan::Stop => {
+                    self.counters.texel_iterations_stopped += (targets.len() * (n - k - 1)) as u64;
+                    break;
+                }
+                Plan::Last(samples) => cut = Some(samples),
+                Plan::Go => {}
             }
         }
     }
@@ -1160,9 +1190,15 @@ impl<'a> IterationCtx<'a> {
     /// the origins and light samples the gather's packet `j` would use, sample `i` of the
     /// iteration taking the light sample of Sobol point `i`; `--direct-spp` of them over the
     /// iterations when set ([`BakeSettings::direct_samples_in_iteration`]).
-    fn direct_alone(&self, t: &GatherTexel, batch: &mut Welford, counters: &mut GatherCounters) {
+    fn direct_alone(
+        &self,
+        t: &GatherTexel,
+        samples: u32,
+        batch: &mut Welford,
+        counters: &mut GatherCounters,
+    ) {
         let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
-        for j in 0..self.settings.direct_samples_in_iteration(self.k) / LANES as u32 {
+        for j in 0..samples / LANES as u32 {
             let samples: [u32; LANES] = core::array::from_fn(|lane| j * LANES as u32 + lane as u32);
             let lu = rotate_x8(sobol_2d_x8(u32x8::new(samples)), light_rot);
             let (lx, ly) = (to_unit_x8(lu[0]).to_array(), to_unit_x8(lu[1]).to_array());

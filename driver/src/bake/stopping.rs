@@ -25,7 +25,13 @@
 //! the direct pass. One `d` per texel is a noisy estimate; the mean over a group is not, and
 //! the mean (not the worst) makes the bake's error per texel, measured over every texel, the
 //! target. Where the lightmap sums the two (series transport borrowing the direct pass's
-//! light), each stops at `target/√2` ([`share_of`]): their errors add in squares.
+//! light), their errors add in squares: the direct pass stops at `target/√2` relative to its
+//! own light ([`share_of`]), and a gather cluster at what is left of `target²` once each
+//! texel's borrowed light has erred that much ([`plan`]).
+//!
+//! **Where it stops.** At the end of an iteration, or within the next one: where the next
+//! iteration's samples would overshoot, the group takes only the samples its error says it
+//! still needs (the squared error falling as `1/samples`) in it and stops after it.
 //!
 //! Only the group's own samples decide, so a bake is the same bits on any thread count,
 //! shard split or resume. What a texel's estimate cannot see, it cannot stop for: a series
@@ -37,10 +43,10 @@ use guidebake_kernels::estimator::Welford;
 /// `ε` over the squared mean of a texel's group (the bench's regulariser).
 const DARK_FLOOR: f64 = 1e-2;
 
-/// The target one estimate of a texel's value stops at, of the bake's `target`: all of it
-/// where the estimate is the whole value, `target/√2` where the value is the sum of two
-/// estimates that stop apart (`split`: a series pass's gathered light and the direct pass's
-/// direct light, each within `target/√2` relative to the value, sum to within `target`).
+/// The target the direct pass stops at, of the bake's `target`: `target/√2` where the
+/// lightmap borrows its light (`split`: a series texel's value is the direct pass's estimate
+/// plus its gathered light, which [`plan`] lets err what is left of `target`²), else all of
+/// it.
 pub fn share_of(target: f32, split: bool) -> f32 {
     if split {
         target * core::f32::consts::FRAC_1_SQRT_2
@@ -72,14 +78,48 @@ fn squared_error(row: &[Welford], k: usize) -> Option<f64> {
     e.is_finite().then_some(e)
 }
 
-/// Whether a group of texels may skip its iterations after `k` (≥ 1): its
-/// [`relative_error`] is within `target`.
-pub fn converged<'b>(
+/// What a group of texels does after an iteration ([`plan`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Plan {
+    /// Its estimate is within the target: skip the remaining iterations.
+    Stop,
+    /// The next iteration's samples are more than it needs: take this many (whole packets of
+    /// 8) in it, and stop after it.
+    Last(u32),
+    /// Go on with the next iteration as scheduled.
+    Go,
+}
+
+/// The stopping rule after iteration `k` (≥ 1) of a group that has taken `taken` samples a
+/// texel and is to take `next` in iteration `k + 1`: [`Plan::Stop`] once the mean of its
+/// texels' squared [`relative_error`]s is within `target`², less what the direct light they
+/// borrow may err (each texel's borrowed light `D` at most `target/√2` relative to itself,
+/// the direct pass's share: `target²·D²/2` over the texel's `T² + ε`); else, the squared
+/// error falling as `1/samples`, [`Plan::Last`] with the samples that bring it to the target
+/// where `next` would take more, so a bake does not overshoot the target by up to a whole
+/// doubling; else [`Plan::Go`].
+pub fn plan<'b>(
     texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
     k: usize,
     target: f32,
-) -> bool {
-    relative_error(texels, k).is_some_and(|e| e <= f64::from(target))
+    taken: u32,
+    next: u32,
+) -> Plan {
+    let t2 = f64::from(target) * f64::from(target);
+    let Some((own, borrowed)) = group_errors(texels, k) else {
+        return Plan::Go;
+    };
+    let allowed = t2 * (1.0 - 0.5 * borrowed);
+    if own <= allowed {
+        return Plan::Stop;
+    }
+    let needed = f64::from(taken) * (own / allowed - 1.0);
+    if needed < f64::from(next) {
+        let packets = (needed / 8.0).ceil().max(1.0) as u32;
+        Plan::Last((packets * 8).min(next))
+    } else {
+        Plan::Go
+    }
 }
 
 /// The root mean square relative error of a group of texels after iteration `k` (≥ 1):
@@ -90,6 +130,15 @@ pub fn relative_error<'b>(
     texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
     k: usize,
 ) -> Option<f64> {
+    group_errors(texels, k).map(|(own, _)| own.sqrt())
+}
+
+/// Over a group: the mean of the texels' squared errors and the mean of their borrowed
+/// light's squares, each over the texel's `T² + ε` (`T` its value, `ε` the group's floor).
+fn group_errors<'b>(
+    texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
+    k: usize,
+) -> Option<(f64, f64)> {
     debug_assert!(k >= 1, "a replicate difference needs two iterations");
     let (mut sum, mut n) = (0.0f64, 0usize);
     for (row, besides) in texels.clone() {
@@ -98,23 +147,34 @@ pub fn relative_error<'b>(
         n += 1;
     }
     if n == 0 {
-        return Some(0.0);
+        return Some((0.0, 0.0));
     }
     let floor = DARK_FLOOR * sum / n as f64;
-    let mut relative = 0.0f64;
+    let (mut own, mut borrowed) = (0.0f64, 0.0f64);
     for (row, besides) in texels {
         let e = squared_error(row, k)?;
-        if e > 0.0 {
-            let level = mean_luminance(&row[..=k]) + besides;
-            relative += e / (level * level + floor);
+        let level = mean_luminance(&row[..=k]) + besides;
+        let scale = level * level + floor;
+        if scale > 0.0 {
+            own += e / scale;
+            borrowed += besides * besides / scale;
         }
     }
-    Some((relative / n as f64).sqrt())
+    Some((own / n as f64, borrowed / n as f64))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Whether the group stops after iteration `k`.
+    fn converged<'b>(
+        texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
+        k: usize,
+        target: f32,
+    ) -> bool {
+        plan(texels, k, target, 1, 0) == Plan::Stop
+    }
     use guidebake_kernels::testing::Pcg32;
 
     /// A batch of `n` independent samples of mean `mean` and standard deviation `sd`.
@@ -164,6 +224,30 @@ mod tests {
             (beside / alone - 0.5).abs() < 0.01,
             "{beside} against {alone}"
         );
+        // ... and that light may err target/√2 of its half of the value: the samples get
+        // target²·(1 − ¼·½) of the square, so a group stops at beside/√(7/8).
+        let stops = beside / (7.0f64 / 8.0).sqrt();
+        let group = || rows.iter().map(|r| (r.as_slice(), 2.0));
+        assert!(converged(group(), 3, (stops * 1.002) as f32));
+        assert!(!converged(group(), 3, (stops * 0.998) as f32));
+    }
+
+    #[test]
+    fn a_group_takes_only_the_samples_it_still_needs() {
+        // After 256 samples a relative error e: the target e/√1.5 needs 384 in all, so 128
+        // more, where the next iteration would take 512 (rounded up to whole packets).
+        let mut rng = Pcg32::new(11, 3);
+        let rows = texels(&mut rng, 100, 1.0);
+        let group = || rows.iter().map(|r| (r.as_slice(), 0.0));
+        let e = relative_error(group(), 3).unwrap();
+        let plan_for = |target: f64, next| plan(group(), 3, target as f32, 256, next);
+        assert_eq!(plan_for(e / 1.5f64.sqrt(), 512), Plan::Last(128));
+        // Where the next iteration does not overshoot, it is taken as scheduled.
+        assert_eq!(plan_for(e / 1.5f64.sqrt(), 120), Plan::Go);
+        assert_eq!(plan_for(e / 3.0, 512), Plan::Go);
+        assert_eq!(plan_for(e * 1.001, 512), Plan::Stop);
+        // At least a packet.
+        assert_eq!(plan_for(e * 0.9999, 512), Plan::Last(8));
     }
 
     #[test]
