@@ -109,8 +109,8 @@ pub struct GatherCounters {
     pub iterations_unguided_no_gain: u64,
     /// Guided iterations that sampled a learned guide.
     pub iterations_guided: u64,
-    /// Texel-iterations the stopping rule skipped (`--target-error`): each iteration a
-    /// stopped cluster's texel, or a stopped texel of the direct pass, did not take.
+    /// Texel-iterations the stopping rule skipped (`--target-error`): each iteration a texel
+    /// of a stopped cluster, or of a stopped tile of the direct pass, did not take.
     pub texel_iterations_stopped: u64,
     /// Nanoseconds spent building guides (summed over workers: CPU time, not wall time).
     pub guide_build_ns: u64,
@@ -1188,8 +1188,9 @@ impl<'a> IterationCtx<'a> {
     /// The direct pass's samples of this iteration at texel `t` into `batch`: next-event
     /// estimates alone, weighing 1 (no gather ray leaves the texel to weigh them against), from
     /// the origins and light samples the gather's packet `j` would use, sample `i` of the
-    /// iteration taking the light sample of Sobol point `i`; `--direct-spp` of them over the
-    /// iterations when set ([`BakeSettings::direct_samples_in_iteration`]).
+    /// iteration taking the light sample of Sobol point `i`; `samples` of them: the
+    /// iteration's share of `--direct-spp` ([`BakeSettings::direct_samples_in_iteration`]), or
+    /// fewer where the stopping rule cut the iteration short ([`stopping::plan`]).
     fn direct_alone(
         &self,
         t: &GatherTexel,

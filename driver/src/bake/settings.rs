@@ -230,12 +230,12 @@ pub struct BakeSettings {
     /// What the learned guides learn (`--guide-target`).
     pub guide_target: GuideTarget,
     /// The stopping rule (`--target-error`; `None`: every texel takes every iteration): the
-    /// relative standard error a texel's estimate may stop at, `--spp` (and `--direct-spp`,
-    /// `--lookup-spp`) the cap. After each iteration but the last, a gather cluster whose
-    /// texels' root-mean-square relative standard error is within it skips its remaining
-    /// iterations, and so does a texel of the direct pass; decided from their own
-    /// iterations so far (and the tile's, for the direct pass), so the bits do not depend on
-    /// threads, shards or resumes ([`crate::bake::gather`], `stopping`).
+    /// relative error a texel's estimate may stop at, `--spp` (and `--direct-spp`,
+    /// `--lookup-spp`) the cap. After each iteration from the second to the last but one, a
+    /// gather cluster (a tile of the direct pass) whose texels' error, measured between its
+    /// iterations, is within it skips its remaining iterations, or takes only the samples it
+    /// still needs in the next one; decided from its own samples, so the bits do not depend
+    /// on threads, shards or resumes ([`crate::bake::stopping`]).
     pub target_error: Option<f32>,
 }
 

@@ -71,9 +71,10 @@ pub struct BakeArgs {
     /// the paper's).
     #[arg(long, value_enum, default_value_t = BakeSettings::default().guide_target)]
     pub guide_target: GuideTarget,
-    /// Stop where the estimate is good enough: a cluster (a texel of the direct pass) skips
-    /// its remaining iterations once its texels' relative standard error is at most this
-    /// (0.02: 2 %); `--spp` is then the cap. Use `--iterations 8` to stop at every doubling.
+    /// Stop where the estimate is good enough: a cluster (a tile of the direct pass) stops
+    /// once its texels' relative error, measured between its iterations, is at most this
+    /// (0.02: 2 %); `--spp` is then the cap. Use `--iterations 8` to stop at every doubling
+    /// (docs/estimator.md, "The stopping rule").
     #[arg(long, value_name = "ERROR")]
     pub target_error: Option<f32>,
     /// How the samples are split over the learning iterations.
