@@ -595,6 +595,19 @@ fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
     scene
 }
 
+/// The closed box of [`emissive_box`] (albedo 0.5) lit by one glowing wall (Le 1.5, its first
+/// two triangles), the others grey: the texels close to the light are the noisy ones.
+fn box_lit_by_one_wall(texels: &Path) -> Scene {
+    let mut scene = emissive_box(texels, 0.5, 1.5);
+    let mut grey = scene.materials[0].clone();
+    grey.emission = Vec3::ZERO;
+    scene.materials.push(grey);
+    for t in &mut scene.triangles[2..] {
+        t.material = 1;
+    }
+    scene
+}
+
 /// Channel `name` of the single-page lightmap at `path`, row by row.
 fn channel(path: &Path, name: &str) -> Vec<f32> {
     read_channel(path, name).unwrap()
@@ -641,13 +654,7 @@ fn closed_box_irradiance(le: f32, albedo: f32, reflections: u32) -> f64 {
 fn a_spatial_budget_moves_samples_and_bakes_the_same_bits_however_it_is_split() {
     let dir = tempfile::tempdir().unwrap();
     let texels = dir.path().join("box.texels");
-    let mut scene = emissive_box(&texels, 0.5, 1.5);
-    let mut grey = scene.materials[0].clone();
-    grey.emission = Vec3::ZERO;
-    scene.materials.push(grey);
-    for t in &mut scene.triangles[2..] {
-        t.material = 1;
-    }
+    let scene = box_lit_by_one_wall(&texels);
     let job = |out: &str, threads: usize, budget: Budget| {
         let settings = BakeSettings {
             spp: 128,
@@ -691,13 +698,7 @@ fn a_spatial_budget_moves_samples_and_bakes_the_same_bits_however_it_is_split() 
 fn the_stopping_rule_skips_converged_work_and_bakes_the_same_bits_however_it_is_split() {
     let dir = tempfile::tempdir().unwrap();
     let texels = dir.path().join("box.texels");
-    let mut scene = emissive_box(&texels, 0.5, 1.5);
-    let mut grey = scene.materials[0].clone();
-    grey.emission = Vec3::ZERO;
-    scene.materials.push(grey);
-    for t in &mut scene.triangles[2..] {
-        t.material = 1;
-    }
+    let scene = box_lit_by_one_wall(&texels);
     let (spp, iterations) = (512, 6);
     let job = |out: &str, threads: usize, target_error: Option<f32>| {
         let settings = BakeSettings {
