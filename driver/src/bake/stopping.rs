@@ -92,7 +92,7 @@ pub enum Plan {
 
 /// The stopping rule after iteration `k` (≥ 1) of a group that has taken `taken` samples a
 /// texel and is to take `next` in iteration `k + 1`: [`Plan::Stop`] once the mean of its
-/// texels' squared [`relative_error`]s is within `target`², less what the direct light they
+/// texels' squared relative errors (module docs) is within `target`², less what the direct light they
 /// borrow may err (each texel's borrowed light `D` at most `target/√2` relative to itself,
 /// the direct pass's share: `target²·D²/2` over the texel's `T² + ε`); else, the squared
 /// error falling as `1/samples`, [`Plan::Last`] with the samples that bring it to the target
@@ -126,7 +126,8 @@ pub fn plan<'b>(
 /// `texels` are each texel's iterations (`0..=k` filled) and the light its value holds
 /// besides them (the direct light a series pass borrows, which its samples do not hold; else
 /// 0). `None` while a texel's last two iterations are not both sampled; 0 for no texel.
-pub fn relative_error<'b>(
+#[cfg(test)]
+fn relative_error<'b>(
     texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
     k: usize,
 ) -> Option<f64> {
