@@ -92,12 +92,12 @@ pub enum Plan {
 
 /// The stopping rule after iteration `k` (≥ 1) of a group that has taken `taken` samples a
 /// texel and is to take `next` in iteration `k + 1`: [`Plan::Stop`] once the mean of its
-/// texels' squared relative errors (module docs) is within `target`², less what the direct light they
-/// borrow may err (each texel's borrowed light `D` at most `target/√2` relative to itself,
-/// the direct pass's share: `target²·D²/2` over the texel's `T² + ε`); else, the squared
-/// error falling as `1/samples`, [`Plan::Last`] with the samples that bring it to the target
-/// where `next` would take more, so a bake does not overshoot the target by up to a whole
-/// doubling; else [`Plan::Go`].
+/// texels' squared relative errors (module docs) is within `target`², less what the direct
+/// light they borrow may err (each texel's borrowed light `D` at most `target/√2` relative
+/// to itself, the direct pass's share: `target²·D²/2` over the texel's `T² + ε`); else, the
+/// squared error falling as `1/samples`, [`Plan::Last`] with the samples that bring it to
+/// the target where `next` would take more, so a bake does not overshoot the target by up
+/// to a whole doubling; else [`Plan::Go`].
 pub fn plan<'b>(
     texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
     k: usize,
