@@ -3,9 +3,9 @@
 and method, the measured relative error (the square root of the bench's relative MSE, every
 valid texel against the path reference) beside the method's --target-error, the gather rays
 per texel per gather pass (the cap without the rule), the shadow rays per texel, the CPU
-time, and the uniform unguided baseline's relative MSE at that CPU time over the bake's (> 1:
-the rule's bake is ahead at equal time; the baseline's two rungs fitted by a power law in
-the CPU time, `*` where read off outside them).
+time, and the uniform unguided baseline's relative MSE and MSE at that CPU time over the
+bake's (> 1: the rule's bake is ahead at equal time; the baseline's two rungs fitted by a
+power law in the CPU time, `*` where read off outside them).
 
     docs/bench/stop/calibration.py OUT [BOUNCES]     (BOUNCES: the bake's gather passes, 3)
 """
@@ -19,15 +19,16 @@ out = Path(sys.argv[1])
 bounces = int(sys.argv[2]) if len(sys.argv) > 2 else 3
 print("| scene | cap (spp) | method | target | measured √relMSE | measured ÷ target "
       "| gather rays / texel / pass | shadow rays / texel | CPU s | rel. bias "
-      "| baseline ÷ bake, relMSE at equal CPU time |")
-print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+      "| baseline ÷ bake at equal CPU time: relMSE | MSE |")
+print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 for runs in sorted(out.glob("*/runs.csv")):
     scene = runs.parent.name
     rows = list(csv.DictReader(runs.open()))
-    base = sorted((float(r["cpu_s"]), float(r["rel_mse"])) for r in rows
-                  if r["method"] == "off/average/-")
-    (t0, e0), (t1, e1) = base[0], base[-1]
+    base = sorted((float(r["cpu_s"]), float(r["rel_mse"]), float(r["rmse"]) ** 2)
+                  for r in rows if r["method"] == "off/average/-")
+    (t0, e0, m0), (t1, e1, m1) = base[0], base[-1]
     slope = math.log(e1 / e0) / math.log(t1 / t0)
+    mslope = math.log(m1 / m0) / math.log(t1 / t0)
     for r in rows:
         m = re.search(r"\+stop=(\d+)", r["method"])
         target = int(m.group(1)) / 1000 if m else None
@@ -36,8 +37,9 @@ for runs in sorted(out.glob("*/runs.csv")):
         ratio = f"{err / target:.2f}" if target else ""
         t = max(float(r["cpu_s"]), 1e-3)
         at = e0 * (t / t0) ** slope / float(r["rel_mse"])
+        mat = m0 * (t / t0) ** mslope / float(r["rmse"]) ** 2
         outside = "*" if not t0 <= t <= t1 else ""
         print(f"| {scene} | {r['spp']} | `{r['method']}` | {target or ''} | {err:.4f} | {ratio} "
               f"| {int(r['gather_rays']) / texels / bounces:.0f} "
               f"| {int(r['shadow_rays']) / texels:.0f} | {float(r['cpu_s']):.1f} "
-              f"| {100 * float(r['rel_bias']):+.2f} % | {at:.2f}{outside} |")
+              f"| {100 * float(r['rel_bias']):+.2f} % | {at:.2f}{outside} | {mat:.2f}{outside} |")
