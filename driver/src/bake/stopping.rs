@@ -55,7 +55,8 @@ pub fn share_of(target: f32, split: bool) -> f32 {
     }
 }
 
-/// The mean luminance of `batches` pooled (0 without samples).
+/// The mean luminance of `batches` pooled, from the batches' own luminance channel as
+/// [`squared_error`] reads it (0 without samples).
 fn mean_luminance(batches: &[Welford]) -> f64 {
     let mut pooled = Welford::new();
     batches.iter().for_each(|b| pooled.merge(b));
@@ -99,7 +100,7 @@ pub enum Plan {
 /// the target where `next` would take more, so a bake does not overshoot the target by up
 /// to a whole doubling; else [`Plan::Go`].
 pub fn plan<'b>(
-    texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
+    texels: impl Iterator<Item = (&'b [Welford], f64)>,
     k: usize,
     target: f32,
     taken: u32,
@@ -127,41 +128,38 @@ pub fn plan<'b>(
 /// besides them (the direct light a series pass borrows, which its samples do not hold; else
 /// 0). `None` while a texel's last two iterations are not both sampled; 0 for no texel.
 #[cfg(test)]
-fn relative_error<'b>(
-    texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
-    k: usize,
-) -> Option<f64> {
+fn relative_error<'b>(texels: impl Iterator<Item = (&'b [Welford], f64)>, k: usize) -> Option<f64> {
     group_errors(texels, k).map(|(own, _)| own.sqrt())
 }
 
 /// Over a group: the mean of the texels' squared errors and the mean of their borrowed
 /// light's squares, each over the texel's `T² + ε` (`T` its value, `ε` the group's floor).
 fn group_errors<'b>(
-    texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
+    texels: impl Iterator<Item = (&'b [Welford], f64)>,
     k: usize,
 ) -> Option<(f64, f64)> {
     debug_assert!(k >= 1, "a replicate difference needs two iterations");
-    let (mut sum, mut n) = (0.0f64, 0usize);
-    for (row, besides) in texels.clone() {
-        let level = mean_luminance(&row[..=k]) + besides;
-        sum += level * level;
-        n += 1;
-    }
-    if n == 0 {
+    // Each texel's value, borrowed light and squared error, in one pass over its batches.
+    let texels: Vec<(f64, f64, f64)> = texels
+        .map(|(row, besides)| {
+            let level = mean_luminance(&row[..=k]) + besides;
+            Some((level, besides, squared_error(row, k)?))
+        })
+        .collect::<Option<_>>()?;
+    if texels.is_empty() {
         return Some((0.0, 0.0));
     }
-    let floor = DARK_FLOOR * sum / n as f64;
+    let n = texels.len() as f64;
+    let floor = DARK_FLOOR * texels.iter().map(|(l, _, _)| l * l).sum::<f64>() / n;
     let (mut own, mut borrowed) = (0.0f64, 0.0f64);
-    for (row, besides) in texels {
-        let e = squared_error(row, k)?;
-        let level = mean_luminance(&row[..=k]) + besides;
+    for (level, besides, e) in texels {
         let scale = level * level + floor;
         if scale > 0.0 {
             own += e / scale;
             borrowed += besides * besides / scale;
         }
     }
-    Some((own / n as f64, borrowed / n as f64))
+    Some((own / n, borrowed / n))
 }
 
 #[cfg(test)]
@@ -170,7 +168,7 @@ mod tests {
 
     /// Whether the group stops after iteration `k`.
     fn converged<'b>(
-        texels: impl Iterator<Item = (&'b [Welford], f64)> + Clone,
+        texels: impl Iterator<Item = (&'b [Welford], f64)>,
         k: usize,
         target: f32,
     ) -> bool {
