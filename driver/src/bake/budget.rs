@@ -8,7 +8,10 @@
 //! variance σ² = (relative standard error × mean)² × samples, summed over the two, and the
 //! mean μ. Each 8×8-texel block of a page gets the root mean square over its baked texels of
 //! the allocation's `a` — σ ([`Budget::Mse`]), σ/√(μ·μ̄) ([`Budget::Balanced`]) or
-//! σ/√(μ² + 10⁻²·μ̄²) ([`Budget::Relative`]), μ̄ the world's mean — and its texels take
+//! σ/√(μ² + 10⁻²·μ̄²) ([`Budget::Relative`]), or σ·√(1/(μ² + 10⁻²·μ̄²) + λ/μ̄²)
+//! ([`Budget::Bounded`]: the least relative error whose predicted squared error stays within
+//! the uniform budget's, λ the smallest that keeps it there), μ̄ the world's mean — and its
+//! texels take
 //! `a_block / ā` times the iteration's samples, ā the texel-weighted mean over the world's
 //! blocks, clamped to [¼, 4] and normalised again, so the pass spends about `--spp` samples
 //! a texel in all (each count rounded to a step of 2^¼ and to whole packets, [`scaled`]). The blocks are computed once, before the pass, from the merged previous
@@ -28,6 +31,9 @@ pub const MIN_FACTOR: f32 = 0.25;
 pub const MAX_FACTOR: f32 = 4.0;
 /// The relative allocation's floor on μ², as a fraction of μ̄² (the bench's relative MSE's ε).
 const RELATIVE_EPSILON: f64 = 1e-2;
+/// [`Budget::Bounded`] tries λ from 2^-20 to 2^20 of 1/μ̄² (in half-powers): past either end
+/// the factors are the relative or the MSE allocation's.
+const BOUNDED_DOUBLINGS: i32 = 20;
 
 /// Each page's block factors.
 #[derive(Clone, Debug, PartialEq)]
@@ -91,10 +97,9 @@ impl SpatialBudget {
             return Ok(None);
         }
         let columns = |w: u32| w.div_ceil(BLOCK);
-        // Per block: Σ a², texels.
-        let mut sums: Vec<Vec<(f64, u32)>> = sizes
+        let mut sums: Vec<Vec<BlockSums>> = sizes
             .iter()
-            .map(|&(w, h)| vec![(0.0, 0); (columns(w) * h.div_ceil(BLOCK)) as usize])
+            .map(|&(w, h)| vec![BlockSums::default(); (columns(w) * h.div_ceil(BLOCK)) as usize])
             .collect();
         for_each(&mut |m| {
             let Some(page) = sums.get_mut(m.page as usize).filter(|_| usable(&m)) else {
@@ -103,41 +108,31 @@ impl SpatialBudget {
             let i = (m.pixel[1] / BLOCK * columns(sizes[m.page as usize].0) + m.pixel[0] / BLOCK)
                 as usize;
             if let Some(block) = page.get_mut(i) {
-                block.0 += allocation(budget, m.variance.max(0.0), m.mean.max(0.0), world_mean);
-                block.1 += 1;
+                let (variance, mean) = (m.variance.max(0.0), m.mean.max(0.0));
+                let own = if budget == Budget::Bounded {
+                    Budget::Relative
+                } else {
+                    budget
+                };
+                block.a2 += allocation(own, variance, mean, world_mean);
+                block.variance += variance;
+                block.texels += 1;
             }
         })?;
-        let a = |&(s, n): &(f64, u32)| {
-            if n > 0 {
-                (s / f64::from(n)).sqrt()
-            } else {
-                0.0
-            }
+        let factors = if budget == Budget::Bounded {
+            bounded(&sums, world_mean)
+        } else {
+            block_factors(&sums, |b| b.a2)
         };
-        let weighted = |f: &dyn Fn(&(f64, u32)) -> f64| -> f64 {
-            let (mut total, mut texels) = (0.0, 0u64);
-            for block in sums.iter().flatten() {
-                total += f(block) * f64::from(block.1);
-                texels += u64::from(block.1);
-            }
-            total / texels.max(1) as f64
-        };
-        let mean_a = weighted(&a);
-        if !(mean_a.is_finite() && mean_a > 0.0) {
+        let Some(factors) = factors else {
             return Ok(None);
-        }
-        let clamp = |f: f64| f.clamp(f64::from(MIN_FACTOR), f64::from(MAX_FACTOR));
-        let first = |b: &(f64, u32)| clamp(a(b) / mean_a);
-        let renormalise = weighted(&first);
-        let pages = sums
-            .iter()
+        };
+        let pages = factors
+            .into_iter()
             .zip(sizes)
-            .map(|(blocks, &(w, _))| Blocks {
+            .map(|(factors, &(w, _))| Blocks {
                 columns: columns(w),
-                factors: blocks
-                    .iter()
-                    .map(|b| clamp(first(b) / renormalise) as f32)
-                    .collect(),
+                factors,
             })
             .collect();
         Ok(Some(Self { pages }))
@@ -194,6 +189,78 @@ impl SpatialBudget {
     }
 }
 
+/// One block's sums over its measured texels.
+#[derive(Clone, Copy, Debug, Default)]
+struct BlockSums {
+    /// Σ of the allocation's `a²` (the relative one's for [`Budget::Bounded`]).
+    a2: f64,
+    /// Σ of the per-sample variances σ².
+    variance: f64,
+    texels: u32,
+}
+
+/// Each page's block factors for the per-texel `a²` sums `a2` hands: a block's root mean
+/// square `a` over the texel-weighted mean ā, clamped to [¼, 4] and normalised again; `None`
+/// where no block has any `a`.
+fn block_factors(sums: &[Vec<BlockSums>], a2: impl Fn(&BlockSums) -> f64) -> Option<Vec<Vec<f32>>> {
+    let a = |b: &BlockSums| {
+        if b.texels > 0 {
+            (a2(b) / f64::from(b.texels)).sqrt()
+        } else {
+            0.0
+        }
+    };
+    let weighted = |f: &dyn Fn(&BlockSums) -> f64| -> f64 {
+        let (mut total, mut texels) = (0.0, 0u64);
+        for block in sums.iter().flatten() {
+            total += f(block) * f64::from(block.texels);
+            texels += u64::from(block.texels);
+        }
+        total / texels.max(1) as f64
+    };
+    let mean_a = weighted(&a);
+    if !(mean_a.is_finite() && mean_a > 0.0) {
+        return None;
+    }
+    let clamp = |f: f64| f.clamp(f64::from(MIN_FACTOR), f64::from(MAX_FACTOR));
+    let first = |b: &BlockSums| clamp(a(b) / mean_a);
+    let renormalise = weighted(&first);
+    Some(
+        sums.iter()
+            .map(|blocks| {
+                blocks
+                    .iter()
+                    .map(|b| clamp(first(b) / renormalise) as f32)
+                    .collect()
+            })
+            .collect(),
+    )
+}
+
+/// The [`Budget::Bounded`] factors: n ∝ σ·√(1/(μ² + ε) + λ/μ̄²) — the least relative MSE
+/// for the samples once the squared error Σσ²/n is bounded by the uniform budget's (the
+/// Lagrangian of both sums) — with the smallest λ of a grid of half-powers of 2 whose
+/// predicted squared error is within the uniform budget's; `None` (uniform) if none is.
+fn bounded(sums: &[Vec<BlockSums>], world_mean: f64) -> Option<Vec<Vec<f32>>> {
+    let uniform: f64 = sums.iter().flatten().map(|b| b.variance).sum();
+    let predicted = |factors: &[Vec<f32>]| -> f64 {
+        sums.iter()
+            .flatten()
+            .zip(factors.iter().flatten())
+            .map(|(b, &f)| b.variance / f64::from(f))
+            .sum()
+    };
+    let scale = 1.0 / (world_mean * world_mean);
+    std::iter::once(0.0)
+        .chain(
+            (-2 * BOUNDED_DOUBLINGS..=2 * BOUNDED_DOUBLINGS).map(|k| (f64::from(k) * 0.5).exp2()),
+        )
+        .find_map(|lambda| {
+            let factors = block_factors(sums, |b| lambda.mul_add(b.variance * scale, b.a2))?;
+            (predicted(&factors) <= uniform).then_some(factors)
+        })
+}
+
 /// A texel result's per-sample luminance variance and mean luminance (of its plain average,
 /// which its relative standard error is of).
 fn per_sample(r: &TexelResult) -> (f64, f64) {
@@ -211,7 +278,9 @@ fn allocation(budget: Budget, variance: f64, mean: f64, world_mean: f64) -> f64 
         Budget::Balanced => {
             variance / (mean.max(RELATIVE_EPSILON.sqrt() * world_mean) * world_mean)
         }
-        Budget::Relative => variance / (mean * mean + RELATIVE_EPSILON * world_mean * world_mean),
+        Budget::Relative | Budget::Bounded => {
+            variance / (mean * mean + RELATIVE_EPSILON * world_mean * world_mean)
+        }
     }
 }
 
@@ -265,7 +334,12 @@ mod tests {
 
     #[test]
     fn noisier_blocks_get_more_samples_and_the_total_stays() {
-        for budget in [Budget::Mse, Budget::Balanced, Budget::Relative] {
+        for budget in [
+            Budget::Mse,
+            Budget::Balanced,
+            Budget::Relative,
+            Budget::Bounded,
+        ] {
             let b = two_blocks(budget);
             let (left, right) = (b.factor(0, [3, 3]), b.factor(0, [12, 7]));
             // a = 4 and 1, ā = 2.5: 1.6 and 0.4, which average 1.
@@ -292,6 +366,53 @@ mod tests {
         assert!((ratio(Budget::Mse) - 4.0).abs() < 1e-5);
         assert!((ratio(Budget::Balanced) - 2.0).abs() < 1e-5);
         assert!((ratio(Budget::Relative) - (17.0f32 / 16.0625).sqrt()).abs() < 1e-5);
+    }
+
+    #[test]
+    fn the_bounded_allocation_keeps_the_squared_error_within_the_uniform_budgets() {
+        // Three blocks (μ̄ = 3): bright of relative noise 1, bright and quiet, dim of relative
+        // noise 2. The relative allocation takes samples from both bright blocks to the dim
+        // one and raises Σσ²/f above the uniform 21; taking them from the quiet one alone
+        // keeps it within.
+        let texels = [
+            texel(0, 0, 16.0, 4.0),
+            texel(8, 0, 1.0, 4.0),
+            texel(16, 0, 4.0, 1.0),
+        ];
+        let epsilon = RELATIVE_EPSILON * 3.0 * 3.0;
+        let a = texels.map(|t| t.variance / (t.mean * t.mean + epsilon));
+        let predicted = |budget| {
+            let b = of(budget, &[(24, 8)], &texels).unwrap();
+            let f = [0, 8, 16].map(|x| f64::from(b.factor(0, [x, 0])));
+            let mse: f64 = (0..3).map(|i| texels[i].variance / f[i]).sum();
+            let relative: f64 = (0..3).map(|i| a[i] / f[i]).sum();
+            (mse, relative)
+        };
+        let (relative_mse, least_relative) = predicted(Budget::Relative);
+        let (mse, relative) = predicted(Budget::Bounded);
+        assert!(
+            relative_mse > 21.0,
+            "the relative allocation alone: {relative_mse}"
+        );
+        assert!(
+            mse <= 21.0 && mse > 20.0,
+            "within the uniform MSE, and close: {mse}"
+        );
+        let uniform: f64 = a.iter().sum();
+        assert!(
+            relative < 0.9 * uniform,
+            "{relative} against uniform {uniform}"
+        );
+        assert!(
+            relative > least_relative,
+            "{relative} against {least_relative}"
+        );
+        // Where the relative allocation keeps within the uniform MSE it is the bounded one.
+        let same_mean = [texel(0, 0, 16.0, 1.0), texel(8, 0, 1.0, 1.0)];
+        assert_eq!(
+            of(Budget::Bounded, &[(16, 8)], &same_mean),
+            of(Budget::Relative, &[(16, 8)], &same_mean)
+        );
     }
 
     #[test]

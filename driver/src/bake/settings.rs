@@ -101,12 +101,12 @@ pub enum Schedule {
 
 /// How the last pass of a series bake spends its samples over the texels (`--budget`, module
 /// [`super::budget`]): every texel the same, or by the error the previous passes measured.
-/// Uniform by default: no allocation wins by both relative MSE and MSE on every scene
-/// (docs/estimator.md, "The spatial budget").
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+/// [`Budget::Bounded`] by default for a guided bake: less relative MSE at equal time on every
+/// scene and rung measured, the MSE the uniform budget's ([`Budget::default_for`];
+/// docs/estimator.md, "The spatial budget").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum Budget {
     /// `--spp` samples at every texel.
-    #[default]
     Uniform,
     /// n ∝ σ / √(μ·μ̄): between the two below.
     Balanced,
@@ -114,6 +114,23 @@ pub enum Budget {
     Mse,
     /// n ∝ σ / √(μ² + ε), ε = 10⁻²·μ̄²: least relative squared error.
     Relative,
+    /// n ∝ σ·√(1/(μ² + ε) + λ/μ̄²): least relative squared error whose predicted squared error
+    /// (MSE) is no more than the uniform budget's, λ the smallest that keeps it there.
+    Bounded,
+}
+
+impl Budget {
+    /// The budget a bake gets unless it asks for one: [`Budget::Bounded`] for a guided bake;
+    /// [`Budget::Uniform`] for an unguided one — the plain Monte Carlo bake guiding is
+    /// measured against — and for one with a `--target-error`, whose stopping rule spends the
+    /// samples by each cluster's own error within the `--spp` cap.
+    pub fn default_for(guiding: Guiding, target_error: Option<f32>) -> Budget {
+        if guiding == Guiding::Off || target_error.is_some() {
+            Budget::Uniform
+        } else {
+            Budget::Bounded
+        }
+    }
 }
 
 /// What a cluster's guide learns from its records (`--guide-target`, docs/guide.md,
@@ -335,7 +352,7 @@ impl Default for BakeSettings {
             emitter_selection: EmitterSelection::default(),
             directional: Directional::None,
             guided_passes: GuidedPasses::default(),
-            budget: Budget::default(),
+            budget: Budget::default_for(Guiding::Coherent, None),
             direct_spp: None,
             lookup_spp: None,
             guide_target: GuideTarget::default(),
@@ -844,10 +861,21 @@ mod tests {
     }
 
     #[test]
+    fn a_guided_bake_gets_the_bounded_budget_unless_it_stops_by_its_error() {
+        for guiding in [Guiding::Naive, Guiding::Coherent, Guiding::Grid] {
+            assert_eq!(Budget::default_for(guiding, None), Budget::Bounded);
+            assert_eq!(Budget::default_for(guiding, Some(0.02)), Budget::Uniform);
+        }
+        assert_eq!(Budget::default_for(Guiding::Off, None), Budget::Uniform);
+        assert_eq!(BakeSettings::default().budget, Budget::Bounded);
+    }
+
+    #[test]
     fn a_uniform_budget_and_the_radiance_target_keep_the_identity_bakes_had_before_them() {
         // The guide's target of the bakes before it: their identity and the bench's keys.
         let d = BakeSettings {
             guide_target: GuideTarget::Radiance,
+            budget: Budget::Uniform,
             ..BakeSettings::default()
         };
         assert_eq!(
@@ -864,12 +892,26 @@ mod tests {
         assert!(format!("{balanced:?}").ends_with("guided_passes: Last, budget: Balanced }"));
         assert_ne!(balanced.bake_id(1), d.bake_id(1));
         // The default learns the second moment: another bake than the radiance target's.
-        let second = BakeSettings::default();
-        assert_eq!(second.guide_target, GuideTarget::SecondMoment);
+        let second = BakeSettings {
+            budget: Budget::Uniform,
+            ..BakeSettings::default()
+        };
+        assert_eq!(
+            BakeSettings::default().guide_target,
+            GuideTarget::SecondMoment
+        );
         assert!(
             format!("{second:?}").ends_with("guided_passes: Last, guide_target: SecondMoment }")
         );
         assert_ne!(second.bake_id(1), d.bake_id(1));
+        // And spends its last pass's samples by the bounded budget: another bake again.
+        let bounded = BakeSettings::default();
+        assert_eq!(bounded.budget, Budget::Bounded);
+        assert!(
+            format!("{bounded:?}")
+                .ends_with("guided_passes: Last, budget: Bounded, guide_target: SecondMoment }")
+        );
+        assert_ne!(bounded.bake_id(1), second.bake_id(1));
         // The stopping rule, set, is another bake too.
         let stopping = BakeSettings {
             target_error: Some(0.02),

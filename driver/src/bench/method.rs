@@ -47,8 +47,9 @@ pub struct Levers {
     /// `--emitter-selection`, where the method sets its own (else the ladder's, `guidebake
     /// bench --emitter-selection`): so one run compares emitter selections at equal time.
     pub selection: Option<EmitterSelection>,
-    /// `--budget`.
-    pub budget: Budget,
+    /// `--budget`; `None`: the bake's default for the method's guiding
+    /// ([`Budget::default_for`]: the unguided baseline stays uniform).
+    pub budget: Option<Budget>,
     /// `--direct-spp` as a percentage of the rung's `--spp` (`+direct=P`), for series
     /// transport; `None`: unset, the lightmap estimates its direct light itself.
     pub direct_percent: Option<u32>,
@@ -74,7 +75,7 @@ impl Default for Levers {
             min_gain: d.min_gain,
             transport: None,
             selection: None,
-            budget: d.budget,
+            budget: None,
             direct_percent: None,
             lookup_percent: None,
             guide_target: d.guide_target,
@@ -96,7 +97,7 @@ impl Levers {
             min_gain: 0,
             transport: None,
             selection: None,
-            budget: Budget::Uniform,
+            budget: Some(Budget::Uniform),
             direct_percent: None,
             lookup_percent: None,
             guide_target: GuideTarget::Radiance,
@@ -132,8 +133,8 @@ impl Levers {
         if let Some(e) = self.selection {
             s += &format!("+select={}", value_name(&e));
         }
-        if self.budget != d.budget {
-            s += &format!("+budget={}", value_name(&self.budget));
+        if let Some(b) = self.budget {
+            s += &format!("+budget={}", value_name(&b));
         }
         if let Some(p) = self.direct_percent {
             s += &format!("+direct={p}");
@@ -270,7 +271,7 @@ impl Method {
                 }
                 "budget" => {
                     levers.budget =
-                        Budget::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
+                        Some(Budget::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?);
                 }
                 "direct" => levers.direct_percent = Some(number()?),
                 "lookup" => levers.lookup_percent = Some(number()?),
@@ -331,6 +332,7 @@ impl Method {
             percent(self.levers.direct_percent),
             percent(self.levers.lookup_percent),
         );
+        let target_error = self.levers.stop_permille.map(|p| p as f32 / 1000.0);
         BakeSettings {
             spp,
             iterations,
@@ -347,11 +349,14 @@ impl Method {
             guided_passes: self.levers.guided_passes,
             min_gain: self.levers.min_gain,
             emitter_selection: self.levers.selection.unwrap_or_default(),
-            budget: self.levers.budget,
+            budget: self
+                .levers
+                .budget
+                .unwrap_or(Budget::default_for(self.guiding, target_error)),
             direct_spp,
             lookup_spp,
             guide_target: self.levers.guide_target,
-            target_error: self.levers.stop_permille.map(|p| p as f32 / 1000.0),
+            target_error,
             ..Default::default()
         }
     }
@@ -414,9 +419,31 @@ mod tests {
         );
         assert!(Method::parse("coherent/cluster/rho+transport=light").is_err());
         let m = Method::parse("coherent/cluster/rho+budget=balanced").unwrap();
-        assert_eq!(m.levers.budget, Budget::Balanced);
+        assert_eq!(m.levers.budget, Some(Budget::Balanced));
         assert_eq!(m.label(), "coherent/cluster/rho+budget=balanced");
         assert!(Method::parse("coherent/cluster/rho+budget=most").is_err());
+        // Without the lever: the bake's default for the method's guiding; the baseline (and
+        // so every reference) stays the uniform unguided bake.
+        let budget = |label: &str| {
+            Method::parse(label)
+                .unwrap()
+                .settings(256, 4, Transport::Series, 3, 1)
+                .budget
+        };
+        assert_eq!(budget("coherent/cluster/rho"), Budget::Bounded);
+        assert_eq!(budget("coherent/cluster/rho+stop=20"), Budget::Uniform);
+        assert_eq!(budget("off/average/-"), Budget::Uniform);
+        assert_eq!(
+            Method::baseline()
+                .settings(256, 4, Transport::Series, 3, 1)
+                .budget,
+            Budget::Uniform
+        );
+        assert_eq!(Method::baseline().label(), "off/average/-");
+        assert_eq!(
+            budget("coherent/cluster/rho+budget=uniform"),
+            Budget::Uniform
+        );
         let m = Method::parse("coherent/cluster/rho+target=radiance").unwrap();
         assert_eq!(m.label(), "coherent/cluster/rho+target=radiance");
         assert_eq!(

@@ -51,11 +51,13 @@ pub struct BakeArgs {
     #[arg(long, value_enum, default_value_t = BakeSettings::default().guided_passes)]
     pub guided_passes: GuidedPasses,
     /// How the last pass of a series bake of 2 or more bounces spreads its samples over the
-    /// texels: `uniform` (`--spp` everywhere, the default), or by the error the previous passes
-    /// measured, per 8×8-texel block (¼ to 4 times `--spp`, about `--spp` in all): `mse`
-    /// (n ∝ σ), `relative` (n ∝ σ/√(μ² + ε)), `balanced` (n ∝ σ/√(μ·μ̄)).
-    #[arg(long, value_enum, default_value_t = BakeSettings::default().budget)]
-    pub budget: Budget,
+    /// texels: `uniform` (`--spp` everywhere), or by the error the previous passes measured,
+    /// per 8×8-texel block (¼ to 4 times `--spp`, about `--spp` in all): `bounded` (the least
+    /// relative error whose predicted squared error stays the uniform budget's), `mse`
+    /// (n ∝ σ), `relative` (n ∝ σ/√(μ² + ε)), `balanced` (n ∝ σ/√(μ·μ̄)). Default: `bounded`;
+    /// `uniform` with `--guiding off` or `--target-error`.
+    #[arg(long, value_enum)]
+    pub budget: Option<Budget>,
     /// Next-event samples per texel of a series bake's direct pass (default: `--spp`), whose
     /// estimate the lightmap takes as its direct light: its last pass gathers the indirect
     /// light alone. With `--directional sh-l1` or `--combine global` the last pass estimates
@@ -202,7 +204,9 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         mix: args.mix,
         schedule: args.schedule,
         guided_passes: args.guided_passes,
-        budget: args.budget,
+        budget: args
+            .budget
+            .unwrap_or(Budget::default_for(args.guiding, args.target_error)),
         direct_spp: args.direct_spp,
         lookup_spp: args.lookup_spp,
         guide_target: args.guide_target,

@@ -74,7 +74,7 @@ pub struct BenchArgs {
     pub overhead_spp: Option<u32>,
     /// Methods of the ladder, comma-separated labels as the tables print them
     /// (`guiding/combine/rho|-`, optional `+mix=N+schedule=even|doubling+split=N+smooth=N`,
-    /// `+passes=last|every+gain=N+transport=series|path+select=…+budget=uniform|balanced|mse|relative`,
+    /// `+passes=last|every+gain=N+transport=series|path+select=…+budget=uniform|bounded|balanced|mse|relative`,
     /// `+direct=P` and `+lookup=P` for `--direct-spp` and `--lookup-spp` at P % of the rung's
     /// spp, `+target=radiance` for `--guide-target`, `+stop=N` for `--target-error` N/1000
     /// (the rung its cap), or `+before` for every lever as before issue 14);
