@@ -3,14 +3,15 @@
 (docs/bench/guide-target/run.sh OUT): per scene and sample count, the CPU time ratio and the
 other method's error over the default's, alone and divided by the time ratio (> 1: the default
 is ahead at equal time), by relative MSE and MSE, and each method's relative bias; means over
-the seeds.   compare.py OUT"""
+the seeds. Other methods of the runs in place of those two: compare.py OUT METHOD...
+   compare.py OUT [METHOD...]"""
 import glob
 import importlib.util
 import os
 import sys
 
 DEFAULT = "coherent/cluster/rho"
-OTHERS = ["coherent/cluster/rho+target=radiance", "off/average/-"]
+OTHERS = sys.argv[2:] or ["coherent/cluster/rho+target=radiance", "off/average/-"]
 
 
 def load_table():
