@@ -235,7 +235,8 @@ pub struct BakeSettings {
     /// Which series passes sample a learned guide (`--guided-passes`).
     pub guided_passes: GuidedPasses,
     /// How the last pass of a series bake of 2 or more bounces spreads its samples over the
-    /// texels (`--budget`).
+    /// texels (`--budget`). The default settings' is the guided bake's, [`Budget::Bounded`];
+    /// [`Budget::default_for`] is what the command line picks for other guiding.
     pub budget: Budget,
     /// Next-event samples per texel of series transport's direct pass (`--direct-spp`;
     /// `None`: `--spp`), whose estimate the lightmap takes as its texels' direct light

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use crate::bake::finish::FinishOptions;
 use crate::bake::run::BakeJob;
-use crate::bake::settings::{BakeSettings, Guiding};
+use crate::bake::settings::{BakeSettings, Budget, Guiding};
 use crate::bake::shard::Shard;
 use crate::demo::{DEMO_TEXELS_PER_METRE, ajar_room, demo_camera};
 use crate::prepare::{Layout, PrepareOptions, Resolution, prepare};
@@ -71,6 +71,8 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
             settings: BakeSettings {
                 spp: args.spp,
                 guiding,
+                // As `bake --guiding off` would: the baseline spends --spp at every texel.
+                budget: Budget::default_for(guiding, None),
                 ..Default::default()
             },
             threads,
