@@ -648,8 +648,9 @@ fn closed_box_irradiance(le: f32, albedo: f32, reflections: u32) -> f64 {
 
 /// The spatial budget (`--budget`): the last pass's texels take ¼–4× the uniform samples by
 /// the error the previous passes measured (in a closed box lit by one glowing wall, the
-/// texels close to it are the noisy ones), about `--spp` in all; the lightmap keeps the
-/// uniform bake's mean and is the same bits on one or two threads and sharded pass by pass.
+/// texels close to it are the noisy ones), about `--spp` in all, and the direct pass's later
+/// iterations by its tiles' earlier ones; the lightmap keeps the uniform bake's mean and is
+/// the same bits on one or two threads and sharded pass by pass.
 #[test]
 fn a_spatial_budget_moves_samples_and_bakes_the_same_bits_however_it_is_split() {
     let dir = tempfile::tempdir().unwrap();

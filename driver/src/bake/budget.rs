@@ -1,5 +1,7 @@
 //! The spatial budget (`--budget`): how many gather samples each texel of the last pass of a
-//! series bake gets, from the error the previous passes measured there. Paper §2.5 weighs a texel's iterations
+//! series bake gets, from the error the previous passes measured there — and how many
+//! next-event samples the direct pass's later iterations take, from the error its tile's
+//! earlier iterations measured ([`tile_factors`]). Paper §2.5 weighs a texel's iterations
 //! by their variance; this spends the samples themselves by it, as production bakers spend
 //! them where the error is (docs/estimator.md, "The spatial budget").
 //!
@@ -187,6 +189,35 @@ impl SpatialBudget {
             Ok(())
         })
     }
+}
+
+/// The direct pass's budget within one tile (module docs of [`super::gather`]'s direct pass:
+/// the later iterations by the earlier ones): per texel of `measured`, in its order, the
+/// factor of its 8×8-texel block by `budget`, normalised over the tile's texels alone, so a
+/// tile spends about its uniform samples and decides from nothing but its own; `None` for
+/// [`Budget::Uniform`] or where nothing lit was measured.
+pub fn tile_factors(budget: Budget, measured: &[Measured]) -> Option<Vec<f32>> {
+    let mut sizes: Vec<(u32, u32)> = Vec::new();
+    for m in measured {
+        let page = m.page as usize;
+        if sizes.len() <= page {
+            sizes.resize(page + 1, (1, 1));
+        }
+        let size = &mut sizes[page];
+        *size = (size.0.max(m.pixel[0] + 1), size.1.max(m.pixel[1] + 1));
+    }
+    let each = |visit: &mut dyn FnMut(Measured)| {
+        measured.iter().copied().for_each(visit);
+        Ok::<(), std::convert::Infallible>(())
+    };
+    let Ok(factors) = SpatialBudget::from_measured(budget, &sizes, each);
+    let factors = factors?;
+    Some(
+        measured
+            .iter()
+            .map(|m| factors.factor(m.page, m.pixel))
+            .collect(),
+    )
 }
 
 /// One block's sums over its measured texels.
@@ -413,6 +444,38 @@ mod tests {
             of(Budget::Bounded, &[(16, 8)], &same_mean),
             of(Budget::Relative, &[(16, 8)], &same_mean)
         );
+    }
+
+    #[test]
+    fn a_tiles_factors_are_its_own_blocks_normalised_over_its_texels() {
+        // A tile of 8 texels on page 1, four in a block 16× as noisy as the other four's,
+        // listed out of order: the noisy block's texels get 1.6, the quiet one's 0.4, in the
+        // order given, whatever else lies on the page.
+        let tile: Vec<Measured> = [
+            (9, 1),
+            (17, 0),
+            (8, 0),
+            (16, 1),
+            (9, 0),
+            (17, 1),
+            (8, 1),
+            (16, 0),
+        ]
+        .into_iter()
+        .map(|(x, y)| Measured {
+            page: 1,
+            ..texel(x, y, if x < 16 { 16.0 } else { 1.0 }, 1.0)
+        })
+        .collect();
+        let factors = tile_factors(Budget::Mse, &tile).unwrap();
+        for (m, f) in tile.iter().zip(&factors) {
+            let want = if m.pixel[0] < 16 { 1.6 } else { 0.4 };
+            assert!((f - want).abs() < 1e-6, "{m:?}: {f}");
+        }
+        assert!(tile_factors(Budget::Uniform, &tile).is_none());
+        let dark: Vec<Measured> = tile.iter().map(|m| Measured { mean: 0.0, ..*m }).collect();
+        assert!(tile_factors(Budget::Bounded, &dark).is_none());
+        assert!(tile_factors(Budget::Bounded, &[]).is_none());
     }
 
     #[test]

@@ -48,7 +48,7 @@ use super::budget;
 use super::directional::{self, Directional, ShL1, ShSample, ShSums};
 use super::grid::{self as grid_guide, GridGuide};
 use super::pipeline::{TileBaked, TileBuffer};
-use super::settings::{BakeSettings, Combine, GuideTarget, Guiding};
+use super::settings::{BakeSettings, Budget, Combine, GuideTarget, Guiding};
 use super::stopping::{self, Plan};
 use super::world::{SurfaceHit, World};
 use crate::output::journal::TileRecord;
@@ -582,12 +582,23 @@ impl<'w> TileBaker<'w> {
             })
             .collect();
         let mut cut: Option<u32> = None;
+        // The direct budget: the later half of the iterations by the earlier half's error.
+        let pilot = (settings.budget != Budget::Uniform && settings.target_error.is_none())
+            .then_some(n / 2)
+            .filter(|&p| p > 0);
+        let mut factors: Option<Vec<f32>> = None;
         for k in 0..n {
             let ctx = IterationCtx::new(self.world, &settings, k as u32, None);
             let samples = cut.unwrap_or_else(|| settings.direct_samples_in_iteration(k as u32));
             for (m, t) in targets.iter().enumerate() {
                 let batch = &mut self.batches[m * n + k];
-                ctx.direct_alone(t, samples, batch, &mut self.counters);
+                let own = factors
+                    .as_ref()
+                    .map_or(samples, |f| budget::scaled(samples, f[m]));
+                ctx.direct_alone(t, own, batch, &mut self.counters);
+            }
+            if pilot == Some(k + 1) {
+                factors = self.direct_budget(texels, k + 1);
             }
             let stop = match settings.target_error.filter(|_| k > 0 && k + 1 < n) {
                 _ if cut.is_some() => Plan::Stop,
@@ -611,6 +622,32 @@ impl<'w> TileBaker<'w> {
                 Plan::Go => {}
             }
         }
+    }
+
+    /// The direct pass's factors for this tile's valid texels from their first `iterations`
+    /// iterations (each texel's samples pooled: its per-sample variance and mean luminance),
+    /// by the bake's `--budget` normalised over the tile ([`budget::tile_factors`]).
+    fn direct_budget(&self, texels: &[TexelRecord], iterations: usize) -> Option<Vec<f32>> {
+        let n = self.settings.iterations as usize;
+        let measured: Vec<budget::Measured> = self
+            .valid
+            .iter()
+            .enumerate()
+            .map(|(m, &i)| {
+                let record = &texels[i as usize];
+                let mut pooled = Welford::new();
+                for batch in &self.batches[m * n..m * n + iterations] {
+                    pooled.merge(batch);
+                }
+                budget::Measured {
+                    page: record.page,
+                    pixel: record.pixel.map(u32::from),
+                    variance: pooled.luminance_variance().unwrap_or(0.0),
+                    mean: pooled.mean_luminance().unwrap_or(0.0),
+                }
+            })
+            .collect();
+        budget::tile_factors(self.settings.budget, &measured)
     }
 
     /// Combines every valid texel's iterations and fills the tile's results and ρ sums.

@@ -100,7 +100,9 @@ pub enum Schedule {
 }
 
 /// How the last pass of a series bake spends its samples over the texels (`--budget`, module
-/// [`super::budget`]): every texel the same, or by the error the previous passes measured.
+/// [`super::budget`]): every texel the same, or by the error the previous passes measured;
+/// and the direct pass its later iterations' samples, by the error each tile's earlier ones
+/// measured ([`super::budget::tile_factors`]).
 /// [`Budget::Bounded`] by default for a guided bake: less relative MSE at equal time on every
 /// scene and rung measured, the MSE the uniform budget's ([`Budget::default_for`];
 /// docs/estimator.md, "The spatial budget").

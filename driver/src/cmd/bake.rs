@@ -54,8 +54,9 @@ pub struct BakeArgs {
     /// texels: `uniform` (`--spp` everywhere), or by the error the previous passes measured,
     /// per 8×8-texel block (¼ to 4 times `--spp`, about `--spp` in all): `bounded` (the least
     /// relative error whose predicted squared error stays the uniform budget's), `mse`
-    /// (n ∝ σ), `relative` (n ∝ σ/√(μ² + ε)), `balanced` (n ∝ σ/√(μ·μ̄)). Default: `bounded`;
-    /// `uniform` with `--guiding off` or `--target-error`.
+    /// (n ∝ σ), `relative` (n ∝ σ/√(μ² + ε)), `balanced` (n ∝ σ/√(μ·μ̄)). The direct pass
+    /// spends the later half of its iterations the same way, by each tile's earlier half.
+    /// Default: `bounded`; `uniform` with `--guiding off` or `--target-error`.
     #[arg(long, value_enum)]
     pub budget: Option<Budget>,
     /// Next-event samples per texel of a series bake's direct pass (default: `--spp`), whose
