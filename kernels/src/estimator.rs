@@ -294,7 +294,7 @@ impl TexelEstimate {
 }
 
 /// All batches of a texel merged: the texel's pooled statistics.
-fn pooled(batches: &[Welford]) -> Welford {
+pub fn pooled(batches: &[Welford]) -> Welford {
     let mut all = Welford::new();
     for b in batches {
         all.merge(b);

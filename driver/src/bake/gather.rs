@@ -28,7 +28,7 @@ use glam::Vec3;
 use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
 use guidebake_kernels::estimator::{
     CombinationWeights, GraybillDeal, PlainAverage, TexelEstimate, Weighted, Welford,
-    combine_weighted, luminance_f32, plain_average,
+    combine_weighted, luminance_f32, plain_average, pooled,
 };
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::mapping::{
@@ -635,10 +635,7 @@ impl<'w> TileBaker<'w> {
             .enumerate()
             .map(|(m, &i)| {
                 let record = &texels[i as usize];
-                let mut pooled = Welford::new();
-                for batch in &self.batches[m * n..m * n + iterations] {
-                    pooled.merge(batch);
-                }
+                let pooled = pooled(&self.batches[m * n..m * n + iterations]);
                 budget::Measured {
                     page: record.page,
                     pixel: record.pixel.map(u32::from),

@@ -38,7 +38,7 @@
 //! pass's lookups read the previous pass's noise at every hit, which no texel's own
 //! iterations hold (docs/estimator.md, "The stopping rule").
 
-use guidebake_kernels::estimator::Welford;
+use guidebake_kernels::estimator::{Welford, pooled};
 
 /// `ε` over the squared mean of a texel's group (the bench's regulariser).
 const DARK_FLOOR: f64 = 1e-2;
@@ -58,9 +58,7 @@ pub fn share_of(target: f32, split: bool) -> f32 {
 /// The mean luminance of `batches` pooled, from the batches' own luminance channel as
 /// [`squared_error`] reads it (0 without samples).
 fn mean_luminance(batches: &[Welford]) -> f64 {
-    let mut pooled = Welford::new();
-    batches.iter().for_each(|b| pooled.merge(b));
-    pooled
+    pooled(batches)
         .mean_luminance()
         .filter(|m| m.is_finite())
         .unwrap_or(0.0)
