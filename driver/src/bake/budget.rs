@@ -111,12 +111,7 @@ impl SpatialBudget {
                 as usize;
             if let Some(block) = page.get_mut(i) {
                 let (variance, mean) = (m.variance.max(0.0), m.mean.max(0.0));
-                let own = if budget == Budget::Bounded {
-                    Budget::Relative
-                } else {
-                    budget
-                };
-                block.a2 += allocation(own, variance, mean, world_mean);
+                block.a2 += allocation(budget, variance, mean, world_mean);
                 block.variance += variance;
                 block.texels += 1;
             }
@@ -191,29 +186,53 @@ impl SpatialBudget {
     }
 }
 
-/// The direct pass's budget within one tile (module docs of [`super::gather`]'s direct pass:
+/// The direct pass's budget within one tile ([`super::gather`]'s `TileBaker::direct_budget`:
 /// the later iterations by the earlier ones): per texel of `measured`, in its order, the
 /// factor of its 8×8-texel block by `budget`, normalised over the tile's texels alone, so a
 /// tile spends about its uniform samples and decides from nothing but its own; `None` for
-/// [`Budget::Uniform`] or where nothing lit was measured.
+/// [`Budget::Uniform`] or where nothing lit was measured. The blocks span only the tile's
+/// bounding box on each page (its corner on the block grid, so the blocks are the page's).
 pub fn tile_factors(budget: Budget, measured: &[Measured]) -> Option<Vec<f32>> {
-    let mut sizes: Vec<(u32, u32)> = Vec::new();
+    // Per page: the block-aligned corner and the far edge of the tile's texels on it.
+    let mut boxes: Vec<([u32; 2], [u32; 2])> = Vec::new();
     for m in measured {
         let page = m.page as usize;
-        if sizes.len() <= page {
-            sizes.resize(page + 1, (1, 1));
+        if boxes.len() <= page {
+            boxes.resize(page + 1, ([u32::MAX; 2], [0; 2]));
         }
-        let size = &mut sizes[page];
-        *size = (size.0.max(m.pixel[0] + 1), size.1.max(m.pixel[1] + 1));
+        let (corner, end) = &mut boxes[page];
+        for axis in 0..2 {
+            corner[axis] = corner[axis].min(m.pixel[axis] / BLOCK * BLOCK);
+            end[axis] = end[axis].max(m.pixel[axis] + 1);
+        }
     }
+    let sizes: Vec<(u32, u32)> = boxes
+        .iter()
+        .map(|&(corner, end)| {
+            (
+                end[0].saturating_sub(corner[0]).max(1),
+                end[1].saturating_sub(corner[1]).max(1),
+            )
+        })
+        .collect();
+    let local: Vec<Measured> = measured
+        .iter()
+        .map(|m| {
+            let corner = boxes[m.page as usize].0;
+            Measured {
+                pixel: [m.pixel[0] - corner[0], m.pixel[1] - corner[1]],
+                ..*m
+            }
+        })
+        .collect();
     let each = |visit: &mut dyn FnMut(Measured)| {
-        measured.iter().copied().for_each(visit);
+        local.iter().copied().for_each(visit);
         Ok::<(), std::convert::Infallible>(())
     };
     let Ok(factors) = SpatialBudget::from_measured(budget, &sizes, each);
     let factors = factors?;
     Some(
-        measured
+        local
             .iter()
             .map(|m| factors.factor(m.page, m.pixel))
             .collect(),
@@ -223,7 +242,7 @@ pub fn tile_factors(budget: Budget, measured: &[Measured]) -> Option<Vec<f32>> {
 /// One block's sums over its measured texels.
 #[derive(Clone, Copy, Debug, Default)]
 struct BlockSums {
-    /// Σ of the allocation's `a²` (the relative one's for [`Budget::Bounded`]).
+    /// Σ of the allocation's `a²` (the relative one's for [`Budget::Bounded`], [`allocation`]).
     a2: f64,
     /// Σ of the per-sample variances σ².
     variance: f64,
@@ -301,7 +320,8 @@ fn per_sample(r: &TexelResult) -> (f64, f64) {
 }
 
 /// The allocation's `a²` for a texel of per-sample variance `variance` and mean `mean`, in a
-/// world of mean `world_mean` (> 0).
+/// world of mean `world_mean` (> 0); [`Budget::Bounded`]'s is the relative one, to which
+/// [`bounded`] adds its λ term.
 fn allocation(budget: Budget, variance: f64, mean: f64, world_mean: f64) -> f64 {
     match budget {
         Budget::Uniform => 1.0,
@@ -472,6 +492,15 @@ mod tests {
             let want = if m.pixel[0] < 16 { 1.6 } else { 0.4 };
             assert!((f - want).abs() < 1e-6, "{m:?}: {f}");
         }
+        // The same tile far down the page, on the same block grid: the same factors.
+        let far: Vec<Measured> = tile
+            .iter()
+            .map(|m| Measured {
+                pixel: [m.pixel[0] + 800, m.pixel[1] + 1600],
+                ..*m
+            })
+            .collect();
+        assert_eq!(tile_factors(Budget::Mse, &far).unwrap(), factors);
         assert!(tile_factors(Budget::Uniform, &tile).is_none());
         let dark: Vec<Measured> = tile.iter().map(|m| Measured { mean: 0.0, ..*m }).collect();
         assert!(tile_factors(Budget::Bounded, &dark).is_none());
