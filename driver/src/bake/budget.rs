@@ -23,7 +23,6 @@ use crate::output::OutputFileError;
 use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
 use crate::texels::TexelFile;
 
-use super::importance::LookupImportance;
 use super::settings::Budget;
 
 /// Edge of a block of texels that shares one factor (about a cluster's extent).
@@ -33,7 +32,7 @@ pub const MIN_FACTOR: f32 = 0.25;
 /// Most samples a texel gets, as a multiple of the uniform count.
 pub const MAX_FACTOR: f32 = 4.0;
 /// The relative allocation's floor on μ², as a fraction of μ̄² (the bench's relative MSE's ε).
-pub(crate) const RELATIVE_EPSILON: f64 = 1e-2;
+const RELATIVE_EPSILON: f64 = 1e-2;
 /// [`Budget::Bounded`] tries λ from 2^-20 to 2^20 of 1/μ̄² (in half-powers): past either end
 /// the factors are the relative or the MSE allocation's.
 const BOUNDED_DOUBLINGS: i32 = 20;
@@ -87,51 +86,53 @@ impl SpatialBudget {
         if budget == Budget::Uniform {
             return Ok(None);
         }
-        let Some((sums, world_mean)) = block_sums(sizes, for_each, |m, world_mean| {
-            allocation(budget, m.variance, m.mean, world_mean)
-        })?
-        else {
+        let usable = |m: &Measured| m.mean.is_finite() && m.variance.is_finite();
+        let (mut sum, mut count) = (0.0, 0u64);
+        for_each(&mut |m| {
+            if usable(&m) {
+                sum += m.mean.max(0.0);
+                count += 1;
+            }
+        })?;
+        let world_mean = sum / count.max(1) as f64;
+        if count == 0 || world_mean.is_nan() || world_mean <= 0.0 {
             return Ok(None);
-        };
+        }
+        let columns = |w: u32| w.div_ceil(BLOCK);
+        let mut sums: Vec<Vec<BlockSums>> = sizes
+            .iter()
+            .map(|&(w, h)| vec![BlockSums::default(); (columns(w) * h.div_ceil(BLOCK)) as usize])
+            .collect();
+        for_each(&mut |m| {
+            let Some(page) = sums.get_mut(m.page as usize).filter(|_| usable(&m)) else {
+                return;
+            };
+            let i = (m.pixel[1] / BLOCK * columns(sizes[m.page as usize].0) + m.pixel[0] / BLOCK)
+                as usize;
+            if let Some(block) = page.get_mut(i) {
+                let (variance, mean) = (m.variance.max(0.0), m.mean.max(0.0));
+                block.a2 += allocation(budget, variance, mean, world_mean);
+                block.variance += variance;
+                block.texels += 1;
+            }
+        })?;
         let factors = if budget == Budget::Bounded {
             bounded(&sums, world_mean)
         } else {
             block_factors(&sums, |b| b.a2)
         };
-        Ok(factors.map(|f| Self::of_blocks(f, sizes)))
-    }
-
-    /// The budget of a lookup pass ([`super::importance`]): texel j's samples ∝ σ_j √I_j,
-    /// σ_j² its per-sample variance in the gather pass before and I_j its block's mean
-    /// importance, clamped and normalised as every budget is; `None` where nothing read has
-    /// any variance.
-    ///
-    /// # Errors
-    /// `for_each`'s.
-    pub fn for_lookups<E>(
-        importance: &LookupImportance,
-        sizes: &[(u32, u32)],
-        for_each: impl Fn(&mut dyn FnMut(Measured)) -> Result<(), E>,
-    ) -> Result<Option<Self>, E> {
-        let Some((sums, _)) = block_sums(sizes, for_each, |m, _| {
-            m.variance * importance.block(m.page, m.pixel)
-        })?
-        else {
+        let Some(factors) = factors else {
             return Ok(None);
         };
-        Ok(block_factors(&sums, |b| b.a2).map(|f| Self::of_blocks(f, sizes)))
-    }
-
-    fn of_blocks(factors: Vec<Vec<f32>>, sizes: &[(u32, u32)]) -> Self {
         let pages = factors
             .into_iter()
             .zip(sizes)
             .map(|(factors, &(w, _))| Blocks {
-                columns: w.div_ceil(BLOCK),
+                columns: columns(w),
                 factors,
             })
             .collect();
-        Self { pages }
+        Ok(Some(Self { pages }))
     }
 
     /// The budget from the previous gather pass's results (and the direct pass's, when that
@@ -145,121 +146,44 @@ impl SpatialBudget {
         results: &ResultFile,
         direct: Option<&ResultFile>,
     ) -> Result<Option<Self>, OutputFileError> {
-        let sizes = page_sizes(texels);
+        let sizes: Vec<(u32, u32)> = texels.pages().iter().map(|p| (p.width, p.height)).collect();
         Self::from_measured(budget, &sizes, |visit| {
-            measured_results(texels, results, direct, visit)
-        })
-    }
-
-    /// [`Self::for_lookups`] from the previous gather pass's results (and the direct pass's,
-    /// as [`Self::from_results`] reads them).
-    ///
-    /// # Errors
-    /// A result file that cannot be read, with its path.
-    pub fn for_lookups_from_results(
-        importance: &LookupImportance,
-        texels: &TexelFile,
-        results: &ResultFile,
-        direct: Option<&ResultFile>,
-    ) -> Result<Option<Self>, OutputFileError> {
-        let sizes = page_sizes(texels);
-        Self::for_lookups(importance, &sizes, |visit| {
-            measured_results(texels, results, direct, visit)
-        })
-    }
-}
-
-fn page_sizes(texels: &TexelFile) -> Vec<(u32, u32)> {
-    texels.pages().iter().map(|p| (p.width, p.height)).collect()
-}
-
-/// Hands `visit` each baked texel of `results` (per-sample variance and mean, the direct
-/// pass's added when `direct` is given), tile by tile.
-fn measured_results(
-    texels: &TexelFile,
-    results: &ResultFile,
-    direct: Option<&ResultFile>,
-    visit: &mut dyn FnMut(Measured),
-) -> Result<(), OutputFileError> {
-    let (mut buffer, mut direct_buffer) = (Vec::new(), Vec::new());
-    for (t, tile) in texels.tiles().iter().enumerate() {
-        let n = tile.texel_count as usize;
-        buffer.resize(n, TexelResult::default());
-        results.read(tile.first_texel, &mut buffer)?;
-        direct_buffer.resize(n, TexelResult::default());
-        if let Some(direct) = direct {
-            direct.read(tile.first_texel, &mut direct_buffer)?;
-        }
-        let each = texels
-            .tile_texels(t)
-            .iter()
-            .zip(&buffer)
-            .zip(&direct_buffer);
-        for ((texel, r), d) in each {
-            if r.flags & FLAG_BAKED == 0 {
-                continue;
+            let (mut buffer, mut direct_buffer) = (Vec::new(), Vec::new());
+            for (t, tile) in texels.tiles().iter().enumerate() {
+                let n = tile.texel_count as usize;
+                buffer.resize(n, TexelResult::default());
+                results.read(tile.first_texel, &mut buffer)?;
+                direct_buffer.resize(n, TexelResult::default());
+                if let Some(direct) = direct {
+                    direct.read(tile.first_texel, &mut direct_buffer)?;
+                }
+                let each = texels
+                    .tile_texels(t)
+                    .iter()
+                    .zip(&buffer)
+                    .zip(&direct_buffer);
+                for ((texel, r), d) in each {
+                    if r.flags & FLAG_BAKED == 0 {
+                        continue;
+                    }
+                    let (variance, mean) = per_sample(r);
+                    let (dv, dm) = if direct.is_some() {
+                        per_sample(d)
+                    } else {
+                        (0.0, 0.0)
+                    };
+                    visit(Measured {
+                        page: texel.page,
+                        pixel: texel.pixel.map(u32::from),
+                        variance: variance + dv,
+                        mean: mean + dm,
+                    });
+                }
+                texels.release_tile(t);
             }
-            let (variance, mean) = per_sample(r);
-            let (dv, dm) = if direct.is_some() {
-                per_sample(d)
-            } else {
-                (0.0, 0.0)
-            };
-            visit(Measured {
-                page: texel.page,
-                pixel: texel.pixel.map(u32::from),
-                variance: variance + dv,
-                mean: mean + dm,
-            });
-        }
-        texels.release_tile(t);
+            Ok(())
+        })
     }
-    Ok(())
-}
-
-/// Each page's blocks' sums of `a2` (per texel, given the world's mean) over the texels
-/// `for_each` hands (called twice: first for the world's mean, then for the blocks), and
-/// that mean; `None` when nothing lit was measured.
-fn block_sums<E>(
-    sizes: &[(u32, u32)],
-    for_each: impl Fn(&mut dyn FnMut(Measured)) -> Result<(), E>,
-    a2: impl Fn(&Measured, f64) -> f64,
-) -> Result<Option<(Vec<Vec<BlockSums>>, f64)>, E> {
-    let usable = |m: &Measured| m.mean.is_finite() && m.variance.is_finite();
-    let (mut sum, mut count) = (0.0, 0u64);
-    for_each(&mut |m| {
-        if usable(&m) {
-            sum += m.mean.max(0.0);
-            count += 1;
-        }
-    })?;
-    let world_mean = sum / count.max(1) as f64;
-    if count == 0 || world_mean.is_nan() || world_mean <= 0.0 {
-        return Ok(None);
-    }
-    let columns = |w: u32| w.div_ceil(BLOCK);
-    let mut sums: Vec<Vec<BlockSums>> = sizes
-        .iter()
-        .map(|&(w, h)| vec![BlockSums::default(); (columns(w) * h.div_ceil(BLOCK)) as usize])
-        .collect();
-    for_each(&mut |m| {
-        let Some(page) = sums.get_mut(m.page as usize).filter(|_| usable(&m)) else {
-            return;
-        };
-        let i =
-            (m.pixel[1] / BLOCK * columns(sizes[m.page as usize].0) + m.pixel[0] / BLOCK) as usize;
-        if let Some(block) = page.get_mut(i) {
-            let m = Measured {
-                variance: m.variance.max(0.0),
-                mean: m.mean.max(0.0),
-                ..m
-            };
-            block.a2 += a2(&m, world_mean);
-            block.variance += m.variance;
-            block.texels += 1;
-        }
-    })?;
-    Ok(Some((sums, world_mean)))
 }
 
 /// The direct pass's budget within one tile ([`super::gather`]'s `TileBaker::direct_budget`:

@@ -11,7 +11,6 @@ pub mod error;
 pub mod finish;
 pub mod gather;
 pub mod grid;
-pub mod importance;
 pub mod pipeline;
 pub mod run;
 pub mod settings;

@@ -30,11 +30,8 @@ pub use super::error::BakeError;
 use super::error::file_error;
 use super::finish::{FinishOptions, finish_with};
 use super::gather::{GatherCounters, TileBaker};
-use super::importance::LookupImportance;
 use super::pipeline::{self, PipelineConfig, TileBuffer, TileFiles};
-use super::settings::{
-    BakeSettings, Budget, Combine, DIRECT_PASS, Directional, LookupBudget, SettingsError,
-};
+use super::settings::{BakeSettings, Budget, Combine, DIRECT_PASS, Directional, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::workdir::{
     Manifest, merged_results, open_batches, open_directional, open_pass, open_work, pass_files,
@@ -279,29 +276,6 @@ pub fn bake_pass_with_progress(
                     sources,
                     bake_id,
                 )?);
-            } else if pass - 1 > DIRECT_PASS
-                && job.settings.budget != Budget::Uniform
-                && job.settings.lookup_budget == LookupBudget::Importance
-            {
-                let clock = Instant::now();
-                let importance = LookupImportance::measure(&world, &texels, job.settings.seed);
-                if let Some(importance) = importance {
-                    let sources = PassSources {
-                        direct: sources
-                            .direct
-                            .filter(|_| !job.settings.lightmap_borrows_direct()),
-                        ..sources
-                    };
-                    let (results, direct) = sources.open(&texels, bake_id)?;
-                    let lb = SpatialBudget::for_lookups_from_results(
-                        &importance,
-                        &texels,
-                        &results,
-                        direct.as_ref(),
-                    )?;
-                    world.set_budget(lb);
-                }
-                report.seconds.previous_pass_images += clock.elapsed().as_secs_f64();
             }
         }
         let run = bake_pass(

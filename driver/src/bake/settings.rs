@@ -135,20 +135,6 @@ impl Budget {
     }
 }
 
-/// How the series passes between the direct pass and the last — read by the next pass's
-/// lookups, never shown — spend their gather rays over the texels (`--lookup-budget`, module
-/// [`super::importance`]), when the bake's [`Budget`] is not uniform: by how much each
-/// texel's noise reaches the next pass's relative error, or every texel the same.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum LookupBudget {
-    /// n ∝ σ √I: the texel's per-sample deviation in the gather pass before, times the root
-    /// of its lookup importance I.
-    #[default]
-    Importance,
-    /// `--lookup-spp` (or `--spp`) at every texel.
-    Uniform,
-}
-
 /// What a cluster's guide learns from its records (`--guide-target`, docs/guide.md,
 /// "The guide's target"): the density ∝ `E[L]` over the cluster's texels (the paper's), or
 /// ∝ `√E[L²]`, which minimises their summed variance (variance-aware guiding, Rath et al.
@@ -261,9 +247,6 @@ pub struct BakeSettings {
     /// Gather rays per texel of the series passes between the direct pass and the last,
     /// whose results only feed the next pass's lookups (`--lookup-spp`; `None`: `--spp`).
     pub lookup_spp: Option<u32>,
-    /// How those passes spread their rays over the texels (`--lookup-budget`), unless the
-    /// [`Self::budget`] is uniform.
-    pub lookup_budget: LookupBudget,
     /// What the learned guides learn (`--guide-target`).
     pub guide_target: GuideTarget,
     /// The stopping rule (`--target-error`; `None`: every texel takes every iteration): the
@@ -277,8 +260,7 @@ pub struct BakeSettings {
 }
 
 /// The fields in order, as `derive(Debug)` would print them, but `budget` only when it is not
-/// [`Budget::Uniform`], `direct_spp` and `lookup_spp` only when they are set, `lookup_budget`
-/// only when it is not [`LookupBudget::Importance`] and
+/// [`Budget::Uniform`], `direct_spp` and `lookup_spp` only when they are set and
 /// `guide_target` only when it is not [`GuideTarget::Radiance`] and `target_error` only when it
 /// is set: a bake without them keeps the
 /// identity ([`BakeSettings::bake_id`]) and the bench's reference keys it had before they
@@ -307,7 +289,6 @@ impl fmt::Debug for BakeSettings {
             budget,
             direct_spp,
             lookup_spp,
-            lookup_budget,
             guide_target,
             target_error,
         } = self;
@@ -337,9 +318,6 @@ impl fmt::Debug for BakeSettings {
         }
         if let Some(lookup_spp) = lookup_spp {
             d.field("lookup_spp", lookup_spp);
-        }
-        if *lookup_budget != LookupBudget::Importance {
-            d.field("lookup_budget", lookup_budget);
         }
         if *guide_target != GuideTarget::Radiance {
             d.field("guide_target", guide_target);
@@ -380,7 +358,6 @@ impl Default for BakeSettings {
             budget: Budget::default_for(Guiding::Coherent, None),
             direct_spp: None,
             lookup_spp: None,
-            lookup_budget: LookupBudget::default(),
             guide_target: GuideTarget::default(),
             target_error: None,
         }

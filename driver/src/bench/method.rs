@@ -8,8 +8,7 @@
 use clap::ValueEnum;
 
 use crate::bake::settings::{
-    BakeSettings, Budget, Combine, GuideTarget, GuidedPasses, Guiding, LookupBudget, Schedule,
-    Transport,
+    BakeSettings, Budget, Combine, GuideTarget, GuidedPasses, Guiding, Schedule, Transport,
 };
 use crate::transport::emitters::EmitterSelection;
 
@@ -57,8 +56,6 @@ pub struct Levers {
     /// `--lookup-spp` as a percentage of the rung's `--spp` (`+lookup=P`), for series
     /// transport; `None`: unset, every gather pass takes `--spp`.
     pub lookup_percent: Option<u32>,
-    /// `--lookup-budget` (`+lookups=`).
-    pub lookup_budget: LookupBudget,
     /// `--guide-target` (`+target=`).
     pub guide_target: GuideTarget,
     /// `--target-error` in thousandths (`+stop=20` is 0.02): the stopping rule, the rung's
@@ -81,7 +78,6 @@ impl Default for Levers {
             budget: None,
             direct_percent: None,
             lookup_percent: None,
-            lookup_budget: d.lookup_budget,
             guide_target: d.guide_target,
             stop_permille: None,
         }
@@ -104,7 +100,6 @@ impl Levers {
             budget: Some(Budget::Uniform),
             direct_percent: None,
             lookup_percent: None,
-            lookup_budget: LookupBudget::Uniform,
             guide_target: GuideTarget::Radiance,
             stop_permille: None,
         }
@@ -146,9 +141,6 @@ impl Levers {
         }
         if let Some(p) = self.lookup_percent {
             s += &format!("+lookup={p}");
-        }
-        if self.lookup_budget != d.lookup_budget {
-            s += &format!("+lookups={}", value_name(&self.lookup_budget));
         }
         if self.guide_target != d.guide_target {
             s += &format!("+target={}", value_name(&self.guide_target));
@@ -220,7 +212,7 @@ impl Method {
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
     /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`,
-    /// `transport`, `select`, `budget`, `direct`, `lookup`, `lookups`, `target`); the
+    /// `transport`, `select`, `budget`, `direct`, `lookup`, `target`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -283,10 +275,6 @@ impl Method {
                 }
                 "direct" => levers.direct_percent = Some(number()?),
                 "lookup" => levers.lookup_percent = Some(number()?),
-                "lookups" => {
-                    levers.lookup_budget = LookupBudget::from_str(value, true)
-                        .map_err(|e| format!("{label:?}: {e}"))?;
-                }
                 "stop" => levers.stop_permille = Some(number()?),
                 "target" => {
                     levers.guide_target = GuideTarget::from_str(value, true)
@@ -367,7 +355,6 @@ impl Method {
                 .unwrap_or(Budget::default_for(self.guiding, target_error)),
             direct_spp,
             lookup_spp,
-            lookup_budget: self.levers.lookup_budget,
             guide_target: self.levers.guide_target,
             target_error,
             ..Default::default()

@@ -9,8 +9,8 @@ use crate::bake::directional::Directional;
 use crate::bake::finish::{Denoise, FinishOptions, Seams};
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress, lights_differ};
 use crate::bake::settings::{
-    BakeSettings, Budget, Combine, EmitterSampling, GuideTarget, GuidedPasses, Guiding,
-    LookupBudget, Schedule, Transport,
+    BakeSettings, Budget, Combine, EmitterSampling, GuideTarget, GuidedPasses, Guiding, Schedule,
+    Transport,
 };
 use crate::bake::shard::Shard;
 use crate::bake::workdir::work_dir;
@@ -69,11 +69,6 @@ pub struct BakeArgs {
     /// results only feed the next pass's lookups (default: `--spp`).
     #[arg(long, value_name = "N")]
     pub lookup_spp: Option<u32>,
-    /// How those passes spread their rays over the texels, unless `--budget` is uniform:
-    /// `importance` (by how much each texel's noise reaches the next pass's relative error
-    /// through its lookups) or `uniform`.
-    #[arg(long, value_enum, default_value_t = LookupBudget::default())]
-    pub lookup_budget: LookupBudget,
     /// What each cluster's guide learns: `second-moment` (the density ∝ √E[L²] over the
     /// cluster's texels: the least summed variance, Rath et al. 2020) or `radiance` (∝ E[L],
     /// the paper's).
@@ -215,7 +210,6 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
             .unwrap_or(Budget::default_for(args.guiding, args.target_error)),
         direct_spp: args.direct_spp,
         lookup_spp: args.lookup_spp,
-        lookup_budget: args.lookup_budget,
         guide_target: args.guide_target,
         target_error: args.target_error,
         min_split: args.min_split,

@@ -29,7 +29,6 @@ use guidebake_kernels::traverse::intersect1;
 use super::direct::{Receiver, power_heuristic};
 use super::emitters::EmittersAt;
 use super::rng::SampleRng;
-use super::series::{Lookup, PreviousPass, Tap};
 use crate::bake::settings::{EmitterSampling, Transport};
 use crate::bake::world::{SurfaceHit, World};
 
@@ -62,41 +61,6 @@ pub struct Leaving {
     pub path_rays: u32,
     /// Reads of the previous series pass's total irradiance (next-event estimation skipped).
     pub totals_read: u32,
-}
-
-/// What a series gather hit reads of the previous pass ([`series_read`]).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct SeriesRead {
-    /// The lookup at the hit, where its side is baked and a baked texel lies under it.
-    pub lookup: Option<Lookup>,
-    /// The texels the lookup read, and their weights.
-    pub taps: [Tap; 4],
-    /// Whether the hit takes the total irradiance from the lookup (no next-event estimation).
-    pub reads_total: bool,
-    /// Whether it takes the gather-only layer (beside its own next-event estimation).
-    pub reads_gathered: bool,
-}
-
-/// What a gather ray that hit `hit` on its `front` (or back) side reads of `previous`: a side
-/// no texel describes (the other side of a thin wall, a triangle without lightmap UVs) has no
-/// lightmap to read — the texels of its other side hold the light of the space behind it —
-/// and neither has a point where no baked texel lies (padding, texels inside geometry, whose
-/// values are the dilation's); where the texels read disagree (a doorway, a shadow edge),
-/// their average is not the light at the hit.
-pub fn series_read(previous: &PreviousPass, hit: &SurfaceHit, front: bool) -> SeriesRead {
-    if !previous.bakes_side(hit.prim, front) {
-        return SeriesRead::default();
-    }
-    let (lookup, taps) = previous.lookup_taps(hit.prim, hit.u, hit.v);
-    if !lookup.baked {
-        return SeriesRead::default();
-    }
-    SeriesRead {
-        lookup: Some(lookup),
-        taps,
-        reads_total: lookup.smooth && previous.reads_total(hit.prim, front, hit.t),
-        reads_gathered: lookup.gathered_smooth,
-    }
 }
 
 impl World {
@@ -144,16 +108,21 @@ impl World {
                 Transport::Series if traced.is_none() => self.previous_pass(),
                 Transport::Series | Transport::Path => None,
             };
-            // Series: where the hit cannot read the lightmap ([`series_read`]), the gather's
-            // hit computes the light there another way: a path
+            // Series: a side no texel describes (the other side of a thin wall, a triangle
+            // without lightmap UVs) has no lightmap to read — the texels of its other side
+            // hold the light of the space behind it — and neither has a point where no baked
+            // texel lies (padding, texels inside geometry, whose values are the dilation's);
+            // where the texels read disagree (a doorway, a shadow edge), their average is not
+            // the light at the hit. The gather's hit computes it another way there: a path
             // traced from it with as many bounces as the previous pass holds, next-event
             // estimation at every vertex, as path transport does.
-            let SeriesRead {
-                lookup,
-                reads_total,
-                reads_gathered,
-                ..
-            } = previous.map_or_else(SeriesRead::default, |p| series_read(p, &hit, front));
+            let lookup = previous
+                .filter(|p| p.bakes_side(hit.prim, front))
+                .map(|p| p.lookup(hit.prim, hit.u, hit.v))
+                .filter(|l| l.baked);
+            let far = previous.is_some_and(|p| p.reads_total(hit.prim, front, hit.t));
+            let reads_total = far && lookup.is_some_and(|l| l.smooth);
+            let reads_gathered = lookup.is_some_and(|l| l.gathered_smooth);
             if let Some(p) = previous.filter(|_| !reads_total && !reads_gathered) {
                 traced = Some(p.pass() + 1);
             }

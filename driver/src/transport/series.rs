@@ -90,17 +90,6 @@ pub struct Lookup {
     pub gathered_smooth: bool,
 }
 
-/// One texel a lookup read ([`PreviousPass::lookup_taps`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Tap {
-    /// Page of the texel.
-    pub page: u32,
-    /// Its pixel on the page.
-    pub pixel: [u32; 2],
-    /// Its weight in the lookup (0: not read).
-    pub weight: f32,
-}
-
 /// Where a triangle's lightmap lies: its page, its corners in pixel coordinates, the world
 /// length of one of its texels, and whether its texels bake its winding's front side.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -234,14 +223,8 @@ impl PreviousPass {
     /// Both layers of the previous pass at barycentrics (`b1`, `b2`) of triangle `prim`
     /// (weights of its second and third vertices); zero off the atlas.
     pub fn lookup(&self, prim: u32, b1: f32, b2: f32) -> Lookup {
-        self.lookup_taps(prim, b1, b2).0
-    }
-
-    /// [`Self::lookup`] and the texels it read: each tap's page, pixel and weight in the
-    /// filter (the weights of the pixels read sum to 1; a tap not read weighs 0).
-    pub fn lookup_taps(&self, prim: u32, b1: f32, b2: f32) -> (Lookup, [Tap; 4]) {
         let Some(Some(t)) = self.triangles.get(prim as usize) else {
-            return (Lookup::default(), [Tap::default(); 4]);
+            return Lookup::default();
         };
         let [a, b, c] = t.corners;
         let uv = a * (1.0 - b1 - b2) + b * b1 + c * b2;
@@ -258,27 +241,19 @@ impl PreviousPass {
     /// `page` (its total less its gather-only layer: the direct pass's estimate, which every
     /// later pass borrows); 0 where no texel was baked there.
     pub fn direct_luminance_at(&self, page: u32, pixel: [u32; 2]) -> f32 {
-        self.baked_pixel(page, pixel).map_or(0.0, |px| {
-            let direct = Vec3::new(px[4] - px[0], px[5] - px[1], px[6] - px[2]);
-            luminance(direct).max(0.0)
-        })
-    }
-
-    /// The luminance of the total irradiance the previous pass held at texel `pixel` of page
-    /// `page`; 0 where no texel was baked there.
-    pub fn total_luminance_at(&self, page: u32, pixel: [u32; 2]) -> f32 {
-        self.baked_pixel(page, pixel)
-            .map_or(0.0, |px| luminance(Vec3::new(px[4], px[5], px[6])).max(0.0))
-    }
-
-    /// The pixel of a baked texel at `pixel` of page `page`.
-    fn baked_pixel(&self, page: u32, [x, y]: [u32; 2]) -> Option<Pixel> {
-        let size = self.pages.get(page as usize)?;
+        let Some(size) = self.pages.get(page as usize) else {
+            return 0.0;
+        };
+        let [x, y] = pixel;
         if x >= size.width || y >= size.height {
-            return None;
+            return 0.0;
         }
         let px = self.pixels()[self.offsets[page as usize] + (y * size.width + x) as usize];
-        (px[GENERATION] == 1.0).then_some(px)
+        if px[GENERATION] != 1.0 {
+            return 0.0;
+        }
+        let direct = Vec3::new(px[4] - px[0], px[5] - px[1], px[6] - px[2]);
+        luminance(direct).max(0.0)
     }
 
     /// Whether triangle `prim`'s texels bake its winding's `front` side (or its back, when
@@ -301,16 +276,16 @@ impl PreviousPass {
     /// four, weights renormalised; over the dilated ones only where none is baked (a point in
     /// a chart's padding). A dilated pixel may mix two charts that lie close in the atlas, so
     /// a hit inside a chart never reads one.
-    fn bilinear(&self, page: u32, uv: Vec2) -> (Lookup, [Tap; 4]) {
+    fn bilinear(&self, page: u32, uv: Vec2) -> Lookup {
         let Some(size) = self.pages.get(page as usize) else {
-            return (Lookup::default(), [Tap::default(); 4]);
+            return Lookup::default();
         };
         let pixels = self.pixels();
         let base = self.offsets[page as usize];
         let (w, h) = (size.width as i64, size.height as i64);
         let p = uv - Vec2::splat(0.5);
         if !p.is_finite() {
-            return (Lookup::default(), [Tap::default(); 4]);
+            return Lookup::default();
         }
         let (x0, y0) = (p.x.floor(), p.y.floor());
         let (fx, fy) = (p.x - x0, p.y - y0);
@@ -323,20 +298,15 @@ impl PreviousPass {
         .map(|(dx, dy, wgt)| {
             let x = (x0 as i64 + dx).clamp(0, w - 1);
             let y = (y0 as i64 + dy).clamp(0, h - 1);
-            (
-                pixels[base + (y * w + x) as usize],
-                wgt,
-                [x as u32, y as u32],
-            )
+            (pixels[base + (y * w + x) as usize], wgt)
         });
         let baked = taps
             .iter()
-            .any(|(px, wgt, _)| px[GENERATION] == 1.0 && *wgt > 0.0);
+            .any(|(px, wgt)| px[GENERATION] == 1.0 && *wgt > 0.0);
         let (mut gathered, mut total, mut weight) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
         let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
         let (mut glo, mut ghi) = (f32::INFINITY, 0.0f32);
-        let mut read = [Tap::default(); 4];
-        for ((px, wgt, pixel), tap) in taps.into_iter().zip(&mut read) {
+        for (px, wgt) in taps {
             let usable = if baked {
                 px[GENERATION] == 1.0
             } else {
@@ -349,29 +319,20 @@ impl PreviousPass {
                 (glo, ghi) = (glo.min(luminance(g)), ghi.max(luminance(g)));
                 total += t * wgt;
                 weight += wgt;
-                *tap = Tap {
-                    page,
-                    pixel,
-                    weight: wgt,
-                };
                 let lum = luminance(t);
                 (lo, hi) = (lo.min(lum), hi.max(lum));
             }
         }
         if weight > 0.0 {
-            for tap in &mut read {
-                tap.weight /= weight;
-            }
-            let lookup = Lookup {
+            Lookup {
                 gathered: gathered / weight,
                 total: total / weight,
                 baked,
                 smooth: baked && hi <= SMOOTH_RATIO * lo,
                 gathered_smooth: baked && ghi <= SMOOTH_RATIO * glo,
-            };
-            (lookup, read)
+            }
         } else {
-            (Lookup::default(), [Tap::default(); 4])
+            Lookup::default()
         }
     }
 }
@@ -539,7 +500,7 @@ mod tests {
         let image: Vec<Option<Vec3>> = (0..16).map(|i| Some(Vec3::splat((i % 4) as f32))).collect();
         let mem = PreviousPass::from_pixels(&scene, &meshes, &pages, std::slice::from_ref(&image));
         // Halfway between pixel centres 1 and 2 of a row: the mean of 1 and 2.
-        let e = mem.bilinear(0, Vec2::new(2.0, 1.5)).0.total;
+        let e = mem.bilinear(0, Vec2::new(2.0, 1.5)).total;
         assert!((e.x - 1.5).abs() < 1e-6, "{e}");
         let dir = tempfile::tempdir().unwrap();
         let mut w = PreviousPassWriter::create(&dir.path().join("pass.bin"), &pages).unwrap();
@@ -591,10 +552,10 @@ mod tests {
             .collect();
         let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image]);
         // Between the centres of columns 0 and 1: only column 0 is baked there.
-        let e = pass.bilinear(0, Vec2::new(1.0, 1.5)).0.total;
+        let e = pass.bilinear(0, Vec2::new(1.0, 1.5)).total;
         assert_eq!(e, Vec3::ONE, "read the dilated column");
         // In column 3, whose taps are columns 3 and (clamped) 3: dilated only, read them.
-        let e = pass.bilinear(0, Vec2::new(3.9, 1.5)).0.total;
+        let e = pass.bilinear(0, Vec2::new(3.9, 1.5)).total;
         assert!(e.x > 1.0, "{e}");
     }
 
