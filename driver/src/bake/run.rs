@@ -23,6 +23,7 @@ use std::sync::Mutex;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
+use glam::Vec3;
 use serde::Serialize;
 
 use super::budget::SpatialBudget;
@@ -43,6 +44,7 @@ use crate::output::fnv1a64;
 use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
 use crate::scene::Scene;
 use crate::texels::TexelFile;
+use crate::transport::lookup_filter::Surfel;
 use crate::transport::series::{PreviousPass, PreviousPassWriter};
 
 /// What a bake run is asked to do.
@@ -256,7 +258,17 @@ pub fn bake_pass_with_progress(
                 results: &source,
                 direct: direct.as_deref(),
             };
-            let previous = previous_pass(&texels, scene, sources, &image, bake_id, &mut report)
+            // The lookups of a gather pass are filtered; the direct pass's light is not.
+            let filter = if job.settings.filters_lookups(pass - 1) {
+                job.settings.lookup_filter
+            } else {
+                0
+            };
+            let target = PassImage {
+                path: &image,
+                filter,
+            };
+            let previous = previous_pass(&texels, scene, sources, target, bake_id, &mut report)
                 .map_err(|e| not_merged_hint(e, &source, pass - 1))?;
             world.set_previous_pass(Some(previous.of_pass(pass - 1)));
             // The last pass, after a gather pass, spends its samples by the passes' error (a
@@ -522,20 +534,30 @@ impl PassSources<'_> {
     }
 }
 
-/// Writes the image (at `image_path`) of the gather-only and total irradiance in a pass's
-/// result file (plus the direct pass's total, when the pass borrowed it), and which side of
-/// each triangle its texels bake, and maps it for the next pass (series transport).
+/// Where a pass image goes, and the radius its gathered light is filtered over (0: none;
+/// [`BakeSettings::lookup_filter`]).
+#[derive(Clone, Copy)]
+struct PassImage<'p> {
+    path: &'p Path,
+    filter: u32,
+}
+
+/// Writes the image (at `target`) of the gather-only and total irradiance in a pass's result
+/// file (plus the direct pass's total, when the pass borrowed it), its gathered light filtered
+/// when `target` asks, and which side of each triangle its texels bake, and maps it for the
+/// next pass (series transport).
 fn previous_pass(
     texels: &TexelFile,
     scene: &Scene,
     sources: PassSources<'_>,
-    image_path: &Path,
+    target: PassImage<'_>,
     bake_id: u64,
     report: &mut BakeReport,
 ) -> Result<PreviousPass, BakeError> {
     let clock = Instant::now();
     let (results, direct) = sources.open(texels, bake_id)?;
-    let mut image = PreviousPassWriter::create(image_path, texels.pages())
+    let mut image = PreviousPassWriter::create(target.path, texels.pages())
+        .and_then(|w| w.with_filter(target.filter))
         .map_err(|e| file_error(&e.path, e.what))?;
     let (mut buffer, mut direct_buffer) = (Vec::new(), Vec::new());
     for (t, tile) in texels.tiles().iter().enumerate() {
@@ -551,6 +573,17 @@ fn previous_pass(
                 let [x, y] = texel.pixel.map(u32::from);
                 let total = core::array::from_fn(|c| r.total[c] + d.total[c]);
                 image.set(texel.page, (x, y), r.gathered, total);
+                if target.filter > 0 {
+                    let size = Vec3::from(texel.dpdu)
+                        .length()
+                        .max(Vec3::from(texel.dpdv).length());
+                    let (position, normal) = (texel.position(), Vec3::from(texel.normal));
+                    if let Some(s) =
+                        Surfel::new(position, normal, size, r.gathered, r.rel_std_error)
+                    {
+                        image.describe(texel.page, (x, y), s);
+                    }
+                }
             }
         }
         texels.release_tile(t);

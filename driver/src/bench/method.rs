@@ -54,8 +54,11 @@ pub struct Levers {
     /// transport; `None`: unset, the lightmap estimates its direct light itself.
     pub direct_percent: Option<u32>,
     /// `--lookup-spp` as a percentage of the rung's `--spp` (`+lookup=P`), for series
-    /// transport; `None`: unset, every gather pass takes `--spp`.
+    /// transport; `None`: unset, the bake's default
+    /// ([`BakeSettings::default_lookup_spp`]).
     pub lookup_percent: Option<u32>,
+    /// `--lookup-filter` (`+filter=R`, a radius in texels; 0: none).
+    pub lookup_filter: u32,
     /// `--guide-target` (`+target=`).
     pub guide_target: GuideTarget,
     /// `--target-error` in thousandths (`+stop=20` is 0.02): the stopping rule, the rung's
@@ -78,6 +81,7 @@ impl Default for Levers {
             budget: None,
             direct_percent: None,
             lookup_percent: None,
+            lookup_filter: d.lookup_filter,
             guide_target: d.guide_target,
             stop_permille: None,
         }
@@ -100,6 +104,7 @@ impl Levers {
             budget: Some(Budget::Uniform),
             direct_percent: None,
             lookup_percent: None,
+            lookup_filter: BakeSettings::default().lookup_filter,
             guide_target: GuideTarget::Radiance,
             stop_permille: None,
         }
@@ -141,6 +146,9 @@ impl Levers {
         }
         if let Some(p) = self.lookup_percent {
             s += &format!("+lookup={p}");
+        }
+        if self.lookup_filter != d.lookup_filter {
+            s += &format!("+filter={}", self.lookup_filter);
         }
         if self.guide_target != d.guide_target {
             s += &format!("+target={}", value_name(&self.guide_target));
@@ -275,6 +283,7 @@ impl Method {
                 }
                 "direct" => levers.direct_percent = Some(number()?),
                 "lookup" => levers.lookup_percent = Some(number()?),
+                "filter" => levers.lookup_filter = number()?,
                 "stop" => levers.stop_permille = Some(number()?),
                 "target" => {
                     levers.guide_target = GuideTarget::from_str(value, true)
@@ -355,6 +364,7 @@ impl Method {
                 .unwrap_or(Budget::default_for(self.guiding, target_error)),
             direct_spp,
             lookup_spp,
+            lookup_filter: self.levers.lookup_filter,
             guide_target: self.levers.guide_target,
             target_error,
             ..Default::default()

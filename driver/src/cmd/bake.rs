@@ -66,9 +66,15 @@ pub struct BakeArgs {
     #[arg(long, value_name = "N")]
     pub direct_spp: Option<u32>,
     /// Gather rays per texel of the series passes between the direct pass and the last, whose
-    /// results only feed the next pass's lookups (default: `--spp`).
+    /// results only feed the next pass's lookups (default: a quarter of `--spp`, at least a
+    /// packet of 8 per iteration: their lookups are filtered, `--lookup-filter`).
     #[arg(long, value_name = "N")]
     pub lookup_spp: Option<u32>,
+    /// Radius in texels over which the gathered light of those passes is filtered before the
+    /// next pass looks it up (texels of the same surface that agree within their noise;
+    /// 0: none). Series transport only.
+    #[arg(long, value_name = "TEXELS", default_value_t = BakeSettings::default().lookup_filter)]
+    pub lookup_filter: u32,
     /// What each cluster's guide learns: `second-moment` (the density ∝ √E[L²] over the
     /// cluster's texels: the least summed variance, Rath et al. 2020) or `radiance` (∝ E[L],
     /// the paper's).
@@ -210,6 +216,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
             .unwrap_or(Budget::default_for(args.guiding, args.target_error)),
         direct_spp: args.direct_spp,
         lookup_spp: args.lookup_spp,
+        lookup_filter: args.lookup_filter,
         guide_target: args.guide_target,
         target_error: args.target_error,
         min_split: args.min_split,

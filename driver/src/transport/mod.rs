@@ -22,6 +22,7 @@ pub mod direct;
 pub mod emitters;
 pub mod light_tree;
 pub mod lights;
+pub mod lookup_filter;
 pub mod path;
 pub mod rng;
 pub mod series;

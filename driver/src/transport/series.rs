@@ -45,6 +45,7 @@ use memmap2::{Mmap, MmapMut};
 use crate::scene::Scene;
 use crate::texels::{PageRecord, TriangleRecord};
 use crate::transport::emitters::luminance;
+use crate::transport::lookup_filter::{Surfel, filter_page};
 
 /// Rings of pixels filled around every chart from their covered neighbours.
 pub const DILATION: u32 = 4;
@@ -370,12 +371,45 @@ fn dilate(pixels: &mut [Pixel], size: PageRecord) {
     }
 }
 
-/// Writes a pass image file: [`Self::set`] every baked texel, then [`Self::finish`].
+/// Writes a pass image file: [`Self::set`] every baked texel, then [`Self::finish`]. With
+/// [`Self::with_filter`], [`Self::describe`] every baked texel too, and the gathered light is
+/// filtered before the dilation ([`crate::transport::lookup_filter`]).
 pub struct PreviousPassWriter {
     path: PathBuf,
     map: MmapMut,
     pages: Vec<PageRecord>,
     offsets: Vec<usize>,
+    filter: Option<SurfelFile>,
+}
+
+/// The lookups' filter's texels, in a file beside the pass image (file-backed pages, so a
+/// world of any size keeps bounded memory), removed when the image is finished.
+struct SurfelFile {
+    path: PathBuf,
+    map: MmapMut,
+    radius: u32,
+}
+
+/// Creates (or truncates) a file of `count` zeroed `T`s at `path` and maps it.
+fn create_mapped<T>(path: &Path, count: usize, what: &str) -> Result<MmapMut, PassImageError> {
+    let err = |what: String| PassImageError {
+        path: path.to_owned(),
+        what,
+    };
+    let bytes = (count.max(1) * size_of::<T>()) as u64;
+    let file: File = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(path)
+        .map_err(|e| err(format!("cannot create the {what}: {e}")))?;
+    file.set_len(bytes)
+        .map_err(|e| err(format!("cannot size the {what} to {bytes} bytes: {e}")))?;
+    // SAFETY: the file was just created by this process in its own work directory and is
+    // not resized or written through any other handle while mapped (the work directory's
+    // invariant, crate::output).
+    unsafe { MmapMut::map_mut(&file) }.map_err(|e| err(format!("cannot map the {what}: {e}")))
 }
 
 impl PreviousPassWriter {
@@ -384,32 +418,51 @@ impl PreviousPassWriter {
     /// # Errors
     /// [`PassImageError`] when the file cannot be created, sized or mapped.
     pub fn create(path: &Path, pages: &[PageRecord]) -> Result<Self, PassImageError> {
-        let err = |what: String| PassImageError {
-            path: path.to_owned(),
-            what,
-        };
         let (offsets, total) = page_offsets(pages);
-        let bytes = (total.max(1) * size_of::<Pixel>()) as u64;
-        let file: File = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(path)
-            .map_err(|e| err(format!("cannot create the pass image: {e}")))?;
-        file.set_len(bytes)
-            .map_err(|e| err(format!("cannot size the pass image to {bytes} bytes: {e}")))?;
-        // SAFETY: the file was just created by this process in its own work directory and is
-        // not resized or written through any other handle while mapped (the work directory's
-        // invariant, crate::output).
-        let map = unsafe { MmapMut::map_mut(&file) }
-            .map_err(|e| err(format!("cannot map the pass image: {e}")))?;
+        let map = create_mapped::<Pixel>(path, total, "pass image")?;
         Ok(Self {
             path: path.to_owned(),
             map,
             pages: pages.to_vec(),
             offsets,
+            filter: None,
         })
+    }
+
+    /// Filters the gathered light over `radius` texels before the image is finished (0: no
+    /// filter), from the texels [`Self::describe`] records in a file beside the image
+    /// (`.surfels`).
+    ///
+    /// # Errors
+    /// [`PassImageError`] when that file cannot be created, sized or mapped.
+    pub fn with_filter(mut self, radius: u32) -> Result<Self, PassImageError> {
+        if radius == 0 {
+            return Ok(self);
+        }
+        let path = self.path.with_extension("surfels");
+        let count = self.offsets.last().map_or(0, |o| {
+            o + self
+                .pages
+                .last()
+                .map_or(0, |p| p.width as usize * p.height as usize)
+        });
+        let map = create_mapped::<Surfel>(&path, count, "lookup filter's texel file")?;
+        self.filter = Some(SurfelFile { path, map, radius });
+        Ok(self)
+    }
+
+    /// Records what the filter needs of texel (`x`, `y`) of page `page`
+    /// ([`Self::with_filter`]; nothing without a filter, or off the page).
+    pub fn describe(&mut self, page: u32, (x, y): (u32, u32), surfel: Surfel) {
+        let (Some(filter), Some(size)) = (&mut self.filter, self.pages.get(page as usize)) else {
+            return;
+        };
+        if x >= size.width || y >= size.height {
+            return;
+        }
+        let i = self.offsets[page as usize] + (y * size.width + x) as usize;
+        let surfels: &mut [Surfel] = bytemuck::cast_slice_mut(&mut filter.map[..]);
+        surfels[i] = surfel;
     }
 
     /// Records texel (`x`, `y`) of page `page`: its gather-only and total irradiance.
@@ -442,8 +495,29 @@ impl PreviousPassWriter {
             for (p, size) in self.pages.iter().enumerate() {
                 let o = self.offsets[p];
                 let n = size.width as usize * size.height as usize;
+                if let Some(filter) = &self.filter {
+                    let surfels: &[Surfel] = bytemuck::cast_slice(&filter.map[..]);
+                    let page = (size.width as usize, size.height as usize);
+                    filter_page(&surfels[o..o + n], page, filter.radius, |i, change| {
+                        let px = &mut pixels[o + i];
+                        // Only where the image holds the texel (`set` refused non-finite ones).
+                        if px[GENERATION] == 1.0 {
+                            for c in 0..3 {
+                                px[c] += change[c];
+                                px[4 + c] += change[c];
+                            }
+                        }
+                    });
+                }
                 dilate(&mut pixels[o..o + n], *size);
             }
+        }
+        if let Some(filter) = self.filter.take() {
+            drop(filter.map);
+            std::fs::remove_file(&filter.path).map_err(|e| PassImageError {
+                path: filter.path.clone(),
+                what: format!("cannot remove the lookup filter's texel file: {e}"),
+            })?;
         }
         let path = self.path.clone();
         let err = |what: String| PassImageError {
@@ -536,6 +610,57 @@ mod tests {
         assert_eq!(file.direct_luminance_at(0, [9, 9]), 0.0);
         assert_eq!(file.direct_luminance_at(3, [0, 0]), 0.0);
         assert_eq!(mem.direct_luminance_at(0, [1, 1]), 0.0);
+    }
+
+    #[test]
+    fn a_filtered_image_moves_the_total_by_the_gathered_change_and_removes_its_texel_file() {
+        let (scene, meshes, pages) = scene();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("pass.bin");
+        let mut w = PreviousPassWriter::create(&path, &pages)
+            .unwrap()
+            .with_filter(2)
+            .unwrap();
+        assert!(path.with_extension("surfels").exists());
+        // Every pixel of the 4×4 page on one plane: gathered 1 or 3 alternately (noise 2,
+        // so they mix), direct light 10 · x on top.
+        for i in 0..16u32 {
+            let (x, y) = (i % 4, i / 4);
+            let g = if (x + y) % 2 == 0 { 1.0 } else { 3.0 };
+            let direct = 10.0 * x as f32;
+            w.set(0, (x, y), [g; 3], [g + direct; 3]);
+            let at = Vec3::new(x as f32, y as f32, 0.0);
+            let s = Surfel::new(at, Vec3::Z, 1.0, [g; 3], 2.0 / g).unwrap();
+            w.describe(0, (x, y), s);
+        }
+        let image = w.finish(&scene, &meshes).unwrap();
+        assert!(
+            !path.with_extension("surfels").exists(),
+            "texel file left behind"
+        );
+        let px = image.pixels();
+        for (i, p) in px.iter().enumerate().take(16) {
+            let (g, t) = (p[0], p[4]);
+            assert!(g > 1.2 && g < 2.8, "pixel {i}: gathered {g} not filtered");
+            assert!(
+                (t - g - 10.0 * (i % 4) as f32).abs() < 1e-4,
+                "pixel {i}: direct moved"
+            );
+        }
+        // Radius 0 writes no texel file and leaves the values.
+        let mut w = PreviousPassWriter::create(&path, &pages)
+            .unwrap()
+            .with_filter(0)
+            .unwrap();
+        w.set(0, (0, 0), [1.0; 3], [2.0; 3]);
+        w.describe(
+            0,
+            (0, 0),
+            Surfel::new(Vec3::ZERO, Vec3::Z, 1.0, [1.0; 3], 1.0).unwrap(),
+        );
+        assert!(!path.with_extension("surfels").exists());
+        let image = w.finish(&scene, &meshes).unwrap();
+        assert_eq!((image.pixels()[0][0], image.pixels()[0][4]), (1.0, 2.0));
     }
 
     #[test]
