@@ -6,7 +6,6 @@ sample count, A's error over B's at equal samples and divided by B's CPU time ov
 equal time; > 1: B is ahead), by relative MSE and MSE; means over the seeds.
    compare.py OUT"""
 import glob
-import importlib.util
 import os
 import sys
 
@@ -21,25 +20,26 @@ PAIRS = [
 ]
 
 
-def load_table():
-    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "lightmap-direct", "compare.py")
-    spec = importlib.util.spec_from_file_location("lightmap_direct_compare", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.table
+# lightmap-direct/compare.py's `table`: per (method, spp) the seeds' mean CPU time, errors, bias.
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "lightmap-direct"))
+from compare import table  # noqa: E402
+def ratios(x, y):
+    """A's error over B's at equal samples and at equal CPU time, and the time ratio B ÷ A."""
+    time = y["cpu"] / x["cpu"]
+    rel, mse = x["rel"] / y["rel"], x["mse"] / y["mse"]
+    return [time, rel, rel / time, mse, mse / time]
 
 
-table = load_table()
-for path in sorted(glob.glob(os.path.join(sys.argv[1], "*", "runs.csv"))):
-    scene = os.path.basename(os.path.dirname(path))
-    t = table(path)
+HEADER = ["A over B", "spp", "CPU B ÷ A", "relMSE A ÷ B", "at equal time", "MSE A ÷ B", "at equal time", "rel. bias A / B"]
+runs = sorted(glob.glob(os.path.join(sys.argv[1], "*", "runs.csv")))
+for scene, t in ((os.path.basename(os.path.dirname(p)), table(p)) for p in runs):
     print(f"## {scene}")
-    print("| A over B | spp | CPU B ÷ A | relMSE A ÷ B | at equal time | MSE A ÷ B | at equal time | rel. bias A / B |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    print("| " + " | ".join(HEADER) + " |")
+    print("|---|" + "---:|" * (len(HEADER) - 1))
     for what, a, b in PAIRS:
-        for spp in sorted({s for (m, s) in t if m == b}):
+        for spp in sorted(s for (m, s) in t if m == b):
             x, y = t[(a, spp)], t[(b, spp)]
-            time = y["cpu"] / x["cpu"]
-            rel, mse = x["rel"] / y["rel"], x["mse"] / y["mse"]
-            print(f"| {what} | {spp} | {time:.2f} | {rel:.2f} | {rel / time:.2f} | {mse:.2f} | {mse / time:.2f} | {100 * x['bias']:+.2f} % / {100 * y['bias']:+.2f} % |")
+            cells = [what, str(spp)] + [f"{r:.2f}" for r in ratios(x, y)]
+            cells.append(f"{100 * x['bias']:+.2f} % / {100 * y['bias']:+.2f} %")
+            print("| " + " | ".join(cells) + " |")
     print()
