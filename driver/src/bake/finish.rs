@@ -760,13 +760,7 @@ fn noisy_texel(
     }
     let sd = r.rel_std_error * luminance_f32(rgb);
     let variance = if sd.is_finite() { sd * sd } else { 0.0 };
-    let spacing = texel
-        .dpdu
-        .map(|c| c * c)
-        .iter()
-        .sum::<f32>()
-        .max(texel.dpdv.map(|c| c * c).iter().sum::<f32>())
-        .sqrt();
+    let spacing = texel.spacing();
     Some(NoisyTexel {
         rgb,
         variance,

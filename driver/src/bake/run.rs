@@ -23,7 +23,6 @@ use std::sync::Mutex;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-use glam::Vec3;
 use serde::Serialize;
 
 use super::budget::SpatialBudget;
@@ -574,10 +573,8 @@ fn previous_pass(
                 let total = core::array::from_fn(|c| r.total[c] + d.total[c]);
                 image.set(texel.page, (x, y), r.gathered, total);
                 if target.filter > 0 {
-                    let size = Vec3::from(texel.dpdu)
-                        .length()
-                        .max(Vec3::from(texel.dpdv).length());
-                    let (position, normal) = (texel.position(), Vec3::from(texel.normal));
+                    let (position, normal) = (texel.position(), texel.normal());
+                    let size = texel.spacing();
                     if let Some(s) =
                         Surfel::new(position, normal, size, r.gathered, r.rel_std_error)
                     {

@@ -245,6 +245,13 @@ impl TexelRecord {
     pub fn normal(&self) -> Vec3 {
         Vec3::from(self.normal)
     }
+    /// The texel's spacing in the world: the longer of its footprint axes.
+    #[must_use]
+    pub fn spacing(&self) -> f32 {
+        Vec3::from(self.dpdu)
+            .length()
+            .max(Vec3::from(self.dpdv).length())
+    }
     /// What is wrong with this record on its own, if anything.
     fn defect(&self) -> Option<String> {
         let finite = |v: &[f32; 3]| v.iter().all(|c| c.is_finite());

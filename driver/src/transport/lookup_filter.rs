@@ -152,10 +152,10 @@ fn filtered(
     sum / weight
 }
 
-/// Filters one page of a pass image in place: for every baked pixel of `surfels` (the page's
-/// texels, row-major), the gathered layer `pixels[i].0` becomes [`filtered`]'s value and the
-/// total `pixels[i].1` moves by the same change (its direct light kept as it was). Pixels
-/// without a surfel are left alone. Depends on nothing but the page, so the same bits come out
+/// Filters one page: for every baked pixel `i` of `surfels` (the page's texels, row-major),
+/// calls `set(i, change)` with [`filtered`]'s value less the texel's own gathered light; the
+/// pass image adds it to both its layers, so the direct light stays as it was. Pixels without
+/// a surfel are left alone. Depends on nothing but the page, so the same bits come out
 /// whatever baked the pass.
 pub fn filter_page(
     surfels: &[Surfel],
