@@ -257,3 +257,67 @@ fn bad_options_name_the_option_and_write_nothing() {
     assert!(message.contains("no-such-scene.glb"), "{message}");
     assert!(!out.exists(), "nothing is written for bad options");
 }
+
+/// `--reference-noise` bakes the reference's twin beside it (cached too) and reports the
+/// reference's noise, which is a part of every run's error and so less than any of them.
+#[test]
+fn the_reference_noise_comes_from_a_cached_twin() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let bench = |out: &Path| {
+        let status = guidebake()
+            .args(["bench", "--quick", "--threads", "2", "--repeats", "0"])
+            .args(["--methods", "off/average/-", "--reference-noise", "-o"])
+            .arg(out)
+            .arg("--cache")
+            .arg(&cache)
+            .status()
+            .expect("the binary runs");
+        assert!(status.success(), "guidebake bench --reference-noise failed");
+        let text = std::fs::read_to_string(out.join("summary.json")).unwrap();
+        serde_json::from_str::<serde_json::Value>(&text).unwrap()
+    };
+    let out = dir.path().join("first");
+    let summary = bench(&out);
+    let noise = &summary["reference_noise"];
+    let (rel, mse) = (
+        noise["rel_mse"].as_f64().unwrap(),
+        noise["mse"].as_f64().unwrap(),
+    );
+    assert!(
+        rel > 0.0 && rel.is_finite() && mse > 0.0 && mse.is_finite(),
+        "{noise}"
+    );
+    let (header, rows) = read_csv(&out.join("runs.csv"));
+    for run in finite_column(&header, &rows, "rel_mse") {
+        assert!(
+            rel < run,
+            "the reference's noise {rel} is a part of a run's error {run}"
+        );
+    }
+    for rmse in finite_column(&header, &rows, "rmse") {
+        assert!(mse < rmse * rmse, "{mse} against {}", rmse * rmse);
+    }
+    assert_eq!(noise["twin"]["cached"], false);
+    assert_ne!(noise["twin"]["key"], summary["reference"]["key"]);
+    let table = std::fs::read_to_string(out.join("table.md")).unwrap();
+    assert!(
+        table.contains("the mean of the bake above and its twin"),
+        "{table}"
+    );
+    let jsons = std::fs::read_dir(&cache)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "json")
+        })
+        .count();
+    assert_eq!(jsons, 2, "the reference and its twin are cached");
+
+    let again = bench(&dir.path().join("second"));
+    assert_eq!(again["reference_noise"]["twin"]["cached"], true);
+    assert_eq!(again["reference_noise"]["rel_mse"], noise["rel_mse"]);
+}

@@ -35,6 +35,13 @@ pub struct ErrorStats {
 #[error("{0}")]
 pub struct CompareError(String);
 
+impl CompareError {
+    /// An error saying `what`.
+    pub(crate) fn new(what: String) -> Self {
+        Self(what)
+    }
+}
+
 /// Compares `estimate` with `reference`, texel by texel (same indexing, `None` for texels a
 /// lightmap does not hold); texels where either is missing or non-finite are left out.
 ///

@@ -125,6 +125,9 @@ pub struct BenchConfig {
     pub bounces: u32,
     /// Rays per texel of the reference.
     pub reference_spp: u32,
+    /// Also bake the reference's twin, measure against the mean of the two and report that
+    /// mean's own noise (`--reference-noise`, [`reference::ReferenceNoise`]).
+    pub reference_noise: bool,
     /// Rays per texel of the overhead runs.
     pub overhead_spp: u32,
     /// Repeats of the overhead runs.
@@ -235,16 +238,23 @@ fn measure_and_write(
     files: &mut Vec<PathBuf>,
 ) -> Result<Summary, BenchError> {
     let clock = Instant::now();
-    let reference = reference::reference(
-        bench,
-        &config.cache,
-        reference::reference_settings(
-            config.reference_spp,
-            config.iterations,
-            config.reference_transport,
-            config.bounces,
-        ),
-    )?;
+    let reference_settings = reference::reference_settings(
+        config.reference_spp,
+        config.iterations,
+        config.reference_transport,
+        config.bounces,
+    );
+    let mut reference = reference::reference(bench, &config.cache, reference_settings)?;
+    let mut reference_noise = None;
+    if config.reference_noise {
+        let twin = reference::reference(
+            bench,
+            &config.cache,
+            reference::twin_settings(reference_settings),
+        )?;
+        let (mean, noise) = reference::ReferenceNoise::estimate(reference, twin)?;
+        (reference, reference_noise) = (mean, Some(noise));
+    }
     let mut spp = config.spp.clone();
     spp.sort_unstable();
     spp.dedup();
@@ -327,6 +337,7 @@ fn measure_and_write(
         threads: config.threads,
         ladder,
         reference: reference.info,
+        reference_noise,
         slopes: curves
             .iter()
             .map(|c| (c.method.clone(), analysis::convergence_slope(c)))

@@ -16,6 +16,15 @@
 //! texel file (header and every record) and the reference's settings. The JSON is written
 //! last, through a temporary name: a reference whose JSON exists and names the same key is
 //! complete and is reused.
+//!
+//! The reference's own noise is part of every error measured against it:
+//! `E[(x − r)²] = E[(x − μ)²] + Var r` for a run `x` independent of `r`. A path reference 16×
+//! a run's samples holds much of the error of a good series bake: path transport is about four
+//! times as noisy per sample (on the Veach rooms, up to 61 % of the default's relative MSE at
+//! 256 spp, docs/BENCHMARKS.md "The reference's own noise"). `--reference-noise` bakes a twin
+//! (the same settings, seed [`TWIN_SEED`]), measures the runs against the mean of the two and
+//! estimates that mean's noise ([`ReferenceNoise`]); subtracted from a run's error it leaves the
+//! run's error against the truth. The tables print the errors with the noise in.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -25,6 +34,7 @@ use serde::{Deserialize, Serialize};
 use super::BenchError;
 use super::harness::Bench;
 use super::method::Method;
+use super::metrics::{CompareError, compare};
 use crate::bake::settings::{BakeSettings, GuideTarget, Transport};
 use crate::output::atomic;
 use crate::output::fnv1a64;
@@ -35,6 +45,9 @@ use crate::transport::emitters::EmitterSelection;
 
 /// The seed of every reference bake (the measured runs use seeds from 1).
 pub const REFERENCE_SEED: u32 = 0x5eed_0000;
+
+/// The seed of the reference's twin (`--reference-noise`), which measures the reference's noise.
+pub const TWIN_SEED: u32 = REFERENCE_SEED + 1;
 
 /// The reference in use.
 #[derive(Clone, Debug)]
@@ -74,12 +87,80 @@ pub fn reference_settings(
 ) -> BakeSettings {
     // Emitters picked in proportion to power, whatever the bake's default selection: every
     // selection is unbiased, and the references cached before `local` keep their key. The
-    // baseline learns no guide: the guide's target is the one its key has always had.
+    // baseline learns no guide: the guide's target and `--min-gain` are the ones its key has
+    // always had.
     BakeSettings {
         emitter_selection: EmitterSelection::Power,
         guide_target: GuideTarget::Radiance,
+        min_gain: 150,
         ..Method::baseline().settings(spp, iterations, transport, bounces, REFERENCE_SEED)
     }
+}
+
+/// The twin's settings: the reference's, with [`TWIN_SEED`].
+pub fn twin_settings(reference: BakeSettings) -> BakeSettings {
+    BakeSettings {
+        seed: TWIN_SEED,
+        ..reference
+    }
+}
+
+/// The reference's own noise: its part of every run's error (`--reference-noise`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ReferenceNoise {
+    /// Its part of every run's relative MSE.
+    pub rel_mse: f64,
+    /// Its part of every run's MSE.
+    pub mse: f64,
+    /// The twin.
+    pub twin: ReferenceInfo,
+}
+
+impl ReferenceNoise {
+    /// The mean of `reference` and `twin` (an independent bake with the same settings but the
+    /// seed: twice the samples), which the runs are measured against then, and that mean's
+    /// noise. Per value `m − r = (r' − r) / 2` and `E[(r' − r)²] = 2 Var r`, so
+    /// `E[(m − r)²] = Var r / 2 = Var m`: the noise is `r`'s error against `m`, weighted by
+    /// `m` as a run's relative MSE is (the weight moves with `m`'s noise by about its relative
+    /// error, a second-order effect). Texels either lacks are left out of the mean.
+    ///
+    /// # Errors
+    /// [`CompareError`] when the two cannot be compared.
+    pub fn estimate(
+        reference: Reference,
+        twin: Reference,
+    ) -> Result<(Reference, Self), CompareError> {
+        if reference.values.len() != twin.values.len() {
+            return Err(CompareError::new(format!(
+                "a reference of {} texels and a twin of {}",
+                reference.values.len(),
+                twin.values.len()
+            )));
+        }
+        let values: Vec<Option<[f32; 3]>> = reference
+            .values
+            .iter()
+            .zip(&twin.values)
+            .map(|(a, b)| Some(mean((*a)?, (*b)?)))
+            .collect();
+        let e = compare(&reference.values, &values)?;
+        let noise = Self {
+            rel_mse: e.rel_mse,
+            mse: e.rmse * e.rmse,
+            twin: twin.info,
+        };
+        Ok((
+            Reference {
+                info: reference.info,
+                values,
+            },
+            noise,
+        ))
+    }
+}
+
+fn mean(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [0, 1, 2].map(|c| 0.5 * a[c] + 0.5 * b[c])
 }
 
 /// A hash of what the scene is, for the cache key (not of its path).
@@ -161,4 +242,82 @@ pub fn reference(
 
 fn read_info(path: &Path) -> Option<ReferenceInfo> {
     serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Uniform noise of mean 0 and standard deviation `sigma`, from a fixed xorshift stream.
+    fn noise(state: &mut u64, sigma: f64) -> f64 {
+        *state ^= *state << 13;
+        *state ^= *state >> 7;
+        *state ^= *state << 17;
+        let u = (*state >> 11) as f64 / (1u64 << 53) as f64;
+        (u - 0.5) * sigma * 12f64.sqrt()
+    }
+
+    fn lightmap(truth: &[f64], sigma: f64, state: &mut u64) -> Vec<Option<[f32; 3]>> {
+        truth
+            .iter()
+            .map(|&t| Some([0; 3].map(|_| (t + noise(state, sigma * t)) as f32)))
+            .collect()
+    }
+
+    fn reference(values: Vec<Option<[f32; 3]>>, seed: u32) -> Reference {
+        Reference {
+            info: ReferenceInfo {
+                kind: "bake".into(),
+                key: format!("test {seed}"),
+                settings: String::new(),
+                spp: 16,
+                bake_seconds: 0.0,
+                path: PathBuf::new(),
+                cached: false,
+            },
+            values,
+        }
+    }
+
+    #[test]
+    fn the_twin_takes_the_references_noise_out_of_a_runs_error() {
+        let truth: Vec<f64> = (0..40_000)
+            .map(|i| 0.5 + f64::from(i % 97) / 20.0)
+            .collect();
+        let exact: Vec<_> = truth.iter().map(|&t| Some([t as f32; 3])).collect();
+        let mut state = 0x9e37_79b9_7f4a_7c15;
+        // A run twice as noisy as each reference bake: their mean holds a ninth of its error.
+        let run = lightmap(&truth, 0.10, &mut state);
+        let a = reference(lightmap(&truth, 0.05, &mut state), 0);
+        let b = reference(lightmap(&truth, 0.05, &mut state), 1);
+        let (mean, noise) = ReferenceNoise::estimate(a, b).unwrap();
+        assert_eq!(mean.info.key, "test 0");
+        let against_truth = compare(&run, &exact).unwrap();
+        let against_mean = compare(&run, &mean.values).unwrap();
+        let raw = against_mean.rel_mse / against_truth.rel_mse;
+        assert!(
+            raw > 1.1,
+            "the reference's noise is in the raw error: {raw}"
+        );
+        let net = (against_mean.rel_mse - noise.rel_mse) / against_truth.rel_mse;
+        assert!((net - 1.0).abs() < 0.02, "relative MSE: {net}");
+        let mse = |e: &crate::bench::metrics::ErrorStats| e.rmse * e.rmse;
+        let net = (mse(&against_mean) - noise.mse) / mse(&against_truth);
+        assert!((net - 1.0).abs() < 0.02, "MSE: {net}");
+        assert_eq!(noise.twin.key, "test 1");
+    }
+
+    #[test]
+    fn the_twin_differs_from_the_reference_by_its_seed_alone() {
+        let reference = reference_settings(4096, 4, Transport::Path, 3);
+        let twin = twin_settings(reference);
+        assert_ne!(twin.seed, reference.seed);
+        assert_eq!(
+            BakeSettings {
+                seed: reference.seed,
+                ..twin
+            },
+            reference
+        );
+    }
 }

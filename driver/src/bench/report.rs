@@ -10,7 +10,7 @@ use super::BenchError;
 use super::analysis::{Curve, EqualTime, EquivalentSamples, ErrorMetric, Interpolated, Overhead};
 use super::harness::{Ladder, OverheadRecord, RunRecord};
 use super::method::{Method, serialize_value_name, value_name};
-use super::reference::ReferenceInfo;
+use super::reference::{ReferenceInfo, ReferenceNoise};
 use crate::bake::settings::Transport;
 use crate::output::atomic;
 
@@ -133,6 +133,9 @@ pub struct Summary {
     pub ladder: Ladder,
     /// The reference.
     pub reference: ReferenceInfo,
+    /// The reference's own noise, a part of every error (`--reference-noise`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_noise: Option<ReferenceNoise>,
     /// Error against time per method.
     pub curves: Vec<Curve>,
     /// Log–log slope of RMSE against wall time per method.
@@ -312,6 +315,16 @@ pub fn markdown(s: &Summary) -> String {
         s.reference.bake_seconds,
         if s.reference.cached { ", cached" } else { "" }
     );
+    if let Some(n) = &s.reference_noise {
+        let _ = writeln!(
+            md,
+            "The reference is the mean of the bake above and its twin ({}{}). Its own noise is a part of every error below: relative MSE {:.3e}, MSE {:.3e}. Subtract it for a run's error against the truth.\n",
+            n.twin.path.display(),
+            if n.twin.cached { ", cached" } else { "" },
+            n.rel_mse,
+            n.mse
+        );
+    }
     let max_spp = s.ladder.spp.iter().copied().max().unwrap_or(0);
     let _ = writeln!(
         md,

@@ -69,6 +69,12 @@ pub struct BenchArgs {
     /// --spp.
     #[arg(long)]
     pub ref_spp: Option<u32>,
+    /// Also bake an independent twin of the reference (another seed, the same samples; cached
+    /// beside it), measure every run against the mean of the two, and report that mean's own
+    /// noise, which every error includes (`reference_noise` in summary.json, a line in
+    /// table.md): subtracted, it leaves a run's error against the truth.
+    #[arg(long)]
+    pub reference_noise: bool,
     /// Rays per texel of the overhead runs (default 256).
     #[arg(long)]
     pub overhead_spp: Option<u32>,
@@ -147,6 +153,7 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
         reference_transport: args.reference_transport,
         bounces: pick(args.bounces, BakeSettings::default().bounces, 1),
         reference_spp: pick(args.ref_spp, 4096, 1024),
+        reference_noise: args.reference_noise,
         overhead_spp: pick(args.overhead_spp, 256, 32),
         repeats: pick(args.repeats, 5, 3),
         light: LightSampling {
