@@ -128,10 +128,17 @@ fn compare(scene: &Scene, texels: &Path, dir: &Path) -> Compared {
     }
 }
 
+/// The bias series transport may have against path transport, relative: −0.04 % to −0.7 % of
+/// the mean on the benchmark rooms (docs/BENCHMARKS.md, "The default bake is right where
+/// surfaces meet"). On this box's faces the unguided series bake is 0.5 % low (face 0: −0.0086
+/// of 1.70, 7.5 standard errors) and the default 0.35–0.6 %; a face baked from its inside is
+/// off by far more.
+const SERIES_BIAS: f64 = 5e-3;
+
 /// A room 4 × 2.5 × 4 open on its +z side, lit by a lamp under its ceiling, with a closed
 /// 1 m box standing on its floor: every visible face of the box bakes its outside — lit, and
-/// within 3 standard errors of the path reference on average over the face — and the floor
-/// under it lies inside geometry.
+/// within 3 standard errors of the path reference on average over the face, give or take
+/// series transport's own bias — and the floor under it lies inside geometry.
 #[test]
 fn a_closed_box_in_a_room_open_on_one_side_bakes_its_outside() {
     let dir = tempfile::tempdir().unwrap();
@@ -205,7 +212,7 @@ fn a_closed_box_in_a_room_open_on_one_side_bakes_its_outside() {
             "face {face} is dark: {value} (scene mean {lit_mean})"
         );
         assert!(
-            diff.abs() <= 3.0 * se + 1e-3 * value,
+            diff.abs() <= 3.0 * se + SERIES_BIAS * value,
             "face {face}: the default is {diff:+.4} off the path reference (standard error {se:.4}, value {value:.4})"
         );
     }

@@ -2014,8 +2014,8 @@ mod tests {
         const SEEDS: u32 = 32;
         const PER_SAMPLE: f64 = 10.0;
         const WHOLE_BAKE: f32 = 4.0;
-        // The mixtures' means with every cluster guided (`--min-gain 0`), then with the
-        // default `--min-gain`.
+        // The mixtures' means with every cluster guided (`--min-gain 0`), then with
+        // `--min-gain 150`, which stops a guide that shows less than 1.5× the gain.
         let base = BakeSettings {
             combine: Combine::Average,
             bias_correction: false,
@@ -2034,7 +2034,7 @@ mod tests {
                 assert_eq!(counters.iterations_guided, 2, "{mode}: {counters:?}");
                 // The guide of a small emitter beats stratified cosine points (by 1.9–5×).
                 let gainful = BakeSettings {
-                    min_gain: BakeSettings::default().min_gain,
+                    min_gain: 150,
                     ..mixed
                 };
                 let (_, _, _, c) = emitter_bake(gainful);
@@ -2185,7 +2185,7 @@ mod tests {
         assert!(lost < 0.5, "{lost}");
     }
 
-    /// `--min-gain`: under a sky that varies smoothly (stratified cosine points leave little
+    /// `--min-gain 150`: under a sky that varies smoothly (stratified cosine points leave little
     /// for a guide to gain), the cluster stops guiding after its first guided iteration and
     /// gathers with cosine points, counted, and the irradiance is still the analytic one.
     #[test]
@@ -2198,8 +2198,12 @@ mod tests {
         .unwrap();
         let want = gradient_sky_coefficients(&rows)[3] / directional::Y1;
         let texels = texels_on_plane(64, 0.0);
-        let (mean, se, c) = bake_mean(&world, settings(Guiding::Coherent), &texels);
-        assert_within_3_sigma("the default --min-gain", (mean, se), want);
+        let gainful = BakeSettings {
+            min_gain: 150,
+            ..settings(Guiding::Coherent)
+        };
+        let (mean, se, c) = bake_mean(&world, gainful, &texels);
+        assert_within_3_sigma("--min-gain 150", (mean, se), want);
         assert!(c.iterations_unguided_no_gain > 0, "{c:?}");
         assert_eq!(c.iterations_learnable(), c.clusters * 2, "{c:?}");
         // Without the lever the same clusters sample their guides.

@@ -223,8 +223,9 @@ pub struct BakeSettings {
     /// iteration that sampled it, at least this gain in percent: the stratified cosine
     /// points' variance per sample over its own (`--min-gain`; 0: always guide). Below it
     /// the cluster gathers with cosine points for its remaining iterations
-    /// ([`GatherCounters`]'s `iterations_unguided_no_gain`). 150 by the benchmark
-    /// (docs/BENCHMARKS.md, "Guiding only where it pays"): a guided pass costs 1.1–1.2×.
+    /// ([`GatherCounters`]'s `iterations_unguided_no_gain`). 25 by the benchmark
+    /// (docs/BENCHMARKS.md, "Guiding only where it pays"): only a guide 4× worse than cosine
+    /// points stops; at 150 the bake lost a third to a half of guiding's gain at equal time.
     ///
     /// [`GatherCounters`]: crate::bake::gather::GatherCounters
     pub min_gain: u32,
@@ -373,7 +374,7 @@ impl Default for BakeSettings {
             schedule: Schedule::Doubling,
             min_split: 64,
             smooth: 10,
-            min_gain: 150,
+            min_gain: 25,
             emitters: EmitterSampling::default(),
             emitter_selection: EmitterSelection::default(),
             directional: Directional::None,
@@ -956,7 +957,7 @@ mod tests {
             format!("{d:?}"),
             "BakeSettings { spp: 256, iterations: 4, guiding: Coherent, combine: Cluster, \
              bias_correction: true, seed: 0, transport: Path, bounces: 3, mix: 25, \
-             schedule: Doubling, min_split: 64, smooth: 10, min_gain: 150, emitters: Mis, \
+             schedule: Doubling, min_split: 64, smooth: 10, min_gain: 25, emitters: Mis, \
              emitter_selection: Local, directional: None, guided_passes: Last }"
         );
         let d = BakeSettings {

@@ -417,10 +417,10 @@ mod tests {
         assert_eq!(m.levers.guided_passes, GuidedPasses::Every);
         assert_eq!(m.label(), "coherent/cluster/rho+passes=every");
         assert!(Method::parse("coherent/cluster/rho+passes=some").is_err());
-        let m = Method::parse("coherent/cluster/rho+gain=0").unwrap();
-        assert_eq!(m.levers.min_gain, 0);
-        assert_eq!(m.label(), "coherent/cluster/rho+gain=0");
-        assert_eq!(m.settings(256, 4, Transport::Series, 3, 1).min_gain, 0);
+        let m = Method::parse("coherent/cluster/rho+gain=150").unwrap();
+        assert_eq!(m.levers.min_gain, 150);
+        assert_eq!(m.label(), "coherent/cluster/rho+gain=150");
+        assert_eq!(m.settings(256, 4, Transport::Series, 3, 1).min_gain, 150);
         let m = Method::parse("coherent/cluster/rho+transport=path").unwrap();
         assert_eq!(m.label(), "coherent/cluster/rho+transport=path");
         assert_eq!(
