@@ -247,20 +247,16 @@ fn read_info(path: &Path) -> Option<ReferenceInfo> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::transport::rng::SampleRng;
 
-    /// Uniform noise of mean 0 and standard deviation `sigma`, from a fixed xorshift stream.
-    fn noise(state: &mut u64, sigma: f64) -> f64 {
-        *state ^= *state << 13;
-        *state ^= *state >> 7;
-        *state ^= *state << 17;
-        let u = (*state >> 11) as f64 / (1u64 << 53) as f64;
-        (u - 0.5) * sigma * 12f64.sqrt()
-    }
-
-    fn lightmap(truth: &[f64], sigma: f64, state: &mut u64) -> Vec<Option<[f32; 3]>> {
+    /// `truth` with uniform noise of mean 0 and relative standard deviation `sigma` on every
+    /// channel, from the sample stream `stream`.
+    fn lightmap(truth: &[f64], sigma: f64, stream: u64) -> Vec<Option<[f32; 3]>> {
+        let mut rng = SampleRng::new(0, stream, 0, 0);
+        let mut noise = |t: f64| (f64::from(rng.unit()) - 0.5) * sigma * t * 12f64.sqrt();
         truth
             .iter()
-            .map(|&t| Some([0; 3].map(|_| (t + noise(state, sigma * t)) as f32)))
+            .map(|&t| Some([0; 3].map(|_| (t + noise(t)) as f32)))
             .collect()
     }
 
@@ -285,11 +281,10 @@ mod tests {
             .map(|i| 0.5 + f64::from(i % 97) / 20.0)
             .collect();
         let exact: Vec<_> = truth.iter().map(|&t| Some([t as f32; 3])).collect();
-        let mut state = 0x9e37_79b9_7f4a_7c15;
         // A run twice as noisy as each reference bake: their mean holds a ninth of its error.
-        let run = lightmap(&truth, 0.10, &mut state);
-        let a = reference(lightmap(&truth, 0.05, &mut state), 0);
-        let b = reference(lightmap(&truth, 0.05, &mut state), 1);
+        let run = lightmap(&truth, 0.10, 1);
+        let a = reference(lightmap(&truth, 0.05, 2), 0);
+        let b = reference(lightmap(&truth, 0.05, 3), 1);
         let (mean, noise) = ReferenceNoise::estimate(a, b).unwrap();
         assert_eq!(mean.info.key, "test 0");
         let against_truth = compare(&run, &exact).unwrap();
