@@ -401,7 +401,7 @@ pub fn markdown(s: &Summary) -> String {
         md,
         "Figure-5 overhead, {} spp, `{}` transport, {} interleaved repeats (medians; every \
          `--guiding` mode with the bake's defaults otherwise, `{}`):\n\n\
-         | guiding | gather (s) | wall (s) | gather / off | wall / off | paired gather / off | guided |\n|---|---:|---:|---:|---:|---:|---:|",
+         | guiding | gather (s) | wall (s) | gather / off | wall / off | paired gather / off | paired CPU / off | guided |\n|---|---:|---:|---:|---:|---:|---:|---:|",
         s.overhead.spp,
         value_name(&s.overhead.transport),
         s.overhead.repeats,
@@ -410,13 +410,14 @@ pub fn markdown(s: &Summary) -> String {
     for o in &s.overhead.modes {
         let _ = writeln!(
             md,
-            "| {} | {:.3} | {:.3} | {:.3}× | {:.3}× | {:.3}× | {:.0}% |",
+            "| {} | {:.3} | {:.3} | {:.3}× | {:.3}× | {:.3}× | {:.3}× | {:.0}% |",
             o.guiding,
             o.gather_s,
             o.wall_s,
             o.gather_ratio,
             o.wall_ratio,
             o.paired_gather_ratio,
+            o.paired_cpu_ratio,
             100.0 * o.guided_fraction
         );
     }
