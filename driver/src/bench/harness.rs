@@ -36,8 +36,12 @@ pub struct Bench<'a> {
     pub texels: &'a TexelFile,
     /// A scratch directory for the runs' lightmaps.
     pub scratch: PathBuf,
-    /// Worker threads of every bake.
+    /// Worker threads of every measured bake.
     pub threads: usize,
+    /// Worker threads of the reference bakes ([`BenchConfig::reference_threads`]).
+    ///
+    /// [`BenchConfig::reference_threads`]: super::BenchConfig::reference_threads
+    pub reference_threads: usize,
     /// Emitter sampling of the measured bakes ([`Self::bake_scratch`]).
     pub light: LightSampling,
     /// Ctrl-C.
@@ -69,11 +73,25 @@ pub struct Baked {
 }
 
 impl Bench<'_> {
-    /// Bakes `settings` to `out` (its pages are left there) and reads the lightmap back.
+    /// Bakes `settings` to `out` (its pages are left there) on the measured bakes' threads
+    /// and reads the lightmap back.
     ///
     /// # Errors
     /// [`BenchError`] when the bake fails, is interrupted, or its pages cannot be read.
     pub fn bake_to(&self, settings: BakeSettings, out: &Path) -> Result<Baked, BenchError> {
+        self.bake_on(settings, out, self.threads)
+    }
+
+    /// [`Self::bake_to`] on `threads` worker threads.
+    ///
+    /// # Errors
+    /// As [`Self::bake_to`].
+    pub fn bake_on(
+        &self,
+        settings: BakeSettings,
+        out: &Path,
+        threads: usize,
+    ) -> Result<Baked, BenchError> {
         let dir = work_dir(out, Shard::WHOLE);
         if dir.exists() {
             std::fs::remove_dir_all(&dir).map_err(|e| BenchError::file(&dir, e))?;
@@ -82,7 +100,7 @@ impl Bench<'_> {
             texels: self.texels_path.to_owned(),
             out: out.to_owned(),
             settings,
-            threads: self.threads,
+            threads,
             shard: Shard::WHOLE,
             resume: false,
             aux: false,

@@ -105,8 +105,11 @@ pub struct BenchConfig {
     pub out: PathBuf,
     /// Directory of cached references.
     pub cache: PathBuf,
-    /// Worker threads of every bake.
+    /// Worker threads of every measured bake.
     pub threads: usize,
+    /// Worker threads of the reference and its twin: they are not timed, and a bake is the
+    /// same bits on any thread count, so a cached reference is the same whatever this is.
+    pub reference_threads: usize,
     /// Methods of the ladder.
     pub methods: Vec<Method>,
     /// Rays per texel of the ladder.
@@ -215,6 +218,7 @@ pub fn run(
         texels: &texels,
         scratch: scratch.clone(),
         threads: config.threads,
+        reference_threads: config.reference_threads,
         light: config.light,
         cancel,
     };

@@ -222,7 +222,7 @@ pub fn reference(
         out.display()
     );
     let clock = Instant::now();
-    let baked = bench.bake_to(settings, &out)?;
+    let baked = bench.bake_on(settings, &out, bench.reference_threads)?;
     let info = ReferenceInfo {
         kind: "bake".into(),
         key,

@@ -242,9 +242,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         texels: args.texels.clone(),
         out: args.out.clone(),
         settings,
-        threads: args
-            .threads
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        threads: args.threads.unwrap_or_else(super::every_core),
         shard: args.shard,
         resume: args.resume,
         aux: args.aux,

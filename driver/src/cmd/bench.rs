@@ -91,9 +91,14 @@ pub struct BenchArgs {
     /// Interleaved repeats of the overhead runs (default 5; 0 skips them).
     #[arg(long)]
     pub repeats: Option<u32>,
-    /// Worker threads of every bake (default: every core).
+    /// Worker threads of every measured bake (default: every core).
     #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
+    /// Worker threads of the reference bakes (default: every core). They are not timed, and
+    /// a bake is the same bits on any thread count, so `--threads 1` runs still bake their
+    /// reference on every core; give 1 here too when benches run side by side, one a core.
+    #[arg(long, value_parser = super::parse_threads)]
+    pub reference_threads: Option<usize>,
     /// How the measured bakes light emissive triangles (`guidebake bake --emitters`); the
     /// reference always uses the bake's default.
     #[arg(long, value_enum, default_value_t = EmitterSampling::default())]
@@ -122,9 +127,10 @@ pub fn run_bench(args: &BenchArgs) -> Result<(), super::CmdError> {
         texels: PathBuf::new(),
         out: args.out.clone(),
         cache: args.cache.clone(),
-        threads: args
-            .threads
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        threads: args.threads.unwrap_or_else(super::every_core).max(1),
+        reference_threads: args
+            .reference_threads
+            .unwrap_or_else(super::every_core)
             .max(1),
         methods: match &args.methods {
             None => Method::all(),

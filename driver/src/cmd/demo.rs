@@ -58,9 +58,7 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
         prepared.tiles,
         texels.display()
     );
-    let threads = args
-        .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let threads = args.threads.unwrap_or_else(super::every_core);
     for (name, guiding) in [("baseline", Guiding::Off), ("guided", Guiding::Coherent)] {
         let out = args.out.join(format!("{name}.exr"));
         // A demo is always baked afresh: an earlier, interrupted demo's work is not resumed.

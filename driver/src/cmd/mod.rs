@@ -27,3 +27,8 @@ pub fn parse_threads(s: &str) -> Result<usize, String> {
         Err(e) => Err(format!("{s:?} is not a worker count: {e}")),
     }
 }
+
+/// Worker threads where `--threads` is left out: every core.
+pub fn every_core() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
