@@ -7,7 +7,8 @@
 # prints each bake's measured relative error (√ relative MSE) beside its target and the
 # samples it took. REF_SPP overrides the reference's samples; REFERENCE_NOISE=1 bakes the
 # reference's twin too (`--reference-noise`), and calibration.py then prints each error net
-# of the reference's own noise as well. SCENES (space-separated) picks the scenes.
+# of the reference's own noise as well; REFERENCE_THREADS passes --reference-threads. SCENES
+# (space-separated) picks the scenes.
 #   docs/bench/stop/run.sh SCENES_DIR OUT [SIZE [CAP]]     (default 128, 4096)
 set -euo pipefail
 scenes=${1:?scenes dir (../shared/scenes)}; out=${2:?output dir}
@@ -21,7 +22,8 @@ for s in ${SCENES:-cornell_box veach_ajar_no_teapots veach_bidir}; do
   "$g" prepare "$glb" -o "$dir/scene.texels" --size "${n}x${n}" >/dev/null
   "$g" bench "$glb" --texels "$dir/scene.texels" -o "$dir" --cache "$out/cache" \
     --methods "${METHODS:-coherent/cluster/rho+stop=50,coherent/cluster/rho+stop=20}" \
-    --spp "$((cap / 4)),$cap" --ref-spp "${REF_SPP:-$((16 * cap))}" ${REFERENCE_NOISE:+--reference-noise} --iterations 8 --seeds 1 --repeats 0 --threads 1 \
+    --spp "$((cap / 4)),$cap" --ref-spp "${REF_SPP:-$((16 * cap))}" ${REFERENCE_NOISE:+--reference-noise} \
+    ${REFERENCE_THREADS:+--reference-threads "$REFERENCE_THREADS"} --iterations 8 --seeds 1 --repeats 0 --threads 1 \
     > "$dir/bench.log" 2>&1
   rm -f "$dir/scene.texels" "$dir/scene.texels.seams"
   echo "$s $n: $(grep -c '' "$dir/runs.csv") rows"
