@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Issue 44's measure on a level none of the defaults were tuned on: the Cube 2 level zdm2
 # (../shared/scenes/calinou_zdm2, CC BY 4.0; textures stripped, a sun and a sky from a TOML
-# file, as docs/bench/surfaces/zdm2.sh bakes it) at SIZE², the default against the uniform
+# file: docs/bench/surfaces/zdm2-scene.sh) at SIZE², the default against the uniform
 # unguided bake, 64 / 256 spp, SEEDS seeds (2), one thread, against a 4 096-spp path reference
 # and its twin (--reference-noise); then docs/bench/reference-noise/net.py: the equal-time
 # ratios raw and net of the reference's noise (docs/BENCHMARKS.md, "Issue 44 on a level").
@@ -10,18 +10,7 @@ set -euo pipefail
 scenes=${1:?scenes dir (../shared/scenes)}; out=${2:?output dir}; n=${3:-768}
 g=$(realpath "${GUIDEBAKE:-target/release/guidebake}")
 here=$(dirname "$(realpath "$0")")
-mkdir -p "$out/src"
-cp "$scenes/calinou_zdm2/zdm2.obj" "$out/src/"
-grep -v -E '^\s*map_' "$scenes/calinou_zdm2/zdm2.mtl" > "$out/src/zdm2.mtl"
-cat > "$out/src/zdm2.toml" <<'TOML'
-geometry = "zdm2.obj"
-[sky]
-constant = [0.4, 0.5, 0.7]
-[sun]
-direction = [0.4, 1.0, 0.3]
-angular_radius_deg = 0.267
-irradiance = [3.0, 2.9, 2.7]
-TOML
+"$here/../surfaces/zdm2-scene.sh" "$scenes" "$out/src"
 dir="$out/zdm2-$n"
 mkdir -p "$dir"
 "$g" prepare "$out/src/zdm2.toml" -o "$dir/scene.texels" --unwrap always --size "${n}x${n}" >/dev/null
