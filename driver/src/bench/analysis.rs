@@ -275,8 +275,8 @@ pub struct Overhead {
     pub wall_ratio: f64,
     /// Median over repeats of this repeat's gather time over the baseline's in the same repeat.
     pub paired_gather_ratio: f64,
-    /// The same for the whole bake's CPU time (every thread, user + system): the measure of
-    /// the paper's Figure 5, which the guide build and the time outside the gather count in.
+    /// The same for the whole bake's CPU time (every phase and thread, user + system): the
+    /// paper's Figure 5 times whole bakes.
     pub paired_cpu_ratio: f64,
     /// Mean fraction of guided cluster-iterations.
     pub guided_fraction: f64,
