@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
-"""Where a bake's relative error sits against a reference: per band of the reference's
-luminance (deciles and quartiles of the valid texels), the band's share of the bake's relative
-MSE and the bake's mean relative error there; then the mean over the texels the reference has
-dark (luminance under DARK, 0.015: the level's darkest tenth) beside the reference's there.
+"""Where a bake's relative error sits against a reference: the mean over the texels the
+reference has dark (luminance under DARK, 0.015: the level's darkest tenth) beside the
+reference's there; the texels the reference has exactly black, their share of the bake's
+relative MSE and the bake's mean there; and per band of the reference's luminance (deciles
+and quartiles of the other valid texels), the band's share and the bake's mean relative error.
 The reference is the mean of the REFERENCE files given before `--`.
     dark.py TEXELS REFERENCE.exr [REFERENCE2.exr] -- BAKE.exr...
 Needs numpy and OpenEXR (pip install numpy OpenEXR)."""

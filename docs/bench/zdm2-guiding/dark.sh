@@ -11,7 +11,6 @@ g=$(realpath "${GUIDEBAKE:-target/release/guidebake}")
 here=$(dirname "$(realpath "$0")")
 d="$out/dark"; mkdir -p "$d"
 "$g" prepare "$out/src/zdm2.toml" -o "$d/z.texels" --unwrap always --size "${n}x${n}" >/dev/null
-head -3 "$out/src/zdm2.toml" > "$out/src/sky.toml"
 bake() { "$g" bake "$d/z.texels" -o "$d/$1.exr" --threads 1 "${@:2}" >/dev/null 2>&1; }
 bake series --scene "$out/src/zdm2.toml" --spp 256
 bake path --scene "$out/src/zdm2.toml" --spp 256 --transport path
@@ -20,8 +19,8 @@ for b in 1 2; do
   bake path-b$b --scene "$out/src/zdm2.toml" --spp 64 --bounces $b --transport path
 done
 bake series-filter0 --scene "$out/src/zdm2.toml" --spp 64 --lookup-filter 0
-bake sky-series-b2 --scene "$out/src/sky.toml" --spp 64 --bounces 2
-bake sky-path-b2 --scene "$out/src/sky.toml" --spp 256 --bounces 2 --transport path
+bake sky-series-b2 --scene "$out/src/zdm2-sky.toml" --spp 64 --bounces 2
+bake sky-path-b2 --scene "$out/src/zdm2-sky.toml" --spp 256 --bounces 2 --transport path
 refs=$(python3 -c "
 import json,glob
 for f in sorted(glob.glob('$out/cache/ref-*.json')): print(json.load(open(f))['path'])")
