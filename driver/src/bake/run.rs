@@ -42,7 +42,7 @@ use crate::bvh::Preset;
 use crate::output::fnv1a64;
 use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
 use crate::scene::Scene;
-use crate::texels::TexelFile;
+use crate::texels::{FLAG_INSIDE, TexelFile};
 use crate::transport::lookup_filter::Surfel;
 use crate::transport::series::{PreviousPass, PreviousPassWriter};
 
@@ -581,6 +581,9 @@ fn previous_pass(
                         image.describe(texel.page, (x, y), s);
                     }
                 }
+            } else if texel.flags & FLAG_INSIDE != 0 {
+                let [x, y] = texel.pixel.map(u32::from);
+                image.mark_inside(texel.page, (x, y));
             }
         }
         texels.release_tile(t);

@@ -20,11 +20,12 @@
 //! **Leak-free lookups** (docs/bake.md, "Where series reads the lightmap"). A lookup is only
 //! read where the texels it interpolates truly describe the surface at the hit
 //! ([`Lookup::baked`], [`Lookup::smooth`]): on the side the texels describe (not the far side
-//! of a thin wall, whose texels hold the light of the space behind it), over baked texels
-//! (not a chart's padding, not texels inside geometry, whose values are the dilation's),
-//! agreeing within [`SMOOTH_RATIO`] (not across a shadow edge or the doorway light enters
-//! by). Elsewhere the caller computes the light at the hit as path transport would
-//! (`transport/path.rs`).
+//! of a thin wall, whose texels hold the light of the space behind it), where none of the
+//! texels it interpolates lies inside geometry (their baked neighbours hold the light of the
+//! open space beside a closed gap, not the gap's) and the one the hit lies in is baked, over
+//! baked texels (not a chart's padding, whose values are the dilation's), agreeing within
+//! [`SMOOTH_RATIO`] (not across a shadow edge or the doorway light enters by). Elsewhere the caller computes the light at the hit as path
+//! transport would (`transport/path.rs`).
 //!
 //! [`PreviousPass`] holds one dense RGB image per atlas page, in a file of the work directory
 //! that is memory-mapped (file-backed pages, not anonymous memory), written by
@@ -59,11 +60,15 @@ pub const DILATION: u32 = 4;
 pub const NEAR_FIELD_TEXELS: f32 = 4.0;
 
 /// One pixel of a pass image: gather-only irradiance (0..3), its generation (3; 0: empty,
-/// 1: a baked texel, g + 1: filled by dilation ring g), total irradiance (4..7), padding.
+/// 1: a baked texel, g + 1: filled by dilation ring g), total irradiance (4..7), and 1 where a
+/// texel inside geometry lies (7; its values are the dilation's).
 type Pixel = [f32; 8];
 
 /// Index of the generation in a [`Pixel`].
 const GENERATION: usize = 3;
+
+/// Index of the inside-geometry mark in a [`Pixel`].
+const INSIDE: usize = 7;
 
 /// A lookup reads a layer only where the baked texels it interpolates agree within this ratio
 /// (luminance): where light changes several-fold within a texel or two — the edge of a shadow,
@@ -81,8 +86,10 @@ pub struct Lookup {
     pub gathered: Vec3,
     /// Total irradiance: direct and gathered.
     pub total: Vec3,
-    /// Whether a baked texel is among the four the point interpolates (else it lies in a
-    /// chart's padding or on texels inside geometry, and the values are the dilation's).
+    /// Whether the texel the point lies in is baked and none of the four it interpolates
+    /// lies inside geometry. Else the values describe the baked neighbours of a texel inside
+    /// geometry (or the dilation), not the point: a surface in a closed gap beside a lit one
+    /// would read the lit one's light.
     pub baked: bool,
     /// Whether the total is read from baked texels that agree within [`SMOOTH_RATIO`]: only
     /// then does it stand for the irradiance at the point.
@@ -276,7 +283,8 @@ impl PreviousPass {
     /// Bilinear filter around `uv` (pixel centres at +0.5) over the baked pixels among its
     /// four, weights renormalised; over the dilated ones only where none is baked (a point in
     /// a chart's padding). A dilated pixel may mix two charts that lie close in the atlas, so
-    /// a hit inside a chart never reads one.
+    /// a hit inside a chart never reads one. [`Lookup::baked`] only where the pixel the point
+    /// lies in is baked and no pixel with weight is marked inside geometry.
     fn bilinear(&self, page: u32, uv: Vec2) -> Lookup {
         let Some(size) = self.pages.get(page as usize) else {
             return Lookup::default();
@@ -301,14 +309,14 @@ impl PreviousPass {
             let y = (y0 as i64 + dy).clamp(0, h - 1);
             (pixels[base + (y * w + x) as usize], wgt)
         });
-        let baked = taps
+        let any_baked = taps
             .iter()
             .any(|(px, wgt)| px[GENERATION] == 1.0 && *wgt > 0.0);
         let (mut gathered, mut total, mut weight) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
         let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
         let (mut glo, mut ghi) = (f32::INFINITY, 0.0f32);
         for (px, wgt) in taps {
-            let usable = if baked {
+            let usable = if any_baked {
                 px[GENERATION] == 1.0
             } else {
                 px[GENERATION] > 0.0
@@ -324,6 +332,15 @@ impl PreviousPass {
                 (lo, hi) = (lo.min(lum), hi.max(lum));
             }
         }
+        // The texel the point lies in (the largest weight; the first on a tie) is baked:
+        // conservative rasterisation bakes every texel a chart touches, so it is unbaked only
+        // inside geometry. And no texel with weight lies inside geometry: the baked texels
+        // beside one hold the light of open space, not of the closed gap the point may be in.
+        let nearest = taps
+            .iter()
+            .fold(taps[0], |n, t| if t.1 > n.1 { *t } else { n });
+        let inside = taps.iter().any(|(px, wgt)| px[INSIDE] == 1.0 && *wgt > 0.0);
+        let baked = nearest.0[GENERATION] == 1.0 && !inside;
         if weight > 0.0 {
             Lookup {
                 gathered: gathered / weight,
@@ -364,6 +381,7 @@ fn dilate(pixels: &mut [Pixel], size: PageRecord) {
                 if n > 0.0 {
                     let mut filled = sum.map(|v| v / n);
                     filled[GENERATION] = generation + 1.0;
+                    filled[INSIDE] = pixels[y * w + x][INSIDE];
                     pixels[y * w + x] = filled;
                 }
             }
@@ -473,6 +491,16 @@ impl PreviousPassWriter {
         let pixels: &mut [Pixel] = bytemuck::cast_slice_mut(&mut self.map[..]);
         let [g, t] = [gathered, total];
         pixels[i] = [g[0], g[1], g[2], 1.0, t[0], t[1], t[2], 0.0];
+    }
+
+    /// Marks texel (`x`, `y`) of page `page` as lying inside geometry: not baked, filled by
+    /// the dilation, and a lookup with weight on it is not read ([`Lookup::baked`]).
+    pub fn mark_inside(&mut self, page: u32, pixel: (u32, u32)) {
+        let Some(i) = self.index(page, pixel) else {
+            return;
+        };
+        let pixels: &mut [Pixel] = bytemuck::cast_slice_mut(&mut self.map[..]);
+        pixels[i][INSIDE] = 1.0;
     }
 
     /// Dilates every page, flushes, and maps the image for lookups.
@@ -682,6 +710,63 @@ mod tests {
         // In column 3, whose taps are columns 3 and (clamped) 3: dilated only, read them.
         let e = pass.bilinear(0, Vec2::new(3.9, 1.5)).total;
         assert!(e.x > 1.0, "{e}");
+    }
+
+    #[test]
+    fn a_lookup_is_read_only_where_the_texel_it_lies_in_is_baked() {
+        let (scene, triangles, pages) = scene();
+        // Column 0 baked and lit (4), column 1 unbaked (a texel inside geometry beside it),
+        // column 2 baked and as lit: every baked tap agrees.
+        let image: Vec<Option<Vec3>> = (0..16)
+            .map(|i| match i % 4 {
+                0 => Some(Vec3::splat(4.0)),
+                2 => Some(Vec3::splat(4.0)),
+                _ => None,
+            })
+            .collect();
+        let pass = PreviousPass::from_pixels(&scene, &triangles, &pages, &[image]);
+        // In column 0, nearer its centre than column 1's: read, smooth (one baked tap).
+        let l = pass.bilinear(0, Vec2::new(0.9, 1.5));
+        assert!(l.baked && l.smooth && l.gathered_smooth, "{l:?}");
+        assert_eq!(l.total, Vec3::splat(4.0));
+        // In column 1, though columns 0 and 2 beside it are baked and agree: not read.
+        for x in [1.1, 1.5, 1.9] {
+            let l = pass.bilinear(0, Vec2::new(x, 1.5));
+            assert!(!l.baked && !l.smooth && !l.gathered_smooth, "x {x}: {l:?}");
+            // The value still averages the baked taps alone (a render reads it).
+            assert_eq!(l.total, Vec3::splat(4.0), "x {x}");
+        }
+        // In column 2, nearer its centre: read again.
+        assert!(pass.bilinear(0, Vec2::new(2.2, 1.5)).baked);
+    }
+
+    #[test]
+    fn a_lookup_with_weight_on_a_texel_inside_geometry_is_not_read() {
+        let (scene, triangles, pages) = scene();
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = PreviousPassWriter::create(&dir.path().join("pass.bin"), &pages).unwrap();
+        // Columns 0, 2 and 3 baked and equally lit; column 1 inside geometry.
+        for y in 0..4 {
+            for x in [0, 2, 3] {
+                w.set(0, (x, y), [1.0; 3], [4.0; 3]);
+            }
+            w.mark_inside(0, (1, y));
+        }
+        w.mark_inside(0, (9, 9));
+        let pass = w.finish(&scene, &triangles).unwrap();
+        // The dilation fills the inside texels and keeps their mark.
+        let px = pass.pixels()[4 + 1];
+        assert!(px[GENERATION] > 1.0 && px[INSIDE] == 1.0, "{px:?}");
+        assert_eq!(pass.pixels()[4 + 2][INSIDE], 0.0);
+        // In column 2 but with weight on column 1: not read, though every baked tap agrees.
+        let l = pass.bilinear(0, Vec2::new(2.2, 1.5));
+        assert!(!l.baked && !l.smooth && !l.gathered_smooth, "{l:?}");
+        assert_eq!(l.total, Vec3::splat(4.0));
+        // Between the centres of columns 2 and 3: read.
+        let l = pass.bilinear(0, Vec2::new(2.6, 1.5));
+        assert!(l.baked && l.smooth && l.gathered_smooth, "{l:?}");
+        // On column 0's centre, no weight on column 1: read.
+        assert!(pass.bilinear(0, Vec2::new(0.5, 1.5)).baked);
     }
 
     #[test]
