@@ -24,8 +24,8 @@
 //! texels it interpolates lies inside geometry (their baked neighbours hold the light of the
 //! open space beside a closed gap, not the gap's) and the one the hit lies in is baked, over
 //! baked texels (not a chart's padding, whose values are the dilation's), agreeing within
-//! [`SMOOTH_RATIO`] (not across a shadow edge or the doorway light enters by). Elsewhere the caller computes the light at the hit as path
-//! transport would (`transport/path.rs`).
+//! [`SMOOTH_RATIO`] (not across a shadow edge or the doorway light enters by). Elsewhere the
+//! caller computes the light at the hit as path transport would (`transport/path.rs`).
 //!
 //! [`PreviousPass`] holds one dense RGB image per atlas page, in a file of the work directory
 //! that is memory-mapped (file-backed pages, not anonymous memory), written by
@@ -715,8 +715,8 @@ mod tests {
     #[test]
     fn a_lookup_is_read_only_where_the_texel_it_lies_in_is_baked() {
         let (scene, triangles, pages) = scene();
-        // Column 0 baked and lit (4), column 1 unbaked (a texel inside geometry beside it),
-        // column 2 baked and as lit: every baked tap agrees.
+        // Column 0 baked and lit (4), column 1 unbaked (and unmarked: the texel under a hit
+        // decides alone), column 2 baked and as lit: every baked tap agrees.
         let image: Vec<Option<Vec3>> = (0..16)
             .map(|i| match i % 4 {
                 0 => Some(Vec3::splat(4.0)),
