@@ -6,14 +6,16 @@ and the rest. Reads the bakes of docs/bench/iterations/run.sh (OUT: the default,
 a reference-noise bench run at 256² (NOISE_OUT); raw errors (the references' noise is
 spread over all texels alike). Needs numpy and OpenEXR.
     borders.py NOISE_OUT OUT"""
-import json
 import os
 import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "surfaces"))
-from error_maps import rgb, texels  # noqa: E402
+here = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(here, "..", "surfaces"))
+sys.path.insert(0, os.path.join(here, "..", "iterations"))
+from compare import SCENES, reference_at_valid  # noqa: E402
+from error_maps import rgb  # noqa: E402
 
 
 def beside(mask):
@@ -29,16 +31,11 @@ def main():
     noise_out, out = sys.argv[1], sys.argv[2]
     print("| scene | bake | relMSE | border texels | their share of it | border mean ÷ rest's mean |")
     print("|---|---|---:|---:|---:|---:|")
-    for s in ["cornell_box", "veach_ajar_no_teapots", "veach_bidir"]:
-        summary = json.load(open(os.path.join(noise_out, f"{s}-256", "summary.json")))
-        ref = (rgb(summary["reference"]["path"]) + rgb(summary["reference_noise"]["twin"]["path"])) / 2
-        t = texels(os.path.join(out, f"{s}.texels"))
-        valid = (t["flags"] & 1) != 0
-        x, y = t["px"][valid, 0].astype(int), t["px"][valid, 1].astype(int)
-        baked = np.zeros(ref.shape[:2], bool)
+    for s in SCENES:
+        r, x, y, shape, _ = reference_at_valid(noise_out, out, s)
+        baked = np.zeros(shape, bool)
         baked[y, x] = True
         border = beside(~baked)[y, x]
-        r = ref[y, x]
         eps = 1e-2 * r.mean() ** 2
         for cfg in ["off-4", "coherent-4"]:
             e = np.mean([(((rgb(os.path.join(out, f"{s}-{cfg}-{k}.exr"))[y, x] - r) ** 2)

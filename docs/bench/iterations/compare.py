@@ -15,20 +15,28 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from error_maps import rgb, texels  # noqa: E402
 
 CONFIGS = ["off-4", "coherent-3", "coherent-4", "coherent-5", "coherent-6"]
+SCENES = ["cornell_box", "veach_ajar_no_teapots", "veach_bidir"]
+
+
+def reference_at_valid(noise_out, out, scene):
+    """The mean of the reference and its twin named in NOISE_OUT's summary.json at the valid
+    texels of OUT's texel file: (reference values, their pixels x and y, the page's shape,
+    the references' noise)."""
+    summary = json.load(open(os.path.join(noise_out, f"{scene}-256", "summary.json")))
+    n = summary["reference_noise"]
+    ref = (rgb(summary["reference"]["path"]) + rgb(n["twin"]["path"])) / 2
+    t = texels(os.path.join(out, f"{scene}.texels"))
+    valid = (t["flags"] & 1) != 0
+    x, y = t["px"][valid, 0].astype(int), t["px"][valid, 1].astype(int)
+    return ref[y, x], x, y, ref.shape[:2], n
 
 
 def main():
     noise_out, out = sys.argv[1], sys.argv[2]
     print("| scene | bake | relMSE (net) | MSE (net) | CPU s | 4's relMSE ÷ this, equal samples | 4's MSE ÷ this | CPU ÷ 4's | against unguided at equal CPU: relMSE | MSE |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for s in ["cornell_box", "veach_ajar_no_teapots", "veach_bidir"]:
-        summary = json.load(open(os.path.join(noise_out, f"{s}-256", "summary.json")))
-        n = summary["reference_noise"]
-        ref = (rgb(summary["reference"]["path"]) + rgb(n["twin"]["path"])) / 2
-        t = texels(os.path.join(out, f"{s}.texels"))
-        valid = (t["flags"] & 1) != 0
-        x, y = t["px"][valid, 0].astype(int), t["px"][valid, 1].astype(int)
-        r = ref[y, x]
+    for s in SCENES:
+        r, x, y, _, n = reference_at_valid(noise_out, out, s)
         eps = 1e-2 * r.mean() ** 2
         res = {}
         for cfg in CONFIGS:
