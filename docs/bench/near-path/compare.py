@@ -1,0 +1,62 @@
+#!/usr/bin/env python3
+"""The bakes of run.sh against their references (the mean of a reference and its twin, named
+in a reference-noise bench's summary.json: NOISE_OUT/SCENE-256 for the converted scenes,
+ZDM2_OUT/zdm2-768 for the level): per scene, build and guiding, relative MSE and MSE over
+every valid texel net of that mean's noise (means over seeds 1 and 2) and CPU seconds; then
+the new build over the old at equal time (the old one's error over the new one's, divided by
+the new one's CPU over the old one's; > 1: the new build is ahead). Needs numpy and OpenEXR.
+    compare.py NOISE_OUT ZDM2_OUT OUT"""
+import json
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "surfaces"))
+from error_maps import rgb, texels  # noqa: E402
+
+SCENES = ["cornell_box", "veach_ajar_no_teapots", "veach_bidir", "zdm2"]
+
+
+def errors(summary, texel_file, bakes):
+    """Relative MSE and MSE of each of `bakes` (EXR paths) net of the references' noise."""
+    s = json.load(open(summary))
+    n = s["reference_noise"]
+    ref = (rgb(s["reference"]["path"]) + rgb(n["twin"]["path"])) / 2
+    t = texels(texel_file)
+    valid = (t["flags"] & 1) != 0
+    x, y = t["px"][valid, 0].astype(int), t["px"][valid, 1].astype(int)
+    r = ref[y, x]
+    eps = 1e-2 * r.mean() ** 2
+    out = []
+    for b in bakes:
+        v = rgb(b)[y, x]
+        out.append(((((v - r) ** 2) / (r ** 2 + eps)).mean() - n["rel_mse"], ((v - r) ** 2).mean() - n["mse"]))
+    return out
+
+
+def main():
+    noise_out, zdm2_out, out = sys.argv[1:4]
+    print("| scene | guiding | build | relMSE (net) | MSE (net) | CPU s | new over old at equal time: relMSE | MSE |")
+    print("|---|---|---|---:|---:|---:|---:|---:|")
+    for s in SCENES:
+        if not os.path.exists(os.path.join(out, f"{s}.texels")):
+            continue
+        summary = (os.path.join(zdm2_out, "zdm2-768", "summary.json") if s == "zdm2"
+                   else os.path.join(noise_out, f"{s}-256", "summary.json"))
+        for g in ["coherent", "off"]:
+            res = {}
+            for build in ["old", "new"]:
+                names = [f"{s}-{build}-{g}-{k}" for k in (1, 2)]
+                e = errors(summary, os.path.join(out, f"{s}.texels"),
+                           [os.path.join(out, f"{n}.exr") for n in names])
+                cpu = sum(sum(map(float, open(os.path.join(out, f"{n}.time")).read().split())) for n in names)
+                res[build] = (np.mean([a for a, _ in e]), np.mean([b for _, b in e]), cpu)
+            (ro, mo, co), (rn, mn, cn) = res["old"], res["new"]
+            for build, (rel, mse, cpu) in res.items():
+                ratio = f"{ro / rn / (cn / co):.3f} | {mo / mn / (cn / co):.3f}" if build == "new" else " | "
+                print(f"| {s} | {g} | {build} | {rel:.3e} | {mse:.3e} | {cpu:.1f} | {ratio} |")
+
+
+if __name__ == "__main__":
+    main()
