@@ -18,17 +18,26 @@ CONFIGS = ["off-4", "coherent-3", "coherent-4", "coherent-5", "coherent-6"]
 SCENES = ["cornell_box", "veach_ajar_no_teapots", "veach_bidir"]
 
 
+def reference_mean_at(summary_path, texel_path):
+    """The reference and its twin that a reference-noise bench's summary.json names, at the
+    valid texels of a texel file: (the reference's values, the twin's, their pixels x and y,
+    the page's shape, the noise of their mean as the bench measured it)."""
+    summary = json.load(open(summary_path))
+    n = summary["reference_noise"]
+    ref, twin = rgb(summary["reference"]["path"]), rgb(n["twin"]["path"])
+    t = texels(texel_path)
+    valid = (t["flags"] & 1) != 0
+    x, y = t["px"][valid, 0].astype(int), t["px"][valid, 1].astype(int)
+    return ref[y, x], twin[y, x], x, y, ref.shape[:2], n
+
+
 def reference_at_valid(noise_out, out, scene):
     """The mean of the reference and its twin named in NOISE_OUT's summary.json at the valid
     texels of OUT's texel file: (reference values, their pixels x and y, the page's shape,
     the references' noise)."""
-    summary = json.load(open(os.path.join(noise_out, f"{scene}-256", "summary.json")))
-    n = summary["reference_noise"]
-    ref = (rgb(summary["reference"]["path"]) + rgb(n["twin"]["path"])) / 2
-    t = texels(os.path.join(out, f"{scene}.texels"))
-    valid = (t["flags"] & 1) != 0
-    x, y = t["px"][valid, 0].astype(int), t["px"][valid, 1].astype(int)
-    return ref[y, x], x, y, ref.shape[:2], n
+    a, b, x, y, shape, n = reference_mean_at(os.path.join(noise_out, f"{scene}-256", "summary.json"),
+                                             os.path.join(out, f"{scene}.texels"))
+    return (a + b) / 2, x, y, shape, n
 
 
 def main():

@@ -5,7 +5,7 @@
 # (user + system CPU), interleaved; on the three converted scenes at 256² against the
 # references and twins of a reference-noise bench run (NOISE_OUT: docs/bench/reference-noise/run.sh
 # ... 256), and on zdm2 at 768² against those of docs/bench/zdm2-guiding/run.sh (ZDM2_OUT);
-# then compare.py prints each bake's relative MSE and MSE net of the references' noise and
+# then errors.py prints each bake's relative MSE and MSE net of the references' noise and
 # the new build over the old at equal time.
 #   docs/bench/near-path/run.sh OLD NEW SCENES_DIR NOISE_OUT ZDM2_OUT OUT
 set -euo pipefail
@@ -34,4 +34,4 @@ for s in ${SCENES:-cornell_box veach_ajar_no_teapots veach_bidir zdm2}; do
     done
   done
 done
-python3 "$here/compare.py" "$noise" "$zdm2" "$out"
+python3 "$here/errors.py" "$noise" "$zdm2" "$out"

@@ -9,7 +9,6 @@ OUT alone: its error, variance and bias by texel kind (the variants of docs/BENC
 "Issue 44 on a level", were throwaway builds baked so). Needs numpy and OpenEXR.
     where.py SUMMARY OUT TRANSPORT
     where.py --bias SUMMARY OUT NAME..."""
-import json
 import os
 import sys
 
@@ -18,7 +17,9 @@ import numpy as np
 here = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(here, "..", "surfaces"))
 sys.path.insert(0, os.path.join(here, "..", "borders"))
+sys.path.insert(0, os.path.join(here, "..", "iterations"))
 from borders import beside  # noqa: E402
+from compare import reference_mean_at  # noqa: E402
 from error_maps import rgb, texels  # noqa: E402
 
 VALID, PARTIAL, INSIDE = 1, 2, 4
@@ -51,13 +52,9 @@ def kinds(t, x, y, shape, luminance):
 def setup(summary, out):
     """The texel file, the valid texels, the page shape, the reference mean at them, the
     denominator of the relative error, and the mean's noise per texel."""
-    s = json.load(open(summary))
-    t = texels(os.path.join(out, "z.texels"))
-    valid = t["flags"] & VALID != 0
-    x, y = t["px"][valid, 0].astype(int), t["px"][valid, 1].astype(int)
-    a = rgb(s["reference"]["path"])
-    b = rgb(s["reference_noise"]["twin"]["path"])[y, x]
-    shape, a = a.shape[:2], a[y, x]
+    texel_path = os.path.join(out, "z.texels")
+    a, b, x, y, shape, _ = reference_mean_at(summary, texel_path)
+    t = texels(texel_path)
     r = (a + b) / 2
     den = r ** 2 + 1e-2 * r.mean() ** 2
     return t, x, y, shape, r, den, ((a - b) ** 2 / 4 / den).mean(-1)

@@ -5,28 +5,25 @@ ZDM2_OUT/zdm2-768 for the level): per scene, build and guiding, relative MSE and
 every valid texel net of that mean's noise (means over seeds 1 and 2) and CPU seconds; then
 the new build over the old at equal time (the old one's error over the new one's, divided by
 the new one's CPU over the old one's; > 1: the new build is ahead). Needs numpy and OpenEXR.
-    compare.py NOISE_OUT ZDM2_OUT OUT"""
-import json
+    errors.py NOISE_OUT ZDM2_OUT OUT"""
 import os
 import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "surfaces"))
-from error_maps import rgb, texels  # noqa: E402
+here = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(here, "..", "surfaces"))
+sys.path.insert(0, os.path.join(here, "..", "iterations"))
+from compare import reference_mean_at  # noqa: E402
+from error_maps import rgb  # noqa: E402
 
 SCENES = ["cornell_box", "veach_ajar_no_teapots", "veach_bidir", "zdm2"]
 
 
 def errors(summary, texel_file, bakes):
     """Relative MSE and MSE of each of `bakes` (EXR paths) net of the references' noise."""
-    s = json.load(open(summary))
-    n = s["reference_noise"]
-    ref = (rgb(s["reference"]["path"]) + rgb(n["twin"]["path"])) / 2
-    t = texels(texel_file)
-    valid = (t["flags"] & 1) != 0
-    x, y = t["px"][valid, 0].astype(int), t["px"][valid, 1].astype(int)
-    r = ref[y, x]
+    a, b, x, y, _, n = reference_mean_at(summary, texel_file)
+    r = (a + b) / 2
     eps = 1e-2 * r.mean() ** 2
     out = []
     for b in bakes:
