@@ -41,14 +41,16 @@ def main():
             continue
         summary = (os.path.join(zdm2_out, "zdm2-768", "summary.json") if s == "zdm2"
                    else os.path.join(noise_out, f"{s}-256", "summary.json"))
+        runs = {(g, b): [f"{s}-{b}-{g}-{k}" for k in (1, 2)] for g in ["coherent", "off"] for b in ["old", "new"]}
+        e = iter(errors(summary, os.path.join(out, f"{s}.texels"),
+                        [os.path.join(out, f"{n}.exr") for names in runs.values() for n in names]))
+        measured = {run: [next(e) for _ in names] for run, names in runs.items()}
         for g in ["coherent", "off"]:
             res = {}
             for build in ["old", "new"]:
-                names = [f"{s}-{build}-{g}-{k}" for k in (1, 2)]
-                e = errors(summary, os.path.join(out, f"{s}.texels"),
-                           [os.path.join(out, f"{n}.exr") for n in names])
+                m, names = measured[(g, build)], runs[(g, build)]
                 cpu = sum(sum(map(float, open(os.path.join(out, f"{n}.time")).read().split())) for n in names)
-                res[build] = (np.mean([a for a, _ in e]), np.mean([b for _, b in e]), cpu)
+                res[build] = (np.mean([a for a, _ in m]), np.mean([b for _, b in m]), cpu)
             (ro, mo, co), (rn, mn, cn) = res["old"], res["new"]
             for build, (rel, mse, cpu) in res.items():
                 ratio = f"{ro / rn / (cn / co):.3f} | {mo / mn / (cn / co):.3f}" if build == "new" else " | "
