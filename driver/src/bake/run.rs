@@ -240,36 +240,49 @@ pub fn bake_pass_with_progress(
                 Some(_) => merged_results(&job.out, b),
                 None => pass_files(&dir, b).0,
             };
-            let source = results_of(pass - 1);
             // A pass that borrowed the direct pass's light gets it back in its image.
-            let direct = job
-                .settings
-                .borrows_direct(pass - 1)
-                .then(|| results_of(DIRECT_PASS));
-            // The image of pass b − 2 goes first: memory holds one pass image, never two (each
-            // is rebuilt from its result file, so a resumed run needs none of them).
-            world.set_previous_pass(None);
-            if let Some(older) = pass.checked_sub(2) {
-                let _ = std::fs::remove_file(pass_image(&dir, older));
+            let paths = |b: u32| {
+                let direct = job
+                    .settings
+                    .borrows_direct(b)
+                    .then(|| results_of(DIRECT_PASS));
+                (results_of(b), direct)
+            };
+            let image_of = |b: u32, report: &mut BakeReport| {
+                let (source, direct) = paths(b);
+                let sources = PassSources {
+                    results: &source,
+                    direct: direct.as_deref(),
+                };
+                let image = pass_image(&dir, b);
+                let target = PassImage {
+                    path: &image,
+                    filter: lookup_filter(&job.settings, b),
+                };
+                previous_pass(&texels, scene, sources, target, bake_id, report)
+                    .map(|p| p.of_pass(b))
+                    .map_err(|e| not_merged_hint(e, &source, b))
+            };
+            // Memory holds two pass images: the previous pass's, and the one before it, read
+            // one bounce beyond the gather's hits near their origin (`NEAR_PATH_TEXELS`). The
+            // previous pass's image becomes the earlier one; each is rebuilt from its result
+            // file where the run has none (a resumed run, a run of one pass).
+            let (kept, _) = world.take_pass_images();
+            if let Some(oldest) = pass.checked_sub(3) {
+                let _ = std::fs::remove_file(pass_image(&dir, oldest));
             }
-            let image = pass_image(&dir, pass - 1);
+            let earlier = match pass.checked_sub(2) {
+                Some(b) if kept.as_ref().is_some_and(|k| k.pass() == b) => kept,
+                Some(b) => Some(image_of(b, &mut report)?),
+                None => None,
+            };
+            world.set_earlier_pass(earlier);
+            world.set_previous_pass(Some(image_of(pass - 1, &mut report)?));
+            let (source, direct) = paths(pass - 1);
             let sources = PassSources {
                 results: &source,
                 direct: direct.as_deref(),
             };
-            // The lookups of a gather pass are filtered; the direct pass's light is not.
-            let filter = if job.settings.filters_lookups(pass - 1) {
-                job.settings.lookup_filter
-            } else {
-                0
-            };
-            let target = PassImage {
-                path: &image,
-                filter,
-            };
-            let previous = previous_pass(&texels, scene, sources, target, bake_id, &mut report)
-                .map_err(|e| not_merged_hint(e, &source, pass - 1))?;
-            world.set_previous_pass(Some(previous.of_pass(pass - 1)));
             // The last pass, after a gather pass, spends its samples by the passes' error (a
             // budgeted middle pass makes the last one's lookups noisier: docs/estimator.md).
             // Its noise holds the direct light's only when it estimates that light itself.
@@ -539,6 +552,16 @@ impl PassSources<'_> {
 struct PassImage<'p> {
     path: &'p Path,
     filter: u32,
+}
+
+/// The filter a pass image of pass `pass` is built with: the lookups of a gather pass are
+/// filtered; the direct pass's light is not.
+fn lookup_filter(settings: &BakeSettings, pass: u32) -> u32 {
+    if settings.filters_lookups(pass) {
+        settings.lookup_filter
+    } else {
+        0
+    }
 }
 
 /// Writes the image (at `target`) of the gather-only and total irradiance in a pass's result

@@ -55,6 +55,7 @@ pub struct World {
     transport: Transport,
     bounces: u32,
     previous: Option<PreviousPass>,
+    earlier: Option<PreviousPass>,
     budget: Option<SpatialBudget>,
 }
 
@@ -116,6 +117,7 @@ impl World {
             transport: Transport::Series,
             bounces: 1,
             previous: None,
+            earlier: None,
             budget: None,
         };
         world.set_emitters(EmitterSampling::default(), EmitterSelection::default());
@@ -149,6 +151,19 @@ impl World {
     /// The previous series pass, looked up at gather hits (`None` in the first pass).
     pub fn set_previous_pass(&mut self, previous: Option<PreviousPass>) {
         self.previous = previous;
+    }
+
+    /// The series pass before the previous one, read one bounce beyond a gather hit within
+    /// [`NEAR_PATH_TEXELS`](crate::transport::series::NEAR_PATH_TEXELS) of the ray's origin
+    /// (`None` in the first gather pass, whose previous pass is the direct pass).
+    pub fn set_earlier_pass(&mut self, earlier: Option<PreviousPass>) {
+        self.earlier = earlier;
+    }
+
+    /// Takes both pass images out, the previous one first (a run keeps the previous pass's
+    /// image as the next pass's earlier one).
+    pub fn take_pass_images(&mut self) -> (Option<PreviousPass>, Option<PreviousPass>) {
+        (self.previous.take(), self.earlier.take())
     }
 
     /// The point of triangle `prim` closest to `p`, moved a thousandth of the way towards the
@@ -252,6 +267,11 @@ impl World {
     /// The previous series pass, if any.
     pub fn previous_pass(&self) -> Option<&PreviousPass> {
         self.previous.as_ref()
+    }
+
+    /// The series pass before the previous one, if any.
+    pub fn earlier_pass(&self) -> Option<&PreviousPass> {
+        self.earlier.as_ref()
     }
 
     /// The spatial budget this pass spends its samples by (`None`: every texel the same).

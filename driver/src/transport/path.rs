@@ -4,7 +4,9 @@
 //! irradiance arriving there: under `series` ([`super::series`]), the previous pass's total
 //! irradiance (pass 1 reads the direct pass 0) where the hit is on the side its texels bake
 //! and not within `NEAR_FIELD_TEXELS` of its texels of the ray's origin, else direct light by
-//! next-event estimation plus the previous pass's gather-only irradiance — or, where the
+//! next-event estimation plus the previous pass's gather-only irradiance — within
+//! `NEAR_PATH_TEXELS`, plus one cosine-weighted bounce to a vertex that reads the pass before
+//! the previous one, as the gather's hit would the previous one — or, where the
 //! texels cannot be read (a side no texel describes, padding or texels inside geometry, texels
 //! that disagree beyond `SMOOTH_RATIO`), a path traced on from the hit with as many bounces as
 //! the previous pass holds, as under `path` (docs/bake.md, "Where series reads the lightmap");
@@ -105,7 +107,8 @@ impl World {
             let p = self.leave_surface(hit.prim, from.point + dir * hit.t, facing, hit.t);
             let reflect = throughput * albedo;
             let previous = match self.transport() {
-                Transport::Series if traced.is_none() => self.previous_pass(),
+                Transport::Series if traced.is_none() && vertex == 1 => self.previous_pass(),
+                Transport::Series if traced.is_none() => self.earlier_pass(),
                 Transport::Series | Transport::Path => None,
             };
             // Series: a side no texel describes (the other side of a thin wall, a triangle
@@ -122,14 +125,19 @@ impl World {
                 .filter(|l| l.baked);
             let far = previous.is_some_and(|p| p.reads_total(hit.prim, front, hit.t));
             let reads_total = far && lookup.is_some_and(|l| l.smooth);
-            let reads_gathered = lookup.is_some_and(|l| l.gathered_smooth);
-            if let Some(p) = previous.filter(|_| !reads_total && !reads_gathered) {
-                traced = Some(p.pass() + 1);
+            // So near the origin the texels a lookup interpolates lie as far from the hit as
+            // the gathering point does: their gather-only light is the blur of the corner the
+            // two make, not the light at the hit (docs/bake.md). Its direct light is
+            // connected and the rest carried one bounce on, where the pass before reads.
+            let near = vertex == 1 && previous.is_some_and(|p| !p.reads_gathered(hit.prim, hit.t));
+            let reads_gathered = lookup.is_some_and(|l| l.gathered_smooth) && !near;
+            if let Some(p) = previous.filter(|_| !reads_total && !reads_gathered && !near) {
+                traced = Some(p.pass() + vertex);
             }
             let continues = match (self.transport(), traced) {
                 (Transport::Path, _) => vertex < self.bounces(),
                 (Transport::Series, Some(depth)) => vertex < depth,
-                (Transport::Series, None) => false,
+                (Transport::Series, None) => near && self.earlier_pass().is_some(),
             };
             let cosine_pdf = |d: Vec3| facing.dot(d).max(0.0) * core::f32::consts::FRAC_1_PI;
             let at = Receiver {
@@ -237,7 +245,9 @@ mod tests {
     use crate::bvh::Preset;
     use crate::scene::Sun;
     use crate::test_support::lightmapped_triangle;
-    use crate::transport::series::{NEAR_FIELD_TEXELS, PreviousPassWriter, SMOOTH_RATIO};
+    use crate::transport::series::{
+        NEAR_FIELD_TEXELS, NEAR_PATH_TEXELS, PreviousPassWriter, SMOOTH_RATIO,
+    };
 
     /// A 4 m right triangle on z = 0 facing +z, albedo 0.5, under a sun of irradiance 2 from
     /// +z; its lightmap is a 4×4 page, so one texel is 1 m. The previous pass (pass 2) read 1
@@ -303,6 +313,45 @@ mod tests {
         assert_eq!((back.totals_read, back.path_rays), (0, 1));
         assert_eq!(back.reflected, Vec3::ZERO, "{back:?}");
         assert_eq!(far.emitted + near.emitted + back.emitted, Vec3::ZERO);
+    }
+
+    /// A hit within [`NEAR_PATH_TEXELS`] of its texels of the ray's origin reads neither
+    /// layer: its sun is connected, and the rest of its light is carried one bounce on to
+    /// where the pass before the previous one is read — here into the black sky above, so
+    /// only the sun comes back. Without that pass (the bake's first gather pass, whose
+    /// previous pass holds no gathered light), the sun alone. That the bounce reads the
+    /// earlier pass, keeping the bake's bounce count, `driver/tests/unwrap.rs` checks in a
+    /// closed room against the closed form.
+    #[test]
+    fn a_series_hit_within_a_texel_of_its_origin_is_carried_one_bounce_on() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut world = lit_triangle(dir.path());
+        let sun_only = Vec3::splat(2.0 * 0.5 * core::f32::consts::FRAC_1_PI);
+        let alone = leaving(&world, 0.5 * NEAR_PATH_TEXELS);
+        assert_eq!(
+            (alone.totals_read, alone.shadow_rays, alone.path_rays),
+            (0, 1, 0),
+            "{alone:?}"
+        );
+        assert!((alone.reflected - sun_only).length() < 1e-5, "{alone:?}");
+        let (previous, _) = world.take_pass_images();
+        let (_, triangles, pages) = lightmapped_triangle(4.0, 0.5);
+        let earlier = PreviousPassWriter::create(&dir.path().join("earlier.bin"), &pages)
+            .unwrap()
+            .finish(&lightmapped_triangle(4.0, 0.5).0, &triangles)
+            .unwrap()
+            .of_pass(1);
+        world.set_previous_pass(previous);
+        world.set_earlier_pass(Some(earlier));
+        let on = leaving(&world, 0.5 * NEAR_PATH_TEXELS);
+        assert_eq!(
+            (on.totals_read, on.shadow_rays, on.path_rays),
+            (0, 1, 1),
+            "{on:?}"
+        );
+        assert!((on.reflected - sun_only).length() < 1e-5, "{on:?}");
+        let beyond = leaving(&world, 2.0 * NEAR_PATH_TEXELS);
+        assert_eq!((beyond.shadow_rays, beyond.path_rays), (1, 0), "{beyond:?}");
     }
 
     /// Where the texels a hit would read disagree by more than [`SMOOTH_RATIO`] (a shadow

@@ -15,7 +15,9 @@
 //! - the **gather-only** irradiance (the final gather's samples `L π / q` without the
 //!   texel's own next-event estimate and the emission its rays hit): read near the ray's
 //!   origin, where a texel's blur of direct light would show, while the caller connects the
-//!   hit's direct light explicitly, so it is never counted twice.
+//!   hit's direct light explicitly, so it is never counted twice — but not within
+//!   [`NEAR_PATH_TEXELS`], where the caller carries the hit's light one bounce on and reads
+//!   the pass before the previous one there (memory holds both passes' images).
 //!
 //! **Leak-free lookups** (docs/bake.md, "Where series reads the lightmap"). A lookup is only
 //! read where the texels it interpolates truly describe the surface at the hit
@@ -58,6 +60,18 @@ pub const DILATION: u32 = 4;
 /// converted scenes (docs/BENCHMARKS.md, "Series reads the total"): at 4 it is within 0.4 %
 /// of connecting every hit; at 0 up to 7.7 % above it.
 pub const NEAR_FIELD_TEXELS: f32 = 4.0;
+
+/// Texels of the hit's lightmap within which a gather's hit reads neither layer
+/// ([`PreviousPass::reads_gathered`]): there the texels a lookup interpolates lie as far from
+/// the hit as the gathering point does, and a point on a chart's edge (a partial texel, in the
+/// corner two surfaces make) reads the other surface's blur of the corner's light. The hit's
+/// direct light is connected and the rest carried one bounce on, to a vertex that reads the
+/// pass before the previous one (`transport/path.rs`), so the texel still gets exactly B
+/// bounces. On the level zdm2 (768², a sun and a sky, 256 spp, 2 seeds, 2026-11-30) this took
+/// 87 % of the default bake's per-texel bias out, and its relative MSE fell 1.70× at equal
+/// samples; on the converted rooms, which carry no such bias, it changed by 0.99–1.04×
+/// (docs/BENCHMARKS.md, "Why guiding gained little on the level").
+pub const NEAR_PATH_TEXELS: f32 = 1.0;
 
 /// One pixel of a pass image: gather-only irradiance (0..3), its generation (3; 0: empty,
 /// 1: a baked texel, g + 1: filled by dilation ring g), total irradiance (4..7), and 1 where a
@@ -274,10 +288,18 @@ impl PreviousPass {
     /// `t` reads the total irradiance there: the side its texels bake, and farther than
     /// [`NEAR_FIELD_TEXELS`] of its texels.
     pub fn reads_total(&self, prim: u32, front: bool, t: f32) -> bool {
-        let Some(Some(tri)) = self.triangles.get(prim as usize) else {
-            return false;
-        };
-        self.bakes_side(prim, front) && t > NEAR_FIELD_TEXELS * tri.texel
+        self.bakes_side(prim, front) && self.beyond(prim, t, NEAR_FIELD_TEXELS)
+    }
+
+    /// Whether a ray that hit triangle `prim` after travelling `t` may read the gather-only
+    /// layer there: farther than [`NEAR_PATH_TEXELS`] of its texels.
+    pub fn reads_gathered(&self, prim: u32, t: f32) -> bool {
+        self.beyond(prim, t, NEAR_PATH_TEXELS)
+    }
+
+    /// Whether `t` is more than `texels` of triangle `prim`'s texels (false off the atlas).
+    fn beyond(&self, prim: u32, t: f32, texels: f32) -> bool {
+        matches!(self.triangles.get(prim as usize), Some(Some(tri)) if t > texels * tri.texel)
     }
 
     /// Bilinear filter around `uv` (pixel centres at +0.5) over the baked pixels among its
