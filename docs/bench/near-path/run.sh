@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Hits within a texel of the ray's origin traced, not read (docs/BENCHMARKS.md, "Issue 44 on a
-# level"; `NEAR_PATH_TEXELS`): the build before (OLD) and after (NEW) side by side, the default
+# Hits within a texel of the ray's origin not read (docs/BENCHMARKS.md, "Issue 44 on a level";
+# `NEAR_PATH_TEXELS`): the build before (OLD) and after (NEW) side by side, the default
 # and the unguided bake (`--guiding off`), 256 spp, seeds 1 and 2, one thread, each bake timed
 # (user + system CPU), interleaved; on the three converted scenes at 256² against the
 # references and twins of a reference-noise bench run (NOISE_OUT: docs/bench/reference-noise/run.sh
@@ -34,4 +34,6 @@ for s in ${SCENES:-cornell_box veach_ajar_no_teapots veach_bidir zdm2}; do
     done
   done
 done
+# where.py --bias reads the level's texel file as OUT/z.texels.
+[ -e "$out/zdm2.texels" ] && ln -sf zdm2.texels "$out/z.texels"
 python3 "$here/errors.py" "$noise" "$zdm2" "$out"

@@ -271,13 +271,14 @@ pub fn bake_pass_with_progress(
             if let Some(oldest) = pass.checked_sub(3) {
                 let _ = std::fs::remove_file(pass_image(&dir, oldest));
             }
+            let previous = image_of(pass - 1, &mut report)?;
             let earlier = match pass.checked_sub(2) {
                 Some(b) if kept.as_ref().is_some_and(|k| k.pass() == b) => kept,
                 Some(b) => Some(image_of(b, &mut report)?),
                 None => None,
             };
+            world.set_previous_pass(Some(previous));
             world.set_earlier_pass(earlier);
-            world.set_previous_pass(Some(image_of(pass - 1, &mut report)?));
             let (source, direct) = paths(pass - 1);
             let sources = PassSources {
                 results: &source,
