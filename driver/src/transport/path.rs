@@ -327,29 +327,24 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mut world = lit_triangle(dir.path());
         let sun_only = Vec3::splat(2.0 * 0.5 * core::f32::consts::FRAC_1_PI);
-        let alone = leaving(&world, 0.5 * NEAR_PATH_TEXELS);
-        assert_eq!(
-            (alone.totals_read, alone.shadow_rays, alone.path_rays),
-            (0, 1, 0),
-            "{alone:?}"
-        );
-        assert!((alone.reflected - sun_only).length() < 1e-5, "{alone:?}");
-        let (previous, _) = world.take_pass_images();
-        let (_, triangles, pages) = lightmapped_triangle(4.0, 0.5);
+        // Neither layer read, one shadow ray, `path_rays` bounces on, the sun alone back.
+        let sun_alone = |l: Leaving, path_rays: u32| {
+            assert_eq!(
+                (l.totals_read, l.shadow_rays, l.path_rays),
+                (0, 1, path_rays),
+                "{l:?}"
+            );
+            assert!((l.reflected - sun_only).length() < 1e-5, "{l:?}");
+        };
+        sun_alone(leaving(&world, 0.5 * NEAR_PATH_TEXELS), 0);
+        let (scene, triangles, pages) = lightmapped_triangle(4.0, 0.5);
         let earlier = PreviousPassWriter::create(&dir.path().join("earlier.bin"), &pages)
             .unwrap()
-            .finish(&lightmapped_triangle(4.0, 0.5).0, &triangles)
+            .finish(&scene, &triangles)
             .unwrap()
             .of_pass(1);
-        world.set_previous_pass(previous);
         world.set_earlier_pass(Some(earlier));
-        let on = leaving(&world, 0.5 * NEAR_PATH_TEXELS);
-        assert_eq!(
-            (on.totals_read, on.shadow_rays, on.path_rays),
-            (0, 1, 1),
-            "{on:?}"
-        );
-        assert!((on.reflected - sun_only).length() < 1e-5, "{on:?}");
+        sun_alone(leaving(&world, 0.5 * NEAR_PATH_TEXELS), 1);
         let beyond = leaving(&world, 2.0 * NEAR_PATH_TEXELS);
         assert_eq!((beyond.shadow_rays, beyond.path_rays), (1, 0), "{beyond:?}");
     }
