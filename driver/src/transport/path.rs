@@ -4,12 +4,14 @@
 //! irradiance arriving there: under `series` ([`super::series`]), the previous pass's total
 //! irradiance (pass 1 reads the direct pass 0) where the hit is on the side its texels bake
 //! and not within `NEAR_FIELD_TEXELS` of its texels of the ray's origin, else direct light by
-//! next-event estimation plus the previous pass's gather-only irradiance — within
-//! `NEAR_PATH_TEXELS`, plus one cosine-weighted bounce to a vertex that reads the pass before
-//! the previous one, as the gather's hit would the previous one — or, where the
-//! texels cannot be read (a side no texel describes, padding or texels inside geometry, texels
-//! that disagree beyond `SMOOTH_RATIO`), a path traced on from the hit with as many bounces as
-//! the previous pass holds, as under `path` (docs/bake.md, "Where series reads the lightmap");
+//! next-event estimation plus the previous pass's gather-only irradiance. Where the gather's hit
+//! reads neither layer — within `NEAR_PATH_TEXELS` of its texels of the ray's origin, or where
+//! the texels cannot be read (a side no texel describes, padding or texels inside geometry,
+//! texels that disagree beyond `SMOOTH_RATIO`) — its direct light is connected and the rest
+//! carried one cosine-weighted bounce on, to a vertex that reads the pass before the previous
+//! one by the same rules; a vertex there that cannot be read either (or a hit that cannot be
+//! read without that pass) has a path traced on from it with as many bounces as the pass it
+//! reads holds, as under `path` (docs/bake.md, "Where series reads the lightmap");
 //! under `path`, direct light by next-event estimation plus a path continued with
 //! cosine-weighted directions, next-event estimation and MIS at every vertex, and Russian
 //! roulette from the third vertex. A ray that leaves the scene sees the sky.
@@ -78,8 +80,8 @@ impl World {
         let mut out = Leaving::default();
         let (mut from, mut dir, mut hit) = (*from, dir, hit);
         let mut throughput = Vec3::ONE;
-        // Series: the vertices a path traced from a gather hit that could not be read may
-        // have (the passes the previous one holds, plus the hit itself), once it is traced.
+        // Series: the vertices a path traced from a vertex that could not be read may have
+        // (the passes the pass it read holds, plus that vertex), once it is traced.
         let mut traced: Option<u32> = None;
         // The emitter selection at `from` when next-event estimation made it there (a path
         // vertex), for the MIS weight of the emission its ray hits; the gather's texel made
@@ -116,9 +118,7 @@ impl World {
             // hold the light of the space behind it — and neither has a point where no baked
             // texel lies (padding, texels inside geometry, whose values are the dilation's);
             // where the texels read disagree (a doorway, a shadow edge), their average is not
-            // the light at the hit. The gather's hit computes it another way there: a path
-            // traced from it with as many bounces as the previous pass holds, next-event
-            // estimation at every vertex, as path transport does.
+            // the light at the hit. The light there is computed another way (below).
             let lookup = previous
                 .filter(|p| p.bakes_side(hit.prim, front))
                 .map(|p| p.lookup(hit.prim, hit.u, hit.v))
@@ -127,17 +127,27 @@ impl World {
             let reads_total = far && lookup.is_some_and(|l| l.smooth);
             // So near the origin the texels a lookup interpolates lie as far from the hit as
             // the gathering point does: their gather-only light is the blur of the corner the
-            // two make, not the light at the hit (docs/bake.md). Its direct light is
-            // connected and the rest carried one bounce on, where the pass before reads.
+            // two make, not the light at the hit (docs/bake.md).
             let near = vertex == 1 && previous.is_some_and(|p| !p.reads_gathered(hit.prim, hit.t));
             let reads_gathered = lookup.is_some_and(|l| l.gathered_smooth) && !near;
-            if let Some(p) = previous.filter(|_| !reads_total && !reads_gathered && !near) {
+            let read = reads_total || reads_gathered;
+            // A gather's hit that reads neither layer has its direct light connected and the
+            // rest carried one bounce on, where the pass before the previous one is read: one
+            // noisy step, not a whole path (docs/bake.md). A vertex that cannot be read there,
+            // or a hit that cannot be read without that pass, has a path traced from it with
+            // as many bounces as the pass it reads holds, next-event estimation at every
+            // vertex, as path transport does (the first gather pass's: its direct light).
+            let carried = vertex == 1
+                && previous.is_some()
+                && !read
+                && (near || self.earlier_pass().is_some());
+            if let Some(p) = previous.filter(|_| !read && !carried) {
                 traced = Some(p.pass() + vertex);
             }
             let continues = match (self.transport(), traced) {
                 (Transport::Path, _) => vertex < self.bounces(),
                 (Transport::Series, Some(depth)) => vertex < depth,
-                (Transport::Series, None) => near && self.earlier_pass().is_some(),
+                (Transport::Series, None) => carried && self.earlier_pass().is_some(),
             };
             let cosine_pdf = |d: Vec3| facing.dot(d).max(0.0) * core::f32::consts::FRAC_1_PI;
             let at = Receiver {
@@ -245,9 +255,11 @@ mod tests {
     use crate::bvh::Preset;
     use crate::scene::Sun;
     use crate::test_support::lightmapped_triangle;
+    use crate::texels::{SEEN_FRONT, TriangleRecord};
     use crate::transport::series::{
         NEAR_FIELD_TEXELS, NEAR_PATH_TEXELS, PreviousPassWriter, SMOOTH_RATIO,
     };
+    use glam::Vec2;
 
     /// A 4 m right triangle on z = 0 facing +z, albedo 0.5, under a sun of irradiance 2 from
     /// +z; its lightmap is a 4×4 page, so one texel is 1 m. The previous pass (pass 2) read 1
@@ -349,8 +361,74 @@ mod tests {
         assert_eq!((beyond.shadow_rays, beyond.path_rays), (1, 0), "{beyond:?}");
     }
 
+    /// A hit whose lookup is refused (here: the floor's texels disagree) reads neither layer.
+    /// With the pass before the previous one in memory, it is carried one bounce on and that
+    /// pass is read where the bounce lands (a ceiling 2 m up whose earlier-pass texels hold a
+    /// gathered 7): the floor's albedo times the ceiling's light. Without that pass a path is
+    /// traced, and in this world without lights or sky the path brings nothing back.
+    #[test]
+    fn a_refused_hit_reads_the_pass_before_one_bounce_on() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut scene, mut triangles, pages) = lightmapped_triangle(4.0, 0.5);
+        let big = 1000.0;
+        let mut ceiling = scene.triangles[0];
+        // Facing down (-z), over the whole sky of the floor's hit.
+        ceiling.positions = [
+            Vec3::new(-big, -big, 2.0),
+            Vec3::new(-big, 3.0 * big, 2.0),
+            Vec3::new(3.0 * big, -big, 2.0),
+        ];
+        ceiling.normals = [-Vec3::Z; 3];
+        ceiling.lightmap_uv = Some([Vec2::ZERO, Vec2::Y, Vec2::X]);
+        scene.triangles.push(ceiling);
+        scene.meshes[0].triangle_count = 2;
+        let uv = [Vec2::ZERO, Vec2::new(0.0, 4.0), Vec2::new(4.0, 0.0)];
+        triangles.push(TriangleRecord::lightmapped(0, uv, SEEN_FRONT));
+        let image = |name: &str, value: &dyn Fn(u32) -> f32| {
+            let mut w = PreviousPassWriter::create(&dir.path().join(name), &pages).unwrap();
+            for i in 0..16 {
+                w.set(0, (i % 4, i / 4), [value(i); 3], [value(i); 3]);
+            }
+            w.finish(&scene, &triangles).unwrap()
+        };
+        // Pass 2: columns 0 and 1 dark, 2 and 3 bright; pass 1: 7 everywhere.
+        let previous = image("pass.bin", &|i| {
+            if i % 4 < 2 { 1.0 } else { 10.0 * SMOOTH_RATIO }
+        });
+        let mut world = World::new(&scene, Preset::DEFAULT).unwrap();
+        world.set_transport(Transport::Series, 3);
+        world.set_previous_pass(Some(previous.of_pass(2)));
+        // Between columns 1 and 2 of the floor, from far above: refused.
+        let hit = SurfaceHit {
+            prim: 0,
+            t: 3.0 * NEAR_FIELD_TEXELS,
+            u: 0.5,
+            v: 0.125,
+        };
+        let from = Departure {
+            point: Vec3::new(2.0, 0.5, hit.t),
+            normal: -Vec3::Z,
+            pdf: 1.0,
+        };
+        let leaving = |world: &World| {
+            world.radiance_from_hit(&from, -Vec3::Z, hit, &mut SampleRng::new(1, 0, 0, 0))
+        };
+        let traced = leaving(&world);
+        assert!(
+            traced.totals_read == 0 && traced.path_rays >= 1,
+            "{traced:?}"
+        );
+        assert_eq!(traced.reflected, Vec3::ZERO, "{traced:?}");
+        world.set_earlier_pass(Some(image("earlier.bin", &|_| 7.0).of_pass(1)));
+        let carried = leaving(&world);
+        assert_eq!(carried.path_rays, 1, "{carried:?}");
+        let want = Vec3::splat(0.5 * 0.5 * core::f32::consts::FRAC_1_PI * 7.0);
+        assert!((carried.reflected - want).length() < 1e-4, "{carried:?}");
+    }
+
     /// Where the texels a hit would read disagree by more than [`SMOOTH_RATIO`] (a shadow
-    /// edge), neither layer is read: the sun is connected at the hit and a path traced on.
+    /// edge), neither layer is read: the sun is connected at the hit and the rest carried on
+    /// (no earlier pass here: a path traced).
     #[test]
     fn a_hit_where_the_texels_disagree_is_traced_not_read() {
         let dir = tempfile::tempdir().unwrap();

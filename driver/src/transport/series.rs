@@ -27,7 +27,8 @@
 //! open space beside a closed gap, not the gap's) and the one the hit lies in is baked, over
 //! baked texels (not a chart's padding, whose values are the dilation's), agreeing within
 //! [`SMOOTH_RATIO`] (not across a shadow edge or the doorway light enters by). Elsewhere the
-//! caller computes the light at the hit as path transport would (`transport/path.rs`).
+//! caller connects the hit's direct light and carries the rest one bounce on, to where the pass
+//! before the previous one is read by the same rules (`transport/path.rs`).
 //!
 //! [`PreviousPass`] holds one dense RGB image per atlas page, in a file of the work directory
 //! that is memory-mapped (file-backed pages, not anonymous memory), written by
@@ -87,10 +88,11 @@ const INSIDE: usize = 7;
 /// A lookup reads a layer only where the baked texels it interpolates agree within this ratio
 /// (luminance): where light changes several-fold within a texel or two — the edge of a shadow,
 /// the doorway light enters a room by — a texel's average is far from the value at the hit,
-/// and the gather computes the light there another way (a path traced from the hit). Chosen
+/// and the gather computes the light there another way (one bounce on from the hit). Chosen
 /// by relative MSE against path references at equal time (docs/bake.md, "Where series reads
 /// the lightmap"): 1.5 traced paths at 31–47 % of the hits of the Veach rooms and doubled
-/// their error at equal samples; 2, 3 and 4 are within 10 % of each other, 3 the best.
+/// their error at equal samples; 2, 3 and 4 are within 10 % of each other, 3 the best. With
+/// such hits carried one bounce on instead, 2 and 1.5 still lose (docs/bake.md).
 pub const SMOOTH_RATIO: f32 = 3.0;
 
 /// What a lookup brings back: both layers at one point.
