@@ -136,7 +136,8 @@ impl World {
             // noisy step, not a whole path (docs/bake.md). A vertex that cannot be read there,
             // or a hit that cannot be read without that pass, has a path traced from it with
             // as many bounces as the pass it reads holds, next-event estimation at every
-            // vertex, as path transport does (the first gather pass's: its direct light).
+            // vertex, as path transport does (in the first gather pass, whose previous pass
+            // holds direct light alone, that path is the hit's next-event estimate).
             let carried = vertex == 1
                 && previous.is_some()
                 && !read
