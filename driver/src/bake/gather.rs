@@ -74,6 +74,9 @@ pub const MIXED_AMBIENT: f32 = 0.02;
 const LIGHT_SALT: u32 = 0x6c69_6768;
 const EMITTER_SALT: u32 = 0x656d_6974;
 const ORIGIN_SALT: u32 = 0x6f72_6967;
+/// Salts the random streams of the pass that keeps guide seeds
+/// ([`TileBaker::writes_guide_seeds`]), so the last pass's points are independent of them.
+const GUIDE_SEED_SALT: u32 = 0x7365_6564;
 
 /// What the workers counted, merged over the bake.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -109,6 +112,10 @@ pub struct GatherCounters {
     pub iterations_unguided_no_gain: u64,
     /// Guided iterations that sampled a learned guide.
     pub iterations_guided: u64,
+    /// Clusters whose first iteration sampled a guide seeded by the pass before
+    /// ([`BakeSettings::reads_guide_seeds`](super::settings::BakeSettings::reads_guide_seeds));
+    /// not among the learnable iterations, which follow the first.
+    pub clusters_seeded: u64,
     /// Texel-iterations the stopping rule skipped (`--target-error`): each iteration a texel
     /// of a stopped cluster, or of a stopped tile of the direct pass, did not take.
     pub texel_iterations_stopped: u64,
@@ -151,6 +158,7 @@ impl GatherCounters {
         self.iterations_unguided_uniform_guide += o.iterations_unguided_uniform_guide;
         self.iterations_unguided_no_gain += o.iterations_unguided_no_gain;
         self.iterations_guided += o.iterations_guided;
+        self.clusters_seeded += o.clusters_seeded;
         self.texel_iterations_stopped += o.texel_iterations_stopped;
         self.guide_build_ns += o.guide_build_ns;
         self.warp_ns += o.warp_ns;
@@ -184,6 +192,10 @@ pub struct TileBaker<'w> {
     direct_only: bool,
     /// Whether each sample includes the texel's next-event estimate ([`Self::texel_direct`]).
     texel_direct: bool,
+    /// Whether the tiles keep their clusters' guide seeds ([`Self::writes_guide_seeds`]).
+    writes_guide_seeds: bool,
+    /// Per valid texel: its cell of its cluster's guide seed, when kept.
+    seeds: Vec<f32>,
     valid: Vec<u32>,
     positions: Vec<[f32; 3]>,
     normals: Vec<[f32; 3]>,
@@ -230,6 +242,8 @@ impl<'w> TileBaker<'w> {
             keep_directional: false,
             direct_only: false,
             texel_direct: true,
+            writes_guide_seeds: false,
+            seeds: Vec::new(),
             valid: Vec::new(),
             positions: Vec::new(),
             normals: Vec::new(),
@@ -262,6 +276,21 @@ impl<'w> TileBaker<'w> {
     /// leaves it out: its samples are the gathered light alone, no shadow ray at the texel.
     pub fn texel_direct(mut self, texel_direct: bool) -> Self {
         self.texel_direct = texel_direct;
+        self
+    }
+
+    /// Keeps each cluster's guide seed in its texels' results ([`TexelResult::seed`]): the
+    /// pass before a guided last pass
+    /// ([`BakeSettings::writes_guide_seeds`](super::settings::BakeSettings::writes_guide_seeds)).
+    /// The last pass reads them through [`World::guide_seed`]. Such a pass draws its random
+    /// numbers from another stream ([`GUIDE_SEED_SALT`]): every pass of a bake rotates a
+    /// texel's points alike, and a seed learned from the very points the last pass then warps
+    /// through it would bias that pass (measured along a room's corner, `tests/surfaces.rs`).
+    pub fn writes_guide_seeds(mut self, writes: bool) -> Self {
+        self.writes_guide_seeds = writes;
+        if writes {
+            self.settings.seed ^= GUIDE_SEED_SALT;
+        }
         self
     }
 
@@ -312,6 +341,8 @@ impl<'w> TileBaker<'w> {
         }
         self.unguided.clear();
         self.unguided.resize(self.valid.len(), true);
+        self.seeds.clear();
+        self.seeds.resize(self.valid.len(), 0.0);
         let rays_before = self.counters.rays();
         for c in 0..clusters {
             let range = self.ranges[c];
@@ -431,6 +462,8 @@ impl<'w> TileBaker<'w> {
             unguided,
             counters,
             texel_direct,
+            writes_guide_seeds,
+            seeds,
             ..
         } = self;
         counters.clusters += 1;
@@ -459,6 +492,20 @@ impl<'w> TileBaker<'w> {
         let mut stopped = false;
         // The stopping rule's last iteration, cut to the samples it still needs (`--target-error`).
         let mut cut: Option<u32> = None;
+        // The pass before kept this cluster's seed: its first iteration samples a guide too.
+        if world.reads_guide_seeds()
+            && matches!(settings.guiding, Guiding::Coherent | Guiding::Naive)
+        {
+            let cells = members.iter().map(|&m| {
+                let id = first_texel + u64::from(valid[m as usize]);
+                world.guide_seed(id).unwrap_or(0.0)
+            });
+            let clock = Instant::now();
+            guide = seeded_guide(cells, learning, &params, nodes);
+            counters.clusters_seeded += u64::from(guide.is_some());
+            counters.guide_build_ns += clock.elapsed().as_nanos() as u64;
+        }
+        let mut seed = writes_guide_seeds.then(|| GuideSeed::new(members.len()));
         for k in 0..iterations {
             learning.clear();
             if stopped {
@@ -483,7 +530,7 @@ impl<'w> TileBaker<'w> {
                     batch: &mut batches[at],
                     gathered: &mut gathered[m as usize],
                     sh: sh.get_mut(at),
-                    learning: learns.then_some(&mut *learning),
+                    learning: (learns || seed.is_some()).then_some(&mut *learning),
                 };
                 let ctx = IterationCtx {
                     texel_direct: *texel_direct,
@@ -497,6 +544,9 @@ impl<'w> TileBaker<'w> {
                         ctx.gather_packets(&t, order, rotated, &mut sinks, counters);
                     }
                 }
+            }
+            if let Some(seed) = &mut seed {
+                seed.add(learning, params.second_moment);
             }
             if cut.is_some() {
                 counters.texel_iterations_stopped +=
@@ -558,6 +608,11 @@ impl<'w> TileBaker<'w> {
                     }
                 }
                 counters.guide_build_ns += clock.elapsed().as_nanos() as u64;
+            }
+        }
+        if let Some(seed) = seed {
+            for (&m, cell) in members.iter().zip(seed.cells()) {
+                seeds[m as usize] = cell;
             }
         }
         if settings.combine == Combine::Cluster {
@@ -703,6 +758,7 @@ impl<'w> TileBaker<'w> {
                     TexelEstimate::Value(e) => e.rgb.map(|c| c as f32),
                     TexelEstimate::NoSamples { .. } => [0.0; 3],
                 },
+                seed: self.seeds[m],
             };
         }
         record
@@ -753,6 +809,38 @@ fn learn<'n>(
         counters.iterations_guided += 1;
         Some(learned)
     }
+}
+
+/// The first guide of a cluster whose texels hold a guide seed (`cells`: each texel's cell, in
+/// the cluster's texel order, [`GuideSeed::cells`]): one record at the centre of each lit
+/// cell, split down to the cells (one record a node suffices: each stands for all the records
+/// of its cell). `None` for a cluster too small to hold a seed, or where the seed saw no light
+/// or gives a uniform guide: the first iteration gathers with cosine points.
+fn seeded_guide<'n>(
+    cells: impl ExactSizeIterator<Item = f32>,
+    learning: &mut Learning,
+    params: &GuideParams,
+    nodes: &'n mut [Node],
+) -> Option<Guide<'n>> {
+    let side = seed_side(cells.len());
+    if side == 0 {
+        return None;
+    }
+    learning.clear();
+    let centre = |i: usize| (i as f32 + 0.5) / side as f32;
+    for (j, flux) in cells.take(side * side).enumerate() {
+        if flux > 0.0 && flux.is_finite() {
+            let u = [centre(j % side), centre(j / side)];
+            learning.push(Record { u, flux }, 1.0);
+        }
+    }
+    let params = GuideParams {
+        min_records: 1,
+        max_depth: side.trailing_zeros(),
+        ..*params
+    };
+    let (seeded, stats) = guide::build(&mut learning.records, &params, nodes);
+    (stats.total_flux > 0.0 && !seeded.is_uniform()).then_some(seeded)
 }
 
 /// The grid comparator's next guide, mixed with the uniform density by `uniform` (`None`,
@@ -982,6 +1070,74 @@ impl Learning {
         } else {
             f64::INFINITY
         }
+    }
+}
+
+/// Cells per side of the largest guide seed: 8 × 8, one cell per texel of a full cluster.
+const SEED_SIDE: usize = 8;
+
+/// Cells per side of the guide seed of a cluster of `members` texels: the largest power of two
+/// whose square they hold, at most [`SEED_SIDE`]; 0 below four texels (no seed).
+fn seed_side(members: usize) -> usize {
+    match members {
+        64.. => SEED_SIDE,
+        16.. => 4,
+        4.. => 2,
+        _ => 0,
+    }
+}
+
+/// A cluster's guide seed (docs/guide.md, "The seed guide"): what the gather of the pass before
+/// a guided last pass brought back, summed over a grid of [`seed_side`]² cells on the primary
+/// sample square. The cluster's j-th texel keeps cell j in its result; the last pass, whose
+/// clusters are the same, builds the cluster's first guide from the cells
+/// ([`seeded_guide`]), so its first iteration is guided too.
+struct GuideSeed {
+    side: usize,
+    sums: [f64; SEED_SIDE * SEED_SIDE],
+    records: u64,
+}
+
+impl GuideSeed {
+    fn new(members: usize) -> Self {
+        Self {
+            side: seed_side(members),
+            sums: [0.0; SEED_SIDE * SEED_SIDE],
+            records: 0,
+        }
+    }
+
+    /// Adds an iteration's records, each as its guide would learn it: `g/q`, or `g²/q` for a
+    /// second-moment guide (as [`Learning::square_fluxes`]).
+    fn add(&mut self, learning: &Learning, second_moment: bool) {
+        if self.side == 0 {
+            return;
+        }
+        let side = self.side;
+        let cell = |x: f32| ((x * side as f32) as usize).min(side - 1);
+        for (r, &q) in learning.records.iter().zip(&learning.densities) {
+            let flux = f64::from(r.flux).max(0.0);
+            let value = if second_moment {
+                flux * flux * f64::from(q)
+            } else {
+                flux
+            };
+            self.sums[cell(r.u[0]) + side * cell(r.u[1])] += value;
+        }
+        self.records += learning.records.len() as u64;
+    }
+
+    /// Each texel's cell, in the cluster's texel order: the cell's sum over the records divided
+    /// by their number (an estimate of the integral over the cell), at most `f32::MAX`; 0 past
+    /// the seed's cells.
+    fn cells(&self) -> impl Iterator<Item = f32> + '_ {
+        let records = self.records.max(1) as f64;
+        (0..).map(move |j| match self.sums.get(j) {
+            Some(sum) if j < self.side * self.side => {
+                (sum / records).min(f64::from(f32::MAX)) as f32
+            }
+            _ => 0.0,
+        })
     }
 }
 
@@ -1435,6 +1591,7 @@ mod tests {
     use super::*;
     use crate::bake::settings::EmitterSampling;
     use crate::bvh::Preset;
+    use crate::output::result_file::{MappedResults, ResultFile};
     use crate::scene::{Material, Scene, Sky, Sun, Triangle};
     use crate::test_support::{inward_box_faces, quad};
     use crate::transport::emitters::EmitterSelection;
@@ -2009,6 +2166,145 @@ mod tests {
     /// recorded for coherent's second guided iteration was such a seed). Pooled over 32
     /// seeds (2026-11-24): naive 11.0× and 12.8×, coherent 12.6× and 13.7× per guided
     /// sample.
+    /// The guide seed (docs/guide.md, "The seed guide"), under [`small_emitter`]: a pass that
+    /// keeps seeds writes its cluster's cells into its texels' results, and a pass that reads
+    /// them samples a guide in its first iteration too. That iteration's variance per sample
+    /// falls far below the cosine iteration's of the same bake unseeded (≥ 4×, pooled over
+    /// [`SEEDS`] seeds, like the guided iterations' test above), the seeded cluster is counted,
+    /// and the texels' mean stays the unguided bake's within its noise.
+    #[test]
+    fn a_seeded_first_iteration_samples_the_guide_of_the_pass_before() {
+        const SEEDS: u32 = 8;
+        let dir = tempfile::tempdir().unwrap();
+        let first_texel = 1000;
+        let (mut unseeded, mut seeded) = (0.0, 0.0);
+        let (mut means, mut unguided) = (Vec::new(), Vec::new());
+        for seed in 0..SEEDS {
+            // The pass before: unguided, keeping the seed.
+            let (world, texels) = small_emitter();
+            let before = BakeSettings {
+                seed: seed + 100,
+                ..settings(Guiding::Off)
+            };
+            let mut baker = TileBaker::new(&world, before).writes_guide_seeds(true);
+            let mut out = TileBuffer::default();
+            baker.bake_tile(0, first_texel, &texels, &mut out);
+            let cells: Vec<f32> = out.results.iter().map(|r| r.seed).collect();
+            assert!(cells.iter().all(|c| c.is_finite() && *c >= 0.0));
+            assert!(cells.iter().filter(|&&c| c > 0.0).count() >= 4, "{cells:?}");
+            let path = dir.path().join(format!("before-{seed}.bin"));
+            let file = ResultFile::create(&path, first_texel + 64, 7).unwrap();
+            file.write(first_texel, &out.results).unwrap();
+
+            // The pass that reads it, against the same pass without it.
+            let guided = BakeSettings {
+                seed,
+                ..settings(Guiding::Coherent)
+            };
+            let k = guided.iterations as usize;
+            let first_iteration = |baker: &TileBaker| {
+                (0..texels.len())
+                    .map(|m| baker.batches[m * k].variance().unwrap()[0])
+                    .sum::<f64>()
+                    / texels.len() as f64
+            };
+            let (world, _) = small_emitter();
+            let mut plain = TileBaker::new(&world, guided);
+            plain.bake_tile(0, first_texel, &texels, &mut out);
+            assert_eq!(plain.counters.clusters_seeded, 0);
+            unseeded += first_iteration(&plain);
+            let (mut world, _) = small_emitter();
+            world.set_guide_seeds(Some(MappedResults::new(&file).unwrap()));
+            let mut baker = TileBaker::new(&world, guided);
+            baker.bake_tile(0, first_texel, &texels, &mut out);
+            assert_eq!(baker.counters.clusters_seeded, 1);
+            seeded += first_iteration(&baker);
+            means.push(out.results.iter().map(|r| r.total[0]).sum::<f32>() / 64.0);
+            let (m, _, _, _) = emitter_bake(BakeSettings {
+                seed,
+                combine: Combine::Average,
+                bias_correction: false,
+                ..settings(Guiding::Off)
+            });
+            unguided.push(m);
+        }
+        let ratio = unseeded / seeded;
+        assert!(
+            ratio >= 4.0,
+            "the seeded first iteration: {ratio:.2}x less variance"
+        );
+        // Each seed's texel mean, over the seeds: mean and standard error.
+        let stats = |v: &[f32]| {
+            let n = v.len() as f32;
+            let m = v.iter().sum::<f32>() / n;
+            let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f32>() / (n - 1.0);
+            (m, var / n)
+        };
+        let ((a, va), (b, vb)) = (stats(&means), stats(&unguided));
+        assert!(
+            (a - b).abs() <= 4.0 * (va + vb).sqrt(),
+            "seeded mean {a} (variance {va}), unguided {b} ({vb})"
+        );
+    }
+
+    /// A guide seed's cells, one per texel of the cluster: the records' mean per cell on a grid
+    /// of 8², 4² or 2² cells by the cluster's size, none below four texels; the guide built
+    /// from them puts its density where the light was.
+    #[test]
+    fn a_guide_seed_holds_one_cell_per_texel_and_builds_the_guide() {
+        assert_eq!(
+            [1, 3, 4, 15, 16, 63, 64, 200].map(seed_side),
+            [0, 0, 2, 2, 4, 4, 8, 8]
+        );
+        let mut learning = Learning::default();
+        // Cosine records: 90 % of the light in the cell (2, 1) of a 4 × 4 grid.
+        for i in 0..1024u32 {
+            let u = [
+                ((i % 32) as f32 + 0.5) / 32.0,
+                ((i / 32) as f32 + 0.5) / 32.0,
+            ];
+            let lit = (u[0] * 4.0) as usize == 2 && (u[1] * 4.0) as usize == 1;
+            learning.push(
+                Record {
+                    u,
+                    flux: if lit { 9.0 } else { 0.0667 },
+                },
+                1.0,
+            );
+        }
+        let mut seed = GuideSeed::new(20);
+        seed.add(&learning, false);
+        let cells: Vec<f32> = seed.cells().take(20).collect();
+        assert!(cells[16..].iter().all(|&c| c == 0.0), "{cells:?}");
+        let lit = 2 + 4; // the cell (2, 1): x + 4 y
+        assert!((cells[lit] - 9.0 / 16.0).abs() < 1e-5, "{cells:?}");
+        // Second moment: g²/q per record.
+        let mut squared = GuideSeed::new(20);
+        squared.add(&learning, true);
+        assert!((squared.cells().nth(lit).unwrap() - 81.0 / 16.0).abs() < 1e-4);
+
+        let params = GuideParams {
+            min_records: 64,
+            alpha: 0.1,
+            ambient: MIXED_AMBIENT,
+            ..GuideParams::default()
+        };
+        let mut nodes = vec![Node::default(); GUIDE_CAPACITY];
+        let guide = seeded_guide(cells.into_iter(), &mut learning, &params, &mut nodes)
+            .expect("a lit seed guides");
+        let inside = warp::pdf(&guide, [0.6, 0.3]);
+        let outside = warp::pdf(&guide, [0.1, 0.9]);
+        assert!(
+            inside > 4.0 && outside < 0.5,
+            "pdf {inside} in the lit cell, {outside} outside"
+        );
+        // Too small a cluster holds no seed; a dark seed gives no guide.
+        for cells in [&[1.0; 3][..], &[0.0; 16]] {
+            let cells = cells.iter().copied();
+            assert!(seeded_guide(cells, &mut learning, &params, &mut nodes).is_none());
+        }
+    }
+
     #[test]
     fn guiding_cuts_the_variance_under_a_small_emitter() {
         const SEEDS: u32 = 32;

@@ -40,7 +40,7 @@ use super::workdir::{
 use super::world::World;
 use crate::bvh::Preset;
 use crate::output::fnv1a64;
-use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
+use crate::output::result_file::{FLAG_BAKED, MappedResults, ResultFile, TexelResult};
 use crate::scene::Scene;
 use crate::texels::{FLAG_INSIDE, TexelFile};
 use crate::transport::lookup_filter::Surfel;
@@ -287,6 +287,11 @@ pub fn bake_pass_with_progress(
             // The last pass, after a gather pass, spends its samples by the passes' error (a
             // budgeted middle pass makes the last one's lookups noisier: docs/estimator.md).
             // Its noise holds the direct light's only when it estimates that light itself.
+            world.set_guide_seeds(None);
+            if job.settings.reads_guide_seeds(pass) {
+                let (results, _) = sources.open(&texels, bake_id)?;
+                world.set_guide_seeds(Some(MappedResults::new(&results)?));
+            }
             world.set_budget(None);
             if pass - 1 > DIRECT_PASS && pass == job.settings.last_pass() {
                 let sources = PassSources {
@@ -484,7 +489,8 @@ fn bake_pass(
         baker: TileBaker::new(world, job.settings.for_pass(pass))
             .keep_directional(last)
             .direct_only(pass == DIRECT_PASS)
-            .texel_direct(!job.settings.borrows_direct(pass)),
+            .texel_direct(!job.settings.borrows_direct(pass))
+            .writes_guide_seeds(job.settings.writes_guide_seeds(pass)),
         sink: &counters,
     };
     let bake_tile = |w: &mut CountedBaker<'_, '_>, tile: u32, out: &mut TileBuffer| {

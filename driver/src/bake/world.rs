@@ -16,6 +16,7 @@ use super::budget::SpatialBudget;
 use super::settings::{EmitterSampling, Transport};
 
 use crate::bvh::{Bvh, BvhError, Preset};
+use crate::output::result_file::MappedResults;
 use crate::scene::texture::{HitAlbedo, VaryingAlbedo};
 use crate::scene::{Scene, Sky};
 use crate::transport::emitters::{EmitterSelection, Emitters};
@@ -57,6 +58,7 @@ pub struct World {
     previous: Option<PreviousPass>,
     earlier: Option<PreviousPass>,
     budget: Option<SpatialBudget>,
+    guide_seeds: Option<MappedResults>,
 }
 
 /// Where a gather ray hit: the primitive, the ray parameter and the barycentric weights of
@@ -119,6 +121,7 @@ impl World {
             previous: None,
             earlier: None,
             budget: None,
+            guide_seeds: None,
         };
         world.set_emitters(EmitterSampling::default(), EmitterSelection::default());
         Ok(world)
@@ -282,6 +285,23 @@ impl World {
     /// How many times the uniform count of samples the texel at `pixel` of `page` takes.
     pub fn budget_factor(&self, page: u32, pixel: [u32; 2]) -> f32 {
         self.budget.as_ref().map_or(1.0, |b| b.factor(page, pixel))
+    }
+
+    /// The results of the pass before this one, whose texels hold the guide seeds of this
+    /// pass's clusters (`None`: the clusters' first iteration gathers with cosine points;
+    /// [`BakeSettings::reads_guide_seeds`](super::settings::BakeSettings::reads_guide_seeds)).
+    pub fn set_guide_seeds(&mut self, seeds: Option<MappedResults>) {
+        self.guide_seeds = seeds;
+    }
+
+    /// Whether this pass's clusters read the guide seeds the pass before kept.
+    pub fn reads_guide_seeds(&self) -> bool {
+        self.guide_seeds.is_some()
+    }
+
+    /// Texel `texel`'s cell of its cluster's guide seed, if this pass reads seeds.
+    pub fn guide_seed(&self, texel: u64) -> Option<f32> {
+        self.guide_seeds.as_ref()?.get(texel).map(|r| r.seed)
     }
 
     /// Radiance of the sky along `dir` (zero without a lookup when the sky is black).

@@ -8,7 +8,8 @@
 use clap::ValueEnum;
 
 use crate::bake::settings::{
-    BakeSettings, Budget, Combine, GuideTarget, GuidedPasses, Guiding, Schedule, Transport,
+    BakeSettings, Budget, Combine, GuideSeed, GuideTarget, GuidedPasses, Guiding, Schedule,
+    Transport,
 };
 use crate::transport::emitters::EmitterSelection;
 
@@ -61,6 +62,8 @@ pub struct Levers {
     pub lookup_filter: u32,
     /// `--guide-target` (`+target=`).
     pub guide_target: GuideTarget,
+    /// `--guide-seed` (`+seed=`).
+    pub guide_seed: GuideSeed,
     /// `--target-error` in thousandths (`+stop=20` is 0.02): the stopping rule, the rung's
     /// spp its cap; `None`: off.
     pub stop_permille: Option<u32>,
@@ -83,6 +86,7 @@ impl Default for Levers {
             lookup_percent: None,
             lookup_filter: d.lookup_filter,
             guide_target: d.guide_target,
+            guide_seed: d.guide_seed,
             stop_permille: None,
         }
     }
@@ -106,6 +110,7 @@ impl Levers {
             lookup_percent: None,
             lookup_filter: BakeSettings::default().lookup_filter,
             guide_target: GuideTarget::Radiance,
+            guide_seed: GuideSeed::Off,
             stop_permille: None,
         }
     }
@@ -155,6 +160,9 @@ impl Levers {
         }
         if let Some(p) = self.stop_permille {
             s += &format!("+stop={p}");
+        }
+        if self.guide_seed != d.guide_seed {
+            s += &format!("+seed={}", value_name(&self.guide_seed));
         }
         s
     }
@@ -220,7 +228,7 @@ impl Method {
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
     /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`,
-    /// `transport`, `select`, `budget`, `direct`, `lookup`, `target`); the
+    /// `transport`, `select`, `budget`, `direct`, `lookup`, `target`, `seed`); the
     /// single word `before` stands for every lever as it was before issue 14.
     ///
     /// # Errors
@@ -288,6 +296,10 @@ impl Method {
                 "target" => {
                     levers.guide_target = GuideTarget::from_str(value, true)
                         .map_err(|e| format!("{label:?}: {e}"))?;
+                }
+                "seed" => {
+                    levers.guide_seed =
+                        GuideSeed::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
                 }
                 _ => return Err(format!("method {label:?}: unknown lever {key:?}")),
             }
@@ -366,6 +378,7 @@ impl Method {
             lookup_spp,
             lookup_filter: self.levers.lookup_filter,
             guide_target: self.levers.guide_target,
+            guide_seed: self.levers.guide_seed,
             target_error,
             ..Default::default()
         }

@@ -9,8 +9,8 @@ use crate::bake::directional::Directional;
 use crate::bake::finish::{Denoise, FinishOptions, Seams};
 use crate::bake::run::{BakeJob, BakeReport, Progress, bake_pass_with_progress, lights_differ};
 use crate::bake::settings::{
-    BakeSettings, Budget, Combine, EmitterSampling, GuideTarget, GuidedPasses, Guiding, Schedule,
-    Transport,
+    BakeSettings, Budget, Combine, EmitterSampling, GuideSeed, GuideTarget, GuidedPasses, Guiding,
+    Schedule, Transport,
 };
 use crate::bake::shard::Shard;
 use crate::bake::workdir::work_dir;
@@ -80,6 +80,11 @@ pub struct BakeArgs {
     /// the paper's).
     #[arg(long, value_enum, default_value_t = BakeSettings::default().guide_target)]
     pub guide_target: GuideTarget,
+    /// Whether the last series pass's first iteration samples a guide seeded by the pass
+    /// before it (`previous`: that pass keeps, per cluster, a coarse histogram of what its
+    /// gather brought back) or gathers with cosine points (`off`, the paper's).
+    #[arg(long, value_enum, default_value_t = BakeSettings::default().guide_seed)]
+    pub guide_seed: GuideSeed,
     /// Stop where the estimate is good enough: a cluster (a tile of the direct pass) stops
     /// once its texels' relative error, measured between its iterations, is at most this
     /// (0.02: 2 %); `--spp` is then the cap. Use `--iterations 8` to stop at every doubling
@@ -218,6 +223,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         lookup_spp: args.lookup_spp,
         lookup_filter: args.lookup_filter,
         guide_target: args.guide_target,
+        guide_seed: args.guide_seed,
         target_error: args.target_error,
         min_split: args.min_split,
         smooth: args.smooth,

@@ -1,8 +1,8 @@
 //! The result file: one [`TexelResult`] per texel, preallocated, written in place.
 //!
-//! Layout (little-endian): a 64-byte [`ResultHeader`], then `texel_count` records of 48 bytes
-//! at `64 + 48 · texel_id`. The file is created sparse at its full size, so a bake of 10^8
-//! texels does not write 4.8 GB of zeros first, and it is written with positioned writes
+//! Layout (little-endian): a 64-byte [`ResultHeader`], then `texel_count` records of 52 bytes
+//! at `64 + 52 · texel_id`. The file is created sparse at its full size, so a bake of 10^8
+//! texels does not write 5.2 GB of zeros first, and it is written with positioned writes
 //! (`pwrite`), never mapped: nothing of it stays in anonymous memory, and the kernel's page
 //! cache is free to drop what has been synced.
 //!
@@ -26,7 +26,7 @@ use super::{OutputFileError, create_with_header, io_error, open_with_header};
 /// Magic bytes at the start of a result file.
 pub const RESULT_MAGIC: [u8; 8] = *b"GBRESULT";
 /// The result-file version this build writes and reads.
-pub const RESULT_VERSION: u32 = 3;
+pub const RESULT_VERSION: u32 = 4;
 /// Bytes before the first record.
 pub const RESULT_HEADER_BYTES: u64 = 64;
 
@@ -59,10 +59,14 @@ pub struct TexelResult {
     /// unbiased whatever the combination: what a next series pass looks up on the side the
     /// texel bakes, in place of next-event estimation there.
     pub total: [f32; 3],
+    /// One cell of the texel's cluster's guide seed, kept by the pass before a guided last
+    /// pass (0 elsewhere): the cluster's j-th texel holds cell j of the histogram the last
+    /// pass builds the cluster's first guide from (`bake/gather.rs`, `GuideSeed`).
+    pub seed: f32,
 }
 
 /// Bytes of one [`TexelResult`] in the file.
-pub const RECORD_BYTES: u64 = 48;
+pub const RECORD_BYTES: u64 = 52;
 
 const _: () = assert!(size_of::<TexelResult>() as u64 == RECORD_BYTES);
 
@@ -74,7 +78,7 @@ pub struct ResultHeader {
     pub magic: [u8; 8],
     /// [`RESULT_VERSION`].
     pub version: u32,
-    /// Bytes of one texel's records: 48 in a result file, K · 80 in a batch file of K
+    /// Bytes of one texel's records: 52 in a result file, K · 80 in a batch file of K
     /// iterations.
     pub record_bytes: u32,
     /// Records in the file.
@@ -324,6 +328,53 @@ fn records_end(texel_count: u64, record_bytes: u64) -> Option<u64> {
         .checked_add(RESULT_HEADER_BYTES)
 }
 
+/// A finished result file, mapped read-only: one field of many texels read without a call
+/// each (the last pass reads the guide seeds the pass before it kept: `bake/gather.rs`).
+#[derive(Debug)]
+pub struct MappedResults {
+    map: memmap2::Mmap,
+    texel_count: u64,
+}
+
+impl MappedResults {
+    /// Maps `results`, a file no one writes any more (a finished pass's).
+    ///
+    /// # Errors
+    /// [`OutputFileError::Io`] when the file cannot be mapped, or is shorter than its texels.
+    pub fn new(results: &ResultFile) -> Result<Self, OutputFileError> {
+        // SAFETY: the work directory's invariant (crate::output): a finished pass's result
+        // file is neither written nor truncated while a later pass reads it. Every record
+        // read below is bounds-checked against `map.len()`.
+        let map = unsafe { memmap2::Mmap::map(&results.file) }
+            .map_err(|e| io_error(&results.path, "map results", e))?;
+        let want = RESULT_HEADER_BYTES + results.texel_count * RECORD_BYTES;
+        if (map.len() as u64) < want {
+            return Err(io_error(
+                &results.path,
+                "map results",
+                std::io::Error::new(
+                    std::io::ErrorKind::UnexpectedEof,
+                    format!("{} bytes, where its texels need {want}", map.len()),
+                ),
+            ));
+        }
+        Ok(Self {
+            map,
+            texel_count: results.texel_count,
+        })
+    }
+
+    /// Texel `texel`'s record (`None` past the file's texels).
+    pub fn get(&self, texel: u64) -> Option<TexelResult> {
+        if texel >= self.texel_count {
+            return None;
+        }
+        let at = (RESULT_HEADER_BYTES + texel * RECORD_BYTES) as usize;
+        let bytes = self.map.get(at..at + RECORD_BYTES as usize)?;
+        Some(bytemuck::pod_read_unaligned(bytes))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::fs::OpenOptions;
@@ -338,6 +389,7 @@ mod tests {
             flags: FLAG_BAKED | FLAG_VALID,
             gathered: [0.25, 0.0, 1.0],
             total: [0.5, 0.25, 1.0],
+            seed: 0.125,
         }
     }
 
@@ -363,6 +415,12 @@ mod tests {
             std::fs::metadata(&path).unwrap().len(),
             64 + 100 * RECORD_BYTES
         );
+        // Mapped, the same records, and none past the end.
+        let mapped = MappedResults::new(&reopened).unwrap();
+        assert_eq!(mapped.get(39), Some(TexelResult::default()));
+        assert!((0..10).all(|i| mapped.get(40 + i) == Some(tile[i as usize])));
+        assert_eq!(mapped.get(99), Some(TexelResult::default()));
+        assert_eq!(mapped.get(100), None);
     }
 
     #[test]
@@ -433,7 +491,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            err.contains("r.bin") && err.contains("record layout of 336 bytes per texel"),
+            err.contains("r.bin") && err.contains("record layout of 364 bytes per texel"),
             "{err}"
         );
         let (seven, _) = RecordFile::<TexelResult>::open_with(&path, false, 7, None).unwrap();
