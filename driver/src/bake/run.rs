@@ -284,14 +284,16 @@ pub fn bake_pass_with_progress(
                 results: &source,
                 direct: direct.as_deref(),
             };
-            // The last pass, after a gather pass, spends its samples by the passes' error (a
-            // budgeted middle pass makes the last one's lookups noisier: docs/estimator.md).
-            // Its noise holds the direct light's only when it estimates that light itself.
+            // The last pass's clusters start from the guide seeds the pass before kept in its
+            // results (docs/guide.md, "The seed guide").
             world.set_guide_seeds(None);
             if job.settings.reads_guide_seeds(pass) {
                 let (results, _) = sources.open(&texels, bake_id)?;
                 world.set_guide_seeds(Some(MappedResults::new(&results)?));
             }
+            // The last pass, after a gather pass, spends its samples by the passes' error (a
+            // budgeted middle pass makes the last one's lookups noisier: docs/estimator.md).
+            // Its noise holds the direct light's only when it estimates that light itself.
             world.set_budget(None);
             if pass - 1 > DIRECT_PASS && pass == job.settings.last_pass() {
                 let sources = PassSources {
