@@ -175,8 +175,9 @@ pub const DIRECT_PASS: u32 = 0;
 /// directories another bake ([`BakeSettings::bake_id`]). 2: series bakes start with
 /// [`DIRECT_PASS`]; 3: the lightmap takes its direct light from it
 /// ([`BakeSettings::lightmap_borrows_direct`]); 4: the pass before the last keeps the seed
-/// of the last pass's guides ([`BakeSettings::guide_seed`]).
-const BAKE_FORMAT: u32 = 4;
+/// of the last pass's guides ([`BakeSettings::guide_seed`]); 5: a guide learns from every
+/// iteration of its cluster since the last cosine one, not the last iteration alone.
+const BAKE_FORMAT: u32 = 5;
 
 /// How the radiance a gather ray brings back from its hit is computed (docs/bake.md, light
 /// transport).
@@ -209,7 +210,9 @@ pub enum EmitterSampling {
 pub struct BakeSettings {
     /// Final-gather rays per texel, all learning iterations together.
     pub spp: u32,
-    /// Learning iterations K (iteration 0 is unguided).
+    /// Learning iterations K (iteration 0 is unguided unless the pass before kept a guide
+    /// seed). 3 by default since the seed guides the first iteration (docs/guide.md, "The
+    /// records a guide learns from").
     pub iterations: u32,
     /// Direction choice.
     pub guiding: Guiding,
@@ -387,7 +390,7 @@ impl Default for BakeSettings {
     fn default() -> Self {
         Self {
             spp: 256,
-            iterations: 4,
+            iterations: 3,
             guiding: Guiding::Coherent,
             combine: Combine::Cluster,
             bias_correction: Combine::Cluster.wants_rho(),
@@ -620,13 +623,16 @@ impl BakeSettings {
     /// The settings pass `pass` bakes with: these, with `--guiding off` for a pass
     /// [`GuidedPasses`] leaves unguided (a pass before the last under
     /// [`GuidedPasses::Last`]) and `--lookup-spp` rays for a gather pass before the last.
+    ///
+    /// A pass that learns nothing from its iterations bakes in one
+    /// ([`Self::needs_iterations`]).
     pub fn for_pass(&self, pass: u32) -> BakeSettings {
         let guided = match self.guided_passes {
             GuidedPasses::Last => pass == self.last_pass(),
             GuidedPasses::Every => true,
         };
         let lookup = self.feeds_lookups(pass);
-        BakeSettings {
+        let pass_settings = BakeSettings {
             guiding: if guided { self.guiding } else { Guiding::Off },
             spp: if lookup {
                 self.lookup_spp.unwrap_or_else(|| self.default_lookup_spp())
@@ -634,7 +640,32 @@ impl BakeSettings {
                 self.spp
             },
             ..*self
+        };
+        BakeSettings {
+            iterations: if pass_settings.needs_iterations(pass) {
+                self.iterations
+            } else {
+                1
+            },
+            ..pass_settings
         }
+    }
+
+    /// Whether pass `pass`, baked with these settings, needs its samples split into
+    /// `--iterations`: a guided pass learns from them, the stopping rule measures its error
+    /// between them, global weights keep them, and the direct pass's budget spends its later
+    /// ones by the earlier ones' error. A pass that needs none of that gathers each texel's
+    /// samples as one presorted set: a set rotated afresh per iteration is stratified only
+    /// within itself, and four sets of 64 points hold 1.27–1.52× the relative MSE of one set of
+    /// 256 for the unguided bake (docs/sampling.md, "One set, not four").
+    pub fn needs_iterations(&self, pass: u32) -> bool {
+        let direct_budget = self.transport == Transport::Series
+            && pass == DIRECT_PASS
+            && self.budget != Budget::Uniform;
+        self.guiding != Guiding::Off
+            || self.target_error.is_some()
+            || self.combine == Combine::Global
+            || direct_budget
     }
 
     /// Gather rays per texel of the lookup passes without `--lookup-spp`: a
@@ -746,6 +777,53 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_pass_that_learns_nothing_from_its_iterations_bakes_in_one() {
+        let iterations = |s: &BakeSettings| -> Vec<u32> {
+            (s.first_pass()..=s.last_pass())
+                .map(|p| s.for_pass(p).iterations)
+                .collect()
+        };
+        // The default: the direct pass's budget spends its later iterations by the earlier
+        // ones, the lookup passes learn nothing, the last pass is guided.
+        let d = BakeSettings::default();
+        assert_eq!(iterations(&d), [3, 1, 1, 3]);
+        // Unguided: every pass one set; with a uniform budget the direct pass too.
+        let off = BakeSettings {
+            guiding: Guiding::Off,
+            budget: Budget::default_for(Guiding::Off, None),
+            combine: Combine::Average,
+            ..d
+        };
+        assert_eq!(iterations(&off), [1, 1, 1, 1]);
+        assert_eq!(
+            iterations(&BakeSettings {
+                transport: Transport::Path,
+                ..off
+            }),
+            [1]
+        );
+        // Every guided pass learns; the stopping rule and global weights need the iterations
+        // of every pass.
+        let every = BakeSettings {
+            guided_passes: GuidedPasses::Every,
+            ..d
+        };
+        assert_eq!(iterations(&every), [3, 3, 3, 3]);
+        for s in [
+            BakeSettings {
+                target_error: Some(0.02),
+                ..off
+            },
+            BakeSettings {
+                combine: Combine::Global,
+                ..off
+            },
+        ] {
+            assert_eq!(iterations(&s), [3, 3, 3, 3]);
+        }
+    }
+
+    #[test]
     fn the_budget_is_split_in_whole_packets() {
         let s = BakeSettings {
             spp: 200,
@@ -843,7 +921,9 @@ mod tests {
             [256, 64, 64, 256],
             "pass 0 and the lightmap keep --spp"
         );
-        assert_eq!(s.for_pass(1).samples_in_iteration(3), 32);
+        // A lookup pass learns nothing from iterations: its 64 rays are one set.
+        assert_eq!(s.for_pass(1).iterations, 1);
+        assert_eq!(s.for_pass(1).samples_in_iteration(0), 64);
         let path = BakeSettings {
             transport: Transport::Path,
             ..s
@@ -854,12 +934,12 @@ mod tests {
             "{err}"
         );
         let few = BakeSettings {
-            lookup_spp: Some(24),
+            lookup_spp: Some(16),
             ..s
         };
         let err = few.validate().unwrap_err().to_string();
         assert!(
-            err.contains("--lookup-spp 24") && err.contains("at least 8"),
+            err.contains("--lookup-spp 16") && err.contains("at least 8"),
             "{err}"
         );
         assert!(format!("{s:?}").contains("lookup_spp: 64"));
@@ -992,6 +1072,7 @@ mod tests {
             guide_target: GuideTarget::Radiance,
             budget: Budget::Uniform,
             transport: Transport::Path,
+            iterations: 4,
             ..BakeSettings::default()
         };
         assert_eq!(
@@ -1147,7 +1228,7 @@ mod tests {
         assert!((1..=2).all(|pass| every.for_pass(pass) == lookup));
         assert_eq!(every.for_pass(3), every);
         let few = |spp| BakeSettings { spp, ..every }.default_lookup_spp();
-        assert_eq!((few(1024), few(64), few(16)), (256, 32, 16));
+        assert_eq!((few(1024), few(64), few(16)), (256, 24, 16));
         let set = BakeSettings {
             lookup_spp: Some(128),
             ..every

@@ -191,10 +191,11 @@ pub fn reference(
     // The version changes with what a bake computes for the same settings (v3: series
     // passes read the previous pass's total irradiance on the side its texels bake; v4,
     // series only — path references stay valid: pass 1 reads a direct pass 0; v5, series
-    // only: the lightmap takes its direct light from pass 0).
+    // only: the lightmap takes its direct light from pass 0; v6 and v4: an unguided pass
+    // gathers each texel's samples as one presorted set, not one per iteration).
     let version = match settings.transport {
-        Transport::Series => 5,
-        Transport::Path => 3,
+        Transport::Series => 6,
+        Transport::Path => 4,
     };
     let key = format!(
         "guidebake bench reference v{version}; scene {:016x}; texels {:016x}; settings {settings:?}",

@@ -45,8 +45,8 @@ pub struct BenchArgs {
     /// Seeds per (method, spp) (default 2).
     #[arg(long)]
     pub seeds: Option<u32>,
-    /// Learning iterations of every bake.
-    #[arg(long, default_value_t = 4)]
+    /// Learning iterations of every bake but the reference (the bake's default).
+    #[arg(long, default_value_t = BakeSettings::default().iterations)]
     pub iterations: u32,
     /// Light transport of the ladder's bakes. Against a reference of the same transport the
     /// errors fall to zero as samples grow; `series` (the bake's default) against a `path`
