@@ -506,6 +506,7 @@ impl<'w> TileBaker<'w> {
             counters.guide_build_ns += clock.elapsed().as_nanos() as u64;
         }
         let mut seed = writes_guide_seeds.then(|| GuideSeed::new(members.len()));
+        learning.pool.clear();
         for k in 0..iterations {
             learning.clear();
             if stopped {
@@ -603,7 +604,7 @@ impl<'w> TileBaker<'w> {
                             if params.second_moment {
                                 learning.square_fluxes();
                             }
-                            guide = learn(&mut learning.records, &params, nodes, counters);
+                            guide = learn(learning.pooled(sampled), &params, nodes, counters);
                         }
                     }
                 }
@@ -998,6 +999,10 @@ struct Learning {
     /// `densities[i]`: the density `q` on the primary sample square that drew `records[i]`
     /// (until a guide's build reorders the records).
     densities: Vec<f32>,
+    /// What the next guide learns from: the records of the cluster's iterations since the
+    /// last one that sampled cosine points, that one included (docs/guide.md, "The records a
+    /// guide learns from, and three iterations").
+    pool: Vec<Record>,
 }
 
 impl Learning {
@@ -1009,6 +1014,20 @@ impl Learning {
     fn push(&mut self, record: Record, density: f32) {
         self.records.push(record);
         self.densities.push(density);
+    }
+
+    /// The records the next guide learns from: this iteration's added to those of the
+    /// iterations before it, or this iteration's alone when it sampled cosine points
+    /// (`guided` false: a guide that saw no energy, or a cluster's first iteration without a
+    /// seed, starts the pool again). Each record is `g/q` (or `g²/q`) for the density `q`
+    /// that drew it, so the mean over records drawn by different densities still estimates
+    /// each cell's integral.
+    fn pooled(&mut self, guided: bool) -> &mut [Record] {
+        if !guided {
+            self.pool.clear();
+        }
+        self.pool.extend_from_slice(&self.records);
+        &mut self.pool
     }
 
     /// Turns each record's flux `g/q` into `g²/q`, what a guide of the second moment learns
@@ -2387,6 +2406,36 @@ mod tests {
                 "{mode}: per-texel variance {default_var} not {WHOLE_BAKE}× below unguided {off_var}"
             );
         }
+    }
+
+    #[test]
+    fn a_guide_learns_from_every_iteration_since_the_last_cosine_one() {
+        let record = |x: f32| Record {
+            u: [x, 0.5],
+            flux: 1.0,
+        };
+        let points = |pool: &[Record]| {
+            let mut u: Vec<f32> = pool.iter().map(|r| r.u[0]).collect();
+            u.sort_by(f32::total_cmp);
+            u
+        };
+        let mut learning = Learning::default();
+        let iteration = |learning: &mut Learning, xs: &[f32]| {
+            learning.clear();
+            for &x in xs {
+                learning.push(record(x), 1.0);
+            }
+        };
+        // A cosine iteration's records alone, then each guided one's added to them.
+        iteration(&mut learning, &[0.1]);
+        assert_eq!(points(learning.pooled(false)), [0.1]);
+        iteration(&mut learning, &[0.2, 0.3]);
+        assert_eq!(points(learning.pooled(true)), [0.1, 0.2, 0.3]);
+        iteration(&mut learning, &[0.4]);
+        assert_eq!(points(learning.pooled(true)), [0.1, 0.2, 0.3, 0.4]);
+        // A cosine iteration (the guide saw no energy) starts the pool again.
+        iteration(&mut learning, &[0.5]);
+        assert_eq!(points(learning.pooled(false)), [0.5]);
     }
 
     #[test]

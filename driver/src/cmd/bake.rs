@@ -32,8 +32,8 @@ pub struct BakeArgs {
     /// Final-gather rays per texel, all learning iterations together.
     #[arg(long, default_value_t = 256)]
     pub spp: u32,
-    /// Learning iterations (iteration 0 is unguided).
-    #[arg(long, default_value_t = 4)]
+    /// Learning iterations (iteration 0 is unguided unless the pass before kept a guide seed).
+    #[arg(long, default_value_t = BakeSettings::default().iterations)]
     pub iterations: u32,
     /// How gather directions are chosen.
     #[arg(long, value_enum, default_value_t = BakeSettings::default().guiding)]
