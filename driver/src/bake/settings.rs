@@ -212,7 +212,7 @@ pub struct BakeSettings {
     pub spp: u32,
     /// Learning iterations K (iteration 0 is unguided unless the pass before kept a guide
     /// seed). 3 by default since the seed guides the first iteration (docs/guide.md, "The
-    /// records a guide learns from").
+    /// records a guide learns from, and three iterations").
     pub iterations: u32,
     /// Direction choice.
     pub guiding: Guiding,
@@ -656,8 +656,8 @@ impl BakeSettings {
     /// between them, global weights keep them, and the direct pass's budget spends its later
     /// ones by the earlier ones' error. A pass that needs none of that gathers each texel's
     /// samples as one presorted set: a set rotated afresh per iteration is stratified only
-    /// within itself, and four sets of 64 points hold 1.27–1.52× the relative MSE of one set of
-    /// 256 for the unguided bake (docs/sampling.md, "One set, not four").
+    /// within itself: the unguided bake's four sets a pass held 1.11–1.50× the relative MSE of
+    /// one set at equal samples (docs/sampling.md, "One set, not four").
     pub fn needs_iterations(&self, pass: u32) -> bool {
         let direct_budget = self.transport == Transport::Series
             && pass == DIRECT_PASS

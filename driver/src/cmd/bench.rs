@@ -45,7 +45,7 @@ pub struct BenchArgs {
     /// Seeds per (method, spp) (default 2).
     #[arg(long)]
     pub seeds: Option<u32>,
-    /// Learning iterations of every bake but the reference (the bake's default).
+    /// Learning iterations of every bake (the bake's default; an unguided pass bakes in one).
     #[arg(long, default_value_t = BakeSettings::default().iterations)]
     pub iterations: u32,
     /// Light transport of the ladder's bakes. Against a reference of the same transport the
