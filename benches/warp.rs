@@ -42,8 +42,9 @@ use wide::f32x8;
 
 /// Points per timed iteration: texels × gather samples per texel.
 const POINTS: u32 = 16_384;
-/// Gather samples per texel and iteration: the bake's default (256 spp over 4 iterations)
-/// and a high count, where presorted packets are more coherent.
+/// Gather samples per texel and iteration: an iteration of the bake's default 256 spp (64 of
+/// them over 4 iterations, when the figure was taken; 64, 64 and 128 over today's 3) and a
+/// high count, where presorted packets are more coherent.
 const SAMPLE_COUNTS: [u32; 2] = [64, 1024];
 /// Distinct point sets each warp cycles through, one per timed pass: enough that the branch
 /// predictor cannot learn them (on the 2-core EPYC the scalar warp is as slow on 8 sets as
