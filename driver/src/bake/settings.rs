@@ -632,7 +632,7 @@ impl BakeSettings {
             GuidedPasses::Every => true,
         };
         let lookup = self.feeds_lookups(pass);
-        let pass_settings = BakeSettings {
+        let mut settings = BakeSettings {
             guiding: if guided { self.guiding } else { Guiding::Off },
             spp: if lookup {
                 self.lookup_spp.unwrap_or_else(|| self.default_lookup_spp())
@@ -641,14 +641,10 @@ impl BakeSettings {
             },
             ..*self
         };
-        BakeSettings {
-            iterations: if pass_settings.needs_iterations(pass) {
-                self.iterations
-            } else {
-                1
-            },
-            ..pass_settings
+        if !settings.needs_iterations(pass) {
+            settings.iterations = 1;
         }
+        settings
     }
 
     /// Whether pass `pass`, baked with these settings, needs its samples split into
