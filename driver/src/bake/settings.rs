@@ -441,7 +441,8 @@ impl BakeSettings {
                 self.iterations
             )));
         }
-        self.check_per_iteration("--spp", self.spp)?;
+        let spp_passes = (self.first_pass()..=self.last_pass()).filter(|&p| !self.feeds_lookups(p));
+        self.check_per_iteration("--spp", self.spp, spp_passes)?;
         if self.mix > 100 {
             return Err(SettingsError(format!(
                 "--mix {}: a percentage of the packets, between 0 and 100",
@@ -476,7 +477,8 @@ impl BakeSettings {
                      (--transport series)"
                 )));
             }
-            self.check_per_iteration("--lookup-spp", n)?;
+            let lookup_passes = DIRECT_PASS + 1..self.last_pass();
+            self.check_per_iteration("--lookup-spp", n, lookup_passes)?;
         }
         if self.lookup_filter > MAX_LOOKUP_FILTER {
             return Err(SettingsError(format!(
@@ -509,17 +511,23 @@ impl BakeSettings {
         Ok(())
     }
 
-    /// `option`'s `n` samples per texel, split over the iterations, must give each at least
-    /// one packet of 8 and at most 2^20.
-    fn check_per_iteration(&self, option: &str, n: u32) -> Result<(), SettingsError> {
-        let per_iteration = n / self.iterations;
+    /// `option`'s `n` samples per texel, split over the iterations of the passes that take
+    /// them (`passes`; one where a pass bakes in one set, [`Self::needs_iterations`]), must
+    /// give each iteration at least one packet of 8 and at most 2^20.
+    fn check_per_iteration(
+        &self,
+        option: &str,
+        n: u32,
+        passes: impl Iterator<Item = u32>,
+    ) -> Result<(), SettingsError> {
+        let iterations = self.iterations_of(passes);
+        let per_iteration = n / iterations;
         if (8..=1 << 20).contains(&per_iteration) {
             return Ok(());
         }
         Err(SettingsError(format!(
-            "{option} {n} over {} iterations leaves {per_iteration} per iteration: give at least \
-             8 (one packet) and at most 2^20 per iteration",
-            self.iterations
+            "{option} {n} over {iterations} iterations leaves {per_iteration} per iteration: \
+             give at least 8 (one packet) and at most 2^20 per iteration"
         )))
     }
 
@@ -531,7 +539,7 @@ impl BakeSettings {
         if self.transport != Transport::Series {
             return refuse("the direct pass is series transport's (--transport series)");
         }
-        self.check_per_iteration("--direct-spp", n)?;
+        self.check_per_iteration("--direct-spp", n, [DIRECT_PASS].into_iter())?;
         if !self.lightmap_borrows_direct() {
             return refuse(
                 "with --directional sh-l1 or --combine global the lightmap estimates its \
@@ -627,24 +635,37 @@ impl BakeSettings {
     /// A pass that learns nothing from its iterations bakes in one
     /// ([`Self::needs_iterations`]).
     pub fn for_pass(&self, pass: u32) -> BakeSettings {
+        let mut settings = self.learning_of(pass);
+        if self.feeds_lookups(pass) {
+            settings.spp = self.lookup_spp.unwrap_or_else(|| self.default_lookup_spp());
+        }
+        settings
+    }
+
+    /// Pass `pass`'s guiding and iterations, the rest these settings: [`Self::for_pass`]
+    /// without the lookup passes' rays.
+    fn learning_of(&self, pass: u32) -> BakeSettings {
         let guided = match self.guided_passes {
             GuidedPasses::Last => pass == self.last_pass(),
             GuidedPasses::Every => true,
         };
-        let lookup = self.feeds_lookups(pass);
         let mut settings = BakeSettings {
             guiding: if guided { self.guiding } else { Guiding::Off },
-            spp: if lookup {
-                self.lookup_spp.unwrap_or_else(|| self.default_lookup_spp())
-            } else {
-                self.spp
-            },
             ..*self
         };
         if !settings.needs_iterations(pass) {
             settings.iterations = 1;
         }
         settings
+    }
+
+    /// The most iterations any of `passes` splits its samples into ([`Self::for_pass`]); 1
+    /// where there is no such pass.
+    fn iterations_of(&self, passes: impl Iterator<Item = u32>) -> u32 {
+        passes
+            .map(|pass| self.learning_of(pass).iterations)
+            .max()
+            .unwrap_or(1)
     }
 
     /// Whether pass `pass`, baked with these settings, needs its samples split into
@@ -665,14 +686,13 @@ impl BakeSettings {
     }
 
     /// Gather rays per texel of the lookup passes without `--lookup-spp`: a
-    /// [`LOOKUP_SHARE`]th of `--spp`, but at least a packet per iteration and at most
-    /// `--spp`. With their lookups filtered ([`Self::lookup_filter`]) a quarter of the rays
+    /// [`LOOKUP_SHARE`]th of `--spp`, but at least a packet per iteration they bake in (one
+    /// packet where they bake in one set, [`Self::needs_iterations`]) and at most `--spp`. With their lookups filtered ([`Self::lookup_filter`]) a quarter of the rays
     /// cost 1–3 % of relative MSE against all of them, for 0.57–0.69× the bake's time (256²,
     /// docs/estimator.md, "The lookups: filtered, a quarter of the rays").
     pub fn default_lookup_spp(&self) -> u32 {
-        (self.spp / LOOKUP_SHARE)
-            .max(8 * self.iterations)
-            .min(self.spp)
+        let iterations = self.iterations_of(DIRECT_PASS + 1..self.last_pass());
+        (self.spp / LOOKUP_SHARE).max(8 * iterations).min(self.spp)
     }
 
     /// Whether the image pass `pass`'s results leave for the next pass is filtered
@@ -791,6 +811,14 @@ mod tests {
             ..d
         };
         assert_eq!(iterations(&off), [1, 1, 1, 1]);
+        // So a packet per texel is all an unguided bake needs, where the guided bake needs
+        // one per iteration of its direct and last passes.
+        assert!(BakeSettings { spp: 8, ..off }.validate().is_ok());
+        let err = BakeSettings { spp: 16, ..d }
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("--spp 16 over 3 iterations"), "{err}");
         assert_eq!(
             iterations(&BakeSettings {
                 transport: Transport::Path,
@@ -929,15 +957,29 @@ mod tests {
             err.contains("--lookup-spp 64") && err.contains("series"),
             "{err}"
         );
+        // Baked in one set, a lookup pass needs one packet; guided, a packet per iteration.
         let few = BakeSettings {
             lookup_spp: Some(16),
             ..s
         };
-        let err = few.validate().unwrap_err().to_string();
+        assert!(few.validate().is_ok());
+        let guided = BakeSettings {
+            guided_passes: GuidedPasses::Every,
+            ..few
+        };
+        let err = guided.validate().unwrap_err().to_string();
         assert!(
-            err.contains("--lookup-spp 16") && err.contains("at least 8"),
+            err.contains("--lookup-spp 16 over 3 iterations") && err.contains("at least 8"),
             "{err}"
         );
+        let err = BakeSettings {
+            lookup_spp: Some(4),
+            ..s
+        }
+        .validate()
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("--lookup-spp 4 over 1 iterations"), "{err}");
         assert!(format!("{s:?}").contains("lookup_spp: 64"));
         assert!(!format!("{:?}", BakeSettings::default()).contains("lookup_spp"));
         let wide = BakeSettings {
@@ -1218,13 +1260,16 @@ mod tests {
             guided_passes: GuidedPasses::Every,
             ..last
         };
-        // The lookup passes take a quarter of the rays (at least a packet per iteration).
+        // Guided, the lookup passes take a quarter of the rays (at least a packet per iteration).
         let lookup = BakeSettings { spp: 64, ..every };
         assert_eq!(every.for_pass(0), every);
         assert!((1..=2).all(|pass| every.for_pass(pass) == lookup));
         assert_eq!(every.for_pass(3), every);
         let few = |spp| BakeSettings { spp, ..every }.default_lookup_spp();
         assert_eq!((few(1024), few(64), few(16)), (256, 24, 16));
+        // Unguided, the lookup passes bake in one set: a packet is their floor.
+        let few = |spp| BakeSettings { spp, ..last }.default_lookup_spp();
+        assert_eq!((few(1024), few(64), few(16)), (256, 16, 8));
         let set = BakeSettings {
             lookup_spp: Some(128),
             ..every

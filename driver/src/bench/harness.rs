@@ -183,7 +183,8 @@ pub struct RunRecord {
     pub rho: bool,
     /// Rays per texel.
     pub spp: u32,
-    /// Learning iterations.
+    /// Iterations of the last pass: `--iterations`, or 1 where it bakes in one set
+    /// ([`BakeSettings::needs_iterations`]).
     pub iterations: u32,
     /// Seed.
     pub seed: u32,
@@ -224,7 +225,7 @@ impl RunRecord {
             combine: value_name(&method.combine),
             rho: method.rho,
             spp: settings.spp,
-            iterations: settings.iterations,
+            iterations: settings.for_pass(settings.last_pass()).iterations,
             seed: settings.seed,
             wall_s: baked.wall_s,
             cpu_s: baked.cpu_s,

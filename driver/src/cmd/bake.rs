@@ -67,7 +67,8 @@ pub struct BakeArgs {
     pub direct_spp: Option<u32>,
     /// Gather rays per texel of the series passes between the direct pass and the last, whose
     /// results only feed the next pass's lookups (default: a quarter of `--spp`, at least a
-    /// packet of 8 per iteration: their lookups are filtered, `--lookup-filter`).
+    /// packet of 8, one per iteration where they are guided: their lookups are filtered,
+    /// `--lookup-filter`).
     #[arg(long, value_name = "N")]
     pub lookup_spp: Option<u32>,
     /// Radius in texels over which the gathered light of those passes is filtered before the
