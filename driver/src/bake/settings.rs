@@ -525,8 +525,9 @@ impl BakeSettings {
         if (8..=1 << 20).contains(&per_iteration) {
             return Ok(());
         }
+        let s = if iterations == 1 { "" } else { "s" };
         Err(SettingsError(format!(
-            "{option} {n} over {iterations} iterations leaves {per_iteration} per iteration: \
+            "{option} {n} over {iterations} iteration{s} leaves {per_iteration} per iteration: \
              give at least 8 (one packet) and at most 2^20 per iteration"
         )))
     }
@@ -687,8 +688,9 @@ impl BakeSettings {
 
     /// Gather rays per texel of the lookup passes without `--lookup-spp`: a
     /// [`LOOKUP_SHARE`]th of `--spp`, but at least a packet per iteration they bake in (one
-    /// packet where they bake in one set, [`Self::needs_iterations`]) and at most `--spp`. With their lookups filtered ([`Self::lookup_filter`]) a quarter of the rays
-    /// cost 1–3 % of relative MSE against all of them, for 0.57–0.69× the bake's time (256²,
+    /// packet where they bake in one set, [`Self::needs_iterations`]) and at most `--spp`.
+    /// With their lookups filtered ([`Self::lookup_filter`]) a quarter of the rays cost 1–3 %
+    /// of relative MSE against all of them, for 0.57–0.69× the bake's time (256²,
     /// docs/estimator.md, "The lookups: filtered, a quarter of the rays").
     pub fn default_lookup_spp(&self) -> u32 {
         let iterations = self.iterations_of(DIRECT_PASS + 1..self.last_pass());
@@ -979,7 +981,10 @@ mod tests {
         .validate()
         .unwrap_err()
         .to_string();
-        assert!(err.contains("--lookup-spp 4 over 1 iterations"), "{err}");
+        assert!(
+            err.contains("--lookup-spp 4 over 1 iteration leaves 4"),
+            "{err}"
+        );
         assert!(format!("{s:?}").contains("lookup_spp: 64"));
         assert!(!format!("{:?}", BakeSettings::default()).contains("lookup_spp"));
         let wide = BakeSettings {
