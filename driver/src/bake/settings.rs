@@ -477,8 +477,7 @@ impl BakeSettings {
                      (--transport series)"
                 )));
             }
-            let lookup_passes = DIRECT_PASS + 1..self.last_pass();
-            self.check_per_iteration("--lookup-spp", n, lookup_passes)?;
+            self.check_per_iteration("--lookup-spp", n, self.lookup_passes())?;
         }
         if self.lookup_filter > MAX_LOOKUP_FILTER {
             return Err(SettingsError(format!(
@@ -584,6 +583,12 @@ impl BakeSettings {
     /// results only feed the next pass's lookups.
     pub fn feeds_lookups(&self, pass: u32) -> bool {
         self.transport == Transport::Series && pass > DIRECT_PASS && pass < self.last_pass()
+    }
+
+    /// The passes whose results only feed the next pass's lookups ([`Self::feeds_lookups`]):
+    /// those that take `--lookup-spp`.
+    fn lookup_passes(&self) -> impl Iterator<Item = u32> + '_ {
+        (self.first_pass()..=self.last_pass()).filter(|&pass| self.feeds_lookups(pass))
     }
 
     /// Whether pass `pass` keeps the seed of the last pass's guides in its results
@@ -693,7 +698,7 @@ impl BakeSettings {
     /// of relative MSE against all of them, for 0.57–0.69× the bake's time (256²,
     /// docs/estimator.md, "The lookups: filtered, a quarter of the rays").
     pub fn default_lookup_spp(&self) -> u32 {
-        let iterations = self.iterations_of(DIRECT_PASS + 1..self.last_pass());
+        let iterations = self.iterations_of(self.lookup_passes());
         (self.spp / LOOKUP_SHARE).max(8 * iterations).min(self.spp)
     }
 
