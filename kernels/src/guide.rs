@@ -49,8 +49,10 @@
 //! The caller supplies the node array (`&mut [Node]`, at most [`MAX_NODES`] nodes are used,
 //! because child links are `u16`); nothing allocates. The records are sorted in place
 //! (their order changes). Before the tree is written the whole storage is the sort's
-//! scratch (13 bytes a record; with less room the sort runs in place, slower): past the tree
-//! and the start table its contents are unspecified after a build. Nodes are created
+//! scratch ([`SORT_BYTES_PER_RECORD`] bytes a record; with less room the sort runs in place,
+//! several times slower): past the tree and the start table its contents are unspecified
+//! after a build. A caller whose records outgrow its tree's storage lends the sort more room
+//! with [`build_in`] ([`sort_room`] nodes) and gets the same tree. Nodes are created
 //! breadth first, so **when the storage is full**
 //! every level that was split is complete and the nodes that would split further simply stay
 //! leaves: the guide is the best coarser tree that fits, still a valid normalized density.
@@ -416,16 +418,42 @@ pub fn build<'a>(
     params: &GuideParams,
     storage: &'a mut [Node],
 ) -> (Guide<'a>, BuildStats) {
-    build_with(records, params, storage, sort, split)
+    build_in(records, params, storage, &mut [])
 }
 
-/// Sorts the accepted records by their cells ([`cells::sort`]), with `storage` (not yet
-/// written) as the scratch its counting sort scatters through: 13 bytes per record (the
-/// bake's 4 096 nodes hold 20 000 records), else it sorts in place.
-fn sort(records: &mut [Record], params: &GuideParams, storage: &mut [Node]) {
-    let bytes: &mut [u8] = bytemuck::cast_slice_mut(storage);
+/// [`build`], its records' sort scattering through `room` when `storage` has too little
+/// ([`sort_room`] nodes for the records): the same tree, faster. `room`'s contents are
+/// unspecified afterwards.
+pub fn build_in<'a>(
+    records: &mut [Record],
+    params: &GuideParams,
+    storage: &'a mut [Node],
+    room: &mut [Node],
+) -> (Guide<'a>, BuildStats) {
+    build_with(records, params, storage, room, sort, split)
+}
+
+/// Bytes of scratch the records' counting sort scatters through, a record: the record and
+/// its bucket.
+pub const SORT_BYTES_PER_RECORD: usize = size_of::<Record>() + 1;
+
+/// Nodes whose bytes hold the sort's scratch for `records` records ([`build_in`]).
+pub const fn sort_room(records: usize) -> usize {
+    (records * SORT_BYTES_PER_RECORD).div_ceil(size_of::<Node>())
+}
+
+/// Sorts the accepted records by their cells ([`cells::sort`]), scattering through `storage`
+/// (not yet written) or, where that is too small, `room`: [`SORT_BYTES_PER_RECORD`] bytes a
+/// record (the bake's 4 096 nodes hold 20 000 records); with neither it sorts in place.
+fn sort(records: &mut [Record], params: &GuideParams, storage: &mut [Node], room: &mut [Node]) {
     let n = records.len();
-    let (scratch, digits) = match bytes.get_mut(..n * (size_of::<Record>() + 1)) {
+    let space = if storage.len() >= sort_room(n) {
+        storage
+    } else {
+        room
+    };
+    let bytes: &mut [u8] = bytemuck::cast_slice_mut(space);
+    let (scratch, digits) = match bytes.get_mut(..n * SORT_BYTES_PER_RECORD) {
         Some(room) => {
             let (scratch, digits) = room.split_at_mut(size_of_val(records));
             (bytemuck::cast_slice_mut(scratch), digits)
@@ -440,12 +468,14 @@ fn sort(records: &mut [Record], params: &GuideParams, storage: &mut [Node]) {
 type SplitFn = fn(&mut [Record], &mut [Node], usize, usize, f64);
 
 /// [`build`] with its record order (`sort`, run on the accepted records before the
-/// subdivision) and its `split`; `reference::build` passes the partitioning ones.
+/// subdivision, with the storage and the room it may scatter through) and its `split`;
+/// `reference::build` passes the partitioning ones.
 fn build_with<'a>(
     records: &mut [Record],
     params: &GuideParams,
     storage: &'a mut [Node],
-    sort: fn(&mut [Record], &GuideParams, &mut [Node]),
+    room: &mut [Node],
+    sort: fn(&mut [Record], &GuideParams, &mut [Node], &mut [Node]),
     split: SplitFn,
 ) -> (Guide<'a>, BuildStats) {
     assert!(
@@ -474,7 +504,7 @@ fn build_with<'a>(
         );
     }
     // The sort may use all of `storage` as scratch: the root is written again after it.
-    sort(records, params, storage);
+    sort(records, params, storage, room);
     storage[0] = root_leaf(stats.accepted);
     subdivide(records, params, &mut storage[..capacity], &mut stats, split);
     let (nodes, rest) = storage.split_at_mut(stats.nodes as usize);
@@ -1572,6 +1602,63 @@ mod tests {
             }
         }
         assert!(sets > 1000, "{sets}");
+    }
+
+    #[test]
+    fn room_lent_to_the_sort_gives_the_same_tree() {
+        // More records than the bake's 4 096 nodes hold as scratch: without room the sort
+        // permutes in place; with `build_in`'s room it scatters, and the tree is the same.
+        let mut rng = crate::testing::Pcg32::new(47, 3);
+        let params = GuideParams {
+            min_records: 64,
+            alpha: 0.1,
+            ambient: 0.02,
+            ..GuideParams::default()
+        };
+        for kind in 0..4 {
+            let n = 30_000;
+            assert!(sort_room(n) > 4096);
+            let records = comparison_records(kind, n, &mut rng);
+            let (mut a, mut b) = (records.clone(), records);
+            let (mut sa, mut sb) = (vec![Node::default(); 4096], vec![Node::default(); 4096]);
+            let poison = Node {
+                mass: f32::NAN,
+                ..Node::default()
+            };
+            let mut room = vec![poison; sort_room(n)];
+            let (ga, ta) = build(&mut a, &params, &mut sa);
+            let (gb, tb) = build_in(&mut b, &params, &mut sb, &mut room);
+            assert_eq!(ta, tb, "kind {kind}");
+            assert!(ta.nodes > 1, "kind {kind}: {ta:?}");
+            for (x, y) in ga.nodes().iter().zip(gb.nodes()) {
+                let (x, y) = (without_first(x), without_first(y));
+                assert_eq!(
+                    bytemuck::bytes_of(&x),
+                    bytemuck::bytes_of(&y),
+                    "kind {kind}"
+                );
+            }
+            assert_eq!(ga.start_table(), gb.start_table());
+            assert_eq!(ga.shortcuts(), gb.shortcuts());
+            // The sort scattered through the room (a cell left unsplit keeps any order).
+            assert!(
+                room.iter().any(|r| !r.mass.is_nan()),
+                "kind {kind}: room unused"
+            );
+        }
+        // Room too small for the accepted records (about 9 in 10): the sort runs in place
+        // and leaves it alone.
+        let mut records = comparison_records(1, 30_000, &mut rng);
+        let mut room = vec![Node::default(); sort_room(20_000)];
+        let before = room.clone();
+        let mut storage = vec![Node::default(); 4096];
+        let (g, _) = build_in(&mut records, &params, &mut storage, &mut room);
+        assert!(g.nodes().len() > 1);
+        assert!(
+            room.iter()
+                .zip(&before)
+                .all(|(x, y)| bytemuck::bytes_of(x) == bytemuck::bytes_of(y))
+        );
     }
 
     #[test]

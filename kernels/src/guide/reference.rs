@@ -13,7 +13,7 @@ pub fn build<'a>(
     params: &GuideParams,
     storage: &'a mut [Node],
 ) -> (Guide<'a>, BuildStats) {
-    super::build_with(records, params, storage, |_, _, _| {}, split)
+    super::build_with(records, params, storage, &mut [], |_, _, _, _| {}, split)
 }
 
 /// Splits node `i` into four children at `first`, partitioning its records by quadrant;
