@@ -52,7 +52,9 @@
 //! scratch ([`SORT_BYTES_PER_RECORD`] bytes a record; with less room the sort runs in place,
 //! several times slower): past the tree and the start table its contents are unspecified
 //! after a build. A caller whose records outgrow its tree's storage lends the sort more room
-//! with [`build_in`] ([`sort_room`] nodes) and gets the same tree. Nodes are created
+//! with [`build_in`] ([`sort_room`] nodes) and gets the same tree (the records in another
+//! order inside the cells that do not split, so a node's f64 flux sum may round otherwise
+//! where the fluxes span many decades). Nodes are created
 //! breadth first, so **when the storage is full**
 //! every level that was split is complete and the nodes that would split further simply stay
 //! leaves: the guide is the best coarser tree that fits, still a valid normalized density.
@@ -422,8 +424,8 @@ pub fn build<'a>(
 }
 
 /// [`build`], its records' sort scattering through `room` when `storage` has too little
-/// ([`sort_room`] nodes for the records): the same tree, faster. `room`'s contents are
-/// unspecified afterwards.
+/// ([`sort_room`] nodes for the records): the same tree (up to the rounding of the flux
+/// sums, module docs), faster. `room`'s contents are unspecified afterwards.
 pub fn build_in<'a>(
     records: &mut [Record],
     params: &GuideParams,

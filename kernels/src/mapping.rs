@@ -108,7 +108,7 @@ fn atan_unit_x8(z: f32x8) -> f32x8 {
 ///
 /// # Panics
 /// Debug builds assert u ∈ [0,1)². Release: any finite u still gives a unit vector with
-/// z ≥ 0 when u ∈ [0,1]² (outside it, |x| or |y| may exceed 1).
+/// z ≥ 0 when u ∈ \[0,1\]² (outside it, |x| or |y| may exceed 1).
 #[inline]
 pub fn sample_cosine_hemisphere(u: [f32; 2]) -> Vec3 {
     debug_assert!(

@@ -87,7 +87,7 @@ fn hilbert_key(p: [u32; 2]) -> u64 {
 }
 
 /// Writes the presorted order of the first `n` Sobol points into `out`: a permutation of
-/// `0..n`; consecutive groups of [`LANES`](crate::packet::LANES) indices are the packets (the last one short when
+/// `0..n`; consecutive groups of [`LANES`] indices are the packets (the last one short when
 /// `n` is not a multiple of 8).
 ///
 /// Uses [`CurveOrder::Hilbert`]. Not a hot path: call once per sample count.
