@@ -1518,15 +1518,23 @@ mod tests {
         Node { first: 0, ..*n }
     }
 
-    /// Builds `records` both ways into `capacity` nodes and asserts identical guides: every
-    /// node bit for bit (but the record offset), the start table, shortcuts and stats.
-    fn assert_same_as_reference(records: &[Record], params: &GuideParams, capacity: usize) {
-        let (mut a, mut b) = (records.to_vec(), records.to_vec());
-        let mut sa = vec![Node::default(); capacity];
-        let mut sb = vec![Node::default(); capacity];
-        let (ga, ta) = build(&mut a, params, &mut sa);
-        let (gb, tb) = reference::build(&mut b, params, &mut sb);
-        let what = || format!("{} records, {params:?}, capacity {capacity}", records.len());
+    /// The bake's split rule: 64-record splits, α 0.1, ambient floor 0.02.
+    fn bake_params() -> GuideParams {
+        GuideParams {
+            min_records: 64,
+            alpha: 0.1,
+            ambient: 0.02,
+            ..GuideParams::default()
+        }
+    }
+
+    /// Asserts two builds' guides identical: every node bit for bit (but the record offset),
+    /// the start table, shortcuts and stats (`what` names the case).
+    fn assert_same_guides(
+        (ga, ta): &(Guide<'_>, BuildStats),
+        (gb, tb): &(Guide<'_>, BuildStats),
+        what: &dyn Fn() -> alloc::string::String,
+    ) {
         assert_eq!(ta, tb, "{}", what());
         assert_eq!(ga.nodes().len(), gb.nodes().len(), "{}", what());
         for (k, (x, y)) in ga.nodes().iter().zip(gb.nodes()).enumerate() {
@@ -1540,8 +1548,20 @@ mod tests {
         }
         assert_eq!(ga.start_table(), gb.start_table(), "{}", what());
         assert_eq!(ga.shortcuts(), gb.shortcuts(), "{}", what());
+    }
+
+    /// Builds `records` both ways into `capacity` nodes and asserts identical guides
+    /// ([`assert_same_guides`]) and the same records, accepted ones first.
+    fn assert_same_as_reference(records: &[Record], params: &GuideParams, capacity: usize) {
+        let (mut a, mut b) = (records.to_vec(), records.to_vec());
+        let mut sa = vec![Node::default(); capacity];
+        let mut sb = vec![Node::default(); capacity];
+        let built = build(&mut a, params, &mut sa);
+        let oracle = reference::build(&mut b, params, &mut sb);
+        let what = || format!("{} records, {params:?}, capacity {capacity}", records.len());
+        assert_same_guides(&built, &oracle, &what);
         // The same records, accepted ones first.
-        let acc = ta.accepted as usize;
+        let acc = built.1.accepted as usize;
         let key = |r: &Record| [r.u[0].to_bits(), r.u[1].to_bits(), r.flux.to_bits()];
         for r in [&mut a[..acc], &mut b[..acc]] {
             r.sort_by_key(key);
@@ -1555,15 +1575,9 @@ mod tests {
     #[test]
     fn sorted_build_equals_the_partitioning_build() {
         let mut rng = crate::testing::Pcg32::new(41, 9);
-        let bake = GuideParams {
-            min_records: 64,
-            alpha: 0.1,
-            ambient: 0.02,
-            ..GuideParams::default()
-        };
         let params = [
             GuideParams::default(),
-            bake,
+            bake_params(),
             GuideParams {
                 max_depth: MAX_DEPTH,
                 min_records: 1,
@@ -1611,12 +1625,7 @@ mod tests {
         // More records than the bake's 4 096 nodes hold as scratch: without room the sort
         // permutes in place; with `build_in`'s room it scatters, and the tree is the same.
         let mut rng = crate::testing::Pcg32::new(47, 3);
-        let params = GuideParams {
-            min_records: 64,
-            alpha: 0.1,
-            ambient: 0.02,
-            ..GuideParams::default()
-        };
+        let params = bake_params();
         for kind in 0..4 {
             let n = 30_000;
             assert!(sort_room(n) > 4096);
@@ -1628,20 +1637,10 @@ mod tests {
                 ..Node::default()
             };
             let mut room = vec![poison; sort_room(n)];
-            let (ga, ta) = build(&mut a, &params, &mut sa);
-            let (gb, tb) = build_in(&mut b, &params, &mut sb, &mut room);
-            assert_eq!(ta, tb, "kind {kind}");
-            assert!(ta.nodes > 1, "kind {kind}: {ta:?}");
-            for (x, y) in ga.nodes().iter().zip(gb.nodes()) {
-                let (x, y) = (without_first(x), without_first(y));
-                assert_eq!(
-                    bytemuck::bytes_of(&x),
-                    bytemuck::bytes_of(&y),
-                    "kind {kind}"
-                );
-            }
-            assert_eq!(ga.start_table(), gb.start_table());
-            assert_eq!(ga.shortcuts(), gb.shortcuts());
+            let in_place = build(&mut a, &params, &mut sa);
+            let scattered = build_in(&mut b, &params, &mut sb, &mut room);
+            assert!(in_place.1.nodes > 1, "kind {kind}: {:?}", in_place.1);
+            assert_same_guides(&in_place, &scattered, &|| format!("kind {kind}"));
             // The sort scattered through the room (a cell left unsplit keeps any order).
             assert!(
                 room.iter().any(|r| !r.mass.is_nan()),
