@@ -75,7 +75,7 @@ for w in "${workloads[@]}"; do
         fi
         for r in $(seq 1 "$rounds"); do
             out=$dir/$w-t$t.exr
-            rm -rf "$out" "$out.bake" "${out%.exr}.png" "$dir/$w-t$t.json"
+            rm -rf "$out" "$out.bake" "${out%.exr}.atlas.png" "$dir/$w-t$t.json"
             start=$(now)
             if ! nice -n "$nice_level" "$bin" bake "${args[@]}" -o "$out" --threads "$t" \
                 --stats "$dir/$w-t$t.json" >"$dir/$w-t$t.log" 2>&1; then
@@ -90,14 +90,14 @@ for w in "${workloads[@]}"; do
             same=reference
             if [[ $t != "${threads_list[0]}" || $r != 1 ]]; then
                 if cmp -s "$out" "$dir/$w-reference.exr" &&
-                    cmp -s "${out%.exr}.png" "$dir/$w-reference.png"; then
+                    cmp -s "${out%.exr}.atlas.png" "$dir/$w-reference.png"; then
                     same=yes
                 else
                     same=NO
                 fi
             else
                 cp "$out" "$dir/$w-reference.exr"
-                cp "${out%.exr}.png" "$dir/$w-reference.png"
+                cp "${out%.exr}.atlas.png" "$dir/$w-reference.png"
             fi
             printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$w" "$t" "$r" "$wall" "$gather" "$pages" "$same" |
                 tee -a "$runs"

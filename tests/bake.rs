@@ -397,8 +397,8 @@ fn series_passes_sharded_pass_by_pass_merge_to_the_same_bits() {
         let sharded = bake_sharded_passes(&job(&format!("{name}-sharded.exr")), 3, &scene);
         assert_eq!(exr_bytes(&whole.out), exr_bytes(&sharded), "{name}");
         assert_eq!(
-            exr_bytes(&whole.out.with_extension("png")),
-            exr_bytes(&sharded.with_extension("png")),
+            exr_bytes(&whole.out.with_extension("atlas.png")),
+            exr_bytes(&sharded.with_extension("atlas.png")),
             "{name}"
         );
     }

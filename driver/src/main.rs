@@ -37,6 +37,7 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    cmd::interrupt::install();
     let result = match &cli.command {
         Command::Samples(a) => cmd::samples::run(a),
         Command::Prepare(a) => cmd::prepare::run(a),
@@ -51,13 +52,12 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("guidebake: {e}");
-            let mut source = e.source();
-            while let Some(s) = source {
-                eprintln!("  caused by: {s}");
-                source = s.source();
+            let lines = cmd::error_lines(e.as_ref());
+            eprintln!("guidebake: {}", lines[0]);
+            for cause in &lines[1..] {
+                eprintln!("  caused by: {cause}");
             }
-            ExitCode::FAILURE
+            ExitCode::from(cmd::exit_code(&e))
         }
     }
 }

@@ -111,7 +111,7 @@ impl World {
         );
         (
             std::fs::read(&out).unwrap(),
-            std::fs::read(out.with_extension("png")).unwrap(),
+            std::fs::read(out.with_extension("atlas.png")).unwrap(),
             took,
         )
     }
@@ -163,7 +163,10 @@ fn run_and_kill(world: &World, out: &Path, after: Duration) -> bool {
 /// After a kill: every file the output may be published under either does not exist or
 /// already holds the complete result; nothing else looks like a lightmap.
 fn assert_nothing_looks_complete(out: &Path, exr: &[u8], png: &[u8], what: &str) {
-    for (path, want) in [(out.to_owned(), exr), (out.with_extension("png"), png)] {
+    for (path, want) in [
+        (out.to_owned(), exr),
+        (out.with_extension("atlas.png"), png),
+    ] {
         if let Ok(bytes) = std::fs::read(&path) {
             assert!(
                 bytes == want,
@@ -180,7 +183,7 @@ fn assert_nothing_looks_complete(out: &Path, exr: &[u8], png: &[u8], what: &str)
         let published =
             name.starts_with(&stem) && (name.ends_with(".exr") || name.ends_with(".png"));
         assert!(
-            !published || name == format!("{stem}.exr") || name == format!("{stem}.png"),
+            !published || name == format!("{stem}.exr") || name == format!("{stem}.atlas.png"),
             "{what}: unexpected output {name}"
         );
     }
@@ -231,7 +234,7 @@ fn kill_and_resume(seed: u64, rounds: usize, chain: usize) -> usize {
             );
         }
         assert!(
-            std::fs::read(out.with_extension("png")).unwrap() == png,
+            std::fs::read(out.with_extension("atlas.png")).unwrap() == png,
             "seed {seed}, round {round}: preview differs"
         );
         let work = world.dir.path().join(format!("round{round}.exr.bake"));

@@ -170,8 +170,8 @@ fn three_shards_by_three_passes_with_a_killed_shard_equal_one_bake() {
     }
     assert_eq!(bytes(&whole), bytes(&out));
     assert_eq!(
-        bytes(&whole.with_extension("png")),
-        bytes(&out.with_extension("png"))
+        bytes(&whole.with_extension("atlas.png")),
+        bytes(&out.with_extension("atlas.png"))
     );
 }
 
@@ -244,8 +244,8 @@ fn slurm_bake_equals_one_bake() {
     assert!(done.status.success(), "{log}");
     assert_eq!(bytes(&whole), bytes(&out), "{log}");
     assert_eq!(
-        bytes(&whole.with_extension("png")),
-        bytes(&out.with_extension("png"))
+        bytes(&whole.with_extension("atlas.png")),
+        bytes(&out.with_extension("atlas.png"))
     );
     let shard_log =
         std::fs::read_to_string(city.dir.path().join("slurm.exr.slurm").join("bake-2-1.log"))

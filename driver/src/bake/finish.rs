@@ -61,14 +61,14 @@ pub enum Denoise {
     /// error `guidebake bench` measures, with no filter bias and nothing blurred).
     #[default]
     Off,
-    /// The edge-aware À-Trous filter of [`crate::output::denoise`], per tile with a halo.
+    /// The edge-aware À-Trous filter, per tile with a halo (docs/lightmaps.md).
     On,
 }
 
 /// Whether seams are stitched ([`crate::output::seams`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum Seams {
-    /// Each chart keeps its own estimates (the default, as for [`Denoise`]).
+    /// Each chart keeps its own estimates (the default, as for `--denoise`).
     #[default]
     Off,
     /// Seam texels are fitted to agree by least squares.
@@ -283,7 +283,7 @@ fn finish_pages(
 ) -> Result<(), BakeError> {
     for (image, path) in pending.drain(..) {
         written.non_finite_pixels += image.non_finite_pixels();
-        let preview = path.with_extension("png");
+        let preview = crate::output::exr_pages::preview_path(&path);
         image.finish(DILATION_PIXELS, &path, &preview)?;
         written.pages.push(path);
         written.previews.push(preview);
@@ -1175,7 +1175,7 @@ mod tests {
         let page = |p: &Path| {
             (
                 std::fs::read(p).unwrap(),
-                std::fs::read(p.with_extension("png")).unwrap(),
+                std::fs::read(crate::output::exr_pages::preview_path(p)).unwrap(),
             )
         };
         let expected = page(&whole.out);

@@ -15,7 +15,7 @@ pub enum Directional {
     #[default]
     None,
     /// L1 spherical harmonics of the incident radiance, world space
-    /// ([`SH_CHANNELS`](super::directional::SH_CHANNELS)).
+    /// (four RGB layers: SH0, SH1x, SH1y, SH1z).
     ShL1,
 }
 
@@ -185,7 +185,7 @@ const BAKE_FORMAT: u32 = 5;
 pub enum Transport {
     /// The paper's production setting: pass b gathers, at each hit, emission + albedo/π ×
     /// (direct light connected explicitly + the indirect irradiance of pass b−1 looked up in
-    /// the previous pass's lightmap). Pass 0 ([`DIRECT_PASS`]) bakes the direct light alone, then
+    /// the previous pass's lightmap). Pass 0 (the direct pass) bakes the direct light alone, then
     /// `--bounces B` gather passes stream the world.
     Series,
     /// Unidirectional path tracing from the gather hit, next-event estimation at every

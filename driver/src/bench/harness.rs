@@ -144,7 +144,7 @@ impl Bench<'_> {
         if let Ok(b) = &baked {
             for page in &b.report.pages {
                 let _ = std::fs::remove_file(page);
-                let _ = std::fs::remove_file(page.with_extension("png"));
+                let _ = std::fs::remove_file(crate::output::exr_pages::preview_path(page));
             }
         }
         baked

@@ -2,8 +2,6 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::bake::directional::Directional;
 use crate::bake::finish::{Denoise, FinishOptions, Seams};
@@ -26,110 +24,46 @@ pub struct BakeArgs {
     /// The scene the texel file was prepared from (.gltf, .glb, .obj or a .toml scene file).
     #[arg(long)]
     pub scene: PathBuf,
-    /// The lightmap to write (OpenEXR; several pages become OUT.pageN.exr).
-    #[arg(short, long)]
+    /// The lightmap to write, OUT.exr (several pages become OUT.pageN.exr), with its atlas
+    /// preview OUT.atlas.png beside it.
+    #[arg(short, long = "output", alias = "out", value_name = "OUT.exr")]
     pub out: PathBuf,
     /// Final-gather rays per texel, all learning iterations together.
     #[arg(long, default_value_t = 256)]
     pub spp: u32,
-    /// Learning iterations (iteration 0 is unguided unless the pass before kept a guide seed).
-    #[arg(long, default_value_t = BakeSettings::default().iterations)]
-    pub iterations: u32,
-    /// How gather directions are chosen.
-    #[arg(long, value_enum, default_value_t = BakeSettings::default().guiding)]
-    pub guiding: Guiding,
-    /// How a texel's iterations are combined.
-    #[arg(long, value_enum, default_value_t = BakeSettings::default().combine)]
-    pub combine: Combine,
-    /// Percent of the cosine baseline in the defensive mixture each guided iteration samples
-    /// (`c + (1 − c)·guide`, folded into the guide; every sample is weighted with the
-    /// mixture's density).
-    #[arg(long, default_value_t = BakeSettings::default().mix)]
-    pub mix: u32,
-    /// Which series passes sample a learned guide: the `last` (the lightmap; the passes
-    /// before it gather with cosine sampling) or `every` gather pass.
-    #[arg(long, value_enum, default_value_t = BakeSettings::default().guided_passes)]
-    pub guided_passes: GuidedPasses,
-    /// How the last pass of a series bake of 2 or more bounces spreads its samples over the
-    /// texels: `uniform` (`--spp` everywhere), or by the error the previous passes measured,
-    /// per 8×8-texel block (¼ to 4 times `--spp`, about `--spp` in all): `bounded` (the least
-    /// relative error whose predicted squared error stays the uniform budget's), `mse`
-    /// (n ∝ σ), `relative` (n ∝ σ/√(μ² + ε)), `balanced` (n ∝ σ/√(μ·μ̄)). The direct pass
-    /// spends the later half of its iterations the same way, by each tile's earlier half.
-    /// Default: `bounded`; `uniform` with `--guiding off` or `--target-error`.
-    #[arg(long, value_enum)]
-    pub budget: Option<Budget>,
-    /// Next-event samples per texel of a series bake's direct pass (default: `--spp`), whose
-    /// estimate the lightmap takes as its direct light: its last pass gathers the indirect
-    /// light alone. With `--directional sh-l1` or `--combine global` the last pass estimates
-    /// the direct light itself (weighted against its gather), and this is refused.
-    #[arg(long, value_name = "N")]
-    pub direct_spp: Option<u32>,
-    /// Gather rays per texel of the series passes between the direct pass and the last, whose
-    /// results only feed the next pass's lookups (default: a quarter of `--spp`, at least a
-    /// packet of 8, one per iteration where they are guided: their lookups are filtered,
-    /// `--lookup-filter`).
-    #[arg(long, value_name = "N")]
-    pub lookup_spp: Option<u32>,
-    /// Radius in texels over which the gathered light of those passes is filtered before the
-    /// next pass looks it up (texels of the same surface that agree within their noise;
-    /// 0: none). Series transport only.
-    #[arg(long, value_name = "TEXELS", default_value_t = BakeSettings::default().lookup_filter)]
-    pub lookup_filter: u32,
-    /// What each cluster's guide learns: `second-moment` (the density ∝ √E[L²] over the
-    /// cluster's texels: the least summed variance, Rath et al. 2020) or `radiance` (∝ E[L],
-    /// the paper's).
-    #[arg(long, value_enum, default_value_t = BakeSettings::default().guide_target)]
-    pub guide_target: GuideTarget,
-    /// Whether the last series pass's first iteration samples a guide seeded by the pass
-    /// before it (`previous`: that pass keeps, per cluster, a coarse histogram of what its
-    /// gather brought back) or gathers with cosine points (`off`, the paper's).
-    #[arg(long, value_enum, default_value_t = BakeSettings::default().guide_seed)]
-    pub guide_seed: GuideSeed,
+    /// Bounces of light after the gather hit (series: passes over the world; path: most
+    /// vertices of a path, Russian roulette from the third).
+    #[arg(long, default_value_t = BakeSettings::default().bounces)]
+    pub bounces: u32,
+    /// Sun and sky, replacing the scene file's: give the same as to `prepare`.
+    #[command(flatten)]
+    pub lights: super::prepare::LightFlags,
+    /// Denoise the lightmap as its pages are written: an edge-aware À-Trous filter guided by
+    /// each texel's position, normal and variance (docs/lightmaps.md). Off by default: the
+    /// lightmap is then the estimator's output, unbiased and unblurred, as the bench measures.
+    #[arg(long, value_enum, default_value_t = Denoise::Off)]
+    pub denoise: Denoise,
+    /// Directional lightmaps: `sh-l1` adds per texel the L1 spherical harmonics of the
+    /// incident radiance, world space, as the EXR layers SH0, SH1x, SH1y, SH1z (RGB each;
+    /// docs/lightmaps.md has the convention and the conversions to Unity and Unreal).
+    #[arg(long, value_enum, default_value_t = Directional::None)]
+    pub directional: Directional,
+    /// Make the texels on the two sides of a UV seam agree (least-squares stitching after
+    /// denoising; docs/lightmaps.md). Off by default, as --denoise.
+    #[arg(long, value_enum, default_value_t = Seams::Off)]
+    pub seams: Seams,
     /// Stop where the estimate is good enough: a cluster (a tile of the direct pass) stops
     /// once its texels' relative error, measured between its iterations, is at most this
     /// (0.02: 2 %); `--spp` is then the cap. Use `--iterations 8` to stop at every doubling
     /// (docs/estimator.md, "The stopping rule").
     #[arg(long, value_name = "ERROR")]
     pub target_error: Option<f32>,
-    /// How the samples are split over the learning iterations.
-    #[arg(long, value_enum, default_value_t = BakeSettings::default().schedule)]
-    pub schedule: Schedule,
-    /// A guide node splits only if it holds at least this many records.
-    #[arg(long, default_value_t = BakeSettings::default().min_split)]
-    pub min_split: u32,
-    /// The guide's smoothing α in percent (paper §2.3): how far each child's share of its
-    /// parent is pulled toward a quarter.
-    #[arg(long, default_value_t = BakeSettings::default().smooth)]
-    pub smooth: u32,
-    /// A cluster keeps sampling its guide only while the guide shows at least this gain, in
-    /// percent (150: 1.5× less variance per sample than stratified cosine points, measured
-    /// on the samples of the iteration that used it); below, it gathers with cosine points
-    /// for its remaining iterations. 0: guide always.
-    #[arg(long, default_value_t = BakeSettings::default().min_gain)]
-    pub min_gain: u32,
-    /// Light transport at gather hits: `series` (passes through the previous pass's
-    /// lightmap, the paper's production setting) or `path` (unbiased path tracing).
-    #[arg(long, value_enum, default_value_t = Transport::Series)]
-    pub transport: Transport,
-    /// Bounces of light after the gather hit (series: passes over the world; path: most
-    /// vertices of a path, Russian roulette from the third).
-    #[arg(long, default_value_t = BakeSettings::default().bounces)]
-    pub bounces: u32,
-    /// How emissive triangles are found: next-event estimation and hits weighted by MIS,
-    /// next-event estimation alone, or hits alone (the bake before emitters were lights).
-    #[arg(long, value_enum, default_value_t = EmitterSampling::default())]
-    pub emitters: EmitterSampling,
-    /// How next-event estimation picks an emitter: `local` (the default) weighs each of a
-    /// world's emitters at the shading point (power, distance, both cosines; worlds of up to
-    /// 8 emitters, beyond by power), `power` in proportion to power alone, `tree` by the light
-    /// tree (which prefers emitters that matter at the shading point).
-    #[arg(long, value_enum, default_value_t = EmitterSelection::default())]
-    pub emitter_selection: EmitterSelection,
-    /// The world-wide bias correction ρ (paper §2.5): `auto` applies it to the combinations
-    /// whose mean needs it (`texel`, `cluster`), not to `average` and `global`.
-    #[arg(long, value_enum, default_value_t = Rho::Auto)]
-    pub bias_correction: Rho,
+    /// Extra EXR channels: sample count, relative standard error, validity.
+    #[arg(long)]
+    pub aux: bool,
+    /// Write the bake's statistics as JSON here.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
     /// Worker threads (default: every core).
     #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
@@ -140,39 +74,119 @@ pub struct BakeArgs {
     /// box-filtered down (3 bytes a texel: 3 MiB an image at the default).
     #[arg(long, default_value_t = TextureOptions::DEFAULT_MAX_SIZE, value_parser = clap::value_parser!(u32).range(1..=65536))]
     pub max_texture_size: u32,
-    /// Write the bake's statistics as JSON here.
-    #[arg(long)]
-    pub stats: Option<PathBuf>,
-    /// Extra EXR channels: sample count, relative standard error, validity.
-    #[arg(long)]
-    pub aux: bool,
-    /// Denoise the lightmap as its pages are written: an edge-aware À-Trous filter guided by
-    /// each texel's position, normal and variance (docs/lightmaps.md). Off by default: the
-    /// lightmap is then the estimator's output, unbiased and unblurred, as the bench measures.
-    #[arg(long, value_enum, default_value_t = Denoise::Off)]
-    pub denoise: Denoise,
-    /// Make the texels on the two sides of a UV seam agree (least-squares stitching after
-    /// denoising; docs/lightmaps.md). Off by default, as --denoise.
-    #[arg(long, value_enum, default_value_t = Seams::Off)]
-    pub seams: Seams,
-    /// Directional lightmaps: `sh-l1` adds per texel the L1 spherical harmonics of the
-    /// incident radiance, world space, as the EXR layers SH0, SH1x, SH1y, SH1z (RGB each;
-    /// docs/lightmaps.md has the convention and the conversions to Unity and Unreal).
-    #[arg(long, value_enum, default_value_t = Directional::None)]
-    pub directional: Directional,
     /// Continue an interrupted bake from its journal.
     #[arg(long)]
     pub resume: bool,
-    /// Sun and sky, replacing the scene file's: give the same as to `prepare`.
-    #[command(flatten)]
-    pub lights: super::prepare::LightFlags,
+    /// No progress and no summary: errors and warnings only.
+    #[arg(long, short)]
+    pub quiet: bool,
     /// Bake only shard I of N (I/N, 0-based); combine with `guidebake merge`.
-    #[arg(long, default_value = "0/1")]
+    #[arg(help_heading = "Sharding over a farm", long, default_value = "0/1")]
     pub shard: Shard,
     /// Bake series pass B only (1-based), reading pass B−1 from `merge --pass B−1`; finish
     /// with `merge --pass B` (docs/farm.md).
-    #[arg(long)]
+    #[arg(help_heading = "Sharding over a farm", long)]
     pub pass: Option<u32>,
+    /// Learning iterations (iteration 0 is unguided unless the pass before kept a guide seed).
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().iterations)]
+    pub iterations: u32,
+    /// How gather directions are chosen.
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().guiding)]
+    pub guiding: Guiding,
+    /// How a texel's iterations are combined.
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().combine)]
+    pub combine: Combine,
+    /// Percent of the cosine baseline in the defensive mixture each guided iteration samples
+    /// (`c + (1 − c)·guide`, folded into the guide; every sample is weighted with the
+    /// mixture's density).
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().mix)]
+    pub mix: u32,
+    /// Which series passes sample a learned guide: the `last` (the lightmap; the passes
+    /// before it gather with cosine sampling) or `every` gather pass.
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().guided_passes)]
+    pub guided_passes: GuidedPasses,
+    /// How the last pass of a series bake of 2 or more bounces spreads its samples over the
+    /// texels: `uniform` (`--spp` everywhere), or by the error the previous passes measured,
+    /// per 8×8-texel block (¼ to 4 times `--spp`, about `--spp` in all): `bounded` (the least
+    /// relative error whose predicted squared error stays the uniform budget's), `mse`
+    /// (n ∝ σ), `relative` (n ∝ σ/√(μ² + ε)), `balanced` (n ∝ σ/√(μ·μ̄)). The direct pass
+    /// spends the later half of its iterations the same way, by each tile's earlier half.
+    /// Default: `bounded`; `uniform` with `--guiding off` or `--target-error`.
+    #[arg(
+        help_heading = "Research levers (the defaults are what the benchmarks chose)",
+        long,
+        value_enum
+    )]
+    pub budget: Option<Budget>,
+    /// Next-event samples per texel of a series bake's direct pass (default: `--spp`), whose
+    /// estimate the lightmap takes as its direct light: its last pass gathers the indirect
+    /// light alone. With `--directional sh-l1` or `--combine global` the last pass estimates
+    /// the direct light itself (weighted against its gather), and this is refused.
+    #[arg(
+        help_heading = "Research levers (the defaults are what the benchmarks chose)",
+        long,
+        value_name = "N"
+    )]
+    pub direct_spp: Option<u32>,
+    /// Gather rays per texel of the series passes between the direct pass and the last, whose
+    /// results only feed the next pass's lookups (default: a quarter of `--spp`, at least a
+    /// packet of 8, one per iteration where they are guided: their lookups are filtered,
+    /// `--lookup-filter`).
+    #[arg(
+        help_heading = "Research levers (the defaults are what the benchmarks chose)",
+        long,
+        value_name = "N"
+    )]
+    pub lookup_spp: Option<u32>,
+    /// Radius in texels over which the gathered light of those passes is filtered before the
+    /// next pass looks it up (texels of the same surface that agree within their noise;
+    /// 0: none). Series transport only.
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_name = "TEXELS", default_value_t = BakeSettings::default().lookup_filter)]
+    pub lookup_filter: u32,
+    /// What each cluster's guide learns: `second-moment` (the density ∝ √E[L²] over the
+    /// cluster's texels: the least summed variance, Rath et al. 2020) or `radiance` (∝ E[L],
+    /// the paper's).
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().guide_target)]
+    pub guide_target: GuideTarget,
+    /// Whether the last series pass's first iteration samples a guide seeded by the pass
+    /// before it (`previous`: that pass keeps, per cluster, a coarse histogram of what its
+    /// gather brought back) or gathers with cosine points (`off`, the paper's).
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().guide_seed)]
+    pub guide_seed: GuideSeed,
+    /// How the samples are split over the learning iterations.
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().schedule)]
+    pub schedule: Schedule,
+    /// A guide node splits only if it holds at least this many records.
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().min_split)]
+    pub min_split: u32,
+    /// The guide's smoothing α in percent (paper §2.3): how far each child's share of its
+    /// parent is pulled toward a quarter.
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().smooth)]
+    pub smooth: u32,
+    /// A cluster keeps sampling its guide only while the guide shows at least this gain, in
+    /// percent (150: 1.5× less variance per sample than stratified cosine points, measured
+    /// on the samples of the iteration that used it); below, it gathers with cosine points
+    /// for its remaining iterations. 0: guide always.
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().min_gain)]
+    pub min_gain: u32,
+    /// Light transport at gather hits: `series` (passes through the previous pass's
+    /// lightmap, the paper's production setting) or `path` (unbiased path tracing).
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = Transport::Series)]
+    pub transport: Transport,
+    /// How emissive triangles are found: next-event estimation and hits weighted by MIS,
+    /// next-event estimation alone, or hits alone (the bake before emitters were lights).
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = EmitterSampling::default())]
+    pub emitters: EmitterSampling,
+    /// How next-event estimation picks an emitter: `local` (the default) weighs each of a
+    /// world's emitters at the shading point (power, distance, both cosines; worlds of up to
+    /// 8 emitters, beyond by power), `power` in proportion to power alone, `tree` by the light
+    /// tree (which prefers emitters that matter at the shading point).
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = EmitterSelection::default())]
+    pub emitter_selection: EmitterSelection,
+    /// The world-wide bias correction ρ (paper §2.5): `auto` applies it to the combinations
+    /// whose mean needs it (`texel`, `cluster`), not to `average` and `global`.
+    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = Rho::Auto)]
+    pub bias_correction: Rho,
 }
 
 /// `on` or `off`.
@@ -234,7 +248,9 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         directional: args.directional,
     };
     settings.validate()?;
-    check_output(&args.out)?;
+    let files = bake_files(args)?;
+    files.check()?;
+    super::interrupt::register_outputs(files.outputs());
     let textures = TextureOptions {
         max_size: args.max_texture_size,
     };
@@ -258,23 +274,116 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
             seams: args.seams,
         },
     };
-    let report = run_with_progress(&job, args.pass, &scene)?;
+    let feedback = if args.quiet {
+        Feedback::Quiet
+    } else {
+        Feedback::for_stderr()
+    };
+    let report = run_with_progress(&job, args.pass, &scene, feedback)?;
     if let Some(path) = &args.stats {
         write_stats_noting(path, &report, &notes)?;
     }
     if report.interrupted {
-        return Err(format!(
+        return Err(Box::new(super::Interrupted(format!(
             "interrupted after {} tiles; the work is kept in {}: run the same command with --resume to finish",
             report.tiles_baked,
             work_dir(&job.out, job.shard).display()
-        )
-        .into());
+        ))));
+    }
+    if !args.quiet {
+        eprintln!("{}", summary(&job, &report));
     }
     Ok(())
 }
 
-/// Runs a bake (of pass `only_pass`, or every pass) with Ctrl-C handling and, on a terminal,
-/// a progress bar.
+/// What `bake` reads and writes: the texel file, the scene, a sky map and the seam sidecar;
+/// the lightmap's pages, their atlas previews, the work directory and the stats.
+fn bake_files(args: &BakeArgs) -> Result<super::files::Files, super::CmdError> {
+    super::files::check_exr("-o", &args.out)?;
+    let mut files = super::files::Files::new()
+        .reads("the texel file", &args.texels)
+        .reads("the scene (--scene)", &args.scene)
+        .reads(
+            "the texel file's seams",
+            &crate::output::seams::seam_file_path(&args.texels),
+        );
+    if let Some(map) = args.lights.sky_map() {
+        files = files.reads("the sky map (--sky)", map);
+    }
+    let pages = TexelFile::peek_header(&args.texels).map_or(1, |h| h.page_count);
+    for page in 0..pages.max(1) {
+        let path = crate::output::exr_pages::page_path(&args.out, page, pages);
+        let preview = crate::output::exr_pages::preview_path(&path);
+        files = files
+            .writes("the lightmap (-o)", &path)
+            .writes("the lightmap's atlas preview", &preview);
+    }
+    files = files.writes_dir(
+        "the bake's work directory",
+        &work_dir(&args.out, args.shard),
+    );
+    if let Some(stats) = &args.stats {
+        files = files.writes("the stats (--stats)", stats);
+    }
+    Ok(files)
+}
+
+/// The line a finished bake ends with: what it baked, in how long, where.
+fn summary(job: &BakeJob, report: &BakeReport) -> String {
+    let t = &report.seconds;
+    let seconds = t.open_texels + t.build_bvh + t.gather + t.previous_pass_images + t.write_pages;
+    let inside = report.counters.texels_inside_geometry;
+    let written = match report.pages.as_slice() {
+        [] => format!(
+            "shard {} of {} kept in {} (finish with guidebake merge)",
+            job.shard.index,
+            job.shard.count,
+            work_dir(&job.out, job.shard).display()
+        ),
+        [one] => one.display().to_string(),
+        pages => format!("{} pages, {} …", pages.len(), pages[0].display()),
+    };
+    format!(
+        "guidebake: baked {} tiles ({} resumed) in {} pass(es), {seconds:.1} s, {:.1} Mrays/s: {written}",
+        report.tiles_baked,
+        report.tiles_resumed,
+        report.passes,
+        report.rays_per_second / 1e6,
+    ) + &if inside > 0 {
+        format!("; {inside} texels inside geometry skipped")
+    } else {
+        String::new()
+    }
+}
+
+/// How a bake tells a person how far it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Feedback {
+    /// Nothing but errors and warnings (`--quiet`).
+    Quiet,
+    /// A progress bar (stderr is a terminal).
+    Bar,
+    /// A line when a pass ends and every few seconds within it (a log, a Slurm job).
+    Lines,
+}
+
+impl Feedback {
+    /// A bar on a terminal, lines elsewhere.
+    #[must_use]
+    pub fn for_stderr() -> Self {
+        if std::io::stderr().is_terminal() {
+            Self::Bar
+        } else {
+            Self::Lines
+        }
+    }
+}
+
+/// Seconds between two progress lines within a pass ([`Feedback::Lines`]).
+const LINE_EVERY: f64 = 10.0;
+
+/// Runs a bake (of pass `only_pass`, or every pass); Ctrl-C stops it with its work kept
+/// ([`super::interrupt`]); `feedback` says how far it is.
 ///
 /// # Errors
 /// What [`bake_pass_with_progress`] returns.
@@ -282,12 +391,11 @@ pub fn run_with_progress(
     job: &BakeJob,
     only_pass: Option<u32>,
     scene: &Scene,
+    feedback: Feedback,
 ) -> Result<BakeReport, super::CmdError> {
-    let cancel = Arc::new(AtomicBool::new(false));
-    let flag = Arc::clone(&cancel);
-    // A second handler cannot be installed (demo bakes twice): the first one keeps working.
-    let _ = ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed));
-    let bar = std::io::stderr().is_terminal().then(|| {
+    let cancel = super::interrupt::cancel_flag();
+    let _cooperate = super::interrupt::Cooperate::begin();
+    let bar = (feedback == Feedback::Bar).then(|| {
         let bar = indicatif::ProgressBar::new(0);
         bar.set_style(
             indicatif::ProgressStyle::with_template(
@@ -297,6 +405,11 @@ pub fn run_with_progress(
         );
         bar
     });
+    let passes = only_pass.map_or_else(
+        || job.settings.last_pass() + 1 - job.settings.first_pass(),
+        |_| 1,
+    );
+    let mut lines = PassLines::new(passes, feedback == Feedback::Lines);
     let start = std::time::Instant::now();
     let mut progress = |p: Progress| {
         if let Some(bar) = &bar {
@@ -305,29 +418,83 @@ pub fn run_with_progress(
             let seconds = start.elapsed().as_secs_f64().max(1e-3);
             bar.set_message(format!("{:.1} Mrays/s", p.rays as f64 / seconds / 1e6));
         }
+        lines.update(p);
     };
-    let report = bake_pass_with_progress(job, only_pass, scene, &cancel, &mut progress)?;
+    let report = bake_pass_with_progress(job, only_pass, scene, cancel, &mut progress)?;
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
     Ok(report)
 }
 
-/// Refuses an output whose directory does not exist, before any work is done.
-fn check_output(out: &std::path::Path) -> Result<(), super::CmdError> {
-    let dir = out
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(std::path::Path::new("."));
-    if !dir.is_dir() {
-        return Err(format!(
-            "{}: the output directory {} does not exist",
-            out.display(),
-            dir.display()
-        )
-        .into());
+/// The progress lines of [`Feedback::Lines`]: one when a pass ends, and one every
+/// [`LINE_EVERY`] seconds within a long pass, with texels done, rays per second and the ETA.
+struct PassLines {
+    passes: u32,
+    on: bool,
+    start: std::time::Instant,
+    last_line: f64,
+    pass_done: u32,
+    /// Texels done and rays when this run's first report came (a resumed run starts ahead).
+    first: Option<(u64, u64)>,
+}
+
+impl PassLines {
+    fn new(passes: u32, on: bool) -> Self {
+        Self {
+            passes: passes.max(1),
+            on,
+            start: std::time::Instant::now(),
+            last_line: 0.0,
+            pass_done: 0,
+            first: None,
+        }
     }
-    Ok(())
+
+    fn update(&mut self, p: Progress) {
+        if !self.on || p.texels_total == 0 {
+            return;
+        }
+        let (done0, rays0) = *self.first.get_or_insert((p.texels_done, p.rays));
+        let per_pass = p.texels_total.div_ceil(u64::from(self.passes)).max(1);
+        let now = self.start.elapsed().as_secs_f64();
+        let finished = (p.texels_done / per_pass) as u32;
+        let rate = (p.rays - rays0) as f64 / now.max(1e-3) / 1e6;
+        let eta =
+            (now / (p.texels_done - done0).max(1) as f64) * (p.texels_total - p.texels_done) as f64;
+        if finished > self.pass_done {
+            self.pass_done = finished;
+            self.last_line = now;
+            eprintln!(
+                "bake: pass {finished}/{} done: {}/{} texels, {now:.1} s, {rate:.1} Mrays/s, ETA {}",
+                self.passes,
+                p.texels_done,
+                p.texels_total,
+                clock(eta)
+            );
+        } else if now - self.last_line >= LINE_EVERY {
+            self.last_line = now;
+            eprintln!(
+                "bake: pass {}/{}: {}/{} texels ({:.0} %), {rate:.1} Mrays/s, ETA {}",
+                self.pass_done + 1,
+                self.passes,
+                p.texels_done,
+                p.texels_total,
+                100.0 * p.texels_done as f64 / p.texels_total as f64,
+                clock(eta)
+            );
+        }
+    }
+}
+
+/// `s` seconds as `H:MM:SS` or `M:SS`.
+fn clock(s: f64) -> String {
+    let s = if s.is_finite() { s.round() as u64 } else { 0 };
+    if s >= 3600 {
+        format!("{}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60)
+    } else {
+        format!("{}:{:02}", s / 60, s % 60)
+    }
 }
 
 /// [`write_stats`] with the textures the scene's loader could not read, counted

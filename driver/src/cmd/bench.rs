@@ -30,7 +30,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub texels_per_unit: Option<f32>,
     /// Output directory: runs.csv, overhead.csv, summary.json, table.md and the charts.
-    #[arg(short, long, default_value = "out/bench")]
+    #[arg(short, long = "output", alias = "out", default_value = "out/bench")]
     pub out: PathBuf,
     /// Directory of cached reference lightmaps (reused while scene, texels and settings match).
     #[arg(long, default_value = "out/bench-cache")]

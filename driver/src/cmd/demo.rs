@@ -27,7 +27,7 @@ const VIEW: ViewOptions = ViewOptions {
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
     /// Directory for the texel file, lightmaps, previews and stats.
-    #[arg(short, long, default_value = "out/demo")]
+    #[arg(short, long = "output", alias = "out", default_value = "out/demo")]
     pub out: PathBuf,
     /// Final-gather rays per texel for both bakes.
     #[arg(long, default_value_t = 256)]
@@ -79,13 +79,16 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
             aux: true,
             finish: FinishOptions::default(),
         };
-        let report = super::bake::run_with_progress(&job, None, &scene)?;
+        let feedback = super::bake::Feedback::for_stderr();
+        let report = super::bake::run_with_progress(&job, None, &scene, feedback)?;
         if report.interrupted {
-            return Err("interrupted".into());
+            return Err(Box::new(super::Interrupted(
+                "interrupted: run guidebake demo again to start over".into(),
+            )));
         }
         super::bake::write_stats(&args.out.join(format!("{name}.json")), &report)?;
         eprintln!(
-            "{name:>8}: {:.2} s gather, {:.1} Mrays/s, ρ = {:.4}, {} guided cluster-iterations: {} (+ .png)",
+            "{name:>8}: {:.2} s gather, {:.1} Mrays/s, ρ = {:.4}, {} guided cluster-iterations: {} (+ .atlas.png)",
             report.seconds.gather,
             report.rays_per_second / 1e6,
             report.rho,

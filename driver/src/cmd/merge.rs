@@ -18,7 +18,7 @@ pub struct MergeArgs {
     #[arg(required = true)]
     pub shards: Vec<PathBuf>,
     /// The lightmap to write (and, with `--pass`, beside which `OUT.exr.merged/` is made).
-    #[arg(short, long)]
+    #[arg(short, long = "output", alias = "out", value_name = "OUT.exr")]
     pub out: PathBuf,
     /// Merge series pass B of a pass-by-pass bake (`bake --pass B --shard I/N`); the last
     /// pass writes the pages, as without `--pass`.
@@ -32,11 +32,36 @@ pub struct MergeArgs {
     pub seams: Seams,
 }
 
+/// What `merge` reads — the texel file and the shards' work directories — and writes: the
+/// lightmap's pages and atlas previews, and `OUT.exr.merged/`.
+fn merge_files(args: &MergeArgs) -> Result<super::files::Files, super::CmdError> {
+    super::files::check_exr("-o", &args.out)?;
+    let mut files = super::files::Files::new().reads("the texel file", &args.texels);
+    for shard in &args.shards {
+        files = files.reads("a shard's work directory", shard);
+    }
+    let pages = TexelFile::peek_header(&args.texels).map_or(1, |h| h.page_count);
+    for page in 0..pages.max(1) {
+        let path = crate::output::exr_pages::page_path(&args.out, page, pages);
+        files = files.writes("the lightmap (-o)", &path).writes(
+            "the lightmap's atlas preview",
+            &crate::output::exr_pages::preview_path(&path),
+        );
+    }
+    Ok(files.writes_dir(
+        "the merged passes' directory",
+        &crate::bake::workdir::merged_dir(&args.out),
+    ))
+}
+
 /// Runs `guidebake merge`.
 ///
 /// # Errors
 /// A missing or foreign shard, an unbaked tile, an unwritable page: each named.
 pub fn run(args: &MergeArgs) -> Result<(), super::CmdError> {
+    let files = merge_files(args)?;
+    files.check()?;
+    super::interrupt::register_outputs(files.outputs());
     let texels = TexelFile::open(&args.texels)?;
     if let Some(pass) = args.pass {
         let passes = read_manifest(&args.shards[0].join("manifest.json"))?.passes;

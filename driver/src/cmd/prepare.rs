@@ -28,6 +28,12 @@ pub struct LightFlags {
 }
 
 impl LightFlags {
+    /// The equirectangular sky map `--sky` names, an input of the command.
+    #[must_use]
+    pub fn sky_map(&self) -> Option<&Path> {
+        self.sky.as_ref().and_then(|s| s.equirect.as_deref())
+    }
+
     /// The flags as [`LightOverrides`].
     #[must_use]
     pub fn overrides(&self) -> LightOverrides {
@@ -74,35 +80,30 @@ pub fn load_lit_scene(
     Ok((scene, notes))
 }
 
-/// Refuses an output whose directory does not exist or that is a directory, or that would
-/// overwrite `scene`, before any work is done.
-///
-/// # Errors
-/// A message naming the file and the option.
-pub fn check_output(option: &str, out: &Path, scene: &Path) -> Result<(), super::CmdError> {
-    let dir = out
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    if !dir.is_dir() {
-        return Err(format!(
-            "{}: {option}: the directory {} does not exist",
-            out.display(),
-            dir.display()
-        )
-        .into());
+/// What `prepare` reads — the scene, a sky map — and writes: the texel file, its seam sidecar
+/// and the glb of `--write-gltf`.
+fn prepare_files(args: &PrepareArgs) -> Result<super::files::Files, super::CmdError> {
+    let mut files = super::files::Files::new().reads("the scene", &args.scene);
+    if let Some(map) = args.lights.sky_map() {
+        files = files.reads("the sky map (--sky)", map);
     }
-    if out.is_dir() {
-        return Err(format!("{}: {option}: is a directory", out.display()).into());
+    files = files.writes("the texel file (-o)", &args.output).writes(
+        "the texel file's seams",
+        &crate::output::seams::seam_file_path(&args.output),
+    );
+    if let Some(glb) = &args.write_gltf {
+        if !glb
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("glb"))
+        {
+            return Err(super::usage(format!(
+                "{}: --write-gltf writes a binary glTF: give it a .glb name",
+                glb.display()
+            )));
+        }
+        files = files.writes("the glb (--write-gltf)", glb);
     }
-    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => a == b,
-    };
-    if same(out, scene) {
-        return Err(format!("{}: {option}: would overwrite the scene", out.display()).into());
-    }
-    Ok(())
+    Ok(files)
 }
 
 /// Arguments of `guidebake prepare`.
@@ -110,8 +111,8 @@ pub fn check_output(option: &str, out: &Path, scene: &Path) -> Result<(), super:
 pub struct PrepareArgs {
     /// Scene: .gltf, .glb, .obj or a .toml scene file.
     pub scene: PathBuf,
-    /// Output texel file.
-    #[arg(short, long)]
+    /// The texel file to write (its seams go beside it, OUT.texels.seams).
+    #[arg(short, long, alias = "out", value_name = "OUT.texels")]
     pub output: PathBuf,
     /// Texels per world unit along an edge.
     #[arg(long, conflicts_with = "size")]
@@ -160,31 +161,17 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
 pub fn run(args: &PrepareArgs) -> Result<(), super::CmdError> {
     let resolution = match (args.texels_per_unit, args.size) {
         (Some(d), _) if !(d.is_finite() && d > 0.0) => {
-            return Err(format!("--texels-per-unit {d} must be positive and finite").into());
+            return Err(super::usage(format!(
+                "--texels-per-unit {d} must be positive and finite"
+            )));
         }
         (Some(d), _) => Resolution::TexelsPerUnit(d),
         (None, Some((w, h))) => Resolution::Size(w, h),
         (None, None) => Resolution::Default,
     };
-    check_output("-o", &args.output, &args.scene)?;
-    if let Some(glb) = &args.write_gltf {
-        check_output("--write-gltf", glb, &args.scene)?;
-        if !glb
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("glb"))
-        {
-            return Err(format!(
-                "{}: --write-gltf writes a binary glTF: give it a .glb name",
-                glb.display()
-            )
-            .into());
-        }
-        if glb == &args.output {
-            return Err(
-                format!("{}: --write-gltf and -o name the same file", glb.display()).into(),
-            );
-        }
-    }
+    let files = prepare_files(args)?;
+    files.check()?;
+    super::interrupt::register_outputs(files.outputs());
     let (scene, notes) =
         load_lit_scene(&args.scene, TextureOptions::default(), &args.lights, true)?;
     let options = PrepareOptions {

@@ -20,8 +20,8 @@ pub struct RenderArgs {
     /// The lightmap (`bake -o`; several pages are read as OUT.pageN.exr).
     #[arg(long)]
     pub lightmap: PathBuf,
-    /// The PNG to write.
-    #[arg(short, long)]
+    /// The PNG to write (a name of its own: not the lightmap's atlas preview, NAME.atlas.png).
+    #[arg(short, long = "output", alias = "out", value_name = "VIEW.png")]
     pub out: PathBuf,
     /// Width in pixels.
     #[arg(long, default_value_t = 960)]
@@ -53,6 +53,37 @@ pub struct RenderArgs {
     pub max_texture_size: u32,
 }
 
+/// What `render` reads — the scene, the texel file, a sky map, the lightmap's pages and their
+/// atlas previews (kept, though not read) — and the one PNG it writes.
+fn render_files(args: &RenderArgs) -> Result<super::files::Files, super::CmdError> {
+    super::files::check_exr("--lightmap", &args.lightmap)?;
+    if !args
+        .out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        return Err(super::usage(format!(
+            "{}: -o writes a PNG picture: give it a name that ends in .png",
+            args.out.display()
+        )));
+    }
+    let mut files = super::files::Files::new()
+        .reads("the scene", &args.scene)
+        .reads("the texel file (--texels)", &args.texels);
+    if let Some(map) = args.lights.sky_map() {
+        files = files.reads("the sky map (--sky)", map);
+    }
+    let pages = TexelFile::peek_header(&args.texels).map_or(1, |h| h.page_count);
+    for page in 0..pages.max(1) {
+        let path = crate::output::exr_pages::page_path(&args.lightmap, page, pages);
+        files = files.reads("the lightmap (--lightmap)", &path).reads(
+            "the lightmap's atlas preview",
+            &crate::output::exr_pages::preview_path(&path),
+        );
+    }
+    Ok(files.writes("the picture (-o)", &args.out))
+}
+
 /// Which camera `render` looks through.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum CameraChoice {
@@ -72,11 +103,18 @@ pub enum CameraChoice {
 pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
     if args.width == 0 || args.height == Some(0) || args.width > 16384 || args.height > Some(16384)
     {
-        return Err("--width and --height must be between 1 and 16384 pixels".into());
+        return Err(super::usage(
+            "--width and --height must be between 1 and 16384 pixels",
+        ));
     }
     if let Some(e) = args.exposure.filter(|e| !(e.is_finite() && *e > 0.0)) {
-        return Err(format!("--exposure {e}: a positive, finite factor").into());
+        return Err(super::usage(format!(
+            "--exposure {e}: a positive, finite factor"
+        )));
     }
+    let files = render_files(args)?;
+    files.check()?;
+    super::interrupt::register_outputs(files.outputs());
     let textures = TextureOptions {
         max_size: args.max_texture_size,
     };

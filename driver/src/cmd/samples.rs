@@ -30,7 +30,7 @@ pub const MAX_FIGURE_N: u32 = 16_384;
 pub struct SamplesArgs {
     /// Output PNG (its directory is created). Default: out/samples.png, unless --coherence
     /// is given alone.
-    #[arg(short, long)]
+    #[arg(short, long, alias = "out")]
     pub output: Option<PathBuf>,
     /// Sample count N per texel (any N from 1 to 16384; packets are consecutive groups of 8).
     #[arg(long, default_value_t = 256)]

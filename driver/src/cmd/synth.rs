@@ -17,8 +17,8 @@ pub struct SynthArgs {
     /// Night: no sun, a dim sky; the windows light the city.
     #[arg(long)]
     pub night: bool,
-    /// Output texel file; the .glb and .toml scene are written beside it.
-    #[arg(short, long)]
+    /// The texel file to write; the scene (OUT.glb and OUT.toml) is written beside it.
+    #[arg(short, long, alias = "out", value_name = "OUT.texels")]
     pub output: PathBuf,
     /// Print the report as JSON.
     #[arg(long)]
@@ -34,6 +34,12 @@ pub fn run(args: &SynthArgs) -> Result<(), super::CmdError> {
         lit_windows: args.lit_windows,
         night: args.night,
     };
+    let files = super::files::Files::new()
+        .writes("the texel file (-o)", &args.output)
+        .writes("the scene's geometry", &args.output.with_extension("glb"))
+        .writes("the scene file", &args.output.with_extension("toml"));
+    files.check()?;
+    super::interrupt::register_outputs(files.outputs());
     let r = crate::synth::synth_with(args.texels, &args.output, &options)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&r)?);

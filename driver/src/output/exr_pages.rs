@@ -995,6 +995,12 @@ pub fn page_path(out: &Path, page: u32, page_count: u32) -> PathBuf {
     out.with_file_name(format!("{stem}.page{page}.{ext}"))
 }
 
+/// The tone-mapped atlas preview of the page at `page`: `NAME.atlas.png` beside `NAME.exr`
+/// (a name of its own, so a view rendered as `NAME.png` does not replace it).
+pub fn preview_path(page: &Path) -> PathBuf {
+    page.with_extension("atlas.png")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

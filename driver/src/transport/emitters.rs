@@ -44,7 +44,7 @@ pub enum EmitterSelection {
     /// By the light tree: power, distance and orientation of clusters of emitters as seen
     /// from the receiver (Conty Estevez & Kulla 2018).
     Tree,
-    /// Every emitter weighed at the receiver ([`LOCAL_MAX`] of them at most; beyond, as
+    /// Every emitter weighed at the receiver (8 of them at most, `LOCAL_MAX`; beyond, as
     /// `power`): luminance × approximate solid angle × the receiver's cosine to its centroid,
     /// zero for an emitter seen from behind or wholly below the receiver's horizon. The
     /// default: at equal time it beats `power` and `tree` on the bidir and ajar rooms and is
