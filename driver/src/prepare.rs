@@ -425,6 +425,43 @@ pub fn prepare_with(
     opts: PrepareOptions,
     unwrap: Unwrap,
 ) -> Result<(PrepareReport, Lightmap), PrepareError> {
+    prepare_reporting(scene, out, opts, unwrap, &mut |_| {})
+}
+
+/// A step of [`prepare_reporting`], reported as it begins (the command line prints them: a
+/// level takes seconds).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PrepareStage {
+    /// xatlas charts and packs this many meshes.
+    Unwrapping {
+        /// Meshes given UVs.
+        meshes: usize,
+    },
+    /// Rays find which side of each surface faces open space (`facing`).
+    SeenSides {
+        /// Triangles of the scene.
+        triangles: usize,
+    },
+    /// The texels of one page are rasterised and written.
+    Rasterising {
+        /// The page, from 0.
+        page: usize,
+        /// Pages in all.
+        pages: usize,
+    },
+}
+
+/// [`prepare_with`], telling `stage` each step as it begins.
+///
+/// # Errors
+/// As [`prepare_with`].
+pub fn prepare_reporting(
+    scene: &Scene,
+    out: &Path,
+    opts: PrepareOptions,
+    unwrap: Unwrap,
+    stage: &mut dyn FnMut(PrepareStage),
+) -> Result<(PrepareReport, Lightmap), PrepareError> {
     if scene.triangles.len() >= (PARTIAL_BIT - 1) as usize {
         return Err(PrepareError::Resolution {
             path: scene.path.clone(),
@@ -437,10 +474,13 @@ pub fn prepare_with(
     let mut selected = unwrap.meshes(scene);
     let not_atlas = not_atlas_meshes(scene, unwrap, &mut selected);
     if selected.iter().any(|&u| u) {
+        stage(PrepareStage::Unwrapping {
+            meshes: selected.iter().filter(|&&u| u).count(),
+        });
         let (unwrapped, pages, meshes, tpu, mut unwrap_report) =
             unwrap_layout(scene, opts.resolution, &selected)?;
         let lightmap = Lightmap::of_records(&unwrapped, &pages, &meshes);
-        let mut report = rasterise(&unwrapped, out, &pages, &meshes, tpu, false)?;
+        let mut report = rasterise(&unwrapped, out, &pages, &meshes, tpu, false, stage)?;
         let area: f64 = pages
             .iter()
             .map(|p| f64::from(p.width) * f64::from(p.height))
@@ -467,7 +507,7 @@ pub fn prepare_with(
     } else {
         shared_layout(scene, &stats, opts.resolution)?
     };
-    let mut report = rasterise(scene, out, &pages, &meshes, tpu, per_mesh)?;
+    let mut report = rasterise(scene, out, &pages, &meshes, tpu, per_mesh, stage)?;
     report.not_atlas = not_atlas;
     Ok((report, Lightmap::of_records(scene, &pages, &meshes)))
 }
@@ -480,7 +520,11 @@ fn rasterise(
     meshes: &[MeshLayout],
     tpu: f32,
     per_mesh: bool,
+    stage: &mut dyn FnMut(PrepareStage),
 ) -> Result<PrepareReport, PrepareError> {
+    stage(PrepareStage::SeenSides {
+        triangles: scene.triangles.len(),
+    });
     let (visibility, facing) = seen_sides(scene).map_err(|e| PrepareError::Resolution {
         path: scene.path.clone(),
         message: format!("cannot trace the scene to orient its surfaces: {e}"),
@@ -509,6 +553,10 @@ fn rasterise(
         missing_textures: Vec::new(),
     };
     for (page_index, page) in pages.iter().enumerate() {
+        stage(PrepareStage::Rasterising {
+            page: page_index,
+            pages: pages.len(),
+        });
         let raster = PageRaster::new(&triangles, page_index as u32, *page, &mut report);
         raster.emit_tiles(scene, &triangles, &visibility, &mut w, &mut report)?;
     }

@@ -525,9 +525,21 @@ impl BakeSettings {
             return Ok(());
         }
         let s = if iterations == 1 { "" } else { "s" };
+        let fix = if per_iteration < 8 {
+            let fewer = n / 8;
+            let more = 8 * iterations;
+            match fewer {
+                0 => format!("{option} {more} would take it"),
+                _ => format!(
+                    "{option} {more} would take it, or --iterations {fewer} (fewer learning iterations)"
+                ),
+            }
+        } else {
+            format!("--iterations {} would take it", n.div_ceil(1 << 20))
+        };
         Err(SettingsError(format!(
             "{option} {n} over {iterations} iteration{s} leaves {per_iteration} per iteration: \
-             give at least 8 (one packet) and at most 2^20 per iteration"
+             give at least 8 (one packet) and at most 2^20 per iteration; {fix}"
         )))
     }
 

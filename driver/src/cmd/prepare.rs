@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::prepare::{Layout, PrepareOptions, Resolution, Unwrap, prepare_with};
+use crate::prepare::{Layout, PrepareOptions, PrepareStage, Resolution, Unwrap, prepare_reporting};
 use crate::scene::{
     LightOverrides, LoadNotes, Scene, SkySpec, SunSpec, TextureOptions, parse_sky, parse_sun,
 };
@@ -134,6 +134,9 @@ pub struct PrepareArgs {
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
+    /// No progress: errors, warnings and the report only.
+    #[arg(long, short)]
+    pub quiet: bool,
     /// Sun and sky, replacing the scene file's (the facing analysis sees them).
     #[command(flatten)]
     pub lights: LightFlags,
@@ -172,24 +175,58 @@ pub fn run(args: &PrepareArgs) -> Result<(), super::CmdError> {
     let files = prepare_files(args)?;
     files.check()?;
     super::interrupt::register_outputs(files.outputs());
+    let clock = std::time::Instant::now();
+    let say = |what: String| {
+        if !args.quiet {
+            eprintln!("prepare: {what} ({:.1} s)", clock.elapsed().as_secs_f64());
+        }
+    };
     let (scene, notes) =
         load_lit_scene(&args.scene, TextureOptions::default(), &args.lights, true)?;
+    say(format!(
+        "{}: {} triangles in {} meshes loaded",
+        args.scene.display(),
+        scene.triangles.len(),
+        scene.meshes.len()
+    ));
     let options = PrepareOptions {
         resolution,
         layout: args.layout,
     };
-    let (mut report, lightmap) = prepare_with(&scene, &args.output, options, args.unwrap)?;
+    let (mut report, lightmap) =
+        prepare_reporting(&scene, &args.output, options, args.unwrap, &mut |stage| {
+            say(match stage {
+                PrepareStage::Unwrapping { meshes } => {
+                    format!("charting and packing {meshes} meshes with xatlas")
+                }
+                PrepareStage::SeenSides { triangles } => {
+                    format!("tracing which sides of {triangles} triangles face open space")
+                }
+                PrepareStage::Rasterising { page, pages } => {
+                    format!("rasterising page {}/{pages}", page + 1)
+                }
+            });
+        })?;
     report.missing_textures = notes.missing_textures.clone();
-    if let Some(glb) = &args.write_gltf
-        && let Err(e) = crate::scene::gltf_write::write_glb(&scene, &lightmap, glb)
-    {
-        // No partial output: the texel file belongs to the same request.
-        let _ = std::fs::remove_file(&args.output);
-        return Err(e.into());
+    // No partial output: the texel file, the glb and the seams are one request; what this
+    // run wrote goes when a later part fails.
+    let mut written = vec![args.output.clone()];
+    let companions = |written: &mut Vec<PathBuf>| -> Result<(), super::CmdError> {
+        if let Some(glb) = &args.write_gltf {
+            crate::scene::gltf_write::write_glb(&scene, &lightmap, glb)?;
+            written.push(glb.clone());
+        }
+        // The seams beside the texel file, for `bake --seams stitch` (docs/lightmaps.md),
+        // found through the lightmap UVs the texel file holds.
+        crate::output::seams::prepare_seams(&scene, &args.output)?;
+        Ok(())
+    };
+    if let Err(e) = companions(&mut written) {
+        for out in &written {
+            let _ = std::fs::remove_file(out);
+        }
+        return Err(e);
     }
-    // The seams beside the texel file, for `bake --seams stitch` (docs/lightmaps.md), found
-    // through the lightmap UVs the texel file holds.
-    crate::output::seams::prepare_seams(&scene, &args.output)?;
     for n in report.not_atlas.iter().take(SHOWN) {
         eprintln!(
             "guidebake: note: mesh '{}': its UV set {}: not a lightmap atlas; {}",
