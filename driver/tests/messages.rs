@@ -472,3 +472,26 @@ fn a_missing_texture_is_a_warning_naming_the_file_as_resolved_and_the_material()
         ),
     );
 }
+
+#[test]
+fn a_glb_named_gltf_loads() {
+    // A .glb renamed .gltf (and the other way round) is read by its first bytes, not
+    // refused by its name.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let obj = write(d, "level.obj", QUAD);
+    let glb = d.join("level.glb");
+    let (code, err) = prepare(
+        d,
+        &obj,
+        &["--sky", "1", "--write-gltf", glb.to_str().unwrap()],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(std::fs::read(&glb).unwrap().starts_with(b"glTF"));
+    let renamed = d.join("renamed.gltf");
+    std::fs::rename(&glb, &renamed).unwrap();
+    std::fs::remove_file(&obj).unwrap();
+    let (code, err) = prepare(d, &renamed, &["--sky", "1"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("warning"), "{err}");
+}

@@ -21,7 +21,13 @@
 //!   [`MISSING_TEXTURE_ALBEDO`] grey; [`Scene::load_reporting`] returns each such texture
 //!   ([`MissingTexture`], naming the file and the material) for the commands to warn about and
 //!   count. Structural faults of a glTF file (a malformed URI, a buffer view outside its
-//!   buffer) stay errors.
+//!   buffer) stay errors. An OBJ material library (`mtllib`) that is missing or malformed
+//!   is not an error either: the OBJ loads, the library's materials are [`Material::default_grey`], and
+//!   [`LoadNotes::file_warnings`] names the library as resolved and the line naming it.
+//! - **Messages** name the file and, where a parser knows it, the line and column
+//!   (`level.obj:1234:7: vertex position "1.0e" is not a number`; [`TextPos`]); a path that
+//!   is a directory, empty, of an unknown extension or of contents of another kind than its
+//!   extension says what it is ([`SceneError::NotAScene`], [`SceneError::UnknownFormat`]).
 //! - Emission is `emissiveFactor` × `KHR_materials_emissive_strength` (radiance, front face).
 //! - All geometry is flattened into one triangle soup in world space (node transforms
 //!   applied; normals by the inverse transpose; a mirroring transform swaps two vertices so
@@ -897,6 +903,49 @@ impl Fnv {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The command line prints an error and then each `source()` as "caused by": an error
+    /// whose message already holds its cause's text must not return it as its source too.
+    #[test]
+    fn no_scene_error_says_its_cause_twice() {
+        use std::error::Error as _;
+        let path = PathBuf::from("level.obj");
+        let io = || std::io::Error::new(std::io::ErrorKind::NotFound, "gone");
+        for e in [
+            SceneError::Io {
+                path: path.clone(),
+                error: io(),
+            },
+            SceneError::Gltf {
+                path: path.clone(),
+                error: ::gltf::Error::Io(io()),
+            },
+            SceneError::Obj {
+                path: path.clone(),
+                error: tobj::LoadError::ReadError,
+            },
+        ] {
+            let cause = match &e {
+                SceneError::Io { error, .. } => error.to_string(),
+                SceneError::Gltf { error, .. } => error.to_string(),
+                SceneError::Obj { error, .. } => error.to_string(),
+                _ => unreachable!(),
+            };
+            assert!(e.to_string().contains(&cause), "{e}");
+            assert!(e.source().is_none(), "{e} also has a source");
+        }
+    }
+
+    #[test]
+    fn text_positions_count_lines_and_characters_from_one() {
+        let text = "a = 1\nb = \"é\" x\n";
+        let at = |offset| TextPos::of_offset(text, offset).to_string();
+        assert_eq!(at(0), "1:1");
+        assert_eq!(at(6), "2:1");
+        // After the two-byte é: column 8 in characters, not 9 in bytes.
+        assert_eq!(at(text.find(" x").unwrap()), "2:8");
+        assert_eq!(at(usize::MAX), "3:1");
+    }
 
     #[test]
     fn degenerate_triangles_are_dropped_and_counted() {

@@ -1,4 +1,6 @@
-//! Wavefront OBJ + MTL through `tobj`.
+//! Wavefront OBJ + MTL through `tobj`, checked line by line first ([`lint`]) so that what
+//! tobj would refuse without saying where is said with its line and column; material
+//! libraries are read here ([`load_mtl`]), a missing or malformed one a warning.
 use std::sync::Arc;
 
 use super::texture::{self, BaseColorTexture, TextureOptions};
