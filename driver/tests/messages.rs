@@ -167,6 +167,21 @@ fn a_malformed_mtl_is_a_warning_naming_its_line_and_column() {
     let (code, err) = prepare(d, &obj, &["--sky", "1"]);
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains("warning"), "{err}");
+    for e in std::fs::read_dir(d).unwrap().filter_map(Result::ok) {
+        if e.file_name().to_string_lossy().starts_with("out.texels") {
+            std::fs::remove_file(e.path()).unwrap();
+        }
+    }
+    // A material the library does not define.
+    write(d, "m.mtl", "newmtl wal\nKd 0.5\n");
+    assert_warns(
+        d,
+        &obj,
+        &format!(
+            "{}:2: usemtl \"wall\": no material library of the file defines it; its faces are the default grey (0.8)",
+            obj.display()
+        ),
+    );
 }
 
 #[test]

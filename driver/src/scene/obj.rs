@@ -46,15 +46,31 @@ pub(super) fn load(
             }
         }
     });
-    notes
-        .file_warnings
-        .extend(libraries.into_inner().into_iter().flatten());
+    let failed: Vec<String> = libraries.into_inner().into_iter().flatten().collect();
     let (models, mtl) = loaded.map_err(|error| SceneError::Obj {
         path: path.to_owned(),
         error,
     })?;
-    // Every library that failed is warned about above; the ones that loaded are here.
+    // Every library that failed is warned about; the ones that loaded are here.
     let mtl = mtl.unwrap_or_default();
+    if failed.is_empty() {
+        // A material no library defines: its faces are the default grey (said once a name).
+        let mut said = std::collections::HashSet::new();
+        for (n, name) in &lint.usemtl {
+            if !mtl.iter().any(|m| &m.name == name) && said.insert(name) {
+                let libraries = if lint.mtllib_lines.is_empty() {
+                    "the file names no material library (mtllib)".to_owned()
+                } else {
+                    "no material library of the file defines it".to_owned()
+                };
+                notes.file_warnings.push(format!(
+                    "{}:{n}: usemtl {name:?}: {libraries}; its faces are the default grey (0.8)",
+                    path.display()
+                ));
+            }
+        }
+    }
+    notes.file_warnings.extend(failed);
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut materials: Vec<Material> = mtl
         .iter()
@@ -83,6 +99,8 @@ pub(super) fn load(
 struct Lint {
     /// The line (from 1) of each `mtllib`, in order: tobj asks for the libraries in it.
     mtllib_lines: Vec<usize>,
+    /// Each `usemtl`'s line and the material name it gives (as tobj reads it).
+    usemtl: Vec<(usize, String)>,
     /// Warnings, each naming the file and line.
     warnings: Vec<String>,
 }
@@ -150,6 +168,7 @@ fn lint(path: &Path, bytes: &[u8]) -> Result<Lint, SceneError> {
     };
     let mut lint = Lint {
         mtllib_lines: Vec::new(),
+        usemtl: Vec::new(),
         warnings: Vec::new(),
     };
     let mut not_finite: Option<(usize, usize, String)> = None;
@@ -238,8 +257,12 @@ fn lint(path: &Path, bytes: &[u8]) -> Result<Lint, SceneError> {
         }
         match first {
             "mtllib" => lint.mtllib_lines.push(n),
-            "usemtl" if line.split_once(' ').unwrap_or_default().1.trim().is_empty() => {
-                return Err(err(n, end, "usemtl names no material".into()));
+            "usemtl" => {
+                let name = line.split_once(' ').unwrap_or_default().1.trim();
+                if name.is_empty() {
+                    return Err(err(n, end, "usemtl names no material".into()));
+                }
+                lint.usemtl.push((n, name.to_owned()));
             }
             "f" | "l" if words.len() == 1 => {
                 return Err(err(n, end, format!("\"{first}\" lists no vertices")));
