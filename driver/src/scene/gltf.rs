@@ -64,14 +64,27 @@ pub(super) fn nodes_in_load_order(doc: &::gltf::Document) -> Vec<(::gltf::Node<'
 pub(super) fn import(
     path: &Path,
 ) -> Result<(::gltf::Document, Vec<::gltf::buffer::Data>), SceneError> {
-    let whole = |source| SceneError::Gltf {
+    let whole = |error| SceneError::Gltf {
         path: path.to_owned(),
-        source,
+        error,
     };
-    let bytes = std::fs::read(path).map_err(|e| whole(::gltf::Error::Io(e)))?;
+    let bytes = std::fs::read(path).map_err(|error| SceneError::Io {
+        path: path.to_owned(),
+        error,
+    })?;
+    // A .glb named .gltf (or the other way round) loads: the crate reads either by its
+    // first bytes. Anything else is said as what it looks like.
+    if let Some(kind) =
+        looks_like(&bytes).filter(|k| !matches!(*k, "a binary glTF (.glb)" | "glTF JSON (.gltf)"))
+    {
+        return Err(SceneError::NotAScene {
+            path: path.to_owned(),
+            message: format!("looks like {kind}, not a glTF file (.gltf JSON or .glb)"),
+        });
+    }
     check_glb_length(&bytes).map_err(whole)?;
-    let ::gltf::Gltf { document, mut blob } =
-        ::gltf::Gltf::from_slice_without_validation(&bytes).map_err(whole)?;
+    let ::gltf::Gltf { document, mut blob } = ::gltf::Gltf::from_slice_without_validation(&bytes)
+        .map_err(|e| json_error(path, &bytes, e))?;
     let json = document.into_json();
     check_position_accessors(&json).map_err(whole)?;
     check_image_sources(&json).map_err(whole)?;
@@ -90,8 +103,9 @@ pub(super) fn import(
         if let ::gltf::buffer::Source::Uri(uri) = source {
             check_uri(uri).map_err(|m| resource(item.clone(), m))?;
         }
-        let data = ::gltf::buffer::Data::from_source_and_blob(source, Some(base), &mut blob)
-            .map_err(|e| resource(item.clone(), describe(&e)))?;
+        let data =
+            ::gltf::buffer::Data::from_source_and_blob(source.clone(), Some(base), &mut blob)
+                .map_err(|e| resource(item.clone(), describe_at(&e, &source, base)))?;
         if data.len() < buffer.length() {
             let message = format!(
                 "{} bytes, fewer than its byteLength of {}",
@@ -131,7 +145,76 @@ fn load_image(
         ::gltf::image::Source::View { view, .. } => check_view(view, buffers).map_err(resource)?,
     }
     let base = path.parent().unwrap_or_else(|| Path::new("./"));
-    Ok(::gltf::image::Data::from_source(source, Some(base), buffers).map_err(|e| describe(&e)))
+    let uri = match &source {
+        ::gltf::image::Source::Uri { uri, .. } => Some(*uri),
+        ::gltf::image::Source::View { .. } => None,
+    };
+    Ok(
+        ::gltf::image::Data::from_source(source, Some(base), buffers).map_err(|e| match uri {
+            Some(uri) => describe_uri(&e, uri, base),
+            None => describe(&e),
+        }),
+    )
+}
+
+/// The importer's error for a buffer, naming the file a relative URI resolves to.
+fn describe_at(e: &::gltf::Error, source: &::gltf::buffer::Source, base: &Path) -> String {
+    match source {
+        ::gltf::buffer::Source::Uri(uri) => describe_uri(e, uri, base),
+        ::gltf::buffer::Source::Bin => describe(e),
+    }
+}
+
+/// [`describe`], an unreadable file said with its URI and the path it resolves to.
+fn describe_uri(e: &::gltf::Error, uri: &str, base: &Path) -> String {
+    let file = if let Some(rest) = uri.strip_prefix("file://") {
+        Some(PathBuf::from(rest))
+    } else if uri.contains(':') {
+        None
+    } else {
+        urlencoding::decode(uri).ok().map(|u| base.join(&*u))
+    };
+    match (e, file) {
+        (::gltf::Error::Io(io), Some(file)) => format!(
+            "cannot read {uri:?} ({}): {io}",
+            shown_absolute(&file).display()
+        ),
+        _ => describe(e),
+    }
+}
+
+/// The importer's error for the document itself; a JSON syntax or data error of a `.gltf`
+/// placed at its line and column (a GLB's JSON chunk: said as the chunk's).
+fn json_error(path: &Path, bytes: &[u8], e: ::gltf::Error) -> SceneError {
+    let ::gltf::Error::Deserialize(json) = &e else {
+        return SceneError::Gltf {
+            path: path.to_owned(),
+            error: e,
+        };
+    };
+    // serde_json's text ends in " at line L column C"; the place goes in front instead.
+    let text = json.to_string();
+    let message = match text.rfind(" at line ") {
+        Some(i) if json.line() > 0 => text[..i].to_owned(),
+        _ => text,
+    };
+    let at = TextPos {
+        line: json.line(),
+        column: Some(json.column()),
+    };
+    if bytes.starts_with(b"glTF") {
+        return SceneError::NotAScene {
+            path: path.to_owned(),
+            message: format!(
+                "its JSON chunk is not valid glTF JSON (at line {at} of the chunk): {message}"
+            ),
+        };
+    }
+    SceneError::Syntax {
+        path: path.to_owned(),
+        at,
+        message: format!("not valid glTF JSON: {message}"),
+    }
 }
 
 /// A URI the importer can resolve without panicking: gltf 1.4.1 (`import.rs`,

@@ -21,7 +21,13 @@
 //!   [`MISSING_TEXTURE_ALBEDO`] grey; [`Scene::load_reporting`] returns each such texture
 //!   ([`MissingTexture`], naming the file and the material) for the commands to warn about and
 //!   count. Structural faults of a glTF file (a malformed URI, a buffer view outside its
-//!   buffer) stay errors.
+//!   buffer) stay errors. An OBJ material library (`mtllib`) that is missing or malformed
+//!   is not an error either: the OBJ loads, the library's materials are [`Material::default_grey`], and
+//!   [`LoadNotes::file_warnings`] names the library as resolved and the line naming it.
+//! - **Messages** name the file and, where a parser knows it, the line and column
+//!   (`level.obj:1234:7: vertex position "1.0e" is not a number`; [`TextPos`]); a path that
+//!   is a directory, empty, of an unknown extension or of contents of another kind than its
+//!   extension says what it is ([`SceneError::NotAScene`], [`SceneError::UnknownFormat`]).
 //! - Emission is `emissiveFactor` × `KHR_materials_emissive_strength` (radiance, front face).
 //! - All geometry is flattened into one triangle soup in world space (node transforms
 //!   applied; normals by the inverse transpose; a mirroring transform swaps two vertices so
@@ -37,25 +43,38 @@ use std::path::{Path, PathBuf};
 
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
-/// Why a scene could not be loaded. Every variant names the file.
+/// Why a scene could not be loaded. Every variant names the file, and where a parser knows
+/// it the line and column (`level.obj:1234:7: ...`, as compilers write it).
+///
+/// No variant's [`std::error::Error::source`] repeats what its message already says: the
+/// messages carry their cause's text, and `source()` is `None` (the command line prints the
+/// message and then each source as a "caused by" line).
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
+    /// The file could not be read (missing, unreadable).
+    #[error("{path}: cannot read: {error}")]
     Io {
         /// The file.
         path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (its text is in the message, so it is not the `source()`).
+        error: std::io::Error,
     },
-    /// The glTF importer rejected the file (bad JSON, a missing buffer or image, a bad GLB
-    /// chunk, a buffer shorter than declared, ...).
-    #[error("{path}: not a loadable glTF file: {source}")]
+    /// The path is not a scene file guidebake can read: a directory, an empty file, or a
+    /// file whose contents are another kind than its extension says.
+    #[error("{path}: {message}")]
+    NotAScene {
+        /// The path.
+        path: PathBuf,
+        /// What it is instead, and what is accepted.
+        message: String,
+    },
+    /// The glTF importer rejected the file (a bad GLB chunk, a failed validation, ...).
+    #[error("{path}: not a loadable glTF file: {error}")]
     Gltf {
         /// The file.
         path: PathBuf,
-        /// The importer's error.
-        source: ::gltf::Error,
+        /// The importer's error (its text is in the message, so it is not the `source()`).
+        error: ::gltf::Error,
     },
     /// One of a glTF file's buffers or images could not be loaded: a data URI that is not
     /// base64, a relative URI whose percent-escapes do not decode to UTF-8, a file that
@@ -69,29 +88,33 @@ pub enum SceneError {
         /// What is wrong.
         message: String,
     },
-    /// An OBJ face or line names an element the file does not have.
-    #[error("{path}: line {line}: {message}")]
-    ObjIndex {
+    /// A text file (OBJ, glTF JSON) is malformed at a place: a number that is not one, too
+    /// few components, a face index naming no element, a JSON syntax error.
+    #[error("{path}:{at}: {message}")]
+    Syntax {
         /// The file.
         path: PathBuf,
-        /// The line, from 1.
-        line: usize,
+        /// Where.
+        at: TextPos,
         /// What is wrong.
         message: String,
     },
-    /// tobj rejected the OBJ or its MTL.
-    #[error("{path}: not a loadable OBJ file: {source}")]
+    /// tobj rejected the OBJ for a reason the loader could not place on a line.
+    #[error("{path}: not a loadable OBJ file: {error}")]
     Obj {
         /// The file.
         path: PathBuf,
-        /// tobj's error.
-        source: tobj::LoadError,
+        /// tobj's error (its text is in the message, so it is not the `source()`).
+        error: tobj::LoadError,
     },
-    /// The TOML scene file is malformed.
-    #[error("{path}: bad scene file: {message}")]
+    /// The TOML scene file is malformed (at `at`, where known), or a `--sun`/`--sky` value
+    /// given for the scene is invalid.
+    #[error("{path}{}: {message}", at.map(|a| format!(":{a}")).unwrap_or_default())]
     SceneFile {
         /// The file.
         path: PathBuf,
+        /// Where in it, when the error is about one place.
+        at: Option<TextPos>,
         /// What is wrong.
         message: String,
     },
@@ -106,10 +129,15 @@ pub enum SceneError {
         message: String,
     },
     /// The file extension is none we read.
-    #[error("{path}: unknown scene format (expected .gltf, .glb, .obj or .toml)")]
+    #[error(
+        "{path}: unknown scene format{detail}; guidebake reads .gltf, .glb, .obj and .toml scene files"
+    )]
     UnknownFormat {
         /// The file.
         path: PathBuf,
+        /// The extension it has and, where the contents are recognised, what it looks like
+        /// (e.g. ` ".fbx"` or ` ".dat" (it looks like a binary glTF (.glb): rename it)`).
+        detail: String,
     },
     /// After dropping degenerate triangles nothing is left.
     #[error("{path}: the scene has no triangles ({degenerate} degenerate triangles dropped)")]
@@ -147,6 +175,90 @@ pub enum SceneError {
         /// What is wrong.
         message: String,
     },
+}
+
+/// A place in a text file: a line and, where the parser knows it, a column, both counted
+/// from 1 (the column in characters). Displays as `LINE` or `LINE:COLUMN`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TextPos {
+    /// The line, from 1.
+    pub line: usize,
+    /// The column, from 1, in characters.
+    pub column: Option<usize>,
+}
+
+impl TextPos {
+    /// The place of byte `offset` of `text` (clamped to its length).
+    #[must_use]
+    pub fn of_offset(text: &str, offset: usize) -> Self {
+        let mut offset = offset.min(text.len());
+        while !text.is_char_boundary(offset) {
+            offset -= 1;
+        }
+        let before = &text[..offset];
+        let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+        Self {
+            line: before.matches('\n').count() + 1,
+            column: Some(before[line_start..].chars().count() + 1),
+        }
+    }
+}
+
+impl std::fmt::Display for TextPos {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.column {
+            Some(c) => write!(f, "{}:{c}", self.line),
+            None => write!(f, "{}", self.line),
+        }
+    }
+}
+
+/// What a file's first bytes say it is, for a message about a file whose contents are
+/// another kind than its extension; `None` for text nothing here recognises.
+pub(crate) fn looks_like(bytes: &[u8]) -> Option<&'static str> {
+    const MAGIC: [(&[u8], &str); 9] = [
+        (b"glTF", "a binary glTF (.glb)"),
+        (&[0x76, 0x2f, 0x31, 0x01], "an OpenEXR image"),
+        (b"GBTEXELS", "a guidebake texel file (.texels)"),
+        (b"\x89PNG", "a PNG image"),
+        (&[0xff, 0xd8, 0xff], "a JPEG image"),
+        (b"PK\x03\x04", "a zip archive"),
+        (&[0x1f, 0x8b], "a gzip file"),
+        (b"Kaydara FBX Binary", "a binary FBX file"),
+        (b"#?RADIANCE", "a Radiance HDR image"),
+    ];
+    if let Some((_, kind)) = MAGIC.iter().find(|(m, _)| bytes.starts_with(m)) {
+        return Some(kind);
+    }
+    let head = &bytes[..bytes.len().min(4096)];
+    let text = String::from_utf8_lossy(head);
+    let text = text.trim_start_matches('\u{feff}').trim_start();
+    if text.starts_with('{') {
+        return Some("glTF JSON (.gltf)");
+    }
+    let words = |w: &str| text.lines().any(|l| l.split_whitespace().next() == Some(w));
+    if words("v") && (words("f") || words("vt") || words("vn")) {
+        return Some("a Wavefront OBJ file");
+    }
+    if head.contains(&0) {
+        return Some("binary data");
+    }
+    None
+}
+
+/// The first 4 KiB of a file, if it can be read.
+fn read_head(path: &Path) -> Option<Vec<u8>> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(4096).read_to_end(&mut head))
+        .ok()?;
+    Some(head)
+}
+
+/// The absolute form of `path` for a message (the path as given where that fails).
+pub(crate) fn shown_absolute(path: &Path) -> PathBuf {
+    std::path::absolute(path).unwrap_or_else(|_| path.to_owned())
 }
 
 /// A Lambertian material.
@@ -200,32 +312,36 @@ pub struct MissingTexture {
 pub struct LoadNotes {
     /// Textures that could not be read, in file order.
     pub missing_textures: Vec<MissingTexture>,
+    /// Other things the loader went on past, each a whole warning naming its file and line:
+    /// an OBJ material library that cannot be read (its materials load as the default
+    /// grey), OBJ vertex positions that are not finite (the triangles using them are
+    /// dropped and counted).
+    pub file_warnings: Vec<String>,
 }
 
 impl LoadNotes {
-    /// One warning line per missing texture, naming the scene file, the image and the
-    /// material, for the commands to print.
+    /// The [`LoadNotes::file_warnings`], then one warning line per missing texture, naming
+    /// the scene file, the image and the material, for the commands to print.
     #[must_use]
     pub fn warnings(&self, scene: &Path) -> Vec<String> {
-        self.missing_textures
-            .iter()
-            .map(|m| {
-                let used = if m.material.is_empty() {
-                    "used by no material".to_owned()
-                } else {
-                    format!(
-                        "material '{}' uses its colour {:.3},{:.3},{:.3} instead",
-                        m.material, m.fallback[0], m.fallback[1], m.fallback[2]
-                    )
-                };
+        let files = self.file_warnings.iter().cloned();
+        let textures = self.missing_textures.iter().map(|m| {
+            let used = if m.material.is_empty() {
+                "used by no material".to_owned()
+            } else {
                 format!(
-                    "{}: texture {} cannot be read ({}); {used}",
-                    scene.display(),
-                    m.file,
-                    m.message
+                    "material '{}' uses its colour {:.3},{:.3},{:.3} instead",
+                    m.material, m.fallback[0], m.fallback[1], m.fallback[2]
                 )
-            })
-            .collect()
+            };
+            format!(
+                "{}: texture {} cannot be read ({}); {used}",
+                scene.display(),
+                m.file,
+                m.message
+            )
+        });
+        files.chain(textures).collect()
     }
 }
 
@@ -431,19 +547,51 @@ impl Scene {
         textures: TextureOptions,
         notes: &mut LoadNotes,
     ) -> Result<Scene, SceneError> {
+        const ACCEPTED: &str = "guidebake reads .gltf, .glb, .obj and .toml scene files";
+        let not_a_scene = |message: String| SceneError::NotAScene {
+            path: path.to_owned(),
+            message,
+        };
+        if path.is_dir() {
+            return Err(not_a_scene(format!(
+                "is a directory, not a scene file; {ACCEPTED}"
+            )));
+        }
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
+        if !matches!(ext.as_deref(), Some("gltf" | "glb" | "obj" | "toml")) {
+            let named = match path.extension() {
+                Some(e) => format!(" \".{}\"", e.to_string_lossy()),
+                None => " (the file name has no extension)".to_owned(),
+            };
+            let seen = read_head(path)
+                .as_deref()
+                .and_then(looks_like)
+                .map(|kind| format!(" (it looks like {kind}; rename it to match)"))
+                .unwrap_or_default();
+            return Err(SceneError::UnknownFormat {
+                path: path.to_owned(),
+                detail: format!("{named}{seen}"),
+            });
+        }
+        match std::fs::metadata(path) {
+            Ok(m) if m.len() == 0 => {
+                return Err(not_a_scene(format!("is empty (0 bytes); {ACCEPTED}")));
+            }
+            Ok(_) => {}
+            Err(error) => {
+                return Err(SceneError::Io {
+                    path: path.to_owned(),
+                    error,
+                });
+            }
+        }
         let scene = match ext.as_deref() {
             Some("gltf" | "glb") => gltf::load(path, textures, notes)?,
             Some("obj") => obj::load(path, textures, notes)?,
-            Some("toml") => SceneFile::load_noting(path, textures, notes)?,
-            _ => {
-                return Err(SceneError::UnknownFormat {
-                    path: path.to_owned(),
-                });
-            }
+            _ => SceneFile::load_noting(path, textures, notes)?,
         };
         if scene.triangles.is_empty() {
             return Err(SceneError::Empty {
@@ -755,6 +903,49 @@ impl Fnv {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The command line prints an error and then each `source()` as "caused by": an error
+    /// whose message already holds its cause's text must not return it as its source too.
+    #[test]
+    fn no_scene_error_says_its_cause_twice() {
+        use std::error::Error as _;
+        let path = PathBuf::from("level.obj");
+        let io = || std::io::Error::new(std::io::ErrorKind::NotFound, "gone");
+        for e in [
+            SceneError::Io {
+                path: path.clone(),
+                error: io(),
+            },
+            SceneError::Gltf {
+                path: path.clone(),
+                error: ::gltf::Error::Io(io()),
+            },
+            SceneError::Obj {
+                path: path.clone(),
+                error: tobj::LoadError::ReadError,
+            },
+        ] {
+            let cause = match &e {
+                SceneError::Io { error, .. } => error.to_string(),
+                SceneError::Gltf { error, .. } => error.to_string(),
+                SceneError::Obj { error, .. } => error.to_string(),
+                _ => unreachable!(),
+            };
+            assert!(e.to_string().contains(&cause), "{e}");
+            assert!(e.source().is_none(), "{e} also has a source");
+        }
+    }
+
+    #[test]
+    fn text_positions_count_lines_and_characters_from_one() {
+        let text = "a = 1\nb = \"é\" x\n";
+        let at = |offset| TextPos::of_offset(text, offset).to_string();
+        assert_eq!(at(0), "1:1");
+        assert_eq!(at(6), "2:1");
+        // After the two-byte é: column 8 in characters, not 9 in bytes.
+        assert_eq!(at(text.find(" x").unwrap()), "2:8");
+        assert_eq!(at(usize::MAX), "3:1");
+    }
 
     #[test]
     fn degenerate_triangles_are_dropped_and_counted() {

@@ -145,41 +145,97 @@ impl SceneFile {
         textures: super::TextureOptions,
         notes: &mut LoadNotes,
     ) -> Result<Scene, SceneError> {
-        let bad = |message: String| SceneError::SceneFile {
-            path: path.to_owned(),
-            message,
+        let at = |span: Option<std::ops::Range<usize>>, text: &str| {
+            span.map(|s| TextPos::of_offset(text, s.start))
         };
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        let bytes = std::fs::read(path).map_err(|error| SceneError::Io {
             path: path.to_owned(),
-            source,
+            error,
         })?;
-        let file: SceneFile = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        if let Some(kind) = looks_like(&bytes) {
+            return Err(SceneError::NotAScene {
+                path: path.to_owned(),
+                message: format!(
+                    "looks like {kind}, not a TOML scene file (a scene file names its \
+                     geometry: geometry = \"level.glb\"; docs/levels.md)"
+                ),
+            });
+        }
+        let text = String::from_utf8(bytes).map_err(|e| SceneError::SceneFile {
+            path: path.to_owned(),
+            at: Some(TextPos::of_offset(
+                &String::from_utf8_lossy(&e.as_bytes()[..e.utf8_error().valid_up_to()]),
+                usize::MAX,
+            )),
+            message: "not UTF-8 text (a TOML scene file is UTF-8)".into(),
+        })?;
+        let located =
+            |span: Option<std::ops::Range<usize>>, message: String| SceneError::SceneFile {
+                path: path.to_owned(),
+                at: at(span, &text),
+                message,
+            };
+        let file: SceneFile = toml::from_str(&text)
+            .map_err(|e| located(e.span(), e.message().trim_end().to_owned()))?;
+        // Where each part is, for the messages about its values (parses: the file did).
+        let spans: Spans = toml::from_str(&text)
+            .map_err(|e| located(e.span(), e.message().trim_end().to_owned()))?;
         let dir = path.parent().unwrap_or(Path::new("."));
         let geometry = dir.join(&file.geometry);
+        let geometry_at = Some(spans.geometry.span());
         if geometry
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
         {
-            return Err(bad(
+            return Err(located(
+                geometry_at,
                 "geometry must be .gltf, .glb or .obj, not another scene file".into(),
             ));
         }
-        let mut scene = Scene::load_noting(&geometry, textures, notes)?;
+        let mut scene = match Scene::load_noting(&geometry, textures, notes) {
+            Ok(scene) => scene,
+            // Which line names a file that is not there: the geometry's own errors name it.
+            Err(SceneError::Io { error, .. }) => {
+                return Err(located(
+                    geometry_at,
+                    format!(
+                        "geometry {:?} cannot be read: {}: {error}",
+                        file.geometry.display().to_string(),
+                        shown_absolute(&geometry).display()
+                    ),
+                ));
+            }
+            Err(e) => return Err(e),
+        };
+        let span_of = |s: &Option<toml::Spanned<toml::Value>>| s.as_ref().map(toml::Spanned::span);
         if let Some(sun) = &file.sun {
-            scene.sun = Some(sun.to_sun().map_err(bad)?);
+            scene.sun = Some(sun.to_sun().map_err(|m| located(span_of(&spans.sun), m))?);
         }
-        for sphere in &file.sphere_light {
-            scene.lights.push(sphere.to_light().map_err(bad)?);
+        for (i, sphere) in file.sphere_light.iter().enumerate() {
+            let span = spans.sphere_light.get(i).map(toml::Spanned::span);
+            scene
+                .lights
+                .push(sphere.to_light().map_err(|m| located(span, m))?);
         }
         scene.sky = match &file.sky {
             None => Sky::None,
             Some(spec) => spec.to_sky(dir).map_err(|e| match e {
-                SkyError::Spec(message) => bad(message),
+                SkyError::Spec(message) => located(span_of(&spans.sky), message),
                 SkyError::Scene(e) => e,
             })?,
         };
         Ok(scene)
     }
+}
+
+/// Where the parts of a [`SceneFile`] are in its text, for messages about their values.
+#[derive(serde::Deserialize)]
+struct Spans {
+    geometry: toml::Spanned<toml::Value>,
+    sky: Option<toml::Spanned<toml::Value>>,
+    sun: Option<toml::Spanned<toml::Value>>,
+    #[serde(default)]
+    sphere_light: Vec<toml::Spanned<toml::Value>>,
 }
 
 /// Why a [`SkySpec`] gives no sky.
@@ -255,6 +311,7 @@ impl LightOverrides {
     pub fn apply(&self, scene: &mut Scene) -> Result<(), SceneError> {
         let bad = |flag: &str, message: String| SceneError::SceneFile {
             path: scene.path.clone(),
+            at: None,
             message: format!("{flag}: {message}"),
         };
         if let Some(sun) = &self.sun {
