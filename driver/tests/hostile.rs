@@ -273,6 +273,11 @@ fn prepare_synth_and_merge_refuse_outputs_over_inputs_and_each_other() {
         refused(d, 2, &args, expect);
     };
     refuse(prepare(&obj, &[]), &["would overwrite the scene"]);
+    // The files the scene is read from are inputs too: its material library.
+    refuse(
+        prepare(&d.join("level.mtl"), &[]),
+        &["would overwrite a file of the scene", "level.mtl"],
+    );
     refuse(
         prepare(&d.join("./level.obj"), &[]),
         &["would overwrite the scene"],

@@ -33,6 +33,16 @@ impl Files {
         self
     }
 
+    /// The command reads every one of `paths`, each as `what`: the files a scene was read
+    /// from (`LoadNotes::files_read`), checked again once the scene is loaded.
+    #[must_use]
+    pub fn reads_each(mut self, what: &str, paths: &[PathBuf]) -> Self {
+        for p in paths {
+            self.reads.push((what.to_owned(), p.clone()));
+        }
+        self
+    }
+
     /// The command writes the file `path`, as `what` (e.g. "the lightmap (-o)").
     #[must_use]
     pub fn writes(mut self, what: impl Into<String>, path: &Path) -> Self {

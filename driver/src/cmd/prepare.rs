@@ -68,7 +68,7 @@ pub fn load_lit_scene(
     }
     if warnings.len() > SHOWN {
         eprintln!(
-            "guidebake: warning: and {} more textures cannot be read ({} in all; listed in prepare --json and bake --stats)",
+            "guidebake: warning: and {} more warnings ({} in all; the textures are listed in prepare --json and bake --stats)",
             warnings.len() - SHOWN,
             warnings.len()
         );
@@ -183,6 +183,8 @@ pub fn run(args: &PrepareArgs) -> Result<(), super::CmdError> {
     };
     let (scene, notes) =
         load_lit_scene(&args.scene, TextureOptions::default(), &args.lights, true)?;
+    let files = files.reads_each("a file of the scene", &notes.files_read);
+    files.check()?;
     say(format!(
         "{}: {} triangles in {} meshes loaded",
         args.scene.display(),

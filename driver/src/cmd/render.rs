@@ -118,7 +118,11 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
     let textures = TextureOptions {
         max_size: args.max_texture_size,
     };
-    let (scene, _) = super::prepare::load_lit_scene(&args.scene, textures, &args.lights, false)?;
+    let (scene, notes) =
+        super::prepare::load_lit_scene(&args.scene, textures, &args.lights, false)?;
+    files
+        .reads_each("a file of the scene", &notes.files_read)
+        .check()?;
     let texels = TexelFile::open(&args.texels)?;
     let lightmap = Lightmap::load(&texels, &scene, &args.lightmap)?;
     let from_file = match args.camera {

@@ -10,6 +10,7 @@ pub(super) fn load(
     notes: &mut LoadNotes,
 ) -> Result<Scene, SceneError> {
     let (doc, buffers) = import(path)?;
+    notes.files_read.extend(files_named(path, &doc));
     let materials = read_materials(path, &doc, &buffers, textures, notes)?;
     let default_material = materials.len() as u32;
     let mut materials = materials;
@@ -26,6 +27,24 @@ pub(super) fn load(
         }
     }
     Ok(b.finish(materials, lights))
+}
+
+/// The files the document's buffers and images name by a relative URI, as resolved beside it.
+fn files_named(path: &Path, doc: &::gltf::Document) -> Vec<PathBuf> {
+    let base = path.parent().unwrap_or(Path::new("."));
+    let buffers = doc.buffers().filter_map(|b| match b.source() {
+        ::gltf::buffer::Source::Uri(uri) => Some(uri),
+        ::gltf::buffer::Source::Bin => None,
+    });
+    let images = doc.images().filter_map(|i| match i.source() {
+        ::gltf::image::Source::Uri { uri, .. } => Some(uri),
+        ::gltf::image::Source::View { .. } => None,
+    });
+    buffers
+        .chain(images)
+        .filter(|uri| !uri.contains(':'))
+        .filter_map(|uri| urlencoding::decode(uri).ok().map(|u| base.join(&*u)))
+        .collect()
 }
 
 /// The nodes of the document's scene (the default one, else the first) with their world

@@ -317,6 +317,10 @@ pub struct LoadNotes {
     /// grey), OBJ vertex positions that are not finite (the triangles using them are
     /// dropped and counted).
     pub file_warnings: Vec<String>,
+    /// Every file the scene was read from: the scene file, a scene file's geometry, OBJ
+    /// material libraries and textures, glTF buffers and images named by a relative URI.
+    /// The commands refuse to write over any of them (`cmd::files`).
+    pub files_read: Vec<PathBuf>,
 }
 
 impl LoadNotes {
@@ -547,6 +551,7 @@ impl Scene {
         textures: TextureOptions,
         notes: &mut LoadNotes,
     ) -> Result<Scene, SceneError> {
+        notes.files_read.push(path.to_owned());
         const ACCEPTED: &str = "guidebake reads .gltf, .glb, .obj and .toml scene files";
         let not_a_scene = |message: String| SceneError::NotAScene {
             path: path.to_owned(),

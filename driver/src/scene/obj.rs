@@ -32,7 +32,10 @@ pub(super) fn load(
     // named (its path as resolved and the `mtllib` line naming it) and the OBJ still loads,
     // its materials the default grey, as other tools do.
     let libraries = std::cell::RefCell::new(Vec::new());
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let read = std::cell::RefCell::new(Vec::new());
     let loaded = tobj::load_obj_buf(&mut &bytes[..], &opts, |name| {
+        read.borrow_mut().push(dir.join(name));
         let mut libraries = libraries.borrow_mut();
         let line = lint.mtllib_lines.get(libraries.len()).copied();
         match load_mtl(path, line, name) {
@@ -46,6 +49,7 @@ pub(super) fn load(
             }
         }
     });
+    notes.files_read.extend(read.into_inner());
     let failed: Vec<String> = libraries.into_inner().into_iter().flatten().collect();
     let (models, mtl) = loaded.map_err(|error| SceneError::Obj {
         path: path.to_owned(),
@@ -71,7 +75,6 @@ pub(super) fn load(
         }
     }
     notes.file_warnings.extend(failed);
-    let dir = path.parent().unwrap_or(Path::new("."));
     let mut materials: Vec<Material> = mtl
         .iter()
         .map(|m| read_material(path, m, dir, textures, notes))
@@ -434,6 +437,9 @@ fn read_material(
         .map_or(Vec3::splat(0.8), Vec3::from)
         .max(Vec3::ZERO);
     let mut albedo = kd;
+    if let Some(name) = &m.diffuse_texture {
+        notes.files_read.push(dir.join(name));
+    }
     let base_color_texture = match &m.diffuse_texture {
         Some(name) => match read_image(path, dir, name, options) {
             Ok(image) => {
