@@ -402,7 +402,7 @@ pub fn run_with_progress(
         let bar = indicatif::ProgressBar::new(0);
         bar.set_style(
             indicatif::ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} texels  {per_sec}  {msg}  ETA {eta}",
+                "{bar:40} {pos}/{len} texels  {msg}  ETA {eta}",
             )
             .expect("a valid template"),
         );
