@@ -65,8 +65,8 @@ impl TexelFile {
     /// [`Header::geometry`]), page table, triangle table and tile table — everything but the
     /// texel records, which `prepare` derives from those deterministically. A bake's work
     /// directory and its lightmap record it (docs/texels.md, "Identity"), so `--resume`,
-    /// `merge` and `render` refuse work made for another texel file. Computed once (about
-    /// 10 ms per million triangles).
+    /// `merge` and `render` refuse work made for another texel file. Computed once, on first
+    /// use.
     #[must_use]
     pub fn identity(&self) -> u64 {
         *self.identity.get_or_init(|| {
