@@ -357,6 +357,22 @@ fn resume_of_a_different_bake_names_each_difference() {
     );
     assert_eq!(snapshot(d), before);
 
+    // A manifest an older guidebake wrote records nothing to compare: a generic refusal.
+    let manifest = work.join("manifest.json");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json.as_object_mut().unwrap().remove("record").unwrap();
+    json["bake_id"] = serde_json::json!(1);
+    std::fs::write(&manifest, serde_json::to_string(&json).unwrap()).unwrap();
+    let mut args = bake_args(&texels, &scene, &out);
+    args.push("--resume");
+    let err = cli_fails(&args);
+    assert!(
+        err.contains("--resume of a different bake (an older guidebake made it"),
+        "{err}"
+    );
+    std::fs::write(&manifest, text).unwrap();
+
     // The same everything resumes and finishes.
     let mut args = bake_args(&texels, &scene, &out);
     args.push("--resume");

@@ -194,7 +194,11 @@ pub(super) fn open_work(
                 }
                 _ => Vec::new(),
             };
-            let what = if differences.is_empty() {
+            let what = if found.record.is_none() {
+                " (an older guidebake made it, and its manifest does not say what of: other \
+                 settings, texel file or scene)"
+                    .to_owned()
+            } else if differences.is_empty() {
                 " (other settings, texel file or scene)".to_owned()
             } else {
                 format!(": {}", differences.join("; "))

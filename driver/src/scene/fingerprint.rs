@@ -129,7 +129,7 @@ impl Scene {
         let n = self.triangles.len();
         if triangles != n {
             return Some(format!(
-                "a scene of {triangles} triangles, but {} has {n}",
+                "a scene of {triangles} triangles, but {} has {n} triangles",
                 self.path.display()
             ));
         }
