@@ -193,14 +193,21 @@ fn a_lightmap_of_another_texel_file_is_not_rendered_or_merged() {
     prepare(&scene, &second, "32x32");
     let lightmap = d.join("first.exr");
     cli_ok(&bake_args(&first, &scene, &lightmap));
-    let identity = read_identity(&lightmap).unwrap().expect("the page says what made it");
+    let identity = read_identity(&lightmap)
+        .unwrap()
+        .expect("the page says what made it");
     assert_eq!(
         identity.texels(),
         Some(TexelFile::open(&first).unwrap().identity())
     );
     assert_eq!(identity.get("texel file"), Some("first.texels"));
     assert!(identity.get("settings").unwrap().contains("--spp 8"));
-    assert!(identity.get("lights").unwrap().contains("--sun 0.3,1,0.2:3"));
+    assert!(
+        identity
+            .get("lights")
+            .unwrap()
+            .contains("--sun 0.3,1,0.2:3")
+    );
 
     let view = d.join("view.png");
     let render = |texels: &Path, lightmap: &Path| {
@@ -237,7 +244,9 @@ fn a_lightmap_of_another_texel_file_is_not_rendered_or_merged() {
     // A page an older guidebake wrote (no identity) is rendered, with a warning.
     let page = TexelFile::open(&first).unwrap().pages()[0];
     let old = d.join("old.exr");
-    PageImage::new(page.width, page.height).write_exr(&old).unwrap();
+    PageImage::new(page.width, page.height)
+        .write_exr(&old)
+        .unwrap();
     assert_eq!(read_identity(&old).unwrap(), None);
     let args = render(&first, &old);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -387,7 +396,11 @@ fn files_that_are_no_texel_files_say_what_they_are() {
     let exr = d.join("lightmap.exr");
     PageImage::new(4, 4).write_exr(&exr).unwrap();
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
-        ("empty.texels", vec![], "this is an empty file, not a texel file"),
+        (
+            "empty.texels",
+            vec![],
+            "this is an empty file, not a texel file",
+        ),
         (
             "scene.glb",
             b"glTF\x02\0\0\0\x40\0\0\0".to_vec(),
@@ -451,7 +464,8 @@ fn files_that_are_no_texel_files_say_what_they_are() {
     );
     let text = e.to_string();
     assert!(
-        text.contains("made by an older guidebake") && text.contains("run `guidebake prepare` again"),
+        text.contains("made by an older guidebake")
+            && text.contains("run `guidebake prepare` again"),
         "{text}"
     );
     let out = d.join("out.exr");

@@ -995,10 +995,10 @@ fn check_texels(dir: &Path, manifest: &Manifest, texels: &TexelFile) -> Result<(
 /// What made the lightmap, for its pages' headers: the texel file (its identity and name),
 /// the scene's fingerprints, the lights and the settings the shards' `manifest` records.
 fn lightmap_identity(texels: &TexelFile, manifest: &Manifest) -> LightmapIdentity {
-    let name = texels
-        .path()
-        .file_name()
-        .map_or_else(|| texels.path().display().to_string(), |n| n.to_string_lossy().into_owned());
+    let name = texels.path().file_name().map_or_else(
+        || texels.path().display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
     let mut identity = LightmapIdentity::default()
         .with(TEXELS_KEY, &format!("{:016x}", texels.identity()))
         .with(TEXEL_FILE_KEY, &name)

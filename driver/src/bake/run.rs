@@ -34,8 +34,8 @@ use super::pipeline::{self, PipelineConfig, TileBuffer, TileFiles};
 use super::settings::{BakeSettings, Budget, Combine, DIRECT_PASS, Directional, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::workdir::{
-    BakeRecord, Manifest, merged_results, open_batches, open_directional, open_pass, open_work, pass_files,
-    pass_image, retire_work, work_dir,
+    BakeRecord, Manifest, merged_results, open_batches, open_directional, open_pass, open_work,
+    pass_files, pass_image, retire_work, work_dir,
 };
 use super::world::World;
 use crate::bvh::Preset;
@@ -158,7 +158,13 @@ fn record_id(record: &BakeRecord) -> u64 {
         lights: _,
         version: _,
     } = record;
-    fnv1a64(format!("{texels} {geometry} {materials} {lighting} aux {}", options["--aux"]).as_bytes())
+    fnv1a64(
+        format!(
+            "{texels} {geometry} {materials} {lighting} aux {}",
+            options["--aux"]
+        )
+        .as_bytes(),
+    )
 }
 
 /// How far a bake is, as [`bake_with_progress`] reports it after every tile.

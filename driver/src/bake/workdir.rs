@@ -84,7 +84,12 @@ impl BakeRecord {
     /// What differs from `earlier` (a bake of the texel file `earlier_texels`) to this one
     /// (of `texels`), one phrase each: `--spp was 256, now 64`.
     #[must_use]
-    pub fn differences(&self, earlier: &BakeRecord, earlier_texels: &Path, texels: &Path) -> Vec<String> {
+    pub fn differences(
+        &self,
+        earlier: &BakeRecord,
+        earlier_texels: &Path,
+        texels: &Path,
+    ) -> Vec<String> {
         let mut out = Vec::new();
         let changed = |a: &BTreeMap<String, String>, b: &BTreeMap<String, String>| {
             let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
@@ -92,7 +97,8 @@ impl BakeRecord {
                 .filter_map(|k| {
                     let (was, now) = (a.get(k), b.get(k));
                     (was != now).then(|| {
-                        let show = |v: Option<&String>| v.map_or("not set", |v| v.as_str()).to_owned();
+                        let show =
+                            |v: Option<&String>| v.map_or("not set", |v| v.as_str()).to_owned();
                         format!("{k} was {}, now {}", show(was), show(now))
                     })
                 })

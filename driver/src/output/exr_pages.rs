@@ -1077,9 +1077,8 @@ impl LightmapIdentity {
         attributes
             .other
             .insert(Text::from(IDENTITY_ATTRIBUTE), AttributeValue::Text(text));
-        attributes.software_name = Some(Text::from(
-            concat!("guidebake ", env!("CARGO_PKG_VERSION")),
-        ));
+        attributes.software_name =
+            Some(Text::from(concat!("guidebake ", env!("CARGO_PKG_VERSION"))));
     }
 }
 

@@ -156,7 +156,11 @@ impl Scene {
                 None => h.word(0),
                 Some(t) => {
                     let (w, hgt) = t.image.size();
-                    h.word(1).word(w).word(hgt).vec3(t.factor).vec3(t.image.average());
+                    h.word(1)
+                        .word(w)
+                        .word(hgt)
+                        .vec3(t.factor)
+                        .vec3(t.image.average());
                     h.bytes(format!("{:?}", t.wrap).as_bytes());
                     for i in 0..64u32 {
                         let uv = Vec2::new(
@@ -286,7 +290,11 @@ fn num(x: f32) -> String {
     } else {
         &s
     };
-    if s == "-0" { "0".to_owned() } else { s.to_owned() }
+    if s == "-0" {
+        "0".to_owned()
+    } else {
+        s.to_owned()
+    }
 }
 
 fn triple(v: Vec3) -> String {

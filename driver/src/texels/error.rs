@@ -234,7 +234,9 @@ pub fn what_file_is(head: &[u8]) -> Option<FileKind> {
             .map(str::trim)
             .filter(|l| !l.is_empty() && !l.starts_with('#'))
     };
-    let obj = ["v ", "vt ", "vn ", "f ", "o ", "g ", "s ", "mtllib ", "usemtl "];
+    let obj = [
+        "v ", "vt ", "vn ", "f ", "o ", "g ", "s ", "mtllib ", "usemtl ",
+    ];
     if lines().next().is_some()
         && lines()
             .take(8)
@@ -247,8 +249,7 @@ pub fn what_file_is(head: &[u8]) -> Option<FileKind> {
             || l.split_once('=').is_some_and(|(k, _)| {
                 let k = k.trim();
                 !k.is_empty()
-                    && k
-                        .chars()
+                    && k.chars()
                         .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
             })
     };
@@ -271,9 +272,9 @@ fn not_a_texel_file(path: &Path, found: &[u8; 8], kind: Option<FileKind>) -> Str
              baked from, or {make}"
         ),
         Some(k) => format!("this is {}, not a texel file: {make}", k.name()),
-        None => format!(
-            "offset 0: not a texel file (magic {found:?}, expected \"GBTEXELS\"): {make}"
-        ),
+        None => {
+            format!("offset 0: not a texel file (magic {found:?}, expected \"GBTEXELS\"): {make}")
+        }
     }
 }
 
