@@ -347,7 +347,8 @@ impl Lightmap {
     ///
     /// # Errors
     /// [`RenderError`] naming the file: the scene is not the texel file's, a page is missing,
-    /// unreadable, of another size or without R, G, B channels.
+    /// unreadable, baked for another texel file (the identity in its header; a page without
+    /// one is read with a warning on stderr), of another size or without R, G, B channels.
     pub fn load(texels: &TexelFile, scene: &Scene, out: &Path) -> Result<Self, RenderError> {
         check_scene_matches(texels, scene)?;
         let pages = texels.pages();
@@ -477,7 +478,8 @@ impl<'s> Stage<'s> {
     ///
     /// # Errors
     /// [`RenderError::Bvh`] for a non-finite vertex; [`RenderError::Scene`] when `texels`
-    /// was prepared from a scene of another triangle count.
+    /// was prepared from a scene of other geometry (another triangle count, or other
+    /// positions).
     pub fn new(scene: &'s Scene, texels: &TexelFile) -> Result<Self, RenderError> {
         check_scene_matches(texels, scene)?;
         // The tree for the rays of a full-HD view or two ([`Preset::for_rays`]).

@@ -4,9 +4,10 @@
 //! A run works in a *work directory* beside its output (`OUT.exr.bake/`, or
 //! `OUT.exr.shard-I-of-N/` for `--shard I/N`) holding the [result
 //! file](crate::output::result_file), the [journal](crate::output::journal) and a
-//! `manifest.json` naming the texel file, the settings and the shard. An unsharded run that
-//! finishes applies ρ and writes the pages ([`finish`]), then removes its work directory; a
-//! shard leaves its work directory for `guidebake merge`. An interrupted run leaves it for
+//! `manifest.json` naming the texel file, the settings and the shard, and recording what the
+//! bake is made of ([`BakeRecord`]: `--resume` of a bake that differs names each difference).
+//! An unsharded run that finishes applies ρ and writes the pages ([`finish`]), then removes
+//! its work directory; a shard leaves its work directory for `guidebake merge`. An interrupted run leaves it for
 //! `--resume`. A work directory is never overwritten without `--resume`: nothing baked is
 //! lost by a repeated command.
 //!
