@@ -532,6 +532,7 @@ fn rasterise(
     let triangles = triangle_records(scene, meshes, visibility.sides());
     let mut w = TexelWriter::create(out, pages, &triangles, tpu)?;
     w.set_lighting(scene.lighting_fingerprint());
+    w.set_geometry(scene.geometry_fingerprint());
     let mut report = PrepareReport {
         texels: 0,
         partial_texels: 0,

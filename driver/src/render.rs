@@ -42,6 +42,7 @@ use rayon::prelude::*;
 
 use crate::bvh::{Bvh, BvhError, Preset};
 use crate::output::exr_pages::page_path;
+use crate::output::exr_pages::{TEXEL_FILE_KEY, read_identity};
 use crate::output::readback::read_page;
 use crate::scene::Scene;
 use crate::texels::{TexelFile, TriangleRecord};
@@ -346,7 +347,8 @@ impl Lightmap {
     ///
     /// # Errors
     /// [`RenderError`] naming the file: the scene is not the texel file's, a page is missing,
-    /// unreadable, of another size or without R, G, B channels.
+    /// unreadable, baked for another texel file (the identity in its header; a page without
+    /// one is read with a warning on stderr), of another size or without R, G, B channels.
     pub fn load(texels: &TexelFile, scene: &Scene, out: &Path) -> Result<Self, RenderError> {
         check_scene_matches(texels, scene)?;
         let pages = texels.pages();
@@ -366,6 +368,9 @@ impl Lightmap {
         let mut images = Vec::with_capacity(pages.len());
         for (p, (size, covered)) in pages.iter().zip(covered).enumerate() {
             let path = page_path(out, p as u32, pages.len() as u32);
+            if path.is_file() {
+                check_lightmap_texels(&path, texels)?;
+            }
             let rgb = read_rgb(&path, size.width as usize, size.height as usize)?;
             images.push(
                 rgb.into_iter()
@@ -385,20 +390,50 @@ impl Lightmap {
     }
 }
 
-/// The texel file must have been prepared from `scene`: the same triangle count.
+/// The texel file must have been prepared from `scene`: the same triangles at the same
+/// positions ([`Scene::geometry_fingerprint`], recorded in its header).
 fn check_scene_matches(texels: &TexelFile, scene: &Scene) -> Result<(), RenderError> {
-    let expected = texels.header().triangle_count as usize;
-    if expected != scene.triangles.len() {
-        return Err(RenderError::Scene {
-            path: scene.path.clone(),
+    let header = texels.header();
+    match scene.geometry_differs(header.triangle_count as usize, header.geometry) {
+        None => Ok(()),
+        Some(what) => Err(RenderError::Scene {
+            path: texels.path().to_owned(),
             what: format!(
-                "has {} triangles, but the texel file {} was prepared from a scene of {expected}",
-                scene.triangles.len(),
-                texels.path().display()
+                "the texel file was prepared from {what}; give the scene it was prepared from \
+                 (or prepare and bake it again)"
             ),
-        });
+        }),
     }
-    Ok(())
+}
+
+/// The lightmap page at `path` must have been baked for `texels`: the texel file identity in
+/// its header ([`LightmapIdentity`]) is `texels`'. A page without one (an older guidebake's)
+/// is read with a warning on stderr.
+fn check_lightmap_texels(path: &Path, texels: &TexelFile) -> Result<(), RenderError> {
+    let fail = |what: String| RenderError::Lightmap {
+        path: path.to_owned(),
+        what,
+    };
+    let Some(identity) = read_identity(path).map_err(fail)? else {
+        eprintln!(
+            "warning: {}: the lightmap does not record the texel file it was baked for (an older \
+             guidebake wrote it); rendering it with {} unchecked",
+            path.display(),
+            texels.path().display()
+        );
+        return Ok(());
+    };
+    let given = texels.identity();
+    match identity.texels() {
+        Some(made_for) if made_for == given => Ok(()),
+        made_for => Err(fail(format!(
+            "the lightmap was baked for the texel file {} (identity {}), not {} (identity \
+             {given:016x}): render it with the texel file it was baked for, or bake this one",
+            identity.get(TEXEL_FILE_KEY).unwrap_or("(not named)"),
+            made_for.map_or_else(|| "unreadable".to_owned(), |id| format!("{id:016x}")),
+            texels.path().display()
+        ))),
+    }
 }
 
 /// The R, G, B channels of an EXR page of `width` × `height`, checked.
@@ -443,7 +478,8 @@ impl<'s> Stage<'s> {
     ///
     /// # Errors
     /// [`RenderError::Bvh`] for a non-finite vertex; [`RenderError::Scene`] when `texels`
-    /// was prepared from a scene of another triangle count.
+    /// was prepared from a scene of other geometry (another triangle count, or other
+    /// positions).
     pub fn new(scene: &'s Scene, texels: &TexelFile) -> Result<Self, RenderError> {
         check_scene_matches(texels, scene)?;
         // The tree for the rays of a full-HD view or two ([`Preset::for_rays`]).

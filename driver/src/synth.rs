@@ -43,6 +43,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
 
+use crate::scene::fingerprint::GeometryFingerprint;
 use crate::texels::{
     FLAG_VALID, PageRecord, SEEN_FRONT, TILE_SIZE, TexelFileError, TexelRecord, TexelWriter,
     TileRect, TriangleRecord,
@@ -408,7 +409,7 @@ pub fn synth_with(n: u64, out: &Path, options: &SynthOptions) -> Result<SynthRep
     let city_triangles = first;
     let geometry = out.with_extension("glb");
     let scene = out.with_extension("toml");
-    let triangles = write_glb(&geometry, &placed, pages, &lit)?;
+    let (triangles, geometry_fingerprint) = write_glb(&geometry, &placed, pages, &lit)?;
     debug_assert_eq!(
         triangles.len(),
         (city_triangles + 2 * lit.len() as u32) as usize
@@ -422,6 +423,7 @@ pub fn synth_with(n: u64, out: &Path, options: &SynthOptions) -> Result<SynthRep
         pages as usize
     ];
     let mut w = TexelWriter::create(out, &page_records, &triangles, d as f32)?;
+    w.set_geometry(geometry_fingerprint);
     let mut buf = Vec::with_capacity((TILE_SIZE * TILE_SIZE) as usize);
     let mut tiles = 0u64;
     for p in &placed {
@@ -503,8 +505,11 @@ fn write_glb(
     placed: &[Placed],
     pages: u32,
     windows: &[Window],
-) -> Result<Vec<TriangleRecord>, SynthError> {
+) -> Result<(Vec<TriangleRecord>, u64), SynthError> {
     use serde_json::json;
+    // The scene's geometry fingerprint, as `Scene::load` of the file will compute it: the
+    // triangles in primitive order, each by its corners.
+    let mut fingerprint = GeometryFingerprint::default();
     let mut bin: Vec<u8> = Vec::new();
     let (mut views, mut accessors, mut meshes, mut nodes, mut records) =
         (vec![], vec![], vec![], vec![], vec![]);
@@ -575,6 +580,9 @@ fn write_glb(
                 }
             }
         }
+        for t in idx.chunks_exact(3) {
+            fingerprint.push(&[pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]]);
+        }
         let a0 = push_geometry(&mut bin, &pos, &nrm, Some(&uv), &idx);
         meshes.push(json!({"name": format!("city_page{page}"), "primitives": [{
             "attributes": {"POSITION": a0, "NORMAL": a0 + 1, "TEXCOORD_1": a0 + 2},
@@ -614,6 +622,9 @@ fn write_glb(
             if pos.is_empty() {
                 continue;
             }
+            for t in idx.chunks_exact(3) {
+                fingerprint.push(&[pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]]);
+            }
             let a0 = push_geometry(&mut bin, &pos, &nrm, None, &idx);
             primitives.push(json!({"attributes": {"POSITION": a0, "NORMAL": a0 + 1},
                 "indices": a0 + 2, "material": 1 + class, "mode": 4}));
@@ -652,7 +663,7 @@ fn write_glb(
     let jh = [(json.len() as u32).to_le_bytes(), *b"JSON"].concat();
     let bh = [(bin.len() as u32).to_le_bytes(), *b"BIN\0"].concat();
     write_atomically(path, &[&header, &jh, &json, &bh, &bin])?;
-    Ok(records)
+    Ok((records, fingerprint.finish()))
 }
 
 fn write_scene_file(path: &Path, geometry: &Path, night: bool) -> Result<(), SynthError> {

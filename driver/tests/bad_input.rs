@@ -117,7 +117,7 @@ fn bad_texel_files_are_clear_errors() {
                 matches!(
                     e,
                     TexelFileError::Truncated {
-                        needed: 128,
+                        needed: 192,
                         actual: 50,
                         ..
                     }

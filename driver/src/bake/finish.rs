@@ -14,7 +14,9 @@ use super::workdir::{
 };
 use crate::output::atomic::temporary_name;
 use crate::output::denoise::{ATrous, Denoiser, NoisyTexel, Window};
-use crate::output::exr_pages::{PageStream, page_path};
+use crate::output::exr_pages::{
+    LightmapIdentity, PageStream, TEXEL_FILE_KEY, TEXELS_KEY, page_path,
+};
 use crate::output::journal::{Journal, TileRecord, dedup_tiles, rho_sums};
 use crate::output::result_file::{BatchFile, FLAG_BAKED, ResultFile, TexelResult};
 use crate::output::seams::{
@@ -168,6 +170,7 @@ pub fn finish_filtered(
         Seams::Off => None,
     };
     let mut pending = Vec::new();
+    let identity = lightmap_identity(texels, first);
     let page_count = texels.pages().len() as u32;
     for (page, size) in texels.pages().iter().enumerate() {
         let path = page_path(out, page as u32, page_count);
@@ -191,6 +194,7 @@ pub fn finish_filtered(
             &aux,
             dilated,
         )?;
+        image.set_identity(identity.clone());
         let grid = filter.map(|_| TileGrid::new(texels, page as u32));
         // The tiles' values are read and denoised in parallel, a few per thread at a time
         // (each from the merged results alone), then written in file order by this thread:
@@ -966,6 +970,60 @@ fn global_weights(
     Ok(g)
 }
 
+/// The work directory `dir` (its `manifest`) must be a bake of `texels`: the texel file
+/// identity its manifest records ([`BakeRecord::texels`](super::workdir::BakeRecord::texels))
+/// is `texels`' (a manifest of an older guidebake records none: its result files' texel count
+/// is all that is checked).
+fn check_texels(dir: &Path, manifest: &Manifest, texels: &TexelFile) -> Result<(), BakeError> {
+    let Some(record) = &manifest.record else {
+        return Ok(());
+    };
+    let given = format!("{:016x}", texels.identity());
+    if record.texels == given {
+        return Ok(());
+    }
+    Err(BakeError::Mismatch(format!(
+        "{}: baked for the texel file {} (identity {}), not {} (identity {given}): give the texel \
+         file it was baked from",
+        dir.display(),
+        manifest.texels.display(),
+        record.texels,
+        texels.path().display()
+    )))
+}
+
+/// What made the lightmap, for its pages' headers: the texel file (its identity and name),
+/// the scene's fingerprints, the lights and the settings the shards' `manifest` records.
+fn lightmap_identity(texels: &TexelFile, manifest: &Manifest) -> LightmapIdentity {
+    let name = texels.path().file_name().map_or_else(
+        || texels.path().display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    let mut identity = LightmapIdentity::default()
+        .with(TEXELS_KEY, &format!("{:016x}", texels.identity()))
+        .with(TEXEL_FILE_KEY, &name)
+        .with("geometry", &format!("{:016x}", texels.header().geometry));
+    identity = match &manifest.record {
+        Some(record) => {
+            let join = |m: &std::collections::BTreeMap<String, String>| {
+                m.iter()
+                    .map(|(k, v)| format!("{k} {v}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            identity
+                .with("materials", &record.materials)
+                .with(
+                    "lights",
+                    &format!("{} ({})", record.lighting, join(&record.lights)),
+                )
+                .with("settings", &join(&record.options))
+        }
+        None => identity.with("settings", &manifest.settings),
+    };
+    identity.with("guidebake", env!("CARGO_PKG_VERSION"))
+}
+
 /// One shard's finished work, opened for the final pass.
 struct ShardWork {
     manifest: Manifest,
@@ -986,6 +1044,7 @@ fn open_shards(
     let mut shards = Vec::new();
     for dir in dirs {
         let manifest = read_manifest(&dir.join("manifest.json"))?;
+        check_texels(dir, &manifest, texels)?;
         let (results_path, journal_path) = pass_files(dir, pass.unwrap_or(manifest.passes));
         let (results, _) = ResultFile::open(
             &results_path,

@@ -4,9 +4,10 @@
 //! A run works in a *work directory* beside its output (`OUT.exr.bake/`, or
 //! `OUT.exr.shard-I-of-N/` for `--shard I/N`) holding the [result
 //! file](crate::output::result_file), the [journal](crate::output::journal) and a
-//! `manifest.json` naming the texel file, the settings and the shard. An unsharded run that
-//! finishes applies ρ and writes the pages ([`finish`]), then removes its work directory; a
-//! shard leaves its work directory for `guidebake merge`. An interrupted run leaves it for
+//! `manifest.json` naming the texel file, the settings and the shard, and recording what the
+//! bake is made of ([`BakeRecord`]: `--resume` of a bake that differs names each difference).
+//! An unsharded run that finishes applies ρ and writes the pages ([`finish`]), then removes
+//! its work directory; a shard leaves its work directory for `guidebake merge`. An interrupted run leaves it for
 //! `--resume`. A work directory is never overwritten without `--resume`: nothing baked is
 //! lost by a repeated command.
 //!
@@ -34,8 +35,8 @@ use super::pipeline::{self, PipelineConfig, TileBuffer, TileFiles};
 use super::settings::{BakeSettings, Budget, Combine, DIRECT_PASS, Directional, SettingsError};
 use super::shard::{Shard, tiles_to_bake};
 use super::workdir::{
-    Manifest, merged_results, open_batches, open_directional, open_pass, open_work, pass_files,
-    pass_image, retire_work, work_dir,
+    BakeRecord, Manifest, merged_results, open_batches, open_directional, open_pass, open_work,
+    pass_files, pass_image, retire_work, work_dir,
 };
 use super::world::World;
 use crate::bvh::Preset;
@@ -125,9 +126,46 @@ pub struct PhaseSeconds {
     pub write_pages: f64,
 }
 
-/// Identity of a texel file: a hash of its header (sizes, counts, bounds, offsets).
-fn texel_file_id(texels: &TexelFile) -> u64 {
-    fnv1a64(bytemuck::bytes_of(texels.header()))
+/// What the bake is made of besides its settings ([`BakeRecord`]): the texel file, the
+/// scene's geometry, materials and lights, and `--aux`.
+fn bake_record(job: &BakeJob, texels: &TexelFile, scene: &Scene) -> BakeRecord {
+    let mut options = job.settings.options();
+    options.insert("--aux".into(), if job.aux { "on" } else { "off" }.into());
+    BakeRecord {
+        options,
+        texels: format!("{:016x}", texels.identity()),
+        geometry: format!("{:016x}", scene.geometry_fingerprint()),
+        materials: format!("{:016x}", scene.materials_fingerprint()),
+        lighting: format!("{:016x}", scene.lighting_fingerprint()),
+        lights: scene
+            .light_entries()
+            .into_iter()
+            .map(|(k, v)| (k.to_owned(), v))
+            .collect(),
+        version: env!("CARGO_PKG_VERSION").to_owned(),
+    }
+}
+
+/// The identity the bake's settings are combined with ([`BakeSettings::bake_id`]): the
+/// record's every field but the version, so a bake of any other texel file, geometry,
+/// materials, lights or `--aux` is another bake.
+fn record_id(record: &BakeRecord) -> u64 {
+    let BakeRecord {
+        options,
+        texels,
+        geometry,
+        materials,
+        lighting,
+        lights: _,
+        version: _,
+    } = record;
+    fnv1a64(
+        format!(
+            "{texels} {geometry} {materials} {lighting} aux {}",
+            options["--aux"]
+        )
+        .as_bytes(),
+    )
 }
 
 /// How far a bake is, as [`bake_with_progress`] reports it after every tile.
@@ -209,7 +247,8 @@ pub fn bake_pass_with_progress(
     report.texture_bytes = scene.texture_bytes();
 
     let passes = job.settings.last_pass();
-    let bake_id = job.settings.bake_id(texel_file_id(&texels));
+    let record = bake_record(job, &texels, scene);
+    let bake_id = job.settings.bake_id(record_id(&record));
     let dir = work_dir(&job.out, job.shard);
     let manifest = Manifest {
         texels: std::path::absolute(&job.texels).unwrap_or_else(|_| job.texels.clone()),
@@ -225,6 +264,7 @@ pub fn bake_pass_with_progress(
         directional: job.settings.directional == Directional::ShL1,
         direct_apart: job.settings.lightmap_borrows_direct(),
         settings: format!("{:?}", job.settings),
+        record: Some(record),
     };
     open_work(&dir, &manifest, job.resume, only_pass)?;
     let pass_texels = shard_texels(&texels, job.shard);
@@ -685,18 +725,18 @@ pub fn lights_differ(header: &crate::texels::Header, scene: &Scene) -> bool {
     header.lighting != 0 && header.lighting != scene.lighting_fingerprint()
 }
 
-/// The texel file must have been prepared from `scene`: the same triangles. Their lightmap
-/// UVs come from the file's triangle table, so the scene's own UV sets (or their absence, on a
+/// The texel file must have been prepared from `scene`: the same triangles, at the same
+/// positions ([`Scene::geometry_fingerprint`], recorded in the header). Their lightmap UVs
+/// come from the file's triangle table, so the scene's own UV sets (or their absence, on a
 /// scene `prepare --unwrap` gave UVs) do not matter.
 fn check_scene_matches(texels: &TexelFile, scene: &Scene) -> Result<(), BakeError> {
-    let expected = texels.header().triangle_count as usize;
-    if expected != scene.triangles.len() {
-        return Err(BakeError::Mismatch(format!(
-            "{}: the texel file was prepared from a scene of {expected} triangles, but {} has {}",
+    let header = texels.header();
+    match scene.geometry_differs(header.triangle_count as usize, header.geometry) {
+        None => Ok(()),
+        Some(what) => Err(BakeError::Mismatch(format!(
+            "{}: the texel file was prepared from {what}; run `guidebake prepare` again or give \
+             the scene it was prepared from",
             texels.path().display(),
-            scene.path.display(),
-            scene.triangles.len()
-        )));
+        ))),
     }
-    Ok(())
 }

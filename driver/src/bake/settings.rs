@@ -1,6 +1,7 @@
 //! What a bake is asked to do: the options of `guidebake bake`, and the identity that lets
 //! `--resume` and `merge` refuse results of a different bake.
 
+use std::collections::BTreeMap;
 use std::fmt;
 
 use crate::output::fnv1a64;
@@ -760,9 +761,86 @@ impl BakeSettings {
     }
 
     /// Identity of a bake of `texel_file_id` with these settings (and [`BAKE_FORMAT`]: work
-    /// left by a bake of another layout is not resumed).
+    /// left by a bake of another layout is not resumed). A bake passes the identity of
+    /// everything else that changes its bits here too: the texel file, the scene's geometry,
+    /// lights and materials ([`super::run`]).
     pub fn bake_id(&self, texel_file_id: u64) -> u64 {
         fnv1a64(format!("{self:?} {texel_file_id:016x} format {BAKE_FORMAT}").as_bytes())
+    }
+
+    /// The settings by the `guidebake bake` options that set them (`--spp` → `256`), every
+    /// field once: what a work directory's manifest records, so `--resume` names each setting
+    /// that differs ([`super::workdir`]). `--direct-spp` and `--lookup-spp` not given read
+    /// `default`; `--bias-correction` reads `on` or `off` as the bake applies it.
+    #[must_use]
+    pub fn options(&self) -> BTreeMap<String, String> {
+        fn name<T: clap::ValueEnum + fmt::Debug>(v: &T) -> String {
+            v.to_possible_value()
+                .map_or_else(|| format!("{v:?}"), |p| p.get_name().to_owned())
+        }
+        let BakeSettings {
+            spp,
+            iterations,
+            guiding,
+            combine,
+            bias_correction,
+            seed,
+            transport,
+            bounces,
+            mix,
+            schedule,
+            min_split,
+            smooth,
+            min_gain,
+            emitters,
+            emitter_selection,
+            directional,
+            guided_passes,
+            budget,
+            direct_spp,
+            lookup_spp,
+            lookup_filter,
+            guide_target,
+            target_error,
+            guide_seed,
+        } = self;
+        let or_default =
+            |v: &Option<u32>| v.map_or_else(|| "default".to_owned(), |n| n.to_string());
+        [
+            ("--spp", spp.to_string()),
+            ("--iterations", iterations.to_string()),
+            ("--guiding", name(guiding)),
+            ("--combine", name(combine)),
+            (
+                "--bias-correction",
+                if *bias_correction { "on" } else { "off" }.to_owned(),
+            ),
+            ("--seed", seed.to_string()),
+            ("--transport", name(transport)),
+            ("--bounces", bounces.to_string()),
+            ("--mix", mix.to_string()),
+            ("--schedule", name(schedule)),
+            ("--min-split", min_split.to_string()),
+            ("--smooth", smooth.to_string()),
+            ("--min-gain", min_gain.to_string()),
+            ("--emitters", name(emitters)),
+            ("--emitter-selection", name(emitter_selection)),
+            ("--directional", name(directional)),
+            ("--guided-passes", name(guided_passes)),
+            ("--budget", name(budget)),
+            ("--direct-spp", or_default(direct_spp)),
+            ("--lookup-spp", or_default(lookup_spp)),
+            ("--lookup-filter", lookup_filter.to_string()),
+            ("--guide-target", name(guide_target)),
+            (
+                "--target-error",
+                target_error.map_or_else(|| "none".to_owned(), |e| e.to_string()),
+            ),
+            ("--guide-seed", name(guide_seed)),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_owned(), v))
+        .collect()
     }
 }
 
@@ -1306,6 +1384,28 @@ mod tests {
         assert!(!path.borrows_direct(1));
         assert!((1..=3).all(|pass| last.borrows_direct(pass)));
         assert!(!last.borrows_direct(0));
+    }
+
+    #[test]
+    fn every_setting_is_named_by_its_option() {
+        let a = BakeSettings::default();
+        let options = a.options();
+        assert_eq!(options.len(), 24, "{options:?}");
+        assert_eq!(options["--spp"], "256");
+        assert_eq!(options["--guiding"], "coherent");
+        assert_eq!(options["--direct-spp"], "default");
+        let b = BakeSettings {
+            spp: 64,
+            seed: 3,
+            ..a
+        };
+        let differ: Vec<_> = b
+            .options()
+            .into_iter()
+            .filter(|(k, v)| options[k] != *v)
+            .map(|(k, _)| k)
+            .collect();
+        assert_eq!(differ, ["--seed", "--spp"]);
     }
 
     #[test]

@@ -2,6 +2,7 @@
 //! its manifest and the per-pass result files and journals, every file name spelled once.
 //! The life of a work directory is described in [`super::run`].
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -50,6 +51,93 @@ pub struct Manifest {
     pub direct_apart: bool,
     /// The settings, for people.
     pub settings: String,
+    /// Everything that changes the bake's bits, by name, so that `--resume` of a different
+    /// bake names what differs; `None` in a manifest an older guidebake wrote.
+    #[serde(default)]
+    pub record: Option<BakeRecord>,
+}
+
+/// What a bake is made of, as its manifest records it: the settings by option, the texel
+/// file's identity, the scene's geometry and materials fingerprints and its lights. Any
+/// difference changes [`Manifest::bake_id`] too; this says which.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BakeRecord {
+    /// The settings by the `bake` options that set them
+    /// ([`BakeSettings::options`](super::settings::BakeSettings::options), and `--aux`).
+    pub options: BTreeMap<String, String>,
+    /// The texel file's identity ([`TexelFile::identity`](crate::texels::TexelFile::identity)), hex.
+    pub texels: String,
+    /// [`Scene::geometry_fingerprint`](crate::scene::Scene::geometry_fingerprint), hex.
+    pub geometry: String,
+    /// [`Scene::materials_fingerprint`](crate::scene::Scene::materials_fingerprint), hex.
+    pub materials: String,
+    /// [`Scene::lighting_fingerprint`](crate::scene::Scene::lighting_fingerprint), hex.
+    pub lighting: String,
+    /// The lights described by the options that set them
+    /// ([`Scene::light_entries`](crate::scene::Scene::light_entries)).
+    pub lights: BTreeMap<String, String>,
+    /// The guidebake that wrote the manifest (not compared).
+    pub version: String,
+}
+
+impl BakeRecord {
+    /// What differs from `earlier` (a bake of the texel file `earlier_texels`) to this one
+    /// (of `texels`), one phrase each: `--spp was 256, now 64`.
+    #[must_use]
+    pub fn differences(
+        &self,
+        earlier: &BakeRecord,
+        earlier_texels: &Path,
+        texels: &Path,
+    ) -> Vec<String> {
+        let mut out = Vec::new();
+        let changed = |a: &BTreeMap<String, String>, b: &BTreeMap<String, String>| {
+            let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+            keys.into_iter()
+                .filter_map(|k| {
+                    let (was, now) = (a.get(k), b.get(k));
+                    (was != now).then(|| {
+                        let show =
+                            |v: Option<&String>| v.map_or("not set", |v| v.as_str()).to_owned();
+                        format!("{k} was {}, now {}", show(was), show(now))
+                    })
+                })
+                .collect::<Vec<_>>()
+        };
+        out.extend(changed(&earlier.options, &self.options));
+        let lights = changed(&earlier.lights, &self.lights);
+        let lights_named = !lights.is_empty();
+        out.extend(lights);
+        if !lights_named && earlier.lighting != self.lighting {
+            out.push(format!(
+                "the lights differ (fingerprint {}, now {})",
+                earlier.lighting, self.lighting
+            ));
+        }
+        if earlier.texels != self.texels {
+            out.push(format!(
+                "the texel file was {} ({}), now {} ({})",
+                earlier_texels.display(),
+                earlier.texels,
+                texels.display(),
+                self.texels
+            ));
+        }
+        if earlier.geometry != self.geometry {
+            out.push(format!(
+                "the scene's geometry differs (fingerprint {}, now {})",
+                earlier.geometry, self.geometry
+            ));
+        }
+        if earlier.materials != self.materials {
+            out.push(format!(
+                "the scene's materials differ: albedo, emission, textures, normals or texture \
+                 UVs (fingerprint {}, now {})",
+                earlier.materials, self.materials
+            ));
+        }
+        out
+    }
 }
 
 /// Manifests written before series bakes had a direct pass began at pass 1.
@@ -106,8 +194,24 @@ pub(super) fn open_work(
         }
         let found = read_manifest(&manifest_path)?;
         if found.bake_id != manifest.bake_id {
+            let differences = match (&found.record, &manifest.record) {
+                (Some(earlier), Some(now)) => {
+                    now.differences(earlier, &found.texels, &manifest.texels)
+                }
+                _ => Vec::new(),
+            };
+            let what = if found.record.is_none() {
+                " (an older guidebake made it, and its manifest does not say what of: other \
+                 settings, texel file or scene)"
+                    .to_owned()
+            } else if differences.is_empty() {
+                " (other settings, texel file or scene)".to_owned()
+            } else {
+                format!(": {}", differences.join("; "))
+            };
             return Err(BakeError::Mismatch(format!(
-                "{}: --resume of a different bake (other settings or texel file); delete it to start over",
+                "{}: --resume of a different bake{what}; delete {} to start over",
+                dir.display(),
                 dir.display()
             )));
         }

@@ -868,6 +868,7 @@ impl SceneBuilder {
     }
 }
 
+pub mod fingerprint;
 mod gltf;
 pub mod gltf_write;
 mod obj;

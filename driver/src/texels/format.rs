@@ -5,10 +5,10 @@ use super::*;
 
 /// `b"GBTEXELS"`: the first eight bytes of every texel file.
 pub const MAGIC: [u8; 8] = *b"GBTEXELS";
-/// The version this build writes and reads. Version 2 replaced version 1's mesh table (a UV
-/// transform per mesh, applied to the scene's own lightmap UVs) with a triangle table: the
-/// file carries every triangle's lightmap UVs and seen sides itself.
-pub const VERSION: u32 = 2;
+/// The version this build writes and reads: a 192-byte header that records the geometry of
+/// the scene the file was prepared from ([`Header::geometry`]), a triangle table (every
+/// triangle's lightmap UVs and seen sides). Files of other versions are refused.
+pub const VERSION: u32 = 3;
 /// Every section starts at a multiple of this many bytes.
 pub const SECTION_ALIGN: u64 = 64;
 /// Default tile edge in texels.
@@ -25,7 +25,7 @@ pub const FLAG_PARTIAL: u32 = 2;
 /// open space, [`crate::facing::Visibility::inside_geometry`]); such a texel is not
 /// [`FLAG_VALID`]: the bake skips it and the lightmap's dilation fills it.
 pub const FLAG_INSIDE: u32 = 4;
-/// Every texel flag bit version 2 defines.
+/// Every texel flag bit this version defines.
 pub const KNOWN_FLAGS: u32 = FLAG_VALID | FLAG_PARTIAL | FLAG_INSIDE;
 
 /// [`TriangleRecord::flags`] bit: the winding's front side faces open space
@@ -41,10 +41,10 @@ pub const LIGHTMAPPED: u32 = 4;
 pub const TEXELS_BACK: u32 = 8;
 /// The bits of [`TriangleRecord::flags`] that say which sides are seen and described.
 pub const SIDE_FLAGS: u32 = SEEN_FRONT | SEEN_BACK | TEXELS_BACK;
-/// Every triangle flag bit version 2 defines.
+/// Every triangle flag bit this version defines.
 pub const KNOWN_TRIANGLE_FLAGS: u32 = SIDE_FLAGS | LIGHTMAPPED;
 
-/// File header at offset 0, 128 bytes.
+/// File header at offset 0, 192 bytes.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct Header {
@@ -52,7 +52,7 @@ pub struct Header {
     pub magic: [u8; 8],
     /// [`VERSION`].
     pub version: u32,
-    /// `size_of::<Header>()` = 128.
+    /// `size_of::<Header>()` = 192.
     pub header_size: u32,
     /// Total file length in bytes.
     pub file_size: u64,
@@ -87,6 +87,13 @@ pub struct Header {
     /// [`Scene::lighting_fingerprint`](crate::scene::Scene::lighting_fingerprint) of the lights
     /// `prepare` decided the seen sides under; 0 when not recorded.
     pub lighting: u64,
+    /// [`Scene::geometry_fingerprint`](crate::scene::Scene::geometry_fingerprint) of the scene
+    /// the file was prepared from (offset 128): `bake` and `render` refuse a scene of other
+    /// geometry. Every guidebake command that writes a texel file records it; 0 (not
+    /// recorded) only in files a library caller wrote without [`TexelWriter::set_geometry`].
+    pub geometry: u64,
+    /// Reserved, 0 (offsets 136..192).
+    pub reserved: [u64; 7],
 }
 
 /// One atlas page, 8 bytes.
@@ -275,7 +282,7 @@ impl TexelRecord {
     }
 }
 
-const _: () = assert!(size_of::<Header>() == 128);
+const _: () = assert!(size_of::<Header>() == 192);
 const _: () = assert!(size_of::<TexelRecord>() == 64);
 const _: () = assert!(size_of::<TileRecord>() == 32);
 const _: () = assert!(size_of::<TriangleRecord>() == 32);

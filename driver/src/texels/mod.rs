@@ -30,7 +30,7 @@ mod format;
 mod reader;
 mod writer;
 
-pub use error::TexelFileError;
+pub use error::{FileKind, TexelFileError, what_file_is};
 pub use format::*;
 use format::{align_up, check_tile, check_tile_texels, check_triangles};
 pub use reader::TexelFile;

@@ -7,6 +7,7 @@ pub struct TexelFile {
     path: PathBuf,
     header: Header,
     map: memmap2::Mmap,
+    identity: std::sync::OnceLock<u64>,
 }
 
 impl std::fmt::Debug for TexelFile {
@@ -35,6 +36,14 @@ impl TexelFile {
             }
         };
         let file = File::open(path).map_err(io("open"))?;
+        // An empty file cannot be mapped; it is no texel file either.
+        if file.metadata().map_err(io("stat"))?.len() == 0 {
+            return Err(TexelFileError::BadMagic {
+                path: path.to_owned(),
+                found: [0; 8],
+                kind: Some(FileKind::Empty),
+            });
+        }
         // SAFETY: the module invariant — nobody modifies or truncates the file while it is
         // mapped (writers write a temporary file and rename it). Every byte read below is
         // bounds-checked against `map.len()` before it is cast.
@@ -48,10 +57,40 @@ impl TexelFile {
             path: path.to_owned(),
             header,
             map,
+            identity: std::sync::OnceLock::new(),
         })
     }
 
-    /// The header of the texel file at `path` when it starts with a version-2 header (read
+    /// The file's identity, never 0: a hash of its header (which records the scene's geometry,
+    /// [`Header::geometry`]), page table, triangle table and tile table — everything but the
+    /// texel records, which `prepare` derives from those deterministically. A bake's work
+    /// directory and its lightmap record it (docs/texels.md, "Identity"), so `--resume`,
+    /// `merge` and `render` refuse work made for another texel file. Computed once, on first
+    /// use.
+    #[must_use]
+    pub fn identity(&self) -> u64 {
+        *self.identity.get_or_init(|| {
+            // FxHash's step over 32-bit words, each section's length first, then SplitMix64's
+            // finaliser (as `scene::fingerprint`, which this module does not import).
+            const K: u64 = 0x517c_c1b7_2722_0a95;
+            let mut h: u64 = 3;
+            let mut words = |w: &[u32]| {
+                for x in std::iter::once(w.len() as u32).chain(w.iter().copied()) {
+                    h = (h.rotate_left(5) ^ u64::from(x)).wrapping_mul(K);
+                }
+            };
+            words(bytemuck::cast_slice(std::slice::from_ref(&self.header)));
+            words(bytemuck::cast_slice(self.pages()));
+            words(bytemuck::cast_slice(self.triangles()));
+            words(bytemuck::cast_slice(self.tiles()));
+            let mut z = h;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            (z ^ (z >> 31)).max(1)
+        })
+    }
+
+    /// The header of the texel file at `path` when it starts with a header of this version (read
     /// without mapping or validating the rest: a command's early checks; [`TexelFile::open`]
     /// reports what is wrong with a file), else `None`.
     #[must_use]
@@ -177,6 +216,27 @@ fn validate(
 ) -> Result<Header, TexelFileError> {
     let file_len = map.len() as u64;
     let hsize = size_of::<Header>() as u64;
+    // The magic and the version first: a file of another kind, or of an older version with a
+    // shorter header, is told so rather than called truncated.
+    let mut found = [0u8; 8];
+    let n = map.len().min(8);
+    found[..n].copy_from_slice(&map[..n]);
+    if map[..n] != MAGIC[..n] {
+        return Err(TexelFileError::BadMagic {
+            path: path.to_owned(),
+            found,
+            kind: what_file_is(&map[..map.len().min(512)]),
+        });
+    }
+    if file_len >= 12 {
+        let version = u32::from_le_bytes(map[8..12].try_into().expect("four bytes"));
+        if version != VERSION {
+            return Err(TexelFileError::UnsupportedVersion {
+                path: path.to_owned(),
+                found: version,
+            });
+        }
+    }
     if file_len < hsize {
         return Err(TexelFileError::Truncated {
             path: path.to_owned(),
@@ -186,18 +246,6 @@ fn validate(
         });
     }
     let header: Header = bytemuck::pod_read_unaligned(&map[..hsize as usize]);
-    if header.magic != MAGIC {
-        return Err(TexelFileError::BadMagic {
-            path: path.to_owned(),
-            found: header.magic,
-        });
-    }
-    if header.version != VERSION {
-        return Err(TexelFileError::UnsupportedVersion {
-            path: path.to_owned(),
-            found: header.version,
-        });
-    }
     let bad = |message: String| TexelFileError::BadHeader {
         path: path.to_owned(),
         message,
@@ -233,6 +281,12 @@ fn validate(
     }
     if header.reserved0 != 0 {
         return Err(bad("offset 48: reserved field is not zero".into()));
+    }
+    if let Some(i) = header.reserved.iter().position(|&r| r != 0) {
+        return Err(bad(format!(
+            "offset {}: reserved field is not zero",
+            136 + 8 * i
+        )));
     }
     let sections = [
         (

@@ -183,6 +183,14 @@ impl TexelWriter {
         self.header.lighting = fingerprint;
     }
 
+    /// Records the [`Scene::geometry_fingerprint`](crate::scene::Scene::geometry_fingerprint)
+    /// of the scene the file is prepared from (header offset 128), which `bake` and `render`
+    /// check their scene against. Every guidebake command that writes a texel file records it;
+    /// a file written without it (0) is checked by its triangle count alone.
+    pub fn set_geometry(&mut self, fingerprint: u64) {
+        self.header.geometry = fingerprint;
+    }
+
     /// Appends one tile. `texels` must be non-empty, on `rect.page`, inside `rect`, in
     /// strictly increasing row-major pixel order, and pass the reader's checks.
     ///
