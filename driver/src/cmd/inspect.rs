@@ -91,6 +91,9 @@ pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
             "triangles_seen_from_both_sides": sides.both,
             "texels_per_unit": h.texels_per_unit,
             "bounds": [h.bounds_min, h.bounds_max],
+            "identity": format!("{:016x}", f.identity()),
+            "geometry": format!("{:016x}", h.geometry),
+            "lighting": format!("{:016x}", h.lighting),
             "texels": dump,
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
@@ -118,6 +121,12 @@ pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
         h.triangle_count, sides.lightmapped, sides.front, sides.back, sides.both
     );
     println!("  bounds: {:?} .. {:?}", h.bounds_min, h.bounds_max);
+    println!(
+        "  identity {:016x}; the scene's geometry {:016x}, its lights {:016x} (0: not recorded)",
+        f.identity(),
+        h.geometry,
+        h.lighting
+    );
     println!("  texels per unit: {}", h.texels_per_unit);
     for t in &dump {
         println!(
