@@ -16,7 +16,13 @@ use crate::scene::{Scene, TextureOptions};
 use crate::texels::TexelFile;
 use crate::transport::emitters::EmitterSelection;
 
-/// Arguments of `guidebake bake`.
+/// `--help`'s heading of the options that shard a bake over a farm.
+const FARM: &str = "Sharding over a farm";
+/// `--help`'s heading of the estimator's and the guide's options, after a user's own.
+const RESEARCH: &str = "Research levers (the defaults are what the benchmarks chose)";
+
+/// Arguments of `guidebake bake`: the options a user reaches for first, then [`FARM`]'s,
+/// then [`RESEARCH`]'s.
 #[derive(Debug, clap::Args)]
 pub struct BakeArgs {
     /// The texel file (from `guidebake prepare` or `guidebake synth`).
@@ -81,29 +87,29 @@ pub struct BakeArgs {
     #[arg(long, short)]
     pub quiet: bool,
     /// Bake only shard I of N (I/N, 0-based); combine with `guidebake merge`.
-    #[arg(help_heading = "Sharding over a farm", long, default_value = "0/1")]
+    #[arg(help_heading = FARM, long, default_value = "0/1")]
     pub shard: Shard,
     /// Bake series pass B only (1-based), reading pass B−1 from `merge --pass B−1`; finish
     /// with `merge --pass B` (docs/farm.md).
-    #[arg(help_heading = "Sharding over a farm", long)]
+    #[arg(help_heading = FARM, long)]
     pub pass: Option<u32>,
     /// Learning iterations (iteration 0 is unguided unless the pass before kept a guide seed).
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().iterations)]
+    #[arg(help_heading = RESEARCH, long, default_value_t = BakeSettings::default().iterations)]
     pub iterations: u32,
     /// How gather directions are chosen.
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().guiding)]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = BakeSettings::default().guiding)]
     pub guiding: Guiding,
     /// How a texel's iterations are combined.
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().combine)]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = BakeSettings::default().combine)]
     pub combine: Combine,
     /// Percent of the cosine baseline in the defensive mixture each guided iteration samples
     /// (`c + (1 − c)·guide`, folded into the guide; every sample is weighted with the
     /// mixture's density).
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().mix)]
+    #[arg(help_heading = RESEARCH, long, default_value_t = BakeSettings::default().mix)]
     pub mix: u32,
     /// Which series passes sample a learned guide: the `last` (the lightmap; the passes
     /// before it gather with cosine sampling) or `every` gather pass.
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().guided_passes)]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = BakeSettings::default().guided_passes)]
     pub guided_passes: GuidedPasses,
     /// How the last pass of a series bake of 2 or more bounces spreads its samples over the
     /// texels: `uniform` (`--spp` everywhere), or by the error the previous passes measured,
@@ -113,7 +119,7 @@ pub struct BakeArgs {
     /// spends the later half of its iterations the same way, by each tile's earlier half.
     /// Default: `bounded`; `uniform` with `--guiding off` or `--target-error`.
     #[arg(
-        help_heading = "Research levers (the defaults are what the benchmarks chose)",
+        help_heading = RESEARCH,
         long,
         value_enum
     )]
@@ -123,7 +129,7 @@ pub struct BakeArgs {
     /// light alone. With `--directional sh-l1` or `--combine global` the last pass estimates
     /// the direct light itself (weighted against its gather), and this is refused.
     #[arg(
-        help_heading = "Research levers (the defaults are what the benchmarks chose)",
+        help_heading = RESEARCH,
         long,
         value_name = "N"
     )]
@@ -133,7 +139,7 @@ pub struct BakeArgs {
     /// packet of 8, one per iteration where they are guided: their lookups are filtered,
     /// `--lookup-filter`).
     #[arg(
-        help_heading = "Research levers (the defaults are what the benchmarks chose)",
+        help_heading = RESEARCH,
         long,
         value_name = "N"
     )]
@@ -141,51 +147,51 @@ pub struct BakeArgs {
     /// Radius in texels over which the gathered light of those passes is filtered before the
     /// next pass looks it up (texels of the same surface that agree within their noise;
     /// 0: none). Series transport only.
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_name = "TEXELS", default_value_t = BakeSettings::default().lookup_filter)]
+    #[arg(help_heading = RESEARCH, long, value_name = "TEXELS", default_value_t = BakeSettings::default().lookup_filter)]
     pub lookup_filter: u32,
     /// What each cluster's guide learns: `second-moment` (the density ∝ √E[L²] over the
     /// cluster's texels: the least summed variance, Rath et al. 2020) or `radiance` (∝ E[L],
     /// the paper's).
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().guide_target)]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = BakeSettings::default().guide_target)]
     pub guide_target: GuideTarget,
     /// Whether the last series pass's first iteration samples a guide seeded by the pass
     /// before it (`previous`: that pass keeps, per cluster, a coarse histogram of what its
     /// gather brought back) or gathers with cosine points (`off`, the paper's).
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().guide_seed)]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = BakeSettings::default().guide_seed)]
     pub guide_seed: GuideSeed,
     /// How the samples are split over the learning iterations.
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = BakeSettings::default().schedule)]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = BakeSettings::default().schedule)]
     pub schedule: Schedule,
     /// A guide node splits only if it holds at least this many records.
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().min_split)]
+    #[arg(help_heading = RESEARCH, long, default_value_t = BakeSettings::default().min_split)]
     pub min_split: u32,
     /// The guide's smoothing α in percent (paper §2.3): how far each child's share of its
     /// parent is pulled toward a quarter.
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().smooth)]
+    #[arg(help_heading = RESEARCH, long, default_value_t = BakeSettings::default().smooth)]
     pub smooth: u32,
     /// A cluster keeps sampling its guide only while the guide shows at least this gain, in
     /// percent (150: 1.5× less variance per sample than stratified cosine points, measured
     /// on the samples of the iteration that used it); below, it gathers with cosine points
     /// for its remaining iterations. 0: guide always.
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, default_value_t = BakeSettings::default().min_gain)]
+    #[arg(help_heading = RESEARCH, long, default_value_t = BakeSettings::default().min_gain)]
     pub min_gain: u32,
     /// Light transport at gather hits: `series` (passes through the previous pass's
     /// lightmap, the paper's production setting) or `path` (unbiased path tracing).
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = Transport::Series)]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = Transport::Series)]
     pub transport: Transport,
     /// How emissive triangles are found: next-event estimation and hits weighted by MIS,
     /// next-event estimation alone, or hits alone (the bake before emitters were lights).
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = EmitterSampling::default())]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = EmitterSampling::default())]
     pub emitters: EmitterSampling,
     /// How next-event estimation picks an emitter: `local` (the default) weighs each of a
     /// world's emitters at the shading point (power, distance, both cosines; worlds of up to
     /// 8 emitters, beyond by power), `power` in proportion to power alone, `tree` by the light
     /// tree (which prefers emitters that matter at the shading point).
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = EmitterSelection::default())]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = EmitterSelection::default())]
     pub emitter_selection: EmitterSelection,
     /// The world-wide bias correction ρ (paper §2.5): `auto` applies it to the combinations
     /// whose mean needs it (`texel`, `cluster`), not to `average` and `global`.
-    #[arg(help_heading = "Research levers (the defaults are what the benchmarks chose)", long, value_enum, default_value_t = Rho::Auto)]
+    #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = Rho::Auto)]
     pub bias_correction: Rho,
 }
 
