@@ -399,10 +399,10 @@ mod tests {
     #[ignore = "a measurement: cargo test -p guidebake --release --lib fingerprint -- --ignored --nocapture"]
     fn a_million_triangles() {
         let mut s = scene();
-        let t = s.triangles[0].clone();
+        let t = s.triangles[0];
         s.triangles = (0..1_000_000)
             .map(|i| {
-                let mut t = t.clone();
+                let mut t = t;
                 t.positions[0].x = i as f32;
                 t
             })

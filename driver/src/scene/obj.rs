@@ -234,7 +234,7 @@ fn lint(path: &Path, bytes: &[u8]) -> Result<Lint, SceneError> {
                                 format!("vertex weight \"{w}\" is not a number"),
                             ));
                         }
-                        Ok(w) if w == 0.0 => {
+                        Ok(0.0) => {
                             return Err(err(
                                 n,
                                 *col,
