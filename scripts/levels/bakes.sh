@@ -23,14 +23,18 @@ if [ ! -f ref1001.exr ] && [ -z "${NO_REF:-}" ]; then
   wait
 fi
 # The direct light alone: --bounces 0 is refused, so the same level with every material black
-# (a copy of the MTL with Kd 0 and no textures): its lightmap is the direct irradiance.
+# (a copy of the MTL with Kd 0 and no textures): its lightmap is the sun's irradiance (4 096
+# next-event samples) plus the sky's that reaches the texel unoccluded (1 024 cosine rays).
 if [ ! -f direct.exr ]; then
   mkdir -p black; ln -sf "$S" black/complex.obj
   awk '/^newmtl/{print; print "Kd 0 0 0"; next} /^map_Kd/{next} {print}' \
     "${S%.obj}.mtl" > black/complex.mtl
-  "$g" bake cx.texels --scene black/complex.obj -o direct.exr --bounces 1 --spp 24 \
+  "$g" bake cx.texels --scene black/complex.obj -o direct.exr --guiding off --combine average --spp 1024 \
     --direct-spp 4096 --seed 1003 --threads 1 -q "${LIGHT[@]}" 2>/dev/null
 fi
+# The sky view: the black level under the sky alone (no sun), 256 cosine rays a texel.
+[ -f skyview.exr ] || "$g" bake cx.texels --scene black/complex.obj -o skyview.exr --guiding off \
+  --combine average --spp 256 --direct-spp 8 --seed 1004 --threads 1 -q --sky 0.45,0.55,0.7 2>/dev/null
 declare -A V=(
   [unguided]="--guiding off --combine average"
   [unguided-cluster]="--guiding off"
@@ -40,13 +44,17 @@ declare -A V=(
   [mix50]="--mix 50"
   [radiance-uniform]="--guide-target radiance --budget uniform"
   [gain150]="--min-gain 150"
+  [mix75]="--mix 75"
+  [noseed]="--guide-seed off"
 )
 names=("$@"); [ ${#names[@]} -gt 0 ] || names=(unguided default uniform radiance mix50)
 for s in $(seq 1 "$seeds"); do
   for n in "${names[@]}"; do
     [ -f "$n-$s.exr" ] && continue
-    /usr/bin/time -f "$n seed $s: %e s wall, %U s user" "$g" bake cx.texels --scene "$S" \
+    # black-NAME: variant NAME on the black level (its gather sees the sky alone)
+    scene=$S; v=$n; [[ $n == black-* ]] && scene=black/complex.obj && v=${n#black-}
+    /usr/bin/time -f "$n seed $s: %e s wall, %U s user" "$g" bake cx.texels --scene "$scene" \
       -o "$n-$s.exr" --spp 64 --direct-spp 1024 --aux --stats "$n-$s.json" --seed "$s" \
-      --threads 1 -q ${V[$n]} "${LIGHT[@]}" 2>&1 | grep -v warning
+      --threads 1 -q ${V[$v]} "${LIGHT[@]}" 2>&1 | grep -v warning || true
   done
 done

@@ -7,11 +7,12 @@ kernels/src/cluster.rs splits a tile's valid texels), the sample count the bake 
 (aux channel `samples`), and the fireflies (top 0.1 % of the texels by squared error).
 
     where_guiding_loses.py TEXELS REF.exr DIRECT.exr BASE.exr NAME=BAKE.exr [NAME=BAKE.exr ...]
-        [--ref2 REF2.exr] [--json OUT.json]
+        [--ref2 REF2.exr] [--sky SKY.exr] [--json OUT.json]
 
 REF.exr: an unbiased reference (path transport, >= 16x the samples); DIRECT.exr: a bake of the
 direct light alone (`--bounces 0`, many samples); BASE.exr: the unguided bake; each NAME=BAKE.exr
-a bake compared with it at equal samples. Every bake's error is measured against REF (or the
+a bake compared with it at equal samples; SKY.exr: the black level under the sky alone (its
+irradiance over pi x the sky's radiance is the texel's sky view). Every bake's error is measured against REF (or the
 mean of REF and REF2). The reference's own noise adds the same expected amount to every bake's
 MSE, so the *differences* of MSE per group (the "loss" columns) are net of it; ratios are
 pulled towards 1 by it. MSE and relative MSE are over the valid texels and the three
@@ -27,6 +28,7 @@ import numpy as np
 import OpenEXR
 
 VALID, PARTIAL = 1, 2
+SKY = np.array([0.45, 0.55, 0.7])  # the recipe's --sky
 MAX_TEXELS, COS_MAX = 64, np.float32(np.cos(np.radians(60.0)))
 
 
@@ -159,6 +161,9 @@ def main():
     ref2 = jpath = None
     if "--ref2" in args:
         i = args.index("--ref2"); ref2 = args[i + 1]; del args[i:i + 2]
+    sky_path = None
+    if "--sky" in args:
+        i = args.index("--sky"); sky_path = args[i + 1]; del args[i:i + 2]
     if "--json" in args:
         i = args.index("--json"); jpath = args[i + 1]; del args[i:i + 2]
     texels_path, ref_path, direct_path, base_path = args[:4]
@@ -169,9 +174,17 @@ def main():
     x, y = t["px"][valid, 0].astype(int), t["px"][valid, 1].astype(int)
     partial = (t["flags"][valid] & PARTIAL) != 0
     ref = channels(ref_path)["RGB"][y, x]
+    noise = np.zeros_like(ref)
     if ref2:
-        ref = (ref + channels(ref2)["RGB"][y, x]) / 2
+        other = channels(ref2)["RGB"][y, x]
+        noise = (ref - other) ** 2 / 4  # per texel and channel: the mean's expected error
+        ref = (ref + other) / 2
     direct = channels(direct_path)["RGB"][y, x]
+    # SKY.exr: the black level lit by the sky alone, no sun: E / (pi L_sky) is the sky view
+    sky = None
+    if sky_path:
+        e = channels(sky_path)["RGB"][y, x]
+        sky = e.sum(-1) / (np.pi * SKY.sum())
     den = ref ** 2 + 1e-2 * ref.mean(0) ** 2
     lum = ref.mean(-1)
     n = len(lum)
@@ -188,6 +201,8 @@ def main():
     names = [k for k, _ in named]
     result = {"texels": n, "bakes": {}}
 
+    print(f"\nreference mean's own noise: MSE {fmt(noise.mean())}, relative MSE "
+          f"{fmt((noise / den).mean())} (in every bake's error below; differences are net of it)")
     print("\n## Totals\n")
     print("| bake | MSE | RMSE | relative MSE | top 0.1 % texels' share of SE | of rel. SE |")
     print("|---|---:|---:|---:|---:|---:|")
@@ -226,12 +241,19 @@ def main():
             print(line)
         result[title] = rows
 
-    q = np.quantile(lum, np.linspace(0, 1, 11))
-    dec = np.clip(np.searchsorted(q, lum, side="right") - 1, 0, 9)
+    # deciles by rank (a fifth of the texels share one value, pi x the sky: ties are split)
+    dec = np.empty(n, int)
+    dec[np.argsort(lum, kind="stable")] = np.arange(n) * 10 // n
+    q = [lum[dec == d].min() for d in range(10)] + [lum.max()]
     table("Reference brightness deciles",
           [(f"decile {d + 1} ({q[d]:.3g}–{q[d + 1]:.3g})", dec == d) for d in range(10)])
+    if sky is not None:
+        table("Sky view (the share of the cosine-weighted hemisphere that sees the sky)",
+              [("0 (indoors)", sky < 0.01), ("0.01–0.2", (sky >= 0.01) & (sky < 0.2)),
+               ("0.2–0.6", (sky >= 0.2) & (sky < 0.6)), ("0.6–0.95", (sky >= 0.6) & (sky < 0.95)),
+               ("≥ 0.95 (open sky)", sky >= 0.95)])
     table("Partial or whole texels", [("partial", partial), ("whole", ~partial)])
-    table("Share of direct light in the reference",
+    table("Share of the reference that is direct light (sun + unoccluded sky)",
           [("< 10 % (lit indirectly)", dfrac < 0.1), ("10–50 %", (dfrac >= 0.1) & (dfrac < 0.5)),
            ("50–90 %", (dfrac >= 0.5) & (dfrac < 0.9)), ("≥ 90 % (sees sun or sky)", dfrac >= 0.9)])
     bright = lum > q[9]
