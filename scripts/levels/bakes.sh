@@ -46,6 +46,8 @@ declare -A V=(
   [gain150]="--min-gain 150"
   [mix75]="--mix 75"
   [noseed]="--guide-seed off"
+  [gain1000]="--min-gain 1000"
+  [noseed-gain1000]="--guide-seed off --min-gain 1000"
 )
 names=("$@"); [ ${#names[@]} -gt 0 ] || names=(unguided default uniform radiance mix50)
 for s in $(seq 1 "$seeds"); do

@@ -11,7 +11,8 @@ kernels/src/cluster.rs splits a tile's valid texels), the sample count the bake 
 
 REF.exr: an unbiased reference (path transport, >= 16x the samples); DIRECT.exr: a bake of the
 direct light alone (`--bounces 0`, many samples); BASE.exr: the unguided bake; each NAME=BAKE.exr
-a bake compared with it at equal samples; SKY.exr: the black level under the sky alone (its
+a bake compared with it at equal samples (BAKE.exr may be a comma-separated list of seeds:
+their squared errors are averaged; BASE.exr too); SKY.exr: the black level under the sky alone (its
 irradiance over pi x the sky's radiance is the texel's sky view). Every bake's error is measured against REF (or the
 mean of REF and REF2). The reference's own noise adds the same expected amount to every bake's
 MSE, so the *differences* of MSE per group (the "loss" columns) are net of it; ratios are
@@ -189,11 +190,16 @@ def main():
     lum = ref.mean(-1)
     n = len(lum)
     bakes, aux = {}, {}
-    for name, p in named:
-        ch = channels(p)
-        v = ch["RGB"][y, x]
-        bakes[name] = (((v - ref) ** 2).mean(-1), ((v - ref) ** 2 / den).mean(-1))
-        aux[name] = {k: ch[k][y, x] for k in ch if k != "RGB" and ch[k].ndim == 2}
+    for name, paths in named:
+        se = rse = 0
+        for p in paths.split(","):  # several seeds: their squared errors averaged
+            ch = channels(p)
+            v = ch["RGB"][y, x]
+            se = se + ((v - ref) ** 2).mean(-1)
+            rse = rse + ((v - ref) ** 2 / den).mean(-1)
+        k = len(paths.split(","))
+        bakes[name] = (se / k, rse / k)
+        aux[name] = {c: ch[c][y, x] for c in ch if c != "RGB" and ch[c].ndim == 2}
     print(f"valid texels {n}, partial {partial.mean():.1%}; aux channels "
           f"{sorted(aux['unguided'])}")
     cols = cluster_table(t, tiles, lum)
