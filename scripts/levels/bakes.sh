@@ -47,6 +47,8 @@ declare -A V=(
   [mix75]="--mix 75"
   [noseed]="--guide-seed off"
   [gain1000]="--min-gain 1000"
+  [unguided-bounded]="--guiding off --combine average --budget bounded"
+  [mix75-uniform]="--mix 75 --budget uniform"
   [noseed-gain1000]="--guide-seed off --min-gain 1000"
 )
 names=("$@"); [ ${#names[@]} -gt 0 ] || names=(unguided default uniform radiance mix50)
