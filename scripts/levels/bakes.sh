@@ -52,13 +52,15 @@ declare -A V=(
   [noseed-gain1000]="--guide-seed off --min-gain 1000"
 )
 names=("$@"); [ ${#names[@]} -gt 0 ] || names=(unguided default uniform radiance mix50)
+# SPP=256 bakes the variants at 256 spp instead, as s256-NAME-SEED.exr
+spp=${SPP:-64}; pre=; [ "$spp" = 64 ] || pre=s$spp-
 for s in $(seq 1 "$seeds"); do
   for n in "${names[@]}"; do
-    [ -f "$n-$s.exr" ] && continue
+    [ -f "$pre$n-$s.exr" ] && continue
     # black-NAME: variant NAME on the black level (its gather sees the sky alone)
     scene=$S; v=$n; [[ $n == black-* ]] && scene=black/complex.obj && v=${n#black-}
     /usr/bin/time -f "$n seed $s: %e s wall, %U s user" "$g" bake cx.texels --scene "$scene" \
-      -o "$n-$s.exr" --spp 64 --direct-spp 1024 --aux --stats "$n-$s.json" --seed "$s" \
+      -o "$pre$n-$s.exr" --spp "$spp" --direct-spp 1024 --aux --stats "$pre$n-$s.json" --seed "$s" \
       --threads 1 -q ${V[$v]} "${LIGHT[@]}" 2>&1 | grep -v warning || true
   done
 done
