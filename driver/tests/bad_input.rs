@@ -2,33 +2,22 @@
 //! the command line, no panic, and no output file left behind.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use guidebake::prepare::{Layout, PrepareError, PrepareOptions, Resolution, prepare};
 use guidebake::scene::{Scene, SceneError};
 use guidebake::test_support::floor_texel;
 use guidebake::texels::{PageRecord, TexelFile, TexelFileError, TexelWriter, TileRect};
 
-/// Runs the CLI; returns (exit code, stderr).
-fn cli(args: &[&str]) -> (Option<i32>, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_guidebake"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+mod cli;
+use cli::fails as cli_fails;
 
+/// A command that fails on its input (exit 1) with `expect` in its message.
 fn assert_cli_fails(args: &[&str], expect: &str) {
-    let (code, err) = cli(args);
-    assert_eq!(code, Some(1), "{args:?}: {err}");
+    let err = cli::fails_with(1, args);
     assert!(
         err.contains(expect),
         "{args:?}: expected '{expect}' in: {err}"
     );
-    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
 }
 
 /// A valid file: one 8x8 page, two tiles, 12 texels.
@@ -262,7 +251,7 @@ fn good_triangle_gltf_prepares() {
     let (json, bin) = triangle_gltf("ok", true, [0, 1, 2]);
     let p = write_gltf(dir.path(), "ok", &json, Some(&bin));
     let out = dir.path().join("ok.texels");
-    let (code, err) = cli(&[
+    let (code, err) = cli::outcome(&[
         "prepare",
         p.to_str().unwrap(),
         "-o",
@@ -384,15 +373,6 @@ fn bad_scenes_are_clear_errors() {
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
 
-/// Runs the CLI; returns (exit code, stderr) and checks it did not panic.
-fn cli_fails(args: &[&str]) -> (i32, String) {
-    let (code, err) = cli(args);
-    let code = code.unwrap_or_else(|| panic!("{args:?} was killed by a signal: {err}"));
-    assert_ne!(code, 0, "{args:?} succeeded");
-    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
-    (code, err)
-}
-
 /// A prepared one-triangle scene in `dir`: (scene, texel file).
 fn prepared_triangle(dir: &Path) -> (PathBuf, PathBuf) {
     let (json, bin) = triangle_gltf("tri", true, [0, 1, 2]);
@@ -405,7 +385,7 @@ fn prepared_triangle(dir: &Path) -> (PathBuf, PathBuf) {
         "geometry = \"tri.gltf\"\n[sky]\nconstant = [1, 1, 1]\n",
     )
     .unwrap();
-    let (code, err) = cli(&[
+    let (code, err) = cli::outcome(&[
         "prepare",
         toml.to_str().unwrap(),
         "-o",

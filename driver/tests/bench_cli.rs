@@ -9,8 +9,10 @@ use std::process::Command;
 use guidebake::bench::method::Method;
 use guidebake::bench::report::{OVERHEAD_COLUMNS, RUN_COLUMNS};
 
+mod cli;
+
 fn guidebake() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_guidebake"))
+    Command::new(cli::BIN)
 }
 
 /// Parses a CSV without quoting (the harness writes none) into its header and rows.

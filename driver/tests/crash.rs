@@ -12,7 +12,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_guidebake");
+mod cli;
+use cli::{BIN, s};
 
 /// One triangle with lightmap UVs (glTF + .bin) under a sky and a sun (TOML scene file).
 fn write_scene(dir: &Path) -> PathBuf {
@@ -115,10 +116,6 @@ impl World {
             took,
         )
     }
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 /// xorshift64*: the kill times' fixed-seed stream.

@@ -5,63 +5,12 @@
 //! outcome. Each case checks the exit code, the message, every input's bytes and that no
 //! output (nor a scratch file) is left behind.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-fn guidebake(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_guidebake"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-fn succeeds(args: &[&str]) -> (String, String) {
-    let o = guidebake(args);
-    let (out, err) = (text(&o.stdout), text(&o.stderr));
-    assert!(o.status.success(), "{args:?} failed: {err}");
-    (out, err)
-}
-
-/// Runs a command that must fail with exit code `code`; returns its stderr.
-fn fails_with(code: i32, args: &[&str]) -> String {
-    let o = guidebake(args);
-    let err = text(&o.stderr);
-    assert_eq!(o.status.code(), Some(code), "{args:?}: {err}");
-    assert!(!err.contains("panicked"), "{args:?}: {err}");
-    err
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Every file under `dir` (relative name → bytes; directories as a marker).
-fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut files = BTreeMap::new();
-    let mut stack = vec![dir.to_owned()];
-    while let Some(d) = stack.pop() {
-        for entry in std::fs::read_dir(&d).unwrap().flatten() {
-            let path = entry.path();
-            let name = path.strip_prefix(dir).unwrap().to_owned();
-            let meta = std::fs::symlink_metadata(&path).unwrap();
-            if meta.is_dir() {
-                files.insert(name, b"<dir>".to_vec());
-                stack.push(path);
-            } else if meta.file_type().is_symlink() {
-                files.insert(name, b"<link>".to_vec());
-            } else {
-                files.insert(name, std::fs::read(&path).unwrap());
-            }
-        }
-    }
-    files
-}
+mod cli;
+use cli::{BIN, changed, fails_with, s, snapshot, succeeds, text};
 
 /// A refused command: exit code `code`, stderr holding each of `expect`, and the folder
 /// exactly as before (every input's bytes, nothing new, no scratch file).
@@ -71,12 +20,7 @@ fn refused(dir: &Path, code: i32, args: &[&str], expect: &[&str]) -> String {
     for e in expect {
         assert!(err.contains(e), "{args:?}: expected {e:?} in: {err}");
     }
-    let after = snapshot(dir);
-    let changed: Vec<_> = before
-        .keys()
-        .chain(after.keys())
-        .filter(|k| before.get(*k) != after.get(*k))
-        .collect();
+    let changed = changed(&before, &snapshot(dir));
     assert!(changed.is_empty(), "{args:?} changed {changed:?}: {err}");
     err
 }
@@ -448,7 +392,7 @@ fn ctrl_c_exits_130_everywhere_and_leaves_nothing_half_written() {
     let mut args = bake_args(&texels, &obj, s(&lm), &[]);
     let spp = args.iter().position(|a| *a == "8").unwrap();
     args[spp] = "65536";
-    let child = Command::new(env!("CARGO_BIN_EXE_guidebake"))
+    let child = Command::new(BIN)
         .args(&args)
         .stderr(Stdio::piped())
         .spawn()
@@ -467,7 +411,7 @@ fn ctrl_c_exits_130_everywhere_and_leaves_nothing_half_written() {
     // prepare stops at once: no texel file, no scratch file beside it.
     let big = d.join("big.texels");
     let before = snapshot(d);
-    let child = Command::new(env!("CARGO_BIN_EXE_guidebake"))
+    let child = Command::new(BIN)
         .args([
             "prepare",
             s(&obj),

@@ -3,40 +3,21 @@
 //! given files that do not belong together refuses them, names them and what differs, and
 //! leaves every file as it was.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use guidebake::output::exr_pages::{PageImage, read_identity};
 use guidebake::scene::Scene;
 use guidebake::texels::{TexelFile, TexelFileError};
 
-const BIN: &str = env!("CARGO_BIN_EXE_guidebake");
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// Runs the CLI; returns (exit code, stderr).
-fn cli(args: &[&str]) -> (Option<i32>, String) {
-    let out = Command::new(BIN).args(args).output().unwrap();
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+mod cli;
+use cli::{s, snapshot};
 
 fn cli_ok(args: &[&str]) -> String {
-    let (code, err) = cli(args);
-    assert_eq!(code, Some(0), "{args:?}: {err}");
-    err
+    cli::succeeds(args).1
 }
 
 fn cli_fails(args: &[&str]) -> String {
-    let (code, err) = cli(args);
-    assert_eq!(code, Some(1), "{args:?} did not fail: {err}");
-    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
-    err
+    cli::fails_with(1, args)
 }
 
 /// A one-triangle glTF `NAME.gltf` (+ `NAME.bin`) whose third corner is at depth `depth`, and
@@ -88,23 +69,6 @@ fn bake_args<'a>(texels: &'a Path, scene: &'a Path, out: &'a Path) -> Vec<&'a st
     let mut a = vec!["bake", s(texels), "--scene", s(scene), "-o", s(out)];
     a.extend(QUICK);
     a
-}
-
-/// Every file under `dir` (recursively) and its bytes.
-fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut files = BTreeMap::new();
-    let mut stack = vec![dir.to_owned()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                files.insert(p.clone(), std::fs::read(&p).unwrap());
-            }
-        }
-    }
-    files
 }
 
 #[test]

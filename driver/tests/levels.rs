@@ -3,39 +3,16 @@
 //! skipped with a message when absent) prepared, baked and rendered from the command line.
 
 use std::path::{Path, PathBuf};
-use std::process::Output;
 
 use guidebake::scene::Scene;
 use guidebake::texels::TexelFile;
 
-fn guidebake(args: &[&str]) -> Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_guidebake"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+mod cli;
+use cli::{s, succeeds};
 
-fn succeeds(args: &[&str]) -> (String, String) {
-    let o = guidebake(args);
-    let (out, err) = (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    );
-    assert!(o.status.success(), "{args:?} failed: {err}");
-    assert!(!err.contains("panicked"), "{err}");
-    (out, err)
-}
-
+/// Runs a command that must fail on its input (exit 1); returns its stderr.
 fn fails(args: &[&str]) -> String {
-    let o = guidebake(args);
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
-    assert!(!err.contains("panicked"), "{err}");
-    err
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    cli::fails_with(1, args)
 }
 
 /// A named plane of the small level: name, material, corner, two edges.
@@ -383,9 +360,7 @@ fn a_scene_without_lights_names_the_flags() {
     assert!(!lightmap.exists());
     // Bad flags are usage errors naming them.
     for (flag, value) in [("--sun", "0,0,0"), ("--sun", "1,2"), ("--sky", "-1")] {
-        let o = guidebake(&["prepare", s(&obj), "-o", s(&texels), flag, value]);
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(2), "{err}");
+        let err = cli::fails_with(2, &["prepare", s(&obj), "-o", s(&texels), flag, value]);
         assert!(err.contains(flag) && err.contains(value), "{err}");
     }
 }

@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_guidebake");
+mod cli;
+use cli::{BIN, s};
+
 const SHARDS: u32 = 3;
 const PASSES: u32 = 3;
 /// The bake's settings, the same for every command (the default transport: series).
@@ -22,10 +24,6 @@ const SETTINGS: [&str; 8] = [
     "--seed",
     "5",
 ];
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 fn run(c: &mut Command) -> String {
     let out = c.output().unwrap();

@@ -6,6 +6,8 @@ use guidebake::scene::{Scene, Sky};
 use guidebake::synth::synth;
 use guidebake::texels::TexelFile;
 
+mod cli;
+
 #[test]
 fn synth_texels_lie_on_the_written_scene() {
     let dir = tempfile::tempdir().unwrap();
@@ -77,8 +79,7 @@ fn synth_rejects_impossible_counts_without_leaving_files() {
 fn cli_synth_then_inspect_json() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("c.texels");
-    let bin = env!("CARGO_BIN_EXE_guidebake");
-    let run = |args: &[&str]| std::process::Command::new(bin).args(args).output().unwrap();
+    let run = |args: &[&str]| cli::run(args);
     let o = run(&["synth", "--texels", "20000", "-o", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let o = run(&[

@@ -22,6 +22,8 @@ use guidebake::scene::gltf_write::write_glb;
 use guidebake::test_support::{assert_texels_on_triangles, inward_box_faces};
 use guidebake::texels::{FLAG_PARTIAL, TexelFile};
 
+mod cli;
+
 const ALBEDO: f32 = 0.5;
 const LE: f32 = 1.5;
 
@@ -517,12 +519,7 @@ fn the_cli_unwraps_and_writes_the_gltf() {
     let gltf = room_with_box(dir.path());
     let texels = dir.path().join("cli.texels");
     let glb = dir.path().join("cli.glb");
-    let run = |args: &[&str]| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_guidebake"))
-            .args(args)
-            .output()
-            .unwrap()
-    };
+    let run = |args: &[&str]| cli::run(args);
     let o = run(&[
         "prepare",
         gltf.to_str().unwrap(),
