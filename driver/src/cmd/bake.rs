@@ -319,10 +319,7 @@ fn bake_files(args: &BakeArgs) -> Result<super::files::Files, super::CmdError> {
     if let Some(map) = args.lights.sky_map() {
         files = files.reads("the sky map (--sky)", map);
     }
-    let pages = TexelFile::peek_header(&args.texels).map_or(1, |h| h.page_count);
-    for page in 0..pages.max(1) {
-        let path = crate::output::exr_pages::page_path(&args.out, page, pages);
-        let preview = crate::output::exr_pages::preview_path(&path);
+    for (path, preview) in super::files::lightmap_files(&args.out, &args.texels) {
         files = files
             .writes("the lightmap (-o)", &path)
             .writes("the lightmap's atlas preview", &preview);

@@ -148,6 +148,22 @@ fn resolved(path: &Path) -> PathBuf {
     }
 }
 
+/// The files of the lightmap `out` baked from the texel file `texels`: each page
+/// (`OUT.exr`, or `OUT.pageN.exr` for several) and its atlas preview. One page where the texel
+/// file cannot be read (the command then fails on it, naming it).
+#[must_use]
+pub fn lightmap_files(out: &Path, texels: &Path) -> Vec<(PathBuf, PathBuf)> {
+    use crate::output::exr_pages::{page_path, preview_path};
+    let pages = crate::texels::TexelFile::peek_header(texels).map_or(1, |h| h.page_count);
+    (0..pages.max(1))
+        .map(|page| {
+            let path = page_path(out, page, pages);
+            let preview = preview_path(&path);
+            (path, preview)
+        })
+        .collect()
+}
+
 /// Refuses a lightmap path that does not end in `.exr` (the pages are OpenEXR; a `.png` name
 /// would put the preview on top of the lightmap).
 ///

@@ -40,13 +40,10 @@ fn merge_files(args: &MergeArgs) -> Result<super::files::Files, super::CmdError>
     for shard in &args.shards {
         files = files.reads("a shard's work directory", shard);
     }
-    let pages = TexelFile::peek_header(&args.texels).map_or(1, |h| h.page_count);
-    for page in 0..pages.max(1) {
-        let path = crate::output::exr_pages::page_path(&args.out, page, pages);
-        files = files.writes("the lightmap (-o)", &path).writes(
-            "the lightmap's atlas preview",
-            &crate::output::exr_pages::preview_path(&path),
-        );
+    for (path, preview) in super::files::lightmap_files(&args.out, &args.texels) {
+        files = files
+            .writes("the lightmap (-o)", &path)
+            .writes("the lightmap's atlas preview", &preview);
     }
     Ok(files.writes_dir(
         "the merged passes' directory",

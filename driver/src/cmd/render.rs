@@ -73,13 +73,10 @@ fn render_files(args: &RenderArgs) -> Result<super::files::Files, super::CmdErro
     if let Some(map) = args.lights.sky_map() {
         files = files.reads("the sky map (--sky)", map);
     }
-    let pages = TexelFile::peek_header(&args.texels).map_or(1, |h| h.page_count);
-    for page in 0..pages.max(1) {
-        let path = crate::output::exr_pages::page_path(&args.lightmap, page, pages);
-        files = files.reads("the lightmap (--lightmap)", &path).reads(
-            "the lightmap's atlas preview",
-            &crate::output::exr_pages::preview_path(&path),
-        );
+    for (path, preview) in super::files::lightmap_files(&args.lightmap, &args.texels) {
+        files = files
+            .reads("the lightmap (--lightmap)", &path)
+            .reads("the lightmap's atlas preview", &preview);
     }
     Ok(files.writes("the picture (-o)", &args.out))
 }
