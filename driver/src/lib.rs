@@ -12,7 +12,7 @@
 //! | [`demo`] | the bundled default scene: a room lit through a door ajar |
 //! | [`bvh`] | obvhs build, flattened into the kernels' node layout; robust ray origins |
 //! | [`prepare`] | lightmap UV rasterization into texel tiles |
-//! | [`facing`] | which side of a two-sided surface its texels describe |
+//! | [`prepare::facing`] | which side of a two-sided surface its texels describe (used by `prepare`) |
 //! | [`synth`] | procedural worlds of any size, streamed |
 //! | [`output`] | result file, journal of finished tiles, ρ, EXR pages |
 //! | [`preview`] | PNG figures and tone-mapped previews |
@@ -27,7 +27,6 @@ pub mod bench;
 pub mod bvh;
 pub mod cmd;
 pub mod demo;
-pub mod facing;
 pub mod output;
 pub mod prepare;
 pub mod preview;

@@ -22,7 +22,7 @@
 //! 4. **Records.** Position and normal are interpolated with the barycentrics of that point
 //!    (clamped to the triangle, so every position lies on its triangle); the normal is the
 //!    interpolated vertex normal, or the geometric normal where the source has none, turned
-//!    to the side of the two-sided surface that sees the scene ([`crate::facing`]); the
+//!    to the side of the two-sided surface that sees the scene ([`crate::prepare::facing`]); the
 //!    footprint axes dP/du, dP/dv are the world-space change over one texel step, from the
 //!    inverse of the triangle's UV Jacobian.
 //! 5. **Tiles.** 32×32-texel tiles of each page in Morton (Z-order) order of their tile
@@ -59,13 +59,14 @@ use glam::{Vec2, Vec3};
 use guidebake_kernels::presort::CurveOrder;
 use rayon::prelude::*;
 
-use crate::facing::{FacingReport, Visibility, seen_sides};
+use facing::{FacingReport, Visibility, seen_sides};
 use crate::scene::{Scene, Triangle};
 use crate::texels::{
     FLAG_INSIDE, FLAG_PARTIAL, FLAG_VALID, PageRecord, TILE_SIZE, TexelFileError, TexelRecord,
     TexelWriter, TileRect, TriangleRecord,
 };
 
+pub mod facing;
 pub mod unwrap;
 pub use unwrap::{Unwrap, UnwrapError};
 
@@ -129,12 +130,12 @@ pub struct PrepareReport {
     /// Triangles skipped because their UV triangle has zero area.
     pub uv_degenerate_triangles: u64,
     /// Triangles whose texels face against their winding: the side that sees the scene
-    /// ([`crate::facing`]).
+    /// ([`crate::prepare::facing`]).
     pub flipped_triangles: u64,
     /// Of the texels, those inside geometry ([`FLAG_INSIDE`]): not baked, filled by the
     /// lightmap's dilation.
     pub inside_texels: u64,
-    /// Which sides of the triangles face open space ([`crate::facing`]).
+    /// Which sides of the triangles face open space ([`crate::prepare::facing`]).
     pub facing: FacingReport,
     /// What the unwrapper did, when it ran.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -22,7 +22,7 @@
 //! object, an open scene) the *overview* frames the scene's bounds from above one corner. A
 //! closed room seen from outside would show only its outer walls, so the overview is a
 //! *cutaway*: a lightmapped surface seen from the side its texels do not face
-//! ([`crate::facing`]) is passed through, as a dollhouse view (on by default for the
+//! ([`crate::prepare::facing`]) is passed through, as a dollhouse view (on by default for the
 //! overview, off for a glTF camera and the inside view; `--cutaway`).
 //!
 //! Tone mapping: exposure, then Reinhard's `x / (1 + x)` and the sRGB curve

@@ -21,8 +21,8 @@ const FARM: &str = "Sharding over a farm";
 /// `--help`'s heading of the estimator's and the guide's options, after a user's own.
 const RESEARCH: &str = "Research levers (the defaults are what the benchmarks chose)";
 
-/// Arguments of `guidebake bake`: the options a user reaches for first, then [`FARM`]'s,
-/// then [`RESEARCH`]'s.
+/// Arguments of `guidebake bake`: the options a user reaches for first, then the sharding
+/// options, then the research levers (`--help` lists them under those headings).
 #[derive(Debug, clap::Args)]
 pub struct BakeArgs {
     /// The texel file (from `guidebake prepare` or `guidebake synth`).

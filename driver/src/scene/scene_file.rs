@@ -285,7 +285,7 @@ pub const SUN_RADIUS_DEG: f32 = 0.267;
 /// **How they combine with a scene file**: `--sun` replaces the TOML file's `[sun]` (the one
 /// sun a scene has), `--sky` its `[sky]`; the scene's other lights (glTF
 /// `KHR_lights_punctual`, TOML sphere lights) and emissive materials are kept. `prepare`
-/// decides from the lights which side of every surface is seen ([`crate::facing`]), so
+/// decides from the lights which side of every surface is seen ([`crate::prepare::facing`]), so
 /// `prepare`, `bake` and `render` must be given the same flags (docs/levels.md).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LightOverrides {

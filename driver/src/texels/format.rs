@@ -22,14 +22,14 @@ pub const FLAG_VALID: u32 = 1;
 /// the triangle that overlaps the texel (conservative rasterization, see `prepare`).
 pub const FLAG_PARTIAL: u32 = 2;
 /// Texel flag: the texel lies inside geometry (its rays meet sides of surfaces that face no
-/// open space, [`crate::facing::Visibility::inside_geometry`]); such a texel is not
+/// open space, [`crate::prepare::facing::Visibility::inside_geometry`]); such a texel is not
 /// [`FLAG_VALID`]: the bake skips it and the lightmap's dilation fills it.
 pub const FLAG_INSIDE: u32 = 4;
 /// Every texel flag bit this version defines.
 pub const KNOWN_FLAGS: u32 = FLAG_VALID | FLAG_PARTIAL | FLAG_INSIDE;
 
 /// [`TriangleRecord::flags`] bit: the winding's front side faces open space
-/// ([`crate::facing`]).
+/// ([`crate::prepare::facing`]).
 pub const SEEN_FRONT: u32 = 1;
 /// [`TriangleRecord::flags`] bit: the back side faces open space.
 pub const SEEN_BACK: u32 = 2;
