@@ -338,7 +338,8 @@ fn bake_files(args: &BakeArgs) -> Result<super::files::Files, super::CmdError> {
 fn summary(job: &BakeJob, report: &BakeReport) -> String {
     let t = &report.seconds;
     let seconds = t.open_texels + t.build_bvh + t.gather + t.previous_pass_images + t.write_pages;
-    let inside = report.counters.texels_inside_geometry;
+    // Every pass skips the same texels; the counter sums the passes.
+    let inside = report.counters.texels_inside_geometry / u64::from(report.passes.max(1));
     let written = match report.pages.as_slice() {
         [] => format!(
             "shard {} of {} kept in {} (finish with guidebake merge)",
