@@ -416,7 +416,7 @@ fn check_lightmap_texels(path: &Path, texels: &TexelFile) -> Result<(), RenderEr
     };
     let Some(identity) = read_identity(path).map_err(fail)? else {
         eprintln!(
-            "warning: {}: the lightmap does not record the texel file it was baked for (an older \
+            "guidebake: warning: {}: the lightmap does not record the texel file it was baked for (an older \
              guidebake wrote it); rendering it with {} unchecked",
             path.display(),
             texels.path().display()
