@@ -15,6 +15,8 @@
 //! | [`prepare::facing`] | which side of a two-sided surface its texels describe (used by `prepare`) |
 //! | [`synth`] | procedural worlds of any size, streamed |
 //! | [`output`] | result file, journal of finished tiles, ρ, EXR pages |
+//! | [`atomic`] | files that appear complete or not at all (temporary name, sync, rename) |
+//! | [`hash`] | FNV-1a and the word hash: checksums, identities, fingerprints |
 //! | [`preview`] | PNG figures and tone-mapped previews |
 //! | [`render`] | a picture of the lit scene: eye rays shaded from the baked lightmap |
 //! | [`transport`] | light transport: next-event estimation, series lookups, path sampling |
@@ -22,11 +24,13 @@
 //! | [`cmd`] | the `guidebake` subcommands |
 #![deny(unsafe_op_in_unsafe_fn)]
 
+pub mod atomic;
 pub mod bake;
 pub mod bench;
 pub mod bvh;
 pub mod cmd;
 pub mod demo;
+pub mod hash;
 pub mod output;
 pub mod prepare;
 pub mod preview;

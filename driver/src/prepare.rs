@@ -59,12 +59,12 @@ use glam::{Vec2, Vec3};
 use guidebake_kernels::presort::CurveOrder;
 use rayon::prelude::*;
 
-use facing::{FacingReport, Visibility, seen_sides};
 use crate::scene::{Scene, Triangle};
 use crate::texels::{
     FLAG_INSIDE, FLAG_PARTIAL, FLAG_VALID, PageRecord, TILE_SIZE, TexelFileError, TexelRecord,
     TexelWriter, TileRect, TriangleRecord,
 };
+use facing::{FacingReport, Visibility, seen_sides};
 
 pub mod facing;
 pub mod unwrap;

@@ -235,7 +235,7 @@ pub fn write_png_rgb8(
         path: dir.to_owned(),
         source,
     })?;
-    let tmp = crate::output::atomic::temporary_name(&dir.join(name));
+    let tmp = crate::atomic::temporary_name(&dir.join(name));
     let written = image::save_buffer_with_format(
         &tmp,
         rgb,

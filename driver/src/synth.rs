@@ -495,7 +495,7 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> SynthError + '_ {
 
 /// Writes `bytes` to `path` through a temporary name.
 fn write_atomically(path: &Path, bytes: &[&[u8]]) -> Result<(), SynthError> {
-    crate::output::atomic::write_parts(path, bytes).map_err(io_err(path))
+    crate::atomic::write_parts(path, bytes).map_err(io_err(path))
 }
 
 /// Writes one glTF mesh per page; returns the triangle table of the texel file (every face is

@@ -12,7 +12,7 @@ use super::shard::Split;
 use super::workdir::{
     Manifest, directional_file, merged_dir, merged_results, pass_files, read_manifest,
 };
-use crate::output::atomic::temporary_name;
+use crate::atomic::temporary_name;
 use crate::output::denoise::{ATrous, Denoiser, NoisyTexel, Window};
 use crate::output::exr_pages::{
     LightmapIdentity, PageStream, TEXEL_FILE_KEY, TEXELS_KEY, page_path,

@@ -40,7 +40,7 @@ use super::workdir::{
 };
 use super::world::World;
 use crate::bvh::Preset;
-use crate::output::fnv1a64;
+use crate::hash::fnv1a64;
 use crate::output::result_file::{FLAG_BAKED, MappedResults, ResultFile, TexelResult};
 use crate::scene::Scene;
 use crate::texels::{FLAG_INSIDE, TexelFile};

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use crate::output::fnv1a64;
+use crate::hash::fnv1a64;
 use crate::transport::emitters::EmitterSelection;
 
 /// Whether a bake writes directional coefficients (`--directional`). A setting, so it lives

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::directional::DirectionalFile;
 use super::error::{BakeError, file_error};
 use super::shard::Shard;
-use crate::output::atomic::temporary_name;
+use crate::atomic::temporary_name;
 use crate::output::journal::{Journal, TileRecord, dedup_tiles};
 use crate::output::result_file::{BatchFile, ResultFile};
 

@@ -16,7 +16,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::analysis::{Curve, Overhead};
-use crate::output::atomic;
+use crate::atomic;
 
 const FONT: &[u8] = include_bytes!("font/DejaVuSans.ttf");
 const SIZE: (u32, u32) = (1000, 680);

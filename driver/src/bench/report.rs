@@ -11,8 +11,8 @@ use super::analysis::{Curve, EqualTime, EquivalentSamples, ErrorMetric, Interpol
 use super::harness::{Ladder, OverheadRecord, RunRecord};
 use super::method::{Method, serialize_value_name, value_name};
 use super::reference::{ReferenceInfo, ReferenceNoise};
+use crate::atomic;
 use crate::bake::settings::Transport;
-use crate::output::atomic;
 
 /// The machine the numbers were measured on.
 #[derive(Clone, Debug, Serialize)]

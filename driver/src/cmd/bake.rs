@@ -526,7 +526,7 @@ pub fn write_stats_noting(
         );
     }
     let json = serde_json::to_string_pretty(&json)?;
-    crate::output::atomic::write(path, json)
+    crate::atomic::write(path, json)
         .map_err(|e| format!("{}: cannot write the stats: {e}", path.display()))?;
     Ok(())
 }
@@ -537,7 +537,7 @@ pub fn write_stats_noting(
 /// When the file cannot be written; names it.
 pub fn write_stats(path: &std::path::Path, report: &BakeReport) -> Result<(), super::CmdError> {
     let json = serde_json::to_string_pretty(report)?;
-    crate::output::atomic::write(path, json)
+    crate::atomic::write(path, json)
         .map_err(|e| format!("{}: cannot write the stats: {e}", path.display()))?;
     Ok(())
 }

@@ -5,7 +5,7 @@
 //! are journalled, and the command returns [`super::Interrupted`] saying how to resume. Any
 //! other time — loading a scene, preparing, rendering, merging, or a second Ctrl-C — the
 //! process stops at once after removing the scratch files of the outputs it registered
-//! ([`remove_scratch_of`]: the `.NAME.*-PID` files `output::atomic` writes before renaming),
+//! ([`remove_scratch_of`]: the `.NAME.*-PID` files `atomic` writes before renaming),
 //! so an output either exists whole, as before the command, or not at all.
 
 use std::path::{Path, PathBuf};
@@ -73,7 +73,7 @@ pub fn register_outputs<'a>(outputs: impl IntoIterator<Item = &'a Path>) {
 }
 
 /// Removes this process's scratch files of `out` (`DIR/.NAME.SUFFIX-PID`, as
-/// `output::atomic::with_suffix` names them).
+/// `atomic::with_suffix` names them).
 pub fn remove_scratch_of(out: &Path) {
     let Some(name) = out.file_name().map(|n| n.to_string_lossy().into_owned()) else {
         return;

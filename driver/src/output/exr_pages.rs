@@ -27,7 +27,7 @@ use exr::prelude::{
 };
 use guidebake_kernels::estimator::luminance_f32;
 
-use super::atomic::temporary_name;
+use crate::atomic::temporary_name;
 
 /// One atlas page of a lightmap.
 #[derive(Clone, Debug, PartialEq)]

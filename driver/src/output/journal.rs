@@ -19,7 +19,8 @@ use std::path::{Path, PathBuf};
 use bytemuck::{Pod, Zeroable};
 use guidebake_kernels::estimator::RhoAccumulator;
 
-use super::{OutputFileError, create_with_header, fnv1a64, io_error, open_with_header};
+use super::{OutputFileError, create_with_header, io_error, open_with_header};
+use crate::hash::fnv1a64;
 
 /// Magic bytes at the start of a journal.
 pub const JOURNAL_MAGIC: [u8; 8] = *b"GBJOURNL";

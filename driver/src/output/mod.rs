@@ -19,34 +19,12 @@ use std::io;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
-pub mod atomic;
 pub mod denoise;
 pub mod exr_pages;
 pub mod journal;
 pub mod readback;
 pub mod result_file;
 pub mod seams;
-
-/// A 64-bit FNV-1a hash: checksums of journal records, identities of bake settings and the
-/// fingerprint of a scene's lights.
-/// Not cryptographic; it detects torn writes and mismatched resumes.
-pub fn fnv1a64(bytes: &[u8]) -> u64 {
-    fnv1a64_more(FNV1A64_EMPTY, bytes)
-}
-
-/// FNV-1a's offset basis: [`fnv1a64`] of no bytes.
-pub const FNV1A64_EMPTY: u64 = 0xcbf2_9ce4_8422_2325;
-
-/// [`fnv1a64`] continued from the hash `h` over more bytes: a hash built piece by piece
-/// (`fnv1a64_more(fnv1a64(a), b) == fnv1a64(a ++ b)`).
-#[must_use]
-pub fn fnv1a64_more(mut h: u64, bytes: &[u8]) -> u64 {
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
-}
 
 /// What went wrong with a result file or a journal; every variant names the file.
 #[derive(Debug, thiserror::Error)]

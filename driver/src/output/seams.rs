@@ -328,7 +328,7 @@ pub fn write_seam_file(path: &Path, samples: &SeamSamples) -> std::io::Result<()
             }
         }
     }
-    super::atomic::write(path, bytes)
+    crate::atomic::write(path, bytes)
 }
 
 /// Reads a seam file.

@@ -7,63 +7,7 @@
 use glam::{Vec2, Vec3};
 
 use super::{Scene, SceneLight, Sky};
-
-/// A fast 64-bit hash over 32-bit words: each step `h = (rotl(h, 5) ^ w) · K` (FxHash's),
-/// then a SplitMix64 finaliser. Every step is a bijection of `h` for a fixed word, so two
-/// inputs of the same length that differ in one word always hash differently. Not for
-/// adversarial input: it tells one scene from another, as a checksum does.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct WordHash(u64);
-
-const K: u64 = 0x517c_c1b7_2722_0a95;
-
-impl WordHash {
-    /// A hash seeded by `domain` (what is being hashed), so that the geometry and the
-    /// materials of an empty scene do not share a fingerprint.
-    pub(crate) fn new(domain: u64) -> Self {
-        Self(domain.wrapping_mul(K) ^ 0x9e37_79b9_7f4a_7c15)
-    }
-
-    pub(crate) fn word(&mut self, w: u32) -> &mut Self {
-        self.0 = (self.0.rotate_left(5) ^ u64::from(w)).wrapping_mul(K);
-        self
-    }
-
-    pub(crate) fn u64(&mut self, w: u64) -> &mut Self {
-        self.word(w as u32).word((w >> 32) as u32)
-    }
-
-    /// An `f32` by its bits, −0 taken as +0 (the same position, whichever way a file wrote it).
-    pub(crate) fn f(&mut self, x: f32) -> &mut Self {
-        self.word((x + 0.0).to_bits())
-    }
-
-    pub(crate) fn vec3(&mut self, v: Vec3) -> &mut Self {
-        self.f(v.x).f(v.y).f(v.z)
-    }
-
-    pub(crate) fn vec2(&mut self, v: Vec2) -> &mut Self {
-        self.f(v.x).f(v.y)
-    }
-
-    pub(crate) fn bytes(&mut self, b: &[u8]) -> &mut Self {
-        self.u64(b.len() as u64);
-        for chunk in b.chunks(4) {
-            let mut w = [0u8; 4];
-            w[..chunk.len()].copy_from_slice(chunk);
-            self.word(u32::from_le_bytes(w));
-        }
-        self
-    }
-
-    /// The hash, never 0 (0 means "not recorded" wherever a fingerprint is stored).
-    pub(crate) fn finish(&self) -> u64 {
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        (z ^ (z >> 31)).max(1)
-    }
-}
+use crate::hash::WordHash;
 
 /// [`Scene::geometry_fingerprint`] built triangle by triangle, for a writer that has the
 /// triangles but no [`Scene`] (`synth`): the same value for the same positions in the same

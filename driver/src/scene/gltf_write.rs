@@ -724,5 +724,5 @@ fn glb_file(out: &Path, json: Vec<u8>, bin: Vec<u8>) -> Result<(), String> {
         bin: Some(bin.into()),
     };
     let bytes = glb.to_vec().map_err(|e| e.to_string())?;
-    crate::output::atomic::write(out, bytes).map_err(|e| e.to_string())
+    crate::atomic::write(out, bytes).map_err(|e| e.to_string())
 }

@@ -881,19 +881,19 @@ pub use scene_file::{
 };
 pub use texture::{BaseColorTexture, TextureOptions};
 
-/// [`crate::output::fnv1a64`] built word by word (little-endian bytes), for
+/// [`crate::hash::fnv1a64`] built word by word (little-endian bytes), for
 /// [`Scene::lighting_fingerprint`].
 struct Fnv(u64);
 
 impl Default for Fnv {
     fn default() -> Self {
-        Self(crate::output::FNV1A64_EMPTY)
+        Self(crate::hash::FNV1A64_EMPTY)
     }
 }
 
 impl Fnv {
     fn tag(&mut self, word: u64) -> &mut Self {
-        self.0 = crate::output::fnv1a64_more(self.0, &word.to_le_bytes());
+        self.0 = crate::hash::fnv1a64_more(self.0, &word.to_le_bytes());
         self
     }
 

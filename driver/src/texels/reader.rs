@@ -70,23 +70,19 @@ impl TexelFile {
     #[must_use]
     pub fn identity(&self) -> u64 {
         *self.identity.get_or_init(|| {
-            // FxHash's step over 32-bit words, each section's length first, then SplitMix64's
-            // finaliser (as `scene::fingerprint`, which this module does not import).
-            const K: u64 = 0x517c_c1b7_2722_0a95;
-            let mut h: u64 = 3;
+            // Each section's length in words first, then its words.
+            let mut h = crate::hash::WordHash::new(3);
             let mut words = |w: &[u32]| {
-                for x in std::iter::once(w.len() as u32).chain(w.iter().copied()) {
-                    h = (h.rotate_left(5) ^ u64::from(x)).wrapping_mul(K);
+                h.word(w.len() as u32);
+                for &x in w {
+                    h.word(x);
                 }
             };
             words(bytemuck::cast_slice(std::slice::from_ref(&self.header)));
             words(bytemuck::cast_slice(self.pages()));
             words(bytemuck::cast_slice(self.triangles()));
             words(bytemuck::cast_slice(self.tiles()));
-            let mut z = h;
-            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-            (z ^ (z >> 31)).max(1)
+            h.finish()
         })
     }
 

@@ -74,8 +74,8 @@ impl TexelWriter {
         if let Some((i, message)) = check_triangles(triangles, pages.len()) {
             return Err(usage(format!("triangle {i}: {message}")));
         }
-        let tmp = crate::output::atomic::temporary_name(path);
-        let tiles_tmp = crate::output::atomic::with_suffix(path, "tiles");
+        let tmp = crate::atomic::temporary_name(path);
+        let tiles_tmp = crate::atomic::with_suffix(path, "tiles");
         let io = |what| {
             move |source| TexelFileError::Io {
                 path: path.to_owned(),
