@@ -43,7 +43,7 @@ pub struct BakeArgs {
     pub bounces: u32,
     /// Sun and sky, replacing the scene file's: give the same as to `prepare`.
     #[command(flatten)]
-    pub lights: super::prepare::LightFlags,
+    pub lights: super::scene::LightFlags,
     /// Denoise the lightmap as its pages are written: an edge-aware À-Trous filter guided by
     /// each texel's position, normal and variance (docs/lightmaps.md). Off by default: the
     /// lightmap is then the estimator's output, unbiased and unblurred, as the bench measures.
@@ -260,7 +260,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
     let textures = TextureOptions {
         max_size: args.max_texture_size,
     };
-    let (scene, notes) = super::prepare::load_lit_scene(&args.scene, textures, &args.lights, true)?;
+    let (scene, notes) = super::scene::load_lit_scene(&args.scene, textures, &args.lights, true)?;
     files
         .reads_each("a file of the scene", &notes.files_read)
         .check()?;

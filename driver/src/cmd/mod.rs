@@ -16,6 +16,7 @@ pub mod merge;
 pub mod prepare;
 pub mod render;
 pub mod samples;
+pub mod scene;
 pub mod synth;
 
 /// What a subcommand failed with: printed by `main` as `guidebake: <message>`.

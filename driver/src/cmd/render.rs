@@ -47,7 +47,7 @@ pub struct RenderArgs {
     /// Sun and sky, replacing the scene file's (the sky is what rays that leave the scene
     /// see): give the same as to `prepare` and `bake`.
     #[command(flatten)]
-    pub lights: super::prepare::LightFlags,
+    pub lights: super::scene::LightFlags,
     /// Largest width or height a base-colour texture is kept at (as `bake`'s).
     #[arg(long, default_value_t = TextureOptions::DEFAULT_MAX_SIZE, value_parser = clap::value_parser!(u32).range(1..=65536))]
     pub max_texture_size: u32,
@@ -115,8 +115,7 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
     let textures = TextureOptions {
         max_size: args.max_texture_size,
     };
-    let (scene, notes) =
-        super::prepare::load_lit_scene(&args.scene, textures, &args.lights, false)?;
+    let (scene, notes) = super::scene::load_lit_scene(&args.scene, textures, &args.lights, false)?;
     files
         .reads_each("a file of the scene", &notes.files_read)
         .check()?;
