@@ -15,10 +15,41 @@ pub fn temporary_name(path: &Path) -> PathBuf {
 /// `DIR/.NAME.SUFFIX-PID`: a scratch name beside `path` (temporary files that are not the
 /// file being published).
 pub fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
+    let (prefix, pid) = scratch_affixes(path);
+    path.with_file_name(format!("{prefix}{suffix}{pid}"))
+}
+
+/// What every scratch name of `path` by this process starts and ends with ([`with_suffix`]):
+/// `.NAME.` and `-PID`.
+fn scratch_affixes(path: &Path) -> (String, String) {
     let name = path
         .file_name()
         .map_or_else(|| "out".into(), |s| s.to_string_lossy());
-    path.with_file_name(format!(".{name}.{suffix}-{}", std::process::id()))
+    (format!(".{name}."), format!("-{}", std::process::id()))
+}
+
+/// Removes every scratch file (or folder) of `path` this process made ([`with_suffix`]):
+/// what an output being written leaves when the process is stopped at once (Ctrl-C).
+pub fn remove_scratch(path: &Path) {
+    let (prefix, pid) = scratch_affixes(path);
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let file = entry.file_name().to_string_lossy().into_owned();
+        if file.starts_with(&prefix) && file.ends_with(&pid) {
+            let scratch = entry.path();
+            let _ = if scratch.is_dir() {
+                std::fs::remove_dir_all(&scratch)
+            } else {
+                std::fs::remove_file(&scratch)
+            };
+        }
+    }
 }
 
 /// Writes `path` through [`temporary_name`]: `write` fills the temporary file (given its
@@ -64,6 +95,24 @@ pub fn write(path: &Path, bytes: impl AsRef<[u8]>) -> io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_this_processs_scratch_of_the_output_is_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("lm.exr");
+        let pid = std::process::id();
+        let ours = temporary_name(&out);
+        let tiles = with_suffix(&out, "tiles");
+        assert_eq!(tiles, dir.path().join(format!(".lm.exr.tiles-{pid}")));
+        let other_process = dir.path().join(format!(".lm.exr.tmp-{}", pid + 1));
+        let other_file = dir.path().join(format!(".lm2.exr.tmp-{pid}"));
+        for p in [&out, &ours, &tiles, &other_process, &other_file] {
+            std::fs::write(p, b"x").unwrap();
+        }
+        remove_scratch(&out);
+        assert!(!ours.exists() && !tiles.exists());
+        assert!(out.exists() && other_process.exists() && other_file.exists());
+    }
 
     #[test]
     fn a_file_appears_whole_and_a_failed_write_leaves_nothing() {

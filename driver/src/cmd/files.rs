@@ -14,9 +14,16 @@ use super::{CmdError, usage};
 #[derive(Debug, Default)]
 pub struct Files {
     reads: Vec<(String, PathBuf)>,
-    writes: Vec<(String, PathBuf)>,
-    /// Which of `writes` are directories (a bake's work directory).
-    directories: Vec<bool>,
+    writes: Vec<Output>,
+}
+
+/// One output of a command: what it is, where, and whether it is a directory (a bake's work
+/// directory) or a file.
+#[derive(Debug)]
+struct Output {
+    what: String,
+    path: PathBuf,
+    directory: bool,
 }
 
 impl Files {
@@ -46,22 +53,28 @@ impl Files {
     /// The command writes the file `path`, as `what` (e.g. "the lightmap (-o)").
     #[must_use]
     pub fn writes(mut self, what: impl Into<String>, path: &Path) -> Self {
-        self.writes.push((what.into(), path.to_owned()));
-        self.directories.push(false);
+        self.writes.push(Output {
+            what: what.into(),
+            path: path.to_owned(),
+            directory: false,
+        });
         self
     }
 
     /// The command writes into the directory `path` (made when missing), as `what`.
     #[must_use]
     pub fn writes_dir(mut self, what: impl Into<String>, path: &Path) -> Self {
-        self.writes.push((what.into(), path.to_owned()));
-        self.directories.push(true);
+        self.writes.push(Output {
+            what: what.into(),
+            path: path.to_owned(),
+            directory: true,
+        });
         self
     }
 
-    /// The outputs, for [`super::interrupt::remove_scratch_of`].
+    /// The outputs, for [`super::interrupt::register_outputs`].
     pub fn outputs(&self) -> impl Iterator<Item = &Path> {
-        self.writes.iter().map(|(_, p)| p.as_path())
+        self.writes.iter().map(|o| o.path.as_path())
     }
 
     /// Refuses an output that is an input or another output, an output whose directory does
@@ -70,9 +83,10 @@ impl Files {
     /// # Errors
     /// A message naming both files and what each is.
     pub fn check(&self) -> Result<(), CmdError> {
-        for (i, (what, out)) in self.writes.iter().enumerate() {
+        for (i, output) in self.writes.iter().enumerate() {
+            let (what, out) = (&output.what, &output.path);
             check_directory(what, out)?;
-            if !self.directories[i] && out.is_dir() {
+            if !output.directory && out.is_dir() {
                 return Err(usage(format!("{}: {what} is a directory", out.display())));
             }
             if let Some((input, path)) = self.reads.iter().find(|(_, p)| same_file(out, p)) {
@@ -82,11 +96,12 @@ impl Files {
                     path.display()
                 )));
             }
-            if let Some((other, path)) = self.writes[..i].iter().find(|(_, p)| same_file(out, p)) {
+            if let Some(other) = self.writes[..i].iter().find(|o| same_file(out, &o.path)) {
                 return Err(usage(format!(
-                    "{}: {what} and {other} ({}) are the same file: nothing was written; give them different names",
+                    "{}: {what} and {} ({}) are the same file: nothing was written; give them different names",
                     out.display(),
-                    path.display()
+                    other.what,
+                    other.path.display()
                 )));
             }
         }
@@ -170,15 +185,27 @@ pub fn lightmap_files(out: &Path, texels: &Path) -> Vec<(PathBuf, PathBuf)> {
 /// # Errors
 /// A message naming the file and the option.
 pub fn check_exr(option: &str, out: &Path) -> Result<(), CmdError> {
-    if out
+    check_extension(
+        out,
+        "exr",
+        &format!("{option} names the lightmap, an OpenEXR file"),
+    )
+}
+
+/// Refuses `path` unless its name ends in `.ext` (any case), saying `what` it is for.
+///
+/// # Errors
+/// `PATH: WHAT: give it a name that ends in .EXT`.
+pub fn check_extension(path: &Path, ext: &str, what: &str) -> Result<(), CmdError> {
+    if path
         .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+        .is_some_and(|e| e.eq_ignore_ascii_case(ext))
     {
         return Ok(());
     }
     Err(usage(format!(
-        "{}: {option} names the lightmap, an OpenEXR file: give it a name that ends in .exr",
-        out.display()
+        "{}: {what}: give it a name that ends in .{ext}",
+        path.display()
     )))
 }
 

@@ -57,16 +57,7 @@ pub struct RenderArgs {
 /// atlas previews (kept, though not read) — and the one PNG it writes.
 fn render_files(args: &RenderArgs) -> Result<super::files::Files, super::CmdError> {
     super::files::check_exr("--lightmap", &args.lightmap)?;
-    if !args
-        .out
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
-    {
-        return Err(super::usage(format!(
-            "{}: -o writes a PNG picture: give it a name that ends in .png",
-            args.out.display()
-        )));
-    }
+    super::files::check_extension(&args.out, "png", "-o writes a PNG picture")?;
     let mut files = super::files::Files::new()
         .reads("the scene", &args.scene)
         .reads("the texel file (--texels)", &args.texels);
