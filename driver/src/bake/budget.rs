@@ -313,7 +313,7 @@ fn bounded(sums: &[Vec<BlockSums>], world_mean: f64) -> Option<Vec<Vec<f32>>> {
 
 /// A texel result's per-sample luminance variance and mean luminance (of its plain average,
 /// which its relative standard error is of).
-fn per_sample(r: &TexelResult) -> (f64, f64) {
+pub(super) fn per_sample(r: &TexelResult) -> (f64, f64) {
     let mean = f64::from(guidebake_kernels::estimator::luminance_f32(r.total));
     let se = f64::from(r.rel_std_error) * mean;
     (se * se * f64::from(r.samples), mean)

@@ -110,8 +110,15 @@ pub struct GatherCounters {
     /// Guided iterations that fell back to the baseline because the guide the cluster sampled
     /// in an earlier iteration beat stratified cosine points by less than `--min-gain`.
     pub iterations_unguided_no_gain: u64,
+    /// Guided iterations that gathered with cosine points because the pass before measured
+    /// the cluster's light as flat (`--flat-below`: [`GatherCounters::clusters_flat`]).
+    pub iterations_unguided_flat: u64,
     /// Guided iterations that sampled a learned guide.
     pub iterations_guided: u64,
+    /// Clusters of a guided last pass that gathered with cosine points alone, no seed and no
+    /// guide learned, because the pass before measured their light as flat: a pooled relative
+    /// per-sample variance below `--flat-below` thousandths.
+    pub clusters_flat: u64,
     /// Clusters whose first iteration sampled a guide seeded by the pass before
     /// ([`BakeSettings::reads_guide_seeds`](super::settings::BakeSettings::reads_guide_seeds));
     /// not among the learnable iterations, which follow the first.
@@ -140,6 +147,7 @@ impl GatherCounters {
             + self.iterations_unguided_no_energy
             + self.iterations_unguided_uniform_guide
             + self.iterations_unguided_no_gain
+            + self.iterations_unguided_flat
     }
 
     /// Adds another worker's counts.
@@ -157,7 +165,9 @@ impl GatherCounters {
         self.iterations_unguided_no_energy += o.iterations_unguided_no_energy;
         self.iterations_unguided_uniform_guide += o.iterations_unguided_uniform_guide;
         self.iterations_unguided_no_gain += o.iterations_unguided_no_gain;
+        self.iterations_unguided_flat += o.iterations_unguided_flat;
         self.iterations_guided += o.iterations_guided;
+        self.clusters_flat += o.clusters_flat;
         self.clusters_seeded += o.clusters_seeded;
         self.texel_iterations_stopped += o.texel_iterations_stopped;
         self.guide_build_ns += o.guide_build_ns;
@@ -497,10 +507,20 @@ impl<'w> TileBaker<'w> {
         let mut stopped = false;
         // The stopping rule's last iteration, cut to the samples it still needs (`--target-error`).
         let mut cut: Option<u32> = None;
+        let guides = matches!(settings.guiding, Guiding::Coherent | Guiding::Naive);
+        // Where the pass before measured this cluster's light as flat, cosine points are
+        // already (nearly) exact: no guide, seeded or learned (`--flat-below`).
+        let flat = guides
+            && world.reads_guide_seeds()
+            && is_flat(
+                members.iter().filter_map(|&m| {
+                    world.seeding_result(first_texel + u64::from(valid[m as usize]))
+                }),
+                settings.flat_below,
+            );
+        counters.clusters_flat += u64::from(flat);
         // The pass before kept this cluster's seed: its first iteration samples a guide too.
-        if world.reads_guide_seeds()
-            && matches!(settings.guiding, Guiding::Coherent | Guiding::Naive)
-        {
+        if world.reads_guide_seeds() && guides && !flat {
             let cells = members.iter().map(|&m| {
                 let id = first_texel + u64::from(valid[m as usize]);
                 world.guide_seed(id).unwrap_or(0.0)
@@ -514,11 +534,16 @@ impl<'w> TileBaker<'w> {
         learning.pool.clear();
         for k in 0..iterations {
             learning.clear();
-            if stopped {
+            if flat && k > 0 {
+                counters.iterations_unguided_flat += 1;
+            } else if stopped {
                 counters.iterations_unguided_no_gain += 1;
             }
-            let learns =
-                !stopped && cut.is_none() && k + 1 < iterations && settings.guiding != Guiding::Off;
+            let learns = !flat
+                && !stopped
+                && cut.is_none()
+                && k + 1 < iterations
+                && settings.guiding != Guiding::Off;
             let nominal = cut.unwrap_or_else(|| settings.samples_in_iteration(k));
             for &m in members {
                 let i = valid[m as usize];
@@ -881,6 +906,25 @@ fn grid_sample8(g: &GridGuide, x: f32x8, y: f32x8) -> (f32x8, f32x8, f32x8) {
         ([wx[lane], wy[lane]], q[lane]) = g.sample([x[lane], y[lane]]);
     }
     (f32x8::from(wx), f32x8::from(wy), f32x8::from(q))
+}
+
+/// Whether the light of a cluster whose texels' results in the pass before are `measured` is
+/// flat: their pooled relative per-sample variance, `Σ σ² / Σ μ²` (σ² a texel's per-sample
+/// luminance variance, μ its mean; dark texels left out), below `permille` thousandths. Never
+/// with `permille` 0, nor where the pass before measured no light.
+fn is_flat(measured: impl Iterator<Item = TexelResult>, permille: u32) -> bool {
+    if permille == 0 {
+        return false;
+    }
+    let (mut variance, mut mean2) = (0.0f64, 0.0f64);
+    for r in measured.filter(|r| r.flags & FLAG_BAKED != 0) {
+        let (v, mu) = budget::per_sample(&r);
+        if v.is_finite() && mu.is_finite() && mu > 0.0 {
+            variance += v;
+            mean2 += mu * mu;
+        }
+    }
+    mean2 > 0.0 && variance < mean2 * f64::from(permille) / 1000.0
 }
 
 /// The relative standard error of a texel's pooled luminance mean (0 when unknown).
@@ -2277,6 +2321,85 @@ mod tests {
             (a - b).abs() <= 4.0 * (va + vb).sqrt(),
             "seeded mean {a} (variance {va}), unguided {b} ({vb})"
         );
+    }
+
+    /// `--flat-below` (docs/guiding-on-levels.md): a cluster whose light the pass before
+    /// measured as flat — a plane under a constant sky, where every cosine sample is πL —
+    /// gathers the last pass with cosine points alone, no seed and no guide, and its texels
+    /// are πL; under the small emitter, whose cosine samples vary, the default threshold
+    /// leaves the cluster seeded and guided.
+    #[test]
+    fn a_cluster_whose_light_the_pass_before_measured_flat_is_not_guided() {
+        let dir = tempfile::tempdir().unwrap();
+        let first_texel = 1000;
+        let last_pass = |mut world: World, texels: &[TexelRecord], name: &str| {
+            let mut before =
+                TileBaker::new(&world, settings(Guiding::Off)).writes_guide_seeds(true);
+            let mut out = TileBuffer::default();
+            before.bake_tile(0, first_texel, texels, &mut out);
+            let path = dir.path().join(name);
+            let file = ResultFile::create(&path, first_texel + texels.len() as u64, 7).unwrap();
+            file.write(first_texel, &out.results).unwrap();
+            world.set_guide_seeds(Some(MappedResults::new(&file).unwrap()));
+            let mut baker = TileBaker::new(&world, settings(Guiding::Coherent));
+            baker.bake_tile(0, first_texel, texels, &mut out);
+            (baker.counters, out.results)
+        };
+        let sky = Vec3::new(0.5, 1.0, 2.0);
+        let texels = texels_on_plane(64, 0.0);
+        let (c, results) = last_pass(world(ground(), grey(0.5, 0.0), sky, None), &texels, "sky");
+        assert_eq!(
+            (
+                c.clusters,
+                c.clusters_flat,
+                c.clusters_seeded,
+                c.iterations_guided
+            ),
+            (1, 1, 0, 0),
+            "{c:?}"
+        );
+        assert_eq!(c.iterations_unguided_flat, 2, "{c:?}");
+        let want = sky * core::f32::consts::PI;
+        for r in &results {
+            assert_eq!(r.flags & FLAG_UNGUIDED, FLAG_UNGUIDED);
+            let got = Vec3::from(r.irradiance);
+            assert!(
+                (got - want).abs().max_element() <= 1e-5 * want.max_element(),
+                "{got}"
+            );
+        }
+        let (world, texels) = small_emitter();
+        let (c, _) = last_pass(world, &texels, "emitter");
+        assert_eq!((c.clusters_flat, c.clusters_seeded), (0, 1), "{c:?}");
+        assert!(c.iterations_guided > 0, "{c:?}");
+    }
+
+    /// [`is_flat`] pools the texels' relative per-sample variance, `rse² · samples` each,
+    /// weighted by their squared means; dark and unbaked texels are left out, and a cluster
+    /// with nothing lit, or a threshold of 0, is never flat.
+    #[test]
+    fn flatness_is_the_pooled_relative_variance_per_sample() {
+        let r = |mean: f32, rse: f32, samples: u32| TexelResult {
+            total: [mean; 3],
+            rel_std_error: rse,
+            samples,
+            flags: FLAG_BAKED,
+            ..Default::default()
+        };
+        // 0.01² × 64 = 6.4 thousandths, in both texels.
+        let quiet = [r(1.0, 0.01, 64), r(2.0, 0.01, 64)];
+        assert!(is_flat(quiet.into_iter(), 7));
+        assert!(!is_flat(quiet.into_iter(), 6));
+        assert!(!is_flat(quiet.into_iter(), 0));
+        // (1 × 0.01² × 64 + 4 × 0.1² × 64) / (1 + 4): 0.513.
+        assert!(!is_flat([quiet[0], r(2.0, 0.1, 64)].into_iter(), 500));
+        assert!(is_flat([quiet[0], r(2.0, 0.1, 64)].into_iter(), 530));
+        assert!(!is_flat([r(0.0, 0.0, 64)].into_iter(), 100));
+        let unbaked = TexelResult {
+            flags: 0,
+            ..r(1.0, 1.0, 64)
+        };
+        assert!(is_flat([quiet[0], unbaked].into_iter(), 7));
     }
 
     /// A guide seed's cells, one per texel of the cluster: the records' mean per cell on a grid

@@ -250,6 +250,16 @@ pub struct BakeSettings {
     ///
     /// [`GatherCounters`]: crate::bake::gather::GatherCounters
     pub min_gain: u32,
+    /// A cluster of the last pass whose light the pass before measured as flat — a pooled
+    /// relative per-sample variance of its cosine samples below this many thousandths —
+    /// gathers that pass with cosine points alone: no seed, no learned guide (`--flat-below`;
+    /// 0: guide every cluster). Stratified cosine points integrate a constant sky exactly; a
+    /// guide learned from a few hundred records adds its own noise there (docs/guiding-on-levels.md).
+    /// Judged from the pass that keeps the guide seeds, so only where the last pass reads them
+    /// ([`Self::reads_guide_seeds`]); counted as [`GatherCounters`]'s `clusters_flat`.
+    ///
+    /// [`GatherCounters`]: crate::bake::gather::GatherCounters
+    pub flat_below: u32,
     /// How emissive triangles are found.
     pub emitters: EmitterSampling,
     /// How next-event estimation picks an emitter.
@@ -293,7 +303,9 @@ pub struct BakeSettings {
 /// The fields in order, as `derive(Debug)` would print them, but `budget` only when it is not
 /// [`Budget::Uniform`], `direct_spp` and `lookup_spp` only when they are set and
 /// `guide_target` only when it is not [`GuideTarget::Radiance`], `target_error` only when it
-/// is set and `guide_seed` only when it is [`GuideSeed::Off`]: a bake without them keeps the
+/// is set, `guide_seed` only when it is [`GuideSeed::Off`] and `flat_below` only when it is
+/// set and can act (a guided series bake whose last pass reads guide seeds): a bake without
+/// them keeps the
 /// identity ([`BakeSettings::bake_id`]) and the bench's reference keys it had before they
 /// existed. The destructuring names every field,
 /// so a field added to the settings cannot be left out of the identity unnoticed.
@@ -313,6 +325,7 @@ impl fmt::Debug for BakeSettings {
             min_split,
             smooth,
             min_gain,
+            flat_below,
             emitters,
             emitter_selection,
             directional,
@@ -364,9 +377,19 @@ impl fmt::Debug for BakeSettings {
         if *guide_seed == GuideSeed::Off {
             d.field("guide_seed", guide_seed);
         }
+        // Judged only where a guided last pass reads the guide seeds (series transport).
+        let judges_flat = matches!(guiding, Guiding::Coherent | Guiding::Naive)
+            && *transport == Transport::Series
+            && *guide_seed == GuideSeed::Previous;
+        if *flat_below != 0 && judges_flat {
+            d.field("flat_below", flat_below);
+        }
         d.finish()
     }
 }
+
+/// The default [`BakeSettings::flat_below`], in thousandths.
+pub const DEFAULT_FLAT_BELOW: u32 = 100;
 
 /// Most learning iterations a bake may ask for.
 pub const MAX_ITERATIONS: usize = 16;
@@ -403,6 +426,7 @@ impl Default for BakeSettings {
             min_split: 64,
             smooth: 10,
             min_gain: 25,
+            flat_below: DEFAULT_FLAT_BELOW,
             emitters: EmitterSampling::default(),
             emitter_selection: EmitterSelection::default(),
             directional: Directional::None,
@@ -792,6 +816,7 @@ impl BakeSettings {
             min_split,
             smooth,
             min_gain,
+            flat_below,
             emitters,
             emitter_selection,
             directional,
@@ -823,6 +848,7 @@ impl BakeSettings {
             ("--min-split", min_split.to_string()),
             ("--smooth", smooth.to_string()),
             ("--min-gain", min_gain.to_string()),
+            ("--flat-below", flat_below.to_string()),
             ("--emitters", name(emitters)),
             ("--emitter-selection", name(emitter_selection)),
             ("--directional", name(directional)),
@@ -1224,6 +1250,11 @@ mod tests {
             transport: Transport::Series,
             ..d
         };
+        assert!(
+            format!("{d:?}").ends_with("guided_passes: Last, lookup_filter: 2, flat_below: 100 }")
+        );
+        // Guiding every cluster, as series bakes did before `--flat-below`: their identity.
+        let d = BakeSettings { flat_below: 0, ..d };
         assert!(format!("{d:?}").ends_with("guided_passes: Last, lookup_filter: 2 }"));
         let unfiltered = BakeSettings {
             lookup_filter: 0,
@@ -1242,6 +1273,7 @@ mod tests {
         // The default learns the second moment: another bake than the radiance target's.
         let second = BakeSettings {
             budget: Budget::Uniform,
+            flat_below: 0,
             ..BakeSettings::default()
         };
         assert_eq!(
@@ -1254,12 +1286,21 @@ mod tests {
         );
         assert_ne!(second.bake_id(1), d.bake_id(1));
         // And spends its last pass's samples by the bounded budget: another bake again.
-        let bounded = BakeSettings::default();
+        let bounded = BakeSettings {
+            flat_below: 0,
+            ..BakeSettings::default()
+        };
         assert_eq!(bounded.budget, Budget::Bounded);
         assert!(
             format!("{bounded:?}")
                 .ends_with("budget: Bounded, lookup_filter: 2, guide_target: SecondMoment }")
         );
+        // And leaves the clusters whose light is flat unguided: another bake again.
+        assert!(
+            format!("{:?}", BakeSettings::default())
+                .ends_with("guide_target: SecondMoment, flat_below: 100 }")
+        );
+        assert_ne!(BakeSettings::default().bake_id(1), bounded.bake_id(1));
         assert_ne!(bounded.bake_id(1), second.bake_id(1));
         // The stopping rule, set, is another bake too.
         let stopping = BakeSettings {
@@ -1390,7 +1431,8 @@ mod tests {
     fn every_setting_is_named_by_its_option() {
         let a = BakeSettings::default();
         let options = a.options();
-        assert_eq!(options.len(), 24, "{options:?}");
+        assert_eq!(options.len(), 25, "{options:?}");
+        assert_eq!(options["--flat-below"], "100");
         assert_eq!(options["--spp"], "256");
         assert_eq!(options["--guiding"], "coherent");
         assert_eq!(options["--direct-spp"], "default");

@@ -16,7 +16,7 @@ use super::budget::SpatialBudget;
 use super::settings::{EmitterSampling, Transport};
 
 use crate::bvh::{Bvh, BvhError, Preset};
-use crate::output::result_file::MappedResults;
+use crate::output::result_file::{MappedResults, TexelResult};
 use crate::scene::texture::{HitAlbedo, VaryingAlbedo};
 use crate::scene::{Scene, Sky};
 use crate::transport::emitters::{EmitterSelection, Emitters};
@@ -301,7 +301,13 @@ impl World {
 
     /// Texel `texel`'s cell of its cluster's guide seed, if this pass reads seeds.
     pub fn guide_seed(&self, texel: u64) -> Option<f32> {
-        self.guide_seeds.as_ref()?.get(texel).map(|r| r.seed)
+        self.seeding_result(texel).map(|r| r.seed)
+    }
+
+    /// Texel `texel`'s result in the pass that kept the guide seeds, if this pass reads
+    /// seeds: besides its cell, what its cosine samples measured there (mean, error, samples).
+    pub fn seeding_result(&self, texel: u64) -> Option<TexelResult> {
+        self.guide_seeds.as_ref()?.get(texel)
     }
 
     /// Radiance of the sky along `dir` (zero without a lookup when the sky is black).

@@ -42,6 +42,8 @@ pub struct Levers {
     pub guided_passes: GuidedPasses,
     /// `--min-gain`.
     pub min_gain: u32,
+    /// `--flat-below` (`+flat=`).
+    pub flat_below: u32,
     /// `--transport`, where the method sets its own (else the ladder's, `guidebake bench
     /// --transport`): so one run compares series and path transport at equal time.
     pub transport: Option<Transport>,
@@ -79,6 +81,7 @@ impl Default for Levers {
             smooth: d.smooth,
             guided_passes: d.guided_passes,
             min_gain: d.min_gain,
+            flat_below: d.flat_below,
             transport: None,
             selection: None,
             budget: None,
@@ -103,6 +106,7 @@ impl Levers {
             smooth: 25,
             guided_passes: GuidedPasses::Every,
             min_gain: 0,
+            flat_below: 0,
             transport: None,
             selection: None,
             budget: Some(Budget::Uniform),
@@ -136,6 +140,9 @@ impl Levers {
         }
         if self.min_gain != d.min_gain {
             s += &format!("+gain={}", self.min_gain);
+        }
+        if self.flat_below != d.flat_below {
+            s += &format!("+flat={}", self.flat_below);
         }
         if let Some(t) = self.transport {
             s += &format!("+transport={}", value_name(&t));
@@ -266,6 +273,7 @@ impl Method {
                 "split" => levers.min_split = number()?,
                 "smooth" => levers.smooth = number()?,
                 "gain" => levers.min_gain = number()?,
+                "flat" => levers.flat_below = number()?,
                 "schedule" => {
                     levers.schedule =
                         Schedule::from_str(value, true).map_err(|e| format!("{label:?}: {e}"))?;
@@ -369,6 +377,7 @@ impl Method {
             smooth: self.levers.smooth,
             guided_passes: self.levers.guided_passes,
             min_gain: self.levers.min_gain,
+            flat_below: self.levers.flat_below,
             emitter_selection: self.levers.selection.unwrap_or_default(),
             budget: self
                 .levers

@@ -175,6 +175,12 @@ pub struct BakeArgs {
     /// for its remaining iterations. 0: guide always.
     #[arg(help_heading = RESEARCH, long, default_value_t = BakeSettings::default().min_gain)]
     pub min_gain: u32,
+    /// A cluster whose light the pass before measured as flat — a relative variance per
+    /// sample below this many thousandths, pooled over its texels — gathers the last pass
+    /// with cosine points alone, no guide (a guide only adds its own noise where cosine points
+    /// are already exact, as on a surface under open sky). 0: guide every cluster.
+    #[arg(help_heading = RESEARCH, long, value_name = "PERMILLE", default_value_t = BakeSettings::default().flat_below)]
+    pub flat_below: u32,
     /// Light transport at gather hits: `series` (passes through the previous pass's
     /// lightmap, the paper's production setting) or `path` (unbiased path tracing).
     #[arg(help_heading = RESEARCH, long, value_enum, default_value_t = Transport::Series)]
@@ -249,6 +255,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         min_split: args.min_split,
         smooth: args.smooth,
         min_gain: args.min_gain,
+        flat_below: args.flat_below,
         emitters: args.emitters,
         emitter_selection: args.emitter_selection,
         directional: args.directional,
