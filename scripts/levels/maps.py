@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""Three atlas panels of docs/guiding-on-levels.md, half size (2x2 texels averaged): the texel's
-sky view (black: none, white: open sky), then the squared error of the unguided bake and of
-the default against the reference, on one log scale (white: 1e-2 and above, black: 1e-5
-and below); blue marks texels not baked. Squared errors are averaged over the seeds given.
-    maps.py TEXELS REF.exr REF2.exr SKY.exr UNGUIDED.exr[,...] DEFAULT.exr[,...] OUT.png
+"""The atlas panels of docs/guiding-on-levels.md, half size (2x2 texels averaged): the texel's
+sky view (black: none, white: open sky), then each bake's squared error against the reference,
+on one log scale (white: 1e-2 and above, black: 1e-5 and below); blue marks texels not
+baked. A bake is one EXR or several, comma-separated (seeds): their squared errors averaged.
+    maps.py TEXELS REF.exr REF2.exr SKY.exr BAKE.exr[,...] [BAKE.exr[,...] ...] OUT.png
 Needs numpy, OpenEXR and Pillow."""
 import sys
 
@@ -14,7 +14,8 @@ import where_guiding_loses as w
 
 
 def main():
-    tp, r1, r2, skyp, up, dp, out = sys.argv[1:8]
+    tp, r1, r2, skyp = sys.argv[1:5]
+    bakes, out = sys.argv[5:-1], sys.argv[-1]
     t, _ = w.read_texels(tp)
     v = (t["flags"] & 1) != 0
     x, y = t["px"][v, 0].astype(int), t["px"][v, 1].astype(int)
@@ -32,7 +33,7 @@ def main():
 
     sky = rgb(skyp).sum(-1) / (np.pi * w.SKY.sum())
     panels = [np.clip(sky, 0, 1)]
-    for p in (up, dp):
+    for p in bakes:
         e = se(p)
         panels.append(np.clip((np.log10(np.maximum(e, 1e-12)) + 5) / 3, 0, 1))
     imgs = []
