@@ -16,8 +16,10 @@
 //! encloses open space — a game level, a room — the automatic view stands inside it
 //! ([`Camera::inside`]; docs/levels.md, "Render from inside"): points of a grid over the
 //! bounds are probed with rays, a point counts as inside when no ray meets a side that faces
-//! no open space (it is not inside a wall), the rays downwards meet a floor and most
-//! horizontal ones meet walls; the point with the widest view is lowered towards its floor,
+//! no open space (it is not inside a wall), the rays downwards meet a floor, most
+//! horizontal ones meet walls and at least half the walls they meet are lit in the lightmap
+//! (a level closed in a shell that keeps the sun and sky out is dark inside: the view then
+//! falls back to the overview, with a warning); the point with the widest view is lowered towards its floor,
 //! looks along its longest horizontal sight line and steps back from it. Elsewhere (an
 //! object, an open scene) the *overview* frames the scene's bounds from above one corner. A
 //! closed room seen from outside would show only its outer walls, so the overview is a
@@ -30,7 +32,8 @@
 //! the surface pixels to ½, as the lightmap previews do, and for the inside view their
 //! log-average to an 18 % grey ([`View::key_exposure`], Reinhard et al. 2002's key), which
 //! keeps both sunlit floors and the shade beside them readable. Views compared side by side (the
-//! demo's baseline and guided) share one exposure.
+//! demo's baseline and guided) share one exposure. A view whose every surface is black has no
+//! exposure to set ([`View::sees_light`]): `render` says so and writes nothing.
 
 use std::path::{Path, PathBuf};
 
@@ -159,10 +162,12 @@ impl Camera {
         Self::look_at(centre + direction * distance, centre, Vec3::Y, AUTO_FOV)
     }
 
-    /// The automatic view from inside the open space `stage` encloses (module docs), or
-    /// `None` when no probed point is enclosed. Vertical field of view [`INSIDE_FOV`].
+    /// The automatic view from inside the open space `stage` encloses where `lightmap` lights
+    /// it (module docs): [`Inside::Dark`] when points are enclosed but none sees lit walls,
+    /// [`Inside::Open`] when no probed point is enclosed. Vertical field of view
+    /// [`INSIDE_FOV`].
     #[must_use]
-    pub fn inside(stage: &Stage<'_>) -> Option<Self> {
+    pub fn inside(stage: &Stage<'_>, lightmap: &Lightmap) -> Inside {
         let (lo, hi) = stage.scene.bounds();
         let size = hi - lo;
         let reach = size.length().max(1e-3);
@@ -178,12 +183,12 @@ impl Camera {
             })
             .collect();
         let directions = sphere_directions(INSIDE_RAYS);
-        // (score, point index), the best first; ties keep the lower index (deterministic).
-        let best = points
+        // Per enclosed point: (score, point index, whether it sees lit walls).
+        let candidates: Vec<(f32, usize, bool)> = points
             .par_iter()
             .enumerate()
             .filter_map(|(i, &p)| {
-                let (mut horizontal, mut enclosed, mut width) = (0u32, 0u32, 0.0f32);
+                let (mut horizontal, mut enclosed, mut lit, mut width) = (0u32, 0u32, 0u32, 0.0f32);
                 for &d in &directions {
                     match stage.probe(p, d) {
                         Sight::Unseen => return None,
@@ -198,20 +203,32 @@ impl Camera {
                                 horizontal += 1;
                                 enclosed += 1;
                                 width += t.min(reach);
+                                lit += u32::from(stage.lit_along(lightmap, p, d));
                             }
                         }
                     }
                 }
                 (enclosed * 4 >= horizontal * 3 && horizontal > 0)
-                    .then(|| (width / horizontal as f32, i))
+                    .then(|| (width / horizontal as f32, i, lit * 2 >= enclosed))
             })
-            .reduce_with(|a, b| {
+            .collect();
+        if candidates.is_empty() {
+            return Inside::Open;
+        }
+        // The best lit point; ties keep the lower index (deterministic).
+        let Some(best) = candidates
+            .into_iter()
+            .filter(|&(_, _, lit)| lit)
+            .reduce(|a, b| {
                 if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
                     b
                 } else {
                     a
                 }
-            })?;
+            })
+        else {
+            return Inside::Dark;
+        };
         let (width, p) = (best.0, points[best.1]);
         // Lower the point towards its floor: a third of the way up to the ceiling (or to the
         // room's width where the sky is open above).
@@ -240,7 +257,7 @@ impl Camera {
         }
         eye -= look * 0.4 * sight(eye, -look);
         let target = eye + look - Vec3::Y * 0.12;
-        Some(Self::look_at(eye, target, Vec3::Y, INSIDE_FOV))
+        Inside::View(Self::look_at(eye, target, Vec3::Y, INSIDE_FOV))
     }
 
     /// The ray through normalised image coordinates `sx`, `sy` ∈ [−1, 1] (right, up) of an
@@ -384,6 +401,19 @@ impl Lightmap {
         })
     }
 
+    /// A lightmap of `texels` whose every covered pixel holds `irradiance` (tests).
+    #[cfg(test)]
+    fn uniform(texels: &TexelFile, scene: &Scene, irradiance: Vec3) -> Self {
+        let pages = texels.pages();
+        let images: Vec<Vec<Option<Vec3>>> = pages
+            .iter()
+            .map(|p| vec![Some(irradiance); p.width as usize * p.height as usize])
+            .collect();
+        Self {
+            lookup: PreviousPass::from_pixels(scene, texels.triangles(), pages, &images),
+        }
+    }
+
     /// The irradiance at barycentrics (`b1`, `b2`) of triangle `prim`; zero without UVs.
     pub fn irradiance(&self, prim: u32, b1: f32, b2: f32) -> Vec3 {
         self.lookup.irradiance(prim, b1, b2)
@@ -496,6 +526,29 @@ impl<'s> Stage<'s> {
     }
 }
 
+/// What [`Camera::inside`] found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Inside {
+    /// The view from inside the enclosed space.
+    View(Camera),
+    /// The scene encloses open space, but no probed point inside sees lit walls: the space
+    /// is dark in the lightmap (a closed shell keeps the sun and sky out).
+    Dark,
+    /// No probed point is enclosed (an object, an open scene).
+    Open,
+}
+
+impl Inside {
+    /// The inside view, if there is one.
+    #[must_use]
+    pub fn view(self) -> Option<Camera> {
+        match self {
+            Inside::View(camera) => Some(camera),
+            Inside::Dark | Inside::Open => None,
+        }
+    }
+}
+
 /// What a probe ray from a point sees.
 enum Sight {
     /// Nothing: it leaves the scene.
@@ -520,6 +573,21 @@ impl Stage<'_> {
                 }
             }
         }
+    }
+}
+
+impl Stage<'_> {
+    /// Whether the surface a ray from `org` along `dir` meets is lit: emissive, or with
+    /// irradiance in `lightmap`.
+    fn lit_along(&self, lightmap: &Lightmap, org: Vec3, dir: Vec3) -> bool {
+        let Some(hit) = intersect1(&self.bvh.wide(), &Ray::new(org, dir, 0.0, f32::INFINITY))
+        else {
+            return false;
+        };
+        let prim = hit.prim as usize;
+        let emission = self.scene.triangle_material(prim).emission;
+        let irradiance = lightmap.irradiance(hit.prim, hit.u, hit.v);
+        emission.max_element() > 0.0 || luminance_f32(irradiance.to_array()) > 0.0
     }
 }
 
@@ -649,6 +717,17 @@ impl View {
             .map(|(c, _)| f64::from(luminance_f32(c.to_array())))
     }
 
+    /// Whether any pixel that sees only surfaces is lit (luminance above zero): a view whose
+    /// every surface is black has no exposure to set.
+    pub fn sees_light(&self) -> bool {
+        self.surface_luminances().any(|l| l > 0.0)
+    }
+
+    /// Whether any pixel sees only surfaces (no sky).
+    pub fn sees_surfaces(&self) -> bool {
+        self.surface_luminances().next().is_some()
+    }
+
     /// The exposure that maps the mean luminance of the pixels that see only surfaces to ½
     /// after Reinhard (1 when no surface is seen or the mean is not positive).
     pub fn auto_exposure(&self) -> f32 {
@@ -772,7 +851,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let (scene, texels) = room_with_a_block(dir.path());
         let stage = Stage::new(&scene, &texels).unwrap();
-        let camera = Camera::inside(&stage).expect("the room encloses open space");
+        let lit = Lightmap::uniform(&texels, &scene, Vec3::ONE);
+        let camera = Camera::inside(&stage, &lit)
+            .view()
+            .expect("the room encloses open space");
         let e = camera.eye;
         assert!(
             e.min_element() > 0.0 && e.max_element() < 4.0,
@@ -799,6 +881,10 @@ mod tests {
         for d in sphere_directions(64) {
             assert!(matches!(stage.probe(e, d), Sight::Seen(_)), "{d}");
         }
+        // The same room, dark in its lightmap (as a level inside a shell that keeps the sun
+        // and sky out): enclosed, but no view from inside.
+        let dark = Lightmap::uniform(&texels, &scene, Vec3::ZERO);
+        assert_eq!(Camera::inside(&stage, &dark), Inside::Dark);
     }
 
     #[test]
@@ -821,11 +907,27 @@ mod tests {
         assert!((e - KEY).abs() < 1e-3 * KEY, "{e}");
         // The plain mean would be 5.05: the shade at 0.1 would be nearly black.
         assert!((view.auto_exposure() - 1.0 / 5.05).abs() < 1e-4);
+        assert!(view.sees_light());
+        let black = View {
+            radiance: vec![
+                Vec3::ZERO,
+                Vec3::ZERO,
+                Vec3::splat(1000.0),
+                Vec3::splat(500.0),
+            ],
+            ..view.clone()
+        };
+        assert!(
+            !black.sees_light(),
+            "the sky and half-sky pixels do not count"
+        );
+        assert!(black.sees_surfaces());
         let sky = View {
             surface: vec![0; 4],
             ..view
         };
         assert_eq!(sky.key_exposure(), 1.0);
+        assert!(!sky.sees_light() && !sky.sees_surfaces());
     }
 
     #[test]
@@ -840,7 +942,8 @@ mod tests {
         prepare(&scene, &texels, options).unwrap();
         let texels = TexelFile::open(&texels).unwrap();
         let stage = Stage::new(&scene, &texels).unwrap();
-        assert_eq!(Camera::inside(&stage), None);
+        let lit = Lightmap::uniform(&texels, &scene, Vec3::ONE);
+        assert_eq!(Camera::inside(&stage, &lit), Inside::Open);
     }
 
     /// A 4 m square ground plane (y = 0, facing +y) under a constant sky, its lightmap UVs

@@ -557,3 +557,89 @@ fn an_atlas_that_cannot_fit_names_the_page_size_that_would() {
         .unwrap_or_else(|e| panic!("the size it named, {size}, holds them: {e}"));
     assert_eq!(report.pages, [(w, h)]);
 }
+
+/// A room the bake leaves black: prepared open to a sky (its sides are baked), then baked and
+/// rendered under a black sky and a sun below the horizon. Every surface `render`'s view sees
+/// is black, so it names the picture and the lightmap, says what to try, writes nothing and
+/// exits 1 — and writes the picture when `--exposure` asks for it anyway. (The automatic
+/// view's fallback from a dark enclosed space is `render.rs`'s unit test.)
+#[test]
+fn a_black_lightmap_renders_no_black_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let obj = d.join("room.obj");
+    // A 4 × 4 floor and four 2 m walls, no roof: quads (corner, edge, edge).
+    let quads: [([f32; 3], [f32; 3], [f32; 3]); 5] = [
+        ([0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 0.0, 4.0]),
+        ([0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 2.0, 0.0]),
+        ([0.0, 0.0, 4.0], [4.0, 0.0, 0.0], [0.0, 2.0, 0.0]),
+        ([0.0, 0.0, 0.0], [0.0, 0.0, 4.0], [0.0, 2.0, 0.0]),
+        ([4.0, 0.0, 0.0], [0.0, 0.0, 4.0], [0.0, 2.0, 0.0]),
+    ];
+    let mut text = String::new();
+    for (i, (o, u, v)) in quads.iter().enumerate() {
+        for (a, b) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
+            let p: Vec<f32> = (0..3).map(|k| o[k] + a * u[k] + b * v[k]).collect();
+            text += &format!("v {} {} {}\n", p[0], p[1], p[2]);
+        }
+        let f = 4 * i + 1;
+        text += &format!("f {} {} {}\nf {} {} {}\n", f, f + 1, f + 2, f, f + 2, f + 3);
+    }
+    std::fs::write(&obj, text).unwrap();
+    let texels = d.join("room.texels");
+    let lights = ["--sun", "0.4,-1,0.3:3", "--sky", "0,0,0"];
+    succeeds(&[
+        "prepare",
+        s(&obj),
+        "-o",
+        s(&texels),
+        "--size",
+        "64x64",
+        "--sky",
+        SKY,
+    ]);
+    let lightmap = d.join("room.exr");
+    let bake = [
+        &[
+            "bake",
+            s(&texels),
+            "--scene",
+            s(&obj),
+            "-o",
+            s(&lightmap),
+            "--spp",
+            "24",
+            "-q",
+        ][..],
+        &lights,
+    ]
+    .concat();
+    succeeds(&bake);
+    let view = d.join("view.png");
+    let render = [
+        &[
+            "render",
+            s(&obj),
+            "--texels",
+            s(&texels),
+            "--lightmap",
+            s(&lightmap),
+            "-o",
+            s(&view),
+            "--width",
+            "64",
+        ][..],
+        &lights,
+    ]
+    .concat();
+    let err = fails(&render);
+    assert!(
+        err.contains(s(&lightmap))
+            && err.contains("every surface this view sees is black")
+            && err.contains("--exposure"),
+        "{err}"
+    );
+    assert!(!view.exists(), "nothing written");
+    succeeds(&[&render[..], &["--exposure", "1"]].concat());
+    assert!(view.is_file());
+}

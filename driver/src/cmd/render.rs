@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use crate::render::{Camera, Lightmap, Stage, ViewOptions, render};
+use crate::render::{Camera, Inside, Lightmap, Stage, View, ViewOptions, render};
 use crate::scene::TextureOptions;
 use crate::texels::TexelFile;
 
@@ -83,6 +83,20 @@ pub enum CameraChoice {
     Overview,
 }
 
+/// A view whose every surface is black has no exposure to set: an error saying what to try,
+/// before anything is written (a view of the sky alone keeps exposure 1).
+fn exposable(view: &View, args: &RenderArgs) -> Result<(), super::CmdError> {
+    if view.sees_surfaces() && !view.sees_light() {
+        return Err(format!(
+            "{}: every surface this view sees is black in {}: there is no exposure to set, and nothing was written. Try --camera overview (or another --camera), check that the bake's --sun and --sky reach the surfaces (a level inside a closed shell receives neither: docs/levels.md), or give --exposure to write the picture anyway",
+            args.out.display(),
+            args.lightmap.display()
+        )
+        .into());
+    }
+    Ok(())
+}
+
 /// Runs `guidebake render`.
 ///
 /// # Errors
@@ -131,9 +145,16 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
     let aspect = args.width as f32 / height as f32;
     let stage = Stage::new(&scene, &texels)?;
     let inside = match (from_file, args.camera) {
-        (None, None | Some(CameraChoice::Auto)) => Camera::inside(&stage),
-        _ => None,
+        (None, None | Some(CameraChoice::Auto)) => Camera::inside(&stage, &lightmap),
+        _ => Inside::Open,
     };
+    if inside == Inside::Dark {
+        eprintln!(
+            "guidebake: warning: {}: the space the scene encloses is dark in this lightmap (no point inside sees lit walls): showing it from outside. A level inside a closed shell receives no sun or sky (docs/levels.md)",
+            args.lightmap.display()
+        );
+    }
+    let inside = inside.view();
     let camera = from_file
         .or(inside)
         .unwrap_or_else(|| Camera::framing(scene.bounds(), aspect));
@@ -149,6 +170,9 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
             cutaway,
         },
     );
+    if args.exposure.is_none() {
+        exposable(&view, args)?;
+    }
     let exposure = args.exposure.unwrap_or_else(|| {
         if inside.is_some() {
             view.key_exposure()
@@ -175,4 +199,60 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
         }
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+    use glam::Vec3;
+
+    use super::*;
+    use crate::render::SUBPIXELS;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: RenderArgs,
+    }
+
+    /// A view of surfaces that are all black is refused, naming the picture and the lightmap
+    /// and what to try; one lit pixel, or a view of the sky alone, is not.
+    #[test]
+    fn a_view_whose_every_surface_is_black_is_refused() {
+        let cli = Cli::parse_from([
+            "render",
+            "level.glb",
+            "--texels",
+            "l.texels",
+            "--lightmap",
+            "lm.exr",
+            "-o",
+            "v.png",
+        ]);
+        let full = (SUBPIXELS * SUBPIXELS) as u8;
+        let black = View {
+            width: 2,
+            height: 1,
+            radiance: vec![Vec3::ZERO; 2],
+            surface: vec![full, full],
+        };
+        let e = exposable(&black, &cli.args).unwrap_err().to_string();
+        assert!(
+            e.starts_with("v.png: every surface this view sees is black in lm.exr")
+                && e.contains("--camera overview")
+                && e.contains("--exposure"),
+            "{e}"
+        );
+        let one_lit = View {
+            radiance: vec![Vec3::ZERO, Vec3::splat(0.01)],
+            ..black.clone()
+        };
+        assert!(exposable(&one_lit, &cli.args).is_ok());
+        let sky = View {
+            radiance: vec![Vec3::ONE; 2],
+            surface: vec![0, 0],
+            ..black
+        };
+        assert!(exposable(&sky, &cli.args).is_ok());
+    }
 }
