@@ -39,7 +39,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{Mat4, Vec3};
 use guidebake_kernels::estimator::luminance_f32;
-use guidebake_kernels::packet::Ray;
+use guidebake_kernels::packet::{Hit, Ray};
 use guidebake_kernels::traverse::intersect1;
 use rayon::prelude::*;
 
@@ -198,12 +198,12 @@ impl Camera {
                                 horizontal += 1;
                             }
                         }
-                        Sight::Seen(t) => {
+                        Sight::Seen(hit) => {
                             if d.y.abs() < 0.35 {
                                 horizontal += 1;
                                 enclosed += 1;
-                                width += t.min(reach);
-                                lit += u32::from(stage.lit_along(lightmap, p, d));
+                                width += hit.t.min(reach);
+                                lit += u32::from(stage.lit(lightmap, &hit));
                             }
                         }
                     }
@@ -233,17 +233,17 @@ impl Camera {
         // Lower the point towards its floor: a third of the way up to the ceiling (or to the
         // room's width where the sky is open above).
         let down = match stage.probe(p, -Vec3::Y) {
-            Sight::Seen(t) => t,
+            Sight::Seen(hit) => hit.t,
             _ => 0.0,
         };
         let up = match stage.probe(p, Vec3::Y) {
-            Sight::Seen(t) => t.min(width),
+            Sight::Seen(hit) => hit.t.min(width),
             _ => width,
         };
         let mut eye = p - Vec3::Y * (down - 0.3 * (down + up).min(width)).max(0.0);
         // Look along the longest horizontal sight line, from a step back.
         let sight = |eye: Vec3, d: Vec3| match stage.probe(eye, d) {
-            Sight::Seen(t) => t,
+            Sight::Seen(hit) => hit.t,
             _ => 0.0,
         };
         let (mut look, mut far) = (Vec3::X, -1.0f32);
@@ -553,8 +553,8 @@ impl Inside {
 enum Sight {
     /// Nothing: it leaves the scene.
     Escapes,
-    /// A side that faces open space, at this distance.
-    Seen(f32),
+    /// A side that faces open space: the ray's hit.
+    Seen(Hit),
     /// A side that faces no open space: the point is inside geometry.
     Unseen,
 }
@@ -567,25 +567,17 @@ impl Stage<'_> {
                 let prim = hit.prim as usize;
                 let front = self.scene.triangles[prim].geometric_normal().dot(dir) < 0.0;
                 if self.triangles[prim].seen_from(front) {
-                    Sight::Seen(hit.t)
+                    Sight::Seen(hit)
                 } else {
                     Sight::Unseen
                 }
             }
         }
     }
-}
 
-impl Stage<'_> {
-    /// Whether the surface a ray from `org` along `dir` meets is lit: emissive, or with
-    /// irradiance in `lightmap`.
-    fn lit_along(&self, lightmap: &Lightmap, org: Vec3, dir: Vec3) -> bool {
-        let Some(hit) = intersect1(&self.bvh.wide(), &Ray::new(org, dir, 0.0, f32::INFINITY))
-        else {
-            return false;
-        };
-        let prim = hit.prim as usize;
-        let emission = self.scene.triangle_material(prim).emission;
+    /// Whether the surface a probe `hit` is lit: emissive, or with irradiance in `lightmap`.
+    fn lit(&self, lightmap: &Lightmap, hit: &Hit) -> bool {
+        let emission = self.scene.triangle_material(hit.prim as usize).emission;
         let irradiance = lightmap.irradiance(hit.prim, hit.u, hit.v);
         emission.max_element() > 0.0 || luminance_f32(irradiance.to_array()) > 0.0
     }
@@ -873,7 +865,7 @@ mod tests {
             e,
             Vec3::new(camera.forward.x, 0.0, camera.forward.z).normalize(),
         ) {
-            Sight::Seen(t) => t,
+            Sight::Seen(hit) => hit.t,
             _ => 0.0,
         };
         assert!(ahead > 2.0, "{ahead}");
