@@ -377,11 +377,8 @@ impl fmt::Debug for BakeSettings {
         if *guide_seed == GuideSeed::Off {
             d.field("guide_seed", guide_seed);
         }
-        // Judged only where a guided last pass reads the guide seeds (series transport).
-        let judges_flat = matches!(guiding, Guiding::Coherent | Guiding::Naive)
-            && *transport == Transport::Series
-            && *guide_seed == GuideSeed::Previous;
-        if *flat_below != 0 && judges_flat {
+        // Judged only where the last pass reads the guide seeds.
+        if *flat_below != 0 && self.reads_guide_seeds(self.last_pass()) {
             d.field("flat_below", flat_below);
         }
         d.finish()
