@@ -210,7 +210,21 @@ impl Bvh {
         preset: Preset,
         keep_binary: bool,
     ) -> Result<Self, BvhError> {
-        Self::build_in_regions(soup, preset, regions::REGION_TRIANGLES, keep_binary)
+        Self::build_in_regions(soup, None, preset, regions::REGION_TRIANGLES, keep_binary)
+    }
+
+    /// [`Bvh::build`] over the triangles of `soup` that `ids` names (ascending; all of them
+    /// for `None`), primitive id still the index in `soup`: the tree of a scene whose
+    /// surfaces of some roles rays pass through (`scene::roles`).
+    ///
+    /// # Errors
+    /// As [`Bvh::build`].
+    pub fn build_over(
+        soup: &[[Vec3; 3]],
+        ids: Option<&[u32]>,
+        preset: Preset,
+    ) -> Result<Self, BvhError> {
+        Self::build_in_regions(soup, ids, preset, regions::REGION_TRIANGLES, false)
     }
 
     /// [`Bvh::build`] with regions of at most `region` triangles ([`regions`]; the bake's
@@ -224,24 +238,26 @@ impl Bvh {
         preset: Preset,
         region: usize,
     ) -> Result<Self, BvhError> {
-        Self::build_in_regions(soup, preset, region.max(16), false)
+        Self::build_in_regions(soup, None, preset, region.max(16), false)
     }
 
     /// The build, cutting a soup of more than `region` triangles into regions of at most
     /// that many ([`regions`]); a smaller soup is built whole.
     fn build_in_regions(
         soup: &[[Vec3; 3]],
+        ids: Option<&[u32]>,
         preset: Preset,
         region: usize,
         keep_binary: bool,
     ) -> Result<Self, BvhError> {
         check_soup(soup)?;
         let start = Instant::now();
-        let (wide, rows, binary) = if soup.len() > region {
-            let built = regions::build(soup, preset, region, keep_binary)?;
+        let count = ids.map_or(soup.len(), <[u32]>::len);
+        let (wide, rows, binary) = if count > region {
+            let built = regions::build(soup, ids, preset, region, keep_binary)?;
             (built.wide, built.rows, built.binary)
         } else {
-            Self::build_whole(soup, preset, keep_binary)?
+            Self::build_whole(soup, ids, preset, keep_binary)?
         };
         WideRef::new(&wide, &rows).map_err(BvhError::Layout)?;
         if let Some((nodes, tris)) = &binary {
@@ -260,6 +276,7 @@ impl Bvh {
     #[allow(clippy::type_complexity)]
     fn build_whole(
         soup: &[[Vec3; 3]],
+        ids: Option<&[u32]>,
         preset: Preset,
         keep_binary: bool,
     ) -> Result<
@@ -272,7 +289,7 @@ impl Bvh {
     > {
         // Each array is dropped, or moved to huge pages, as soon as the next step allows: a
         // big world's build peaks at the sum of what is alive at once.
-        let (nodes, tris) = obvhs_flattened(soup, None, preset);
+        let (nodes, tris) = obvhs_flattened(soup, ids, preset);
         let tree = BvhRef::new(&nodes, &tris).map_err(BvhError::Layout)?;
         let wide = HugeSlice::new(collapse(&tree));
         let rows = HugeSlice::new(leaf_rows(&wide, &tris));
@@ -625,8 +642,8 @@ mod tests {
         let whole = Bvh::build_with_binary(&soup, Preset::MediumBuild).unwrap();
         for preset in [Preset::MediumBuild, Preset::VerySlowBuild] {
             // 6000 triangles in regions of at most 700: 16 regions.
-            let cut = Bvh::build_in_regions(&soup, preset, 700, true).unwrap();
-            let bake = Bvh::build_in_regions(&soup, preset, 700, false).unwrap();
+            let cut = Bvh::build_in_regions(&soup, None, preset, 700, true).unwrap();
+            let bake = Bvh::build_in_regions(&soup, None, preset, 700, false).unwrap();
             assert_eq!(bake.wide_nodes(), cut.wide_nodes(), "{preset:?}");
             assert!(bake.binary().is_none());
             // Every triangle, bit for bit, in both layouts (spatial splits may repeat one).
@@ -661,6 +678,33 @@ mod tests {
     }
 
     #[test]
+    fn a_tree_over_some_triangles_meets_only_those_and_names_them_by_their_scene_index() {
+        let soup = jumbled(3000);
+        // Every third triangle is left out (as rays pass through a `sky` or `skip` surface).
+        let ids: Vec<u32> = (0..soup.len() as u32).filter(|i| i % 3 != 0).collect();
+        let want: Vec<Tri> = ids.iter().map(|&i| Tri::new(soup[i as usize], i)).collect();
+        let whole = Bvh::build_over(&soup, Some(&ids), Preset::MediumBuild).unwrap();
+        let cut =
+            Bvh::build_in_regions(&soup, Some(&ids), Preset::MediumBuild, 500, false).unwrap();
+        let mut rng = guidebake_kernels::testing::Pcg32::new(43, 2);
+        let mut f = || rng.next_f32();
+        let mut hits = 0;
+        for _ in 0..3000 {
+            let o = Vec3::new(f() * 60.0 - 8.0, f() * 60.0 - 8.0, f() * 12.0 - 2.0);
+            let d = Vec3::new(f() - 0.5, f() - 0.5, f() - 0.5);
+            let ray = Ray::new(o, d, 0.0, f32::INFINITY);
+            let brute = intersect_brute(&want, &ray);
+            hits += usize::from(brute.is_some());
+            assert_eq!(intersect1(&whole.wide(), &ray), brute);
+            assert_eq!(intersect1(&cut.wide(), &ray), brute);
+        }
+        assert!(hits > 300, "the rays meet the kept triangles: {hits}");
+        let all = Bvh::build_over(&soup, None, Preset::MediumBuild).unwrap();
+        let prims: std::collections::BTreeSet<u32> = all.wide().tris().map(|t| t.prim).collect();
+        assert_eq!(prims.len(), soup.len());
+    }
+
+    #[test]
     fn a_tree_built_in_regions_is_the_same_on_any_number_of_threads() {
         let soup = jumbled(5000);
         let on = |threads| {
@@ -668,7 +712,7 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            pool.install(|| Bvh::build_in_regions(&soup, Preset::VerySlowBuild, 600, false))
+            pool.install(|| Bvh::build_in_regions(&soup, None, Preset::VerySlowBuild, 600, false))
                 .unwrap()
         };
         let (one, three) = (on(1), on(3));

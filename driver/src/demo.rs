@@ -100,6 +100,7 @@ pub(crate) fn scene_of_faces(groups: &[(&str, Vec<Face>)], materials: Vec<Materi
         sun: None,
         sky: Sky::None,
         degenerate_triangles: 0,
+        roles: Vec::new(),
     }
 }
 

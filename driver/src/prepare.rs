@@ -67,6 +67,7 @@ use crate::texels::{
 use facing::{FacingReport, Visibility, seen_sides};
 
 pub mod facing;
+pub mod shell;
 pub mod unwrap;
 pub use unwrap::{Unwrap, UnwrapError};
 
@@ -145,6 +146,12 @@ pub struct PrepareReport {
     /// Textures the scene's loader could not read (filled in by the `prepare` command,
     /// which loads the scene; [`crate::scene::LoadNotes`]).
     pub missing_textures: Vec<crate::scene::MissingTexture>,
+    /// The triangles of each role but `baked`, and the `--role` rules that matched nothing
+    /// (filled in by the `prepare` command, which applies them; [`crate::scene::roles`]).
+    pub roles: crate::scene::RoleReport,
+    /// A shell that keeps the sun and sky out of the level, if one does ([`shell`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shell: Option<shell::Shell>,
 }
 
 /// A mesh whose own UV set is not a lightmap atlas ([`uv_set_problem`]).
@@ -348,8 +355,10 @@ fn uv_area(uv: &[Vec2; 3]) -> f32 {
 
 fn mesh_uv_stats(scene: &Scene) -> Vec<Option<MeshUv>> {
     let mut out: Vec<Option<MeshUv>> = vec![None; scene.meshes.len()];
-    for t in &scene.triangles {
-        let Some(uv) = t.lightmap_uv else { continue };
+    for (i, t) in scene.triangles.iter().enumerate() {
+        let Some(uv) = t.lightmap_uv.filter(|_| scene.role(i).has_texels()) else {
+            continue;
+        };
         let s = out[t.mesh as usize].get_or_insert(MeshUv {
             world_area: 0.0,
             uv_area: 0.0,
@@ -398,12 +407,13 @@ impl Lightmap {
         let uv = scene
             .triangles
             .iter()
-            .map(|t| {
+            .enumerate()
+            .map(|(i, t)| {
                 let m = &meshes[t.mesh as usize];
                 let p = pages[m.page as usize];
                 let size = Vec2::new(p.width as f32, p.height as f32);
                 pixel_uv(t, m)
-                    .filter(|_| m.flags != 0)
+                    .filter(|_| m.flags != 0 && scene.role(i).has_texels())
                     .map(|q| q.map(|v| v / size))
             })
             .collect();
@@ -530,6 +540,11 @@ fn rasterise(
         path: scene.path.clone(),
         message: format!("cannot trace the scene to orient its surfaces: {e}"),
     })?;
+    let mut shell =
+        shell::find_shell(scene, &visibility).map_err(|e| PrepareError::Resolution {
+            path: scene.path.clone(),
+            message: format!("cannot trace the scene to look for a shell around it: {e}"),
+        })?;
     let triangles = triangle_records(scene, meshes, visibility.sides());
     let mut w = TexelWriter::create(out, pages, &triangles, tpu)?;
     w.set_lighting(scene.lighting_fingerprint());
@@ -553,6 +568,8 @@ fn rasterise(
         unwrap: None,
         not_atlas: Vec::new(),
         missing_textures: Vec::new(),
+        roles: crate::scene::RoleReport::default(),
+        shell: None,
     };
     for (page_index, page) in pages.iter().enumerate() {
         stage(PrepareStage::Rasterising {
@@ -560,6 +577,11 @@ fn rasterise(
             pages: pages.len(),
         });
         let raster = PageRaster::new(&triangles, page_index as u32, *page, &mut report);
+        if let Some(shell) = &mut shell {
+            let (on, all) = raster.texels_of(&shell.mask);
+            shell.texels += on;
+            shell.atlas_texels += all;
+        }
         raster.emit_tiles(scene, &triangles, &visibility, &mut w, &mut report)?;
     }
     if report.texels == 0 {
@@ -568,6 +590,7 @@ fn rasterise(
         });
     }
     w.finish()?;
+    report.shell = shell;
     Ok(report)
 }
 
@@ -829,8 +852,12 @@ fn unwrap_layout(
     let area: f64 = scene
         .triangles
         .iter()
-        .filter(|t| selected[t.mesh as usize] || kept[t.mesh as usize].is_some())
-        .map(|t| f64::from(t.area()))
+        .enumerate()
+        .filter(|&(i, t)| {
+            (selected[t.mesh as usize] || kept[t.mesh as usize].is_some())
+                && scene.role(i).has_texels()
+        })
+        .map(|(_, t)| f64::from(t.area()))
         .sum();
     let resolution_error = |message: String| PrepareError::Resolution {
         path: scene.path.clone(),
@@ -1205,14 +1232,17 @@ fn triangle_records(scene: &Scene, meshes: &[MeshLayout], sides: &[u32]) -> Vec<
         .triangles
         .iter()
         .zip(sides)
-        .map(|(t, &seen)| {
+        .enumerate()
+        .map(|(i, (t, &seen))| {
             let m = &meshes[t.mesh as usize];
-            match pixel_uv(t, m).filter(|_| m.flags != 0) {
+            let role = scene.role(i);
+            let record = match pixel_uv(t, m).filter(|_| m.flags != 0 && role.has_texels()) {
                 Some(q) if q.iter().all(|v| v.is_finite()) => {
                     TriangleRecord::lightmapped(m.page, q, seen)
                 }
                 _ => TriangleRecord::unmapped(seen),
-            }
+            };
+            record.with_role(role)
         })
         .collect()
 }
@@ -1222,6 +1252,22 @@ struct PageRaster {
     page: u32,
     size: PageRecord,
     owner: Vec<u32>,
+}
+
+impl PageRaster {
+    /// Texels of the page owned by a triangle `mask` names, and texels in all.
+    fn texels_of(&self, mask: &[bool]) -> (u64, u64) {
+        self.owner
+            .iter()
+            .filter(|&&o| o != 0)
+            .fold((0, 0), |(on, all), &o| {
+                let t = ((o & !PARTIAL_BIT) - 1) as usize;
+                (
+                    on + u64::from(mask.get(t).copied().unwrap_or(false)),
+                    all + 1,
+                )
+            })
+    }
 }
 
 impl PageRaster {

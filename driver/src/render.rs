@@ -514,8 +514,14 @@ impl<'s> Stage<'s> {
         check_scene_matches(texels, scene)?;
         // The tree for the rays of a full-HD view or two ([`Preset::for_rays`]).
         let rays = 2.0 * 1920.0 * 1080.0 * (SUBPIXELS * SUBPIXELS) as f64;
-        let bvh = Bvh::build(
+        // What a player sees: the surfaces with texels (`scene::roles`); a sky shell is seen
+        // through, to the sky.
+        let drawn = crate::scene::ids_where(texels.triangles().len(), |t| {
+            texels.triangles()[t].role().drawn()
+        });
+        let bvh = Bvh::build_over(
             &scene.triangle_positions(),
+            drawn.as_deref(),
             Preset::for_rays(scene.triangles.len(), rays),
         )?;
         Ok(Self {

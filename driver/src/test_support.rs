@@ -176,6 +176,7 @@ pub fn lightmapped_triangle(
         sun: None,
         sky: Sky::None,
         degenerate_triangles: 0,
+        roles: Vec::new(),
     };
     let uv = [Vec2::ZERO, Vec2::new(4.0, 0.0), Vec2::new(0.0, 4.0)];
     let triangles = vec![TriangleRecord::lightmapped(0, uv, SEEN_FRONT)];

@@ -238,7 +238,12 @@ pub fn bake_pass_with_progress(
     report.prepared_under_other_lights = lights_differ(texels.header(), scene);
 
     let clock = Instant::now();
-    let mut world = World::new(scene, run_preset(job, &texels, scene, &run_passes))?;
+    // The roles `prepare` recorded decide what rays meet (`scene::roles`).
+    let traced = crate::scene::ids_where(texels.triangles().len(), |t| {
+        texels.triangles()[t].role().traced()
+    });
+    let preset = run_preset(job, &texels, scene, &run_passes);
+    let mut world = World::tracing(scene, traced.as_deref(), preset)?;
     world.set_transport(job.settings.transport, job.settings.bounces);
     world.set_emitters(job.settings.emitters, job.settings.emitter_selection);
     report.seconds.build_bvh = clock.elapsed().as_secs_f64();

@@ -82,8 +82,26 @@ impl World {
     /// # Errors
     /// [`BvhError`] when the BVH cannot be built (a non-finite vertex).
     pub fn new(scene: &Scene, preset: Preset) -> Result<Self, BvhError> {
+        Self::tracing(scene, scene.traced_triangles().as_deref(), preset)
+    }
+
+    /// [`World::new`] whose rays meet only the triangles `traced` names (all for `None`): the
+    /// roles a texel file records (`scene::roles`; a `sky`, `skip` or `no-shadow` surface is
+    /// passed through). A triangle rays pass through emits nothing.
+    ///
+    /// # Errors
+    /// As [`World::new`].
+    pub fn tracing(
+        scene: &Scene,
+        traced: Option<&[u32]>,
+        preset: Preset,
+    ) -> Result<Self, BvhError> {
         let corners = scene.triangle_positions();
-        let bvh = Bvh::build(&corners, preset)?;
+        let bvh = Bvh::build_over(&corners, traced, preset)?;
+        let mut lit = vec![traced.is_none(); corners.len()];
+        for &t in traced.unwrap_or_default() {
+            lit[t as usize] = true;
+        }
         let mut varying = Vec::new();
         let surfaces: Vec<Surface> = scene
             .triangles
@@ -101,7 +119,7 @@ impl World {
                 Surface {
                     normal: t.geometric_normal(),
                     albedo: m.albedo,
-                    emission: m.emission,
+                    emission: if lit[i] { m.emission } else { Vec3::ZERO },
                     varying: index,
                 }
             })

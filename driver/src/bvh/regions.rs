@@ -52,15 +52,16 @@ pub(super) struct Built {
     pub(super) binary: Option<(HugeSlice<Node>, HugeSlice<Tri>)>,
 }
 
-/// Builds `soup`'s tree in regions of at most `region` triangles (more than `region`
-/// triangles expected, `region` ≥ 16).
+/// Builds the tree over the triangles of `soup` that `ids` names (all for `None`) in regions
+/// of at most `region` triangles (more than `region` triangles expected, `region` ≥ 16).
 pub(super) fn build(
     soup: &[[Vec3; 3]],
+    ids: Option<&[u32]>,
     preset: Preset,
     region: usize,
     keep_binary: bool,
 ) -> Result<Built, BvhError> {
-    let mut ids: Vec<u32> = (0..soup.len() as u32).collect();
+    let mut ids: Vec<u32> = ids.map_or_else(|| (0..soup.len() as u32).collect(), <[u32]>::to_vec);
     let (top, ranges) = cut(soup, &mut ids, region);
     let mut regions = Vec::with_capacity(ranges.len());
     for range in &ranges {

@@ -89,6 +89,7 @@ pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
             "triangles_seen_from_front": sides.front,
             "triangles_seen_from_back": sides.back,
             "triangles_seen_from_both_sides": sides.both,
+            "triangle_roles": sides.roles.iter().map(|&(r, n)| (r, n)).collect::<std::collections::BTreeMap<_, _>>(),
             "texels_per_unit": h.texels_per_unit,
             "bounds": [h.bounds_min, h.bounds_max],
             "identity": format!("{:016x}", f.identity()),
@@ -120,6 +121,14 @@ pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
         "  triangles: {} ({} with lightmap UVs; seen from the front {}, the back {}, both sides {})",
         h.triangle_count, sides.lightmapped, sides.front, sides.back, sides.both
     );
+    if !sides.roles.is_empty() {
+        let roles: Vec<String> = sides
+            .roles
+            .iter()
+            .map(|(r, n)| format!("{r} {n}"))
+            .collect();
+        println!("  roles (docs/levels.md): {}", roles.join(", "));
+    }
     println!("  bounds: {:?} .. {:?}", h.bounds_min, h.bounds_max);
     println!(
         "  identity {:016x}; the scene's geometry {:016x}, its lights {:016x} (0: not recorded)",
@@ -143,6 +152,8 @@ struct TriangleCounts {
     front: usize,
     back: usize,
     both: usize,
+    /// Per role but `baked` (`scene::roles`), its name and triangles, where any.
+    roles: Vec<(&'static str, usize)>,
 }
 
 impl TriangleCounts {
@@ -158,6 +169,11 @@ impl TriangleCounts {
             front: seen(SEEN_FRONT),
             back: seen(SEEN_BACK),
             both: seen(SEEN_FRONT | SEEN_BACK),
+            roles: crate::scene::Role::ALL[1..]
+                .iter()
+                .map(|&r| (r.name(), triangles.iter().filter(|t| t.role() == r).count()))
+                .filter(|&(_, n)| n > 0)
+                .collect(),
         }
     }
 }

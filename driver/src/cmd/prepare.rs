@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use super::scene::{LightFlags, SHOWN, load_lit_scene};
 use crate::prepare::{Layout, PrepareOptions, PrepareStage, Resolution, Unwrap, prepare_reporting};
-use crate::scene::TextureOptions;
+use crate::scene::{RoleRule, TextureOptions};
 
 /// What `prepare` reads — the scene, a sky map — and writes: the texel file, its seam sidecar
 /// and the glb of `--write-gltf`.
@@ -71,6 +71,41 @@ pub struct PrepareArgs {
     /// Sun and sky, replacing the scene file's (the facing analysis sees them).
     #[command(flatten)]
     pub lights: LightFlags,
+    /// Give the meshes or materials whose names match PATTERN (a glob, `*` and `?`,
+    /// case-insensitive; `mesh:` or `material:` in front for one kind of name) a role: `sky`
+    /// (a shell drawn as sky: rays pass through it to the sky; no texels), `skip` (no texels,
+    /// casts nothing), `no-shadow` (texels, casts nothing), `occluder` (no texels, casts
+    /// shadows) or `baked` (the default). Repeatable, the last match winning; bake and render
+    /// read the roles from the texel file (docs/levels.md).
+    #[arg(long = "role", value_name = "ROLE=PATTERN", value_parser = RoleRule::parse)]
+    pub roles: Vec<RoleRule>,
+}
+
+/// What `prepare` says of a shell that keeps the sun and sky out of the level.
+fn shell_warning(scene: &std::path::Path, shell: &crate::prepare::shell::Shell) -> String {
+    let kind = match shell.by {
+        crate::prepare::shell::ShellBy::Material => "material",
+        crate::prepare::shell::ShellBy::Mesh => "mesh",
+    };
+    let names = shell
+        .names
+        .iter()
+        .map(|n| format!("{kind} '{n}'"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let percent = |x: f64| 100.0 * x;
+    format!(
+        "{}: no sun or sky reaches inside the level: {names} ({} triangles) closes it like a shell \
+         ({:.0} % of the inside gets no light; with it open, {:.0} % of the inside's rays reach the sky). \
+         Its outside, which no one inside sees, takes {:.0} % of the atlas's texels. If the game \
+         draws it as sky, give it the sky role: prepare {} (docs/levels.md)",
+        scene.display(),
+        shell.triangles,
+        percent(shell.dark_share),
+        percent(shell.opened_sky_share),
+        percent(shell.texels as f64 / shell.atlas_texels.max(1) as f64),
+        shell.suggested_roles().join(" ")
+    )
 }
 
 /// Parses `WxH` (also `W×H`).
@@ -112,8 +147,19 @@ pub fn run(args: &PrepareArgs) -> Result<(), super::CmdError> {
             eprintln!("prepare: {what} ({:.1} s)", clock.elapsed().as_secs_f64());
         }
     };
-    let (scene, notes) =
+    let (mut scene, notes) =
         load_lit_scene(&args.scene, TextureOptions::default(), &args.lights, true)?;
+    let unmatched = scene.apply_roles(&args.roles);
+    let roles = scene.role_report(unmatched);
+    for line in roles.lines() {
+        say(format!("roles: {line}"));
+    }
+    for rule in &roles.unmatched_rules {
+        eprintln!(
+            "guidebake: warning: --role {rule} matches no mesh or material name of {}",
+            args.scene.display()
+        );
+    }
     let files = files.reads_each("a file of the scene", &notes.files_read);
     files.check()?;
     say(format!(
@@ -141,6 +187,10 @@ pub fn run(args: &PrepareArgs) -> Result<(), super::CmdError> {
             });
         })?;
     report.missing_textures = notes.missing_textures.clone();
+    report.roles = roles;
+    if let Some(shell) = &report.shell {
+        eprintln!("guidebake: warning: {}", shell_warning(&args.scene, shell));
+    }
     // No partial output: the texel file, the glb and the seams are one request; what this
     // run wrote goes when a later part fails.
     let mut written = vec![args.output.clone()];

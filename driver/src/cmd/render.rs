@@ -150,7 +150,7 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
     };
     if inside == Inside::Dark {
         eprintln!(
-            "guidebake: warning: {}: the space the scene encloses is dark in this lightmap (no point inside sees lit walls): showing it from outside. A level inside a closed shell receives no sun or sky (docs/levels.md)",
+            "guidebake: warning: {}: the space the scene encloses is dark in this lightmap (no point inside sees lit walls): showing it from outside. A level inside a closed shell receives no sun or sky: prepare names the shell and the --role sky=... that opens it (docs/levels.md)",
             args.lightmap.display()
         );
     }

@@ -117,6 +117,18 @@ pub struct Visibility {
     corners: Vec<[Vec3; 3]>,
     normals: Vec<Vec3>,
     sides: Vec<u32>,
+    /// Per side ([`node`]): the irradiance (luminance) it gets from the sky above and the sun
+    /// directly, and all it gets through the coarse transport.
+    light: Vec<SideLight>,
+}
+
+/// What one side of a triangle receives in the coarse transport of [`seen_sides`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SideLight {
+    /// From the sky above and the sun, directly.
+    pub direct: f32,
+    /// Direct and through reflections ([`REACH`]).
+    pub total: f32,
 }
 
 /// Texel sample points of [`Visibility::inside_geometry`], each with one packet of rays.
@@ -133,6 +145,13 @@ impl Visibility {
     #[must_use]
     pub fn sides(&self) -> &[u32] {
         &self.sides
+    }
+
+    /// What the two sides of triangle `t` receive (its winding's front first): the light
+    /// `prepare` looks at to find a shell that keeps the sun and sky out (`prepare::shell`).
+    #[must_use]
+    pub fn side_light(&self, t: usize) -> [SideLight; 2] {
+        [self.light[2 * t], self.light[2 * t + 1]]
     }
 
     /// Whether `texel` lies inside geometry: more than [`INSIDE_SHARE`] of 64 fixed rays from
@@ -191,7 +210,12 @@ pub fn seen_sides(scene: &Scene) -> Result<(Visibility, FacingReport), BvhError>
     let corners = scene.triangle_positions();
     let points = points_per_triangle(corners.len());
     let rays = (points * RAYS * 2 * corners.len()) as f64;
-    let bvh = Bvh::build(&corners, Preset::for_rays(corners.len(), rays))?;
+    // Rays pass through the surfaces whose roles say so (`scene::roles`).
+    let bvh = Bvh::build_over(
+        &corners,
+        scene.traced_triangles().as_deref(),
+        Preset::for_rays(corners.len(), rays),
+    )?;
     let probe = Probe::new(scene, &corners, bvh.wide(), points);
     let sides: Vec<SideRays> = (0..2 * corners.len() as u32)
         .into_par_iter()
@@ -254,7 +278,10 @@ pub fn seen_sides(scene: &Scene) -> Result<(Visibility, FacingReport), BvhError>
                     flags |= flag;
                 }
             }
+            let role = scene.role(t);
             match flags & (SEEN_FRONT | SEEN_BACK) {
+                // A surface rays pass through that has no texels has no side (`sample`).
+                0 if !(role.traced() || role.has_texels()) => {}
                 0 => report.degenerate += 1,
                 SEEN_FRONT => report.front += 1,
                 SEEN_BACK => report.back += 1,
@@ -265,12 +292,21 @@ pub fn seen_sides(scene: &Scene) -> Result<(Visibility, FacingReport), BvhError>
         })
         .collect();
     let normals = probe.normals;
+    let light = sides
+        .iter()
+        .zip(&light)
+        .map(|(s, &total)| SideLight {
+            direct: s.direct,
+            total,
+        })
+        .collect();
     Ok((
         Visibility {
             bvh,
             corners,
             normals,
             sides: seen,
+            light,
         },
         report,
     ))
@@ -451,7 +487,9 @@ impl<'a> Probe<'a> {
         let c = &self.corners[t];
         let n = self.normals[t] * if node.is_multiple_of(2) { 1.0 } else { -1.0 };
         let mut out = SideRays::default();
-        if n == Vec3::ZERO {
+        // A surface rays pass through and that has no texels has no side to decide.
+        let role = self.scene.role(t);
+        if n == Vec3::ZERO || !(role.traced() || role.has_texels()) {
             return out;
         }
         for (k, [b1, b2]) in POINTS.iter().take(self.points).enumerate() {
@@ -557,7 +595,7 @@ impl<'a> Probe<'a> {
                     core::f32::consts::PI * luminance(m.emission) * tri.area(),
                 )
             })
-            .filter(|&(_, p)| p > 0.0 && p.is_finite())
+            .filter(|&(t, p)| p > 0.0 && p.is_finite() && self.scene.role(t as usize).traced())
             .collect();
         let total: f32 = power.iter().map(|p| p.1).sum();
         if power.is_empty() || !total.is_finite() {
@@ -620,7 +658,7 @@ impl<'a> Probe<'a> {
 
 /// [`RAYS`] cosine-distributed directions over the hemisphere of `n` (with its tangent frame),
 /// stratified 4 × 2, the pattern turned by `k` (one per sample point).
-fn cosine_packet(tangent: Vec3, bitangent: Vec3, n: Vec3, k: usize) -> [Vec3; RAYS] {
+pub(super) fn cosine_packet(tangent: Vec3, bitangent: Vec3, n: Vec3, k: usize) -> [Vec3; RAYS] {
     let turn = k as f32 * 0.618_034;
     core::array::from_fn(|i| {
         let u = [

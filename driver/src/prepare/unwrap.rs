@@ -70,13 +70,15 @@ impl Unwrap {
     /// Per mesh of `scene`: does it get UVs from the unwrapper?
     #[must_use]
     pub fn meshes(self, scene: &Scene) -> Vec<bool> {
+        // A mesh whose every triangle's role has no texels (a sky shell) gets no UVs.
         scene
             .meshes
             .iter()
-            .map(|m| match self {
+            .map(|m| (m, scene.mesh_has_texels(m)))
+            .map(|(m, texels)| match self {
                 Unwrap::Never => false,
-                Unwrap::Missing => !m.has_lightmap_uvs,
-                Unwrap::Always => m.triangle_count > 0,
+                Unwrap::Missing => !m.has_lightmap_uvs && texels,
+                Unwrap::Always => m.triangle_count > 0 && texels,
             })
             .collect()
     }
@@ -249,18 +251,27 @@ impl Charted {
         let mut work: Vec<(usize, Vec<u32>)> = Vec::new();
         for (i, &m) in meshes.iter().enumerate() {
             let mesh = &scene.meshes[m];
-            let n = mesh.triangle_count as usize;
-            if n <= chunk_triangles {
-                work.push((i, (0..n as u32).collect()));
+            let first = mesh.first_triangle as usize;
+            // Its triangles that get texels (`scene::roles`), as indices within the mesh.
+            let keep: Vec<u32> = (0..mesh.triangle_count)
+                .filter(|&k| scene.role(first + k as usize).has_texels())
+                .collect();
+            if keep.is_empty() {
                 continue;
             }
-            let first = mesh.first_triangle as usize;
-            let centroids: Vec<[f32; 3]> = scene.triangles[first..][..n]
+            if keep.len() <= chunk_triangles {
+                work.push((i, keep));
+                continue;
+            }
+            let centroids: Vec<[f32; 3]> = keep
                 .iter()
-                .map(|t| ((t.positions[0] + t.positions[1] + t.positions[2]) / 3.0).to_array())
+                .map(|&k| {
+                    let t = &scene.triangles[first + k as usize];
+                    ((t.positions[0] + t.positions[1] + t.positions[2]) / 3.0).to_array()
+                })
                 .collect();
             for c in chunk::median_cut(&centroids, chunk_triangles) {
-                work.push((i, c));
+                work.push((i, c.into_iter().map(|j| keep[j as usize]).collect()));
             }
         }
         let results: Vec<Result<ChunkCharts, UnwrapError>> = work

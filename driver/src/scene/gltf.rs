@@ -1,6 +1,7 @@
 //! glTF 2.0 through the `gltf` crate.
 use std::sync::Arc;
 
+use super::roles::{default_role, extras_role};
 use super::texture::{self, BaseColorTexture, TextureOptions};
 use super::*;
 
@@ -16,11 +17,21 @@ pub(super) fn load(
     let mut materials = materials;
     materials.push(Material::default_grey());
 
+    let material_roles = material_roles(path, &doc)?;
     let mut b = SceneBuilder::new(path);
     let mut lights = Vec::new();
     for (node, world) in nodes_in_load_order(&doc) {
         if let Some(mesh) = node.mesh() {
-            read_mesh(&mut b, &node, &mesh, &buffers, world, default_material)?;
+            let roles = PrimitiveRoles::of(&b, &node, &mesh, &material_roles)?;
+            read_mesh(
+                &mut b,
+                &node,
+                &mesh,
+                &buffers,
+                world,
+                default_material,
+                &roles,
+            )?;
         }
         if let Some(light) = node.light() {
             lights.push(read_light(&light, world));
@@ -611,6 +622,96 @@ fn read_light(light: &::gltf::khr_lights_punctual::Light, world: Mat4) -> SceneL
     }
 }
 
+/// A role the file declares (`extras`) or a name asks for, per material: (declared, by name).
+type MaterialRole = (Option<Role>, Option<Role>);
+
+/// Every material's [`MaterialRole`]: its `extras`, and its name's and base-colour image's
+/// words (`roles::default_role`).
+fn material_roles(path: &Path, doc: &::gltf::Document) -> Result<Vec<MaterialRole>, SceneError> {
+    doc.materials()
+        .enumerate()
+        .map(|(i, m)| {
+            let name = m
+                .name()
+                .map_or_else(|| format!("material#{i}"), str::to_owned);
+            let declared =
+                extras_role(m.extras().as_ref().map(|r| r.get())).map_err(|message| {
+                    SceneError::GltfResource {
+                        path: path.to_owned(),
+                        item: format!("materials[{i}] '{name}'"),
+                        message,
+                    }
+                })?;
+            let image = m
+                .pbr_metallic_roughness()
+                .base_color_texture()
+                .map(|info| image_name(&info.texture().source()))
+                .unwrap_or_default();
+            Ok((declared, default_role([name.as_str(), image.as_str()])))
+        })
+        .collect()
+}
+
+/// An image's URI, else its name.
+fn image_name(image: &::gltf::Image) -> String {
+    match image.source() {
+        ::gltf::image::Source::Uri { uri, .. } => uri.to_owned(),
+        ::gltf::image::Source::View { .. } => image.name().unwrap_or_default().to_owned(),
+    }
+}
+
+/// The roles of one node's primitives: what the node or mesh declares in `extras` wins over
+/// what the material declares, which wins over what the node's, mesh's or material's names
+/// ask for.
+struct PrimitiveRoles<'a> {
+    declared: Option<Role>,
+    by_name: Option<Role>,
+    materials: &'a [MaterialRole],
+}
+
+impl<'a> PrimitiveRoles<'a> {
+    fn of(
+        b: &SceneBuilder,
+        node: &::gltf::Node,
+        mesh: &::gltf::Mesh,
+        materials: &'a [MaterialRole],
+    ) -> Result<Self, SceneError> {
+        let named = node.name().or(mesh.name()).unwrap_or_default();
+        let declared = |extras: &::gltf::json::Extras, what: String| {
+            extras_role(extras.as_ref().map(|r| r.get())).map_err(|message| {
+                SceneError::GltfResource {
+                    path: b.path.clone(),
+                    item: what,
+                    message,
+                }
+            })
+        };
+        let declared = declared(node.extras(), format!("nodes[{}] '{named}'", node.index()))?.or(
+            declared(mesh.extras(), format!("meshes[{}] '{named}'", mesh.index()))?,
+        );
+        let names = [node.name().unwrap_or(""), mesh.name().unwrap_or("")];
+        Ok(Self {
+            declared,
+            by_name: default_role(names),
+            materials,
+        })
+    }
+
+    /// The role of a primitive of `material` (an index into the document's materials, or
+    /// none).
+    fn of_material(&self, material: Option<usize>) -> Role {
+        let (m_declared, m_named) = material
+            .and_then(|m| self.materials.get(m).copied())
+            .unwrap_or((None, None));
+        self.declared
+            .or(m_declared)
+            .or(self.by_name)
+            .or(m_named)
+            .unwrap_or_default()
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
 fn read_mesh(
     b: &mut SceneBuilder,
     node: &::gltf::Node,
@@ -618,6 +719,7 @@ fn read_mesh(
     buffers: &[::gltf::buffer::Data],
     world: Mat4,
     default_material: u32,
+    roles: &PrimitiveRoles,
 ) -> Result<(), SceneError> {
     let name = node
         .name()
@@ -637,6 +739,7 @@ fn read_mesh(
             ));
         }
         check_accessors(b, id, &prim)?;
+        b.set_role(roles.of_material(prim.material().index()));
         let reader = prim.reader(|buf| buffers.get(buf.index()).map(|d| d.0.as_slice()));
         let Some(positions) = reader.read_positions() else {
             return Err(b.bad_mesh(id, "primitive without POSITION".into()));
@@ -993,6 +1096,52 @@ mod tests {
                 "{}: mesh 'tri': indices accessor 1 has a count of 0 (the glTF spec's minimum is 1)",
                 path.display()
             )
+        );
+    }
+
+    /// Three nodes sharing one triangle mesh: one whose node `extras` declare `skip`, one
+    /// named like a clip brush, one plain; two materials, one declaring `no-shadow` in its
+    /// `extras`. `extras` win over names, and a role no one knows is an error naming the node.
+    #[test]
+    fn roles_come_from_extras_then_from_names() {
+        let dir = tempfile::tempdir().unwrap();
+        let floats: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+        let bytes: Vec<u8> = floats.iter().flat_map(|f| f.to_le_bytes()).collect();
+        std::fs::write(dir.path().join("tri.bin"), &bytes).unwrap();
+        let gltf = |node_role: &str| {
+            serde_json::json!({
+                "asset": { "version": "2.0" },
+                "scene": 0, "scenes": [{ "nodes": [0, 1, 2, 3] }],
+                "nodes": [
+                    { "name": "shell", "mesh": 0, "extras": { "guidebake_role": node_role } },
+                    { "name": "PlayerClip_3", "mesh": 0 },
+                    { "name": "wall", "mesh": 0 },
+                    { "name": "leaves", "mesh": 1 },
+                ],
+                "meshes": [
+                    { "primitives": [{ "attributes": { "POSITION": 0 }, "material": 0 }] },
+                    { "primitives": [{ "attributes": { "POSITION": 0 }, "material": 1 }] },
+                ],
+                "materials": [
+                    { "name": "stone" },
+                    { "name": "foliage", "extras": { "guidebake_role": "no_shadow" } },
+                ],
+                "accessors": [{ "bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0] }],
+                "bufferViews": [{ "buffer": 0, "byteLength": 36 }],
+                "buffers": [{ "byteLength": 36, "uri": "tri.bin" }],
+            })
+            .to_string()
+        };
+        let path = dir.path().join("roles.gltf");
+        std::fs::write(&path, gltf("sky")).unwrap();
+        let scene = Scene::load(&path).unwrap();
+        let roles: Vec<Role> = (0..4).map(|t| scene.role(t)).collect();
+        assert_eq!(roles, [Role::Sky, Role::Skip, Role::Baked, Role::NoShadow]);
+        std::fs::write(&path, gltf("cloud")).unwrap();
+        let e = Scene::load(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("nodes[0] 'shell'") && e.contains("\"cloud\" is not a role"),
+            "{e}"
         );
     }
 

@@ -490,6 +490,9 @@ pub struct Scene {
     pub sky: Sky,
     /// Triangles dropped because their area was zero or a position was not finite.
     pub degenerate_triangles: usize,
+    /// Each triangle's [`Role`] ([`roles`]), in [`Scene::triangles`] order; empty when every
+    /// triangle is [`Role::Baked`].
+    pub roles: Vec<Role>,
 }
 
 impl Scene {
@@ -511,6 +514,7 @@ impl Scene {
             sun: None,
             sky: Sky::None,
             degenerate_triangles: 0,
+            roles: Vec::new(),
         }
     }
 
@@ -720,6 +724,72 @@ impl Scene {
         self.triangles.iter().map(|t| t.positions).collect()
     }
 
+    /// The [`Role`] of triangle `triangle` ([`Role::Baked`] past the end of [`Scene::roles`]).
+    #[must_use]
+    pub fn role(&self, triangle: usize) -> Role {
+        self.roles.get(triangle).copied().unwrap_or_default()
+    }
+
+    /// Gives every triangle a rule names the rule's role, the rules in order (the last that
+    /// names a triangle wins, over what the file said); returns the rules that named none.
+    pub fn apply_roles(&mut self, rules: &[RoleRule]) -> Vec<String> {
+        if rules.is_empty() {
+            return Vec::new();
+        }
+        self.roles.resize(self.triangles.len(), Role::Baked);
+        let mut matched = vec![false; rules.len()];
+        // Per (mesh, material) pair, the rule that wins: names are matched once a pair.
+        let mut last: Option<((u32, u32), Option<usize>)> = None;
+        for (t, role) in self.triangles.iter().zip(&mut self.roles) {
+            let pair = (t.mesh, t.material);
+            let winner = match last {
+                Some((p, w)) if p == pair => w,
+                _ => {
+                    let mesh = &self.meshes[t.mesh as usize].name;
+                    let material = &self.materials[t.material as usize].name;
+                    let w = rules.iter().rposition(|r| r.matches(mesh, material));
+                    for (k, r) in rules.iter().enumerate() {
+                        matched[k] |= r.matches(mesh, material);
+                    }
+                    last = Some((pair, w));
+                    w
+                }
+            };
+            if let Some(w) = winner {
+                *role = rules[w].role;
+            }
+        }
+        if self.roles.iter().all(|&r| r == Role::Baked) {
+            self.roles.clear();
+        }
+        rules
+            .iter()
+            .zip(matched)
+            .filter(|(_, m)| !m)
+            .map(|(r, _)| r.to_string())
+            .collect()
+    }
+
+    /// What [`Scene::roles`] holds, by role, with `unmatched` rules (those
+    /// [`Scene::apply_roles`] returned).
+    #[must_use]
+    pub fn role_report(&self, unmatched: Vec<String>) -> RoleReport {
+        let roles: Vec<Role> = (0..self.triangles.len()).map(|t| self.role(t)).collect();
+        RoleReport::of(
+            &roles,
+            &self.triangles,
+            &self.meshes,
+            &self.materials,
+            unmatched,
+        )
+    }
+
+    /// The triangles rays meet ([`Role::traced`]), as BVH primitive ids; `None` when all are.
+    #[must_use]
+    pub fn traced_triangles(&self) -> Option<Vec<u32>> {
+        ids_where(self.triangles.len(), |t| self.role(t).traced())
+    }
+
     /// The mesh a triangle belongs to.
     ///
     /// # Panics
@@ -759,9 +829,16 @@ impl Scene {
     pub fn meshes_without_lightmap_uvs(&self) -> Vec<&str> {
         self.meshes
             .iter()
-            .filter(|m| !m.has_lightmap_uvs)
+            .filter(|m| !m.has_lightmap_uvs && self.mesh_has_texels(m))
             .map(|m| m.name.as_str())
             .collect()
+    }
+
+    /// Whether a triangle of `mesh` has a role with texels ([`Role::has_texels`]).
+    #[must_use]
+    pub fn mesh_has_texels(&self, mesh: &Mesh) -> bool {
+        let first = mesh.first_triangle as usize;
+        (first..first + mesh.triangle_count as usize).any(|t| self.role(t).has_texels())
     }
 
     /// World-space bounds of all triangles, `(min, max)`.
@@ -777,12 +854,22 @@ impl Scene {
     }
 }
 
+/// The indices below `n` where `keep` holds; `None` when it holds for all.
+#[must_use]
+pub fn ids_where(n: usize, keep: impl Fn(usize) -> bool) -> Option<Vec<u32>> {
+    let ids: Vec<u32> = (0..n).filter(|&t| keep(t)).map(|t| t as u32).collect();
+    (ids.len() < n).then_some(ids)
+}
+
 /// Accumulates meshes and triangles while a source is read; drops degenerate triangles.
 struct SceneBuilder {
     path: PathBuf,
     meshes: Vec<Mesh>,
     triangles: Vec<Triangle>,
     degenerate: usize,
+    /// The role of the triangles pushed next ([`SceneBuilder::set_role`]).
+    role: Role,
+    roles: Vec<Role>,
 }
 
 impl SceneBuilder {
@@ -792,7 +879,14 @@ impl SceneBuilder {
             meshes: Vec::new(),
             triangles: Vec::new(),
             degenerate: 0,
+            role: Role::Baked,
+            roles: Vec::new(),
         }
+    }
+
+    /// The role the file gives the triangles pushed next.
+    fn set_role(&mut self, role: Role) {
+        self.role = role;
     }
 
     fn begin_mesh(&mut self, name: String) -> u32 {
@@ -844,6 +938,7 @@ impl SceneBuilder {
             mesh.has_lightmap_uvs = false;
         }
         self.triangles.push(t);
+        self.roles.push(self.role);
     }
 
     fn bad_mesh(&self, mesh: u32, message: String) -> SceneError {
@@ -864,6 +959,11 @@ impl SceneBuilder {
             sun: None,
             sky: Sky::None,
             degenerate_triangles: self.degenerate,
+            roles: if self.roles.iter().all(|&r| r == Role::Baked) {
+                Vec::new()
+            } else {
+                self.roles
+            },
         }
     }
 }
@@ -872,9 +972,11 @@ pub mod fingerprint;
 mod gltf;
 pub mod gltf_write;
 mod obj;
+pub mod roles;
 mod scene_file;
 pub mod texture;
 
+pub use roles::{Role, RoleReport, RoleRule};
 pub use scene_file::{
     DEFAULT_SUN_IRRADIANCE, LightOverrides, SUN_RADIUS_DEG, SceneFile, SkySpec, SphereSpec,
     SunSpec, load_equirect, parse_sky, parse_sun,

@@ -3,6 +3,7 @@
 //! libraries are read here ([`load_mtl`]), a missing or malformed one a warning.
 use std::sync::Arc;
 
+use super::roles::default_role;
 use super::texture::{self, BaseColorTexture, TextureOptions};
 use super::*;
 
@@ -85,6 +86,13 @@ pub(super) fn load(
     let textured: Vec<u32> = (0..materials.len() as u32)
         .filter(|&m| materials[m as usize].base_color_texture.is_some())
         .collect();
+    // What each material's names ask for by default (`roles::default_role`): its own name and
+    // its texture's path, read or not (levels come without their texture packs).
+    let mut material_role: Vec<Option<Role>> = mtl
+        .iter()
+        .map(|m| default_role([m.name.as_str(), m.diffuse_texture.as_deref().unwrap_or("")]))
+        .collect();
+    material_role.push(None);
     let mut b = SceneBuilder::new(path);
     for (k, model) in models.iter().enumerate() {
         let name = if model.name.is_empty() {
@@ -92,6 +100,13 @@ pub(super) fn load(
         } else {
             model.name.clone()
         };
+        let material = model
+            .mesh
+            .material_id
+            .map_or(default_material, |m| m as u32);
+        let role = default_role([name.as_str()])
+            .or(material_role.get(material as usize).copied().flatten());
+        b.set_role(role.unwrap_or_default());
         let id = b.begin_mesh(name);
         read_model(&mut b, id, &model.mesh, default_material, &textured)?;
     }

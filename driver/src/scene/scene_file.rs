@@ -8,6 +8,7 @@ use super::*;
 ///
 /// ```toml
 /// geometry = "city.glb"          # relative to this file; .gltf, .glb or .obj
+/// roles = ["sky=material:sky*", "skip=mesh:clip*"]  # ROLE=PATTERN, as prepare --role
 /// [sky]
 /// constant = [0.5, 0.6, 0.8]     # radiance, or:
 /// # equirect = "sky.exr"         # latitude-longitude EXR, +Y up
@@ -32,6 +33,10 @@ pub struct SceneFile {
     /// Sphere lights.
     #[serde(default)]
     pub sphere_light: Vec<SphereSpec>,
+    /// Roles of meshes and materials, `ROLE=PATTERN` in order ([`super::roles`]); before the
+    /// command line's `--role`.
+    #[serde(default)]
+    pub roles: Vec<String>,
 }
 
 /// `[[sphere_light]]` of a [`SceneFile`].
@@ -217,6 +222,25 @@ impl SceneFile {
                 .lights
                 .push(sphere.to_light().map_err(|m| located(span, m))?);
         }
+        let rules = file
+            .roles
+            .iter()
+            .map(|r| RoleRule::parse(r))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|m| {
+                located(
+                    spans.roles.as_ref().map(toml::Spanned::span),
+                    format!("roles: {m}"),
+                )
+            })?;
+        let unmatched = scene.apply_roles(&rules);
+        if !unmatched.is_empty() {
+            notes.file_warnings.push(format!(
+                "{}: roles: {} matches no mesh or material",
+                path.display(),
+                unmatched.join(", ")
+            ));
+        }
         scene.sky = match &file.sky {
             None => Sky::None,
             Some(spec) => spec.to_sky(dir).map_err(|e| match e {
@@ -236,6 +260,7 @@ struct Spans {
     sun: Option<toml::Spanned<toml::Value>>,
     #[serde(default)]
     sphere_light: Vec<toml::Spanned<toml::Value>>,
+    roles: Option<toml::Spanned<toml::Value>>,
 }
 
 /// Why a [`SkySpec`] gives no sky.

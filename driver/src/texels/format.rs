@@ -2,6 +2,7 @@
 //! (shared by the writer and the reader). Layout: docs/texel-format.md.
 
 use super::*;
+use crate::scene::Role;
 
 /// `b"GBTEXELS"`: the first eight bytes of every texel file.
 pub const MAGIC: [u8; 8] = *b"GBTEXELS";
@@ -41,8 +42,13 @@ pub const LIGHTMAPPED: u32 = 4;
 pub const TEXELS_BACK: u32 = 8;
 /// The bits of [`TriangleRecord::flags`] that say which sides are seen and described.
 pub const SIDE_FLAGS: u32 = SEEN_FRONT | SEEN_BACK | TEXELS_BACK;
+/// The first of the three bits of [`TriangleRecord::flags`] that hold the triangle's
+/// [`Role`]'s code ([`Role::code`]; 0, [`Role::Baked`], in files written before roles).
+pub const ROLE_SHIFT: u32 = 4;
+/// The bits of [`TriangleRecord::flags`] that hold the role.
+pub const ROLE_FLAGS: u32 = 7 << ROLE_SHIFT;
 /// Every triangle flag bit this version defines.
-pub const KNOWN_TRIANGLE_FLAGS: u32 = SIDE_FLAGS | LIGHTMAPPED;
+pub const KNOWN_TRIANGLE_FLAGS: u32 = SIDE_FLAGS | LIGHTMAPPED | ROLE_FLAGS;
 
 /// File header at offset 0, 192 bytes.
 #[repr(C)]
@@ -156,6 +162,22 @@ impl TriangleRecord {
         self.flags & if front { SEEN_FRONT } else { SEEN_BACK } != 0
     }
 
+    /// Its role ([`ROLE_FLAGS`]; [`Role::Baked`] for a code no role has, which
+    /// [`check_triangles`] refuses).
+    #[must_use]
+    pub fn role(&self) -> Role {
+        Role::of_code((self.flags & ROLE_FLAGS) >> ROLE_SHIFT).unwrap_or_default()
+    }
+
+    /// This record with `role`.
+    #[must_use]
+    pub fn with_role(self, role: Role) -> Self {
+        Self {
+            flags: (self.flags & !ROLE_FLAGS) | (role.code() << ROLE_SHIFT),
+            ..self
+        }
+    }
+
     /// Whether its texels describe its back side ([`TEXELS_BACK`]): their normals face against
     /// the winding.
     #[must_use]
@@ -170,6 +192,14 @@ impl TriangleRecord {
                 "unknown flag bits {:#x}",
                 self.flags & !KNOWN_TRIANGLE_FLAGS
             ));
+        }
+        let role = (self.flags & ROLE_FLAGS) >> ROLE_SHIFT;
+        match Role::of_code(role) {
+            None => return Some(format!("unknown role code {role}")),
+            Some(r) if !r.has_texels() && self.flags & LIGHTMAPPED != 0 => {
+                return Some(format!("a {r} triangle with lightmap UVs"));
+            }
+            Some(_) => {}
         }
         if self.flags & TEXELS_BACK != 0 && self.flags & SEEN_BACK == 0 {
             return Some("TEXELS_BACK without SEEN_BACK".to_owned());
