@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use guidebake::scene::Role;
 use guidebake::texels::TexelFile;
 
 mod cli;
@@ -175,6 +176,25 @@ fn a_sky_shell_darkens_the_level_until_it_gets_the_sky_role() {
     assert!(open.on(2..14).is_empty(), "a sky shell has no texels");
     assert_eq!(open.report["roles"]["roles"][0]["role"], "sky");
     assert_eq!(open.report["roles"]["roles"][0]["triangles"], 12);
+    // Written back for the engine, the level keeps the role in its nodes' extras.
+    let glb = dir.path().join("level.glb");
+    let texels = dir.path().join("again.texels");
+    succeeds(&[
+        "prepare",
+        s(&obj),
+        "-o",
+        s(&texels),
+        "--sky",
+        "0.5",
+        "--role",
+        "sky=material:shell",
+        "--write-gltf",
+        s(&glb),
+    ]);
+    let scene = guidebake::scene::Scene::load(&glb).unwrap();
+    let roles: Vec<_> = (0..scene.triangles.len()).map(|t| scene.role(t)).collect();
+    assert_eq!(roles.iter().filter(|&&r| r == Role::Sky).count(), 12);
+    assert_eq!(roles.iter().filter(|&&r| r == Role::Baked).count(), 2);
 }
 
 #[test]

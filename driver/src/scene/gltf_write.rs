@@ -677,11 +677,29 @@ pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
         }
         meshes.push(json!({ "name": mesh.name, "primitives": primitives }));
         let mut node = json!({ "name": mesh.name, "mesh": id });
+        let mut extras = serde_json::Map::new();
         if with_texels {
             let page = lightmap.mesh_page[id];
             let (width, height) = lightmap.pages[page as usize];
-            node["extras"] =
-                json!({ "guidebake_lightmap": { "page": page, "width": width, "height": height } });
+            extras.insert(
+                "guidebake_lightmap".into(),
+                json!({ "page": page, "width": width, "height": height }),
+            );
+        }
+        // The mesh's role, where all its triangles share one but `baked` (`roles`), so the
+        // glb prepares as the OBJ did.
+        let first = mesh.first_triangle as usize;
+        let roles: Vec<_> = (first..first + mesh.triangle_count as usize)
+            .map(|t| scene.role(t))
+            .collect();
+        if let Some(&role) = roles.first()
+            && role != super::Role::Baked
+            && roles.iter().all(|&r| r == role)
+        {
+            extras.insert(super::roles::EXTRAS_KEY.into(), json!(role.name()));
+        }
+        if !extras.is_empty() {
+            node["extras"] = extras.into();
         }
         nodes.push(node);
     }
