@@ -28,6 +28,17 @@ use wide::{f32x8, u32x8};
 /// Number of lanes in a packet.
 pub const LANES: usize = 8;
 
+/// The lanes (or a wide node's slots) of `bits` as a mask vector: lane `i` all ones where
+/// bit `i` is set, zero elsewhere. Without a branch per lane (a branch per lane on the live
+/// lanes mispredicted where lanes finish at random: docs/traverse.md, "What each kept change
+/// bought").
+#[inline(always)]
+pub(crate) fn mask_of(bits: u8) -> wide::f32x8 {
+    use wide::u32x8;
+    const BITS: u32x8 = u32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
+    bytemuck::cast(!(u32x8::splat(u32::from(bits)) & BITS).simd_eq(u32x8::ZERO))
+}
+
 /// The lanes whose bit is set in the lane mask `bits` (as the packet traversals return
 /// them), lowest first.
 #[inline(always)]

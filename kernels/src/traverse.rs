@@ -110,7 +110,7 @@ mod scalar;
 mod slab;
 mod triangle;
 
-use packet::{Closest, Occlusion, Visitor, start8, walk8};
+use packet::{Closest, Occlusion, start8, walk8};
 use scalar::{box1_at, walk1};
 use slab::{NEAR_DOWN, widened};
 use triangle::{

@@ -37,11 +37,10 @@
 
 #[cfg(any(feature = "alloc", test))]
 use super::BvhRef;
-use super::packet::mask_of;
 use super::slab::{exact, met8, plane8, slab_of};
 use super::triangle::{Pre1x8, ROWS, RowTri, TriAt, occludes_rows};
-use super::{LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri, Visitor};
-use crate::packet::{LANES, set_lanes};
+use super::{LEAF, LayoutError, NEAR_DOWN, Pre, Pre8, Tri};
+use crate::packet::{LANES, mask_of, set_lanes};
 use bytemuck::{Pod, Zeroable};
 use core::mem::MaybeUninit;
 use wide::{f32x8, u32x8};
@@ -1065,6 +1064,30 @@ fn boxes8<const EXACT: bool>(
         }
     }
     (met, nearest)
+}
+
+/// What a packet walk (the binary tree's, `super::packet`, and the wide one below) does at a
+/// leaf.
+pub(super) trait Visitor<'a> {
+    /// The live lanes at most from which the wide walk finishes the subtree of an inner
+    /// node lane by lane ([`Visitor::alone`]); 0: never. (The closest-hit walk never does:
+    /// Embree's hybrid switch was measured and dropped there four times, docs/traverse.md,
+    /// "Measured and dropped".)
+    const ALONE: u32 = 0;
+
+    /// Walks the subtree of the wide entry `entry` (`child | meta << 32`) for each lane of
+    /// `lanes` alone; returns the packet's new `tmax`.
+    fn alone(&mut self, _bvh: &WideRef<'a>, _lanes: u8, _entry: u64) -> f32x8 {
+        unreachable!("ALONE is 0")
+    }
+
+    /// Tests a leaf's triangles for the packet, eight lanes per test; returns the packet's
+    /// new `tmax` (−∞ in finished lanes).
+    fn leaf8<T: TriAt>(&mut self, leaf: impl Iterator<Item = T>) -> f32x8;
+
+    /// Tests the wide leaf of `n` triangles whose rows start at `rows[0]` for each lane of
+    /// `lanes`, eight triangles per pass; returns the packet's new `tmax`.
+    fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8;
 }
 
 /// Depth-first walk of a packet: a shared stack ([`Stack8`]) of slots, each with the lanes

@@ -3,28 +3,17 @@
 //! One shared stack of `(child, meta)` entries with the mask of lanes that met each entry's
 //! box; when both children are met, the lanes meeting both vote with their entry distances for
 //! the one visited first. Leaves are tested by a [`Visitor`] (closest hit or occlusion), which
-//! the wide walk ([`super::bvh8`]) shares.
+//! the wide walk ([`super::bvh8`], where the trait lives: its any-hit switch hands a subtree to
+//! the wide single-ray walk) shares.
 
-// The one import back into the wide walk, kept: the `Visitor` trait's hybrid switch hands a
-// subtree to the wide single-ray walk (docs/ARCHITECTURE.md, "Crates and what may depend on
-// what").
-use super::bvh8::WideRef;
+use super::bvh8::{Visitor, WideRef};
 use super::slab::widened8;
 use super::triangle::{
     Best8, Pre1x8, Pre8, TriAt, closest_rows, closest8, occludes_rows, occludes8, set_lane,
 };
 use super::{BvhRef, Node, STACK};
-use crate::packet::{Ray8, set_lanes};
-use wide::{f32x8, u32x8};
-
-/// The lanes (or a node's slots) of `bits` as a mask vector: lane `i` all ones where bit `i`
-/// is set, zero elsewhere. Without a branch per lane (a branch per lane on the live lanes
-/// mispredicted where lanes finish at random: docs/traverse.md, "What each kept change bought").
-#[inline(always)]
-pub(super) fn mask_of(bits: u8) -> f32x8 {
-    const BITS: u32x8 = u32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
-    bytemuck::cast(!(u32x8::splat(u32::from(bits)) & BITS).simd_eq(u32x8::ZERO))
-}
+use crate::packet::{Ray8, mask_of, set_lanes};
+use wide::f32x8;
 
 impl Pre8 {
     /// Lanes whose interval meets slot `slot`'s box, and their entry distances: [`box1`] for
@@ -75,29 +64,6 @@ impl Pre8 {
             same.to_bitmask() as u8 & self.traced == self.traced
         })
     }
-}
-
-/// What a packet walk does at a leaf.
-pub(super) trait Visitor<'a> {
-    /// The live lanes at most from which the wide walk finishes the subtree of an inner
-    /// node lane by lane ([`Visitor::alone`]); 0: never. (The closest-hit walk never does:
-    /// Embree's hybrid switch was measured and dropped there four times, docs/traverse.md,
-    /// "Measured and dropped".)
-    const ALONE: u32 = 0;
-
-    /// Walks the subtree of the wide entry `entry` (`child | meta << 32`) for each lane of
-    /// `lanes` alone; returns the packet's new `tmax`.
-    fn alone(&mut self, _bvh: &WideRef<'a>, _lanes: u8, _entry: u64) -> f32x8 {
-        unreachable!("ALONE is 0")
-    }
-
-    /// Tests a leaf's triangles for the packet, eight lanes per test; returns the packet's
-    /// new `tmax` (−∞ in finished lanes).
-    fn leaf8<T: TriAt>(&mut self, leaf: impl Iterator<Item = T>) -> f32x8;
-
-    /// Tests the wide leaf of `n` triangles whose rows start at `rows[0]` for each lane of
-    /// `lanes`, eight triangles per pass; returns the packet's new `tmax`.
-    fn rows1(&mut self, rows: &'a [f32], n: usize, lanes: u8) -> f32x8;
 }
 
 /// Closest-hit visitor.
