@@ -41,8 +41,13 @@ fn level(dir: &Path, extra: &str) -> PathBuf {
 /// A closed box from (−10, −1, −10) to (10, 10, 10) around the plane, wound inwards
 /// (object `box`, material `shell`, no UVs).
 fn shell() -> String {
-    let (a, b) = ([-10.0f32, -1.0, -10.0], [10.0f32, 10.0, 10.0]);
-    let mut out = String::from("o box\nusemtl shell\n");
+    closed_box("box", "shell", [-10.0, -1.0, -10.0], [10.0, 10.0, 10.0], 4)
+}
+
+/// OBJ lines of a closed box from `a` to `b` wound inwards, object `object`, material
+/// `material`, no UVs; the file has `vertices` vertices before it.
+fn closed_box(object: &str, material: &str, a: [f32; 3], b: [f32; 3], vertices: usize) -> String {
+    let mut out = format!("o {object}\nusemtl {material}\n");
     for i in 0..8 {
         let pick = |k: usize| if i >> k & 1 == 1 { b[k] } else { a[k] };
         out += &format!("v {} {} {}\n", pick(0), pick(1), pick(2));
@@ -57,7 +62,7 @@ fn shell() -> String {
         [1, 5, 7, 3],
     ];
     for q in quads {
-        let [a, b, c, d] = q.map(|k| k + 5);
+        let [a, b, c, d] = q.map(|k| k + 1 + vertices);
         out += &format!("f {a} {b} {c}\nf {a} {c} {d}\n");
     }
     out
@@ -294,23 +299,9 @@ fn zdm2_in_a_shell_bakes_as_the_open_level_once_the_shell_is_sky() {
         }
     }
     let pad: Vec<f32> = (0..3).map(|k| 0.05 * (hi[k] - lo[k])).collect();
-    let (a, b): (Vec<f32>, Vec<f32>) = (0..3).map(|k| (lo[k] - pad[k], hi[k] + pad[k])).unzip();
-    let mut shell = String::from("\no shell\nusemtl shellwall\n");
-    for i in 0..8 {
-        let pick = |k: usize| if i >> k & 1 == 1 { b[k] } else { a[k] };
-        shell += &format!("v {} {} {}\n", pick(0), pick(1), pick(2));
-    }
-    for q in [
-        [0, 1, 3, 2],
-        [4, 6, 7, 5],
-        [0, 4, 5, 1],
-        [2, 3, 7, 6],
-        [0, 2, 6, 4],
-        [1, 5, 7, 3],
-    ] {
-        let [p, q1, r, t] = q.map(|k| k + 1 + vertices);
-        shell += &format!("f {p} {q1} {r}\nf {p} {r} {t}\n");
-    }
+    let a = [0, 1, 2].map(|k| lo[k] - pad[k]);
+    let b = [0, 1, 2].map(|k| hi[k] + pad[k]);
+    let shell = "\n".to_owned() + &closed_box("shell", "shellwall", a, b, vertices);
     let boxed = d.join("boxed.obj");
     std::fs::write(
         &boxed,

@@ -168,7 +168,6 @@ impl Visibility {
         let n = texel.normal();
         let g = self.normals[texel.triangle as usize];
         let side = if g.dot(n) < 0.0 { -g } else { g };
-        let (tangent, bitangent) = orthonormal_basis(n);
         let view = self.bvh.wide();
         let footprint = Vec3::from(texel.dpdu).length() + Vec3::from(texel.dpdv).length();
         let jitter = texel.flags & FLAG_PARTIAL == 0;
@@ -182,13 +181,7 @@ impl Visibility {
             let p = texel.position() + Vec3::from(texel.dpdu) * a + Vec3::from(texel.dpdv) * b;
             let on = onto_triangle(p, c, 0.01 * footprint);
             let origin = offset_origin(on, side, triangle_extent(on, c));
-            let dirs = cosine_packet(tangent, bitangent, n, k);
-            let mut hits = Hit8::NONE;
-            intersect8(
-                &view,
-                &Ray8::from_origin(origin, &dirs, 0.0, f32::INFINITY),
-                &mut hits,
-            );
+            let (dirs, hits) = trace_cosine(&view, origin, n, k);
             for (lane, &u) in hits.prim.to_array().iter().enumerate() {
                 if u != NO_HIT {
                     let front = self.normals[u as usize].dot(dirs[lane]) < 0.0;
@@ -509,12 +502,8 @@ impl<'a> Probe<'a> {
     /// the hemisphere of `n`, and a shadow ray to the sun; `k` turns the pattern from point to
     /// point. Adds the point's irradiance from the sky above and the sun to `out.direct`.
     fn sample_point(&self, p: Vec3, c: &[Vec3; 3], n: Vec3, k: usize, out: &mut SideRays) {
-        let (tangent, bitangent) = orthonormal_basis(n);
         let origin = offset_origin(p, n, triangle_extent(p, c));
-        let dirs = cosine_packet(tangent, bitangent, n, k);
-        let mut hits = Hit8::NONE;
-        let rays = Ray8::from_origin(origin, &dirs, 0.0, f32::INFINITY);
-        intersect8(&self.bvh, &rays, &mut hits);
+        let (dirs, hits) = trace_cosine(&self.bvh, origin, n, k);
         out.rays += RAYS as u32;
         let mut sky = 0.0;
         for (lane, &u) in hits.prim.to_array().iter().enumerate() {
@@ -656,9 +645,28 @@ impl<'a> Probe<'a> {
     }
 }
 
+/// One packet of [`cosine_packet`]'s directions over the hemisphere of `n` (pattern `k`) traced
+/// from `origin` on `view`: the directions and what each met.
+pub(super) fn trace_cosine(
+    view: &WideRef<'_>,
+    origin: Vec3,
+    n: Vec3,
+    k: usize,
+) -> ([Vec3; RAYS], Hit8) {
+    let (tangent, bitangent) = orthonormal_basis(n);
+    let dirs = cosine_packet(tangent, bitangent, n, k);
+    let mut hits = Hit8::NONE;
+    intersect8(
+        view,
+        &Ray8::from_origin(origin, &dirs, 0.0, f32::INFINITY),
+        &mut hits,
+    );
+    (dirs, hits)
+}
+
 /// [`RAYS`] cosine-distributed directions over the hemisphere of `n` (with its tangent frame),
 /// stratified 4 × 2, the pattern turned by `k` (one per sample point).
-pub(super) fn cosine_packet(tangent: Vec3, bitangent: Vec3, n: Vec3, k: usize) -> [Vec3; RAYS] {
+fn cosine_packet(tangent: Vec3, bitangent: Vec3, n: Vec3, k: usize) -> [Vec3; RAYS] {
     let turn = k as f32 * 0.618_034;
     core::array::from_fn(|i| {
         let u = [

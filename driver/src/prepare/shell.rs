@@ -22,11 +22,9 @@
 //! texels, and suggests the role that opens it (`--role sky=…`, `scene::roles`).
 
 use glam::Vec3;
-use guidebake_kernels::mapping::orthonormal_basis;
-use guidebake_kernels::packet::{Hit8, NO_HIT, Ray8, offset_origin, triangle_extent};
-use guidebake_kernels::traverse::intersect8;
+use guidebake_kernels::packet::{NO_HIT, offset_origin, triangle_extent};
 
-use super::facing::{Visibility, cosine_packet};
+use super::facing::{Visibility, trace_cosine};
 use crate::bvh::{Bvh, BvhError, Preset};
 use crate::scene::{Scene, Sky, ids_where};
 
@@ -220,15 +218,8 @@ fn opened_sky_share(scene: &Scene, shell: &[bool], rest: &[usize]) -> Result<f64
         let g = scene.triangles[t].geometric_normal();
         let p = (c[0] + c[1] + c[2]) / 3.0;
         for n in [g, -g] {
-            let (tangent, bitangent) = orthonormal_basis(n);
-            let dirs = cosine_packet(tangent, bitangent, n, k);
             let origin = offset_origin(p, n, triangle_extent(p, c));
-            let mut hits = Hit8::NONE;
-            intersect8(
-                &view,
-                &Ray8::from_origin(origin, &dirs, 0.0, f32::INFINITY),
-                &mut hits,
-            );
+            let (dirs, hits) = trace_cosine(&view, origin, n, k);
             for (lane, &u) in hits.prim.to_array().iter().enumerate() {
                 sky += u64::from(u == NO_HIT && dirs[lane].dot(Vec3::Y) > 0.0);
             }
