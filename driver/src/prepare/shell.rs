@@ -1,5 +1,5 @@
-//! Why a level is dark: a shell that keeps the sun and sky out (docs/levels.md, "A level
-//! closed in a sky shell").
+//! Why a level is dark: a shell that keeps the sun and sky out (docs/levels.md, "Roles: sky
+//! shells, clip brushes and caulk").
 //!
 //! Cube 2, Quake-family and many other engines wrap the playable space in a world-sized shell
 //! they draw as sky. Baked as it comes, that shell is a wall: no sun or sky reaches inside,
