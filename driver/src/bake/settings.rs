@@ -106,7 +106,7 @@ pub enum Schedule {
 /// measured ([`super::budget::tile_factors`]).
 /// [`Budget::Bounded`] by default for a guided bake: less relative MSE at equal time on every
 /// scene and rung measured, the MSE the uniform budget's ([`Budget::default_for`];
-/// docs/estimator.md, "The spatial budget").
+/// docs/budget.md, "The spatial budget").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum Budget {
     /// `--spp` samples at every texel.
