@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 44's measure on a level none of the defaults were tuned on: the Cube 2 level zdm2
+# The guiding targets' measure (docs/BENCHMARKS.md, "What falls short") on a level none of the defaults were tuned on: the Cube 2 level zdm2
 # (../shared/scenes/calinou_zdm2, CC BY 4.0; textures stripped, a sun and a sky from a TOML
 # file: docs/bench/surfaces/zdm2-scene.sh) at SIZE², the default against the uniform
 # unguided bake, 64 / 256 spp, SEEDS seeds (2), one thread, against a 4 096-spp path reference
