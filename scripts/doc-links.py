@@ -38,14 +38,9 @@ def headings(path):
 
 def titles(path):
     """Heading texts and bold leads ("**Title.**"), for quoted section names."""
-    ts = []
-    with open(path, encoding="utf-8") as f:
-        for line in f:
-            m = re.match(r"^#{1,6} (.*)$", line)
-            if m:
-                ts.append(m.group(1).strip())
-            ts += re.findall(r"\*\*([^*]+)\*\*", line)
-    return ts
+    text = open(path, encoding="utf-8").read()
+    ts = [m.group(1).strip() for m in re.finditer(r"^#{1,6} (.*)$", text, re.M)]
+    return ts + re.findall(r"\*\*([^*]{1,300}?)\*\*", text)
 
 
 def md_files():
