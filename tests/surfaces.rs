@@ -129,7 +129,7 @@ fn compare(scene: &Scene, texels: &Path, dir: &Path) -> Compared {
 }
 
 /// The bias series transport may have against path transport, relative: −0.04 % to −0.7 % of
-/// the mean on the benchmark rooms (docs/BENCHMARKS.md, "The default bake is right where
+/// the mean on the benchmark rooms (docs/series.md, "The default bake is right where
 /// surfaces meet"). On this box's faces the default is 0.14–0.82 % low (face 0: −0.0138 of
 /// 1.70, 7 standard errors; measured 2026-11-30 with and without hits near their origin going
 /// one bounce on, within 0.07 point of each other); a face baked from its inside is off by far

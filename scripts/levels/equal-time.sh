@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The levels' equal-time measure (docs/guiding-on-levels.md, "At equal time"): on the Tesseract
+# The levels' equal-time measure (docs/guiding-on-levels.md, "At equal CPU time"): on the Tesseract
 # level `complex` (512², the sun and sky of README's level recipe) and the Cube 2 level zdm2
 # (768², its sun and sky from docs/bench/surfaces/zdm2-scene.sh), both without their textures,
 # `guidebake bench` at 64 and 256 spp, SEEDS seeds (2), one thread, against a 4 096-spp path

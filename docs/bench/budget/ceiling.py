@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""What a spatial budget could buy at equal samples (docs/estimator.md, "The spatial budget").
+"""What a spatial budget could buy at equal samples (docs/budget.md, "The spatial budget").
 
     ceiling.py REF.exr BAKE.exr PILOT.exr [BLOCK]
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The spatial budget (`--budget`, docs/estimator.md "The spatial budget") against the default's
+# The spatial budget (`--budget`, docs/budget.md "The spatial budget") against the default's
 # uniform budget, against unbiased path references: docs/bench/surfaces/run.sh (each converted
 # Bitterli scene at SIZE², the bench's ladder 64, 256, 1024 spp × 2 seeds, one thread,
 # 16 384-spp path references, the same as that run's, so OUT/cache can be its) with methods

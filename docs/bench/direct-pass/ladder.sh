@@ -1,5 +1,5 @@
 #!/bin/bash
-# The series ladder of BENCHMARKS.md "The direct pass": baseline and the default,
+# The series ladder of series.md "The direct pass": baseline and the default,
 # 64 and 256 spp, 2 seeds, 128x128, against 4096-spp series references, with 3 interleaved
 # Figure-5 repeats. From the repository root, after `cargo build --release -p guidebake`;
 # about 10 minutes on 2 cores (the references are cached in out/bench-cache).

@@ -1,5 +1,5 @@
 #!/bin/bash
-# Issue 13's equal-time measurement: emitters found by hits alone (the bake before) against
+# Emitters as lights, measured at equal time (docs/bake.md, "Emitters as lights: measured"): emitters found by hits alone (the bake before) against
 # next-event estimation + MIS, on the three converted scenes at 64x64, path transport, the
 # unbiased estimator (--guiding off --combine average), 256 spp x 2 seeds, against a 4096-spp
 # MIS reference. Hits alone get one more vertex so both reach the emitters' light reflected

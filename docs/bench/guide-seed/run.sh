@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The guide seed (docs/guide.md, "The seed guide"): issue 44's measure (docs/bench/reference-noise/run.sh:
+# The guide seed (docs/guiding-levers.md, "The seed guide"): the guiding targets' measure (docs/bench/reference-noise/run.sh:
 # the three converted Bitterli scenes, 4 seeds, one thread, net of the path references' own noise)
 # with the default, the default without its seed (`+seed=off`) and the unguided bake side by side
 # in one run; net.py prints each against the unguided bake, and compare.py the default against

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The guide's target (docs/guide.md, "The guide's target"): the default bake, whose guides
+# The guide's target (docs/guiding-levers.md, "The guide's target"): the default bake, whose guides
 # learn the square root of the second moment, against the same with the radiance target
 # (`+target=radiance`, the paper's) and the unguided series bake, side by side in one bench
 # run per scene, through docs/bench/surfaces/run.sh (the converted Bitterli scenes, 2 seeds,

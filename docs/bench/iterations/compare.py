@@ -2,7 +2,7 @@
 """The bakes of run.sh against the references (and twins) of a reference-noise bench run at
 256² (its summary.json names them and their noise): per scene and iteration count, relative
 MSE and MSE over every valid texel net of the references' noise (means over the seeds), CPU
-time, equal-sample ratios against 4 iterations (> 1: fewer errors than 4) and issue 44's
+time, equal-sample ratios against 4 iterations (> 1: fewer errors than 4) and the guiding targets'
 measure against the unguided bake. Needs numpy and OpenEXR.
     compare.py NOISE_OUT OUT"""
 import json

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# How many learning iterations (docs/guide.md, "The number of learning iterations"): for each
+# How many learning iterations (docs/guiding-levers.md, "The records a guide learns from, and three iterations"): for each
 # converted Bitterli scene at 256², the default bake with `--iterations` 3, 4, 5 and 6 and the
 # unguided bake (4), 256 spp, seeds 1 and 2, one thread, timed (user + system CPU); then
 # compare.py measures them against the 4 096-spp path references and twins that

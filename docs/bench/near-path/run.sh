@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Hits within a texel of the ray's origin not read (docs/BENCHMARKS.md, "Issue 44 on a level";
+# Hits within a texel of the ray's origin not read (docs/series.md, "Guiding at equal time on a level (zdm2)";
 # `NEAR_PATH_TEXELS`): the build before (OLD) and after (NEW) side by side, the default
 # and the unguided bake (`--guiding off`), 256 spp, seeds 1 and 2, one thread, each bake timed
 # (user + system CPU), interleaved; on the three converted scenes at 256² against the

@@ -2,8 +2,8 @@
 """The bakes of run.sh against the mean of a reference and its twin (NOISE_OUT/SCENE-256's
 summary.json): per scene and variant, relative MSE and MSE over every valid texel net of that
 mean's noise (means over the seeds) and CPU seconds; then each variant against `old` (old's
-error over the variant's: > 1, the variant is ahead) and against the unguided `off` (issue 44's
-measure; `offold`, the unguided bake of before, split into 4 iterations, beside it), at equal samples
+error over the variant's: > 1, the variant is ahead) and against the unguided `off` (the guiding
+targets' measure, docs/BENCHMARKS.md, "What falls short"; `offold`, the unguided bake of before, split into 4 iterations, beside it), at equal samples
 and at equal CPU time (the error ratio divided by the CPU ratio).
 Needs numpy and OpenEXR.
     compare.py NOISE_OUT OUT"""

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A guide learning from every iteration of its cluster, 3 iterations by default, and an unguided
-# pass baking in one (docs/guide.md, "The records a guide learns from"; docs/sampling.md, "One
+# pass baking in one (docs/guiding-levers.md, "The records a guide learns from"; docs/sampling.md, "One
 # set, not four"): the build before (OLD: a guide learns from the last iteration's records, 4
 # iterations in every pass) and after (NEW) side by side, 256², 256 spp, seeds 5–8, one thread,
 # each bake timed (user + system CPU), interleaved per seed:

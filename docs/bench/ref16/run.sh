@@ -1,5 +1,5 @@
 #!/bin/bash
-# The six runs of BENCHMARKS.md "Rerun with a 16x reference": baseline, the
+# The six runs of references.md "A reference has 16× the top rung's samples": baseline, the
 # default and cluster weights + rho, 64 and 256 spp, 2 seeds, 128x128, each transport against
 # a 4096-spp reference of its own. From the repository root, after
 # `cargo build --release -p guidebake`; about 25 minutes on 2 cores.

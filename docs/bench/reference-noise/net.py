@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Issue 44's measure with the reference's own noise taken out, from bench runs made with
+"""The guiding targets' measure with the reference's own noise taken out, from bench runs made with
 --reference-noise (run.sh; OUT holds scene-size directories with runs.csv and summary.json,
 whose `reference_noise` is the noise of the reference the runs were measured against). Per
 scene, size and sample count: the default (A; then every other method of the runs) against

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 44's measure with the reference's own noise taken out (docs/BENCHMARKS.md, "The
+# The guiding targets' measure with the reference's own noise taken out (docs/references.md, "The
 # reference's own noise"): the default and the unguided bake through docs/bench/surfaces/run.sh
 # with --reference-noise (the reference and its twin, the runs against their mean), 4 seeds,
 # one thread (128²: 128 / 256 / 1024 spp against 16 384-spp path references; 256²: 128 / 256

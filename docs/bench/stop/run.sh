@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The stopping rule's calibration (docs/estimator.md, "The stopping rule"): for each converted
+# The stopping rule's calibration (docs/budget.md, "The stopping rule"): for each converted
 # Bitterli scene at SIZE² texels, the default bake with `--target-error` 0.05 and 0.02
 # (`+stop=50`, `+stop=20`), 8 iterations (a stop at every doubling), the cap CAP spp, one
 # seed, one thread, against a path reference of 16× the cap (the bench's baseline, unguided at

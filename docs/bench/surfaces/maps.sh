@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The "after" pictures of docs/BENCHMARKS.md, "The default bake is right where surfaces meet":
+# The "after" pictures of docs/series.md, "The default bake is right where surfaces meet":
 # per-texel error maps of the default (series) and of path transport, 256 spp each, against a
 # 16 384-spp unguided path reference (Cornell box at 128², Veach ajar at 256²), and the Cornell
 # box rendered from each lightmap (path | default). The references take about 9 minutes on 2 cores.

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The default bake against path transport at equal time, against unbiased path references
-# (docs/bake.md, "Where series reads the lightmap"; docs/BENCHMARKS.md, "The default bake is
+# (docs/bake.md, "Where series reads the lightmap"; docs/series.md, "The default bake is
 # right where surfaces meet"). For each converted Bitterli scene at SIZE² texels: prepare,
 # then `guidebake bench` with the ladder 64, 256, 1024 spp × 2 seeds, one thread, methods
 #   off/average/-                        unguided series (the bench's baseline)

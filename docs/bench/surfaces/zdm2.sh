@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # zdm2 (Cube 2 level, ../shared/scenes/calinou_zdm2, CC BY 4.0) baked by the default
 # (series) and by path transport at equal samples; prints each bake's mean irradiance over the
-# valid texels (docs/BENCHMARKS.md, "The default bake is right where surfaces meet").
+# valid texels (docs/series.md, "The default bake is right where surfaces meet").
 # The level as zdm2-scene.sh writes it: textures stripped, a sun and a sky from a TOML file.
 #   docs/bench/surfaces/zdm2.sh SCENES_DIR OUT [SPP]      (default SPP: 64)
 set -euo pipefail

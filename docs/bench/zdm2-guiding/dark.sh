@@ -1,6 +1,5 @@
 #!/usr/bin/env bash
-# Where series transport's error on zdm2 sits, against path transport's (docs/BENCHMARKS.md,
-# "Issue 44 on a level"): after run.sh (its OUT holds the level, the TOML scene and the cached references),
+# Where series transport's error on zdm2 sits, against path transport's (docs/series.md, "Guiding at equal time on a level (zdm2)"): after run.sh (its OUT holds the level, the TOML scene and the cached references),
 # bakes the default and path transport at 256 spp against the reference, then both at 64 spp
 # with 1 and 2 bounces, the default with `--lookup-filter 0`, and both lit by the sky alone
 # (the texel file prepared with the sun), one thread; dark.py prints where each one's error sits.

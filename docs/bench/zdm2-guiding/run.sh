@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Issue 44's measure on a level none of the defaults were tuned on: the Cube 2 level zdm2
+# The guiding targets' measure (docs/BENCHMARKS.md, "What falls short") on a level none of the defaults were tuned on: the Cube 2 level zdm2
 # (../shared/scenes/calinou_zdm2, CC BY 4.0; textures stripped, a sun and a sky from a TOML
 # file: docs/bench/surfaces/zdm2-scene.sh) at SIZE², the default against the uniform
 # unguided bake, 64 / 256 spp, SEEDS seeds (2), one thread, against a 4 096-spp path reference
 # and its twin (--reference-noise); then docs/bench/reference-noise/net.py: the equal-time
-# ratios raw and net of the reference's noise (docs/BENCHMARKS.md, "Issue 44 on a level").
+# ratios raw and net of the reference's noise (docs/series.md, "Guiding at equal time on a level (zdm2)").
 #   docs/bench/zdm2-guiding/run.sh SCENES_DIR OUT [SIZE]      (default SIZE: 768; 17 552 charts do not fit 512²)
 set -euo pipefail
 scenes=${1:?scenes dir (../shared/scenes)}; out=${2:?output dir}; n=${3:-768}

@@ -5,8 +5,7 @@ reference and its twin that run.sh's bench named in SUMMARY, relative MSE net of
 noise (per texel: (reference − twin)² / 4), split by texel kind; and how much of each bake's
 error is its variance (per texel: (seed 1 − seed 2)² / 2) and how much is left, a bias that
 more samples do not take out. With --bias, each of the bakes NAME-1.exr and NAME-2.exr in
-OUT alone: its error, variance and bias by texel kind (the variants of docs/BENCHMARKS.md,
-"Issue 44 on a level", were throwaway builds baked so). Needs numpy and OpenEXR.
+OUT alone: its error, variance and bias by texel kind (the variants of docs/series.md, "Guiding at equal time on a level (zdm2)", were throwaway builds baked so). Needs numpy and OpenEXR.
     where.py SUMMARY OUT TRANSPORT
     where.py --bias SUMMARY OUT NAME..."""
 import os

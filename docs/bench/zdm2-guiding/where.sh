@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Which of zdm2's texels guiding gains least at (docs/BENCHMARKS.md, "Issue 44 on a level"):
+# Which of zdm2's texels guiding gains least at (docs/series.md, "Guiding at equal time on a level (zdm2)"):
 # after run.sh (its OUT holds the level, the TOML scene and the cached reference and twin),
 # bakes the default and the unguided bake (`--guiding off`), series and path transport,
 # 256 spp, seeds 1 and 2, one thread; where.py splits each pair's relative MSE (net of the

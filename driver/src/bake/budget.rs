@@ -3,7 +3,7 @@
 //! next-event samples the direct pass's later iterations take, from the error its tile's
 //! earlier iterations measured ([`tile_factors`]). Paper §2.5 weighs a texel's iterations
 //! by their variance; this spends the samples themselves by it, as production bakers spend
-//! them where the error is (docs/estimator.md, "The spatial budget").
+//! them where the error is (docs/budget.md, "The spatial budget").
 //!
 //! The last pass b ≥ 2 of a series bake reads, per texel, the previous gather pass's result (and the
 //! direct pass's, when that pass borrowed its direct light): the per-sample luminance

@@ -1057,7 +1057,7 @@ struct Learning {
     /// (until a guide's build reorders the records).
     densities: Vec<f32>,
     /// What the next guide learns from: the records of the cluster's iterations since the
-    /// last one that sampled cosine points, that one included (docs/guide.md, "The records a
+    /// last one that sampled cosine points, that one included (docs/guiding-levers.md, "The records a
     /// guide learns from, and three iterations").
     pool: Vec<Record>,
 }
@@ -1163,7 +1163,7 @@ fn seed_side(members: usize) -> usize {
     }
 }
 
-/// A cluster's guide seed (docs/guide.md, "The seed guide"): what the gather of the pass before
+/// A cluster's guide seed (docs/guiding-levers.md, "The seed guide"): what the gather of the pass before
 /// a guided last pass brought back, summed over a grid of [`seed_side`]² cells on the primary
 /// sample square. The cluster's j-th texel keeps cell j in its result; the last pass, whose
 /// clusters are the same, builds the cluster's first guide from the cells
@@ -2242,7 +2242,7 @@ mod tests {
     /// recorded for coherent's second guided iteration was such a seed). Pooled over 32
     /// seeds (2026-11-24): naive 11.0× and 12.8×, coherent 12.6× and 13.7× per guided
     /// sample.
-    /// The guide seed (docs/guide.md, "The seed guide"), under [`small_emitter`]: a pass that
+    /// The guide seed (docs/guiding-levers.md, "The seed guide"), under [`small_emitter`]: a pass that
     /// keeps seeds writes its cluster's cells into its texels' results, and a pass that reads
     /// them samples a guide in its first iteration too. That iteration's variance per sample
     /// falls far below the cosine iteration's of the same bake unseeded (≥ 4×, pooled over

@@ -330,7 +330,7 @@ pub fn bake_pass_with_progress(
                 direct: direct.as_deref(),
             };
             // The last pass's clusters start from the guide seeds the pass before kept in its
-            // results (docs/guide.md, "The seed guide").
+            // results (docs/guiding-levers.md, "The seed guide").
             world.set_guide_seeds(None);
             if job.settings.reads_guide_seeds(pass) {
                 let (results, _) = sources.open(&texels, bake_id)?;

@@ -106,7 +106,7 @@ pub enum Schedule {
 /// measured ([`super::budget::tile_factors`]).
 /// [`Budget::Bounded`] by default for a guided bake: less relative MSE at equal time on every
 /// scene and rung measured, the MSE the uniform budget's ([`Budget::default_for`];
-/// docs/estimator.md, "The spatial budget").
+/// docs/budget.md, "The spatial budget").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum Budget {
     /// `--spp` samples at every texel.
@@ -136,7 +136,7 @@ impl Budget {
     }
 }
 
-/// What a cluster's guide learns from its records (`--guide-target`, docs/guide.md,
+/// What a cluster's guide learns from its records (`--guide-target`, docs/guiding-levers.md,
 /// "The guide's target"): the density ∝ `E[L]` over the cluster's texels (the paper's), or
 /// ∝ `√E[L²]`, which minimises their summed variance (variance-aware guiding, Rath et al.
 /// 2020; [`guidebake_kernels::guide::GuideParams::second_moment`]).
@@ -146,13 +146,13 @@ pub enum GuideTarget {
     Radiance,
     /// The square root of its second moment (records `L²/q`): 1.00–1.23× less relative MSE
     /// at equal time on the three converted scenes, never behind by more than the noise
-    /// (docs/guide.md).
+    /// (docs/guiding-levers.md).
     #[default]
     SecondMoment,
 }
 
 /// Whether the last pass's first iteration samples a guide seeded by the pass before it
-/// (`--guide-seed`; docs/guide.md, "The seed guide").
+/// (`--guide-seed`; docs/guiding-levers.md, "The seed guide").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
 pub enum GuideSeed {
     /// The pass before the last keeps, per cluster, a coarse histogram of what its gather
@@ -160,7 +160,7 @@ pub enum GuideSeed {
     /// the last pass builds its clusters' first guide from it, so no iteration of the
     /// lightmap is unguided. The default: 1.02–1.03× (Cornell box), 1.07× (ajar) and
     /// 1.19–1.23× (bidir) less relative MSE at equal samples, no measurable CPU
-    /// (docs/guide.md).
+    /// (docs/guiding-levers.md).
     #[default]
     Previous,
     /// Every guided pass's first iteration gathers with cosine points (the paper's).
@@ -212,7 +212,7 @@ pub struct BakeSettings {
     /// Final-gather rays per texel, all learning iterations together.
     pub spp: u32,
     /// Learning iterations K (iteration 0 is unguided unless the pass before kept a guide
-    /// seed). 3 by default since the seed guides the first iteration (docs/guide.md, "The
+    /// seed). 3 by default since the seed guides the first iteration (docs/guiding-levers.md, "The
     /// records a guide learns from, and three iterations").
     pub iterations: u32,
     /// Direction choice.

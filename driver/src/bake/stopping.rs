@@ -36,7 +36,7 @@
 //! Only the group's own samples decide, so a bake is the same bits on any thread count,
 //! shard split or resume. What a texel's estimate cannot see, it cannot stop for: a series
 //! pass's lookups read the previous pass's noise at every hit, which no texel's own
-//! iterations hold (docs/estimator.md, "The stopping rule").
+//! iterations hold (docs/budget.md, "The stopping rule").
 
 use guidebake_kernels::estimator::{Welford, pooled};
 

@@ -21,7 +21,7 @@
 //! `E[(x − r)²] = E[(x − μ)²] + Var r` for a run `x` independent of `r`. A path reference 16×
 //! a run's samples holds much of the error of a good series bake: path transport is about four
 //! times as noisy per sample (on the Veach rooms at 256², 256 spp, about half the default's
-//! relative MSE; docs/BENCHMARKS.md, "The reference's own noise"). `--reference-noise` bakes a twin
+//! relative MSE; docs/references.md, "The reference's own noise"). `--reference-noise` bakes a twin
 //! (the same settings, seed [`TWIN_SEED`]), measures the runs against the mean of the two and
 //! estimates that mean's noise ([`ReferenceNoise`]); subtracted from a run's error it leaves the
 //! run's error against the truth. The tables print the errors with the noise in.

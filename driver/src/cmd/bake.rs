@@ -61,7 +61,7 @@ pub struct BakeArgs {
     /// Stop where the estimate is good enough: a cluster (a tile of the direct pass) stops
     /// once its texels' relative error, measured between its iterations, is at most this
     /// (0.02: 2 %); `--spp` is then the cap. Use `--iterations 8` to stop at every doubling
-    /// (docs/estimator.md, "The stopping rule").
+    /// (docs/budget.md, "The stopping rule").
     #[arg(long, value_name = "ERROR")]
     pub target_error: Option<f32>,
     /// Extra EXR channels: sample count, relative standard error, validity.

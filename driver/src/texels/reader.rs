@@ -64,9 +64,9 @@ impl TexelFile {
     /// The file's identity, never 0: a hash of its header (which records the scene's geometry,
     /// [`Header::geometry`]), page table, triangle table and tile table — everything but the
     /// texel records, which `prepare` derives from those deterministically. A bake's work
-    /// directory and its lightmap record it (docs/texels.md, "Identity"), so `--resume`,
-    /// `merge` and `render` refuse work made for another texel file. Computed once, on first
-    /// use.
+    /// directory and its lightmap record it (docs/texels.md, "What a file knows about what
+    /// made it"), so `--resume`, `merge` and `render` refuse work made for another texel file.
+    /// Computed once, on first use.
     #[must_use]
     pub fn identity(&self) -> u64 {
         *self.identity.get_or_init(|| {

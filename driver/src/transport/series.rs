@@ -58,7 +58,7 @@ pub const DILATION: u32 = 4;
 /// reading the total ([`PreviousPass::reads_total`]): so near, one texel's blur is a large
 /// part of what the gathering point sees (corners, where the neighbouring wall's direct
 /// light changes within a texel). Chosen by the RMSE against a path reference of the three
-/// converted scenes (docs/BENCHMARKS.md, "Series reads the total"): at 4 it is within 0.4 %
+/// converted scenes (docs/series.md, "Series reads the total"): at 4 it is within 0.4 %
 /// of connecting every hit; at 0 up to 7.7 % above it.
 pub const NEAR_FIELD_TEXELS: f32 = 4.0;
 
@@ -71,7 +71,7 @@ pub const NEAR_FIELD_TEXELS: f32 = 4.0;
 /// bounces. On the level zdm2 (768², a sun and a sky, 256 spp, 2 seeds, 2026-11-30) this took
 /// 87 % of the default bake's per-texel bias out, and its relative MSE fell 1.70× at equal
 /// samples; on the converted rooms, which carry no such bias, it changed by 0.99–1.04×
-/// (docs/BENCHMARKS.md, "Why guiding gained little on the level").
+/// (docs/series.md, "Why guiding gained little on the level").
 pub const NEAR_PATH_TEXELS: f32 = 1.0;
 
 /// One pixel of a pass image: gather-only irradiance (0..3), its generation (3; 0: empty,
