@@ -7,7 +7,7 @@ kernels/src/cluster.rs splits a tile's valid texels), the sample count the bake 
 (aux channel `samples`), and the fireflies (top 0.1 % of the texels by squared error).
 
     where_guiding_loses.py TEXELS REF.exr DIRECT.exr BASE.exr NAME=BAKE.exr [NAME=BAKE.exr ...]
-        [--ref2 REF2.exr] [--sky SKY.exr] [--json OUT.json]
+        [--ref2 REF2.exr] [--sky SKY.exr] [--sky-radiance R,G,B] [--json OUT.json]
 
 REF.exr: an unbiased reference (path transport, >= 16x the samples); DIRECT.exr: a bake of the
 direct light alone (`--bounces 0`, many samples); BASE.exr: the unguided bake; each NAME=BAKE.exr
@@ -29,7 +29,7 @@ import numpy as np
 import OpenEXR
 
 VALID, PARTIAL = 1, 2
-SKY = np.array([0.45, 0.55, 0.7])  # the recipe's --sky
+SKY = np.array([0.45, 0.55, 0.7])  # the recipe's --sky (complex); --sky-radiance for another
 MAX_TEXELS, COS_MAX = 64, np.float32(np.cos(np.radians(60.0)))
 
 
@@ -165,6 +165,10 @@ def main():
     sky_path = None
     if "--sky" in args:
         i = args.index("--sky"); sky_path = args[i + 1]; del args[i:i + 2]
+    global SKY
+    if "--sky-radiance" in args:
+        i = args.index("--sky-radiance")
+        SKY = np.array([float(v) for v in args[i + 1].split(",")]); del args[i:i + 2]
     if "--json" in args:
         i = args.index("--json"); jpath = args[i + 1]; del args[i:i + 2]
     texels_path, ref_path, direct_path, base_path = args[:4]

@@ -89,7 +89,7 @@ pub fn run(args: &InspectArgs) -> Result<(), super::CmdError> {
             "triangles_seen_from_front": sides.front,
             "triangles_seen_from_back": sides.back,
             "triangles_seen_from_both_sides": sides.both,
-            "triangle_roles": sides.roles.iter().map(|&(r, n)| (r, n)).collect::<std::collections::BTreeMap<_, _>>(),
+            "triangle_roles": sides.roles.iter().copied().collect::<std::collections::BTreeMap<_, _>>(),
             "texels_per_unit": h.texels_per_unit,
             "bounds": [h.bounds_min, h.bounds_max],
             "identity": format!("{:016x}", f.identity()),
