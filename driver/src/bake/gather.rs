@@ -110,8 +110,9 @@ pub struct GatherCounters {
     /// Guided iterations that fell back to the baseline because the guide the cluster sampled
     /// in an earlier iteration beat stratified cosine points by less than `--min-gain`.
     pub iterations_unguided_no_gain: u64,
-    /// Guided iterations that gathered with cosine points because the pass before measured
-    /// the cluster's light as flat (`--flat-below`: [`GatherCounters::clusters_flat`]).
+    /// Guided iterations folded into one set of cosine points because the pass before
+    /// measured the cluster's light as flat (`--flat-below`: [`GatherCounters::clusters_flat`];
+    /// each such cluster bakes its iterations' samples as one set: `iterations − 1` here).
     pub iterations_unguided_flat: u64,
     /// Guided iterations that sampled a learned guide.
     pub iterations_guided: u64,
@@ -532,11 +533,20 @@ impl<'w> TileBaker<'w> {
         }
         let mut seed = writes_guide_seeds.then(|| GuideSeed::new(members.len()));
         learning.pool.clear();
+        // A flat cluster learns nothing from its iterations: it bakes them in one set of all
+        // their samples, stratified over the whole hemisphere as the unguided bake's pass is
+        // (docs/guiding-on-levels.md, "One set where the light is flat").
+        let one_set = flat.then(|| {
+            (0..iterations)
+                .map(|k| settings.samples_in_iteration(k))
+                .sum()
+        });
+        if flat {
+            counters.iterations_unguided_flat += u64::from(iterations - 1);
+        }
         for k in 0..iterations {
             learning.clear();
-            if flat && k > 0 {
-                counters.iterations_unguided_flat += 1;
-            } else if stopped {
+            if stopped {
                 counters.iterations_unguided_no_gain += 1;
             }
             let learns = !flat
@@ -544,7 +554,8 @@ impl<'w> TileBaker<'w> {
                 && cut.is_none()
                 && k + 1 < iterations
                 && settings.guiding != Guiding::Off;
-            let nominal = cut.unwrap_or_else(|| settings.samples_in_iteration(k));
+            let nominal =
+                one_set.unwrap_or_else(|| cut.unwrap_or_else(|| settings.samples_in_iteration(k)));
             for &m in members {
                 let i = valid[m as usize];
                 let t = gather_texel(&texels[i as usize], first_texel + u64::from(i), frame);
@@ -578,6 +589,9 @@ impl<'w> TileBaker<'w> {
             }
             if let Some(seed) = &mut seed {
                 seed.add(learning, params.second_moment);
+            }
+            if one_set.is_some() {
+                break;
             }
             if cut.is_some() {
                 counters.texel_iterations_stopped +=
@@ -2372,6 +2386,46 @@ mod tests {
         let (c, _) = last_pass(world, &texels, "emitter");
         assert_eq!((c.clusters_flat, c.clusters_seeded), (0, 1), "{c:?}");
         assert!(c.iterations_guided > 0, "{c:?}");
+    }
+
+    /// A flat cluster bakes its iterations' samples as one set, stratified over the whole
+    /// hemisphere: under the small emitter, with a threshold every cluster passes, its texels
+    /// are those of the unguided bake of one iteration of all the samples, bit for bit.
+    #[test]
+    fn a_flat_cluster_bakes_its_samples_as_one_set() {
+        let dir = tempfile::tempdir().unwrap();
+        let first_texel = 1000;
+        let (mut world, texels) = small_emitter();
+        let mut before = TileBaker::new(&world, settings(Guiding::Off)).writes_guide_seeds(true);
+        let mut out = TileBuffer::default();
+        before.bake_tile(0, first_texel, &texels, &mut out);
+        let path = dir.path().join("seeds");
+        let file = ResultFile::create(&path, first_texel + texels.len() as u64, 7).unwrap();
+        file.write(first_texel, &out.results).unwrap();
+        world.set_guide_seeds(Some(MappedResults::new(&file).unwrap()));
+        let flat = BakeSettings {
+            flat_below: u32::MAX,
+            ..settings(Guiding::Coherent)
+        };
+        let mut baker = TileBaker::new(&world, flat);
+        let mut folded = TileBuffer::default();
+        baker.bake_tile(0, first_texel, &texels, &mut folded);
+        assert_eq!(baker.counters.clusters_flat, baker.counters.clusters);
+        let one = BakeSettings {
+            iterations: 1,
+            ..settings(Guiding::Off)
+        };
+        let mut unguided = TileBaker::new(&world, one);
+        let mut want = TileBuffer::default();
+        unguided.bake_tile(0, first_texel, &texels, &mut want);
+        let bits = |b: &TileBuffer| -> Vec<[u32; 3]> {
+            b.results
+                .iter()
+                .map(|r| r.irradiance.map(f32::to_bits))
+                .collect()
+        };
+        assert_eq!(bits(&folded), bits(&want));
+        assert!(folded.results.iter().any(|r| r.irradiance[0] > 0.0));
     }
 
     /// [`is_flat`] pools the texels' relative per-sample variance, `rse² · samples` each,
