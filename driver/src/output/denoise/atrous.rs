@@ -24,7 +24,7 @@ use super::{Denoiser, NoisyTexel, Window};
 use guidebake_kernels::estimator::luminance_f32;
 
 /// À-Trous passes of [`ATrous::default`] (taps 1 and 2 pixels apart; chosen by the sweep
-/// of docs/lightmaps.md).
+/// of docs/bench/denoise/atrous-sweep.md).
 pub const LEVELS: u32 = 2;
 /// Exponent of the normal weight.
 pub const NORMAL_POWER: i32 = 32;

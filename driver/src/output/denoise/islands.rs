@@ -90,18 +90,6 @@ impl Islands {
         }
         Self { labels, boxes }
     }
-
-    /// Whether island `island` has a pixel in `[x0, y0, x1, y1)`.
-    #[must_use]
-    pub fn meets(&self, island: usize, width: usize, rect: [usize; 4]) -> bool {
-        let b = self.boxes[island];
-        if b[0] >= rect[2] || b[2] <= rect[0] || b[1] >= rect[3] || b[3] <= rect[1] {
-            return false;
-        }
-        let (x0, x1) = (b[0].max(rect[0]), b[2].min(rect[2]));
-        (b[1].max(rect[1])..b[3].min(rect[3]))
-            .any(|y| (x0..x1).any(|x| self.labels[y * width + x] == island as u32))
-    }
 }
 
 /// The 4-neighbours of `(x, y)` inside a `w` × `h` grid, as row-major indices.
@@ -253,8 +241,6 @@ mod tests {
         assert_eq!(islands.labels[4], NO_ISLAND);
         assert_eq!(islands.labels[6], 1);
         assert_eq!(islands.labels[5 * 12], 2);
-        assert!(islands.meets(1, 12, [8, 2, 9, 3]));
-        assert!(!islands.meets(0, 12, [4, 0, 12, 6]));
     }
 
     #[test]

@@ -4,9 +4,8 @@
 //! OIDN is an image network: run on an atlas as it stands it mixes neighbouring charts and
 //! the padding between them. Here it runs per island of each window ([`super::islands`]):
 //! the island on its bounding box plus [`MARGIN`] pixels, every other pixel filled from the
-//! island's own texels by dilation, and only the island's texels taken back. An island with
-//! no texel in the window's inner part (the tile) is left as it is — its own tile's window
-//! filters it.
+//! island's own texels by dilation, and only the island's texels taken back. Islands of
+//! fewer than [`MIN_ISLAND`] texels are left as baked.
 //!
 //! - **Irradiance**: `RTLightmap` in HDR mode on linear RGB. The filter takes no albedo or
 //!   normal auxiliary images (OIDN documents `color`, `output` and `directional` for it; the
@@ -48,6 +47,9 @@ pub const MARGIN: usize = 4;
 pub const ROUND: usize = 16;
 /// How many standard errors the output may move from the texel's estimate.
 pub const CLAMP_SIGMAS: f32 = 3.0;
+/// Islands of fewer texels are left as baked: on a level's tiny charts the network, seeing
+/// mostly the dilated fill, raised the error (docs/lightmaps.md).
+pub const MIN_ISLAND: usize = 64;
 /// `|L1| ≤ √3 · L0` for non-negative radiance in this SH basis (`Y1 / Y0`).
 const L1_BOUND: f32 = 1.732_050_8;
 
@@ -194,6 +196,8 @@ pub struct Oidn {
     pool: Mutex<Vec<Engine>>,
     /// How many standard errors the output may move from the estimate.
     pub clamp_sigmas: f32,
+    /// Islands of fewer texels are left as baked.
+    pub min_island: usize,
 }
 
 impl Oidn {
@@ -206,6 +210,7 @@ impl Oidn {
         Ok(Self {
             pool: Mutex::new(vec![Engine::new()?]),
             clamp_sigmas: CLAMP_SIGMAS,
+            min_island: MIN_ISLAND,
         })
     }
 
@@ -225,7 +230,7 @@ impl Oidn {
     }
 
     /// The filtered irradiance and (with `count` = 12) directional coefficients of every
-    /// island of `window` that reaches its inner part; the rest as they were.
+    /// island of `window` of at least `min_island` texels; the rest as they were.
     ///
     /// # Errors
     /// [`OidnError`] from the library.
@@ -239,15 +244,15 @@ impl Oidn {
             window.texels.iter().map(|t| t.map(|t| t.rgb)).collect();
         let mut out_extra = extra.to_vec();
         let islands = Islands::of(window);
-        let halo = (HALO as usize).min(window.width / 2).min(window.height / 2);
-        let inner = [halo, halo, window.width - halo, window.height - halo];
         let directional = count == 12 && extra.len() == 12 * window.texels.len();
         self.with_engine(|engine| -> Result<(), OidnError> {
+            // Every island, those in the halo too: a window clipped at the page's edge holds its
+            // tile off centre, so which pixels are the tile's is not known here.
             for island in 0..islands.boxes.len() {
-                if !islands.meets(island, window.width, inner) {
+                let image = IslandImage::new(&islands, window.width, island, MARGIN, ROUND);
+                if image.own.iter().filter(|own| **own).count() < self.min_island {
                     continue;
                 }
-                let image = IslandImage::new(&islands, window.width, island, MARGIN, ROUND);
                 let texel = |i: usize| window.texels[i].expect("island pixels hold texels");
                 let filtered = filter_layer(engine, &image, false, |i| texel(i).rgb)?;
                 for (at, i) in image.own_pixels() {
@@ -331,11 +336,20 @@ fn held(texel: &NoisyTexel, filtered: [f32; 3], sigmas: f32) -> [f32; 3] {
     let luminance = luminance_f32(texel.rgb);
     std::array::from_fn(|c| {
         let own = texel.rgb[c];
-        let reach = if luminance > 0.0 {
-            sigmas * sd * own / luminance
+        let share = if luminance > 0.0 {
+            (own / luminance).abs()
         } else {
-            sigmas * sd
+            1.0
         };
+        // An infinite `sigmas` holds nothing (∞ · 0 would be NaN where σ = 0).
+        let reach = if sigmas.is_finite() {
+            sigmas * sd * share
+        } else {
+            f32::INFINITY
+        };
+        if reach.is_nan() {
+            return own;
+        }
         filtered[c].clamp(own - reach, own + reach).max(0.0)
     })
 }
@@ -373,5 +387,212 @@ impl Denoiser for Oidn {
                     extra.to_vec(),
                 )
             })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// A tiny xorshift for test noise, uniform in [0, 1).
+    struct Noise(u64);
+    impl Noise {
+        fn next(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
+    /// Edge of the charts of [`atlas`] and the padding between them.
+    const CHART: usize = 8;
+    const PADDING: usize = 2;
+    const PITCH: usize = CHART + PADDING;
+
+    /// The true irradiance of chart `k` of [`atlas`]: bright and dark in a checkerboard.
+    fn truth(k: usize) -> f32 {
+        if (k + k / 8) % 2 == 0 { 50.0 } else { 0.5 }
+    }
+
+    /// An 80 × 80 window of 8 × 8 small charts (8 × 8 texels, 2 pixels of padding), each a
+    /// patch of floor 10 m from the next, lit bright or dark ([`truth`]) with noise of
+    /// relative standard deviation 0.5. `keep(k)` picks the charts present.
+    fn atlas(keep: impl Fn(usize) -> bool) -> Window {
+        let n = 8 * PITCH;
+        let mut noise = Noise(17);
+        let texels = (0..n * n)
+            .map(|i| {
+                let (x, y) = (i % n, i / n);
+                let sample = noise.next();
+                let (cx, cy) = (x / PITCH, y / PITCH);
+                let k = cy * 8 + cx;
+                if x % PITCH >= CHART || y % PITCH >= CHART || !keep(k) {
+                    return None;
+                }
+                let value = truth(k) * (1.0 + (sample - 0.5) * 3f32.sqrt());
+                let sd = 0.5 * truth(k);
+                Some(NoisyTexel {
+                    rgb: [value; 3],
+                    variance: sd * sd,
+                    position: Vec3::new(
+                        10.0 * k as f32 + (x % PITCH) as f32 * 0.1,
+                        0.0,
+                        (y % PITCH) as f32 * 0.1,
+                    ),
+                    normal: Vec3::Y,
+                    spacing: 0.1,
+                })
+            })
+            .collect();
+        Window {
+            width: n,
+            height: n,
+            texels,
+        }
+    }
+
+    fn chart_of(i: usize) -> usize {
+        let n = 8 * PITCH;
+        (i / n / PITCH) * 8 + (i % n) / PITCH
+    }
+
+    #[test]
+    fn each_small_chart_is_denoised_as_if_it_were_alone_in_the_atlas() {
+        let oidn = Oidn::new().unwrap();
+        let window = atlas(|_| true);
+        let together = oidn.try_denoise_with(&window, &[], 0).unwrap().0;
+        let n = window.width;
+        let (mut before, mut after, mut compared) = (0.0f64, 0.0f64, 0);
+        for k in 0..64 {
+            let alone = oidn.try_denoise_with(&atlas(|c| c == k), &[], 0).unwrap().0;
+            for i in (0..n * n).filter(|&i| chart_of(i) == k && window.texels[i].is_some()) {
+                // Bit for bit: neither the bright charts around a dark one nor the padding
+                // reach it.
+                assert_eq!(together[i], alone[i], "chart {k}, pixel {i}");
+                let t = f64::from(truth(k));
+                before += (f64::from(window.texels[i].unwrap().rgb[0]) / t - 1.0).powi(2);
+                after += (f64::from(together[i].unwrap()[0]) / t - 1.0).powi(2);
+                compared += 1;
+            }
+        }
+        assert_eq!(compared, 64 * CHART * CHART);
+        // And the filter did its work: the relative error fell.
+        assert!(
+            after < before / 2.0,
+            "relative squared error {before} → {after}"
+        );
+    }
+
+    #[test]
+    fn islands_below_the_least_size_are_left_as_baked() {
+        let oidn = Oidn {
+            min_island: CHART * CHART + 1,
+            ..Oidn::new().unwrap()
+        };
+        let window = atlas(|_| true);
+        let out = oidn.try_denoise_with(&window, &[], 0).unwrap().0;
+        let raw: Vec<_> = window.texels.iter().map(|t| t.map(|t| t.rgb)).collect();
+        assert_eq!(out, raw);
+    }
+
+    #[test]
+    fn a_certain_texel_keeps_its_value_beside_a_lit_one() {
+        // One floor chart running from a lit room (x < 16, noisy) under a thin wall into a
+        // dark room that no light reaches (σ = 0): the dark half stays exactly 0.
+        let n = 48;
+        let mut noise = Noise(5);
+        let texels = (0..n * n)
+            .map(|i| {
+                let (x, y) = (i % n, i / n);
+                let lit = x < 24;
+                let value = if lit {
+                    5.0 + 4.0 * (noise.next() - 0.5)
+                } else {
+                    0.0
+                };
+                Some(NoisyTexel {
+                    rgb: [value; 3],
+                    variance: if lit { 1.5 } else { 0.0 },
+                    position: Vec3::new(x as f32 * 0.1, 0.0, y as f32 * 0.1),
+                    normal: Vec3::Y,
+                    spacing: 0.1,
+                })
+            })
+            .collect();
+        let window = Window {
+            width: n,
+            height: n,
+            texels,
+        };
+        let out = Oidn::new()
+            .unwrap()
+            .try_denoise_with(&window, &[], 0)
+            .unwrap()
+            .0;
+        for i in (0..n * n).filter(|i| i % n >= 24) {
+            assert_eq!(out[i], Some([0.0; 3]), "dark texel {i}");
+        }
+    }
+
+    #[test]
+    fn any_thread_count_gives_the_same_bits() {
+        let windows: Vec<Window> = (0..6).map(|k| atlas(move |c| c % 6 != k)).collect();
+        let run = |threads: usize| {
+            let oidn = Oidn::new().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                use rayon::prelude::*;
+                windows
+                    .par_iter()
+                    .map(|w| oidn.try_denoise_with(w, &[], 0).unwrap().0)
+                    .collect::<Vec<_>>()
+            })
+        };
+        assert_eq!(run(1), run(2));
+    }
+
+    #[test]
+    fn directional_coefficients_keep_their_direction_and_follow_the_filtered_l0() {
+        // Every texel's L1 points along +x at half its bound (√3/2 · L0) with a noisy L0:
+        // the filtered coefficients still do, and L0 is smoother.
+        let window = atlas(|_| true);
+        let mut noise = Noise(9);
+        let extra: Vec<f32> = window
+            .texels
+            .iter()
+            .flat_map(|t| {
+                let l0 = t.map_or(0.0, |t| t.rgb[0] * (0.8 + 0.4 * noise.next()));
+                let l1x = 0.5 * L1_BOUND * l0;
+                [l0, l0, l0, l1x, l1x, l1x, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+            })
+            .collect();
+        let (_, out) = Oidn::new()
+            .unwrap()
+            .try_denoise_with(&window, &extra, 12)
+            .unwrap();
+        let mut changed = 0;
+        for (i, t) in window.texels.iter().enumerate() {
+            let (c, e) = (&out[12 * i..12 * (i + 1)], &extra[12 * i..12 * (i + 1)]);
+            if t.is_none() {
+                assert_eq!(c, e);
+                continue;
+            }
+            changed += usize::from(c[0] != e[0]);
+            if c[0] > 0.0 {
+                let ratio = c[3] / (L1_BOUND * c[0]);
+                assert!((ratio - 0.5).abs() < 0.1, "texel {i}: L1x / bound {ratio}");
+                assert!(
+                    c[6].abs() <= 0.1 * L1_BOUND * c[0],
+                    "texel {i}: L1y {}",
+                    c[6]
+                );
+            }
+        }
+        assert!(changed > 500, "{changed} texels' L0 filtered");
     }
 }
