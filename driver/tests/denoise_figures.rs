@@ -224,13 +224,15 @@ fn denoiser_figures() -> Result<(), Error> {
         let at_equal_time = |error: fn(&ErrorStats) -> f64| {
             interpolate(&ladder, |(_, s, _)| *s, |(_, _, e)| error(e), o_seconds)
         };
+        // The spp where the raw ladder reaches `target`: "≤ 64" when its first rung already
+        // does, "> 1024" when its last does not.
         let reaching = |error: fn(&ErrorStats) -> f64, target: f64| {
-            interpolate(
-                &ladder,
-                |(_, _, e)| error(e),
-                |(spp, _, _)| f64::from(*spp),
-                target,
-            )
+            let spp = |(spp, _, _): &(u32, f64, ErrorStats)| f64::from(*spp);
+            match interpolate(&ladder, |(_, _, e)| error(e), spp, target) {
+                Some(spp) => format!("{spp:.0}"),
+                None if error(&ladder[0].2) <= target => format!("≤ {}", LADDER[0]),
+                None => format!("> {}", LADDER[LADDER.len() - 1]),
+            }
         };
         let rmse = |e: &ErrorStats| e.rmse;
         let rel = |e: &ErrorStats| e.rel_mse;
@@ -241,8 +243,8 @@ fn denoiser_figures() -> Result<(), Error> {
             o_seconds,
             shown(at_equal_time(rmse), 4),
             shown(at_equal_time(rel), 4),
-            shown(reaching(rmse, o.rmse), 0),
-            shown(reaching(rel, o.rel_mse), 0),
+            reaching(rmse, o.rmse),
+            reaching(rel, o.rel_mse),
         ));
         eprintln!("{}", speed_rows.last().expect("just pushed"));
     }

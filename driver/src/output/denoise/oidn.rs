@@ -190,6 +190,9 @@ impl Drop for Engine {
     }
 }
 
+/// A window's filtered irradiance (per pixel, `None` without a texel) and extra channels.
+pub type Filtered = (Vec<Option<[f32; 3]>>, Vec<f32>);
+
 /// The chart-aware OIDN denoiser of the module docs.
 pub struct Oidn {
     /// Idle engines; a thread takes one (or makes one) per window.
@@ -239,7 +242,7 @@ impl Oidn {
         window: &Window,
         extra: &[f32],
         count: usize,
-    ) -> Result<(Vec<Option<[f32; 3]>>, Vec<f32>), OidnError> {
+    ) -> Result<Filtered, OidnError> {
         let mut rgb: Vec<Option<[f32; 3]>> =
             window.texels.iter().map(|t| t.map(|t| t.rgb)).collect();
         let mut out_extra = extra.to_vec();
@@ -413,7 +416,11 @@ mod tests {
 
     /// The true irradiance of chart `k` of [`atlas`]: bright and dark in a checkerboard.
     fn truth(k: usize) -> f32 {
-        if (k + k / 8) % 2 == 0 { 50.0 } else { 0.5 }
+        if (k + k / 8).is_multiple_of(2) {
+            50.0
+        } else {
+            0.5
+        }
     }
 
     /// An 80 × 80 window of 8 × 8 small charts (8 × 8 texels, 2 pixels of padding), each a
