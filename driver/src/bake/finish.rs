@@ -63,8 +63,13 @@ pub enum Denoise {
     /// error `guidebake bench` measures, with no filter bias and nothing blurred).
     #[default]
     Off,
-    /// The edge-aware À-Trous filter, per tile with a halo (docs/lightmaps.md).
-    On,
+    /// The edge-aware À-Trous filter, per tile with a halo (docs/lightmaps.md; `on` is its
+    /// older spelling).
+    #[value(alias = "on")]
+    Atrous,
+    /// Intel Open Image Denoise's `RTLightmap` network, per island of each tile's window
+    /// (a build with the `oidn` feature; scripts/oidn/fetch.sh).
+    Oidn,
 }
 
 /// Whether seams are stitched ([`crate::output::seams`]).
@@ -97,7 +102,7 @@ pub fn finish(texels: &TexelFile, dirs: &[PathBuf], out: &Path) -> Result<Writte
     finish_with(texels, dirs, out, FinishOptions::default())
 }
 
-/// [`finish`], denoising the pages with [`ATrous`] and stitching their seams as `options`
+/// [`finish`], denoising the pages (with [`ATrous`] or OIDN) and stitching their seams as `options`
 /// ask. Both run on the merged results (the filter tile by tile with a halo, the stitch on
 /// the border texels once every tile is written), so n shards still give the bytes of one
 /// bake.
@@ -110,9 +115,30 @@ pub fn finish_with(
     out: &Path,
     options: FinishOptions,
 ) -> Result<Written, BakeError> {
-    let filter = ATrous::default();
-    let denoiser = (options.denoise == Denoise::On).then_some(&filter as &dyn Denoiser);
-    finish_filtered(texels, dirs, out, denoiser, options.seams)
+    match options.denoise {
+        Denoise::Off => finish_filtered(texels, dirs, out, None, options.seams),
+        Denoise::Atrous => {
+            finish_filtered(texels, dirs, out, Some(&ATrous::default()), options.seams)
+        }
+        Denoise::Oidn => {
+            let oidn = oidn_denoiser()?;
+            finish_filtered(texels, dirs, out, Some(&oidn), options.seams)
+        }
+    }
+}
+
+/// The OIDN denoiser, or why there is none: a build without the `oidn` feature, or a library
+/// that cannot make its CPU device.
+#[cfg(feature = "oidn")]
+fn oidn_denoiser() -> Result<crate::output::denoise::Oidn, BakeError> {
+    crate::output::denoise::Oidn::new()
+        .map_err(|e| SettingsError::new(format!("--denoise oidn: {e}")).into())
+}
+
+/// The OIDN denoiser, or why there is none: a build without the `oidn` feature.
+#[cfg(not(feature = "oidn"))]
+fn oidn_denoiser() -> Result<ATrous, BakeError> {
+    Err(SettingsError::new(crate::output::denoise::OIDN_MISSING.into()).into())
 }
 
 /// [`finish_with`] with any [`Denoiser`] (or none): where another filter plugs in.
@@ -1100,11 +1126,11 @@ mod tests {
     use crate::scene::{Material, Scene};
 
     const DENOISE: FinishOptions = FinishOptions {
-        denoise: Denoise::On,
+        denoise: Denoise::Atrous,
         seams: Seams::Off,
     };
     const BOTH: FinishOptions = FinishOptions {
-        denoise: Denoise::On,
+        denoise: Denoise::Atrous,
         seams: Seams::Stitch,
     };
 

@@ -44,9 +44,11 @@ pub struct BakeArgs {
     /// Sun and sky, replacing the scene file's: give the same as to `prepare`.
     #[command(flatten)]
     pub lights: super::scene::LightFlags,
-    /// Denoise the lightmap as its pages are written: an edge-aware À-Trous filter guided by
-    /// each texel's position, normal and variance (docs/lightmaps.md). Off by default: the
-    /// lightmap is then the estimator's output, unbiased and unblurred, as the bench measures.
+    /// Denoise the lightmap as its pages are written: `atrous` (or `on`), an edge-aware
+    /// À-Trous filter guided by each texel's position, normal and variance; `oidn`, Intel Open
+    /// Image Denoise's lightmap network per chart (a build with `--features oidn`;
+    /// scripts/oidn/fetch.sh). Off by default: the lightmap is then the estimator's output,
+    /// unbiased and unblurred, as the bench measures (docs/lightmaps.md).
     #[arg(long, value_enum, default_value_t = Denoise::Off)]
     pub denoise: Denoise,
     /// Directional lightmaps: `sh-l1` adds per texel the L1 spherical harmonics of the
@@ -227,6 +229,7 @@ pub enum Rho {
 /// Bad options, an invalid texel file or scene, I/O failures: each names the file or option.
 /// An interrupted bake is an error too (exit code 1) that says how to resume.
 pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
+    check_denoiser(args.denoise)?;
     let settings = BakeSettings {
         spp: args.spp,
         iterations: args.iterations,
@@ -395,6 +398,24 @@ impl Feedback {
 
 /// Seconds between two progress lines within a pass ([`Feedback::Lines`]).
 const LINE_EVERY: f64 = 10.0;
+
+/// A `--denoise` this build can run, checked before any baking: `oidn` needs the `oidn`
+/// feature (a usage error saying how to get it) and a library that makes its CPU device.
+fn check_denoiser(denoise: Denoise) -> Result<(), super::CmdError> {
+    if denoise != Denoise::Oidn {
+        return Ok(());
+    }
+    #[cfg(feature = "oidn")]
+    {
+        crate::output::denoise::Oidn::new()
+            .map(drop)
+            .map_err(|e| super::usage(format!("--denoise oidn: {e}")))
+    }
+    #[cfg(not(feature = "oidn"))]
+    {
+        Err(super::usage(crate::output::denoise::OIDN_MISSING))
+    }
+}
 
 /// Runs a bake (of pass `only_pass`, or every pass); Ctrl-C stops it with its work kept
 /// ([`super::interrupt`]); `feedback` says how far it is.
