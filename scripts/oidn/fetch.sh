@@ -31,11 +31,16 @@ if [[ ! -e $DIR/lib/libOpenImageDenoise_device_cpu.so.2.5.1 ]]; then
     download=$(mktemp -d)
     trap 'rm -rf "$download"' EXIT
     say "downloading $WHEEL from PyPI"
+    # pip where it is installed, else the wheel's URL from PyPI's simple index with curl.
     if ! python3 -m pip download --quiet --no-deps --only-binary :all: \
             --platform manylinux2014_x86_64 --python-version 3.11 \
-            -d "$download" "pyoidn==$VERSION" >&2; then
-        say "pip could not download pyoidn==$VERSION"
-        exit 1
+            -d "$download" "pyoidn==$VERSION" >&2 2>/dev/null; then
+        url=$(curl -fsSL "https://pypi.org/simple/pyoidn/" |
+            grep -o "href=\"[^\"]*/$WHEEL[^\"]*\"" | head -1 | sed 's/^href="//; s/[#"].*//') || true
+        if [[ -z $url ]] || ! curl -fsSL -o "$download/$WHEEL" "$url"; then
+            say "neither pip nor curl could download $WHEEL from PyPI"
+            exit 1
+        fi
     fi
     if ! echo "$SHA256  $download/$WHEEL" | sha256sum --check --status; then
         say "$WHEEL does not have the pinned SHA-256 $SHA256"
