@@ -179,8 +179,9 @@ pub struct BakeArgs {
     pub min_gain: u32,
     /// A cluster whose light the pass before measured as flat — a relative variance per
     /// sample below this many thousandths, pooled over its texels — gathers the last pass
-    /// with cosine points alone, no guide (a guide only adds its own noise where cosine points
-    /// are already exact, as on a surface under open sky). 0: guide every cluster.
+    /// with cosine points alone, as one set of all its samples, no guide (one stratified set
+    /// integrates flat and broad light better than a guide learned from it). 0: guide every
+    /// cluster.
     #[arg(help_heading = RESEARCH, long, value_name = "PERMILLE", default_value_t = BakeSettings::default().flat_below)]
     pub flat_below: u32,
     /// Light transport at gather hits: `series` (passes through the previous pass's
