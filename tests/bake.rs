@@ -63,6 +63,7 @@ fn plane_scene() -> Scene {
         sun: None,
         sky: Sky::Constant(Vec3::splat(SKY)),
         degenerate_triangles: 0,
+        roles: Vec::new(),
     }
 }
 
@@ -563,6 +564,7 @@ fn emissive_box(path: &Path, albedo: f32, le: f32) -> Scene {
         sun: None,
         sky: Sky::Constant(Vec3::splat(100.0)),
         degenerate_triangles: 0,
+        roles: Vec::new(),
     };
     let records = triangles_on_page(&scene, page, SEEN_FRONT);
     let mut writer = TexelWriter::create(path, &[page], &records, FACE as f32 / s).unwrap();

@@ -143,6 +143,7 @@ fn scene(textured: bool) -> Scene {
         }),
         sky: Sky::None,
         degenerate_triangles: 0,
+        roles: Vec::new(),
     }
 }
 
