@@ -381,6 +381,9 @@ fn series_passes_sharded_pass_by_pass_merge_to_the_same_bits() {
                 bias_correction,
                 transport: Transport::Series,
                 bounces: 3,
+                // Every cluster guided, so the last pass combines iterations and ρ has
+                // something to correct (a flat cluster bakes one set: ρ 1).
+                flat_below: 0,
                 ..Default::default()
             },
             threads: 2,

@@ -536,7 +536,8 @@ impl<'w> TileBaker<'w> {
         // A flat cluster learns nothing from its iterations: it bakes them in one set of all
         // their samples, stratified over the whole hemisphere as the unguided bake's pass is
         // (docs/guiding-on-levels.md, "One set where the light is flat").
-        let one_set = flat.then(|| {
+        // (Not under `--target-error`: its stopping rule judges between iterations.)
+        let one_set = (flat && settings.target_error.is_none()).then(|| {
             (0..iterations)
                 .map(|k| settings.samples_in_iteration(k))
                 .sum()
