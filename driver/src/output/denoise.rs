@@ -80,3 +80,23 @@ pub trait Denoiser: Sync {
         (self.denoise(window), extra.to_vec())
     }
 }
+
+/// A tiny xorshift for the denoisers' tests: noise uniform in [0, 1) (`next`) or of zero mean
+/// and a given standard deviation (`centred`), the same sequence on every run.
+#[cfg(test)]
+pub(crate) struct Noise(pub(crate) u64);
+
+#[cfg(test)]
+impl Noise {
+    pub(crate) fn next(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform noise of zero mean and standard deviation `sd`.
+    pub(crate) fn centred(&mut self, sd: f32) -> f32 {
+        (self.next() - 0.5) * sd * 12f32.sqrt()
+    }
+}

@@ -26,7 +26,7 @@ use guidebake_kernels::packet::{NO_HIT, offset_origin, triangle_extent};
 
 use super::facing::{Visibility, trace_cosine};
 use crate::bvh::{Bvh, BvhError, Preset};
-use crate::scene::{Scene, Sky, ids_where};
+use crate::scene::{Scene, ids_where};
 
 /// Share of the directly lit area the candidate groups must hold.
 pub const SKY_COVER: f64 = 0.99;
@@ -95,7 +95,7 @@ impl Shell {
 /// # Errors
 /// [`BvhError`] when the tree without the candidate cannot be built.
 pub fn find_shell(scene: &Scene, visibility: &Visibility) -> Result<Option<Shell>, BvhError> {
-    if !lit_from_outside(scene) {
+    if !scene.lit_from_outside() {
         return Ok(None);
     }
     let n = scene.triangles.len();
@@ -154,20 +154,6 @@ pub fn find_shell(scene: &Scene, visibility: &Visibility) -> Result<Option<Shell
         atlas_texels: 0,
         mask,
     }))
-}
-
-/// Whether the sun or a sky that is not black lights the scene: what a shell keeps out.
-fn lit_from_outside(scene: &Scene) -> bool {
-    let sun = scene
-        .sun
-        .as_ref()
-        .is_some_and(|s| s.irradiance.max_element() > 0.0);
-    let sky = match &scene.sky {
-        Sky::None => false,
-        Sky::Constant(c) => c.max_element() > 0.0,
-        Sky::Equirect { pixels, .. } => pixels.iter().any(|p| p.max_element() > 0.0),
-    };
-    sun || sky
 }
 
 /// The triangles of the fewest groups (`group` of a triangle) that hold [`SKY_COVER`] of the

@@ -74,11 +74,10 @@ impl Unwrap {
         scene
             .meshes
             .iter()
-            .map(|m| (m, scene.mesh_has_texels(m)))
-            .map(|(m, texels)| match self {
+            .map(|m| match self {
                 Unwrap::Never => false,
-                Unwrap::Missing => !m.has_lightmap_uvs && texels,
-                Unwrap::Always => m.triangle_count > 0 && texels,
+                Unwrap::Missing => !m.has_lightmap_uvs && scene.mesh_has_texels(m),
+                Unwrap::Always => m.triangle_count > 0 && scene.mesh_has_texels(m),
             })
             .collect()
     }

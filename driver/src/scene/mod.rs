@@ -615,15 +615,6 @@ impl Scene {
     /// or an emissive material on some triangle.
     #[must_use]
     pub fn is_lit(&self) -> bool {
-        let sky = match &self.sky {
-            Sky::None => false,
-            Sky::Constant(c) => c.max_element() > 0.0,
-            Sky::Equirect { pixels, .. } => pixels.iter().any(|p| p.max_element() > 0.0),
-        };
-        let sun = self
-            .sun
-            .as_ref()
-            .is_some_and(|s| s.irradiance.max_element() > 0.0);
         let emitters = {
             let mut used = vec![false; self.materials.len()];
             for t in &self.triangles {
@@ -634,7 +625,23 @@ impl Scene {
                 .zip(&used)
                 .any(|(m, &u)| u && m.emission.max_element() > 0.0)
         };
-        sky || sun || !self.lights.is_empty() || emitters
+        self.lit_from_outside() || !self.lights.is_empty() || emitters
+    }
+
+    /// Whether a sun or a sky that is not black lights the scene: the light from outside that
+    /// a shell around a level keeps out (`prepare::shell`).
+    #[must_use]
+    pub fn lit_from_outside(&self) -> bool {
+        let sky = match &self.sky {
+            Sky::None => false,
+            Sky::Constant(c) => c.max_element() > 0.0,
+            Sky::Equirect { pixels, .. } => pixels.iter().any(|p| p.max_element() > 0.0),
+        };
+        let sun = self
+            .sun
+            .as_ref()
+            .is_some_and(|s| s.irradiance.max_element() > 0.0);
+        sky || sun
     }
 
     /// A fingerprint of everything that lights the scene — punctual and sphere lights, the
@@ -747,9 +754,12 @@ impl Scene {
                 _ => {
                     let mesh = &self.meshes[t.mesh as usize].name;
                     let material = &self.materials[t.material as usize].name;
-                    let w = rules.iter().rposition(|r| r.matches(mesh, material));
+                    let mut w = None;
                     for (k, r) in rules.iter().enumerate() {
-                        matched[k] |= r.matches(mesh, material);
+                        if r.matches(mesh, material) {
+                            matched[k] = true;
+                            w = Some(k);
+                        }
                     }
                     last = Some((pair, w));
                     w

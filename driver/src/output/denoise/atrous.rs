@@ -206,20 +206,7 @@ mod tests {
     use super::*;
     use glam::Vec3;
 
-    /// A tiny xorshift for test noise.
-    struct Noise(u64);
-    impl Noise {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
-        /// Uniform noise of zero mean and standard deviation `sd`.
-        fn centred(&mut self, sd: f32) -> f32 {
-            (self.next() - 0.5) * sd * 12f32.sqrt()
-        }
-    }
+    use super::super::Noise;
 
     fn texel(rgb: f32, sd: f32, position: Vec3, normal: Vec3) -> Option<NoisyTexel> {
         Some(NoisyTexel {

@@ -398,16 +398,7 @@ mod tests {
     use super::*;
     use glam::Vec3;
 
-    /// A tiny xorshift for test noise, uniform in [0, 1).
-    struct Noise(u64);
-    impl Noise {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
+    use super::super::Noise;
 
     /// Edge of the charts of [`atlas`] and the padding between them.
     const CHART: usize = 8;
