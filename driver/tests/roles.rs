@@ -265,6 +265,31 @@ fn names_that_say_clip_or_sky_take_their_role_without_a_flag_and_a_rule_that_nam
         .map(|r| r["role"].as_str().unwrap())
         .collect();
     assert_eq!(roles, ["sky", "skip"]);
+    // A role no one knows, or a rule without a pattern: a clear error, exit 2, nothing written.
+    let texels = dir.path().join("typo.texels");
+    for (rule, says) in [
+        (
+            "skyy=dome",
+            "\"skyy\" is not a role; the roles are baked, sky, skip",
+        ),
+        ("dome", "is not ROLE=PATTERN"),
+    ] {
+        let err = cli::fails_with(
+            2,
+            &[
+                "prepare",
+                s(&obj),
+                "-o",
+                s(&texels),
+                "--sky",
+                "0.5",
+                "--role",
+                rule,
+            ],
+        );
+        assert!(err.contains(says), "{rule}: {err}");
+        assert!(!texels.exists(), "{rule}: nothing written");
+    }
 }
 
 /// The Cube 2 level zdm2 (from `../shared/scenes`) closed in a box spanning its bounds, as
