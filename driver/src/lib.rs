@@ -34,6 +34,7 @@ pub mod hash;
 pub mod output;
 pub mod prepare;
 pub mod preview;
+pub mod probes;
 pub mod render;
 pub mod scene;
 pub mod synth;

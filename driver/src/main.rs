@@ -31,6 +31,8 @@ enum Command {
     Bench(cmd::bench::BenchArgs),
     /// Render a picture of the lit scene from its glTF camera or an automatic view.
     Render(cmd::render::RenderArgs),
+    /// Place light probes over a baked level and bake them with the guided gather.
+    Probes(cmd::probes::ProbesArgs),
     /// Print a texel file's header and counts; dump chosen texels as JSON.
     Inspect(cmd::inspect::InspectArgs),
 }
@@ -48,6 +50,7 @@ fn main() -> ExitCode {
         Command::Merge(a) => cmd::merge::run(a),
         Command::Bench(a) => cmd::bench::run_bench(a),
         Command::Render(a) => cmd::render::run(a),
+        Command::Probes(a) => cmd::probes::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

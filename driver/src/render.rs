@@ -49,7 +49,7 @@ use crate::output::exr_pages::{TEXEL_FILE_KEY, read_identity};
 use crate::output::readback::read_page;
 use crate::scene::Scene;
 use crate::texels::{TexelFile, TriangleRecord};
-use crate::transport::series::PreviousPass;
+use crate::transport::series::{Lookup, PreviousPass};
 use crate::transport::sky::sky_radiance;
 
 /// Sub-pixels per pixel along each axis (stratified, at the sub-pixel centres).
@@ -418,6 +418,17 @@ impl Lightmap {
     pub fn irradiance(&self, prim: u32, b1: f32, b2: f32) -> Vec3 {
         self.lookup.irradiance(prim, b1, b2)
     }
+
+    /// The lightmap at barycentrics (`b1`, `b2`) of triangle `prim`, with whether a baked
+    /// texel lies there ([`Lookup::baked`]): what a light probe's gather reads.
+    pub fn lookup(&self, prim: u32, b1: f32, b2: f32) -> Lookup {
+        self.lookup.lookup(prim, b1, b2)
+    }
+
+    /// Whether the lightmap describes triangle `prim`'s side `front` (its texels face it).
+    pub fn bakes_side(&self, prim: u32, front: bool) -> bool {
+        self.lookup.bakes_side(prim, front)
+    }
 }
 
 /// The texel file must have been prepared from `scene`: the same triangles at the same
@@ -626,12 +637,31 @@ pub struct View {
     pub surface: Vec<u8>,
 }
 
+/// What a view draws besides the scene (`crate::probes::view`: the light probes and a
+/// sphere they light): the nearest of its surfaces a ray meets before `tmax`, and the
+/// radiance it sends back along the ray.
+pub trait Overlay: Sync {
+    /// The ray parameter and radiance of the first hit in (0, `tmax`), if any.
+    fn hit(&self, org: Vec3, dir: Vec3, tmax: f32) -> Option<(f32, Vec3)>;
+}
+
 /// Renders `camera`'s view of `stage` lit by `lightmap`.
 pub fn render(
     stage: &Stage<'_>,
     lightmap: &Lightmap,
     camera: &Camera,
     options: ViewOptions,
+) -> View {
+    render_with(stage, lightmap, camera, options, None)
+}
+
+/// [`render`], with `overlay`'s surfaces drawn where they are nearer than the scene's.
+pub fn render_with(
+    stage: &Stage<'_>,
+    lightmap: &Lightmap,
+    camera: &Camera,
+    options: ViewOptions,
+    overlay: Option<&dyn Overlay>,
 ) -> View {
     let (w, h) = (options.width.max(1), options.height.max(1));
     let aspect = w as f32 / h as f32;
@@ -646,7 +676,10 @@ pub fn render(
                 let sx = 2.0 * (x + ox) / w as f32 - 1.0;
                 let sy = 1.0 - 2.0 * (y + oy) / h as f32;
                 let (org, dir) = camera.ray(sx, sy, aspect);
-                let (radiance, hit) = shade(stage, lightmap, org, dir, options.cutaway);
+                let (mut radiance, mut hit, t) = shade(stage, lightmap, org, dir, options.cutaway);
+                if let Some((_, over)) = overlay.and_then(|o| o.hit(org, dir, t)) {
+                    (radiance, hit) = (over, true);
+                }
                 sum += radiance;
                 surface += u8::from(hit);
             }
@@ -662,14 +695,15 @@ pub fn render(
     }
 }
 
-/// The radiance seen along one eye ray, and whether it saw a surface.
+/// The radiance seen along one eye ray, whether it saw a surface, and how far (∞ for the
+/// sky).
 fn shade(
     stage: &Stage<'_>,
     lightmap: &Lightmap,
     org: Vec3,
     dir: Vec3,
     cutaway: bool,
-) -> (Vec3, bool) {
+) -> (Vec3, bool, f32) {
     let view = stage.bvh.wide();
     let mut tmin = 0.0f32;
     for _ in 0..MAX_PASS_THROUGH {
@@ -700,9 +734,9 @@ fn shade(
         } else {
             Vec3::ZERO
         };
-        return (finite, true);
+        return (finite, true, hit.t);
     }
-    (sky_radiance(&stage.scene.sky, dir), false)
+    (sky_radiance(&stage.scene.sky, dir), false, f32::INFINITY)
 }
 
 impl View {

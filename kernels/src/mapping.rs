@@ -8,7 +8,11 @@
 //! method (z = √(1 − r²)). Frames: Duff et al., *Building an Orthonormal Basis, Revisited*,
 //! JCGT 6(1), 2017, listing 3 — no branch on the sign of n.z.
 //!
-//! Every map is a triple (`sample_*`, `*_pdf`, `invert_*`), scalar and 8-wide. The scalar
+//! The light probes' directions cover the whole sphere: Clarberg's equal-area octahedral map
+//! ([`sample_sphere_equal_area`], its inverse, density [`SPHERE_PDF`]; scalar only — a probe's
+//! packets are warped one lane at a time, docs/probes.md).
+//!
+//! Every hemisphere map is a triple (`sample_*`, `*_pdf`, `invert_*`), scalar and 8-wide. The scalar
 //! versions are the readable reference; the 8-wide ones are branch-free (`select`) and run
 //! the *same* floating-point operations in the same order — only +, −, ×, ÷ and √, all
 //! correctly rounded in IEEE 754, never a fused multiply-add — so the two agree **bit for bit**
@@ -240,6 +244,65 @@ pub fn invert_cosine_hemisphere_x8(w: [f32x8; 3]) -> [f32x8; 2] {
         clamp_unit_x8((a + one) * half),
         clamp_unit_x8((b + one) * half),
     ]
+}
+
+/// Maps u ∈ [0,1)² to the unit sphere by Clarberg's equal-area octahedral map (*Fast
+/// Equal-Area Mapping of the (Hemi)Sphere using SIMD*, JGT 13(3), 2008; as pbrt-v4's
+/// `EqualAreaSquareToSphere`): every region of the square goes to a region of the sphere of
+/// the same share of its area, so a density p on the square is p / 4π per unit solid angle.
+/// The light probes' primary sample space (their guide lives on this square, as a texel's
+/// lives on the cosine map's).
+///
+/// # Panics
+/// Debug builds assert u ∈ [0,1)².
+#[inline]
+pub fn sample_sphere_equal_area(u: [f32; 2]) -> Vec3 {
+    debug_assert!(
+        (0.0..1.0).contains(&u[0]) && (0.0..1.0).contains(&u[1]),
+        "u = {u:?}"
+    );
+    let (a, b) = (2.0 * u[0] - 1.0, 2.0 * u[1] - 1.0);
+    let (ap, bp) = (a.abs(), b.abs());
+    let signed_distance = 1.0 - (ap + bp);
+    let r = 1.0 - signed_distance.abs();
+    // φ = π/4 · (1 + t), t = (|b| − |a|) / r ∈ [−1, 1].
+    let t = if r == 0.0 {
+        0.0
+    } else {
+        ((bp - ap) / r).clamp(-1.0, 1.0)
+    };
+    let (s, c) = sin_cos_quarter_pi(t);
+    let half_root2 = core::f32::consts::FRAC_1_SQRT_2;
+    let (cos_phi, sin_phi) = ((c - s) * half_root2, (c + s) * half_root2);
+    let z = (1.0 - r * r).copysign(signed_distance);
+    let lift = r * libm::sqrtf((2.0 - r * r).max(0.0));
+    Vec3::new(cos_phi.copysign(a) * lift, sin_phi.copysign(b) * lift, z)
+}
+
+/// Solid-angle density of [`sample_sphere_equal_area`] under the uniform square: 1 / 4π.
+pub const SPHERE_PDF: f32 = FRAC_1_PI / 4.0;
+
+/// The inverse of [`sample_sphere_equal_area`]: the point of [0,1)² that maps to the unit
+/// vector `w`, clamped into [0, 1 − 2⁻²⁴]² (NaN components come back as 0).
+#[inline]
+pub fn invert_sphere_equal_area(w: Vec3) -> [f32; 2] {
+    let (x, y, z) = (w.x.abs(), w.y.abs(), w.z.abs());
+    let r = libm::sqrtf((1.0 - z).max(0.0));
+    let (big, small) = (x.max(y), x.min(y));
+    let ratio = if big == 0.0 { 0.0 } else { small / big };
+    let mut phi = atan_unit(ratio) * (2.0 * FRAC_1_PI);
+    if x < y {
+        phi = 1.0 - phi;
+    }
+    let mut v = phi * r;
+    let mut u = r - v;
+    if w.z < 0.0 {
+        core::mem::swap(&mut u, &mut v);
+        u = 1.0 - u;
+        v = 1.0 - v;
+    }
+    let (u, v) = (u.copysign(w.x), v.copysign(w.y));
+    [clamp_unit(0.5 * (u + 1.0)), clamp_unit(0.5 * (v + 1.0))]
 }
 
 /// A right-handed orthonormal basis (t, b) with t × b = n, for a unit normal `n` (Duff et
@@ -695,5 +758,37 @@ mod tests {
             let turned = m.angle_between(n);
             assert!(a.angle_between(t) <= turned + 1e-3, "{n}: {a} vs {t}");
         }
+    }
+
+    /// The equal-area map is uniform over the sphere: 8 bands of equal area in z (z is
+    /// uniform on [−1, 1] for uniform directions) × 16 sectors in φ, chi-square against equal
+    /// counts; and it inverts to the point it came from.
+    #[test]
+    fn the_equal_area_sphere_map_is_uniform_and_inverts() {
+        let mut rng = Pcg32::new(7, 3);
+        let (bands, sectors, n) = (8usize, 16usize, 200_000usize);
+        let mut observed = std::vec![0.0f64; bands * sectors];
+        for _ in 0..n {
+            let u = [rng.next_f32(), rng.next_f32()];
+            let w = sample_sphere_equal_area(u);
+            assert!((w.length() - 1.0).abs() < 1e-5, "{u:?} -> {w}");
+            let back = invert_sphere_equal_area(w);
+            assert!(
+                (back[0] - u[0]).abs() < 2e-4 && (back[1] - u[1]).abs() < 2e-4,
+                "{u:?} -> {w} -> {back:?}"
+            );
+            let band = (((w.z + 1.0) * 0.5 * bands as f32) as usize).min(bands - 1);
+            let phi = w.y.atan2(w.x) + core::f32::consts::PI;
+            let sector =
+                ((phi / core::f32::consts::TAU * sectors as f32) as usize).min(sectors - 1);
+            observed[band * sectors + sector] += 1.0;
+        }
+        let expected = std::vec![n as f64 / (bands * sectors) as f64; bands * sectors];
+        let test = chi_square(&observed, &expected, 5.0);
+        assert!(test.passes(0.01, 1), "{test:?}");
+        assert_eq!(
+            sample_sphere_equal_area([0.5, 0.5]),
+            Vec3::new(0.0, 0.0, 1.0)
+        );
     }
 }

@@ -14,6 +14,7 @@ pub mod inspect;
 pub mod interrupt;
 pub mod merge;
 pub mod prepare;
+pub mod probes;
 pub mod render;
 pub mod samples;
 pub mod scene;

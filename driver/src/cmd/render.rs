@@ -3,7 +3,10 @@
 
 use std::path::PathBuf;
 
-use crate::render::{Camera, Inside, Lightmap, Stage, View, ViewOptions, render};
+use crate::probes::field::ProbeField;
+use crate::probes::file::ProbeFile;
+use crate::probes::view::ProbeOverlay;
+use crate::render::{Camera, Inside, Lightmap, Stage, View, ViewOptions, render_with};
 use crate::scene::TextureOptions;
 use crate::texels::TexelFile;
 
@@ -51,6 +54,31 @@ pub struct RenderArgs {
     /// Largest width or height a base-colour texture is kept at (as `bake`'s).
     #[arg(long, default_value_t = TextureOptions::DEFAULT_MAX_SIZE, value_parser = clap::value_parser!(u32).range(1..=65536))]
     pub max_texture_size: u32,
+    /// Draw the light probes of this probe file (`guidebake probes -o`) as small spheres
+    /// shaded by their SH.
+    #[arg(long, value_name = "LEVEL.probes")]
+    pub probes: Option<PathBuf>,
+    /// Radius of the drawn probes (default: a tenth of the finest probe spacing; 0: none
+    /// drawn, only --sphere).
+    #[arg(long, requires = "probes")]
+    pub probe_radius: Option<f32>,
+    /// A grey test sphere (albedo 0.5) at X,Y,Z of radius R, lit from the probes
+    /// interpolated at its centre as an engine lights a dynamic object.
+    #[arg(long, value_name = "X,Y,Z,R", requires = "probes", value_parser = parse_sphere, allow_hyphen_values = true)]
+    pub sphere: Option<[f32; 4]>,
+}
+
+/// `--sphere X,Y,Z,R`: four finite numbers, the radius positive.
+fn parse_sphere(s: &str) -> Result<[f32; 4], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("`{s}` is not X,Y,Z,R (four numbers)"))?;
+    match v[..] {
+        [x, y, z, r] if [x, y, z, r].iter().all(|v| v.is_finite()) && r > 0.0 => Ok([x, y, z, r]),
+        _ => Err(format!("`{s}` is not X,Y,Z,R: four finite numbers, R > 0")),
+    }
 }
 
 /// What `render` reads — the scene, the texel file, a sky map, the lightmap's pages and their
@@ -69,7 +97,29 @@ fn render_files(args: &RenderArgs) -> Result<super::files::Files, super::CmdErro
             .reads("the lightmap (--lightmap)", &path)
             .reads("the lightmap's atlas preview", &preview);
     }
+    if let Some(probes) = &args.probes {
+        files = files.reads("the probe file (--probes)", probes);
+    }
     Ok(files.writes("the picture (-o)", &args.out))
+}
+
+/// The probes and test sphere to draw, read from `--probes`.
+fn probe_overlay(args: &RenderArgs) -> Result<Option<ProbeOverlay>, super::CmdError> {
+    let Some(path) = &args.probes else {
+        return Ok(None);
+    };
+    if let Some(r) = args.probe_radius.filter(|r| !(r.is_finite() && *r >= 0.0)) {
+        return Err(super::usage(format!(
+            "--probe-radius {r}: a finite distance ≥ 0"
+        )));
+    }
+    let file = ProbeFile::open(path)?;
+    let radius = args.probe_radius.unwrap_or(0.1 * file.header.fine_spacing);
+    let field = ProbeField::new(file.probes);
+    let sphere = args
+        .sphere
+        .map(|[x, y, z, r]| (glam::Vec3::new(x, y, z), r));
+    Ok(Some(ProbeOverlay::new(&field, radius, sphere)))
 }
 
 /// Which camera `render` looks through.
@@ -160,7 +210,8 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
         .unwrap_or_else(|| Camera::framing(scene.bounds(), aspect));
     let overview = from_file.is_none() && inside.is_none();
     let cutaway = args.cutaway.map_or(overview, |c| c == OnOff::On);
-    let view = render(
+    let overlay = probe_overlay(args)?;
+    let view = render_with(
         &stage,
         &lightmap,
         &camera,
@@ -169,6 +220,7 @@ pub fn run(args: &RenderArgs) -> Result<(), super::CmdError> {
             height,
             cutaway,
         },
+        overlay.as_ref().map(|o| o as &dyn crate::render::Overlay),
     );
     if args.exposure.is_none() {
         exposable(&view, args)?;

@@ -1071,7 +1071,7 @@ impl LightmapIdentity {
         }
     }
 
-    fn write_into(&self, attributes: &mut LayerAttributes) {
+    pub(crate) fn write_into(&self, attributes: &mut LayerAttributes) {
         use exr::meta::attribute::{AttributeValue, Text};
         let text = Text::new_or_none(self.to_text()).expect("Latin-1 text (cleaned by `with`)");
         attributes

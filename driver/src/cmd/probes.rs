@@ -1,0 +1,270 @@
+//! `guidebake probes TEXELS --scene SCENE --lightmap OUT.exr -o LEVEL.probes`: light probes
+//! placed over the level and baked with the guided gather ([`crate::probes`];
+//! docs/probes.md).
+
+use std::path::PathBuf;
+
+use crate::probes::file::volume_path;
+use crate::probes::gather::{GatherSettings, ProbeTransport};
+use crate::probes::placement::{PlacementSettings, read_points};
+use crate::probes::{ProbeError, ProbeReport, ProbeSettings, bake_probes};
+use crate::render::Lightmap;
+use crate::scene::TextureOptions;
+use crate::texels::TexelFile;
+
+use super::bake::OnOff;
+
+/// Arguments of `guidebake probes`.
+#[derive(Debug, clap::Args)]
+pub struct ProbesArgs {
+    /// The texel file the lightmap was baked from (its roles and seen sides decide what rays
+    /// meet and where a probe is inside geometry).
+    pub texels: PathBuf,
+    /// The scene the texel file was prepared from.
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// The baked lightmap (`bake -o`): what the probes' rays read where they hit a surface.
+    /// Without it they trace paths (as `--transport path`).
+    #[arg(long)]
+    pub lightmap: Option<PathBuf>,
+    /// The probe file to write; the volume textures go beside it (OUT.volume-l0.exr, -l1,
+    /// -l2) and the stats to OUT.json.
+    #[arg(short, long = "output", alias = "out", value_name = "OUT.probes")]
+    pub out: PathBuf,
+    /// The finest probe spacing, in scene units, near geometry (coarse cells are 4×).
+    /// Default: the level's longest side / 24.
+    #[arg(long)]
+    pub spacing: Option<f32>,
+    /// More probes: a text file of points, `x y z` a line (`#` comments).
+    #[arg(long, value_name = "FILE")]
+    pub points: Option<PathBuf>,
+    /// `lattice`: the adaptive lattice (and --points, if given); `points`: --points alone.
+    #[arg(long, value_enum, default_value_t = Placement::Lattice)]
+    pub placement: Placement,
+    /// Gather samples per probe.
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(8..=1 << 20))]
+    pub spp: u32,
+    /// Learning iterations (their samples ⅛, ⅛, ¼, ½ of --spp for four).
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
+    pub iterations: u32,
+    /// Guide the iterations after the first (off: uniform directions, the unguided baseline).
+    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    pub guiding: OnOff,
+    /// What a ray that hits a surface reads: the lightmap (default with --lightmap), or a
+    /// path (unbiased: the reference).
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportChoice>,
+    /// Path vertices under --transport path.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub bounces: u32,
+    /// Seed of every random number.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u32,
+    /// De-ring the SH (Lanczos window: no negative irradiance opposite a bright source, a
+    /// blurrier probe).
+    #[arg(long)]
+    pub dering: bool,
+    /// Write the coarse grid as volume textures (one EXR per SH band).
+    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    pub volume: OnOff,
+    /// Worker threads (default: every core).
+    #[arg(long, value_parser = super::parse_threads)]
+    pub threads: Option<usize>,
+    /// Sun and sky, as given to `prepare` and `bake`.
+    #[command(flatten)]
+    pub lights: super::scene::LightFlags,
+    /// Largest width or height a base-colour texture is kept at (as `bake`'s).
+    #[arg(long, default_value_t = TextureOptions::DEFAULT_MAX_SIZE, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    pub max_texture_size: u32,
+    /// No summary.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `--placement`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Placement {
+    /// The adaptive lattice, plus any --points.
+    Lattice,
+    /// The --points alone.
+    Points,
+}
+
+/// `--transport`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum TransportChoice {
+    /// Hits read the baked lightmap.
+    Lightmap,
+    /// Hits trace paths.
+    Path,
+}
+
+/// The stats JSON beside the probe file.
+fn stats_path(out: &std::path::Path) -> PathBuf {
+    let mut name = out.as_os_str().to_owned();
+    name.push(".json");
+    PathBuf::from(name)
+}
+
+fn check_args(args: &ProbesArgs) -> Result<(), super::CmdError> {
+    if let Some(d) = args.spacing.filter(|d| !(d.is_finite() && *d > 0.0)) {
+        return Err(super::usage(format!(
+            "--spacing {d}: a positive, finite distance in scene units"
+        )));
+    }
+    if args.placement == Placement::Points && args.points.is_none() {
+        return Err(super::usage("--placement points needs --points FILE"));
+    }
+    if args.transport == Some(TransportChoice::Lightmap) && args.lightmap.is_none() {
+        return Err(super::usage(
+            "--transport lightmap needs --lightmap OUT.exr (the lightmap the probes read)",
+        ));
+    }
+    if args.out.extension().is_some_and(|e| e == "exr") {
+        return Err(super::usage(format!(
+            "-o {}: the probe file is not an EXR (name it LEVEL.probes; its volume textures are written beside it)",
+            args.out.display()
+        )));
+    }
+    Ok(())
+}
+
+fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError> {
+    let mut files = super::files::Files::new()
+        .reads("the scene (--scene)", &args.scene)
+        .reads("the texel file", &args.texels);
+    if let Some(points) = &args.points {
+        files = files.reads("the probe points (--points)", points);
+    }
+    if let Some(map) = args.lights.sky_map() {
+        files = files.reads("the sky map (--sky)", map);
+    }
+    if let Some(lightmap) = &args.lightmap {
+        super::files::check_exr("--lightmap", lightmap)?;
+        for (path, preview) in super::files::lightmap_files(lightmap, &args.texels) {
+            files = files
+                .reads("the lightmap (--lightmap)", &path)
+                .reads("the lightmap's atlas preview", &preview);
+        }
+    }
+    files = files.writes("the probe file (-o)", &args.out);
+    if args.volume == OnOff::On {
+        for band in 0..3 {
+            files = files.writes(
+                format!("the volume's band {band}"),
+                &volume_path(&args.out, band),
+            );
+        }
+    }
+    Ok(files.writes("the stats", &stats_path(&args.out)))
+}
+
+/// Runs `guidebake probes`.
+///
+/// # Errors
+/// A wrong command line (exit 2); an unreadable scene, texel file, lightmap or points file,
+/// a level no probe can be placed in, an unwritable output (exit 1): each named. Nothing is
+/// left behind on failure.
+pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
+    check_args(args)?;
+    let files = probe_files(args)?;
+    files.check()?;
+    super::interrupt::register_outputs(files.outputs());
+    let points = match &args.points {
+        Some(p) => read_points(p)?,
+        None => Vec::new(),
+    };
+    let textures = TextureOptions {
+        max_size: args.max_texture_size,
+    };
+    let (scene, notes) = super::scene::load_lit_scene(&args.scene, textures, &args.lights, true)?;
+    files
+        .reads_each("a file of the scene", &notes.files_read)
+        .check()?;
+    let texels = TexelFile::open(&args.texels)?;
+    let lightmap = match &args.lightmap {
+        Some(path) => Some(Lightmap::load(&texels, &scene, path)?),
+        None => None,
+    };
+    let transport = match (args.transport, &lightmap) {
+        (Some(TransportChoice::Path), _) | (None, None) => ProbeTransport::Path,
+        _ => ProbeTransport::Lightmap,
+    };
+    let settings = ProbeSettings {
+        placement: PlacementSettings {
+            spacing: args.spacing,
+            points,
+            lattice: args.placement == Placement::Lattice,
+        },
+        gather: GatherSettings {
+            spp: args.spp,
+            iterations: args.iterations,
+            guiding: args.guiding == OnOff::On,
+            transport,
+            seed: args.seed,
+        },
+        bounces: args.bounces,
+        dering: args.dering,
+        volume: args.volume == OnOff::On,
+    };
+    let threads = args.threads.unwrap_or_else(super::every_core);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| format!("cannot start {threads} worker threads: {e}"))?;
+    let cancel = super::interrupt::cancel_flag();
+    let report = pool
+        .install(|| {
+            bake_probes(
+                &scene,
+                &texels,
+                lightmap.as_ref(),
+                &args.out,
+                &settings,
+                cancel,
+            )
+        })
+        .map_err(|e| -> super::CmdError {
+            match e {
+                ProbeError::Invalid(m) => format!("{}: {m}", args.texels.display()).into(),
+                ProbeError::Interrupted => Box::new(super::Interrupted(e.to_string())),
+                other => Box::new(other),
+            }
+        })?;
+    let stats = stats_path(&args.out);
+    let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+    if let Err(e) = crate::atomic::write(&stats, json) {
+        for f in &report.files {
+            let _ = std::fs::remove_file(f);
+        }
+        return Err(format!("{}: cannot write the stats: {e}", stats.display()).into());
+    }
+    if !args.quiet {
+        summary(args, &report, transport, threads);
+    }
+    Ok(())
+}
+
+fn summary(args: &ProbesArgs, r: &ProbeReport, transport: ProbeTransport, threads: usize) {
+    eprintln!(
+        "{}: {} probes in {} clusters ({} lattice and {} listed candidates, {} inside geometry skipped), {} spp {}, hits read {}; {:.2} s on {threads} threads (placement {:.2} s, gather {:.2} s, volume {:.2} s); median relative error {:.3}",
+        args.out.display(),
+        r.probes,
+        r.clusters,
+        r.lattice_candidates,
+        r.listed_candidates,
+        r.skipped_inside_geometry,
+        args.spp,
+        if args.guiding == OnOff::On && args.iterations > 1 {
+            "guided"
+        } else {
+            "unguided"
+        },
+        transport.name(),
+        r.seconds.total,
+        r.seconds.placement,
+        r.seconds.gather,
+        r.seconds.volume,
+        r.median_relative_error,
+    );
+}
