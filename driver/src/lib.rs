@@ -41,3 +41,4 @@ pub mod synth;
 pub mod test_support;
 pub mod texels;
 pub mod transport;
+pub mod view;

@@ -33,6 +33,8 @@ enum Command {
     Render(cmd::render::RenderArgs),
     /// Print a texel file's header and counts; dump chosen texels as JSON.
     Inspect(cmd::inspect::InspectArgs),
+    /// Show the baked level in a browser (three.js): write the viewer's folder and serve it.
+    View(cmd::view::ViewArgs),
 }
 
 fn main() -> ExitCode {
@@ -48,6 +50,7 @@ fn main() -> ExitCode {
         Command::Merge(a) => cmd::merge::run(a),
         Command::Bench(a) => cmd::bench::run_bench(a),
         Command::Render(a) => cmd::render::run(a),
+        Command::View(a) => cmd::view::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
