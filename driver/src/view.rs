@@ -166,7 +166,8 @@ pub fn write_web(
     check_folder(dir)?;
     let scratch = crate::atomic::with_suffix(dir, "tmp");
     let _ = std::fs::remove_dir_all(&scratch);
-    let result = fill(scene, texels, lightmaps, start, &scratch).and_then(|()| publish(&scratch, dir));
+    let result =
+        fill(scene, texels, lightmaps, start, &scratch).and_then(|()| publish(&scratch, dir));
     if result.is_err() {
         let _ = std::fs::remove_dir_all(&scratch);
     }
@@ -217,15 +218,19 @@ fn fill(
             write_half_exr(&source, &folder.join(&name))?;
             pages.push(name);
         }
-        let name = lightmap
-            .file_name()
-            .map_or_else(|| lightmap.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let name = lightmap.file_name().map_or_else(
+            || lightmap.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
         described.push(serde_json::json!({ "name": name, "pages": pages }));
     }
     let json = view_json(scene, start, described);
     let path = folder.join(VIEW_JSON);
-    std::fs::write(&path, serde_json::to_vec_pretty(&json).expect("JSON of numbers and strings"))
-        .map_err(write_error(&path))
+    std::fs::write(
+        &path,
+        serde_json::to_vec_pretty(&json).expect("JSON of numbers and strings"),
+    )
+    .map_err(write_error(&path))
 }
 
 /// `view.json`: what the viewer reads besides the glb and the pages.
@@ -273,7 +278,13 @@ fn write_half_exr(source: &Path, out: &Path) -> Result<(), ViewError> {
         what: e.what,
     })?;
     let width = page.width;
-    let half = |v: f32| f16::from_f32(if v.is_finite() { v.clamp(0.0, 65504.0) } else { 0.0 });
+    let half = |v: f32| {
+        f16::from_f32(if v.is_finite() {
+            v.clamp(0.0, 65504.0)
+        } else {
+            0.0
+        })
+    };
     let channels = SpecificChannels::rgba(|Vec2(x, y): Vec2<usize>| {
         let [r, g, b] = page.rgb[y * width + x];
         (half(r), half(g), half(b), f16::ONE)
@@ -343,7 +354,10 @@ mod tests {
             assert!(has(&format!("three/addons/{file}")), "{file}");
         }
         // The addons' own relative imports.
-        for (name, _) in STATIC_FILES.iter().filter(|(n, _)| n.starts_with("three/addons/")) {
+        for (name, _) in STATIC_FILES
+            .iter()
+            .filter(|(n, _)| n.starts_with("three/addons/"))
+        {
             let dir = Path::new(name).parent().unwrap();
             for line in text(name).lines().filter(|l| l.contains("from '../")) {
                 let rel = line.split("from '").nth(1).unwrap().trim_end_matches("';");
@@ -371,10 +385,17 @@ mod tests {
         std::fs::create_dir(&web).unwrap();
         std::fs::write(web.join("notes.txt"), "mine").unwrap();
         let e = check_folder(&web).unwrap_err().to_string();
-        assert!(e.starts_with(&format!("{}: the folder exists", web.display())), "{e}");
+        assert!(
+            e.starts_with(&format!("{}: the folder exists", web.display())),
+            "{e}"
+        );
         std::fs::write(web.join(VIEW_JSON), r#"{"generator": "someone else"}"#).unwrap();
         assert!(check_folder(&web).is_err());
-        std::fs::write(web.join(VIEW_JSON), format!(r#"{{"generator": "{GENERATOR}"}}"#)).unwrap();
+        std::fs::write(
+            web.join(VIEW_JSON),
+            format!(r#"{{"generator": "{GENERATOR}"}}"#),
+        )
+        .unwrap();
         assert!(check_folder(&web).is_ok());
     }
 

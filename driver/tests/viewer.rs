@@ -82,7 +82,11 @@ fn check_glb(path: &Path) -> usize {
             let n = r.read_positions().unwrap().count();
             for set in [0, 1] {
                 let uv = r.read_tex_coords(set).unwrap_or_else(|| {
-                    panic!("{}: mesh {:?} has no TEXCOORD_{set}", path.display(), mesh.name())
+                    panic!(
+                        "{}: mesh {:?} has no TEXCOORD_{set}",
+                        path.display(),
+                        mesh.name()
+                    )
                 });
                 let uv: Vec<[f32; 2]> = uv.into_f32().collect();
                 assert_eq!(uv.len(), n);
@@ -104,8 +108,11 @@ fn a_written_glb_reimports_with_both_uv_sets_and_its_lightmap_extras_whatever_te
 {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    std::fs::write(d.join("level.mtl"), "newmtl stone\nKd 0.6 0.5 0.4\nmap_Kd textures/stone.png\n")
-        .unwrap();
+    std::fs::write(
+        d.join("level.mtl"),
+        "newmtl stone\nKd 0.6 0.5 0.4\nmap_Kd textures/stone.png\n",
+    )
+    .unwrap();
     // A floor of two quads whose UVs tile (texture UVs: no lightmap atlas, so prepare unwraps).
     std::fs::write(
         d.join("level.obj"),
@@ -128,7 +135,10 @@ fn a_written_glb_reimports_with_both_uv_sets_and_its_lightmap_extras_whatever_te
         "--write-gltf",
         s(&glb),
     ]);
-    assert!(err.contains("stone.png"), "the missing texture is warned about: {err}");
+    assert!(
+        err.contains("stone.png"),
+        "the missing texture is warned about: {err}"
+    );
     assert_eq!(check_glb(&glb), 1);
     // The texture UVs are the OBJ's, v turned down as glTF has it.
     let (doc, buffers) = open_glb(&glb);
@@ -194,7 +204,8 @@ fn a_written_glb_reimports_with_both_uv_sets_and_its_lightmap_extras_whatever_te
         matches!(image.source(), gltf::image::Source::Uri { uri, .. } if uri == "textures/missing.png")
     );
     let node = doc.nodes().next().unwrap();
-    let extras: serde_json::Value = serde_json::from_str(node.extras().as_ref().unwrap().get()).unwrap();
+    let extras: serde_json::Value =
+        serde_json::from_str(node.extras().as_ref().unwrap().get()).unwrap();
     assert_eq!(extras["note"], "kept", "other extras are kept: {extras}");
 }
 
@@ -217,8 +228,17 @@ fn the_viewer_folder_holds_the_level_and_its_lightmaps_and_bad_input_writes_noth
         a
     };
     let baseline = dir.join("baseline.exr");
-    let (_, err) = succeeds(&args(&["--lightmap", s(&baseline), "-o", s(&web), "--no-serve"]));
-    assert!(err.contains("2 lightmaps side by side") && err.contains("the glTF camera"), "{err}");
+    let (_, err) = succeeds(&args(&[
+        "--lightmap",
+        s(&baseline),
+        "-o",
+        s(&web),
+        "--no-serve",
+    ]));
+    assert!(
+        err.contains("2 lightmaps side by side") && err.contains("the glTF camera"),
+        "{err}"
+    );
     for file in [
         "index.html",
         "viewer.js",
@@ -229,7 +249,11 @@ fn the_viewer_folder_holds_the_level_and_its_lightmaps_and_bad_input_writes_noth
     ] {
         assert!(web.join(file).is_file(), "{file}");
     }
-    assert_eq!(check_glb(&web.join("level.glb")), 3, "the room, the door, the table");
+    assert_eq!(
+        check_glb(&web.join("level.glb")),
+        3,
+        "the room, the door, the table"
+    );
     let view: serde_json::Value =
         serde_json::from_slice(&std::fs::read(web.join("view.json")).unwrap()).unwrap();
     assert_eq!(view["lightmaps"][1]["name"], "baseline.exr");
@@ -246,7 +270,11 @@ fn the_viewer_folder_holds_the_level_and_its_lightmaps_and_bad_input_writes_noth
     // The demo's folder, but for what the browser test (running beside this one) writes.
     let snapshot = |dir: &Path| {
         let mut files = snapshot(dir);
-        files.retain(|p, _| !p.starts_with("browser.web") && p != Path::new("browser.png") && p != Path::new("render.png"));
+        files.retain(|p, _| {
+            !p.starts_with("browser.web")
+                && p != Path::new("browser.png")
+                && p != Path::new("render.png")
+        });
         files
     };
     let before = snapshot(dir);
@@ -257,15 +285,52 @@ fn the_viewer_folder_holds_the_level_and_its_lightmaps_and_bad_input_writes_noth
     let err = fails_with(2, &args(&["-o", s(&mine), "--no-serve"]));
     assert!(err.contains("is not one guidebake view wrote"), "{err}");
     let g = s(&dir.join("guided.exr")).to_owned();
-    let err = fails_with(2, &args(&["--lightmap", &g, "--lightmap", &g, "--no-serve", "-o", s(&web)]));
+    let err = fails_with(
+        2,
+        &args(&[
+            "--lightmap",
+            &g,
+            "--lightmap",
+            &g,
+            "--no-serve",
+            "-o",
+            s(&web),
+        ]),
+    );
     assert!(err.contains("3 times"), "{err}");
     let err = fails_with(2, &args(&["-o", s(texels), "--no-serve"]));
     assert!(err.contains("would overwrite"), "{err}");
     let err = fails_with(2, &args(&["--exposure", "0", "--no-serve"]));
     assert!(err.contains("--exposure 0"), "{err}");
-    let err = fails_with(1, &["view", s(texels), "--scene", s(&glb), "--lightmap", s(&dir.join("nope.exr")), "--no-serve", "-o", s(&web)]);
+    let err = fails_with(
+        1,
+        &[
+            "view",
+            s(texels),
+            "--scene",
+            s(&glb),
+            "--lightmap",
+            s(&dir.join("nope.exr")),
+            "--no-serve",
+            "-o",
+            s(&web),
+        ],
+    );
     assert!(err.contains("nope.exr"), "{err}");
-    let err = fails_with(1, &["view", s(&dir.join("no.texels")), "--scene", s(&glb), "--lightmap", &g, "--no-serve", "-o", s(&web)]);
+    let err = fails_with(
+        1,
+        &[
+            "view",
+            s(&dir.join("no.texels")),
+            "--scene",
+            s(&glb),
+            "--lightmap",
+            &g,
+            "--no-serve",
+            "-o",
+            s(&web),
+        ],
+    );
     assert!(err.contains("no.texels"), "{err}");
     assert_eq!(snapshot(dir), before_mine, "refused runs wrote nothing");
     std::fs::remove_dir_all(&mine).unwrap();
@@ -356,8 +421,20 @@ fn three_js_in_headless_chromium_shows_the_demo_room_as_render_does() {
     let rendered = dir.join("render.png");
     let (w, h) = (SHOT.0.to_string(), SHOT.1.to_string());
     let (_, err) = succeeds(&[
-        "render", s(&glb), "--texels", s(texels), "--lightmap", s(&guided), "-o", s(&rendered),
-        "--width", &w, "--height", &h, "--sky", SKY,
+        "render",
+        s(&glb),
+        "--texels",
+        s(texels),
+        "--lightmap",
+        s(&guided),
+        "-o",
+        s(&rendered),
+        "--width",
+        &w,
+        "--height",
+        &h,
+        "--sky",
+        SKY,
     ]);
     assert!(err.contains("from the glTF camera"), "{err}");
     let exposure = err
@@ -370,8 +447,20 @@ fn three_js_in_headless_chromium_shows_the_demo_room_as_render_does() {
     let web = dir.join("browser.web");
     let mut child = Command::new(BIN)
         .args([
-            "view", s(texels), "--scene", s(&glb), "--lightmap", s(&guided), "-o", s(&web),
-            "--port", "0", "--sky", SKY, "--exposure", &exposure,
+            "view",
+            s(texels),
+            "--scene",
+            s(&glb),
+            "--lightmap",
+            s(&guided),
+            "-o",
+            s(&web),
+            "--port",
+            "0",
+            "--sky",
+            SKY,
+            "--exposure",
+            &exposure,
         ])
         .stderr(Stdio::piped())
         .spawn()
@@ -417,7 +506,11 @@ fn three_js_in_headless_chromium_shows_the_demo_room_as_render_does() {
         std::thread::sleep(Duration::from_millis(200));
     }
     drop(server);
-    assert!(shot.is_file(), "Chromium wrote no screenshot ({})", shot.display());
+    assert!(
+        shot.is_file(),
+        "Chromium wrote no screenshot ({})",
+        shot.display()
+    );
 
     let (bw, bh, b) = luma(&shot);
     let (rw, rh, r) = luma(&rendered);
@@ -427,8 +520,14 @@ fn three_js_in_headless_chromium_shows_the_demo_room_as_render_does() {
     let spread = (b.iter().map(|v| (v - mb).powi(2)).sum::<f64>() / b.len() as f64).sqrt();
     let look = format!("look at {} and {}", shot.display(), rendered.display());
     assert!(mb > 8.0, "the canvas is black (mean luma {mb:.1}): {look}");
-    assert!(mb < 247.0, "the canvas is white (mean luma {mb:.1}): {look}");
-    assert!(spread > 8.0, "the canvas is one colour (spread {spread:.1}): {look}");
+    assert!(
+        mb < 247.0,
+        "the canvas is white (mean luma {mb:.1}): {look}"
+    );
+    assert!(
+        spread > 8.0,
+        "the canvas is one colour (spread {spread:.1}): {look}"
+    );
     let (gb, gr) = (regions(bw, bh, &b, 4, 3), regions(rw, rh, &r, 4, 3));
     let worst = gb
         .iter()
@@ -440,7 +539,16 @@ fn three_js_in_headless_chromium_shows_the_demo_room_as_render_does() {
         "browser against render, {bw}×{bh}: mean luma {mb:.2} against {mr:.2} (|Δ| {:.2}), worst of 12 regions |Δ| {worst:.2}, mean |Δ| per pixel {pixels:.2}; regions browser {gb:.1?}, render {gr:.1?}",
         (mb - mr).abs()
     );
-    assert!((mb - mr).abs() <= MEAN_TOLERANCE, "mean luma {mb:.2} against {mr:.2}: {look}");
-    assert!(worst <= REGION_TOLERANCE, "a region differs by {worst:.2}: {look}");
-    assert!(pixels <= PIXEL_TOLERANCE, "pixels differ by {pixels:.2} on average: {look}");
+    assert!(
+        (mb - mr).abs() <= MEAN_TOLERANCE,
+        "mean luma {mb:.2} against {mr:.2}: {look}"
+    );
+    assert!(
+        worst <= REGION_TOLERANCE,
+        "a region differs by {worst:.2}: {look}"
+    );
+    assert!(
+        pixels <= PIXEL_TOLERANCE,
+        "pixels differ by {pixels:.2} on average: {look}"
+    );
 }

@@ -176,7 +176,11 @@ pub fn run(args: &ViewArgs) -> Result<(), super::CmdError> {
         "{}: the viewer's folder ({} lightmap{}, exposure {exposure:.4}, from {})",
         dir.display(),
         args.lightmap.len(),
-        if args.lightmap.len() == 1 { "" } else { "s side by side" },
+        if args.lightmap.len() == 1 {
+            ""
+        } else {
+            "s side by side"
+        },
         if from_file.is_some() {
             "the glTF camera"
         } else if inside.is_some() {
@@ -193,7 +197,9 @@ pub fn run(args: &ViewArgs) -> Result<(), super::CmdError> {
         return Ok(());
     };
     let port = listener.local_addr().map_or(args.port, |a| a.port());
-    eprintln!("open http://127.0.0.1:{port}/ in a browser (Ctrl-C stops the server; the folder stays)");
+    eprintln!(
+        "open http://127.0.0.1:{port}/ in a browser (Ctrl-C stops the server; the folder stays)"
+    );
     crate::view::server::serve(&listener, &dir);
     Ok(())
 }

@@ -36,8 +36,8 @@
 //! v down as glTF has them) wherever the triangles have UVs of their own, textured or not (a
 //! level whose texture pack is missing keeps the UVs the pack needs: an OBJ's one UV set,
 //! which the loader keeps as the triangles' own UVs when no texture was read), `TEXCOORD_1`
-//! the lightmap's page UVs; materials as `baseColorFactor` (the fallback colour where a texture was missing),
-//! the base-colour image embedded as it is (PNG or JPEG) and emission (with
+//! the lightmap's page UVs; materials as `baseColorFactor` (the fallback colour where a
+//! texture was missing), the base-colour image embedded as it is (PNG or JPEG) and emission (with
 //! `KHR_materials_emissive_strength` above 1); a camera node where one is given
 //! ([`GlbCamera`]: `guidebake demo`'s view, which `render` and `view` then both start from).
 //! The sun, the sky and sphere lights of a TOML file are not written: glTF has no sky; keep

@@ -42,10 +42,22 @@ fn answer(mut stream: TcpStream, root: &Path) -> std::io::Result<()> {
     let mut words = request.split_whitespace();
     let (method, target) = (words.next().unwrap_or(""), words.next().unwrap_or(""));
     if method != "GET" && method != "HEAD" {
-        return respond(&mut stream, "405 Method Not Allowed", "text/plain", b"GET only\n", true);
+        return respond(
+            &mut stream,
+            "405 Method Not Allowed",
+            "text/plain",
+            b"GET only\n",
+            true,
+        );
     }
     let Some(file) = file_for(root, target) else {
-        return respond(&mut stream, "404 Not Found", "text/plain", b"not found\n", true);
+        return respond(
+            &mut stream,
+            "404 Not Found",
+            "text/plain",
+            b"not found\n",
+            true,
+        );
     };
     match std::fs::read(&file) {
         Ok(body) => respond(
@@ -55,7 +67,13 @@ fn answer(mut stream: TcpStream, root: &Path) -> std::io::Result<()> {
             &body,
             method == "GET",
         ),
-        Err(_) => respond(&mut stream, "404 Not Found", "text/plain", b"not found\n", true),
+        Err(_) => respond(
+            &mut stream,
+            "404 Not Found",
+            "text/plain",
+            b"not found\n",
+            true,
+        ),
     }
 }
 
@@ -83,7 +101,10 @@ fn file_for(root: &Path, target: &str) -> Option<PathBuf> {
     let path = target.split(['?', '#']).next()?;
     let path = urlencoding::decode(path.strip_prefix('/')?).ok()?;
     let relative = Path::new(if path.is_empty() { "index.html" } else { &path });
-    if !relative.components().all(|c| matches!(c, Component::Normal(_))) {
+    if !relative
+        .components()
+        .all(|c| matches!(c, Component::Normal(_)))
+    {
         return None;
     }
     let file = root.join(relative);
@@ -144,8 +165,18 @@ mod tests {
         assert!(module.contains("Content-Type: text/javascript"), "{module}");
         assert!(module.ends_with("export {}"));
         let head = get(port, "HEAD /index.html HTTP/1.1\r\n\r\n");
-        assert!(head.contains("Content-Length: 9\r\n") && head.ends_with("\r\n\r\n"), "{head}");
-        for target in ["/../secret.txt", "/three/../../secret.txt", "/%2e%2e/secret.txt", "//etc/passwd", "/missing.js", "/three"] {
+        assert!(
+            head.contains("Content-Length: 9\r\n") && head.ends_with("\r\n\r\n"),
+            "{head}"
+        );
+        for target in [
+            "/../secret.txt",
+            "/three/../../secret.txt",
+            "/%2e%2e/secret.txt",
+            "//etc/passwd",
+            "/missing.js",
+            "/three",
+        ] {
             let answer = get(port, &format!("GET {target} HTTP/1.1\r\n\r\n"));
             assert!(answer.starts_with("HTTP/1.1 404"), "{target}: {answer}");
         }
