@@ -151,7 +151,7 @@ pub fn run(args: &ViewArgs) -> Result<(), super::CmdError> {
         Sky::None => Vec3::ZERO,
         Sky::Constant(c) => *c,
         Sky::Equirect { .. } => {
-            // The mean of the map over the sphere: sampled along a band of directions.
+            // The mean of the map over the sphere, on a 64 × 64 grid uniform in height and angle.
             let n = 64;
             (0..n * n)
                 .map(|i| {
