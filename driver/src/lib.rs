@@ -42,3 +42,4 @@ pub mod synth;
 pub mod test_support;
 pub mod texels;
 pub mod transport;
+pub mod view;

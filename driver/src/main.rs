@@ -35,6 +35,8 @@ enum Command {
     Probes(cmd::probes::ProbesArgs),
     /// Print a texel file's header and counts; dump chosen texels as JSON.
     Inspect(cmd::inspect::InspectArgs),
+    /// Show the baked level in a browser (three.js): write the viewer's folder and serve it.
+    View(cmd::view::ViewArgs),
 }
 
 fn main() -> ExitCode {
@@ -51,6 +53,7 @@ fn main() -> ExitCode {
         Command::Bench(a) => cmd::bench::run_bench(a),
         Command::Render(a) => cmd::render::run(a),
         Command::Probes(a) => cmd::probes::run(a),
+        Command::View(a) => cmd::view::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -423,6 +423,33 @@ impl Lightmap {
             uv,
         }
     }
+
+    /// The layout a texel file holds (its triangle table's pixel UVs over its pages), for
+    /// `scene`, the scene it was prepared from (the caller checks that: `render`'s
+    /// `Lightmap::load` does): what `prepare --write-gltf` wrote, without preparing again.
+    /// A mesh none of whose triangles has texels is given page 0 (it is written without
+    /// `TEXCOORD_1`).
+    #[must_use]
+    pub fn of_texel_file(texels: &crate::texels::TexelFile, scene: &Scene) -> Self {
+        let pages: Vec<(u32, u32)> = texels.pages().iter().map(|p| (p.width, p.height)).collect();
+        let mut mesh_page = vec![None; scene.meshes.len()];
+        let uv = texels
+            .triangles()
+            .iter()
+            .zip(&scene.triangles)
+            .map(|(record, t)| {
+                let (page, q) = record.pixel_uv()?;
+                let &(w, h) = pages.get(page as usize)?;
+                mesh_page[t.mesh as usize].get_or_insert(page);
+                Some(q.map(|v| v / Vec2::new(w as f32, h as f32)))
+            })
+            .collect();
+        Self {
+            pages,
+            mesh_page: mesh_page.into_iter().map(|p| p.unwrap_or(0)).collect(),
+            uv,
+        }
+    }
 }
 
 /// Writes the texel file for `scene` to `out`, first giving the meshes `unwrap` selects

@@ -3,7 +3,8 @@
 //! counts — unguided baseline and coherent guiding — writing both lightmaps (EXR) and their
 //! previews (PNG), each bake's stats JSON, and the room seen through [`demo_camera`] lit by
 //! each lightmap ([`crate::render`]): `baseline.view.png`, `guided.view.png` and the two side
-//! by side at one exposure, `views.png`.
+//! by side at one exposure, `views.png`; and the room as `ajar.glb` (its lightmap UVs and
+//! that camera), for `guidebake view` and engines.
 
 use std::path::PathBuf;
 
@@ -58,6 +59,8 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
         prepared.tiles,
         texels.display()
     );
+    let glb = args.out.join("ajar.glb");
+    write_glb(&scene, &texels, &glb)?;
     let threads = args.threads.unwrap_or_else(super::every_core);
     for (name, guiding) in [("baseline", Guiding::Off), ("guided", Guiding::Coherent)] {
         let out = args.out.join(format!("{name}.exr"));
@@ -97,6 +100,33 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
         );
     }
     write_views(&args.out, &scene, &texels)
+}
+
+/// The room as a glb for engines and `guidebake view`/`render`: its lightmap UVs as
+/// `TEXCOORD_1` and [`demo_camera`] as its camera (at the views' aspect), so `render
+/// ajar.glb` and `view --scene ajar.glb` start from the demo's view.
+fn write_glb(
+    scene: &crate::scene::Scene,
+    texels: &std::path::Path,
+    glb: &std::path::Path,
+) -> Result<(), super::CmdError> {
+    use crate::render::Projection;
+    use crate::scene::gltf_write::{GlbCamera, write_new_with_camera};
+    let layout = crate::prepare::Lightmap::of_texel_file(&TexelFile::open(texels)?, scene);
+    let aspect = VIEW.width as f32 / VIEW.height as f32;
+    let camera = demo_camera(aspect);
+    let Projection::Perspective { tan_half_fov } = camera.projection else {
+        unreachable!("the demo's camera is a perspective one")
+    };
+    let camera = GlbCamera {
+        eye: camera.eye,
+        forward: camera.forward,
+        up: camera.up,
+        yfov: 2.0 * tan_half_fov.atan(),
+        aspect,
+    };
+    write_new_with_camera(scene, &layout, Some(camera), glb)?;
+    Ok(())
 }
 
 /// Renders the room lit by each lightmap; writes each view and both side by side, at the

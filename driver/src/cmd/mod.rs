@@ -19,6 +19,7 @@ pub mod render;
 pub mod samples;
 pub mod scene;
 pub mod synth;
+pub mod view;
 
 /// What a subcommand failed with: printed by `main` as `guidebake: <message>`.
 pub type CmdError = Box<dyn std::error::Error + Send + Sync + 'static>;

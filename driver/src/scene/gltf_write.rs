@@ -9,12 +9,21 @@
 //! - A vertex is split wherever its triangles give it different lightmap UVs (xatlas cuts
 //!   charts along seams); every attribute of the source vertex (normals, tangents, other UV
 //!   sets, colours, joints, weights, morph targets) is copied to each of its copies.
-//! - `TEXCOORD_1` is the page UV (0..1 across the page); the node's `extras` get
-//!   `guidebake_lightmap: { page, width, height }`, since glTF has no field for it.
+//! - `TEXCOORD_1` is the page UV (0..1 across the page, v down as every glTF UV); the
+//!   node's `extras` get `guidebake_lightmap: { page, width, height, scale, offset }`, since
+//!   glTF has no field for it: the page's index and size in texels, and the transform from
+//!   `TEXCOORD_1` to the page's UV, `uv · scale + offset` — `[1, 1]` and `[0, 0]`, as the UVs
+//!   are written in page space already (an engine that packs lightmaps again, as Unity's
+//!   `lightmapScaleOffset` does, changes these, not the UVs). The document's own `extras`
+//!   get `guidebake_lightmap: { pages: [{ width, height }], texcoord: 1 }`: how many pages
+//!   there are (one glb for all of them: page N is the bake's `OUT.pageN.exr`, or `OUT.exr`
+//!   where there is one page; docs/engines.md).
 //! - A mesh instanced by several nodes gets a copy per further node (each instance has its
 //!   own place in the lightmap); a mesh instance without texels is left as it is.
 //! - All buffers, and images stored as files beside the source, go into the GLB's one
-//!   binary chunk, so the output stands alone.
+//!   binary chunk, so the output stands alone; an image file that cannot be read (a level
+//!   without its texture pack) keeps its URI as the source had it, and every primitive keeps
+//!   its texture UVs (`TEXCOORD_0`) whatever textures are missing.
 //!
 //! Loading the written file gives the same triangles in the same order with these UVs, so
 //! `prepare --unwrap never` of it rasterises the same texels (driver/tests/unwrap.rs).
@@ -24,11 +33,15 @@
 //! back for the engine"): a node and a mesh per scene mesh, a primitive per run of
 //! triangles of one material, vertices welded where every attribute agrees — `POSITION`,
 //! `NORMAL` (the loader's, so reloading gives the same ones), `TEXCOORD_0` (the texture UVs,
-//! v down as glTF has them) where the material is textured, `TEXCOORD_1` the lightmap's page
-//! UVs; materials as `baseColorFactor` (the fallback colour where a texture was missing),
-//! the base-colour image embedded as it is (PNG or JPEG) and emission (with
-//! `KHR_materials_emissive_strength` above 1). The sun, the sky and sphere lights of a TOML
-//! file are not written: glTF has no sky; keep the scene file (or the flags) for them.
+//! v down as glTF has them) wherever the triangles have UVs of their own, textured or not (a
+//! level whose texture pack is missing keeps the UVs the pack needs: an OBJ's one UV set,
+//! which the loader keeps as the triangles' own UVs when no texture was read), `TEXCOORD_1`
+//! the lightmap's page UVs; materials as `baseColorFactor` (the fallback colour where a
+//! texture was missing), the base-colour image embedded as it is (PNG or JPEG) and emission (with
+//! `KHR_materials_emissive_strength` above 1); a camera node where one is given
+//! ([`GlbCamera`]: `guidebake demo`'s view, which `render` and `view` then both start from).
+//! The sun, the sky and sphere lights of a TOML file are not written: glTF has no sky; keep
+//! the scene file (or the flags) for them.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -96,6 +109,7 @@ pub fn write_glb(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
     };
     w.consolidate_buffers(&buffers, path.parent().unwrap_or(Path::new(".")))?;
     w.rewrite_meshes(&doc, &buffers)?;
+    set_extra(&mut w.root.extras, pages_extra(lightmap));
     w.finish(out)
 }
 
@@ -168,11 +182,12 @@ impl Writer<'_> {
                 continue;
             }
             let file = base.join(urlencoding::decode(&uri).map_or(uri.clone(), |u| u.into_owned()));
-            let bytes = std::fs::read(&file).map_err(|e| SceneError::GltfResource {
-                path: self.scene.path.clone(),
-                item: format!("images[{i}]"),
-                message: format!("cannot read {}: {e}", file.display()),
-            })?;
+            // An image that cannot be read (a level without its texture pack: the loader
+            // warned and baked the material's colour) keeps its URI, as the source had it,
+            // and its primitives keep their texture UVs, so the pack can be added later.
+            let Ok(bytes) = std::fs::read(&file) else {
+                continue;
+            };
             let mime = if bytes.starts_with(b"\x89PNG") {
                 "image/png"
             } else {
@@ -219,11 +234,7 @@ impl Writer<'_> {
                 let page = self.lightmap.mesh_page[id as usize];
                 let node_json = &mut self.root.nodes[node.index()];
                 node_json.mesh = Some(json::Index::new(index as u32));
-                let (width, height) = self.lightmap.pages[page as usize];
-                set_extra(
-                    &mut node_json.extras,
-                    serde_json::json!({ "page": page, "width": width, "height": height }),
-                );
+                set_extra(&mut node_json.extras, mesh_extra(self.lightmap, page));
             }
         }
         if next_mesh as usize != self.scene.meshes.len() {
@@ -485,6 +496,29 @@ fn float3_bounds(bytes: &[u8], stride: usize) -> ([f32; 3], [f32; 3]) {
     (lo, hi)
 }
 
+/// The key of the lightmap binding in a node's and in the document's `extras`.
+pub const EXTRAS_KEY: &str = "guidebake_lightmap";
+
+/// A mesh instance's lightmap binding (module docs): its page, the page's size, and the
+/// transform from `TEXCOORD_1` to the page's UV (identity: the UVs are page UVs).
+fn mesh_extra(lightmap: &Lightmap, page: u32) -> serde_json::Value {
+    let (width, height) = lightmap.pages[page as usize];
+    serde_json::json!({
+        "page": page, "width": width, "height": height,
+        "scale": [1.0, 1.0], "offset": [0.0, 0.0],
+    })
+}
+
+/// The document's lightmap description: the pages' sizes and the UV set they use.
+fn pages_extra(lightmap: &Lightmap) -> serde_json::Value {
+    let pages: Vec<_> = lightmap
+        .pages
+        .iter()
+        .map(|&(width, height)| serde_json::json!({ "width": width, "height": height }))
+        .collect();
+    serde_json::json!({ "pages": pages, "texcoord": 1 })
+}
+
 /// Sets `extras.guidebake_lightmap` to `value`, keeping other extras of an object.
 fn set_extra(extras: &mut json::Extras, value: serde_json::Value) {
     let mut object = extras
@@ -492,8 +526,46 @@ fn set_extra(extras: &mut json::Extras, value: serde_json::Value) {
         .and_then(|raw| serde_json::from_str::<serde_json::Value>(raw.get()).ok())
         .filter(serde_json::Value::is_object)
         .unwrap_or_else(|| serde_json::json!({}));
-    object["guidebake_lightmap"] = value;
+    object[EXTRAS_KEY] = value;
     *extras = serde_json::value::to_raw_value(&object).ok();
+}
+
+/// A perspective camera to write into a new glb ([`write_new_with_camera`]): where it
+/// stands, where it looks, which way is up, its vertical field of view (radians) and the
+/// width / height it asks for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GlbCamera {
+    /// Eye position.
+    pub eye: Vec3,
+    /// Unit view direction.
+    pub forward: Vec3,
+    /// Unit up vector, orthogonal to `forward`.
+    pub up: Vec3,
+    /// Vertical field of view, radians.
+    pub yfov: f32,
+    /// Width / height.
+    pub aspect: f32,
+}
+
+impl GlbCamera {
+    /// The camera's node and camera objects: glTF cameras look along their local −Z with
+    /// +Y up, so the node's rotation takes (X, Y, −Z) to (right, up, forward).
+    fn to_json(self) -> (serde_json::Value, serde_json::Value) {
+        let right = self.forward.cross(self.up).normalize();
+        let up = right.cross(self.forward).normalize();
+        let q = glam::Quat::from_mat3(&glam::Mat3::from_cols(right, up, -self.forward)).normalize();
+        let node = serde_json::json!({
+            "name": "camera",
+            "camera": 0,
+            "translation": self.eye.to_array(),
+            "rotation": q.to_array(),
+        });
+        let camera = serde_json::json!({
+            "type": "perspective",
+            "perspective": { "yfov": self.yfov, "aspectRatio": self.aspect, "znear": 0.01 },
+        });
+        (node, camera)
+    }
 }
 
 /// Writes `scene` (from an OBJ: no source document to keep) as a new binary glTF with
@@ -502,6 +574,20 @@ fn set_extra(extras: &mut json::Extras, value: serde_json::Value) {
 /// # Errors
 /// [`WriteError::Write`] naming `out` (or a texture file that can no longer be read).
 pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), WriteError> {
+    write_new_with_camera(scene, lightmap, None, out)
+}
+
+/// [`write_new`], with `camera` as the document's first camera where one is given (a scene
+/// made in code, whose view `render` and `view` should share).
+///
+/// # Errors
+/// As [`write_new`].
+pub fn write_new_with_camera(
+    scene: &Scene,
+    lightmap: &Lightmap,
+    camera: Option<GlbCamera>,
+    out: &Path,
+) -> Result<(), WriteError> {
     use serde_json::{Value, json};
     let write_error = |message: String| WriteError::Write {
         path: out.to_owned(),
@@ -585,6 +671,7 @@ pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
 
     let mut meshes: Vec<Value> = Vec::new();
     let mut nodes: Vec<Value> = Vec::new();
+    let mut cameras: Vec<Value> = Vec::new();
     for (id, mesh) in scene.meshes.iter().enumerate() {
         let first = mesh.first_triangle as usize;
         let range = first..first + mesh.triangle_count as usize;
@@ -598,7 +685,16 @@ pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
                 end += 1;
             }
             let run = &scene.triangles[start..end];
-            let textured = run.iter().all(|t| t.texture_uv.is_some());
+            // The texture's UVs; where no texture was read, the triangles' own UVs (an OBJ's
+            // one UV set, which the loader keeps as `lightmap_uv`), v turned down as the
+            // loader turns a textured OBJ's.
+            let texture_uv = |t: &super::Triangle| {
+                t.texture_uv.or_else(|| {
+                    t.lightmap_uv
+                        .map(|q| q.map(|v| glam::Vec2::new(v.x, 1.0 - v.y)))
+                })
+            };
+            let textured = run.iter().all(|t| texture_uv(t).is_some());
             // Vertices welded where every attribute written agrees (by bits).
             let mut index_of: HashMap<[u32; 12], u32> = HashMap::new();
             let (mut pos, mut nor, mut uv0, mut uv1) = (vec![], vec![], vec![], vec![]);
@@ -608,7 +704,7 @@ pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
                 for c in 0..3 {
                     let p = t.positions[c];
                     let n = t.normals[c];
-                    let a = t.texture_uv.map_or(glam::Vec2::ZERO, |q| q[c]);
+                    let a = texture_uv(t).map_or(glam::Vec2::ZERO, |q| q[c]);
                     let b = lm.map_or(glam::Vec2::ZERO, |q| q[c]);
                     let key = [p.x, p.y, p.z, n.x, n.y, n.z, a.x, a.y, b.x, b.y, 0.0, 0.0]
                         .map(f32::to_bits);
@@ -679,11 +775,9 @@ pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
         let mut node = json!({ "name": mesh.name, "mesh": id });
         let mut extras = serde_json::Map::new();
         if with_texels {
-            let page = lightmap.mesh_page[id];
-            let (width, height) = lightmap.pages[page as usize];
             extras.insert(
-                "guidebake_lightmap".into(),
-                json!({ "page": page, "width": width, "height": height }),
+                EXTRAS_KEY.into(),
+                mesh_extra(lightmap, lightmap.mesh_page[id]),
             );
         }
         // The mesh's role, where all its triangles share one but `baked` (`roles`), so the
@@ -706,6 +800,11 @@ pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
     while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
+    if let Some(camera) = camera {
+        let (node, camera) = camera.to_json();
+        nodes.push(node);
+        cameras.push(camera);
+    }
     let mut root = json!({
         "asset": { "version": "2.0", "generator": "guidebake prepare --write-gltf" },
         "scene": 0,
@@ -721,6 +820,11 @@ pub fn write_new(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
         root["images"] = images.into();
         root["textures"] = textures.into();
         root["samplers"] = json!([{ "wrapS": 10497, "wrapT": 10497 }]);
+    }
+    root["extras"] = json!({});
+    root["extras"][EXTRAS_KEY] = pages_extra(lightmap);
+    if !cameras.is_empty() {
+        root["cameras"] = cameras.into();
     }
     if emissive_strength {
         root["extensionsUsed"] = json!(["KHR_materials_emissive_strength"]);
