@@ -44,11 +44,13 @@ pub struct ProbesArgs {
     /// Gather samples per probe.
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(8..=1 << 20))]
     pub spp: u32,
-    /// Learning iterations (their samples ⅛, ⅛, ¼, ½ of --spp for four).
+    /// Learning iterations under --guiding on (their samples ⅛, ⅛, ¼, ½ of --spp for four).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
     pub iterations: u32,
-    /// Guide the iterations after the first (off: uniform directions, the unguided baseline).
-    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    /// `on`: learning iterations, each after the first guided by what the cluster's probes
+    /// found; `off` (the default: it wins at equal time on every scene measured,
+    /// docs/probes.md): one stratified set, uniform over the sphere.
+    #[arg(long, value_enum, default_value_t = OnOff::Off)]
     pub guiding: OnOff,
     /// What a ray that hits a surface reads: the lightmap (default with --lightmap), or a
     /// path (unbiased: the reference).

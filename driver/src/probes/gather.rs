@@ -1,7 +1,9 @@
 //! A cluster of light probes gathered: incident radiance over the whole sphere, projected on
-//! L2 spherical harmonics, in learning iterations guided by one quadtree the cluster shares
-//! (paper §2.2–2.4, with the sphere's equal-area map as the primary sample space in place of
-//! the cosine hemisphere's; docs/probes.md, "The gather").
+//! L2 spherical harmonics — by default in one stratified set uniform over the sphere (at equal
+//! time it beats guiding on every scene measured: docs/probes.md, "How good the probes are"),
+//! or (`guiding`) in learning iterations guided by one quadtree the cluster shares (paper
+//! §2.2–2.4, with the sphere's equal-area map as the primary sample space in place of the
+//! cosine hemisphere's; docs/probes.md, "The gather").
 //!
 //! Per probe and iteration, Cranley–Patterson-rotated Sobol points (the rotation from the
 //! seed, the probe's id and the iteration, as a texel's) are warped through the cluster's
@@ -101,7 +103,7 @@ impl Default for GatherSettings {
         Self {
             spp: 256,
             iterations: 4,
-            guiding: true,
+            guiding: false,
             transport: ProbeTransport::Lightmap,
             seed: 0,
         }
@@ -731,6 +733,7 @@ mod tests {
             GatherSettings {
                 spp,
                 iterations,
+                guiding: true,
                 ..GatherSettings::default()
             }
             .schedule()

@@ -3,9 +3,10 @@
 //!
 //! - [`placement`]: where probes go — an adaptive lattice, fine near geometry, none inside it;
 //!   probes a user lists; clusters of nearby probes.
-//! - [`gather`]: each cluster's probes gather incident radiance over the sphere through one
-//!   learned guide (paper §2.1–2.4 on the sphere), next-event estimation of the sun and the
-//!   analytic lights, hits reading the lightmap (or paths).
+//! - [`gather`]: each cluster's probes gather incident radiance over the sphere — one
+//!   stratified set by default, or through one learned guide (paper §2.1–2.5 on the sphere) —
+//!   with next-event estimation of the sun, the analytic lights and the emitters, hits reading
+//!   the lightmap (or paths).
 //! - [`sh`]: L2 spherical harmonics, their convention, irradiance and de-ringing.
 //! - [`file`]: the probe file an engine reads, and the volume textures of the coarse grid.
 //! - [`field`]: probes interpolated at any point, as an engine does.
