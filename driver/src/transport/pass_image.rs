@@ -15,9 +15,9 @@
 //!   value, the smaller ones within that much of the largest, 2⁻³² to 4.3·10⁹). Half floats
 //!   (2⁻¹¹, up to 65 504) would break the closed rooms' 1e-4 checks and clip a bright sun;
 //!   RGB9E5 (2⁻⁹) more so.
-//! - **Build.** [`build`] reads the source tile by tile in chunks, every tile of a chunk on its
-//!   own rayon worker, and appends their blocks and colours in tile order: the bytes do not
-//!   depend on the thread count. With the lookups' filter a second parallel step replaces each
+//! - **Build.** [`build`] reads the source tile by tile in chunks (a few tiles per thread),
+//!   every tile of a chunk on its own rayon worker, and appends their blocks and colours in
+//!   tile order: the bytes do not depend on the thread count. With the lookups' filter a second parallel step replaces each
 //!   baked colour by its filtered value ([`crate::transport::lookup_filter`]), reading the
 //!   neighbours through the table from a scratch array of one [`FilterSlot`] per colour.
 //!
@@ -33,9 +33,11 @@ use crate::transport::lookup_filter::{Surfel, filtered_at};
 /// Edge of a cell in pixels: one cell's pixels are one 64-bit mask.
 pub const CELL: u32 = 8;
 
-/// Tiles read per parallel step of the build: bounds its buffers (about 3 MB, 16 MB with the
-/// filter, for 1 024-texel tiles) whatever the world's size.
-const CHUNK_TILES: usize = 256;
+/// Tiles read per parallel step of the build, per worker thread: bounds its buffers (per
+/// thread about 0.1 MB a tile, 0.6 MB with the filter's slots, for 1 024-texel tiles)
+/// whatever the world's size. 256 tiles a step held 34 MB of anonymous memory with the filter,
+/// more than the whole bake of a 10⁶-texel world.
+const CHUNK_TILES_PER_THREAD: usize = 4;
 
 /// Both layers of one pixel: gather-only RGB (0..3) and total RGB (3..6), each [`pack_rgb`].
 pub type Packed = [u16; 6];
@@ -433,7 +435,8 @@ pub fn build<S: Source>(
     // Each tile's colours, for the filter's step.
     let mut tile_colours = Vec::new();
     let tiles: Vec<usize> = (0..source.tile_count()).collect();
-    for chunk in tiles.chunks(CHUNK_TILES) {
+    let chunk_tiles = CHUNK_TILES_PER_THREAD * rayon::current_num_threads();
+    for chunk in tiles.chunks(chunk_tiles) {
         let outs: Vec<Result<TileOut, S::Error>> = chunk
             .par_iter()
             .map_init(

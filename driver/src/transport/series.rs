@@ -34,8 +34,8 @@
 //! 12 bytes, found through a table of 8×8-pixel cells per page (`transport/pass_image.rs`),
 //! in a file of the work directory that is memory-mapped (file-backed pages, not anonymous
 //! memory) and built on every core straight from the pass's result files
-//! ([`PassImageSource`], [`build_pass_image`]), or by [`PreviousPassWriter`] from pixels set one
-//! by one (tests). Lookups are bilinear over the baked pixels among the four (weights
+//! ([`PreviousPass::build`]; its source is `bake/run.rs`'s `ResultTiles`), or by
+//! [`PreviousPassWriter`] from pixels set one by one (tests). Lookups are bilinear over the baked pixels among the four (weights
 //! renormalised). The bake's images hold no dilation: a lookup is read only where the texel
 //! under it is baked, and then only baked pixels count; [`PreviousPass::from_pixels`] (a baked
 //! lightmap, for `render`) dilates [`DILATION`] rings, which a lookup reads where none of its
