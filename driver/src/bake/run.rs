@@ -308,9 +308,17 @@ pub fn bake_pass_with_progress(
                     path: &image,
                     filter: lookup_filter(&job.settings, b),
                 };
-                previous_pass(&texels, scene, sources, target, bake_id, job.threads, report)
-                    .map(|p| p.of_pass(b))
-                    .map_err(|e| not_merged_hint(e, &source, b))
+                previous_pass(
+                    &texels,
+                    scene,
+                    sources,
+                    target,
+                    bake_id,
+                    job.threads,
+                    report,
+                )
+                .map(|p| p.of_pass(b))
+                .map_err(|e| not_merged_hint(e, &source, b))
             };
             // Memory holds two pass images: the previous pass's, and the one before it, read
             // one bounce beyond the gather's hits near their origin (`NEAR_PATH_TEXELS`). The
@@ -720,7 +728,13 @@ impl Source for ResultTiles<'_> {
             let surfel = (baked && self.filter)
                 .then(|| {
                     let (position, normal) = (texel.position(), texel.normal());
-                    Surfel::new(position, normal, texel.spacing(), r.gathered, r.rel_std_error)
+                    Surfel::new(
+                        position,
+                        normal,
+                        texel.spacing(),
+                        r.gathered,
+                        r.rel_std_error,
+                    )
                 })
                 .flatten();
             out.push(SourceTexel {

@@ -573,7 +573,15 @@ mod tests {
             assert!((m - mb).abs() <= step, "{c:?} → {back:?}");
         }
         // Exact where the value fits: 0, small integers, powers of two, sums of a few.
-        for v in [0.0, 1.0, 3.0, 0.5, 1024.0, 1.0 + 2f32.powi(-13), 2f32.powi(-30)] {
+        for v in [
+            0.0,
+            1.0,
+            3.0,
+            0.5,
+            1024.0,
+            1.0 + 2f32.powi(-13),
+            2f32.powi(-30),
+        ] {
             assert_eq!(unpack_rgb(pack_rgb([v, v, v])), Vec3::splat(v), "{v}");
         }
     }
@@ -616,12 +624,18 @@ mod tests {
         }
         fn bounds(&self) -> (u64, u64) {
             let cells = (self.tile.div_ceil(CELL) + 1).pow(2);
-            (self.tile_count() as u64 * u64::from(cells), self.texels.len() as u64)
+            (
+                self.tile_count() as u64 * u64::from(cells),
+                self.texels.len() as u64,
+            )
         }
         fn read_tile(&self, tile: usize, out: &mut Vec<SourceTexel>) -> Result<u32, ()> {
             out.clear();
             let across = self.size.width.div_ceil(self.tile);
-            let (tx, ty) = (tile as u32 % across * self.tile, tile as u32 / across * self.tile);
+            let (tx, ty) = (
+                tile as u32 % across * self.tile,
+                tile as u32 / across * self.tile,
+            );
             for y in ty..(ty + self.tile).min(self.size.height) {
                 for x in tx..(tx + self.tile).min(self.size.width) {
                     if let Some(t) = self.texels[(y * self.size.width + x) as usize] {
@@ -635,7 +649,12 @@ mod tests {
 
     fn grid(w: u32, h: u32, tile: u32, texel: impl Fn(u32, u32) -> Option<SourceTexel>) -> Grid {
         let texels = (0..w * h)
-            .map(|i| texel(i % w, i / w).map(|t| SourceTexel { pixel: (i % w, i / w), ..t }))
+            .map(|i| {
+                texel(i % w, i / w).map(|t| SourceTexel {
+                    pixel: (i % w, i / w),
+                    ..t
+                })
+            })
             .collect();
         Grid {
             size: PageRecord {
@@ -669,7 +688,7 @@ mod tests {
         let texel = |x: u32, y: u32| {
             let v = (x * 100 + y) as f32;
             let t = SourceTexel {
-                baked: (x + 2 * y) % 3 != 0,
+                baked: !(x + 2 * y).is_multiple_of(3),
                 inside: x == 7 && y == 3,
                 filled: x == 30 && y == 20,
                 gathered: [v, 0.5 * v, 0.0],
@@ -730,7 +749,7 @@ mod tests {
                 0.3,
             );
             Some(SourceTexel {
-                baked: (x + y) % 7 != 0,
+                baked: !(x + y).is_multiple_of(7),
                 gathered: [g; 3],
                 total: [g + x as f32; 3],
                 surfel: s,
@@ -761,9 +780,14 @@ mod tests {
                     };
                     let i = (y * w + x) as usize;
                     let (g, total) = (want[i], want[i] + Vec3::splat(t.total[0] - t.gathered[0]));
-                    let near = |a: Vec3, b: Vec3| (a - b).abs().max_element() <= 1e-4 * b.max_element();
+                    let near =
+                        |a: Vec3, b: Vec3| (a - b).abs().max_element() <= 1e-4 * b.max_element();
                     assert!(near(tap.gathered, g), "({x}, {y}): {} vs {g}", tap.gathered);
-                    assert!(near(tap.total, total), "({x}, {y}): {} vs {total}", tap.total);
+                    assert!(
+                        near(tap.total, total),
+                        "({x}, {y}): {} vs {total}",
+                        tap.total
+                    );
                 }
             }
         }

@@ -211,6 +211,9 @@ impl PreviousPass {
     /// A lightmap held in memory: `images[p]` is page `p`'s pixels, row-major, RGB, `None`
     /// for a pixel no texel covers; both layers hold it, and [`DILATION`] rings around the
     /// covered pixels are filled. For rendering a baked lightmap, and tests.
+    ///
+    /// # Panics
+    /// If the pages hold 2³² − 2 pixels or more with a value (the image's 32-bit indices).
     pub fn from_pixels(
         scene: &Scene,
         triangles: &[TriangleRecord],
@@ -236,7 +239,8 @@ impl PreviousPass {
         let (blocks, texels) = source.bounds();
         let layout = Layout::new(pages, blocks, texels).expect("a memory image within u32 texels");
         let mut words = vec![0u64; layout.bytes() / 8];
-        let Ok(built) = pass_image::build(&layout, &source, bytemuck::cast_slice_mut(&mut words), None);
+        let Ok(built) =
+            pass_image::build(&layout, &source, bytemuck::cast_slice_mut(&mut words), None);
         Self {
             storage: Storage::Owned(words),
             layout,
@@ -298,8 +302,12 @@ impl PreviousPass {
         // No flush: the file is this run's scratch, read back through the page cache.
         drop(map);
         let used = built.bytes(&layout).max(8) as u64;
-        file.set_len(used)
-            .map_err(|e| err(path, format!("cannot cut the pass image to {used} bytes: {e}")))?;
+        file.set_len(used).map_err(|e| {
+            err(
+                path,
+                format!("cannot cut the pass image to {used} bytes: {e}"),
+            )
+        })?;
         // SAFETY: the file was created by this process in its own work directory and is not
         // resized or written through any other handle while mapped (the work directory's
         // invariant, crate::output); it is at least `built.bytes` long, which `View` checks.
@@ -501,11 +509,7 @@ pub struct PreviousPassWriter {
 }
 
 /// Creates (or truncates) a file of `bytes` zero bytes (at least 8) at `path` and maps it.
-fn create_mapped(
-    path: &Path,
-    bytes: usize,
-    what: &str,
-) -> Result<(File, MmapMut), PassImageError> {
+fn create_mapped(path: &Path, bytes: usize, what: &str) -> Result<(File, MmapMut), PassImageError> {
     let err = |what: String| PassImageError {
         path: path.to_owned(),
         what,
@@ -523,8 +527,8 @@ fn create_mapped(
     // SAFETY: the file was just created by this process in its own work directory and is
     // not resized or written through any other handle while mapped (the work directory's
     // invariant, crate::output).
-    let map =
-        unsafe { MmapMut::map_mut(&file) }.map_err(|e| err(format!("cannot map the {what}: {e}")))?;
+    let map = unsafe { MmapMut::map_mut(&file) }
+        .map_err(|e| err(format!("cannot map the {what}: {e}")))?;
     Ok((file, map))
 }
 
@@ -680,7 +684,11 @@ impl<'a> DenseSource<'a> {
         let bands = pages
             .iter()
             .enumerate()
-            .flat_map(|(p, s)| (0..s.height).step_by(CELL as usize).map(move |y| (p as u32, y)))
+            .flat_map(|(p, s)| {
+                (0..s.height)
+                    .step_by(CELL as usize)
+                    .map(move |y| (p as u32, y))
+            })
             .collect();
         Self {
             pages,
