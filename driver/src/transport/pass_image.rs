@@ -13,13 +13,15 @@
 //!   is both layers (gather-only, total), each RGB in 48 bits ([`pack_rgb`]: three 14-bit
 //!   mantissas under one 6-bit exponent; the largest channel within 2⁻¹⁴ = 6.1e-5 of its
 //!   value, the smaller ones within that much of the largest, 2⁻³² to 4.3·10⁹). Half floats
-//!   (2⁻¹¹, up to 65 504) would break the closed rooms' 1e-4 checks and clip a bright sun;
+//!   (rounding up to 2⁻¹¹ of a value, at most 65 504) could put 2.4·10⁻⁴ of error into the
+//!   closed rooms' texels, whose checks allow 10⁻⁴, and clip a bright sun (not tried);
 //!   RGB9E5 (2⁻⁹) more so.
 //! - **Build.** [`build`] reads the source tile by tile in chunks (a few tiles per thread),
 //!   every tile of a chunk on its own rayon worker, and appends their blocks and colours in
-//!   tile order: the bytes do not depend on the thread count. With the lookups' filter a second parallel step replaces each
-//!   baked colour by its filtered value ([`crate::transport::lookup_filter`]), reading the
-//!   neighbours through the table from a scratch array of one [`FilterSlot`] per colour.
+//!   tile order: the bytes do not depend on the thread count. With the lookups' filter a
+//!   second parallel step replaces each baked colour by its filtered value
+//!   ([`crate::transport::lookup_filter`]), reading the neighbours through the table from a
+//!   scratch array of one [`FilterSlot`] per colour.
 //!
 //! The file is the work directory's (written and read by one process; rebuilt by each run),
 //! so its layout is in memory ([`Layout`], [`Built`]), not in a header.
