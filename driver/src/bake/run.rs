@@ -45,7 +45,8 @@ use crate::output::result_file::{FLAG_BAKED, MappedResults, ResultFile, TexelRes
 use crate::scene::Scene;
 use crate::texels::{FLAG_INSIDE, TexelFile};
 use crate::transport::lookup_filter::Surfel;
-use crate::transport::series::{PreviousPass, PreviousPassWriter};
+use crate::transport::pass_image::{CELL, Source, SourceTexel};
+use crate::transport::series::{BuildError, PreviousPass};
 
 /// What a bake run is asked to do.
 #[derive(Clone, Debug)]
@@ -101,6 +102,9 @@ pub struct BakeReport {
     /// Whether the texel file was prepared under other lights than this bake's (its seen
     /// sides were decided under those; [`lights_differ`]).
     pub prepared_under_other_lights: bool,
+    /// Bytes of the largest pass image the series transport built (its file in the work
+    /// directory; 0 for other transports).
+    pub pass_image_bytes: u64,
     /// Pixels with non-finite results replaced by zero when writing (should be 0).
     pub non_finite_pixels: u64,
     /// Mean relative jump between the two texels of each seam pair, before and after
@@ -120,7 +124,7 @@ pub struct PhaseSeconds {
     pub build_bvh: f64,
     /// The gather (all tiles and passes of this run).
     pub gather: f64,
-    /// Writing and dilating the previous passes' images for series transport.
+    /// Building the previous passes' images for series transport.
     pub previous_pass_images: f64,
     /// Applying ρ and writing the pages.
     pub write_pages: f64,
@@ -304,9 +308,17 @@ pub fn bake_pass_with_progress(
                     path: &image,
                     filter: lookup_filter(&job.settings, b),
                 };
-                previous_pass(&texels, scene, sources, target, bake_id, report)
-                    .map(|p| p.of_pass(b))
-                    .map_err(|e| not_merged_hint(e, &source, b))
+                previous_pass(
+                    &texels,
+                    scene,
+                    sources,
+                    target,
+                    bake_id,
+                    job.threads,
+                    report,
+                )
+                .map(|p| p.of_pass(b))
+                .map_err(|e| not_merged_hint(e, &source, b))
             };
             // Memory holds two pass images: the previous pass's, and the one before it, read
             // one bounce beyond the gather's hits near their origin (`NEAR_PATH_TEXELS`). The
@@ -618,58 +630,126 @@ fn lookup_filter(settings: &BakeSettings, pass: u32) -> u32 {
     }
 }
 
-/// Writes the image (at `target`) of the gather-only and total irradiance in a pass's result
+/// Builds the image (at `target`) of the gather-only and total irradiance in a pass's result
 /// file (plus the direct pass's total, when the pass borrowed it), its gathered light filtered
 /// when `target` asks, and which side of each triangle its texels bake, and maps it for the
-/// next pass (series transport).
+/// next pass (series transport). Tile by tile on `threads` threads, the same bytes on any
+/// number ([`PreviousPass::build`]).
 fn previous_pass(
     texels: &TexelFile,
     scene: &Scene,
     sources: PassSources<'_>,
     target: PassImage<'_>,
     bake_id: u64,
+    threads: usize,
     report: &mut BakeReport,
 ) -> Result<PreviousPass, BakeError> {
     let clock = Instant::now();
     let (results, direct) = sources.open(texels, bake_id)?;
-    let mut image = PreviousPassWriter::create(target.path, texels.pages())
-        .and_then(|w| w.with_filter(target.filter))
-        .map_err(|e| file_error(&e.path, e.what))?;
-    let (mut buffer, mut direct_buffer) = (Vec::new(), Vec::new());
-    for (t, tile) in texels.tiles().iter().enumerate() {
-        buffer.resize(tile.texel_count as usize, TexelResult::default());
-        results.read(tile.first_texel, &mut buffer)?;
-        direct_buffer.resize(tile.texel_count as usize, TexelResult::default());
-        if let Some(direct) = &direct {
-            direct.read(tile.first_texel, &mut direct_buffer)?;
-        }
-        let texel_results = texels.tile_texels(t).iter().zip(&buffer);
-        for ((texel, r), d) in texel_results.zip(&direct_buffer) {
-            if r.flags & FLAG_BAKED != 0 {
-                let [x, y] = texel.pixel.map(u32::from);
-                let total = core::array::from_fn(|c| r.total[c] + d.total[c]);
-                image.set(texel.page, (x, y), r.gathered, total);
-                if target.filter > 0 {
-                    let (position, normal) = (texel.position(), texel.normal());
-                    let size = texel.spacing();
-                    if let Some(s) =
-                        Surfel::new(position, normal, size, r.gathered, r.rel_std_error)
-                    {
-                        image.describe(texel.page, (x, y), s);
-                    }
-                }
-            } else if texel.flags & FLAG_INSIDE != 0 {
-                let [x, y] = texel.pixel.map(u32::from);
-                image.mark_inside(texel.page, (x, y));
-            }
-        }
-        texels.release_tile(t);
-    }
-    let previous = image
-        .finish(scene, texels.triangles())
-        .map_err(|e| file_error(&e.path, e.what))?;
+    let source = ResultTiles {
+        texels,
+        results: &results,
+        direct: direct.as_ref(),
+        filter: target.filter > 0,
+    };
+    let build = || {
+        PreviousPass::build(
+            target.path,
+            texels.pages(),
+            &source,
+            target.filter,
+            scene,
+            texels.triangles(),
+        )
+    };
+    let built = match rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .thread_name(|i| format!("guidebake-pass-image-{i}"))
+        .build()
+    {
+        Ok(pool) => pool.install(build),
+        Err(_) => build(),
+    };
+    let previous = built.map_err(|e| match e {
+        BuildError::Image(e) => file_error(&e.path, e.what),
+        BuildError::Source(e) => e,
+    })?;
     report.seconds.previous_pass_images += clock.elapsed().as_secs_f64();
+    report.pass_image_bytes = report.pass_image_bytes.max(previous.bytes());
     Ok(previous)
+}
+
+/// A pass's results, tile by tile of the texel file, as a pass image's source: each baked
+/// texel's gather-only layer and its total (with the direct pass's, where the pass borrowed
+/// it), and the texels inside geometry.
+struct ResultTiles<'a> {
+    texels: &'a TexelFile,
+    results: &'a ResultFile,
+    direct: Option<&'a ResultFile>,
+    /// Whether the lookups' filter needs each texel's surfel.
+    filter: bool,
+}
+
+impl Source for ResultTiles<'_> {
+    type Error = BakeError;
+
+    fn tile_count(&self) -> usize {
+        self.texels.tiles().len()
+    }
+
+    fn bounds(&self) -> (u64, u64) {
+        let cells = |from: u32, len: u32| u64::from((from + len).div_ceil(CELL) - from / CELL);
+        let blocks = self
+            .texels
+            .tiles()
+            .iter()
+            .map(|t| cells(t.x, t.width) * cells(t.y, t.height))
+            .sum();
+        (blocks, self.texels.header().texel_count)
+    }
+
+    fn read_tile(&self, tile: usize, out: &mut Vec<SourceTexel>) -> Result<u32, BakeError> {
+        let record = &self.texels.tiles()[tile];
+        let n = record.texel_count as usize;
+        let mut results = vec![TexelResult::default(); n];
+        self.results.read(record.first_texel, &mut results)?;
+        let mut direct = vec![TexelResult::default(); n];
+        if let Some(d) = self.direct {
+            d.read(record.first_texel, &mut direct)?;
+        }
+        out.clear();
+        let tile_texels = self.texels.tile_texels(tile).iter().zip(&results);
+        for ((texel, r), d) in tile_texels.zip(&direct) {
+            let baked = r.flags & FLAG_BAKED != 0;
+            let inside = !baked && texel.flags & FLAG_INSIDE != 0;
+            if !baked && !inside {
+                continue;
+            }
+            let surfel = (baked && self.filter)
+                .then(|| {
+                    let (position, normal) = (texel.position(), texel.normal());
+                    Surfel::new(
+                        position,
+                        normal,
+                        texel.spacing(),
+                        r.gathered,
+                        r.rel_std_error,
+                    )
+                })
+                .flatten();
+            out.push(SourceTexel {
+                pixel: (u32::from(texel.pixel[0]), u32::from(texel.pixel[1])),
+                baked,
+                filled: false,
+                inside,
+                gathered: r.gathered,
+                total: core::array::from_fn(|c| r.total[c] + d.total[c]),
+                surfel,
+            });
+        }
+        self.texels.release_tile(tile);
+        Ok(record.page)
+    }
 }
 
 /// The spatial budget of a pass after `sources`' gather pass ([`SpatialBudget`]).

@@ -103,6 +103,22 @@ fn filtered(
     radius: usize,
 ) -> Vec3 {
     let me = page[y * width + x];
+    filtered_at(&me, (x, y), (width, height), radius, |nx, ny| {
+        page[ny * width + nx]
+    })
+}
+
+/// [`filtered`] of texel `me` at (`x`, `y`) on a page of `width` × `height`, its neighbours
+/// given by `at(column, row)` (called on the page only; a surfel that is not baked where no
+/// texel is): the pass image's build reads them through its cell table
+/// (`transport/pass_image.rs`), the same arithmetic in the same order.
+pub fn filtered_at(
+    me: &Surfel,
+    (x, y): (usize, usize),
+    (width, height): (usize, usize),
+    radius: usize,
+    at: impl Fn(usize, usize) -> Surfel,
+) -> Vec3 {
     let (p, n) = (Vec3::from(me.position), Vec3::from(me.normal));
     let lum = luminance(Vec3::from(me.gathered));
     let spread = 0.75 * radius as f32;
@@ -113,7 +129,7 @@ fn filtered(
         if nx >= width || ny >= height {
             return None;
         }
-        let other = page[ny * width + nx];
+        let other = at(nx, ny);
         if !other.is_baked() || Vec3::from(other.normal).dot(n) < NORMAL_COS {
             return None;
         }

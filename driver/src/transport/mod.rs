@@ -23,6 +23,7 @@ pub mod emitters;
 pub mod light_tree;
 pub mod lights;
 pub mod lookup_filter;
+pub mod pass_image;
 pub mod path;
 pub mod rng;
 pub mod series;

@@ -30,16 +30,22 @@
 //! caller connects the hit's direct light and carries the rest one bounce on, to where the pass
 //! before the previous one is read by the same rules (`transport/path.rs`).
 //!
-//! [`PreviousPass`] holds one dense RGB image per atlas page, in a file of the work directory
-//! that is memory-mapped (file-backed pages, not anonymous memory), written by
-//! [`PreviousPassWriter`]: pixels of baked texels first, then [`DILATION`] rings of
-//! dilation. Lookups are bilinear over the baked pixels among the four (weights
-//! renormalised), over the dilated ones only where none is baked.
+//! [`PreviousPass`] holds the pass's image: only the pixels that hold texels, both layers in
+//! 12 bytes, found through a table of 8×8-pixel cells per page (`transport/pass_image.rs`),
+//! in a file of the work directory that is memory-mapped (file-backed pages, not anonymous
+//! memory) and built on every core straight from the pass's result files
+//! ([`PreviousPass::build`]; its source is `bake/run.rs`'s `ResultTiles`), or by
+//! [`PreviousPassWriter`] from pixels set one by one (tests). Lookups are bilinear over the baked pixels among the four (weights
+//! renormalised). The bake's images hold no dilation: a lookup is read only where the texel
+//! under it is baked, and then only baked pixels count; [`PreviousPass::from_pixels`] (a baked
+//! lightmap, for `render`) dilates [`DILATION`] rings, which a lookup reads where none of its
+//! four pixels is baked.
 //!
 //! Deviations and limits: detail finer than a texel where the texels agree — soft shadows,
 //! gradients within [`SMOOTH_RATIO`] — is averaged (the lightmap's resolution error, which
 //! the `path` transport does not have).
 
+use std::collections::BTreeMap;
 use std::fs::{File, OpenOptions};
 use std::path::{Path, PathBuf};
 
@@ -49,7 +55,10 @@ use memmap2::{Mmap, MmapMut};
 use crate::scene::Scene;
 use crate::texels::{PageRecord, TriangleRecord};
 use crate::transport::emitters::luminance;
-use crate::transport::lookup_filter::{Surfel, filter_page};
+use crate::transport::lookup_filter::Surfel;
+use crate::transport::pass_image::{
+    self, Built, CELL, FilterSlot, Layout, Source, SourceTexel, View,
+};
 
 /// Rings of pixels filled around every chart from their covered neighbours.
 pub const DILATION: u32 = 4;
@@ -74,9 +83,10 @@ pub const NEAR_FIELD_TEXELS: f32 = 4.0;
 /// (docs/series.md, "Why guiding gained little on the level").
 pub const NEAR_PATH_TEXELS: f32 = 1.0;
 
-/// One pixel of a pass image: gather-only irradiance (0..3), its generation (3; 0: empty,
-/// 1: a baked texel, g + 1: filled by dilation ring g), total irradiance (4..7), and 1 where a
-/// texel inside geometry lies (7; its values are the dilation's).
+/// One pixel of a dense image before it is packed ([`PreviousPass::from_pixels`]):
+/// gather-only irradiance (0..3), its generation (3; 0: empty, 1: a baked texel, g + 1:
+/// filled by dilation ring g), total irradiance (4..7), and 1 where a texel inside geometry
+/// lies (7).
 type Pixel = [f32; 8];
 
 /// Index of the generation in a [`Pixel`].
@@ -124,20 +134,28 @@ struct TriangleUv {
     front: bool,
 }
 
-/// The pixel images' bytes: a memory-mapped file, or a buffer (tests).
+/// An image's bytes: a memory-mapped file, or a buffer (memory images).
 #[derive(Debug)]
 enum Storage {
     Mapped(Mmap),
-    Owned(Vec<Pixel>),
+    Owned(Vec<u64>),
+}
+
+impl Storage {
+    fn bytes(&self) -> &[u8] {
+        match self {
+            Storage::Mapped(m) => &m[..],
+            Storage::Owned(v) => bytemuck::cast_slice(v),
+        }
+    }
 }
 
 /// The previous pass's irradiance, looked up by triangle and barycentrics.
 #[derive(Debug)]
 pub struct PreviousPass {
     storage: Storage,
-    pages: Vec<PageRecord>,
-    /// First pixel of each page in the storage.
-    offsets: Vec<usize>,
+    layout: Layout,
+    built: Built,
     triangles: Vec<Option<TriangleUv>>,
     /// The series pass it holds.
     pass: u32,
@@ -153,14 +171,13 @@ pub struct PassImageError {
     pub what: String,
 }
 
-fn page_offsets(pages: &[PageRecord]) -> (Vec<usize>, usize) {
-    let mut offsets = Vec::with_capacity(pages.len());
-    let mut total = 0usize;
-    for p in pages {
-        offsets.push(total);
-        total += p.width as usize * p.height as usize;
-    }
-    (offsets, total)
+/// Why a pass image could not be built: its file, or its source.
+#[derive(Debug)]
+pub enum BuildError<E> {
+    /// Writing or mapping the image failed.
+    Image(PassImageError),
+    /// The source could not be read.
+    Source(E),
 }
 
 /// Each triangle's page and pixel-space corners, from the texel file's triangle table (the
@@ -192,44 +209,126 @@ fn triangle_uvs(scene: &Scene, records: &[TriangleRecord]) -> Vec<Option<Triangl
 
 impl PreviousPass {
     /// A lightmap held in memory: `images[p]` is page `p`'s pixels, row-major, RGB, `None`
-    /// for a pixel no texel covers; both layers hold it. For rendering a baked lightmap, and
-    /// tests.
+    /// for a pixel no texel covers; both layers hold it, and [`DILATION`] rings around the
+    /// covered pixels are filled. For rendering a baked lightmap, and tests.
+    ///
+    /// # Panics
+    /// If the pages hold 2³² − 2 pixels or more with a value (the image's 32-bit indices).
     pub fn from_pixels(
         scene: &Scene,
         triangles: &[TriangleRecord],
         pages: &[PageRecord],
         images: &[Vec<Option<Vec3>>],
     ) -> Self {
-        let (offsets, total) = page_offsets(pages);
-        let mut pixels = vec![[0.0; 8]; total];
-        for (p, image) in images.iter().enumerate() {
-            for (i, px) in image.iter().enumerate() {
-                if let Some(c) = px {
-                    pixels[offsets[p] + i] = [c.x, c.y, c.z, 1.0, c.x, c.y, c.z, 0.0];
+        let dense: Vec<Vec<Pixel>> = pages
+            .iter()
+            .enumerate()
+            .map(|(p, size)| {
+                let n = size.width as usize * size.height as usize;
+                let mut pixels = vec![[0.0; 8]; n];
+                for (px, c) in pixels.iter_mut().zip(images.get(p).into_iter().flatten()) {
+                    if let Some(c) = c {
+                        *px = [c.x, c.y, c.z, 1.0, c.x, c.y, c.z, 0.0];
+                    }
                 }
-            }
-        }
-        let mut pass = Self {
-            storage: Storage::Owned(Vec::new()),
-            pages: pages.to_vec(),
-            offsets,
+                dilate(&mut pixels, *size);
+                pixels
+            })
+            .collect();
+        let source = DenseSource::new(pages, &dense);
+        let (blocks, texels) = source.bounds();
+        let layout = Layout::new(pages, blocks, texels).expect("a memory image within u32 texels");
+        let mut words = vec![0u64; layout.bytes() / 8];
+        let Ok(built) =
+            pass_image::build(&layout, &source, bytemuck::cast_slice_mut(&mut words), None);
+        Self {
+            storage: Storage::Owned(words),
+            layout,
+            built,
             triangles: triangle_uvs(scene, triangles),
             pass: 0,
-        };
-        for (p, size) in pages.iter().enumerate() {
-            let o = pass.offsets[p];
-            let n = size.width as usize * size.height as usize;
-            dilate(&mut pixels[o..o + n], *size);
         }
-        pass.storage = Storage::Owned(pixels);
-        pass
     }
 
-    fn pixels(&self) -> &[Pixel] {
-        match &self.storage {
-            Storage::Mapped(m) => bytemuck::cast_slice(&m[..]),
-            Storage::Owned(v) => v,
+    /// Builds the image of `source` (its gathered light filtered over `filter` texels; 0:
+    /// none) into a file at `path`, on the current rayon pool, and maps it. The filter's
+    /// scratch lies beside it (`.surfels`, removed when done).
+    ///
+    /// # Errors
+    /// [`BuildError::Image`] when a file cannot be created, sized, mapped or removed, or the
+    /// source holds more than 32-bit indices reach; [`BuildError::Source`] when it cannot be
+    /// read.
+    pub fn build<S: Source>(
+        path: &Path,
+        pages: &[PageRecord],
+        source: &S,
+        filter: u32,
+        scene: &Scene,
+        triangles: &[TriangleRecord],
+    ) -> Result<Self, BuildError<S::Error>> {
+        let err = |path: &Path, what: String| {
+            BuildError::Image(PassImageError {
+                path: path.to_owned(),
+                what,
+            })
+        };
+        let (blocks, texels) = source.bounds();
+        let layout = Layout::new(pages, blocks, texels).ok_or_else(|| {
+            err(
+                path,
+                format!("{texels} texels: more than one pass image holds (2^32 - 2)"),
+            )
+        })?;
+        let (file, mut map) =
+            create_mapped(path, layout.bytes(), "pass image").map_err(BuildError::Image)?;
+        let scratch = path.with_extension("surfels");
+        let built = if filter > 0 {
+            let bytes = texels as usize * size_of::<FilterSlot>();
+            let (_, mut slots) = create_mapped(&scratch, bytes, "lookup filter's texel file")
+                .map_err(BuildError::Image)?;
+            let slots: &mut [FilterSlot] = bytemuck::cast_slice_mut(&mut slots[..bytes]);
+            let built = pass_image::build(&layout, source, &mut map, Some((filter, slots)));
+            std::fs::remove_file(&scratch).map_err(|e| {
+                err(
+                    &scratch,
+                    format!("cannot remove the lookup filter's texel file: {e}"),
+                )
+            })?;
+            built
+        } else {
+            pass_image::build(&layout, source, &mut map, None)
         }
+        .map_err(BuildError::Source)?;
+        // No flush: the file is this run's scratch, read back through the page cache.
+        drop(map);
+        let used = built.bytes(&layout).max(8) as u64;
+        file.set_len(used).map_err(|e| {
+            err(
+                path,
+                format!("cannot cut the pass image to {used} bytes: {e}"),
+            )
+        })?;
+        // SAFETY: the file was created by this process in its own work directory and is not
+        // resized or written through any other handle while mapped (the work directory's
+        // invariant, crate::output); it is at least `built.bytes` long, which `View` checks.
+        let map = unsafe { Mmap::map(&file) }
+            .map_err(|e| err(path, format!("cannot remap the pass image: {e}")))?;
+        Ok(Self {
+            storage: Storage::Mapped(map),
+            layout,
+            built,
+            triangles: triangle_uvs(scene, triangles),
+            pass: 0,
+        })
+    }
+
+    fn view(&self) -> View<'_> {
+        View::new(&self.layout, self.built, self.storage.bytes())
+    }
+
+    /// Bytes the image holds (its file's length, for a mapped one).
+    pub fn bytes(&self) -> u64 {
+        self.built.bytes(&self.layout) as u64
     }
 
     /// The same image, holding series pass `pass` (0: the direct pass): its light has made
@@ -265,19 +364,11 @@ impl PreviousPass {
     /// `page` (its total less its gather-only layer: the direct pass's estimate, which every
     /// later pass borrows); 0 where no texel was baked there.
     pub fn direct_luminance_at(&self, page: u32, pixel: [u32; 2]) -> f32 {
-        let Some(size) = self.pages.get(page as usize) else {
-            return 0.0;
-        };
-        let [x, y] = pixel;
-        if x >= size.width || y >= size.height {
+        let tap = self.view().tap(page, pixel[0], pixel[1]);
+        if !tap.baked {
             return 0.0;
         }
-        let px = self.pixels()[self.offsets[page as usize] + (y * size.width + x) as usize];
-        if px[GENERATION] != 1.0 {
-            return 0.0;
-        }
-        let direct = Vec3::new(px[4] - px[0], px[5] - px[1], px[6] - px[2]);
-        luminance(direct).max(0.0)
+        luminance(tap.total - tap.gathered).max(0.0)
     }
 
     /// Whether triangle `prim`'s texels bake its winding's `front` side (or its back, when
@@ -310,12 +401,11 @@ impl PreviousPass {
     /// a hit inside a chart never reads one. [`Lookup::baked`] only where the pixel the point
     /// lies in is baked and no pixel with weight is marked inside geometry.
     fn bilinear(&self, page: u32, uv: Vec2) -> Lookup {
-        let Some(size) = self.pages.get(page as usize) else {
+        let view = self.view();
+        let Some((w, h)) = self.layout.page_size(page) else {
             return Lookup::default();
         };
-        let pixels = self.pixels();
-        let base = self.offsets[page as usize];
-        let (w, h) = (size.width as i64, size.height as i64);
+        let (w, h) = (i64::from(w), i64::from(h));
         let p = uv - Vec2::splat(0.5);
         if !p.is_finite() {
             return Lookup::default();
@@ -331,23 +421,16 @@ impl PreviousPass {
         .map(|(dx, dy, wgt)| {
             let x = (x0 as i64 + dx).clamp(0, w - 1);
             let y = (y0 as i64 + dy).clamp(0, h - 1);
-            (pixels[base + (y * w + x) as usize], wgt)
+            (view.tap(page, x as u32, y as u32), wgt)
         });
-        let any_baked = taps
-            .iter()
-            .any(|(px, wgt)| px[GENERATION] == 1.0 && *wgt > 0.0);
+        let any_baked = taps.iter().any(|(px, wgt)| px.baked && *wgt > 0.0);
         let (mut gathered, mut total, mut weight) = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
         let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
         let (mut glo, mut ghi) = (f32::INFINITY, 0.0f32);
         for (px, wgt) in taps {
-            let usable = if any_baked {
-                px[GENERATION] == 1.0
-            } else {
-                px[GENERATION] > 0.0
-            };
+            let usable = if any_baked { px.baked } else { px.filled };
             if usable && wgt > 0.0 {
-                let t = Vec3::new(px[4], px[5], px[6]);
-                let g = Vec3::new(px[0], px[1], px[2]);
+                let (t, g) = (px.total, px.gathered);
                 gathered += g * wgt;
                 (glo, ghi) = (glo.min(luminance(g)), ghi.max(luminance(g)));
                 total += t * wgt;
@@ -363,8 +446,8 @@ impl PreviousPass {
         let nearest = taps
             .iter()
             .fold(taps[0], |n, t| if t.1 > n.1 { *t } else { n });
-        let inside = taps.iter().any(|(px, wgt)| px[INSIDE] == 1.0 && *wgt > 0.0);
-        let baked = nearest.0[GENERATION] == 1.0 && !inside;
+        let inside = taps.iter().any(|(px, wgt)| px.inside && *wgt > 0.0);
+        let baked = nearest.0.baked && !inside;
         if weight > 0.0 {
             Lookup {
                 gathered: gathered / weight,
@@ -413,32 +496,25 @@ fn dilate(pixels: &mut [Pixel], size: PageRecord) {
     }
 }
 
-/// Writes a pass image file: [`Self::set`] every baked texel, then [`Self::finish`]. With
-/// [`Self::with_filter`], [`Self::describe`] every baked texel too, and the gathered light is
-/// filtered before the dilation ([`crate::transport::lookup_filter`]).
+/// Writes a pass image file from pixels set one by one: [`Self::set`] every baked texel,
+/// then [`Self::finish`]. With [`Self::with_filter`], [`Self::describe`] every baked texel too,
+/// and the gathered light is filtered ([`crate::transport::lookup_filter`]). Holds the pixels
+/// in memory until then: for tests and small images; the bake builds its images from its
+/// result files ([`PreviousPass::build`]).
 pub struct PreviousPassWriter {
     path: PathBuf,
-    map: MmapMut,
     pages: Vec<PageRecord>,
-    offsets: Vec<usize>,
-    filter: Option<SurfelFile>,
+    texels: BTreeMap<(u32, u32, u32), SourceTexel>,
+    filter: u32,
 }
 
-/// The lookups' filter's texels, in a file beside the pass image (file-backed pages, so a
-/// world of any size keeps bounded memory), removed when the image is finished.
-struct SurfelFile {
-    path: PathBuf,
-    map: MmapMut,
-    radius: u32,
-}
-
-/// Creates (or truncates) a file of `count` zeroed `T`s at `path` and maps it.
-fn create_mapped<T>(path: &Path, count: usize, what: &str) -> Result<MmapMut, PassImageError> {
+/// Creates (or truncates) a file of `bytes` zero bytes (at least 8) at `path` and maps it.
+fn create_mapped(path: &Path, bytes: usize, what: &str) -> Result<(File, MmapMut), PassImageError> {
     let err = |what: String| PassImageError {
         path: path.to_owned(),
         what,
     };
-    let bytes = (count.max(1) * size_of::<T>()) as u64;
+    let bytes = bytes.max(8) as u64;
     let file: File = OpenOptions::new()
         .read(true)
         .write(true)
@@ -451,139 +527,221 @@ fn create_mapped<T>(path: &Path, count: usize, what: &str) -> Result<MmapMut, Pa
     // SAFETY: the file was just created by this process in its own work directory and is
     // not resized or written through any other handle while mapped (the work directory's
     // invariant, crate::output).
-    unsafe { MmapMut::map_mut(&file) }.map_err(|e| err(format!("cannot map the {what}: {e}")))
+    let map = unsafe { MmapMut::map_mut(&file) }
+        .map_err(|e| err(format!("cannot map the {what}: {e}")))?;
+    Ok((file, map))
 }
 
 impl PreviousPassWriter {
-    /// Creates (or truncates) the image file at `path` for `pages`, zero-filled (sparse).
+    /// A writer of the image file at `path` for `pages` (created by [`Self::finish`]).
     ///
     /// # Errors
-    /// [`PassImageError`] when the file cannot be created, sized or mapped.
+    /// None now; kept for the callers that create files.
     pub fn create(path: &Path, pages: &[PageRecord]) -> Result<Self, PassImageError> {
-        let (offsets, total) = page_offsets(pages);
-        let map = create_mapped::<Pixel>(path, total, "pass image")?;
         Ok(Self {
             path: path.to_owned(),
-            map,
             pages: pages.to_vec(),
-            offsets,
-            filter: None,
+            texels: BTreeMap::new(),
+            filter: 0,
         })
     }
 
-    /// Filters the gathered light over `radius` texels before the image is finished (0: no
-    /// filter), from the texels [`Self::describe`] records in a file beside the image
-    /// (`.surfels`).
+    /// Filters the gathered light over `radius` texels when the image is finished (0: no
+    /// filter), from the texels [`Self::describe`] records.
     ///
     /// # Errors
-    /// [`PassImageError`] when that file cannot be created, sized or mapped.
+    /// None now; kept for the callers.
     pub fn with_filter(mut self, radius: u32) -> Result<Self, PassImageError> {
-        if radius == 0 {
-            return Ok(self);
-        }
-        let path = self.path.with_extension("surfels");
-        let (_, count) = page_offsets(&self.pages);
-        let map = create_mapped::<Surfel>(&path, count, "lookup filter's texel file")?;
-        self.filter = Some(SurfelFile { path, map, radius });
+        self.filter = radius;
         Ok(self)
+    }
+
+    /// The texel at (`x`, `y`) of `page`, if that pixel is on its page.
+    fn texel(&mut self, page: u32, (x, y): (u32, u32)) -> Option<&mut SourceTexel> {
+        let size = self.pages.get(page as usize)?;
+        (x < size.width && y < size.height).then(|| {
+            self.texels.entry((page, y, x)).or_insert(SourceTexel {
+                pixel: (x, y),
+                ..SourceTexel::default()
+            })
+        })
     }
 
     /// Records what the filter needs of texel (`x`, `y`) of page `page`
     /// ([`Self::with_filter`]; nothing without a filter, or off the page).
     pub fn describe(&mut self, page: u32, pixel: (u32, u32), surfel: Surfel) {
-        let (Some(i), Some(filter)) = (self.index(page, pixel), &mut self.filter) else {
-            return;
-        };
-        let surfels: &mut [Surfel] = bytemuck::cast_slice_mut(&mut filter.map[..]);
-        surfels[i] = surfel;
-    }
-
-    /// Where pixel (`x`, `y`) of page `page` lies in the image; `None` off the pages.
-    fn index(&self, page: u32, (x, y): (u32, u32)) -> Option<usize> {
-        let size = self.pages.get(page as usize)?;
-        (x < size.width && y < size.height)
-            .then(|| self.offsets[page as usize] + (y * size.width + x) as usize)
+        if self.filter > 0
+            && let Some(t) = self.texel(page, pixel)
+        {
+            t.surfel = Some(surfel);
+        }
     }
 
     /// Records texel (`x`, `y`) of page `page`: its gather-only and total irradiance.
     /// Non-finite values and pixels off the page are ignored.
     pub fn set(&mut self, page: u32, pixel: (u32, u32), gathered: [f32; 3], total: [f32; 3]) {
         let finite = gathered.iter().chain(&total).all(|c| c.is_finite());
-        let (Some(i), true) = (self.index(page, pixel), finite) else {
-            return;
-        };
-        let pixels: &mut [Pixel] = bytemuck::cast_slice_mut(&mut self.map[..]);
-        let [g, t] = [gathered, total];
-        pixels[i] = [g[0], g[1], g[2], 1.0, t[0], t[1], t[2], 0.0];
+        if let (true, Some(t)) = (finite, self.texel(page, pixel)) {
+            (t.baked, t.gathered, t.total) = (true, gathered, total);
+        }
     }
 
-    /// Marks texel (`x`, `y`) of page `page` as lying inside geometry: not baked, filled by
-    /// the dilation, and a lookup with weight on it is not read ([`Lookup::baked`]).
+    /// Marks texel (`x`, `y`) of page `page` as lying inside geometry: not baked, and a
+    /// lookup with weight on it is not read ([`Lookup::baked`]).
     pub fn mark_inside(&mut self, page: u32, pixel: (u32, u32)) {
-        let Some(i) = self.index(page, pixel) else {
-            return;
-        };
-        let pixels: &mut [Pixel] = bytemuck::cast_slice_mut(&mut self.map[..]);
-        pixels[i][INSIDE] = 1.0;
+        if let Some(t) = self.texel(page, pixel) {
+            t.inside = true;
+        }
     }
 
-    /// Dilates every page, flushes, and maps the image for lookups.
+    /// Builds the image file and maps it for lookups.
     ///
     /// # Errors
-    /// [`PassImageError`] when flushing or remapping fails.
+    /// [`PassImageError`] when the file or the filter's scratch cannot be written, mapped or
+    /// removed.
     pub fn finish(
-        mut self,
+        self,
         scene: &Scene,
         triangles: &[TriangleRecord],
     ) -> Result<PreviousPass, PassImageError> {
-        {
-            let pixels: &mut [Pixel] = bytemuck::cast_slice_mut(&mut self.map[..]);
-            for (p, size) in self.pages.iter().enumerate() {
-                let o = self.offsets[p];
-                let n = size.width as usize * size.height as usize;
-                if let Some(filter) = &self.filter {
-                    let surfels: &[Surfel] = bytemuck::cast_slice(&filter.map[..]);
-                    let page = (size.width as usize, size.height as usize);
-                    filter_page(&surfels[o..o + n], page, filter.radius, |i, change| {
-                        let px = &mut pixels[o + i];
-                        // Only where the image holds the texel (`set` refused non-finite ones).
-                        if px[GENERATION] == 1.0 {
-                            for c in 0..3 {
-                                px[c] += change[c];
-                                px[4 + c] += change[c];
-                            }
-                        }
+        // Tiles of one band of cells each.
+        let mut tiles: Vec<(u32, Vec<SourceTexel>)> = Vec::new();
+        for (&(page, y, _), t) in &self.texels {
+            if tiles.last().is_none_or(|(p, band)| {
+                *p != page || band.first().is_some_and(|b| b.pixel.1 / CELL != y / CELL)
+            }) {
+                tiles.push((page, Vec::new()));
+            }
+            tiles.last_mut().expect("pushed above").1.push(*t);
+        }
+        let source = TileList::new(&self.pages, tiles);
+        let image = PreviousPass::build(
+            &self.path,
+            &self.pages,
+            &source,
+            self.filter,
+            scene,
+            triangles,
+        );
+        image.map_err(|e| match e {
+            BuildError::Image(e) => e,
+            BuildError::Source(never) => match never {},
+        })
+    }
+}
+
+/// A source held in memory: tiles of one band of cells of one page each.
+struct TileList {
+    tiles: Vec<(u32, Vec<SourceTexel>)>,
+    blocks: u64,
+    texels: u64,
+}
+
+impl TileList {
+    fn new(pages: &[PageRecord], tiles: Vec<(u32, Vec<SourceTexel>)>) -> Self {
+        let across = |p: u32| pages.get(p as usize).map_or(0, |s| s.width.div_ceil(CELL));
+        Self {
+            blocks: tiles.iter().map(|(p, _)| u64::from(across(*p))).sum(),
+            texels: tiles.iter().map(|(_, t)| t.len() as u64).sum(),
+            tiles,
+        }
+    }
+}
+
+impl Source for TileList {
+    type Error = std::convert::Infallible;
+
+    fn tile_count(&self) -> usize {
+        self.tiles.len()
+    }
+
+    fn bounds(&self) -> (u64, u64) {
+        (self.blocks, self.texels)
+    }
+
+    fn read_tile(
+        &self,
+        tile: usize,
+        out: &mut Vec<SourceTexel>,
+    ) -> Result<u32, std::convert::Infallible> {
+        let (page, texels) = &self.tiles[tile];
+        out.clear();
+        out.extend_from_slice(texels);
+        Ok(*page)
+    }
+}
+
+/// The source of [`PreviousPass::from_pixels`]: dense, dilated pages, a band of cells a tile.
+struct DenseSource<'a> {
+    pages: &'a [PageRecord],
+    dense: &'a [Vec<Pixel>],
+    /// Every band: page and first row.
+    bands: Vec<(u32, u32)>,
+}
+
+impl<'a> DenseSource<'a> {
+    fn new(pages: &'a [PageRecord], dense: &'a [Vec<Pixel>]) -> Self {
+        let bands = pages
+            .iter()
+            .enumerate()
+            .flat_map(|(p, s)| {
+                (0..s.height)
+                    .step_by(CELL as usize)
+                    .map(move |y| (p as u32, y))
+            })
+            .collect();
+        Self {
+            pages,
+            dense,
+            bands,
+        }
+    }
+}
+
+impl Source for DenseSource<'_> {
+    type Error = std::convert::Infallible;
+
+    fn tile_count(&self) -> usize {
+        self.bands.len()
+    }
+
+    fn bounds(&self) -> (u64, u64) {
+        let blocks = self
+            .bands
+            .iter()
+            .map(|&(p, _)| u64::from(self.pages[p as usize].width.div_ceil(CELL)))
+            .sum();
+        let content = |px: &&Pixel| px[GENERATION] > 0.0 || px[INSIDE] == 1.0;
+        let texels = self.dense.iter().flatten().filter(content).count() as u64;
+        (blocks, texels)
+    }
+
+    fn read_tile(
+        &self,
+        tile: usize,
+        out: &mut Vec<SourceTexel>,
+    ) -> Result<u32, std::convert::Infallible> {
+        out.clear();
+        let (page, top) = self.bands[tile];
+        let w = self.pages[page as usize].width;
+        let h = self.pages[page as usize].height;
+        for y in top..(top + CELL).min(h) {
+            for x in 0..w {
+                let px = self.dense[page as usize][(y * w + x) as usize];
+                if px[GENERATION] > 0.0 || px[INSIDE] == 1.0 {
+                    out.push(SourceTexel {
+                        pixel: (x, y),
+                        baked: px[GENERATION] == 1.0,
+                        filled: px[GENERATION] > 1.0,
+                        inside: px[INSIDE] == 1.0,
+                        gathered: [px[0], px[1], px[2]],
+                        total: [px[4], px[5], px[6]],
+                        surfel: None,
                     });
                 }
-                dilate(&mut pixels[o..o + n], *size);
             }
         }
-        if let Some(filter) = self.filter.take() {
-            drop(filter.map);
-            std::fs::remove_file(&filter.path).map_err(|e| PassImageError {
-                path: filter.path.clone(),
-                what: format!("cannot remove the lookup filter's texel file: {e}"),
-            })?;
-        }
-        let path = self.path.clone();
-        let err = |what: String| PassImageError {
-            path: path.clone(),
-            what,
-        };
-        self.map
-            .flush()
-            .map_err(|e| err(format!("cannot flush the pass image: {e}")))?;
-        let map = self
-            .map
-            .make_read_only()
-            .map_err(|e| err(format!("cannot remap the pass image: {e}")))?;
-        Ok(PreviousPass {
-            storage: Storage::Mapped(map),
-            pages: self.pages,
-            offsets: self.offsets,
-            triangles: triangle_uvs(scene, triangles),
-            pass: 0,
-        })
+        Ok(page)
     }
 }
 
@@ -667,7 +825,6 @@ mod tests {
             .unwrap()
             .with_filter(2)
             .unwrap();
-        assert!(path.with_extension("surfels").exists());
         // Every pixel of the 4×4 page on one plane: gathered 1 or 3 alternately (noise 2,
         // so they mix), direct light 10 · x on top.
         for i in 0..16u32 {
@@ -684,9 +841,10 @@ mod tests {
             !path.with_extension("surfels").exists(),
             "texel file left behind"
         );
-        let px = image.pixels();
-        for (i, p) in px.iter().enumerate().take(16) {
-            let (g, t) = (p[0], p[4]);
+        let view = image.view();
+        for i in 0..16 {
+            let p = view.tap(0, i % 4, i / 4);
+            let (g, t) = (p.gathered.x, p.total.x);
             // The page's corners have no texel opposite them in the window: left alone.
             let corner = matches!((i % 4, i / 4), (0 | 3, 0 | 3));
             assert!(
@@ -695,7 +853,7 @@ mod tests {
                 !corner
             );
             assert!(
-                (t - g - 10.0 * (i % 4) as f32).abs() < 1e-4,
+                (t - g - 10.0 * (i % 4) as f32).abs() < 1e-3,
                 "pixel {i}: direct moved"
             );
         }
@@ -710,9 +868,10 @@ mod tests {
             (0, 0),
             Surfel::new(Vec3::ZERO, Vec3::Z, 1.0, [1.0; 3], 1.0).unwrap(),
         );
-        assert!(!path.with_extension("surfels").exists());
         let image = w.finish(&scene, &meshes).unwrap();
-        assert_eq!((image.pixels()[0][0], image.pixels()[0][4]), (1.0, 2.0));
+        assert!(!path.with_extension("surfels").exists());
+        let p = image.view().tap(0, 0, 0);
+        assert_eq!((p.gathered.x, p.total.x), (1.0, 2.0));
     }
 
     #[test]
@@ -778,10 +937,10 @@ mod tests {
         }
         w.mark_inside(0, (9, 9));
         let pass = w.finish(&scene, &triangles).unwrap();
-        // The dilation fills the inside texels and keeps their mark.
-        let px = pass.pixels()[4 + 1];
-        assert!(px[GENERATION] > 1.0 && px[INSIDE] == 1.0, "{px:?}");
-        assert_eq!(pass.pixels()[4 + 2][INSIDE], 0.0);
+        // The inside texels are marked, and hold no value: the bake's image is not dilated.
+        let px = pass.view().tap(0, 1, 1);
+        assert!(px.inside && !px.filled && !px.baked, "{px:?}");
+        assert!(!pass.view().tap(0, 2, 1).inside);
         // In column 2 but with weight on column 1: not read, though every baked tap agrees.
         let l = pass.bilinear(0, Vec2::new(2.2, 1.5));
         assert!(!l.baked && !l.smooth && !l.gathered_smooth, "{l:?}");

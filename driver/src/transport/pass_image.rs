@@ -1,0 +1,797 @@
+//! How a series pass image is stored ([`super::series::PreviousPass`]; docs/series.md, "The
+//! pass image: only what is baked"): only the pixels that hold texels, each in 12 bytes,
+//! found through a table of 8×8-pixel cells per page, and built on every core straight from
+//! the pass's texels.
+//!
+//! - **Cells.** Each page is cut into [`CELL`]×[`CELL`]-pixel cells; a table holds, per cell,
+//!   the last of its [`Block`]s (0: none). A block is what one source tile (a texel file's
+//!   tile) holds of one cell: 64-bit masks of its baked, dilated-only and inside-geometry
+//!   pixels, and where its colours start. Tiles do not overlap, so the blocks of one cell (a
+//!   cell cut by tile edges) hold disjoint pixels; they are chained, each to an earlier one.
+//! - **Colours.** One per baked or dilated pixel, in block order and within a block in pixel
+//!   (bit) order, so pixel `i` of a block is colour `first + popcount(mask below i)`. A colour
+//!   is both layers (gather-only, total), each RGB in 48 bits ([`pack_rgb`]: three 14-bit
+//!   mantissas under one 6-bit exponent; the largest channel within 2⁻¹⁴ = 6.1e-5 of its
+//!   value, the smaller ones within that much of the largest, 2⁻³² to 4.3·10⁹). Half floats
+//!   (rounding up to 2⁻¹¹ of a value, at most 65 504) could put 2.4·10⁻⁴ of error into the
+//!   closed rooms' texels, whose checks allow 10⁻⁴, and clip a bright sun (not tried);
+//!   RGB9E5 (2⁻⁹) more so.
+//! - **Build.** [`build`] reads the source tile by tile in chunks (a few tiles per thread),
+//!   every tile of a chunk on its own rayon worker, and appends their blocks and colours in
+//!   tile order: the bytes do not depend on the thread count. With the lookups' filter a
+//!   second parallel step replaces each baked colour by its filtered value
+//!   ([`crate::transport::lookup_filter`]), reading the neighbours through the table from a
+//!   scratch array of one [`FilterSlot`] per colour.
+//!
+//! The file is the work directory's (written and read by one process; rebuilt by each run),
+//! so its layout is in memory ([`Layout`], [`Built`]), not in a header.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::texels::PageRecord;
+use crate::transport::lookup_filter::{Surfel, filtered_at};
+
+/// Edge of a cell in pixels: one cell's pixels are one 64-bit mask.
+pub const CELL: u32 = 8;
+
+/// Tiles read per parallel step of the build, per worker thread: bounds its buffers (per
+/// thread about 0.1 MB a tile, 0.6 MB with the filter's slots, for 1 024-texel tiles)
+/// whatever the world's size. 256 tiles a step held 34 MB of anonymous memory with the filter,
+/// more than the whole bake of a 10⁶-texel world.
+const CHUNK_TILES_PER_THREAD: usize = 4;
+
+/// Both layers of one pixel: gather-only RGB (0..3) and total RGB (3..6), each [`pack_rgb`].
+pub type Packed = [u16; 6];
+
+/// What one source tile holds of one cell.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Block {
+    /// Pixels holding a baked texel (one colour each).
+    pub baked: u64,
+    /// Pixels holding a dilated value only (one colour each; memory images for `render`).
+    pub filled: u64,
+    /// Pixels of texels inside geometry.
+    pub inside: u64,
+    /// Colour of the block's first baked or dilated pixel.
+    pub first: u32,
+    /// The cell's previous block, plus one (0: none); always an earlier block.
+    pub next: u32,
+    /// The page.
+    pub page: u32,
+    /// The cell, row-major within its page.
+    pub cell: u32,
+}
+
+/// What the filter's second step needs of a baked pixel: its texel as the filter sees it
+/// (`baked` 0 where the texel has none, and then it is neither filtered nor a neighbour), its
+/// gathered light unquantised (in the surfel) and its total.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FilterSlot {
+    /// The texel for the filter; its `gathered` is the pixel's even where `baked` is 0.
+    pub surfel: Surfel,
+    /// Total irradiance, unquantised.
+    pub total: [f32; 3],
+    _pad: u32,
+}
+
+/// Mantissa bits per channel of [`pack_rgb`].
+const MANTISSA_BITS: i32 = 14;
+/// Bias of [`pack_rgb`]'s 6-bit exponent: stored 0..=63 is 2^(−32..=31).
+const EXPONENT_BIAS: i32 = 32;
+/// The largest value [`pack_rgb`] keeps; larger ones are clamped to it.
+pub const PACKED_MAX: f32 = ((1 << MANTISSA_BITS) - 1) as f32 * (1u64 << 18) as f32;
+
+/// 2^`e` for `e` in the normal range of f32, exactly.
+fn pow2(e: i32) -> f32 {
+    debug_assert!((-126..=127).contains(&e));
+    f32::from_bits(((e + 127) as u32) << 23)
+}
+
+/// RGB in 48 bits: three 14-bit mantissas and a 6-bit exponent shared by the channels
+/// (bits 0–13 red, 14–27 green, 28–41 blue, 42–47 the exponent + 32), each channel
+/// `m · 2^(e − 13)` with the largest channel's `m` in [2¹³, 2¹⁴) where it can be. Rounds to
+/// nearest; negative values and NaN become 0, values above [`PACKED_MAX`] (and ∞) that;
+/// below 2⁻⁴⁶ values round to 0. Deterministic: a pure function of the bits.
+pub fn pack_rgb(c: [f32; 3]) -> [u16; 3] {
+    // `v > 0.0` is false for NaN and negatives.
+    let c = c.map(|v| if v > 0.0 { v.min(PACKED_MAX) } else { 0.0 });
+    let max = c[0].max(c[1]).max(c[2]);
+    if max == 0.0 {
+        return [0; 3];
+    }
+    let top = (1u32 << MANTISSA_BITS) as f32;
+    let mut e = (((max.to_bits() >> 23) & 0xff) as i32 - 127).clamp(-EXPONENT_BIAS, 31);
+    let mut scale = pow2(MANTISSA_BITS - 1 - e);
+    if (max * scale).round() >= top {
+        // Rounding carried into the next binade (never at e = 31: `PACKED_MAX` rounds down).
+        e += 1;
+        scale = pow2(MANTISSA_BITS - 1 - e);
+    }
+    let m = c.map(|v| u64::from((v * scale).round() as u32));
+    let bits = m[0] | m[1] << 14 | m[2] << 28 | ((e + EXPONENT_BIAS) as u64) << 42;
+    [bits as u16, (bits >> 16) as u16, (bits >> 32) as u16]
+}
+
+/// The RGB [`pack_rgb`] packed: always finite and ≥ 0.
+pub fn unpack_rgb(p: [u16; 3]) -> Vec3 {
+    let bits = u64::from(p[0]) | u64::from(p[1]) << 16 | u64::from(p[2]) << 32;
+    let e = (bits >> 42) as i32 - EXPONENT_BIAS;
+    let scale = pow2(e - (MANTISSA_BITS - 1));
+    let m = |shift: u32| ((bits >> shift) & 0x3fff) as f32 * scale;
+    Vec3::new(m(0), m(14), m(28))
+}
+
+/// Packs both layers of a pixel.
+pub fn pack(gathered: [f32; 3], total: [f32; 3]) -> Packed {
+    let (g, t) = (pack_rgb(gathered), pack_rgb(total));
+    [g[0], g[1], g[2], t[0], t[1], t[2]]
+}
+
+/// One page's cells in the table.
+#[derive(Clone, Copy, Debug)]
+struct PageCells {
+    base: usize,
+    across: u32,
+    width: u32,
+    height: u32,
+}
+
+/// Where the table, the blocks and the colours lie in an image's bytes.
+#[derive(Clone, Debug)]
+pub struct Layout {
+    pages: Vec<PageCells>,
+    blocks_at: usize,
+    block_bound: usize,
+    colours_at: usize,
+    colour_bound: usize,
+}
+
+impl Layout {
+    /// The layout of an image of `pages` with at most `block_bound` blocks and
+    /// `colour_bound` colours; `None` where they pass what 32-bit indices hold.
+    pub fn new(pages: &[PageRecord], block_bound: u64, colour_bound: u64) -> Option<Self> {
+        let mut cells = 0usize;
+        let pages = pages
+            .iter()
+            .map(|p| {
+                let across = p.width.div_ceil(CELL);
+                let page = PageCells {
+                    base: cells,
+                    across,
+                    width: p.width,
+                    height: p.height,
+                };
+                cells += across as usize * p.height.div_ceil(CELL) as usize;
+                page
+            })
+            .collect();
+        let limit = u64::from(u32::MAX - 1);
+        if block_bound > limit || colour_bound > limit {
+            return None;
+        }
+        let blocks_at = (cells * 4).next_multiple_of(8);
+        let colours_at = blocks_at + block_bound as usize * size_of::<Block>();
+        Some(Self {
+            pages,
+            blocks_at,
+            block_bound: block_bound as usize,
+            colours_at,
+            colour_bound: colour_bound as usize,
+        })
+    }
+
+    /// Width and height of page `page`.
+    pub fn page_size(&self, page: u32) -> Option<(u32, u32)> {
+        self.pages.get(page as usize).map(|p| (p.width, p.height))
+    }
+
+    /// Bytes the build may write: the table, `block_bound` blocks, `colour_bound` colours.
+    pub fn bytes(&self) -> usize {
+        (self.colours_at + self.colour_bound * size_of::<Packed>()).next_multiple_of(8)
+    }
+}
+
+/// What a build wrote: the blocks and colours in use.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Built {
+    /// Blocks written.
+    pub blocks: usize,
+    /// Colours written.
+    pub colours: usize,
+}
+
+impl Built {
+    /// Bytes of the image in use: the rest of [`Layout::bytes`] may be cut off.
+    pub fn bytes(&self, layout: &Layout) -> usize {
+        (layout.colours_at + self.colours * size_of::<Packed>()).next_multiple_of(8)
+    }
+}
+
+/// One pixel as a lookup sees it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Tap {
+    /// A baked texel.
+    pub baked: bool,
+    /// A baked texel or a dilated value.
+    pub filled: bool,
+    /// A texel inside geometry.
+    pub inside: bool,
+    /// Gather-only irradiance (0 where not filled).
+    pub gathered: Vec3,
+    /// Total irradiance (0 where not filled).
+    pub total: Vec3,
+}
+
+/// A finished image's parts, borrowed from its bytes.
+#[derive(Clone, Copy)]
+pub struct View<'a> {
+    layout: &'a Layout,
+    cells: &'a [u32],
+    blocks: &'a [Block],
+    colours: &'a [Packed],
+}
+
+impl<'a> View<'a> {
+    /// The parts of `bytes`, an image of `layout` that [`build`] wrote `built` into.
+    ///
+    /// # Panics
+    /// If `bytes` is shorter than `built` needs, or not 8-byte aligned.
+    pub fn new(layout: &'a Layout, built: Built, bytes: &'a [u8]) -> Self {
+        let cells = layout.pages.last().map_or(0, |p| {
+            p.base + p.across as usize * p.height.div_ceil(CELL) as usize
+        });
+        let blocks_end = layout.blocks_at + built.blocks * size_of::<Block>();
+        let colours_end = layout.colours_at + built.colours * size_of::<Packed>();
+        Self {
+            layout,
+            cells: bytemuck::cast_slice(&bytes[..cells * 4]),
+            blocks: bytemuck::cast_slice(&bytes[layout.blocks_at..blocks_end]),
+            colours: bytemuck::cast_slice(&bytes[layout.colours_at..colours_end]),
+        }
+    }
+
+    /// The block holding pixel (`x`, `y`) of `page` and the pixel's bit in it.
+    fn find(&self, page: u32, x: u32, y: u32) -> Option<(&'a Block, u64)> {
+        let p = self.layout.pages.get(page as usize)?;
+        if x >= p.width || y >= p.height {
+            return None;
+        }
+        let cell = p.base + (y / CELL * p.across + x / CELL) as usize;
+        let bit = 1u64 << ((y % CELL) * CELL + x % CELL);
+        let mut at = *self.cells.get(cell)? as usize;
+        while at > 0 {
+            let b = self.blocks.get(at - 1)?;
+            if (b.baked | b.filled | b.inside) & bit != 0 {
+                return Some((b, bit));
+            }
+            // Chains run to earlier blocks only, so this ends.
+            at = (b.next as usize).min(at - 1);
+        }
+        None
+    }
+
+    /// The colour of a pixel with one: its index.
+    fn colour_index(b: &Block, bit: u64) -> Option<usize> {
+        let with = b.baked | b.filled;
+        (with & bit != 0).then(|| b.first as usize + (with & (bit - 1)).count_ones() as usize)
+    }
+
+    /// Pixel (`x`, `y`) of `page`; an empty tap off the page or where no texel lies.
+    pub fn tap(&self, page: u32, x: u32, y: u32) -> Tap {
+        let Some((b, bit)) = self.find(page, x, y) else {
+            return Tap::default();
+        };
+        let mut tap = Tap {
+            baked: b.baked & bit != 0,
+            filled: (b.baked | b.filled) & bit != 0,
+            inside: b.inside & bit != 0,
+            ..Tap::default()
+        };
+        if let Some(c) = Self::colour_index(b, bit).and_then(|i| self.colours.get(i)) {
+            tap.gathered = unpack_rgb([c[0], c[1], c[2]]);
+            tap.total = unpack_rgb([c[3], c[4], c[5]]);
+        }
+        tap
+    }
+
+    /// The colour index of baked pixel (`x`, `y`) of `page`, if it is one.
+    fn baked_index(&self, page: u32, x: u32, y: u32) -> Option<usize> {
+        let (b, bit) = self.find(page, x, y)?;
+        (b.baked & bit != 0)
+            .then(|| Self::colour_index(b, bit))
+            .flatten()
+    }
+}
+
+/// One texel of a source tile.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SourceTexel {
+    /// Column and row on the tile's page.
+    pub pixel: (u32, u32),
+    /// Baked: its values are read (kept only where finite).
+    pub baked: bool,
+    /// A dilated value, not a texel (memory images).
+    pub filled: bool,
+    /// Inside geometry.
+    pub inside: bool,
+    /// Gather-only irradiance.
+    pub gathered: [f32; 3],
+    /// Total irradiance.
+    pub total: [f32; 3],
+    /// What the lookups' filter knows of it (`None`: not filtered, nor a neighbour).
+    pub surfel: Option<Surfel>,
+}
+
+/// Where an image's texels come from, tile by tile: tiles do not overlap, and each lies on
+/// one page.
+pub trait Source: Sync {
+    /// Why a tile could not be read.
+    type Error: Send;
+    /// Tiles, read in this order.
+    fn tile_count(&self) -> usize;
+    /// At most this many blocks over every tile (the cells each tile's rectangle meets) and
+    /// this many texels.
+    fn bounds(&self) -> (u64, u64);
+    /// Tile `tile`'s page, its texels put in `out` (cleared first).
+    ///
+    /// # Errors
+    /// The source's, when the tile cannot be read.
+    fn read_tile(&self, tile: usize, out: &mut Vec<SourceTexel>) -> Result<u32, Self::Error>;
+}
+
+/// One tile's blocks (`first` counted from the tile's first colour), colours and filter slots.
+#[derive(Default)]
+struct TileOut {
+    page: u32,
+    blocks: Vec<Block>,
+    colours: Vec<Packed>,
+    slots: Vec<FilterSlot>,
+}
+
+/// Groups one tile's texels into blocks, in cell order, and packs their colours.
+fn tile_blocks(
+    layout: &Layout,
+    page: u32,
+    texels: &[SourceTexel],
+    filter: bool,
+    keys: &mut Vec<(u32, u32, u32)>,
+) -> TileOut {
+    let mut out = TileOut {
+        page,
+        ..TileOut::default()
+    };
+    let Some(p) = layout.pages.get(page as usize) else {
+        return out;
+    };
+    keys.clear();
+    for (i, t) in texels.iter().enumerate() {
+        let (x, y) = t.pixel;
+        let finite = t.gathered.iter().chain(&t.total).all(|c| c.is_finite());
+        let coloured = (t.baked || t.filled) && finite;
+        if x < p.width && y < p.height && (coloured || t.inside) {
+            let cell = y / CELL * p.across + x / CELL;
+            keys.push((cell, (y % CELL) * CELL + x % CELL, i as u32));
+        }
+    }
+    keys.sort_unstable();
+    // A pixel given twice keeps its first texel.
+    keys.dedup_by_key(|k| (k.0, k.1));
+    for &(cell, bit, i) in keys.iter() {
+        if out.blocks.last().is_none_or(|b| b.cell != cell) {
+            out.blocks.push(Block {
+                first: out.colours.len() as u32,
+                page,
+                cell,
+                ..Block::default()
+            });
+        }
+        let block = out.blocks.last_mut().expect("pushed above");
+        let t = &texels[i as usize];
+        let bit = 1u64 << bit;
+        let finite = t.gathered.iter().chain(&t.total).all(|c| c.is_finite());
+        if t.inside {
+            block.inside |= bit;
+        }
+        if finite && (t.baked || t.filled) {
+            if t.baked {
+                block.baked |= bit;
+            } else {
+                block.filled |= bit;
+            }
+            out.colours.push(pack(t.gathered, t.total));
+            if filter {
+                let mut surfel = t.surfel.filter(|_| t.baked).unwrap_or_default();
+                surfel.gathered = t.gathered;
+                out.slots.push(FilterSlot {
+                    surfel,
+                    total: t.total,
+                    _pad: 0,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Builds the image of `source` into `bytes` (zeroed, [`Layout::bytes`] long, 8-byte
+/// aligned), its baked pixels' gathered light filtered over `filter.0` texels where
+/// `filter` is given, with `filter.1` as scratch (one [`FilterSlot`] per colour bound).
+/// Runs on the current rayon pool; the bytes do not depend on its size.
+///
+/// # Errors
+/// The source's, when a tile cannot be read.
+///
+/// # Panics
+/// If the source holds more blocks or texels than its [`Source::bounds`] said.
+pub fn build<S: Source>(
+    layout: &Layout,
+    source: &S,
+    bytes: &mut [u8],
+    mut filter: Option<(u32, &mut [FilterSlot])>,
+) -> Result<Built, S::Error> {
+    let filtering = filter.as_ref().is_some_and(|f| f.0 > 0);
+    let mut built = Built::default();
+    // Each tile's colours, for the filter's step.
+    let mut tile_colours = Vec::new();
+    let tiles: Vec<usize> = (0..source.tile_count()).collect();
+    let chunk_tiles = CHUNK_TILES_PER_THREAD * rayon::current_num_threads();
+    for chunk in tiles.chunks(chunk_tiles) {
+        let outs: Vec<Result<TileOut, S::Error>> = chunk
+            .par_iter()
+            .map_init(
+                || (Vec::new(), Vec::new()),
+                |(texels, keys), &t| {
+                    let page = source.read_tile(t, texels)?;
+                    Ok(tile_blocks(layout, page, texels, filtering, keys))
+                },
+            )
+            .collect();
+        let (head, colours) = bytes.split_at_mut(layout.colours_at);
+        let (cells, blocks) = head.split_at_mut(layout.blocks_at);
+        let cells: &mut [u32] = bytemuck::cast_slice_mut(cells);
+        let blocks: &mut [Block] = bytemuck::cast_slice_mut(blocks);
+        let colours: &mut [Packed] =
+            bytemuck::cast_slice_mut(&mut colours[..layout.colour_bound * size_of::<Packed>()]);
+        for out in outs {
+            let out = out?;
+            let first = built.colours;
+            let (b, c) = (out.blocks.len(), out.colours.len());
+            assert!(
+                built.blocks + b <= layout.block_bound && first + c <= layout.colour_bound,
+                "a pass image's source holds more than its bounds"
+            );
+            let base = layout.pages[out.page as usize].base;
+            for (i, mut block) in out.blocks.into_iter().enumerate() {
+                let at = built.blocks + i;
+                let cell = &mut cells[base + block.cell as usize];
+                block.first += first as u32;
+                block.next = *cell;
+                *cell = at as u32 + 1;
+                blocks[at] = block;
+            }
+            colours[first..first + c].copy_from_slice(&out.colours);
+            if let Some((_, slots)) = filter.as_mut().filter(|_| filtering) {
+                slots[first..first + c].copy_from_slice(&out.slots);
+            }
+            tile_colours.push((built.blocks..built.blocks + b, first..first + c));
+            built.blocks += b;
+            built.colours += c;
+        }
+    }
+    if let Some((radius, slots)) = filter.filter(|f| f.0 > 0) {
+        filter_colours(layout, built, bytes, &tile_colours, radius, slots);
+    }
+    Ok(built)
+}
+
+/// Replaces each baked colour with a surfel by its filtered value: the filtered gathered
+/// light, and the total moved by as much (the direct light stays), from the unquantised
+/// values in `slots`. Every tile on its own worker, writing its own colours.
+fn filter_colours(
+    layout: &Layout,
+    built: Built,
+    bytes: &mut [u8],
+    tiles: &[(std::ops::Range<usize>, std::ops::Range<usize>)],
+    radius: u32,
+    slots: &[FilterSlot],
+) {
+    let (head, tail) = bytes.split_at_mut(layout.colours_at);
+    let colours: &mut [Packed] =
+        bytemuck::cast_slice_mut(&mut tail[..built.colours * size_of::<Packed>()]);
+    let view = View {
+        layout,
+        cells: bytemuck::cast_slice(&head[..layout.blocks_at]),
+        blocks: bytemuck::cast_slice(
+            &head[layout.blocks_at..layout.blocks_at + built.blocks * size_of::<Block>()],
+        ),
+        colours: &[],
+    };
+    // Every tile's colours, disjoint.
+    let mut rest = colours;
+    let mut work = Vec::with_capacity(tiles.len());
+    for (blocks, range) in tiles {
+        let (mine, later) = rest.split_at_mut(range.len());
+        work.push((blocks.clone(), range.start, mine));
+        rest = later;
+    }
+    work.into_par_iter().for_each(|(blocks, first, mine)| {
+        for b in &view.blocks[blocks] {
+            let p = layout.pages[b.page as usize];
+            let (cx, cy) = (b.cell % p.across * CELL, b.cell / p.across * CELL);
+            let mut mask = b.baked;
+            while mask != 0 {
+                let bit = mask.trailing_zeros();
+                mask &= mask - 1;
+                let slot = View::colour_index(b, 1 << bit).expect("a baked pixel");
+                let me = slots[slot];
+                if me.surfel.baked != 1.0 {
+                    continue;
+                }
+                let (x, y) = ((cx + bit % CELL) as usize, (cy + bit / CELL) as usize);
+                let at = |nx: usize, ny: usize| {
+                    view.baked_index(b.page, nx as u32, ny as u32)
+                        .map_or_else(Surfel::default, |i| slots[i].surfel)
+                };
+                let page = (p.width as usize, p.height as usize);
+                let f = filtered_at(&me.surfel, (x, y), page, radius as usize, at);
+                let change = f - Vec3::from(me.surfel.gathered);
+                let g: [f32; 3] = core::array::from_fn(|c| me.surfel.gathered[c] + change[c]);
+                let t: [f32; 3] = core::array::from_fn(|c| me.total[c] + change[c]);
+                mine[slot - first] = pack(g, t);
+            }
+        }
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packing_keeps_the_largest_channel_within_its_precision_over_the_whole_range() {
+        let mut state = 7u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        for _ in 0..100_000 {
+            // 10⁻⁹ to 10⁹, and channels up to 10⁴ apart.
+            let scale = 10f32.powf(18.0 * next() - 9.0);
+            let c = [next(), next() * 1e-4, next()].map(|v| v * scale);
+            let back = unpack_rgb(pack_rgb(c)).to_array();
+            let max = c[0].max(c[1]).max(c[2]);
+            // Below 2⁻³² the exponent is at its least: steps of 2⁻⁴⁵.
+            let step = (max * 6.11e-5).max(2f32.powi(-46));
+            for (a, b) in c.iter().zip(back) {
+                assert!(
+                    (a - b).abs() <= step,
+                    "{c:?} → {back:?}: channel {a} off by more than 2⁻¹⁴ of {max}"
+                );
+            }
+            let (m, mb) = (max, back[0].max(back[1]).max(back[2]));
+            assert!((m - mb).abs() <= step, "{c:?} → {back:?}");
+        }
+        // Exact where the value fits: 0, small integers, powers of two, sums of a few.
+        for v in [
+            0.0,
+            1.0,
+            3.0,
+            0.5,
+            1024.0,
+            1.0 + 2f32.powi(-13),
+            2f32.powi(-30),
+        ] {
+            assert_eq!(unpack_rgb(pack_rgb([v, v, v])), Vec3::splat(v), "{v}");
+        }
+    }
+
+    #[test]
+    fn packing_clamps_what_it_cannot_hold_and_never_makes_a_non_finite_value() {
+        let cases = [
+            ([-1.0, f32::NAN, 2.0], [0.0, 0.0, 2.0]),
+            ([f32::INFINITY, 1.0, 0.0], [PACKED_MAX, 0.0, 0.0]),
+            ([1e12, 0.0, 0.0], [PACKED_MAX, 0.0, 0.0]),
+            ([1e-20, 0.0, 0.0], [0.0, 0.0, 0.0]),
+            ([f32::MIN_POSITIVE / 2.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+        ];
+        for (c, want) in cases {
+            assert_eq!(unpack_rgb(pack_rgb(c)).to_array(), want, "{c:?}");
+        }
+        // Rounding up into the next binade.
+        let v = 2.0 - 2f32.powi(-20);
+        assert_eq!(unpack_rgb(pack_rgb([v, 0.0, 0.0])).x, 2.0);
+        // Every bit pattern decodes to finite values.
+        for e in 0..64u64 {
+            let bits = 0x3fff | 0x3fff << 14 | 0x3fff << 28 | e << 42;
+            let p = [bits as u16, (bits >> 16) as u16, (bits >> 32) as u16];
+            assert!(unpack_rgb(p).is_finite());
+        }
+    }
+
+    /// A source of one page given as a map from pixel to texel, in tiles of `tile` × `tile`
+    /// pixels (row-major), which need not align with the cells.
+    struct Grid {
+        size: PageRecord,
+        tile: u32,
+        texels: Vec<Option<SourceTexel>>,
+    }
+
+    impl Source for Grid {
+        type Error = ();
+        fn tile_count(&self) -> usize {
+            (self.size.width.div_ceil(self.tile) * self.size.height.div_ceil(self.tile)) as usize
+        }
+        fn bounds(&self) -> (u64, u64) {
+            let cells = (self.tile.div_ceil(CELL) + 1).pow(2);
+            (
+                self.tile_count() as u64 * u64::from(cells),
+                self.texels.len() as u64,
+            )
+        }
+        fn read_tile(&self, tile: usize, out: &mut Vec<SourceTexel>) -> Result<u32, ()> {
+            out.clear();
+            let across = self.size.width.div_ceil(self.tile);
+            let (tx, ty) = (
+                tile as u32 % across * self.tile,
+                tile as u32 / across * self.tile,
+            );
+            for y in ty..(ty + self.tile).min(self.size.height) {
+                for x in tx..(tx + self.tile).min(self.size.width) {
+                    if let Some(t) = self.texels[(y * self.size.width + x) as usize] {
+                        out.push(t);
+                    }
+                }
+            }
+            Ok(0)
+        }
+    }
+
+    fn grid(w: u32, h: u32, tile: u32, texel: impl Fn(u32, u32) -> Option<SourceTexel>) -> Grid {
+        let texels = (0..w * h)
+            .map(|i| {
+                texel(i % w, i / w).map(|t| SourceTexel {
+                    pixel: (i % w, i / w),
+                    ..t
+                })
+            })
+            .collect();
+        Grid {
+            size: PageRecord {
+                width: w,
+                height: h,
+            },
+            tile,
+            texels,
+        }
+    }
+
+    fn build_grid(g: &Grid, filter: u32) -> (Layout, Built, Vec<u64>) {
+        let (blocks, texels) = g.bounds();
+        let layout = Layout::new(&[g.size], blocks, texels).unwrap();
+        let mut words = vec![0u64; layout.bytes() / 8];
+        let mut slots = vec![FilterSlot::default(); texels as usize];
+        let built = build(
+            &layout,
+            g,
+            bytemuck::cast_slice_mut(&mut words),
+            Some((filter, &mut slots)),
+        )
+        .unwrap();
+        (layout, built, words)
+    }
+
+    #[test]
+    fn every_pixel_reads_back_whatever_the_tiles_and_the_thread_count() {
+        // A 37 × 21 page, texels on a pattern, tiles of 5 pixels (cut every cell), a pixel
+        // inside geometry, one baked texel non-finite (dropped), one dilated value.
+        let texel = |x: u32, y: u32| {
+            let v = (x * 100 + y) as f32;
+            let t = SourceTexel {
+                baked: !(x + 2 * y).is_multiple_of(3),
+                inside: x == 7 && y == 3,
+                filled: x == 30 && y == 20,
+                gathered: [v, 0.5 * v, 0.0],
+                total: [2.0 * v, v, 1.0],
+                ..SourceTexel::default()
+            };
+            if x == 11 && y == 11 {
+                return Some(SourceTexel {
+                    gathered: [f32::NAN; 3],
+                    ..t
+                });
+            }
+            (t.baked || t.inside || t.filled).then_some(t)
+        };
+        let g = grid(37, 21, 5, texel);
+        let (layout, built, words) = build_grid(&g, 0);
+        let view = View::new(&layout, built, bytemuck::cast_slice(&words));
+        for y in 0..21 {
+            for x in 0..37 {
+                let tap = view.tap(0, x, y);
+                let want = texel(x, y).filter(|_| (x, y) != (11, 11));
+                let baked = want.is_some_and(|t| t.baked);
+                let filled = want.is_some_and(|t| t.baked || t.filled);
+                assert_eq!((tap.baked, tap.filled), (baked, filled), "({x}, {y})");
+                assert_eq!(tap.inside, (x, y) == (7, 3), "({x}, {y})");
+                if let Some(t) = want.filter(|_| filled) {
+                    assert_eq!(tap.gathered.to_array(), t.gathered, "({x}, {y})");
+                    assert_eq!(tap.total.to_array(), t.total, "({x}, {y})");
+                }
+            }
+        }
+        assert_eq!(view.tap(0, 37, 0), Tap::default());
+        assert_eq!(view.tap(1, 0, 0), Tap::default());
+        // One thread or two: the same bytes.
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let (_, b, w) = pool.install(|| build_grid(&g, 0));
+            assert_eq!((b.blocks, b.colours), (built.blocks, built.colours));
+            assert_eq!(w, words, "{threads} threads");
+        }
+    }
+
+    #[test]
+    fn the_filtered_image_holds_the_dense_filter_s_values() {
+        use crate::transport::lookup_filter::filter_page;
+        // Noisy gathered light on a plane, direct light on top; tiles of 8 and of 5.
+        let value = |x: u32, y: u32| 1.0 + ((x * 7 + y * 13) % 5) as f32 * 0.2;
+        let texel = |x: u32, y: u32| {
+            let g = value(x, y);
+            let s = Surfel::new(
+                Vec3::new(x as f32, y as f32, 0.0),
+                Vec3::Z,
+                1.0,
+                [g; 3],
+                0.3,
+            );
+            Some(SourceTexel {
+                baked: !(x + y).is_multiple_of(7),
+                gathered: [g; 3],
+                total: [g + x as f32; 3],
+                surfel: s,
+                ..SourceTexel::default()
+            })
+            .filter(|t| t.baked)
+        };
+        let (w, h) = (19, 13);
+        let surfels: Vec<Surfel> = (0..w * h)
+            .map(|i| {
+                texel(i % w, i / w)
+                    .and_then(|t| t.surfel)
+                    .unwrap_or_default()
+            })
+            .collect();
+        let mut want: Vec<Vec3> = surfels.iter().map(|s| Vec3::from(s.gathered)).collect();
+        filter_page(&surfels, (w as usize, h as usize), 2, |i, c| want[i] += c);
+        for tile in [8, 5] {
+            let g = grid(w, h, tile, texel);
+            let (layout, built, words) = build_grid(&g, 2);
+            let view = View::new(&layout, built, bytemuck::cast_slice(&words));
+            for y in 0..h {
+                for x in 0..w {
+                    let tap = view.tap(0, x, y);
+                    let Some(t) = texel(x, y) else {
+                        assert!(!tap.filled);
+                        continue;
+                    };
+                    let i = (y * w + x) as usize;
+                    let (g, total) = (want[i], want[i] + Vec3::splat(t.total[0] - t.gathered[0]));
+                    let near =
+                        |a: Vec3, b: Vec3| (a - b).abs().max_element() <= 1e-4 * b.max_element();
+                    assert!(near(tap.gathered, g), "({x}, {y}): {} vs {g}", tap.gathered);
+                    assert!(
+                        near(tap.total, total),
+                        "({x}, {y}): {} vs {total}",
+                        tap.total
+                    );
+                }
+            }
+        }
+    }
+}
