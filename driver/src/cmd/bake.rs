@@ -268,13 +268,13 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
     let files = bake_files(args)?;
     files.check()?;
     super::interrupt::register_outputs(files.outputs());
-    let textures = TextureOptions {
-        max_size: args.max_texture_size,
-    };
-    let (scene, notes) = super::scene::load_lit_scene(&args.scene, textures, &args.lights, true)?;
-    files
-        .reads_each("a file of the scene", &notes.files_read)
-        .check()?;
+    let (scene, notes) = super::scene::load_checked(
+        files,
+        &args.scene,
+        args.max_texture_size,
+        &args.lights,
+        true,
+    )?;
     if TexelFile::peek_header(&args.texels).is_some_and(|h| lights_differ(&h, &scene)) {
         eprintln!(
             "guidebake: warning: {}: prepared under other lights than this bake's (--sun, --sky, the scene's lights or emission differ); prepare decided under those which sides of each surface are baked and which texels lie inside geometry: run prepare again with the same --sun and --sky",

@@ -176,13 +176,13 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
         Some(p) => read_points(p)?,
         None => Vec::new(),
     };
-    let textures = TextureOptions {
-        max_size: args.max_texture_size,
-    };
-    let (scene, notes) = super::scene::load_lit_scene(&args.scene, textures, &args.lights, true)?;
-    files
-        .reads_each("a file of the scene", &notes.files_read)
-        .check()?;
+    let (scene, _) = super::scene::load_checked(
+        files,
+        &args.scene,
+        args.max_texture_size,
+        &args.lights,
+        true,
+    )?;
     let texels = TexelFile::open(&args.texels)?;
     let lightmap = match &args.lightmap {
         Some(path) => Some(Lightmap::load(&texels, &scene, path)?),

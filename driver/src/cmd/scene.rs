@@ -75,3 +75,26 @@ pub fn load_lit_scene(
     }
     Ok((scene, notes))
 }
+
+/// [`load_lit_scene`] with the base-colour textures capped at `max_texture_size`, then
+/// `files` checked again with every file the scene was read from (none may be one of the
+/// command's outputs): what `bake`, `render`, `view` and `probes` do before their work.
+///
+/// # Errors
+/// As [`load_lit_scene`], or a file of the scene that is one of the outputs.
+pub fn load_checked(
+    files: super::files::Files,
+    path: &Path,
+    max_texture_size: u32,
+    lights: &LightFlags,
+    lit: bool,
+) -> Result<(Scene, LoadNotes), super::CmdError> {
+    let textures = TextureOptions {
+        max_size: max_texture_size,
+    };
+    let (scene, notes) = load_lit_scene(path, textures, lights, lit)?;
+    files
+        .reads_each("a file of the scene", &notes.files_read)
+        .check()?;
+    Ok((scene, notes))
+}

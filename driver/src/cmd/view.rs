@@ -116,13 +116,13 @@ pub fn run(args: &ViewArgs) -> Result<(), super::CmdError> {
         })?)
     };
     super::interrupt::register_outputs(files.outputs());
-    let textures = TextureOptions {
-        max_size: args.max_texture_size,
-    };
-    let (scene, notes) = super::scene::load_lit_scene(&args.scene, textures, &args.lights, false)?;
-    files
-        .reads_each("a file of the scene", &notes.files_read)
-        .check()?;
+    let (scene, _) = super::scene::load_checked(
+        files,
+        &args.scene,
+        args.max_texture_size,
+        &args.lights,
+        false,
+    )?;
     let texels = TexelFile::open(&args.texels)?;
     // Each lightmap checked against the texel file and the scene as `render` checks it.
     let mut lightmaps = Vec::new();
