@@ -111,13 +111,6 @@ fn baked(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     (scene, texels, lightmap)
 }
 
-fn temp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("gb-probes-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 /// The irradiance the lightmap holds at floor point (x, 0, z).
 fn floor_irradiance(scene: &Path, texels: &Path, lightmap: &Path, x: f32, z: f32) -> Vec3 {
     let scene = Scene::load(scene).unwrap();
@@ -148,8 +141,9 @@ fn floor_irradiance(scene: &Path, texels: &Path, lightmap: &Path, x: f32, z: f32
 /// inside the block is skipped and counted; the volume textures are written.
 #[test]
 fn a_probe_above_the_floor_reads_the_floors_baked_irradiance() {
-    let dir = temp("floor");
-    let (scene, texels, lightmap) = baked(&dir);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
     let points = dir.join("points.txt");
     std::fs::write(
         &points,
@@ -195,15 +189,15 @@ fn a_probe_above_the_floor_reads_the_floors_baked_irradiance() {
         (ratio - 1.0).abs() < 0.1,
         "probe {probe} vs floor texel {floor}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The lattice places probes over the room and none inside the block or under the floor;
 /// one thread and two write the same bytes; `render --probes --sphere` draws them.
 #[test]
 fn lattice_probes_are_the_same_bytes_on_any_thread_count_and_render() {
-    let dir = temp("lattice");
-    let (scene, texels, lightmap) = baked(&dir);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
     let mut files = Vec::new();
     for threads in ["1", "2"] {
         let out = dir.join(format!("t{threads}.probes"));
@@ -259,7 +253,6 @@ fn lattice_probes_are_the_same_bytes_on_any_thread_count_and_render() {
         "160",
     ]);
     assert!(std::fs::metadata(&view).unwrap().len() > 1000);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Bad input is named, exits 1 or 2, and writes nothing: a points file with a bad line, a
@@ -267,13 +260,14 @@ fn lattice_probes_are_the_same_bytes_on_any_thread_count_and_render() {
 /// and `render --probes` of a damaged probe file.
 #[test]
 fn bad_input_is_named_and_nothing_is_written() {
-    let dir = temp("bad");
-    let (scene, texels, lightmap) = baked(&dir);
-    let before = snapshot(&dir);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
+    let before = snapshot(dir);
     let out = dir.join("x.probes");
     let points = dir.join("bad-points.txt");
     std::fs::write(&points, "1 2 3\n1 two 3\n").unwrap();
-    let before_points = snapshot(&dir);
+    let before_points = snapshot(dir);
     let common = [
         "probes",
         s(&texels),
@@ -294,7 +288,7 @@ fn bad_input_is_named_and_nothing_is_written() {
         e.contains("bad-points.txt:2") && e.contains("`1 two 3`"),
         "{e}"
     );
-    assert_eq!(snapshot(&dir), before_points);
+    assert_eq!(snapshot(dir), before_points);
     std::fs::remove_file(&points).unwrap();
     let e = fails_with(2, &with(&["-o", s(&dir.join("x.exr"))]));
     assert!(e.contains("not an EXR"), "{e}");
@@ -312,7 +306,7 @@ fn bad_input_is_named_and_nothing_is_written() {
         s(&out),
     ]);
     assert!(e.contains("nothing.exr"), "{e}");
-    assert_eq!(snapshot(&dir), before);
+    assert_eq!(snapshot(dir), before);
     let damaged = dir.join("damaged.probes");
     std::fs::write(
         &damaged,
@@ -339,5 +333,4 @@ fn bad_input_is_named_and_nothing_is_written() {
         "{e}"
     );
     assert!(!dir.join("v.png").exists());
-    std::fs::remove_dir_all(&dir).unwrap();
 }

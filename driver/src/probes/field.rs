@@ -88,7 +88,9 @@ impl ProbeField {
     }
 }
 
-fn key(p: Vec3, cell: f32) -> [i32; 3] {
+/// The cell of side `cell` that holds `p`, in a uniform grid from the origin (also the
+/// drawn probes' grid, [`super::view`]).
+pub(crate) fn key(p: Vec3, cell: f32) -> [i32; 3] {
     let k = (p / cell).floor();
     [k.x as i32, k.y as i32, k.z as i32]
 }

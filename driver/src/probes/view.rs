@@ -8,7 +8,7 @@ use std::collections::HashMap;
 
 use glam::Vec3;
 
-use super::field::ProbeField;
+use super::field::{ProbeField, key};
 use super::sh::Sh9;
 use crate::render::Overlay;
 
@@ -182,11 +182,6 @@ impl Overlay for ProbeOverlay {
         let limit = probe.map_or(tmax, |p| p.0);
         self.sphere.and_then(|s| s.hit(org, dir, limit)).or(probe)
     }
-}
-
-fn key(p: Vec3, cell: f32) -> [i32; 3] {
-    let k = (p / cell).floor();
-    [k.x as i32, k.y as i32, k.z as i32]
 }
 
 #[cfg(test)]
