@@ -11,7 +11,7 @@ use exr::prelude::{
 };
 use glam::Vec3;
 
-use super::placement::{CoarseGrid, LEVELS, PlacedProbe};
+use super::placement::CoarseGrid;
 use super::sh::{BAND, COEFFICIENTS, Sh9};
 use crate::hash::{fnv1a64, fnv1a64_more};
 use crate::output::exr_pages::LightmapIdentity;
@@ -280,24 +280,20 @@ pub fn volume_path(out: &Path, band: usize) -> PathBuf {
     PathBuf::from(name)
 }
 
-/// The coarse grid's SH, one per grid point (x fastest, then y, then z): the placed probes
-/// at its points, and the points inside geometry filled from their neighbours — the mean of
-/// the filled neighbours among the six, ring by ring, as a lightmap is dilated — so
-/// trilinear interpolation never reads the inside of a wall.
+/// The coarse grid's SH, one per grid point (x fastest, then y, then z): `placed`, the SH of
+/// the probes at its points ([`super::placement::PlacedProbe::coarse_point`]), and the points inside geometry
+/// filled from their neighbours — the mean of the filled neighbours among the six, ring by
+/// ring, as a lightmap is dilated — so trilinear interpolation never reads the inside of a
+/// wall.
 #[must_use]
-pub fn coarse_values(grid: &CoarseGrid, probes: &[PlacedProbe], sh: &[Sh9]) -> Vec<Sh9> {
+pub fn coarse_values(grid: &CoarseGrid, placed: &[([u32; 3], Sh9)]) -> Vec<Sh9> {
     let [nx, ny, nz] = grid.points.map(|n| n as usize);
     let index = |x: usize, y: usize, z: usize| x + nx * (y + ny * z);
     let mut values: Vec<Option<Sh9>> = vec![None; grid.len()];
-    let step = 1 << LEVELS;
-    for (p, s) in probes.iter().zip(sh) {
-        if let Some(at) = p.lattice
-            && at.iter().all(|v| v % step == 0)
-        {
-            let [x, y, z] = at.map(|v| (v / step) as usize);
-            if x < nx && y < ny && z < nz {
-                values[index(x, y, z)] = Some(*s);
-            }
+    for (at, s) in placed {
+        let [x, y, z] = at.map(|v| v as usize);
+        if x < nx && y < ny && z < nz {
+            values[index(x, y, z)] = Some(*s);
         }
     }
     loop {
@@ -416,6 +412,7 @@ pub fn write_volume(out: &Path, grid: &CoarseGrid, values: &[Sh9]) -> Result<Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::probes::placement::PlacedProbe;
 
     fn record(i: usize) -> ProbeRecord {
         let mut sh = Sh9::default();
@@ -503,7 +500,9 @@ mod tests {
         };
         let mut sh = Sh9::default();
         sh.c[0] = Vec3::splat(2.0);
-        let values = coarse_values(&grid, &[probe], &[sh]);
+        let point = probe.coarse_point().unwrap();
+        assert_eq!(point, [1, 0, 1]);
+        let values = coarse_values(&grid, &[(point, sh)]);
         assert_eq!(values.len(), 12);
         assert!(values.iter().all(|v| v.c[0] == Vec3::splat(2.0)));
     }

@@ -14,8 +14,9 @@
 //!
 //! [`bake_probes`] runs them in order: placement, then the clusters in batches on every core,
 //! each batch's records written in file order as it completes (what is held is the probes'
-//! positions and one batch's results), then the volume. Every random number derives from
-//! (seed, probe id, iteration, sample): the file is the same bytes on any thread count.
+//! positions, one batch's results and the coarse grid's SH), then the volume. Every random
+//! number derives from (seed, probe id, iteration, sample): the file is the same bytes on any
+//! thread count.
 
 pub mod field;
 pub mod file;
@@ -232,8 +233,8 @@ pub fn bake_probes(
                     return Err(ProbeError::Write(e));
                 }
                 errors.push(light.relative_error);
-                if let Some(v) = coarse_sh.as_mut() {
-                    v.push(sh);
+                if let (Some(v), Some(point)) = (coarse_sh.as_mut(), probe.coarse_point()) {
+                    v.push((point, sh));
                 }
             }
         }
@@ -245,7 +246,7 @@ pub fn bake_probes(
 
     let clock = Instant::now();
     if let Some(sh) = coarse_sh {
-        let values = file::coarse_values(&placement.grid, &placement.probes, &sh);
+        let values = file::coarse_values(&placement.grid, &sh);
         match file::write_volume(out, &placement.grid, &values) {
             Ok(paths) => report.files.extend(paths),
             Err(e) => {

@@ -70,6 +70,18 @@ pub struct PlacedProbe {
     pub lattice: Option<[i32; 3]>,
 }
 
+impl PlacedProbe {
+    /// Its point of the coarse grid (a lattice probe at a coarse cell's corner), if it is one.
+    #[must_use]
+    pub fn coarse_point(&self) -> Option<[u32; 3]> {
+        let step = 1 << LEVELS;
+        let at = self.lattice?;
+        at.iter()
+            .all(|v| v % step == 0 && *v >= 0)
+            .then(|| at.map(|v| (v / step) as u32))
+    }
+}
+
 /// The regular grid of the coarse cells' corners: what a volume texture holds.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CoarseGrid {
