@@ -23,12 +23,14 @@
 //!   ([`crate::transport::lookup_filter`]) each tile's baked colours are then replaced by
 //!   their filtered values as soon as every tile within the filter's reach has been read,
 //!   every ready tile on its own worker, reading the neighbours through the table from one
-//!   [`FilterSlot`] per colour, held in memory only while a tile still to be filtered can
-//!   reach it: a band of rows across a page, not a slot for every texel of the world
-//!   ([`Built::filter_slots`] counts the most it held).
+//!   [`Surfel`] per colour, held in memory only while a tile still to be filtered can reach
+//!   it: a band of rows across a page, not one for every texel of the world
+//!   ([`Built::filter_surfels`] counts the most it held).
 //!
 //! The file is the work directory's (written and read by one process; rebuilt by each run),
 //! so its layout is in memory ([`Layout`], [`Built`]), not in a header.
+
+use std::collections::VecDeque;
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -40,7 +42,7 @@ use crate::transport::lookup_filter::{Surfel, filtered_at};
 pub const CELL: u32 = 8;
 
 /// Tiles read per parallel step of the build, per worker thread: bounds its buffers (per
-/// thread about 0.1 MB a tile, 0.6 MB with the filter's slots, for 1 024-texel tiles)
+/// thread about 0.1 MB a tile, 0.5 MB with the filter's surfels, for 1 024-texel tiles)
 /// whatever the world's size. 256 tiles a step held 34 MB of anonymous memory with the filter,
 /// more than the whole bake of a 10⁶-texel world.
 const CHUNK_TILES_PER_THREAD: usize = 4;
@@ -66,19 +68,6 @@ pub struct Block {
     pub page: u32,
     /// The cell, row-major within its page.
     pub cell: u32,
-}
-
-/// What the filter's second step needs of a baked pixel: its texel as the filter sees it
-/// (`baked` 0 where the texel has none, and then it is neither filtered nor a neighbour), its
-/// gathered light unquantised (in the surfel) and its total.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct FilterSlot {
-    /// The texel for the filter; its `gathered` is the pixel's even where `baked` is 0.
-    pub surfel: Surfel,
-    /// Total irradiance, unquantised.
-    pub total: [f32; 3],
-    _pad: u32,
 }
 
 /// Mantissa bits per channel of [`pack_rgb`].
@@ -206,7 +195,7 @@ pub struct Built {
     /// Colours written.
     pub colours: usize,
     /// The most texels the lookups' filter held at once (0: not filtered).
-    pub filter_slots: usize,
+    pub filter_surfels: usize,
 }
 
 impl Built {
@@ -366,13 +355,17 @@ pub trait Source: Sync {
     fn read_tile(&self, tile: usize, out: &mut Vec<SourceTexel>) -> Result<u32, Self::Error>;
 }
 
-/// One tile's blocks (`first` counted from the tile's first colour), colours and filter slots.
+/// One tile's blocks (`first` counted from the tile's first colour) and colours, and with the
+/// filter each colour's texel as the filter sees it (`baked` 0 where it has none, and then it
+/// is neither filtered nor a neighbour; its `gathered` the pixel's all the same) and its total
+/// irradiance, unquantised.
 #[derive(Default)]
 struct TileOut {
     page: u32,
     blocks: Vec<Block>,
     colours: Vec<Packed>,
-    slots: Vec<FilterSlot>,
+    surfels: Vec<Surfel>,
+    totals: Vec<[f32; 3]>,
 }
 
 /// Groups one tile's texels into blocks, in cell order, and packs their colours.
@@ -429,11 +422,8 @@ fn tile_blocks(
             if filter {
                 let mut surfel = t.surfel.filter(|_| t.baked).unwrap_or_default();
                 surfel.gathered = t.gathered;
-                out.slots.push(FilterSlot {
-                    surfel,
-                    total: t.total,
-                    _pad: 0,
-                });
+                out.surfels.push(surfel);
+                out.totals.push(t.total);
             }
         }
     }
@@ -445,12 +435,12 @@ fn tile_blocks(
 /// filtered). Runs on the current rayon pool; the bytes do not depend on its size, nor on the
 /// order of the source's tiles: they are read page by page, top to bottom ([`Source::rect`]).
 ///
-/// The filter holds what it knows of each texel ([`FilterSlot`]) only while a tile within
+/// The filter holds what it knows of each texel (its [`Surfel`]) only while a tile within
 /// its reach is still to be filtered: a tile is filtered as soon as every tile that may hold
 /// its neighbours has been read (the next tile to read starts `filter` rows below it, or on
-/// another page), and its slots are let go once every tile still to be filtered starts
+/// another page), and its surfels are let go once every tile still to be filtered starts
 /// `filter` rows below its bottom. The filter's memory is a band of rows across a page, not
-/// the world: [`Built::filter_slots`] says how many slots it held at most.
+/// the world: [`Built::filter_surfels`] says how many it held at most.
 ///
 /// # Errors
 /// The source's, when a tile cannot be read.
@@ -495,7 +485,7 @@ pub fn build<S: Source>(
             };
             let (blocks, first) = append(layout, bytes, &mut built, &out);
             if filter > 0 {
-                window.read(rect, blocks, first, out.slots);
+                window.read(rect, blocks, first, out.surfels, out.totals);
             }
         }
         // The next chunk is read while the tiles this one made ready are filtered: they need
@@ -508,7 +498,7 @@ pub fn build<S: Source>(
             read(chunks.get(c + 1))
         };
     }
-    built.filter_slots = window.peak;
+    built.filter_surfels = window.peak;
     Ok(built)
 }
 
@@ -553,52 +543,53 @@ fn append(
     (range, first)
 }
 
-/// A tile read but not yet filtered: where it lies, its blocks and its colours.
+/// A tile read but not yet filtered: where it lies, its blocks, its colours and their totals.
 struct Pending {
     rect: TileRect,
     blocks: std::ops::Range<usize>,
     colours: std::ops::Range<usize>,
+    totals: Vec<[f32; 3]>,
 }
 
-/// The filter's slots of the tiles a tile still to be filtered may reach, in colour order:
-/// `slots[i]` is colour `first + i`'s, the first `released` let go (removed once they are half
-/// the vector, so that letting go costs no more than reading).
+/// What the filter knows of the texels a tile still to be filtered may reach, in colour
+/// order: `surfels[i]` is colour `first + i`'s.
 #[derive(Default)]
 struct FilterWindow {
-    slots: Vec<FilterSlot>,
+    surfels: VecDeque<Surfel>,
     first: usize,
-    released: usize,
-    /// The tiles whose slots are held, in colour order: where each lies and its colour count.
-    held: std::collections::VecDeque<(TileRect, usize)>,
+    /// The tiles whose surfels are held, in colour order: where each lies, its colour count.
+    held: VecDeque<(TileRect, usize)>,
     /// Tiles read and not yet filtered, in the order they were read.
     pending: Vec<Pending>,
-    /// The most slots held at once (the vector's capacity).
+    /// The most surfels held at once (the ring's capacity).
     peak: usize,
 }
 
 impl FilterWindow {
-    /// Takes a tile just read: its rectangle, blocks, first colour and slots.
+    /// Takes a tile just read: its rectangle, blocks, first colour, surfels and totals.
     fn read(
         &mut self,
         rect: TileRect,
         blocks: std::ops::Range<usize>,
         first: usize,
-        slots: Vec<FilterSlot>,
+        surfels: Vec<Surfel>,
+        totals: Vec<[f32; 3]>,
     ) {
-        debug_assert_eq!(first, self.first + self.slots.len());
-        self.held.push_back((rect, slots.len()));
+        debug_assert_eq!(first, self.first + self.surfels.len());
+        self.held.push_back((rect, surfels.len()));
         self.pending.push(Pending {
             rect,
             blocks,
-            colours: first..first + slots.len(),
+            colours: first..first + surfels.len(),
+            totals,
         });
-        self.slots.extend(slots);
-        self.peak = self.peak.max(self.slots.capacity());
+        self.surfels.extend(surfels);
+        self.peak = self.peak.max(self.surfels.capacity());
     }
 
     /// Filters every pending tile whose neighbours within `radius` rows have all been read
     /// (`next`, the next tile to read, starts `radius` rows below it or on another page; none:
-    /// every tile), then lets go of the slots no tile still to be filtered can reach.
+    /// every tile), then lets go of the surfels no tile still to be filtered can reach.
     fn filter_ready(
         &mut self,
         layout: &Layout,
@@ -613,16 +604,7 @@ impl FilterWindow {
             .into_iter()
             .partition(|p| ready(&p.rect));
         self.pending = later;
-        let held = &self.slots[self.released..];
-        filter_colours(
-            layout,
-            built,
-            bytes,
-            &now,
-            radius,
-            held,
-            self.first + self.released,
-        );
+        filter_colours(layout, built, bytes, &now, radius, self);
         // The first tile still to be filtered starts highest: earlier tiles ending `radius`
         // rows above it are out of every later tile's reach.
         let frontier = self.pending.first().map(|p| p.rect).or(next);
@@ -634,27 +616,32 @@ impl FilterWindow {
                 break;
             }
             self.held.pop_front();
-            self.released += n;
+            self.surfels.drain(..n);
+            self.first += n;
         }
-        if 2 * self.released >= self.slots.len() {
-            self.slots.drain(..self.released);
-            self.first += std::mem::take(&mut self.released);
-        }
+    }
+
+    /// Colour `colour`'s surfel, if the window holds it.
+    fn surfel(&self, colour: usize) -> Option<&Surfel> {
+        let i = colour.checked_sub(self.first);
+        debug_assert!(
+            i.is_some_and(|i| i < self.surfels.len()),
+            "a colour the window let go"
+        );
+        self.surfels.get(i?)
     }
 }
 
 /// Replaces each baked colour of the tiles `tiles` with a surfel by its filtered value: the
 /// filtered gathered light, and the total moved by as much (the direct light stays), from the
-/// unquantised values in `slots` (colour `first + i`'s at `i`). Every tile on its own worker,
-/// writing its own colours.
+/// unquantised values the window holds. Every tile on its own worker, writing its own colours.
 fn filter_colours(
     layout: &Layout,
     built: Built,
     bytes: &mut [u8],
     tiles: &[Pending],
     radius: u32,
-    slots: &[FilterSlot],
-    slots_first: usize,
+    window: &FilterWindow,
 ) {
     let (head, tail) = bytes.split_at_mut(layout.colours_at);
     let colours: &mut [Packed] =
@@ -667,14 +654,6 @@ fn filter_colours(
         ),
         colours: &[],
     };
-    let slot = |colour: usize| {
-        let i = colour.checked_sub(slots_first);
-        debug_assert!(
-            i.is_some_and(|i| i < slots.len()),
-            "a colour the window let go"
-        );
-        i.and_then(|i| slots.get(i))
-    };
     // Every tile's colours, disjoint (the tiles are in colour order).
     let mut rest = colours;
     let mut at = 0;
@@ -682,12 +661,12 @@ fn filter_colours(
     for t in tiles {
         let (_, tail) = std::mem::take(&mut rest).split_at_mut(t.colours.start - at);
         let (mine, later) = tail.split_at_mut(t.colours.len());
-        work.push((t.blocks.clone(), t.colours.start, mine));
+        work.push((t, mine));
         rest = later;
         at = t.colours.end;
     }
-    work.into_par_iter().for_each(|(blocks, first, mine)| {
-        for b in &view.blocks[blocks] {
+    work.into_par_iter().for_each(|(tile, mine)| {
+        for b in &view.blocks[tile.blocks.clone()] {
             let p = layout.pages[b.page as usize];
             let (cx, cy) = (b.cell % p.across * CELL, b.cell / p.across * CELL);
             let mut mask = b.baked;
@@ -695,21 +674,23 @@ fn filter_colours(
                 let bit = mask.trailing_zeros();
                 mask &= mask - 1;
                 let colour = View::colour_index(b, 1 << bit).expect("a baked pixel");
-                let Some(me) = slot(colour).filter(|s| s.surfel.baked == 1.0) else {
+                let Some(me) = window.surfel(colour).filter(|s| s.baked == 1.0) else {
                     continue;
                 };
                 let (x, y) = ((cx + bit % CELL) as usize, (cy + bit / CELL) as usize);
                 let at = |nx: usize, ny: usize| {
                     view.baked_index(b.page, nx as u32, ny as u32)
-                        .and_then(slot)
-                        .map_or_else(Surfel::default, |s| s.surfel)
+                        .and_then(|i| window.surfel(i))
+                        .copied()
+                        .unwrap_or_default()
                 };
                 let page = (p.width as usize, p.height as usize);
-                let f = filtered_at(&me.surfel, (x, y), page, radius as usize, at);
-                let change = f - Vec3::from(me.surfel.gathered);
-                let g: [f32; 3] = core::array::from_fn(|c| me.surfel.gathered[c] + change[c]);
-                let t: [f32; 3] = core::array::from_fn(|c| me.total[c] + change[c]);
-                mine[colour - first] = pack(g, t);
+                let f = filtered_at(me, (x, y), page, radius as usize, at);
+                let change = f - Vec3::from(me.gathered);
+                let i = colour - tile.colours.start;
+                let g: [f32; 3] = core::array::from_fn(|c| me.gathered[c] + change[c]);
+                let t: [f32; 3] = core::array::from_fn(|c| tile.totals[i][c] + change[c]);
+                mine[i] = pack(g, t);
             }
         }
     });
@@ -1075,12 +1056,12 @@ mod tests {
         // The filter held a band of rows, not the 4 660 baked texels: on one thread, four
         // tiles (one row of tiles across the first page) a step, the rows the filter reaches
         // above and below a row of tiles (3 rows of tiles, 15 rows of 24 pixels) and one step
-        // more, in a vector that lets go of them in batches (up to twice as many).
-        assert!(built.filter_slots > 0, "nothing held");
+        // more, in a ring whose capacity is a power of two.
+        assert!(built.filter_surfels > 0, "nothing held");
         assert!(
-            built.filter_slots <= 2 * 24 * 25,
+            built.filter_surfels <= 1024,
             "the filter held {} texels",
-            built.filter_slots
+            built.filter_surfels
         );
     }
 }

@@ -57,7 +57,7 @@ use crate::texels::{PageRecord, TriangleRecord};
 use crate::transport::emitters::luminance;
 use crate::transport::lookup_filter::Surfel;
 use crate::transport::pass_image::{
-    self, Built, CELL, FilterSlot, Layout, Source, SourceTexel, TileRect, View,
+    self, Built, CELL, Layout, Source, SourceTexel, TileRect, View,
 };
 
 /// Rings of pixels filled around every chart from their covered neighbours.
@@ -317,7 +317,7 @@ impl PreviousPass {
 
     /// Bytes the lookups' filter held at most while it built the image (0: unfiltered).
     pub fn filter_window_bytes(&self) -> u64 {
-        (self.built.filter_slots * size_of::<FilterSlot>()) as u64
+        (self.built.filter_surfels * size_of::<Surfel>()) as u64
     }
 
     /// The same image, holding series pass `pass` (0: the direct pass): its light has made
