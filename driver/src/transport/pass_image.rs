@@ -665,35 +665,70 @@ fn filter_colours(
         rest = later;
         at = t.colours.end;
     }
-    work.into_par_iter().for_each(|(tile, mine)| {
-        for b in &view.blocks[tile.blocks.clone()] {
-            let p = layout.pages[b.page as usize];
-            let (cx, cy) = (b.cell % p.across * CELL, b.cell / p.across * CELL);
-            let mut mask = b.baked;
-            while mask != 0 {
-                let bit = mask.trailing_zeros();
-                mask &= mask - 1;
-                let colour = View::colour_index(b, 1 << bit).expect("a baked pixel");
-                let Some(me) = window.surfel(colour).filter(|s| s.baked == 1.0) else {
-                    continue;
-                };
-                let (x, y) = ((cx + bit % CELL) as usize, (cy + bit / CELL) as usize);
-                let at = |nx: usize, ny: usize| {
-                    view.baked_index(b.page, nx as u32, ny as u32)
-                        .and_then(|i| window.surfel(i))
-                        .copied()
-                        .unwrap_or_default()
-                };
-                let page = (p.width as usize, p.height as usize);
-                let f = filtered_at(me, (x, y), page, radius as usize, at);
-                let change = f - Vec3::from(me.gathered);
-                let i = colour - tile.colours.start;
-                let g: [f32; 3] = core::array::from_fn(|c| me.gathered[c] + change[c]);
-                let t: [f32; 3] = core::array::from_fn(|c| tile.totals[i][c] + change[c]);
-                mine[i] = pack(g, t);
+    work.into_par_iter()
+        .for_each_init(Vec::new, |around, (tile, mine)| {
+            let (x0, y0, w, h) = surfels_around(&view, window, tile.rect, radius, around);
+            for b in &view.blocks[tile.blocks.clone()] {
+                let p = layout.pages[b.page as usize];
+                let (cx, cy) = (b.cell % p.across * CELL, b.cell / p.across * CELL);
+                let mut mask = b.baked;
+                while mask != 0 {
+                    let bit = mask.trailing_zeros();
+                    mask &= mask - 1;
+                    let colour = View::colour_index(b, 1 << bit).expect("a baked pixel");
+                    let (x, y) = (
+                        (cx + bit % CELL - x0) as usize,
+                        (cy + bit / CELL - y0) as usize,
+                    );
+                    let me = &around[y * w + x];
+                    if me.baked != 1.0 {
+                        continue;
+                    }
+                    let at = |nx: usize, ny: usize| around[ny * w + nx];
+                    let f = filtered_at(me, (x, y), (w, h), radius as usize, at);
+                    let change = f - Vec3::from(me.gathered);
+                    let i = colour - tile.colours.start;
+                    let g: [f32; 3] = core::array::from_fn(|c| me.gathered[c] + change[c]);
+                    let t: [f32; 3] = core::array::from_fn(|c| tile.totals[i][c] + change[c]);
+                    mine[i] = pack(g, t);
+                }
+            }
+        });
+}
+
+/// Puts the surfels of the pixels within `radius` of `rect` (cut at its page's edges) in
+/// `around`, row-major, a default (not baked) surfel where no baked texel lies; returns the
+/// rectangle's left column, top row, width and height. The filter then reads a texel's
+/// neighbours by index, not each through the cell table: a tap outside this rectangle is
+/// outside the page, so [`filtered_at`] over it gives the page's values.
+fn surfels_around(
+    view: &View<'_>,
+    window: &FilterWindow,
+    rect: TileRect,
+    radius: u32,
+    around: &mut Vec<Surfel>,
+) -> (u32, u32, usize, usize) {
+    let (pw, ph) = view.layout.page_size(rect.page).unwrap_or((0, 0));
+    let (x0, y0) = (rect.x.saturating_sub(radius), rect.y.saturating_sub(radius));
+    let x1 = (rect.x + rect.width + radius).min(pw);
+    let y1 = (rect.y + rect.height + radius).min(ph);
+    let (w, h) = (
+        x1.saturating_sub(x0) as usize,
+        y1.saturating_sub(y0) as usize,
+    );
+    around.clear();
+    around.resize(w * h, Surfel::default());
+    for y in y0..y1 {
+        for x in x0..x1 {
+            if let Some(s) = view
+                .baked_index(rect.page, x, y)
+                .and_then(|i| window.surfel(i))
+            {
+                around[(y - y0) as usize * w + (x - x0) as usize] = *s;
             }
         }
-    });
+    }
+    (x0, y0, w, h)
 }
 
 #[cfg(test)]
