@@ -4,7 +4,7 @@
 //! visit tests two boxes for all eight lanes of a packet), their indices and their leaf
 //! counts. A [`Tri`] stores its three vertices (not edges: the watertight test needs the
 //! vertices themselves) and its primitive id, in leaf order. [`BvhRef`] is a validated view.
-//! The wide layout, collapsed from this one, is in [`super::bvh8`].
+//! The wide layout, collapsed from this one, is in [`super::wide`].
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
