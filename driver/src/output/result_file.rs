@@ -61,7 +61,7 @@ pub struct TexelResult {
     pub total: [f32; 3],
     /// One cell of the texel's cluster's guide seed, kept by the pass before a guided last
     /// pass (0 elsewhere): the cluster's j-th texel holds cell j of the histogram the last
-    /// pass builds the cluster's first guide from (`bake/gather.rs`, `GuideSeed`).
+    /// pass builds the cluster's first guide from (`bake/gather/learning.rs`, `GuideSeed`).
     pub seed: f32,
 }
 
@@ -329,7 +329,7 @@ fn records_end(texel_count: u64, record_bytes: u64) -> Option<u64> {
 }
 
 /// A finished result file, mapped read-only: one field of many texels read without a call
-/// each (the last pass reads the guide seeds the pass before it kept: `bake/gather.rs`).
+/// each (the last pass reads the guide seeds the pass before it kept: `bake/gather/learning.rs`).
 #[derive(Debug)]
 pub struct MappedResults {
     map: memmap2::Mmap,
