@@ -17,4 +17,3 @@ pub mod settings;
 pub mod shard;
 pub mod stopping;
 pub mod workdir;
-pub mod world;

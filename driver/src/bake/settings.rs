@@ -6,6 +6,7 @@ use std::fmt;
 
 use crate::hash::fnv1a64;
 use crate::transport::emitters::EmitterSelection;
+pub use crate::transport::settings::{EmitterSampling, Transport};
 
 /// Whether a bake writes directional coefficients (`--directional`). A setting, so it lives
 /// here; [`super::directional`], which computes the coefficients, re-exports it and imports
@@ -179,32 +180,6 @@ pub const DIRECT_PASS: u32 = 0;
 /// of the last pass's guides ([`BakeSettings::guide_seed`]); 5: a guide learns from every
 /// iteration of its cluster since the last cosine one, not the last iteration alone.
 const BAKE_FORMAT: u32 = 5;
-
-/// How the radiance a gather ray brings back from its hit is computed (docs/bake.md, light
-/// transport).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum Transport {
-    /// The paper's production setting: pass b gathers, at each hit, emission + albedo/π ×
-    /// (direct light connected explicitly + the indirect irradiance of pass b−1 looked up in
-    /// the previous pass's lightmap). Pass 0 (the direct pass) bakes the direct light alone, then
-    /// `--bounces B` gather passes stream the world.
-    Series,
-    /// Unidirectional path tracing from the gather hit, next-event estimation at every
-    /// vertex and Russian roulette: the unbiased reference, one pass.
-    Path,
-}
-
-/// How emissive triangles light a shading point (`crate::transport::direct`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum EmitterSampling {
-    /// Next-event estimation and the rays that hit them, weighted by the power heuristic.
-    #[default]
-    Mis,
-    /// Next-event estimation alone; emission that rays hit is not counted.
-    Nee,
-    /// Only rays that happen to hit them (the bake before emitters were lights).
-    Hits,
-}
 
 /// The bake's settings; everything that changes its bits is part of [`Self::bake_id`].
 #[derive(Clone, Copy, PartialEq)]
@@ -868,25 +843,6 @@ impl BakeSettings {
         .into_iter()
         .map(|(k, v)| (k.to_owned(), v))
         .collect()
-    }
-}
-
-impl fmt::Display for Transport {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Transport::Series => "series",
-            Transport::Path => "path",
-        })
-    }
-}
-
-impl fmt::Display for EmitterSampling {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            EmitterSampling::Mis => "mis",
-            EmitterSampling::Nee => "nee",
-            EmitterSampling::Hits => "hits",
-        })
     }
 }
 

@@ -67,6 +67,7 @@ mod raster;
 pub mod shell;
 pub mod unwrap;
 mod uv_check;
+pub use crate::scene::gltf_write::Lightmap;
 pub use unwrap::{Unwrap, UnwrapError};
 pub use uv_check::{ATLAS_TEST_SIZE, NotAtlas, SELF_OVERLAP_SHARE, uv_set_problem};
 
@@ -220,18 +221,6 @@ pub fn prepare(
     opts: PrepareOptions,
 ) -> Result<PrepareReport, PrepareError> {
     prepare_with(scene, out, opts, Unwrap::Never).map(|(report, _)| report)
-}
-
-/// Where every triangle's texels are: the layout `prepare` rasterised, as UVs of the page
-/// (0..1 across it) — what `--write-gltf` writes as `TEXCOORD_1`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Lightmap {
-    /// Page sizes in texels.
-    pub pages: Vec<(u32, u32)>,
-    /// Per mesh: its page.
-    pub mesh_page: Vec<u32>,
-    /// Per triangle: its UVs on its mesh's page, `None` where it has no texels.
-    pub uv: Vec<Option<[Vec2; 3]>>,
 }
 
 impl Lightmap {

@@ -23,10 +23,10 @@ use wide::{f32x8, u32x8};
 
 use crate::bake::directional::{self, ShSample, ShSums};
 use crate::bake::settings::BakeSettings;
-use crate::bake::world::{SurfaceHit, World};
 use crate::transport::direct::Receiver8;
 use crate::transport::path::{Departure, Leaving};
 use crate::transport::rng::SampleRng;
+use crate::transport::world::{SurfaceHit, World};
 
 use super::*;
 

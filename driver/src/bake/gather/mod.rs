@@ -34,10 +34,10 @@ use super::directional::{Directional, ShL1, ShSums};
 use super::grid::{self as grid_guide};
 use super::pipeline::{TileBaked, TileBuffer};
 use super::settings::{BakeSettings, Combine, Guiding};
-use super::world::World;
 use crate::output::journal::TileRecord;
 use crate::output::result_file::TexelResult;
 use crate::texels::{FLAG_INSIDE as TEXEL_INSIDE, FLAG_VALID as TEXEL_VALID, TexelRecord};
+use crate::transport::world::World;
 
 mod cluster;
 mod combine;
