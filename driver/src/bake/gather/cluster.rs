@@ -45,6 +45,7 @@ impl<'w> TileBaker<'w> {
             counters,
             texel_direct,
             writes_guide_seeds,
+            stream_seed,
             seeds,
             ..
         } = self;
@@ -143,6 +144,7 @@ impl<'w> TileBaker<'w> {
                 };
                 let ctx = IterationCtx {
                     texel_direct: *texel_direct,
+                    seed: *stream_seed,
                     ..IterationCtx::new(world, settings, k, learned)
                 };
                 let n = budget::scaled(nominal, factors[m as usize]);
@@ -256,7 +258,10 @@ impl<'w> TileBaker<'w> {
             .filter(|&p| p > 0);
         let mut factors: Option<Vec<f32>> = None;
         for k in 0..n {
-            let ctx = IterationCtx::new(self.world, &settings, k as u32, None);
+            let ctx = IterationCtx {
+                seed: self.stream_seed,
+                ..IterationCtx::new(self.world, &settings, k as u32, None)
+            };
             let samples = cut.unwrap_or_else(|| settings.direct_samples_in_iteration(k as u32));
             for (m, t) in targets.iter().enumerate() {
                 let batch = &mut self.batches[m * n + k];

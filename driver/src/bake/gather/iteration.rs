@@ -45,7 +45,9 @@ pub(super) struct Sinks<'a> {
 /// What one iteration's gather needs, borrowed.
 pub(super) struct IterationCtx<'a> {
     pub(super) world: &'a World,
-    pub(super) settings: &'a BakeSettings,
+    /// The seed every random number of the iteration derives from: the settings' `--seed`,
+    /// or the baker's own stream ([`TileBaker::stream_seed`]).
+    pub(super) seed: u32,
     pub(super) k: u32,
     /// The guide this iteration samples; it holds the defensive mixture with the cosine
     /// baseline ([`GuideParams::uniform`]), so its density is the mixture's.
@@ -63,7 +65,7 @@ impl<'a> IterationCtx<'a> {
     ) -> Self {
         Self {
             world,
-            settings,
+            seed: settings.seed,
             k,
             guide,
             texel_direct: true,
@@ -110,11 +112,7 @@ impl<'a> IterationCtx<'a> {
     fn origin(&self, t: &GatherTexel, packet: u32) -> Vec3 {
         let mut p = t.position;
         if t.jitter {
-            let r = rotation(
-                self.settings.seed ^ ORIGIN_SALT,
-                t.id,
-                self.k << 20 | packet,
-            );
+            let r = rotation(self.seed ^ ORIGIN_SALT, t.id, self.k << 20 | packet);
             p += t.dpdu * (to_unit(r[0]) - 0.5) + t.dpdv * (to_unit(r[1]) - 0.5);
         }
         // Off the triangle's own plane, on the texel's side: a shading normal near the
@@ -144,8 +142,8 @@ impl<'a> IterationCtx<'a> {
         sinks: &mut Sinks<'_>,
         counters: &mut GatherCounters,
     ) {
-        let rot = rotation(self.settings.seed, t.id, self.k);
-        let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
+        let rot = rotation(self.seed, t.id, self.k);
+        let light_rot = rotation(self.seed ^ LIGHT_SALT, t.id, self.k);
         rotated.resize(order.len(), 0);
         reorder_after_rotation_into(order, rot, rotated);
         let tree = self.world.wide_bvh();
@@ -217,8 +215,8 @@ impl<'a> IterationCtx<'a> {
         sinks: &mut Sinks<'_>,
         counters: &mut GatherCounters,
     ) {
-        let rot = rotation(self.settings.seed, t.id, self.k);
-        let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
+        let rot = rotation(self.seed, t.id, self.k);
+        let light_rot = rotation(self.seed ^ LIGHT_SALT, t.id, self.k);
         let bvh = self.world.wide_bvh();
         for j in 0..n / LANES as u32 {
             let origin = self.origin(t, j);
@@ -289,7 +287,7 @@ impl<'a> IterationCtx<'a> {
         batch: &mut Welford,
         counters: &mut GatherCounters,
     ) {
-        let light_rot = rotation(self.settings.seed ^ LIGHT_SALT, t.id, self.k);
+        let light_rot = rotation(self.seed ^ LIGHT_SALT, t.id, self.k);
         for j in 0..samples / LANES as u32 {
             let samples: [u32; LANES] = core::array::from_fn(|lane| j * LANES as u32 + lane as u32);
             let lu = rotate_x8(sobol_2d_x8(u32x8::new(samples)), light_rot);
@@ -322,7 +320,7 @@ impl<'a> IterationCtx<'a> {
             return direct;
         }
         let pick: [f32; LANES] = core::array::from_fn(|lane| {
-            let seed = self.settings.seed ^ EMITTER_SALT;
+            let seed = self.seed ^ EMITTER_SALT;
             SampleRng::new(seed, t.id, self.k, samples[lane]).unit()
         });
         let gather_pdf8 = |dirs: &[Vec3; LANES], live: u8| self.gather_pdf8(t, dirs, live);
@@ -411,7 +409,7 @@ impl<'a> IterationCtx<'a> {
                 ..Leaving::default()
             },
             Some(hit) => {
-                let mut rng = SampleRng::new(self.settings.seed, texel, self.k, sample);
+                let mut rng = SampleRng::new(self.seed, texel, self.k, sample);
                 let leaving = self.world.radiance_from_hit(from, dir, hit, &mut rng);
                 counters.shadow_rays += u64::from(leaving.shadow_rays);
                 counters.path_rays += u64::from(leaving.path_rays);

@@ -106,6 +106,8 @@ pub struct TileBaker<'w> {
     texel_direct: bool,
     /// Whether the tiles keep their clusters' guide seeds ([`Self::writes_guide_seeds`]).
     writes_guide_seeds: bool,
+    /// The seed the gather's random numbers derive from ([`Self::stream_seed`]).
+    stream_seed: u32,
     /// Per valid texel: its cell of its cluster's guide seed, when kept.
     seeds: Vec<f32>,
     valid: Vec<u32>,
@@ -156,6 +158,7 @@ impl<'w> TileBaker<'w> {
             direct_only: false,
             texel_direct: true,
             writes_guide_seeds: false,
+            stream_seed: settings.seed,
             seeds: Vec::new(),
             valid: Vec::new(),
             positions: Vec::new(),
@@ -199,12 +202,23 @@ impl<'w> TileBaker<'w> {
     /// numbers from another stream ([`GUIDE_SEED_SALT`]): every pass of a bake rotates a
     /// texel's points alike, and a seed learned from the very points the last pass then warps
     /// through it would bias that pass (measured along a room's corner, `tests/surfaces.rs`).
+    /// The settings keep the bake's `--seed`; [`Self::stream_seed`] says which stream the
+    /// baker draws from.
     pub fn writes_guide_seeds(mut self, writes: bool) -> Self {
         self.writes_guide_seeds = writes;
-        if writes {
-            self.settings.seed ^= GUIDE_SEED_SALT;
-        }
+        self.stream_seed = if writes {
+            self.settings.seed ^ GUIDE_SEED_SALT
+        } else {
+            self.settings.seed
+        };
         self
+    }
+
+    /// The seed every random number of this baker derives from (with the texel, iteration
+    /// and sample): the bake's `--seed`, or, in a pass that keeps guide seeds
+    /// ([`Self::writes_guide_seeds`]), `--seed` salted with [`GUIDE_SEED_SALT`].
+    pub fn stream_seed(&self) -> u32 {
+        self.stream_seed
     }
 
     /// Bakes tile `tile` whose texels (`texels`, global ids from `first_texel`) are given;
