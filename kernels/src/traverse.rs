@@ -56,7 +56,7 @@
 //! Deviations and limits:
 //! - Rays with `tmin < 0` are not traced (they never hit): the conservative box bound assumes
 //!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
-//! - The tree depth is capped at [`MAX_DEPTH`] ([`WIDE_MAX_DEPTH`] for the wide layout, which
+//! - The tree depth is capped at [`BVH_MAX_DEPTH`] ([`WIDE_MAX_DEPTH`] for the wide layout, which
 //!   [`collapse`] always meets); [`BvhRef::new`] and [`WideRef::new`] reject deeper trees.
 //! - **Hits outside their own box.** At extreme magnitudes the triangle test can report a hit
 //!   that lies outside the slab interval of the box of the leaf holding the triangle (its
@@ -119,7 +119,7 @@ use triangle::{
 };
 
 use node::STACK;
-pub use node::{BvhRef, LEAF, LayoutError, MAX_DEPTH, Node, Tri};
+pub use node::{BVH_MAX_DEPTH, BvhRef, LEAF, LayoutError, Node, Tri};
 pub use wide::{INTERLEAVE_BYTES, WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
 #[cfg(any(feature = "alloc", test))]
 pub use wide::{collapse, leaf_rows};
@@ -986,8 +986,8 @@ mod tests {
             BvhRef::new(&[bad], &[]).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 0 }
         );
-        // A chain deeper than MAX_DEPTH.
-        let chain: Vec<Node> = (0..MAX_DEPTH as u32 + 2)
+        // A chain deeper than BVH_MAX_DEPTH.
+        let chain: Vec<Node> = (0..BVH_MAX_DEPTH as u32 + 2)
             .map(|i| Node {
                 child: [i + 1, 0],
                 meta: [0, LEAF],

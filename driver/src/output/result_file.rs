@@ -61,7 +61,7 @@ pub struct TexelResult {
     pub total: [f32; 3],
     /// One cell of the texel's cluster's guide seed, kept by the pass before a guided last
     /// pass (0 elsewhere): the cluster's j-th texel holds cell j of the histogram the last
-    /// pass builds the cluster's first guide from (`bake/gather/learning.rs`, `GuideSeed`).
+    /// pass builds the cluster's first guide from (`bake/gather/learning.rs`, `SeedHistogram`).
     pub seed: f32,
 }
 

@@ -61,7 +61,7 @@ pub const WIDTH: usize = 8;
 
 /// Deepest wide tree [`WideRef::new`] accepts (root at depth 0). [`collapse`] halves the
 /// binary depth at least, so every valid binary tree collapses within it.
-pub const WIDE_MAX_DEPTH: usize = crate::traverse::MAX_DEPTH / 2;
+pub const WIDE_MAX_DEPTH: usize = crate::traverse::BVH_MAX_DEPTH / 2;
 
 /// Stack entries a walk needs: at most `WIDTH − 1` pending siblings per level, plus one
 /// node's children.

@@ -98,7 +98,7 @@ impl<'w> TileBaker<'w> {
             counters.clusters_seeded += u64::from(guide.is_some());
             counters.guide_build_ns += clock.elapsed().as_nanos() as u64;
         }
-        let mut seed = writes_guide_seeds.then(|| GuideSeed::new(members.len()));
+        let mut seed = writes_guide_seeds.then(|| SeedHistogram::new(members.len()));
         learning.pool.clear();
         // A flat cluster learns nothing from its iterations: it bakes them in one set of all
         // their samples, stratified over the whole hemisphere as the unguided bake's pass is

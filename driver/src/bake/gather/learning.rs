@@ -1,8 +1,8 @@
 //! What a cluster learns between iterations (paper §2.2–2.3): the guide built from the
 //! records ([`learn`]; the grid comparator's, [`learn_grid`]), the records pooled since the
 //! last cosine iteration and the gain `--min-gain` judges ([`Learning`]), the guide seed the
-//! pass before the last keeps ([`GuideSeed`], [`seeded_guide`]), and whether the pass before
-//! measured a cluster's light as flat ([`is_flat`]).
+//! pass before the last keeps ([`SeedHistogram`], [`seeded_guide`]), and whether the pass
+//! before measured a cluster's light as flat ([`is_flat`]).
 
 use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
 use guidebake_kernels::packet::LANES;
@@ -43,7 +43,7 @@ pub(super) fn learn<'n>(
 }
 
 /// The first guide of a cluster whose texels hold a guide seed (`cells`: each texel's cell, in
-/// the cluster's texel order, [`GuideSeed::cells`]): one record at the centre of each lit
+/// the cluster's texel order, [`SeedHistogram::cells`]): one record at the centre of each lit
 /// cell, split down to the cells (one record a node suffices: each stands for all the records
 /// of its cell). `None` for a cluster too small to hold a seed, or where the seed saw no light
 /// or gives a uniform guide: the first iteration gathers with cosine points.
@@ -246,13 +246,13 @@ pub(super) fn seed_side(members: usize) -> usize {
 /// sample square. The cluster's j-th texel keeps cell j in its result; the last pass, whose
 /// clusters are the same, builds the cluster's first guide from the cells
 /// ([`seeded_guide`]), so its first iteration is guided too.
-pub(super) struct GuideSeed {
+pub(super) struct SeedHistogram {
     side: usize,
     sums: [f64; SEED_SIDE * SEED_SIDE],
     records: u64,
 }
 
-impl GuideSeed {
+impl SeedHistogram {
     pub(super) fn new(members: usize) -> Self {
         Self {
             side: seed_side(members),

@@ -55,7 +55,7 @@ use combine::cluster_weights;
 use counters::{WARP_TIMED_EVERY, count_warp};
 use iteration::{IterationCtx, Sinks};
 use learning::{
-    GuideSeed, Learned, Learning, grid_sample8, is_flat, learn, learn_grid, seeded_guide,
+    Learned, Learning, SeedHistogram, grid_sample8, is_flat, learn, learn_grid, seeded_guide,
 };
 
 /// Guide nodes per cluster: enough for a 64-texel cluster's records at the default split rule.

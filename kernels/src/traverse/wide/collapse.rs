@@ -245,7 +245,7 @@ mod tests {
     use glam::Vec3;
     use std::vec::Vec;
 
-    /// A binary chain as deep as [`crate::traverse::MAX_DEPTH`] allows: every node a leaf of one
+    /// A binary chain as deep as [`crate::traverse::BVH_MAX_DEPTH`] allows: every node a leaf of one
     /// triangle beside the next node.
     fn chain(depth: usize) -> (Vec<Node>, Vec<Tri>) {
         let tris: Vec<Tri> = (0..=depth as u32)
@@ -289,7 +289,7 @@ mod tests {
 
     #[test]
     fn the_deepest_binary_chain_collapses_within_the_wide_depth() {
-        let (nodes, tris) = chain(crate::traverse::MAX_DEPTH + 1);
+        let (nodes, tris) = chain(crate::traverse::BVH_MAX_DEPTH + 1);
         let binary = BvhRef::new(&nodes, &tris).unwrap();
         let wide = collapse(&binary);
         let rows = leaf_rows(&wide, &tris);

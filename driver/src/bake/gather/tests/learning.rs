@@ -319,14 +319,14 @@ fn a_guide_seed_holds_one_cell_per_texel_and_builds_the_guide() {
             1.0,
         );
     }
-    let mut seed = GuideSeed::new(20);
+    let mut seed = SeedHistogram::new(20);
     seed.add(&learning, false);
     let cells: Vec<f32> = seed.cells().take(20).collect();
     assert!(cells[16..].iter().all(|&c| c == 0.0), "{cells:?}");
     let lit = 2 + 4; // the cell (2, 1): x + 4 y
     assert!((cells[lit] - 9.0 / 16.0).abs() < 1e-5, "{cells:?}");
     // Second moment: g²/q per record.
-    let mut squared = GuideSeed::new(20);
+    let mut squared = SeedHistogram::new(20);
     squared.add(&learning, true);
     assert!((squared.cells().nth(lit).unwrap() - 81.0 / 16.0).abs() < 1e-4);
 
