@@ -9,11 +9,14 @@
 # `/usr/bin/time -v`, polling the bake's /proc/PID/status every 0.2 s (POLL) for its peak
 # RssAnon and RssFile. Prints one row per bake:
 #   texels binary transport round peak_anon_MB peak_file_MB peak_rss_MB(time -v) wall_s
-#   previous_pass_images_s pass_image_bytes
+#   previous_pass_images_s pass_image_bytes filter_window_bytes
 # (MB = 10⁶ bytes; pass_image_bytes from the stats JSON, `-` where a build does not report it).
 # Each bake runs twice and the second is measured (WARM=0: once): a bake right after `synth`
 # wrote its texel file holds that file's fresh pages (docs/bake.md, "Memory and throughput").
-# TRANSPORTS (default "series path") picks the transports.
+# TRANSPORTS (default "series path") picks the transports; BAKE_ARGS (default "--spp 16
+# --iterations 2 --bounces 1") the bake's settings: BAKE_ARGS="--spp 24" bakes the default
+# (three bounces, the last two passes' images filtered). Each measured bake's pages
+# stay (OUT/TEXELS-BINARY-TRANSPORT-ROUND.page*.exr), to compare the binaries' bytes.
 set -euo pipefail
 out=$1
 shift
@@ -28,6 +31,7 @@ rounds=${ROUNDS:-1}
 warm=${WARM:-1}
 read -r -a transports <<<"${TRANSPORTS:-series path}"
 poll=${POLL:-0.2}
+read -r -a bake_args <<<"${BAKE_ARGS:---spp 16 --iterations 2 --bounces 1}"
 mkdir -p "$out"
 
 # Runs a bake under /usr/bin/time -v; prints "anon_kb file_kb maxrss_kb wall_s".
@@ -56,7 +60,7 @@ measure() {
     echo "$anon $file $maxrss $wall"
 }
 
-printf '%s\n' "texels binary transport round peak_anon_MB peak_file_MB peak_rss_MB wall_s previous_pass_images_s pass_image_bytes"
+printf '%s\n' "texels binary transport round peak_anon_MB peak_file_MB peak_rss_MB wall_s previous_pass_images_s pass_image_bytes filter_window_bytes"
 for n in "${texels[@]}"; do
     world=$out/w$n
     [[ -f $world.texels ]] || "${binaries[0]}" synth --texels "$n" -o "$world.texels" >&2
@@ -65,7 +69,7 @@ for n in "${texels[@]}"; do
             for transport in "${transports[@]}"; do
                 tag=$out/$n-$b-$transport-$round
                 bake=("${binaries[$b]}" bake "$world.texels" --scene "$world.toml" -o "$tag.exr"
-                    --spp 16 --iterations 2 --bounces 1 --threads 2 --transport "$transport"
+                    "${bake_args[@]}" --threads 2 --transport "$transport"
                     --stats "$tag.json" -q)
                 rm -rf "$tag.exr"*
                 if [[ $warm == 1 ]]; then "${bake[@]}" && rm -rf "$tag.exr"*; fi
@@ -77,8 +81,9 @@ s = json.load(open(stats))
 t = s["seconds"]
 wall = float(wall)
 image = s.get("pass_image_bytes", "-")
+window = s.get("filter_window_bytes", "-")
 print(n, b, transport, rnd, f"{int(anon) * 1024 / 1e6:.0f}", f"{int(file) * 1024 / 1e6:.0f}",
-      f"{int(maxrss) * 1024 / 1e6:.0f}", f"{wall:.2f}", f"{t['previous_pass_images']:.2f}", image)
+      f"{int(maxrss) * 1024 / 1e6:.0f}", f"{wall:.2f}", f"{t['previous_pass_images']:.2f}", image, window)
 EOF
                 rm -rf "$tag.exr"*
             done

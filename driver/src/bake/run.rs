@@ -44,7 +44,7 @@ use crate::output::result_file::{FLAG_BAKED, MappedResults, ResultFile, TexelRes
 use crate::scene::Scene;
 use crate::texels::{FLAG_INSIDE, TexelFile};
 use crate::transport::lookup_filter::Surfel;
-use crate::transport::pass_image::{CELL, Source, SourceTexel};
+use crate::transport::pass_image::{CELL, Source, SourceTexel, TileRect};
 use crate::transport::series::{BuildError, PreviousPass};
 use crate::transport::world::World;
 
@@ -105,6 +105,9 @@ pub struct BakeReport {
     /// Bytes of the largest pass image the series transport built (its file in the work
     /// directory; 0 for other transports).
     pub pass_image_bytes: u64,
+    /// Bytes the lookups' filter held at most while it built a pass image (what it knows of
+    /// the texels within its reach; 0 unfiltered).
+    pub filter_window_bytes: u64,
     /// Pixels with non-finite results replaced by zero when writing (should be 0).
     pub non_finite_pixels: u64,
     /// Mean relative jump between the two texels of each seam pair, before and after
@@ -676,6 +679,9 @@ fn previous_pass(
     })?;
     report.seconds.previous_pass_images += clock.elapsed().as_secs_f64();
     report.pass_image_bytes = report.pass_image_bytes.max(previous.bytes());
+    report.filter_window_bytes = report
+        .filter_window_bytes
+        .max(previous.filter_window_bytes());
     Ok(previous)
 }
 
@@ -695,6 +701,17 @@ impl Source for ResultTiles<'_> {
 
     fn tile_count(&self) -> usize {
         self.texels.tiles().len()
+    }
+
+    fn rect(&self, tile: usize) -> TileRect {
+        let t = &self.texels.tiles()[tile];
+        TileRect {
+            page: t.page,
+            x: t.x,
+            y: t.y,
+            width: t.width,
+            height: t.height,
+        }
     }
 
     fn bounds(&self) -> (u64, u64) {

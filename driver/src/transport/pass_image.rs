@@ -16,15 +16,21 @@
 //!   (rounding up to 2⁻¹¹ of a value, at most 65 504) could put 2.4·10⁻⁴ of error into the
 //!   closed rooms' texels, whose checks allow 10⁻⁴, and clip a bright sun (not tried);
 //!   RGB9E5 (2⁻⁹) more so.
-//! - **Build.** [`build`] reads the source tile by tile in chunks (a few tiles per thread),
-//!   every tile of a chunk on its own rayon worker, and appends their blocks and colours in
-//!   tile order: the bytes do not depend on the thread count. With the lookups' filter a
-//!   second parallel step replaces each baked colour by its filtered value
-//!   ([`crate::transport::lookup_filter`]), reading the neighbours through the table from a
-//!   scratch array of one [`FilterSlot`] per colour.
+//! - **Build.** [`build`] reads the source's tiles page by page, top to bottom, in chunks (a
+//!   few tiles per thread), every tile of a chunk on its own rayon worker, and appends their
+//!   blocks and colours in that order: the bytes depend neither on the thread count nor on
+//!   the order the source lists its tiles. With the lookups' filter
+//!   ([`crate::transport::lookup_filter`]) each tile's baked colours are then replaced by
+//!   their filtered values as soon as every tile within the filter's reach has been read,
+//!   every ready tile on its own worker, reading the neighbours through the table from one
+//!   [`Surfel`] per colour, held in memory only while a tile still to be filtered can reach
+//!   it: a band of rows across a page, not one for every texel of the world
+//!   ([`Built::filter_surfels`] counts the most it held).
 //!
 //! The file is the work directory's (written and read by one process; rebuilt by each run),
 //! so its layout is in memory ([`Layout`], [`Built`]), not in a header.
+
+use std::collections::VecDeque;
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -36,7 +42,7 @@ use crate::transport::lookup_filter::{Surfel, filtered_at};
 pub const CELL: u32 = 8;
 
 /// Tiles read per parallel step of the build, per worker thread: bounds its buffers (per
-/// thread about 0.1 MB a tile, 0.6 MB with the filter's slots, for 1 024-texel tiles)
+/// thread about 0.1 MB a tile, 0.5 MB with the filter's surfels, for 1 024-texel tiles)
 /// whatever the world's size. 256 tiles a step held 34 MB of anonymous memory with the filter,
 /// more than the whole bake of a 10⁶-texel world.
 const CHUNK_TILES_PER_THREAD: usize = 4;
@@ -62,19 +68,6 @@ pub struct Block {
     pub page: u32,
     /// The cell, row-major within its page.
     pub cell: u32,
-}
-
-/// What the filter's second step needs of a baked pixel: its texel as the filter sees it
-/// (`baked` 0 where the texel has none, and then it is neither filtered nor a neighbour), its
-/// gathered light unquantised (in the surfel) and its total.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct FilterSlot {
-    /// The texel for the filter; its `gathered` is the pixel's even where `baked` is 0.
-    pub surfel: Surfel,
-    /// Total irradiance, unquantised.
-    pub total: [f32; 3],
-    _pad: u32,
 }
 
 /// Mantissa bits per channel of [`pack_rgb`].
@@ -201,6 +194,8 @@ pub struct Built {
     pub blocks: usize,
     /// Colours written.
     pub colours: usize,
+    /// The most texels the lookups' filter held at once (0: not filtered).
+    pub filter_surfels: usize,
 }
 
 impl Built {
@@ -325,13 +320,31 @@ pub struct SourceTexel {
     pub surfel: Option<Surfel>,
 }
 
+/// Where a source tile lies: its page and its rectangle of pixels, which holds its texels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TileRect {
+    /// The page.
+    pub page: u32,
+    /// Left column.
+    pub x: u32,
+    /// Top row.
+    pub y: u32,
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+}
+
 /// Where an image's texels come from, tile by tile: tiles do not overlap, and each lies on
 /// one page.
 pub trait Source: Sync {
     /// Why a tile could not be read.
     type Error: Send;
-    /// Tiles, read in this order.
+    /// Tiles.
     fn tile_count(&self) -> usize;
+    /// Where tile `tile` lies. The build reads the tiles page by page, top to bottom (by
+    /// their top rows, then their left columns), whatever their order here.
+    fn rect(&self, tile: usize) -> TileRect;
     /// At most this many blocks over every tile (the cells each tile's rectangle meets) and
     /// this many texels.
     fn bounds(&self) -> (u64, u64);
@@ -342,13 +355,17 @@ pub trait Source: Sync {
     fn read_tile(&self, tile: usize, out: &mut Vec<SourceTexel>) -> Result<u32, Self::Error>;
 }
 
-/// One tile's blocks (`first` counted from the tile's first colour), colours and filter slots.
+/// One tile's blocks (`first` counted from the tile's first colour) and colours, and with the
+/// filter each colour's texel as the filter sees it (`baked` 0 where it has none, and then it
+/// is neither filtered nor a neighbour; its `gathered` the pixel's all the same) and its total
+/// irradiance, unquantised.
 #[derive(Default)]
 struct TileOut {
     page: u32,
     blocks: Vec<Block>,
     colours: Vec<Packed>,
-    slots: Vec<FilterSlot>,
+    surfels: Vec<Surfel>,
+    totals: Vec<[f32; 3]>,
 }
 
 /// Groups one tile's texels into blocks, in cell order, and packs their colours.
@@ -405,11 +422,8 @@ fn tile_blocks(
             if filter {
                 let mut surfel = t.surfel.filter(|_| t.baked).unwrap_or_default();
                 surfel.gathered = t.gathered;
-                out.slots.push(FilterSlot {
-                    surfel,
-                    total: t.total,
-                    _pad: 0,
-                });
+                out.surfels.push(surfel);
+                out.totals.push(t.total);
             }
         }
     }
@@ -417,9 +431,16 @@ fn tile_blocks(
 }
 
 /// Builds the image of `source` into `bytes` (zeroed, [`Layout::bytes`] long, 8-byte
-/// aligned), its baked pixels' gathered light filtered over `filter.0` texels where
-/// `filter` is given, with `filter.1` as scratch (one [`FilterSlot`] per colour bound).
-/// Runs on the current rayon pool; the bytes do not depend on its size.
+/// aligned), its baked pixels' gathered light filtered over `filter` texels (0: not
+/// filtered). Runs on the current rayon pool; the bytes do not depend on its size, nor on the
+/// order of the source's tiles: they are read page by page, top to bottom ([`Source::rect`]).
+///
+/// The filter holds what it knows of each texel (its [`Surfel`]) only while a tile within
+/// its reach is still to be filtered: a tile is filtered as soon as every tile that may hold
+/// its neighbours has been read (the next tile to read starts `filter` rows below it, or on
+/// another page), and its surfels are let go once every tile still to be filtered starts
+/// `filter` rows below its bottom. The filter's memory is a band of rows across a page, not
+/// the world: [`Built::filter_surfels`] says how many it held at most.
 ///
 /// # Errors
 /// The source's, when a tile cannot be read.
@@ -430,73 +451,197 @@ pub fn build<S: Source>(
     layout: &Layout,
     source: &S,
     bytes: &mut [u8],
-    mut filter: Option<(u32, &mut [FilterSlot])>,
+    filter: u32,
 ) -> Result<Built, S::Error> {
-    let filtering = filter.as_ref().is_some_and(|f| f.0 > 0);
     let mut built = Built::default();
-    // Each tile's colours, for the filter's step.
-    let mut tile_colours = Vec::new();
-    let tiles: Vec<usize> = (0..source.tile_count()).collect();
+    let mut order: Vec<(TileRect, usize)> = (0..source.tile_count())
+        .map(|t| (source.rect(t), t))
+        .collect();
+    order.sort_unstable_by_key(|&(r, t)| (r.page, r.y, r.x, t));
+    let mut window = FilterWindow::default();
     let chunk_tiles = CHUNK_TILES_PER_THREAD * rayon::current_num_threads();
-    for chunk in tiles.chunks(chunk_tiles) {
-        let outs: Vec<Result<TileOut, S::Error>> = chunk
-            .par_iter()
-            .map_init(
-                || (Vec::new(), Vec::new()),
-                |(texels, keys), &t| {
-                    let page = source.read_tile(t, texels)?;
-                    Ok(tile_blocks(layout, page, texels, filtering, keys))
-                },
-            )
-            .collect();
-        let (head, colours) = bytes.split_at_mut(layout.colours_at);
-        let (cells, blocks) = head.split_at_mut(layout.blocks_at);
-        let cells: &mut [u32] = bytemuck::cast_slice_mut(cells);
-        let blocks: &mut [Block] = bytemuck::cast_slice_mut(blocks);
-        let colours: &mut [Packed] =
-            bytemuck::cast_slice_mut(&mut colours[..layout.colour_bound * size_of::<Packed>()]);
-        for out in outs {
+    let chunks: Vec<&[(TileRect, usize)]> = order.chunks(chunk_tiles).collect();
+    let read = |chunk: Option<&&[(TileRect, usize)]>| -> Vec<Result<TileOut, S::Error>> {
+        chunk.map_or_else(Vec::new, |chunk| {
+            chunk
+                .par_iter()
+                .map_init(
+                    || (Vec::new(), Vec::new()),
+                    |(texels, keys), &(_, t)| {
+                        let page = source.read_tile(t, texels)?;
+                        Ok(tile_blocks(layout, page, texels, filter > 0, keys))
+                    },
+                )
+                .collect()
+        })
+    };
+    let mut outs = read(chunks.first());
+    for (c, chunk) in chunks.iter().enumerate() {
+        for (out, &(rect, _)) in std::mem::take(&mut outs).into_iter().zip(chunk.iter()) {
             let out = out?;
-            let first = built.colours;
-            let (b, c) = (out.blocks.len(), out.colours.len());
-            assert!(
-                built.blocks + b <= layout.block_bound && first + c <= layout.colour_bound,
-                "a pass image's source holds more than its bounds"
-            );
-            let base = layout.pages[out.page as usize].base;
-            for (i, mut block) in out.blocks.into_iter().enumerate() {
-                let at = built.blocks + i;
-                let cell = &mut cells[base + block.cell as usize];
-                block.first += first as u32;
-                block.next = *cell;
-                *cell = at as u32 + 1;
-                blocks[at] = block;
+            let rect = TileRect {
+                page: out.page,
+                ..rect
+            };
+            let (blocks, first) = append(layout, bytes, &mut built, &out);
+            if filter > 0 {
+                window.read(rect, blocks, first, out.surfels, out.totals);
             }
-            colours[first..first + c].copy_from_slice(&out.colours);
-            if let Some((_, slots)) = filter.as_mut().filter(|_| filtering) {
-                slots[first..first + c].copy_from_slice(&out.slots);
-            }
-            tile_colours.push((built.blocks..built.blocks + b, first..first + c));
-            built.blocks += b;
-            built.colours += c;
         }
+        // The next chunk is read while the tiles this one made ready are filtered: they need
+        // none of its tiles.
+        outs = if filter > 0 {
+            let next = chunks.get(c + 1).map(|chunk| chunk[0].0);
+            let filter_ready = || window.filter_ready(layout, built, bytes, next, filter);
+            rayon::join(|| read(chunks.get(c + 1)), filter_ready).0
+        } else {
+            read(chunks.get(c + 1))
+        };
     }
-    if let Some((radius, slots)) = filter.filter(|f| f.0 > 0) {
-        filter_colours(layout, built, bytes, &tile_colours, radius, slots);
-    }
+    built.filter_surfels = window.peak;
     Ok(built)
 }
 
-/// Replaces each baked colour with a surfel by its filtered value: the filtered gathered
-/// light, and the total moved by as much (the direct light stays), from the unquantised
-/// values in `slots`. Every tile on its own worker, writing its own colours.
+/// Appends one tile's blocks (chained into the cell table) and colours to the image; returns
+/// its blocks and its first colour.
+///
+/// # Panics
+/// If the image's bounds cannot hold them.
+fn append(
+    layout: &Layout,
+    bytes: &mut [u8],
+    built: &mut Built,
+    out: &TileOut,
+) -> (std::ops::Range<usize>, usize) {
+    let (head, colours) = bytes.split_at_mut(layout.colours_at);
+    let (cells, blocks) = head.split_at_mut(layout.blocks_at);
+    let cells: &mut [u32] = bytemuck::cast_slice_mut(cells);
+    let blocks: &mut [Block] = bytemuck::cast_slice_mut(blocks);
+    let colours: &mut [Packed] =
+        bytemuck::cast_slice_mut(&mut colours[..layout.colour_bound * size_of::<Packed>()]);
+    let first = built.colours;
+    let (b, c) = (out.blocks.len(), out.colours.len());
+    assert!(
+        built.blocks + b <= layout.block_bound && first + c <= layout.colour_bound,
+        "a pass image's source holds more than its bounds"
+    );
+    let base = layout.pages[out.page as usize].base;
+    for (i, block) in out.blocks.iter().enumerate() {
+        let at = built.blocks + i;
+        let cell = &mut cells[base + block.cell as usize];
+        blocks[at] = Block {
+            first: block.first + first as u32,
+            next: *cell,
+            ..*block
+        };
+        *cell = at as u32 + 1;
+    }
+    colours[first..first + c].copy_from_slice(&out.colours);
+    let range = built.blocks..built.blocks + b;
+    built.blocks += b;
+    built.colours += c;
+    (range, first)
+}
+
+/// A tile read but not yet filtered: where it lies, its blocks, its colours and their totals.
+struct Pending {
+    rect: TileRect,
+    blocks: std::ops::Range<usize>,
+    colours: std::ops::Range<usize>,
+    totals: Vec<[f32; 3]>,
+}
+
+/// What the filter knows of the texels a tile still to be filtered may reach, in colour
+/// order: `surfels[i]` is colour `first + i`'s.
+#[derive(Default)]
+struct FilterWindow {
+    surfels: VecDeque<Surfel>,
+    first: usize,
+    /// The tiles whose surfels are held, in colour order: where each lies, its colour count.
+    held: VecDeque<(TileRect, usize)>,
+    /// Tiles read and not yet filtered, in the order they were read.
+    pending: Vec<Pending>,
+    /// The most surfels held at once (the ring's capacity).
+    peak: usize,
+}
+
+impl FilterWindow {
+    /// Takes a tile just read: its rectangle, blocks, first colour, surfels and totals.
+    fn read(
+        &mut self,
+        rect: TileRect,
+        blocks: std::ops::Range<usize>,
+        first: usize,
+        surfels: Vec<Surfel>,
+        totals: Vec<[f32; 3]>,
+    ) {
+        debug_assert_eq!(first, self.first + self.surfels.len());
+        self.held.push_back((rect, surfels.len()));
+        self.pending.push(Pending {
+            rect,
+            blocks,
+            colours: first..first + surfels.len(),
+            totals,
+        });
+        self.surfels.extend(surfels);
+        self.peak = self.peak.max(self.surfels.capacity());
+    }
+
+    /// Filters every pending tile whose neighbours within `radius` rows have all been read
+    /// (`next`, the next tile to read, starts `radius` rows below it or on another page; none:
+    /// every tile), then lets go of the surfels no tile still to be filtered can reach.
+    fn filter_ready(
+        &mut self,
+        layout: &Layout,
+        built: Built,
+        bytes: &mut [u8],
+        next: Option<TileRect>,
+        radius: u32,
+    ) {
+        let ready =
+            |t: &TileRect| next.is_none_or(|n| n.page != t.page || n.y >= t.y + t.height + radius);
+        let (now, later): (Vec<Pending>, Vec<Pending>) = std::mem::take(&mut self.pending)
+            .into_iter()
+            .partition(|p| ready(&p.rect));
+        self.pending = later;
+        filter_colours(layout, built, bytes, &now, radius, self);
+        // The first tile still to be filtered starts highest: earlier tiles ending `radius`
+        // rows above it are out of every later tile's reach.
+        let frontier = self.pending.first().map(|p| p.rect).or(next);
+        while let Some(&(held, n)) = self.held.front() {
+            let done = frontier.is_none_or(|f| {
+                held.page < f.page || (held.page == f.page && held.y + held.height + radius <= f.y)
+            });
+            if !done {
+                break;
+            }
+            self.held.pop_front();
+            self.surfels.drain(..n);
+            self.first += n;
+        }
+    }
+
+    /// Colour `colour`'s surfel, if the window holds it.
+    fn surfel(&self, colour: usize) -> Option<&Surfel> {
+        let i = colour.checked_sub(self.first);
+        debug_assert!(
+            i.is_some_and(|i| i < self.surfels.len()),
+            "a colour the window let go"
+        );
+        self.surfels.get(i?)
+    }
+}
+
+/// Replaces each baked colour of the tiles `tiles` with a surfel by its filtered value: the
+/// filtered gathered light, and the total moved by as much (the direct light stays), from the
+/// unquantised values the window holds. Every tile on its own worker, writing its own colours.
 fn filter_colours(
     layout: &Layout,
     built: Built,
     bytes: &mut [u8],
-    tiles: &[(std::ops::Range<usize>, std::ops::Range<usize>)],
+    tiles: &[Pending],
     radius: u32,
-    slots: &[FilterSlot],
+    window: &FilterWindow,
 ) {
     let (head, tail) = bytes.split_at_mut(layout.colours_at);
     let colours: &mut [Packed] =
@@ -509,38 +654,43 @@ fn filter_colours(
         ),
         colours: &[],
     };
-    // Every tile's colours, disjoint.
+    // Every tile's colours, disjoint (the tiles are in colour order).
     let mut rest = colours;
+    let mut at = 0;
     let mut work = Vec::with_capacity(tiles.len());
-    for (blocks, range) in tiles {
-        let (mine, later) = rest.split_at_mut(range.len());
-        work.push((blocks.clone(), range.start, mine));
+    for t in tiles {
+        let (_, tail) = std::mem::take(&mut rest).split_at_mut(t.colours.start - at);
+        let (mine, later) = tail.split_at_mut(t.colours.len());
+        work.push((t, mine));
         rest = later;
+        at = t.colours.end;
     }
-    work.into_par_iter().for_each(|(blocks, first, mine)| {
-        for b in &view.blocks[blocks] {
+    work.into_par_iter().for_each(|(tile, mine)| {
+        for b in &view.blocks[tile.blocks.clone()] {
             let p = layout.pages[b.page as usize];
             let (cx, cy) = (b.cell % p.across * CELL, b.cell / p.across * CELL);
             let mut mask = b.baked;
             while mask != 0 {
                 let bit = mask.trailing_zeros();
                 mask &= mask - 1;
-                let slot = View::colour_index(b, 1 << bit).expect("a baked pixel");
-                let me = slots[slot];
-                if me.surfel.baked != 1.0 {
+                let colour = View::colour_index(b, 1 << bit).expect("a baked pixel");
+                let Some(me) = window.surfel(colour).filter(|s| s.baked == 1.0) else {
                     continue;
-                }
+                };
                 let (x, y) = ((cx + bit % CELL) as usize, (cy + bit / CELL) as usize);
                 let at = |nx: usize, ny: usize| {
                     view.baked_index(b.page, nx as u32, ny as u32)
-                        .map_or_else(Surfel::default, |i| slots[i].surfel)
+                        .and_then(|i| window.surfel(i))
+                        .copied()
+                        .unwrap_or_default()
                 };
                 let page = (p.width as usize, p.height as usize);
-                let f = filtered_at(&me.surfel, (x, y), page, radius as usize, at);
-                let change = f - Vec3::from(me.surfel.gathered);
-                let g: [f32; 3] = core::array::from_fn(|c| me.surfel.gathered[c] + change[c]);
-                let t: [f32; 3] = core::array::from_fn(|c| me.total[c] + change[c]);
-                mine[slot - first] = pack(g, t);
+                let f = filtered_at(me, (x, y), page, radius as usize, at);
+                let change = f - Vec3::from(me.gathered);
+                let i = colour - tile.colours.start;
+                let g: [f32; 3] = core::array::from_fn(|c| me.gathered[c] + change[c]);
+                let t: [f32; 3] = core::array::from_fn(|c| tile.totals[i][c] + change[c]);
+                mine[i] = pack(g, t);
             }
         }
     });
@@ -624,6 +774,20 @@ mod tests {
         fn tile_count(&self) -> usize {
             (self.size.width.div_ceil(self.tile) * self.size.height.div_ceil(self.tile)) as usize
         }
+        fn rect(&self, tile: usize) -> TileRect {
+            let across = self.size.width.div_ceil(self.tile);
+            let (x, y) = (
+                tile as u32 % across * self.tile,
+                tile as u32 / across * self.tile,
+            );
+            TileRect {
+                page: 0,
+                x,
+                y,
+                width: self.tile.min(self.size.width - x),
+                height: self.tile.min(self.size.height - y),
+            }
+        }
         fn bounds(&self) -> (u64, u64) {
             let cells = (self.tile.div_ceil(CELL) + 1).pow(2);
             (
@@ -672,14 +836,7 @@ mod tests {
         let (blocks, texels) = g.bounds();
         let layout = Layout::new(&[g.size], blocks, texels).unwrap();
         let mut words = vec![0u64; layout.bytes() / 8];
-        let mut slots = vec![FilterSlot::default(); texels as usize];
-        let built = build(
-            &layout,
-            g,
-            bytemuck::cast_slice_mut(&mut words),
-            Some((filter, &mut slots)),
-        )
-        .unwrap();
+        let built = build(&layout, g, bytemuck::cast_slice_mut(&mut words), filter).unwrap();
         (layout, built, words)
     }
 
@@ -793,5 +950,118 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A source given as a list of tiles, in any order.
+    struct Listed {
+        pages: Vec<PageRecord>,
+        tiles: Vec<(TileRect, Vec<SourceTexel>)>,
+    }
+
+    impl Source for Listed {
+        type Error = ();
+        fn tile_count(&self) -> usize {
+            self.tiles.len()
+        }
+        fn rect(&self, tile: usize) -> TileRect {
+            self.tiles[tile].0
+        }
+        fn bounds(&self) -> (u64, u64) {
+            let cells = |from: u32, len: u32| u64::from((from + len).div_ceil(CELL) - from / CELL);
+            let blocks = self
+                .tiles
+                .iter()
+                .map(|(r, _)| cells(r.x, r.width) * cells(r.y, r.height));
+            let texels = self.tiles.iter().map(|(_, t)| t.len() as u64);
+            (blocks.sum(), texels.sum())
+        }
+        fn read_tile(&self, tile: usize, out: &mut Vec<SourceTexel>) -> Result<u32, ()> {
+            out.clear();
+            out.extend_from_slice(&self.tiles[tile].1);
+            Ok(self.tiles[tile].0.page)
+        }
+    }
+
+    #[test]
+    fn the_filtered_bytes_do_not_depend_on_the_tiles_order_and_the_filter_holds_a_band() {
+        // Two pages, 24 × 200 and 16 × 40, in tiles of 6 × 5 (cutting the cells), a noisy
+        // plane each, the tiles listed in their order and shuffled.
+        let pages = [
+            PageRecord {
+                width: 24,
+                height: 200,
+            },
+            PageRecord {
+                width: 16,
+                height: 40,
+            },
+        ];
+        let mut tiles = Vec::new();
+        for (p, size) in pages.iter().enumerate() {
+            for ty in (0..size.height).step_by(5) {
+                for tx in (0..size.width).step_by(6) {
+                    let rect = TileRect {
+                        page: p as u32,
+                        x: tx,
+                        y: ty,
+                        width: 6.min(size.width - tx),
+                        height: 5.min(size.height - ty),
+                    };
+                    let mut texels = Vec::new();
+                    for y in ty..ty + rect.height {
+                        for x in tx..tx + rect.width {
+                            let g = 1.0 + ((x * 7 + y * 13 + p as u32) % 5) as f32 * 0.2;
+                            let at = Vec3::new(x as f32, y as f32, p as f32 * 100.0);
+                            texels.push(SourceTexel {
+                                pixel: (x, y),
+                                baked: !(x + y).is_multiple_of(7),
+                                gathered: [g; 3],
+                                total: [g + x as f32; 3],
+                                surfel: Surfel::new(at, Vec3::Z, 1.0, [g; 3], 0.3),
+                                ..SourceTexel::default()
+                            });
+                        }
+                    }
+                    tiles.push((rect, texels));
+                }
+            }
+        }
+        let build_of = |tiles: Vec<(TileRect, Vec<SourceTexel>)>, threads: usize| {
+            let source = Listed {
+                pages: pages.to_vec(),
+                tiles,
+            };
+            let (blocks, texels) = source.bounds();
+            let layout = Layout::new(&source.pages, blocks, texels).unwrap();
+            let mut words = vec![0u64; layout.bytes() / 8];
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let built = pool
+                .install(|| build(&layout, &source, bytemuck::cast_slice_mut(&mut words), 2))
+                .unwrap();
+            (built, words)
+        };
+        let (built, words) = build_of(tiles.clone(), 1);
+        // Reversed, then stirred.
+        let mut shuffled: Vec<_> = tiles.iter().rev().cloned().collect();
+        shuffled.sort_by_key(|(r, _)| (r.x * 31 + r.y * 17 + r.page * 7) % 11);
+        assert_ne!(shuffled[0].0, tiles[0].0);
+        for threads in [1, 3] {
+            let (b, w) = build_of(shuffled.clone(), threads);
+            assert_eq!((b.blocks, b.colours), (built.blocks, built.colours));
+            assert!(w == words, "{threads} threads, shuffled tiles: other bytes");
+        }
+        // The filter held a band of rows, not the 4 660 baked texels: on one thread, four
+        // tiles (one row of tiles across the first page) a step, the rows the filter reaches
+        // above and below a row of tiles (3 rows of tiles, 15 rows of 24 pixels) and one step
+        // more, in a ring whose capacity is a power of two.
+        assert!(built.filter_surfels > 0, "nothing held");
+        assert!(
+            built.filter_surfels <= 1024,
+            "the filter held {} texels",
+            built.filter_surfels
+        );
     }
 }

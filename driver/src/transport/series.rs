@@ -57,7 +57,7 @@ use crate::texels::{PageRecord, TriangleRecord};
 use crate::transport::emitters::luminance;
 use crate::transport::lookup_filter::Surfel;
 use crate::transport::pass_image::{
-    self, Built, CELL, FilterSlot, Layout, Source, SourceTexel, View,
+    self, Built, CELL, Layout, Source, SourceTexel, TileRect, View,
 };
 
 /// Rings of pixels filled around every chart from their covered neighbours.
@@ -240,7 +240,7 @@ impl PreviousPass {
         let layout = Layout::new(pages, blocks, texels).expect("a memory image within u32 texels");
         let mut words = vec![0u64; layout.bytes() / 8];
         let Ok(built) =
-            pass_image::build(&layout, &source, bytemuck::cast_slice_mut(&mut words), None);
+            pass_image::build(&layout, &source, bytemuck::cast_slice_mut(&mut words), 0);
         Self {
             storage: Storage::Owned(words),
             layout,
@@ -251,11 +251,11 @@ impl PreviousPass {
     }
 
     /// Builds the image of `source` (its gathered light filtered over `filter` texels; 0:
-    /// none) into a file at `path`, on the current rayon pool, and maps it. The filter's
-    /// scratch lies beside it (`.surfels`, removed when done).
+    /// none) into a file at `path`, on the current rayon pool, and maps it. The filter holds
+    /// a band of rows in memory while it runs ([`pass_image::build`]), no file.
     ///
     /// # Errors
-    /// [`BuildError::Image`] when a file cannot be created, sized, mapped or removed, or the
+    /// [`BuildError::Image`] when a file cannot be created, sized or mapped, or the
     /// source holds more than 32-bit indices reach; [`BuildError::Source`] when it cannot be
     /// read.
     pub fn build<S: Source>(
@@ -281,24 +281,8 @@ impl PreviousPass {
         })?;
         let (file, mut map) =
             create_mapped(path, layout.bytes(), "pass image").map_err(BuildError::Image)?;
-        let scratch = path.with_extension("surfels");
-        let built = if filter > 0 {
-            let bytes = texels as usize * size_of::<FilterSlot>();
-            let (_, mut slots) = create_mapped(&scratch, bytes, "lookup filter's texel file")
-                .map_err(BuildError::Image)?;
-            let slots: &mut [FilterSlot] = bytemuck::cast_slice_mut(&mut slots[..bytes]);
-            let built = pass_image::build(&layout, source, &mut map, Some((filter, slots)));
-            std::fs::remove_file(&scratch).map_err(|e| {
-                err(
-                    &scratch,
-                    format!("cannot remove the lookup filter's texel file: {e}"),
-                )
-            })?;
-            built
-        } else {
-            pass_image::build(&layout, source, &mut map, None)
-        }
-        .map_err(BuildError::Source)?;
+        let built =
+            pass_image::build(&layout, source, &mut map, filter).map_err(BuildError::Source)?;
         // No flush: the file is this run's scratch, read back through the page cache.
         drop(map);
         let used = built.bytes(&layout).max(8) as u64;
@@ -329,6 +313,11 @@ impl PreviousPass {
     /// Bytes the image holds (its file's length, for a mapped one).
     pub fn bytes(&self) -> u64 {
         self.built.bytes(&self.layout) as u64
+    }
+
+    /// Bytes the lookups' filter held at most while it built the image (0: unfiltered).
+    pub fn filter_window_bytes(&self) -> u64 {
+        (self.built.filter_surfels * size_of::<Surfel>()) as u64
     }
 
     /// The same image, holding series pass `pass` (0: the direct pass): its light has made
@@ -597,8 +586,7 @@ impl PreviousPassWriter {
     /// Builds the image file and maps it for lookups.
     ///
     /// # Errors
-    /// [`PassImageError`] when the file or the filter's scratch cannot be written, mapped or
-    /// removed.
+    /// [`PassImageError`] when the file cannot be written or mapped.
     pub fn finish(
         self,
         scene: &Scene,
@@ -633,6 +621,8 @@ impl PreviousPassWriter {
 /// A source held in memory: tiles of one band of cells of one page each.
 struct TileList {
     tiles: Vec<(u32, Vec<SourceTexel>)>,
+    /// Each page's width.
+    widths: Vec<u32>,
     blocks: u64,
     texels: u64,
 }
@@ -643,6 +633,7 @@ impl TileList {
         Self {
             blocks: tiles.iter().map(|(p, _)| u64::from(across(*p))).sum(),
             texels: tiles.iter().map(|(_, t)| t.len() as u64).sum(),
+            widths: pages.iter().map(|p| p.width).collect(),
             tiles,
         }
     }
@@ -653,6 +644,19 @@ impl Source for TileList {
 
     fn tile_count(&self) -> usize {
         self.tiles.len()
+    }
+
+    fn rect(&self, tile: usize) -> TileRect {
+        let (page, texels) = &self.tiles[tile];
+        let top = texels.first().map_or(0, |t| t.pixel.1 / CELL * CELL);
+        let width = self.widths.get(*page as usize).copied().unwrap_or(0);
+        TileRect {
+            page: *page,
+            x: 0,
+            y: top,
+            width,
+            height: CELL,
+        }
     }
 
     fn bounds(&self) -> (u64, u64) {
@@ -703,6 +707,18 @@ impl Source for DenseSource<'_> {
 
     fn tile_count(&self) -> usize {
         self.bands.len()
+    }
+
+    fn rect(&self, tile: usize) -> TileRect {
+        let (page, y) = self.bands[tile];
+        let size = self.pages[page as usize];
+        TileRect {
+            page,
+            x: 0,
+            y,
+            width: size.width,
+            height: CELL.min(size.height - y),
+        }
     }
 
     fn bounds(&self) -> (u64, u64) {
@@ -837,10 +853,6 @@ mod tests {
             w.describe(0, (x, y), s);
         }
         let image = w.finish(&scene, &meshes).unwrap();
-        assert!(
-            !path.with_extension("surfels").exists(),
-            "texel file left behind"
-        );
         let view = image.view();
         for i in 0..16 {
             let p = view.tap(0, i % 4, i / 4);
@@ -857,7 +869,7 @@ mod tests {
                 "pixel {i}: direct moved"
             );
         }
-        // Radius 0 writes no texel file and leaves the values.
+        // Radius 0 leaves the values.
         let mut w = PreviousPassWriter::create(&path, &pages)
             .unwrap()
             .with_filter(0)
@@ -869,7 +881,6 @@ mod tests {
             Surfel::new(Vec3::ZERO, Vec3::Z, 1.0, [1.0; 3], 1.0).unwrap(),
         );
         let image = w.finish(&scene, &meshes).unwrap();
-        assert!(!path.with_extension("surfels").exists());
         let p = image.view().tap(0, 0, 0);
         assert_eq!((p.gathered.x, p.total.x), (1.0, 2.0));
     }
