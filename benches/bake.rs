@@ -21,13 +21,13 @@ use guidebake::bake::directional::Directional;
 use guidebake::bake::gather::TileBaker;
 use guidebake::bake::pipeline::TileBuffer;
 use guidebake::bake::settings::BakeSettings;
-use guidebake::bake::world::World;
 use guidebake::bench::method::{Method, value_name};
 use guidebake::bvh::Preset;
 use guidebake::demo::{DEMO_TEXELS_PER_METRE, ajar_room};
 use guidebake::output::result_file::FLAG_BAKED;
 use guidebake::prepare::{Layout, PrepareOptions, Resolution, prepare};
 use guidebake::texels::{FLAG_VALID, TexelFile};
+use guidebake::transport::world::World;
 
 const SPP: u32 = 64;
 

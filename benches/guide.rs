@@ -20,7 +20,7 @@ use std::hint::black_box;
 /// learn from ~1 000–2 000 today) and a large one.
 const RECORD_COUNTS: [usize; 3] = [512, 4096, 16_384];
 
-/// The bake's guide parameters (`driver/src/bake/gather.rs`, defaults `--min-split 64`,
+/// The bake's guide parameters (`driver/src/bake/gather/`, defaults `--min-split 64`,
 /// `--smooth 10`, `--mix 25`: the mixture's uniform share 0.25 and so the mixed ambient
 /// floor 0.02).
 fn bake_params() -> GuideParams {

@@ -4,7 +4,7 @@
 //! Sobol points in two orders — `unsorted` (Sobol index order after the texel's rotation:
 //! consecutive points far apart) and `presorted` (the presorted order repaired for the
 //! rotation's wrap, `presort::reorder_after_rotation_into`: consecutive 8-point packets are
-//! coherent, paper §2.4) — the packets `driver/src/bake/gather.rs` (`gather_packets`) feeds
+//! coherent, paper §2.4) — the packets `driver/src/bake/gather/iteration.rs` (`gather_packets`) feeds
 //! `warp::sample8`. Both at the bake's default 64 samples per texel and iteration and at 1024
 //! (benchmark ids `warp/<function>/<samples>`). The guide is a realistic learned one: a small
 //! bright disk and a dim sky, learned in two iterations from 256 uniform and 512 guided

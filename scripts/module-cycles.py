@@ -6,7 +6,8 @@ everything from the first `#[cfg(test)]` on are skipped) becomes an edge to the 
 that defines the item; a name reached through a parent module's own `use` (a child's
 `super::NAME` where the parent did `use sibling::NAME`) is followed to the sibling that
 defines it. Edges between a module and its ancestors are the module tree, not imports.
-Usage: scripts/module-cycles.py CRATE_SRC_DIR [MODULE...]  (MODULE: print its edges)"""
+Usage: scripts/module-cycles.py CRATE_SRC_DIR [MODULE...]  (MODULE: print its edges)
+Exit 1 when there is a cycle (CI runs it on driver/src and kernels/src)."""
 import os, re, sys
 root = sys.argv[1]
 mods = {}
@@ -95,3 +96,4 @@ for comp in comps:
 print(f"{root}: {len(mods)} modules, {sum(map(len, edges.values()))} import edges, {len(comps)} cycle(s)")
 if len(sys.argv) > 2:
     for m in sys.argv[2:]: print("   ", m, "->", ", ".join(sorted(edges[m])))
+sys.exit(1 if comps else 0)

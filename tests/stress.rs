@@ -18,13 +18,13 @@ use glam::{Vec2, Vec3};
 use guidebake::bake::gather::TileBaker;
 use guidebake::bake::pipeline::TileBuffer;
 use guidebake::bake::settings::{BakeSettings, Combine, Guiding, MAX_BOUNCES, Transport};
-use guidebake::bake::world::World;
 use guidebake::bvh::Preset;
 use guidebake::output::journal::rho_sums;
 use guidebake::output::result_file::{FLAG_BAKED, FLAG_NO_FINITE_SAMPLES, FLAG_VALID};
 use guidebake::scene::{Material, Scene, Sky, Sun, Triangle};
 use guidebake::test_support::{inward_box_faces, quad};
 use guidebake::texels::{FLAG_VALID as TEXEL_VALID, TexelRecord};
+use guidebake::transport::world::World;
 
 const MODES: [Guiding; 3] = [Guiding::Off, Guiding::Naive, Guiding::Coherent];
 

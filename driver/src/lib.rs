@@ -19,7 +19,7 @@
 //! | [`hash`] | FNV-1a and the word hash: checksums, identities, fingerprints |
 //! | [`preview`] | PNG figures and tone-mapped previews |
 //! | [`render`] | a picture of the lit scene: eye rays shaded from the baked lightmap |
-//! | [`transport`] | light transport: next-event estimation, series lookups, path sampling |
+//! | [`transport`] | the world a gather ray meets ([`transport::world`]) and light transport: next-event estimation, series lookups, path sampling |
 //! | [`bench`] | the run-time-against-error harness and the Figure-5 overhead |
 //! | [`cmd`] | the `guidebake` subcommands |
 #![deny(unsafe_op_in_unsafe_fn)]

@@ -4,16 +4,11 @@
 //! are valid PNG and SVG. Bad options fail with a message naming the option, and write nothing.
 
 use std::path::Path;
-use std::process::Command;
 
 use guidebake::bench::method::Method;
 use guidebake::bench::report::{OVERHEAD_COLUMNS, RUN_COLUMNS};
 
 mod cli;
-
-fn guidebake() -> Command {
-    Command::new(cli::BIN)
-}
 
 /// Parses a CSV without quoting (the harness writes none) into its header and rows.
 fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
@@ -114,7 +109,7 @@ fn quick_bench_writes_well_formed_outputs() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");
     let cache = dir.path().join("cache");
-    let status = guidebake()
+    let status = cli::command()
         .args(["bench", "--quick", "--threads", "2", "-o"])
         .arg(&out)
         .arg("--cache")
@@ -240,7 +235,7 @@ fn bad_options_name_the_option_and_write_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");
     let run = |args: &[&str]| {
-        let o = guidebake()
+        let o = cli::command()
             .arg("bench")
             .args(args)
             .arg("-o")
@@ -267,7 +262,7 @@ fn the_reference_noise_comes_from_a_cached_twin() {
     let dir = tempfile::tempdir().unwrap();
     let cache = dir.path().join("cache");
     let bench = |out: &Path| {
-        let status = guidebake()
+        let status = cli::command()
             .args(["bench", "--quick", "--threads", "2", "--repeats", "0"])
             .args(["--methods", "off/average/-", "--reference-noise", "-o"])
             .arg(out)

@@ -6,14 +6,13 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 mod cli;
 
 /// Runs `guidebake prepare SCENE -o DIR/out.texels EXTRA...`; returns (exit code, stderr).
 fn prepare(dir: &Path, scene: &Path, extra: &[&str]) -> (i32, String) {
     let out = dir.join("out.texels");
-    let result = Command::new(cli::BIN)
+    let result = cli::command()
         .arg("prepare")
         .arg(scene)
         .arg("-o")

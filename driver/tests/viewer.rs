@@ -267,11 +267,13 @@ fn the_viewer_folder_holds_the_level_and_its_lightmaps_and_bad_input_writes_noth
         serde_json::from_slice(&std::fs::read(web.join("view.json")).unwrap()).unwrap();
     assert_eq!(view["exposure"], 2.0);
 
-    // The demo's folder, but for what the browser test (running beside this one) writes.
+    // The demo's folder, but for what the browser test (running beside this one) writes: its
+    // folder, and that folder's scratch name while it is written (`.browser.web.tmp-PID`).
     let snapshot = |dir: &Path| {
         let mut files = snapshot(dir);
         files.retain(|p, _| {
             !p.starts_with("browser.web")
+                && !p.to_string_lossy().starts_with(".browser.web.")
                 && p != Path::new("browser.png")
                 && p != Path::new("render.png")
         });

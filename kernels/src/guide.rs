@@ -897,7 +897,7 @@ fn smooth(nodes: &mut [Node], alpha: f64, uniform: f64) {
         let hi = |q: usize| [[tx, n.hi[0]][q & 1], [ty[q & 1], n.hi[1]][q >> 1]];
         let empty = |q: usize| (0..2).any(|a| lo(q)[a] >= hi(q)[a]);
         if (0..4).any(|q| sampled[q] > 0.0 && empty(q)) {
-            collapse(nodes, i);
+            make_leaf(nodes, i);
             continue;
         }
         nodes[i].t = [tx, ty[0], ty[1]];
@@ -922,7 +922,7 @@ fn smooth(nodes: &mut [Node], alpha: f64, uniform: f64) {
 /// children). The leaf keeps the node's mass and source rectangle, so its density is still
 /// exactly that of the map as rounded; its former descendants stay in the storage but are
 /// cut off (side 0, never reached from the root, skipped by [`Guide::for_each_leaf`]).
-fn collapse(nodes: &mut [Node], i: usize) {
+fn make_leaf(nodes: &mut [Node], i: usize) {
     if let Some(c) = nodes[i].first_child() {
         for q in 0..4 {
             cut_off(nodes, c + q);

@@ -42,7 +42,7 @@
 //! - **Sections**, as Embree keeps `bvh_node_*`, `*_intersector*` and `bvh_traverser*` apart:
 //!   `node` (binary layout), `triangle` (per-ray constants, the watertight test for one and
 //!   eight rays), `slab` (the slab tests' slack and the fused form's constants), `scalar` (slab
-//!   test, single-ray walk), `packet` (8-lane slab test, packet walk), `bvh8` (wide layout,
+//!   test, single-ray walk), `packet` (8-lane slab test, packet walk), `wide` (wide layout,
 //!   collapse, both wide walks); this file holds the public API and the oracle. Measured
 //!   speeds: docs/traverse.md.
 //!
@@ -56,7 +56,7 @@
 //! Deviations and limits:
 //! - Rays with `tmin < 0` are not traced (they never hit): the conservative box bound assumes
 //!   `t ≥ 0`. See [`Ray::is_traceable`](crate::packet::Ray::is_traceable) for the full rule.
-//! - The tree depth is capped at [`MAX_DEPTH`] ([`WIDE_MAX_DEPTH`] for the wide layout, which
+//! - The tree depth is capped at [`BVH_MAX_DEPTH`] ([`WIDE_MAX_DEPTH`] for the wide layout, which
 //!   [`collapse`] always meets); [`BvhRef::new`] and [`WideRef::new`] reject deeper trees.
 //! - **Hits outside their own box.** At extreme magnitudes the triangle test can report a hit
 //!   that lies outside the slab interval of the box of the leaf holding the triangle (its
@@ -101,14 +101,14 @@
 //!   `benches/traverse.rs`.)
 
 use crate::packet::{Hit, Hit8, NO_HIT, Ray, Ray8};
-use wide::{f32x8, u32x8};
+use ::wide::{f32x8, u32x8};
 
-mod bvh8;
 mod node;
 mod packet;
 mod scalar;
 mod slab;
 mod triangle;
+mod wide;
 
 use packet::{Closest, Occlusion, start8, walk8};
 use scalar::{box1_at, walk1};
@@ -118,11 +118,11 @@ use triangle::{
     traceable, tri1,
 };
 
-pub use bvh8::{INTERLEAVE_BYTES, WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
-#[cfg(any(feature = "alloc", test))]
-pub use bvh8::{collapse, leaf_rows};
 use node::STACK;
-pub use node::{BvhRef, LEAF, LayoutError, MAX_DEPTH, Node, Tri};
+pub use node::{BVH_MAX_DEPTH, BvhRef, LEAF, LayoutError, Node, Tri};
+pub use wide::{INTERLEAVE_BYTES, WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
+#[cfg(any(feature = "alloc", test))]
+pub use wide::{collapse, leaf_rows};
 
 /// A validated BVH in one of the kernels' layouts: what the traversals walk.
 #[derive(Clone, Copy, Debug)]
@@ -136,7 +136,7 @@ pub enum Layout<'a> {
 /// The triangles of one leaf of either layout.
 enum LeafTris<'a> {
     Binary(core::slice::Iter<'a, Tri>),
-    Wide(bvh8::RowTris<'a>),
+    Wide(wide::RowTris<'a>),
 }
 
 impl Iterator for LeafTris<'_> {
@@ -306,7 +306,7 @@ pub fn intersect1(bvh: &impl Tree, ray: &Ray) -> Option<Hit> {
         }),
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            bvh8::walk1(&w, &pre, |rows, n| {
+            wide::walk1(&w, &pre, |rows, n| {
                 closest_rows(|| pre, &pre8, rows, n, &mut best);
                 best.t
             })
@@ -336,7 +336,7 @@ pub fn occluded1(bvh: &impl Tree, ray: &Ray) -> bool {
         }
         Layout::Wide(w) => {
             let pre8 = Pre1x8::new(&pre);
-            bvh8::walk1_any(&w, &pre, tmax, |rows, n| {
+            wide::walk1_any(&w, &pre, tmax, |rows, n| {
                 occludes_rows(|| pre, &pre8, rows, n, tmax)
             })
         }
@@ -364,7 +364,7 @@ pub fn intersect8(bvh: &impl Tree, rays: &Ray8, hits: &mut Hit8) -> u8 {
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut closest),
-        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut closest),
+        Layout::Wide(w) => wide::walk8(&w, &pre, tmax, &mut closest),
     }
     let best = closest.best;
     let hit_mask = best.prim.simd_ne(u32x8::splat(NO_HIT));
@@ -396,18 +396,18 @@ pub fn occluded8(bvh: &impl Tree, rays: &Ray8) -> u8 {
     };
     match bvh.layout() {
         Layout::Binary(b) => walk8(&b, &pre, tmax, &mut occlusion),
-        Layout::Wide(w) if w.bytes() > bvh8::INTERLEAVE_BYTES && !pre.shared_origin() => {
+        Layout::Wide(w) if w.bytes() > wide::INTERLEAVE_BYTES && !pre.shared_origin() => {
             return occluded_interleaved(&w, &pre, tmax);
         }
-        Layout::Wide(w) => bvh8::walk8(&w, &pre, tmax, &mut occlusion),
+        Layout::Wide(w) => wide::walk8(&w, &pre, tmax, &mut occlusion),
     }
     occlusion.blocked
 }
 
 /// The traced lanes of a packet through the wide layout as single rays from the root, their
-/// walks interleaved ([`bvh8::walk_interleaved_any`]): the blocked lanes.
+/// walks interleaved ([`wide::walk_interleaved_any`]): the blocked lanes.
 fn occluded_interleaved(w: &WideRef<'_>, pre: &Pre8, tmax: f32x8) -> u8 {
-    bvh8::walk_interleaved_any(w, pre, tmax, pre.traced, |i, pre8, rows, n| {
+    wide::walk_interleaved_any(w, pre, tmax, pre.traced, |i, pre8, rows, n| {
         occludes_rows(|| pre.lane(i), pre8, rows, n, tmax.as_array()[i])
     })
 }
@@ -568,7 +568,7 @@ mod tests {
                     // lane after lane (what the hybrid switch runs from an inner node) and
                     // interleaved (a large tree's packets of unrelated lanes).
                     assert_eq!(
-                        bvh8::occluded_alone(&w, &pre, tmax, pre.traced, 0),
+                        wide::occluded_alone(&w, &pre, tmax, pre.traced, 0),
                         blocked,
                         "{packet:?}"
                     );
@@ -986,8 +986,8 @@ mod tests {
             BvhRef::new(&[bad], &[]).unwrap_err(),
             LayoutError::BadLeaf { node: 0, slot: 0 }
         );
-        // A chain deeper than MAX_DEPTH.
-        let chain: Vec<Node> = (0..MAX_DEPTH as u32 + 2)
+        // A chain deeper than BVH_MAX_DEPTH.
+        let chain: Vec<Node> = (0..BVH_MAX_DEPTH as u32 + 2)
             .map(|i| Node {
                 child: [i + 1, 0],
                 meta: [0, LEAF],

@@ -24,9 +24,9 @@ use crate::output::result_file::{FLAG_BAKED, ResultFile, TexelResult};
 use crate::texels::TexelFile;
 
 use super::settings::Budget;
+use crate::transport::world::Blocks;
+pub use crate::transport::world::{BLOCK, SpatialBudget};
 
-/// Edge of a block of texels that shares one factor (about a cluster's extent).
-pub const BLOCK: u32 = 8;
 /// Fewest samples a texel gets, as a fraction of the uniform count.
 pub const MIN_FACTOR: f32 = 0.25;
 /// Most samples a texel gets, as a multiple of the uniform count.
@@ -36,18 +36,6 @@ const RELATIVE_EPSILON: f64 = 1e-2;
 /// [`Budget::Bounded`] tries λ from 2^-20 to 2^20 of 1/μ̄² (in half-powers): past either end
 /// the factors are the relative or the MSE allocation's.
 const BOUNDED_DOUBLINGS: i32 = 20;
-
-/// Each page's block factors.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SpatialBudget {
-    pages: Vec<Blocks>,
-}
-
-#[derive(Clone, Debug, PartialEq)]
-struct Blocks {
-    columns: u32,
-    factors: Vec<f32>,
-}
 
 /// One texel of the previous passes, as the budget reads it.
 #[derive(Clone, Copy, Debug)]
@@ -63,14 +51,6 @@ pub struct Measured {
 }
 
 impl SpatialBudget {
-    /// The factor of the texel at `pixel` of `page` (1 outside the pages).
-    pub fn factor(&self, page: u32, [x, y]: [u32; 2]) -> f32 {
-        self.pages.get(page as usize).map_or(1.0, |b| {
-            let i = (y / BLOCK) as usize * b.columns as usize + (x / BLOCK) as usize;
-            b.factors.get(i).copied().unwrap_or(1.0)
-        })
-    }
-
     /// The budget of `budget` for pages of `sizes` (width, height) from the texels
     /// `for_each` hands its callback — called twice, first for the world's mean, then for the
     /// blocks, so nothing per texel is held; `None` for [`Budget::Uniform`] or when nothing

@@ -34,11 +34,7 @@ use guidebake_kernels::estimator::{CombinationWeights, Welford};
 pub use super::settings::Directional;
 use super::settings::MAX_ITERATIONS;
 use crate::output::result_file::{PerTexel, RecordFile};
-
-/// `Y0 = 1 / (2√π)`.
-pub const Y0: f32 = 0.282_094_8;
-/// `√(3 / 4π)`: `Y1a(ω) = Y1 · ω_a`.
-pub const Y1: f32 = 0.488_602_5;
+pub use crate::transport::sh_l1::{ShSample, Y0, Y1, add_irradiance_sample, hemisphere, project};
 
 /// The EXR channels of [`ShL1`], in its order: layer `SH0` (L0) and layers `SH1x`, `SH1y`,
 /// `SH1z` (L1 by world axis), each R, G, B.
@@ -87,37 +83,6 @@ impl ShL1 {
             a * c[ch] + b * (c[3 + ch] * n.x + c[6 + ch] * n.y + c[9 + ch] * n.z)
         }))
     }
-}
-
-/// The projection of one sample (or the sum of several): `[L0, L1x, L1y, L1z]`, RGB each.
-pub type ShSample = [Vec3; 4];
-
-/// `r · Y_i(ω)` for the four basis functions: the projection of radiance-over-density `r`
-/// arriving from unit direction `dir`.
-pub fn project(r: Vec3, dir: Vec3) -> ShSample {
-    [r * Y0, r * (Y1 * dir.x), r * (Y1 * dir.y), r * (Y1 * dir.z)]
-}
-
-/// Adds to `sample` the projection of an irradiance estimate `e = L cosθ / p` of direction
-/// `dir`, `cos` its cosine to the receiver's normal: `(e / cos) · Y_i(dir)`. Nothing for
-/// `cos ≤ 0` or a projection that is not finite.
-pub fn add_irradiance_sample(sample: &mut ShSample, e: Vec3, dir: Vec3, cos: f32) {
-    if cos <= 0.0 {
-        return;
-    }
-    let p = project(e / cos, dir);
-    if p.iter().all(|v| v.is_finite()) {
-        sample.iter_mut().zip(p).for_each(|(s, v)| *s += v);
-    }
-}
-
-/// The exact coefficients of radiance `l` arriving from every direction of the hemisphere
-/// around unit normal `n` (a receiver inside a sphere light): `L0 = √π l` and
-/// `L1 = √(3/4π) π l n`.
-pub fn hemisphere(l: Vec3, n: Vec3) -> ShSample {
-    let pi = core::f32::consts::PI;
-    let l1 = l * (Y1 * pi);
-    [l * pi.sqrt(), l1 * n.x, l1 * n.y, l1 * n.z]
 }
 
 /// One iteration's sums of a texel's sample projections, in `f64` (as the irradiance's

@@ -38,7 +38,6 @@ use super::workdir::{
     BakeRecord, Manifest, merged_results, open_batches, open_directional, open_pass, open_work,
     pass_files, pass_image, retire_work, work_dir,
 };
-use super::world::World;
 use crate::bvh::Preset;
 use crate::hash::fnv1a64;
 use crate::output::result_file::{FLAG_BAKED, MappedResults, ResultFile, TexelResult};
@@ -47,6 +46,7 @@ use crate::texels::{FLAG_INSIDE, TexelFile};
 use crate::transport::lookup_filter::Surfel;
 use crate::transport::pass_image::{CELL, Source, SourceTexel, TileRect};
 use crate::transport::series::{BuildError, PreviousPass};
+use crate::transport::world::World;
 
 /// What a bake run is asked to do.
 #[derive(Clone, Debug)]

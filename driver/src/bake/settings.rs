@@ -6,6 +6,7 @@ use std::fmt;
 
 use crate::hash::fnv1a64;
 use crate::transport::emitters::EmitterSelection;
+pub use crate::transport::settings::{EmitterSampling, Transport};
 
 /// Whether a bake writes directional coefficients (`--directional`). A setting, so it lives
 /// here; [`super::directional`], which computes the coefficients, re-exports it and imports
@@ -180,32 +181,6 @@ pub const DIRECT_PASS: u32 = 0;
 /// iteration of its cluster since the last cosine one, not the last iteration alone.
 const BAKE_FORMAT: u32 = 5;
 
-/// How the radiance a gather ray brings back from its hit is computed (docs/bake.md, light
-/// transport).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum Transport {
-    /// The paper's production setting: pass b gathers, at each hit, emission + albedo/π ×
-    /// (direct light connected explicitly + the indirect irradiance of pass b−1 looked up in
-    /// the previous pass's lightmap). Pass 0 (the direct pass) bakes the direct light alone, then
-    /// `--bounces B` gather passes stream the world.
-    Series,
-    /// Unidirectional path tracing from the gather hit, next-event estimation at every
-    /// vertex and Russian roulette: the unbiased reference, one pass.
-    Path,
-}
-
-/// How emissive triangles light a shading point (`crate::transport::direct`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum EmitterSampling {
-    /// Next-event estimation and the rays that hit them, weighted by the power heuristic.
-    #[default]
-    Mis,
-    /// Next-event estimation alone; emission that rays hit is not counted.
-    Nee,
-    /// Only rays that happen to hit them (the bake before emitters were lights).
-    Hits,
-}
-
 /// The bake's settings; everything that changes its bits is part of [`Self::bake_id`].
 #[derive(Clone, Copy, PartialEq)]
 pub struct BakeSettings {
@@ -301,88 +276,11 @@ pub struct BakeSettings {
     pub guide_seed: GuideSeed,
 }
 
-/// The fields in order, as `derive(Debug)` would print them, but `budget` only when it is not
-/// [`Budget::Uniform`], `direct_spp` and `lookup_spp` only when they are set and
-/// `guide_target` only when it is not [`GuideTarget::Radiance`], `target_error` only when it
-/// is set, `guide_seed` only when it is [`GuideSeed::Off`] and `flat_below` only when it is
-/// set and can act (a guided series bake whose last pass reads guide seeds): a bake without
-/// them keeps the
-/// identity ([`BakeSettings::bake_id`]) and the bench's reference keys it had before they
-/// existed. The destructuring names every field,
-/// so a field added to the settings cannot be left out of the identity unnoticed.
+/// The settings as their identity's text ([`BakeSettings::identity`]), so that `{:?}` shows
+/// what the identity hashes.
 impl fmt::Debug for BakeSettings {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let BakeSettings {
-            spp,
-            iterations,
-            guiding,
-            combine,
-            bias_correction,
-            seed,
-            transport,
-            bounces,
-            mix,
-            schedule,
-            min_split,
-            smooth,
-            min_gain,
-            flat_below,
-            emitters,
-            emitter_selection,
-            directional,
-            guided_passes,
-            budget,
-            direct_spp,
-            lookup_spp,
-            lookup_filter,
-            guide_target,
-            target_error,
-            guide_seed,
-        } = self;
-        let mut d = f.debug_struct("BakeSettings");
-        d.field("spp", spp)
-            .field("iterations", iterations)
-            .field("guiding", guiding)
-            .field("combine", combine)
-            .field("bias_correction", bias_correction)
-            .field("seed", seed)
-            .field("transport", transport)
-            .field("bounces", bounces)
-            .field("mix", mix)
-            .field("schedule", schedule)
-            .field("min_split", min_split)
-            .field("smooth", smooth)
-            .field("min_gain", min_gain)
-            .field("emitters", emitters)
-            .field("emitter_selection", emitter_selection)
-            .field("directional", directional)
-            .field("guided_passes", guided_passes);
-        if *budget != Budget::Uniform {
-            d.field("budget", budget);
-        }
-        if let Some(direct_spp) = direct_spp {
-            d.field("direct_spp", direct_spp);
-        }
-        if let Some(lookup_spp) = lookup_spp {
-            d.field("lookup_spp", lookup_spp);
-        }
-        if *transport == Transport::Series {
-            d.field("lookup_filter", lookup_filter);
-        }
-        if *guide_target != GuideTarget::Radiance {
-            d.field("guide_target", guide_target);
-        }
-        if let Some(target_error) = target_error {
-            d.field("target_error", target_error);
-        }
-        if *guide_seed == GuideSeed::Off {
-            d.field("guide_seed", guide_seed);
-        }
-        // Judged only where the last pass reads the guide seeds.
-        if *flat_below != 0 && self.reads_guide_seeds(self.last_pass()) {
-            d.field("flat_below", flat_below);
-        }
-        d.finish()
+        f.write_str(&self.identity())
     }
 }
 
@@ -790,7 +688,97 @@ impl BakeSettings {
     /// everything else that changes its bits here too: the texel file, the scene's geometry,
     /// lights and materials ([`super::run`]).
     pub fn bake_id(&self, texel_file_id: u64) -> u64 {
-        fnv1a64(format!("{self:?} {texel_file_id:016x} format {BAKE_FORMAT}").as_bytes())
+        let identity = self.identity();
+        fnv1a64(format!("{identity} {texel_file_id:016x} format {BAKE_FORMAT}").as_bytes())
+    }
+
+    /// The text a bake's identity ([`Self::bake_id`]) and the bench's reference keys hash:
+    /// every setting by its field name, `BakeSettings { spp: 256, iterations: 3, … }`, in
+    /// the fields' order, each value as its `Debug` (a number, an enum's variant name), with
+    /// the settings added after bakes existed written only where they differ from what those
+    /// bakes did, so those bakes keep their identity: `budget` only when it is not
+    /// [`Budget::Uniform`], `direct_spp` and `lookup_spp` only when they are set,
+    /// `lookup_filter` only for [`Transport::Series`], `guide_target` only when it is not
+    /// [`GuideTarget::Radiance`], `target_error` only when it is set, `guide_seed` only when
+    /// it is [`GuideSeed::Off`], and `flat_below` only when it is set and can act (a guided
+    /// series bake whose last pass reads guide seeds). The destructuring names every field
+    /// (no `..`), so a field added to the settings does not compile until it is written here;
+    /// a test changes each field alone and checks that the identity changes.
+    #[must_use]
+    pub fn identity(&self) -> String {
+        let BakeSettings {
+            spp,
+            iterations,
+            guiding,
+            combine,
+            bias_correction,
+            seed,
+            transport,
+            bounces,
+            mix,
+            schedule,
+            min_split,
+            smooth,
+            min_gain,
+            flat_below,
+            emitters,
+            emitter_selection,
+            directional,
+            guided_passes,
+            budget,
+            direct_spp,
+            lookup_spp,
+            lookup_filter,
+            guide_target,
+            target_error,
+            guide_seed,
+        } = self;
+        let mut fields: Vec<(&str, String)> = vec![
+            ("spp", format!("{spp:?}")),
+            ("iterations", format!("{iterations:?}")),
+            ("guiding", format!("{guiding:?}")),
+            ("combine", format!("{combine:?}")),
+            ("bias_correction", format!("{bias_correction:?}")),
+            ("seed", format!("{seed:?}")),
+            ("transport", format!("{transport:?}")),
+            ("bounces", format!("{bounces:?}")),
+            ("mix", format!("{mix:?}")),
+            ("schedule", format!("{schedule:?}")),
+            ("min_split", format!("{min_split:?}")),
+            ("smooth", format!("{smooth:?}")),
+            ("min_gain", format!("{min_gain:?}")),
+            ("emitters", format!("{emitters:?}")),
+            ("emitter_selection", format!("{emitter_selection:?}")),
+            ("directional", format!("{directional:?}")),
+            ("guided_passes", format!("{guided_passes:?}")),
+        ];
+        if *budget != Budget::Uniform {
+            fields.push(("budget", format!("{budget:?}")));
+        }
+        if let Some(direct_spp) = direct_spp {
+            fields.push(("direct_spp", format!("{direct_spp:?}")));
+        }
+        if let Some(lookup_spp) = lookup_spp {
+            fields.push(("lookup_spp", format!("{lookup_spp:?}")));
+        }
+        if *transport == Transport::Series {
+            fields.push(("lookup_filter", format!("{lookup_filter:?}")));
+        }
+        if *guide_target != GuideTarget::Radiance {
+            fields.push(("guide_target", format!("{guide_target:?}")));
+        }
+        if let Some(target_error) = target_error {
+            fields.push(("target_error", format!("{target_error:?}")));
+        }
+        if *guide_seed == GuideSeed::Off {
+            fields.push(("guide_seed", format!("{guide_seed:?}")));
+        }
+        // Judged only where the last pass reads the guide seeds.
+        if *flat_below != 0 && self.reads_guide_seeds(self.last_pass()) {
+            fields.push(("flat_below", format!("{flat_below:?}")));
+        }
+        let fields: Vec<String> = fields.iter().map(|(k, v)| format!("{k}: {v}")).collect();
+        format!("BakeSettings {{ {} }}", fields.join(", "))
     }
 
     /// The settings by the `guidebake bake` options that set them (`--spp` → `256`), every
@@ -868,25 +856,6 @@ impl BakeSettings {
         .into_iter()
         .map(|(k, v)| (k.to_owned(), v))
         .collect()
-    }
-}
-
-impl fmt::Display for Transport {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Transport::Series => "series",
-            Transport::Path => "path",
-        })
-    }
-}
-
-impl fmt::Display for EmitterSampling {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            EmitterSampling::Mis => "mis",
-            EmitterSampling::Nee => "nee",
-            EmitterSampling::Hits => "hits",
-        })
     }
 }
 
@@ -1458,5 +1427,244 @@ mod tests {
         assert_ne!(a.bake_id(7), b.bake_id(7));
         assert_ne!(a.bake_id(7), a.bake_id(8));
         assert_eq!(a.bake_id(7), a.bake_id(7));
+    }
+    /// The default settings with each field changed alone, by name: every field of
+    /// [`BakeSettings`] once (the literal below has no `..`, so a new field must be added here).
+    fn each_field_changed() -> Vec<(&'static str, BakeSettings)> {
+        let d = BakeSettings::default();
+        let BakeSettings {
+            spp,
+            iterations,
+            guiding,
+            combine,
+            bias_correction,
+            seed,
+            transport,
+            bounces,
+            mix,
+            schedule,
+            min_split,
+            smooth,
+            min_gain,
+            flat_below,
+            emitters,
+            emitter_selection,
+            directional,
+            guided_passes,
+            budget,
+            direct_spp,
+            lookup_spp,
+            lookup_filter,
+            guide_target,
+            target_error,
+            guide_seed,
+        } = d;
+        let all = BakeSettings {
+            spp,
+            iterations,
+            guiding,
+            combine,
+            bias_correction,
+            seed,
+            transport,
+            bounces,
+            mix,
+            schedule,
+            min_split,
+            smooth,
+            min_gain,
+            flat_below,
+            emitters,
+            emitter_selection,
+            directional,
+            guided_passes,
+            budget,
+            direct_spp,
+            lookup_spp,
+            lookup_filter,
+            guide_target,
+            target_error,
+            guide_seed,
+        };
+        assert!(all == d);
+        vec![
+            ("spp", BakeSettings { spp: 512, ..d }),
+            ("iterations", BakeSettings { iterations: 4, ..d }),
+            (
+                "guiding",
+                BakeSettings {
+                    guiding: Guiding::Naive,
+                    ..d
+                },
+            ),
+            (
+                "combine",
+                BakeSettings {
+                    combine: Combine::Texel,
+                    ..d
+                },
+            ),
+            (
+                "bias_correction",
+                BakeSettings {
+                    bias_correction: false,
+                    ..d
+                },
+            ),
+            ("seed", BakeSettings { seed: 1, ..d }),
+            (
+                "transport",
+                BakeSettings {
+                    transport: Transport::Path,
+                    ..d
+                },
+            ),
+            ("bounces", BakeSettings { bounces: 2, ..d }),
+            ("mix", BakeSettings { mix: 50, ..d }),
+            (
+                "schedule",
+                BakeSettings {
+                    schedule: Schedule::Even,
+                    ..d
+                },
+            ),
+            ("min_split", BakeSettings { min_split: 32, ..d }),
+            ("smooth", BakeSettings { smooth: 20, ..d }),
+            ("min_gain", BakeSettings { min_gain: 0, ..d }),
+            ("flat_below", BakeSettings { flat_below: 0, ..d }),
+            (
+                "emitters",
+                BakeSettings {
+                    emitters: EmitterSampling::Nee,
+                    ..d
+                },
+            ),
+            (
+                "emitter_selection",
+                BakeSettings {
+                    emitter_selection: EmitterSelection::Tree,
+                    ..d
+                },
+            ),
+            (
+                "directional",
+                BakeSettings {
+                    directional: Directional::ShL1,
+                    ..d
+                },
+            ),
+            (
+                "guided_passes",
+                BakeSettings {
+                    guided_passes: GuidedPasses::Every,
+                    ..d
+                },
+            ),
+            (
+                "budget",
+                BakeSettings {
+                    budget: Budget::Uniform,
+                    ..d
+                },
+            ),
+            (
+                "direct_spp",
+                BakeSettings {
+                    direct_spp: Some(64),
+                    ..d
+                },
+            ),
+            (
+                "lookup_spp",
+                BakeSettings {
+                    lookup_spp: Some(32),
+                    ..d
+                },
+            ),
+            (
+                "lookup_filter",
+                BakeSettings {
+                    lookup_filter: 0,
+                    ..d
+                },
+            ),
+            (
+                "guide_target",
+                BakeSettings {
+                    guide_target: GuideTarget::Radiance,
+                    ..d
+                },
+            ),
+            (
+                "target_error",
+                BakeSettings {
+                    target_error: Some(0.05),
+                    ..d
+                },
+            ),
+            (
+                "guide_seed",
+                BakeSettings {
+                    guide_seed: GuideSeed::Off,
+                    ..d
+                },
+            ),
+        ]
+    }
+
+    /// The identities the settings had when they were the hash of a hand-written `Debug`:
+    /// work directories, shard files and the bench's references of those bakes stay theirs.
+    #[test]
+    fn the_identity_of_every_setting_is_the_one_bakes_had() {
+        let pinned = [
+            ("default", 0x98a6_0b68_ec38_c057),
+            ("spp", 0xaa0e_9a7d_f0ef_eda4),
+            ("iterations", 0x2922_eb9f_6122_f25a),
+            ("guiding", 0xa186_781b_9bb1_e572),
+            ("combine", 0x77e5_0370_d7f6_0789),
+            ("bias_correction", 0xde1a_7ceb_ab8c_4986),
+            ("seed", 0x309a_770a_f5cc_6496),
+            ("transport", 0xb775_da2b_9b1e_2604),
+            ("bounces", 0x04da_eeed_77af_6f5c),
+            ("mix", 0x4eb3_f699_9bc2_8877),
+            ("schedule", 0x2e25_d9a1_78c5_9db9),
+            ("min_split", 0xa223_77a3_5c16_6a78),
+            ("smooth", 0x9c57_2eb4_efc6_5638),
+            ("min_gain", 0xe3a6_3c75_9013_e34a),
+            ("flat_below", 0xd52e_bdad_5f95_fc1d),
+            ("emitters", 0x7e7e_cdbd_e3a6_ed46),
+            ("emitter_selection", 0xf266_6a01_c2d5_d456),
+            ("directional", 0x53eb_104d_5586_c071),
+            ("guided_passes", 0x1aaa_9b08_05cf_c308),
+            ("budget", 0x1972_ef6f_1f02_75f1),
+            ("direct_spp", 0x37da_c720_3eb7_b650),
+            ("lookup_spp", 0x523e_9842_455f_0bf4),
+            ("lookup_filter", 0x60ac_1cd4_c9fb_3031),
+            ("guide_target", 0x49ae_5342_d38e_4a81),
+            ("target_error", 0xe6dc_987a_0800_8910),
+            ("guide_seed", 0x43b1_ec4c_5239_4336),
+        ];
+        let mut settings = vec![("default", BakeSettings::default())];
+        settings.extend(each_field_changed());
+        assert_eq!(settings.len(), pinned.len());
+        for ((name, s), (pinned_name, id)) in settings.into_iter().zip(pinned) {
+            assert_eq!(name, pinned_name);
+            assert_eq!(s.bake_id(0x0123_4567_89ab_cdef), id, "{name}: {s:?}");
+        }
+    }
+
+    /// A setting left out of the identity would let `--resume` and `merge` take another
+    /// bake's results: each field changed alone changes it.
+    #[test]
+    fn changing_any_setting_changes_the_identity() {
+        let d = BakeSettings::default();
+        let changed = each_field_changed();
+        for (name, s) in &changed {
+            assert_ne!(s.bake_id(7), d.bake_id(7), "{name} is not in the identity");
+        }
+        let mut ids: Vec<u64> = changed.iter().map(|(_, s)| s.bake_id(7)).collect();
+        ids.sort_unstable();
+        ids.dedup();
+        assert_eq!(ids.len(), changed.len());
     }
 }

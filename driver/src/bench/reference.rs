@@ -198,9 +198,10 @@ pub fn reference(
         Transport::Path => 4,
     };
     let key = format!(
-        "guidebake bench reference v{version}; scene {:016x}; texels {:016x}; settings {settings:?}",
+        "guidebake bench reference v{version}; scene {:016x}; texels {:016x}; settings {}",
         scene_id(bench.scene),
-        texel_file_id(bench.texels)
+        texel_file_id(bench.texels),
+        settings.identity()
     );
     let stem = format!("ref-{:016x}", fnv1a64(key.as_bytes()));
     let out = cache.join(format!("{stem}.exr"));
@@ -227,7 +228,7 @@ pub fn reference(
     let info = ReferenceInfo {
         kind: "bake".into(),
         key,
-        settings: format!("{settings:?}"),
+        settings: settings.identity(),
         spp: settings.spp,
         bake_seconds: clock.elapsed().as_secs_f64(),
         path: out,

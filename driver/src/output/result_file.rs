@@ -61,7 +61,7 @@ pub struct TexelResult {
     pub total: [f32; 3],
     /// One cell of the texel's cluster's guide seed, kept by the pass before a guided last
     /// pass (0 elsewhere): the cluster's j-th texel holds cell j of the histogram the last
-    /// pass builds the cluster's first guide from (`bake/gather.rs`, `GuideSeed`).
+    /// pass builds the cluster's first guide from (`bake/gather/learning.rs`, `SeedHistogram`).
     pub seed: f32,
 }
 
@@ -346,10 +346,10 @@ thread_local! {
 }
 
 /// A finished result file, read one texel at a time without a call each (the last pass reads
-/// the guide seeds the pass before it kept: `bake/gather.rs`): each thread reads blocks of
-/// [`SEED_BLOCK_TEXELS`] records with `pread` and keeps its last [`SEED_BLOCKS`], so what it
-/// reads stays in the page cache, not in the bake's memory. Mapping the file instead kept
-/// every page the pass touched resident: 518 MB of the default bake's 792 MB peak of
+/// the guide seeds the pass before it kept: `bake/gather/learning.rs`): each thread reads
+/// blocks of [`SEED_BLOCK_TEXELS`] records with `pread` and keeps its last [`SEED_BLOCKS`], so
+/// what it reads stays in the page cache, not in the bake's memory. Mapping the file instead
+/// kept every page the pass touched resident: 518 MB of the default bake's 792 MB peak of
 /// file-backed memory at 10⁷ texels (docs/series.md).
 #[derive(Debug)]
 pub struct MappedResults {

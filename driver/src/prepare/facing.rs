@@ -45,12 +45,12 @@ use guidebake_kernels::packet::{Hit8, NO_HIT, Ray, Ray8, offset_origin, triangle
 use guidebake_kernels::traverse::{WideRef, intersect8, occluded1};
 use rayon::prelude::*;
 
-use crate::bake::world::onto_triangle;
 use crate::bvh::{Bvh, BvhError, Preset};
 use crate::scene::{Scene, SceneLight};
 use crate::texels::{FLAG_PARTIAL, SEEN_BACK, SEEN_FRONT, TEXELS_BACK, TexelRecord};
 use crate::transport::emitters::luminance;
 use crate::transport::sky::sky_radiance;
+use crate::transport::world::onto_triangle;
 
 /// Rays per sample point and side: one packet.
 const RAYS: usize = 8;

@@ -44,13 +44,13 @@ use guidebake_kernels::warp;
 
 use super::sh::Sh9;
 use crate::bake::settings::EmitterSampling;
-use crate::bake::world::{SurfaceHit, World};
 use crate::render::Lightmap;
 use crate::transport::direct::power_heuristic;
 use crate::transport::emitters::EmittersAt;
 use crate::transport::lights::AnalyticLight;
 use crate::transport::path::Departure;
 use crate::transport::rng::SampleRng;
+use crate::transport::world::{SurfaceHit, World};
 
 /// The share of the uniform density in the guided iterations' defensive mixture.
 pub const UNIFORM_SHARE: f32 = 0.2;

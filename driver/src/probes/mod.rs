@@ -35,11 +35,11 @@ use self::file::{FLAG_DERINGED, FLAG_GUIDED, FLAG_PATH, ProbeHeader, ProbeRecord
 use self::gather::{GatherCount, GatherSettings, ProbeTransport, gather_cluster};
 use self::placement::{PlacementReport, PlacementSettings, place};
 use crate::bake::settings::Transport;
-use crate::bake::world::World;
 use crate::bvh::Preset;
 use crate::render::Lightmap;
 use crate::scene::Scene;
 use crate::texels::{SEEN_BACK, SEEN_FRONT, TexelFile};
+use crate::transport::world::World;
 
 /// Clusters gathered between two writes of the probe file.
 const BATCH_CLUSTERS: usize = 256;

@@ -32,9 +32,9 @@ use guidebake_kernels::packet::{Hit8, NO_HIT, Ray8};
 use guidebake_kernels::traverse::intersect8;
 use rayon::prelude::*;
 
-use crate::bake::world::{World, closest_point_on_triangle};
 use crate::prepare::facing::INSIDE_SHARE;
 use crate::texels::{SEEN_BACK, SEEN_FRONT};
+use crate::transport::world::{World, closest_point_on_triangle};
 
 /// The default finest spacing: the level's longest side over this many cells.
 pub const DEFAULT_CELLS: f32 = 24.0;

@@ -47,10 +47,9 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use ::gltf::json;
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec2, Vec3};
 
 use super::{Scene, SceneError};
-use crate::prepare::Lightmap;
 
 /// Why the scene could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -82,6 +81,19 @@ pub enum WriteError {
         /// What failed.
         message: String,
     },
+}
+
+/// Where every triangle's texels are: the layout `prepare` rasterised, as UVs of the page
+/// (0..1 across it) — what `--write-gltf` writes as `TEXCOORD_1`. Made by `prepare`
+/// ([`crate::prepare`]: `Lightmap::of_texel_file`), defined here with the writer that reads it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lightmap {
+    /// Page sizes in texels.
+    pub pages: Vec<(u32, u32)>,
+    /// Per mesh: its page.
+    pub mesh_page: Vec<u32>,
+    /// Per triangle: its UVs on its mesh's page, `None` where it has no texels.
+    pub uv: Vec<Option<[Vec2; 3]>>,
 }
 
 /// Writes `scene` (loaded from a glTF file) with `lightmap`'s UVs as `TEXCOORD_1` to `out`

@@ -1,5 +1,5 @@
 //! Base-colour textures and the albedo at a hit: one home for "what colour is this surface
-//! here" — the bake's gather hits ([`crate::bake::world::World`]) and `guidebake render`
+//! here" — the bake's gather hits ([`crate::transport::world::World`]) and `guidebake render`
 //! both read [`HitAlbedo`].
 //!
 //! The albedo at a point of a triangle is `texture(uv) × factor × vertex colour`: the UV and

@@ -19,9 +19,9 @@ use guidebake_kernels::packet::{LANES, Ray, Ray8, set_lanes};
 use guidebake_kernels::traverse::{WideRef, occluded1, occluded8};
 
 use super::emitters::{EmitterSample, EmittersAt};
-use crate::bake::directional::{ShSample, add_irradiance_sample, hemisphere};
-use crate::bake::settings::EmitterSampling;
-use crate::bake::world::World;
+use super::settings::EmitterSampling;
+use super::sh_l1::{ShSample, add_irradiance_sample, hemisphere};
+use super::world::World;
 
 /// Shadow rays stop this fraction short of a light at a finite distance, so the light's own
 /// geometry (a sphere light's surface) does not occlude it.
@@ -288,12 +288,12 @@ mod tests {
     use guidebake_kernels::traverse::intersect1;
 
     use super::*;
-    use crate::bake::world::SurfaceHit;
     use crate::bvh::Preset;
     use crate::scene::{Material, Scene, Triangle};
     use crate::transport::emitters::EmitterSelection;
     use crate::transport::path::Departure;
     use crate::transport::rng::SampleRng;
+    use crate::transport::world::SurfaceHit;
 
     /// Irradiance at `p` (normal `n`) from a Lambertian polygon of radiance `l` (Lambert's
     /// formula, `E = L/2 · Σ γᵢ n·(rᵢ × rᵢ₊₁)/|rᵢ × rᵢ₊₁|`), after clipping the polygon to

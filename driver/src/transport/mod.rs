@@ -27,4 +27,7 @@ pub mod pass_image;
 pub mod path;
 pub mod rng;
 pub mod series;
+pub mod settings;
+pub mod sh_l1;
 pub mod sky;
+pub mod world;

@@ -33,8 +33,8 @@ use guidebake_kernels::traverse::intersect1;
 use super::direct::{Receiver, power_heuristic};
 use super::emitters::EmittersAt;
 use super::rng::SampleRng;
-use crate::bake::settings::{EmitterSampling, Transport};
-use crate::bake::world::{SurfaceHit, World};
+use super::settings::{EmitterSampling, Transport};
+use super::world::{SurfaceHit, World};
 
 /// Path vertices from which Russian roulette may end a path (the first two always continue).
 const ROULETTE_FROM: u32 = 3;

@@ -12,6 +12,11 @@ use std::process::{Command, Output};
 /// The binary under test.
 pub const BIN: &str = env!("CARGO_BIN_EXE_guidebake");
 
+/// A `guidebake` command to add arguments, a directory or pipes to before running it.
+pub fn command() -> Command {
+    Command::new(BIN)
+}
+
 /// `guidebake` with `args`, run to its end.
 pub fn run<S: AsRef<OsStr>>(args: &[S]) -> Output {
     Command::new(BIN).args(args).output().unwrap()

@@ -4,7 +4,7 @@
 //! visit tests two boxes for all eight lanes of a packet), their indices and their leaf
 //! counts. A [`Tri`] stores its three vertices (not edges: the watertight test needs the
 //! vertices themselves) and its primitive id, in leaf order. [`BvhRef`] is a validated view.
-//! The wide layout, collapsed from this one, is in [`super::bvh8`].
+//! The wide layout, collapsed from this one, is in [`super::wide`].
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -13,9 +13,9 @@ use glam::Vec3;
 pub const LEAF: u32 = 1 << 31;
 
 /// Deepest tree [`BvhRef::new`] accepts (root at depth 0); bounds the traversal stack.
-pub const MAX_DEPTH: usize = 128;
+pub const BVH_MAX_DEPTH: usize = 128;
 
-pub(super) const STACK: usize = MAX_DEPTH + 2;
+pub(super) const STACK: usize = BVH_MAX_DEPTH + 2;
 
 /// One BVH node: the boxes of its two children, one 64-byte cache line.
 ///
@@ -103,7 +103,7 @@ pub enum LayoutError {
     /// A wide view's leaf rows are not the length [`super::leaf_rows`] gives for any number
     /// of triangles.
     BadRows,
-    /// The tree is deeper than [`MAX_DEPTH`].
+    /// The tree is deeper than [`BVH_MAX_DEPTH`].
     TooDeep {
         /// First node found too deep.
         node: u32,
@@ -131,7 +131,7 @@ impl<'a> BvhRef<'a> {
         while sp > 0 {
             sp -= 1;
             let (index, depth) = stack[sp];
-            if depth > MAX_DEPTH {
+            if depth > BVH_MAX_DEPTH {
                 return Err(LayoutError::TooDeep { node: index });
             }
             let node = &nodes[index as usize];

@@ -3,14 +3,14 @@
 //! One shared stack of `(child, meta)` entries with the mask of lanes that met each entry's
 //! box; when both children are met, the lanes meeting both vote with their entry distances for
 //! the one visited first. Leaves are tested by a [`Visitor`] (closest hit or occlusion), which
-//! the wide walk ([`super::bvh8`], where the trait lives: its any-hit switch hands a subtree to
-//! the wide single-ray walk) shares.
+//! the wide walk ([`super::wide`], whose packet walk holds the trait: its any-hit switch hands
+//! a subtree to the wide single-ray walk) shares.
 
-use super::bvh8::{Visitor, WideRef};
 use super::slab::widened8;
 use super::triangle::{
     Best8, Pre1x8, Pre8, TriAt, closest_rows, closest8, occludes_rows, occludes8, set_lane,
 };
+use super::wide::{Visitor, WideRef};
 use super::{BvhRef, Node, STACK};
 use crate::packet::{Ray8, mask_of, set_lanes};
 use wide::f32x8;
@@ -113,7 +113,7 @@ impl<'a> Visitor<'a> for Occlusion<'_> {
 
     #[inline(always)]
     fn alone(&mut self, bvh: &WideRef<'a>, lanes: u8, entry: u64) -> f32x8 {
-        let blocked = super::bvh8::occluded_alone(bvh, self.pre, self.tmax, lanes, entry);
+        let blocked = super::wide::occluded_alone(bvh, self.pre, self.tmax, lanes, entry);
         self.blocked |= blocked;
         self.tmax = mask_of(blocked).bitselect(f32x8::splat(f32::NEG_INFINITY), self.tmax);
         self.tmax

@@ -1,7 +1,7 @@
 //! # traverse::scalar: the conservative slab test and the single-ray walk of the binary tree
 //!
 //! [`box1`] is the reference slab test, which the binary tree's walks reproduce (8-wide in
-//! [`super::packet`]); the wide tree's walks ([`super::bvh8`]) test their boxes in the fused
+//! [`super::packet`]); the wide tree's walks ([`super::wide`]) test their boxes in the fused
 //! form [`slab`](super::slab::slab) sets up, as conservative as [`box1`] and a few ulps looser.
 //! [`walk1`] is the scalar reference traversal of the binary layout. The slab test's slack
 //! lives in [`super::slab`].

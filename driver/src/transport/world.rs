@@ -2,9 +2,9 @@
 //! kernels' layout, per-triangle shading data, the lights (analytic lights and emissive
 //! triangles), the sky, and the transport settings.
 //!
-//! How light is carried lives in [`crate::transport`]: next-event estimation
-//! ([`crate::transport::direct`]), what leaves a gather hit ([`crate::transport::path`]),
-//! the emitters ([`crate::transport::emitters`]). Light kinds the scene lacks cost nothing:
+//! It lives in [`crate::transport`], below the bake, and how light is carried lives beside
+//! it: next-event estimation ([`crate::transport::direct`]), what leaves a gather hit
+//! ([`crate::transport::path`]), the emitters ([`crate::transport::emitters`]). Light kinds the scene lacks cost nothing:
 //! no light, no shadow rays; no emitter, no emitter table; a black sky, no lookups; a black
 //! surface, no continuation.
 
@@ -12,7 +12,6 @@ use glam::Vec3;
 use guidebake_kernels::packet::{offset_origin, triangle_extent};
 use guidebake_kernels::traverse::WideRef;
 
-use super::budget::SpatialBudget;
 use super::settings::{EmitterSampling, Transport};
 
 use crate::bvh::{Bvh, BvhError, Preset};
@@ -40,6 +39,34 @@ pub struct Surface {
 
 /// [`Surface::varying`] of a triangle whose albedo is constant.
 pub const CONSTANT_ALBEDO: u32 = u32::MAX;
+
+/// Edge of a block of texels that shares one factor (about a cluster's extent).
+pub const BLOCK: u32 = 8;
+
+/// Each page's block factors: the spatial budget's share of `--spp` per [`BLOCK`]² texels
+/// (`--budget`), which the gather reads through [`World::budget_factor`]; made from the
+/// passes before by [`crate::bake::budget`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpatialBudget {
+    pub(crate) pages: Vec<Blocks>,
+}
+
+/// One page's factors, a row of blocks after another.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Blocks {
+    pub(crate) columns: u32,
+    pub(crate) factors: Vec<f32>,
+}
+
+impl SpatialBudget {
+    /// The factor of the texel at `pixel` of `page` (1 outside the pages).
+    pub fn factor(&self, page: u32, [x, y]: [u32; 2]) -> f32 {
+        self.pages.get(page as usize).map_or(1.0, |b| {
+            let i = (y / BLOCK) as usize * b.columns as usize + (x / BLOCK) as usize;
+            b.factors.get(i).copied().unwrap_or(1.0)
+        })
+    }
+}
 
 /// The scene as the bake sees it.
 #[derive(Debug)]
