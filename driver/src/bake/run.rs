@@ -40,7 +40,7 @@ use super::workdir::{
 };
 use crate::bvh::Preset;
 use crate::hash::fnv1a64;
-use crate::output::result_file::{FLAG_BAKED, MappedResults, ResultFile, TexelResult};
+use crate::output::result_file::{FLAG_BAKED, FinishedResults, ResultFile, TexelResult};
 use crate::scene::Scene;
 use crate::texels::{FLAG_INSIDE, TexelFile};
 use crate::transport::lookup_filter::Surfel;
@@ -349,7 +349,7 @@ pub fn bake_pass_with_progress(
             world.set_guide_seeds(None);
             if job.settings.reads_guide_seeds(pass) {
                 let (results, _) = sources.open(&texels, bake_id)?;
-                world.set_guide_seeds(Some(MappedResults::new(&results)?));
+                world.set_guide_seeds(Some(FinishedResults::new(&results)?));
             }
             // The last pass, after a gather pass, spends its samples by the passes' error (a
             // budgeted middle pass makes the last one's lookups noisier: docs/estimator.md).

@@ -328,13 +328,13 @@ fn records_end(texel_count: u64, record_bytes: u64) -> Option<u64> {
         .checked_add(RESULT_HEADER_BYTES)
 }
 
-/// Records a [`MappedResults`] reads at once, per thread (13 KB).
+/// Records a [`FinishedResults`] reads at once, per thread (13 KB).
 const SEED_BLOCK_TEXELS: u64 = 256;
 /// Blocks each thread keeps: a cluster's texels lie in one texel-file tile, up to 1 024
 /// texels (five blocks) in files guidebake writes.
 const SEED_BLOCKS: usize = 8;
 
-/// Tells apart the [`MappedResults`] whose blocks a thread keeps.
+/// Tells apart the [`FinishedResults`] whose blocks a thread keeps.
 static NEXT_READER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 /// One thread's blocks of records: the reader, the block, its bytes; the next to replace.
@@ -352,14 +352,14 @@ thread_local! {
 /// kept every page the pass touched resident: 518 MB of the default bake's 792 MB peak of
 /// file-backed memory at 10⁷ texels (docs/series.md).
 #[derive(Debug)]
-pub struct MappedResults {
+pub struct FinishedResults {
     file: File,
     texel_count: u64,
     /// Keys this reader's blocks in each thread's cache.
     id: u64,
 }
 
-impl MappedResults {
+impl FinishedResults {
     /// Opens `results`, a file no one writes any more (a finished pass's), for reading.
     ///
     /// # Errors
@@ -462,11 +462,11 @@ mod tests {
             64 + 100 * RECORD_BYTES
         );
         // Read a block at a time, the same records, and none past the end.
-        let mapped = MappedResults::new(&reopened).unwrap();
-        assert_eq!(mapped.get(39), Some(TexelResult::default()));
-        assert!((0..10).all(|i| mapped.get(40 + i) == Some(tile[i as usize])));
-        assert_eq!(mapped.get(99), Some(TexelResult::default()));
-        assert_eq!(mapped.get(100), None);
+        let reader = FinishedResults::new(&reopened).unwrap();
+        assert_eq!(reader.get(39), Some(TexelResult::default()));
+        assert!((0..10).all(|i| reader.get(40 + i) == Some(tile[i as usize])));
+        assert_eq!(reader.get(99), Some(TexelResult::default()));
+        assert_eq!(reader.get(100), None);
     }
 
     #[test]
@@ -483,7 +483,7 @@ mod tests {
             .collect();
         let readers: Vec<_> = files
             .iter()
-            .map(|f| MappedResults::new(f).unwrap())
+            .map(|f| FinishedResults::new(f).unwrap())
             .collect();
         // Strides that walk every block, forwards and back, the two readers interleaved.
         for step in [1u64, 255, 257, 1031] {

@@ -15,7 +15,7 @@ use guidebake_kernels::traverse::WideRef;
 use super::settings::{EmitterSampling, Transport};
 
 use crate::bvh::{Bvh, BvhError, Preset};
-use crate::output::result_file::{MappedResults, TexelResult};
+use crate::output::result_file::{FinishedResults, TexelResult};
 use crate::scene::texture::{HitAlbedo, VaryingAlbedo};
 use crate::scene::{Scene, Sky};
 use crate::transport::emitters::{EmitterSelection, Emitters};
@@ -85,7 +85,7 @@ pub struct World {
     previous: Option<PreviousPass>,
     earlier: Option<PreviousPass>,
     budget: Option<SpatialBudget>,
-    guide_seeds: Option<MappedResults>,
+    guide_seeds: Option<FinishedResults>,
 }
 
 /// Where a gather ray hit: the primitive, the ray parameter and the barycentric weights of
@@ -335,7 +335,7 @@ impl World {
     /// The results of the pass before this one, whose texels hold the guide seeds of this
     /// pass's clusters (`None`: the clusters' first iteration gathers with cosine points;
     /// [`BakeSettings::reads_guide_seeds`](super::settings::BakeSettings::reads_guide_seeds)).
-    pub fn set_guide_seeds(&mut self, seeds: Option<MappedResults>) {
+    pub fn set_guide_seeds(&mut self, seeds: Option<FinishedResults>) {
         self.guide_seeds = seeds;
     }
 

@@ -10,7 +10,7 @@ use crate::bake::directional;
 use crate::bake::settings::EmitterSampling;
 use crate::bvh::Preset;
 use crate::output::result_file::{FLAG_BAKED, FLAG_UNGUIDED};
-use crate::output::result_file::{MappedResults, ResultFile};
+use crate::output::result_file::{FinishedResults, ResultFile};
 use crate::scene::{Material, Scene, Sky, Sun, Triangle};
 use crate::test_support::{inward_box_faces, quad};
 use crate::transport::emitters::EmitterSelection;

@@ -143,7 +143,7 @@ fn a_seeded_first_iteration_samples_the_guide_of_the_pass_before() {
         assert_eq!(plain.counters.clusters_seeded, 0);
         unseeded += first_iteration(&plain);
         let (mut world, _) = small_emitter();
-        world.set_guide_seeds(Some(MappedResults::new(&file).unwrap()));
+        world.set_guide_seeds(Some(FinishedResults::new(&file).unwrap()));
         let mut baker = TileBaker::new(&world, guided);
         baker.bake_tile(0, first_texel, &texels, &mut out);
         assert_eq!(baker.counters.clusters_seeded, 1);
@@ -192,7 +192,7 @@ fn a_cluster_whose_light_the_pass_before_measured_flat_is_not_guided() {
         let path = dir.path().join(name);
         let file = ResultFile::create(&path, first_texel + texels.len() as u64, 7).unwrap();
         file.write(first_texel, &out.results).unwrap();
-        world.set_guide_seeds(Some(MappedResults::new(&file).unwrap()));
+        world.set_guide_seeds(Some(FinishedResults::new(&file).unwrap()));
         let mut baker = TileBaker::new(&world, settings(Guiding::Coherent));
         baker.bake_tile(0, first_texel, texels, &mut out);
         (baker.counters, out.results)
@@ -240,7 +240,7 @@ fn a_flat_cluster_bakes_its_samples_as_one_set() {
     let path = dir.path().join("seeds");
     let file = ResultFile::create(&path, first_texel + texels.len() as u64, 7).unwrap();
     file.write(first_texel, &out.results).unwrap();
-    world.set_guide_seeds(Some(MappedResults::new(&file).unwrap()));
+    world.set_guide_seeds(Some(FinishedResults::new(&file).unwrap()));
     let flat = BakeSettings {
         flat_below: u32::MAX,
         ..settings(Guiding::Coherent)
