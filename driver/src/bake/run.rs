@@ -45,7 +45,7 @@ use crate::scene::Scene;
 use crate::texels::{FLAG_INSIDE, TexelFile};
 use crate::transport::lookup_filter::Surfel;
 use crate::transport::pass_image::{CELL, Source, SourceTexel, TileRect};
-use crate::transport::series::{BuildError, PreviousPass};
+use crate::transport::series::{BuildError, PreviousPass, TriangleUvs};
 use crate::transport::world::World;
 
 /// What a bake run is asked to do.
@@ -285,6 +285,8 @@ pub fn bake_pass_with_progress(
         ..Default::default()
     };
     let clock = Instant::now();
+    // The pass images' table of triangles, made by the first image the run builds.
+    let triangle_uvs = std::cell::OnceCell::new();
     for pass in run_passes.clone() {
         if pass > job.settings.first_pass() {
             // A one-pass run reads the merged previous pass; a run of every pass its own.
@@ -310,18 +312,12 @@ pub fn bake_pass_with_progress(
                 let target = PassImage {
                     path: &image,
                     filter: lookup_filter(&job.settings, b),
+                    triangles: triangle_uvs
+                        .get_or_init(|| TriangleUvs::new(scene, texels.triangles())),
                 };
-                previous_pass(
-                    &texels,
-                    scene,
-                    sources,
-                    target,
-                    bake_id,
-                    job.threads,
-                    report,
-                )
-                .map(|p| p.of_pass(b))
-                .map_err(|e| not_merged_hint(e, &source, b))
+                previous_pass(&texels, sources, target, bake_id, job.threads, report)
+                    .map(|p| p.of_pass(b))
+                    .map_err(|e| not_merged_hint(e, &source, b))
             };
             // Memory holds two pass images: the previous pass's, and the one before it, read
             // one bounce beyond the gather's hits near their origin (`NEAR_PATH_TEXELS`). The
@@ -621,6 +617,8 @@ impl PassSources<'_> {
 struct PassImage<'p> {
     path: &'p Path,
     filter: u32,
+    /// Each triangle's lightmap corners: one table for every image of the bake.
+    triangles: &'p TriangleUvs,
 }
 
 /// The filter a pass image of pass `pass` is built with: the lookups of a gather pass are
@@ -640,7 +638,6 @@ fn lookup_filter(settings: &BakeSettings, pass: u32) -> u32 {
 /// number ([`PreviousPass::build`]).
 fn previous_pass(
     texels: &TexelFile,
-    scene: &Scene,
     sources: PassSources<'_>,
     target: PassImage<'_>,
     bake_id: u64,
@@ -661,8 +658,7 @@ fn previous_pass(
             texels.pages(),
             &source,
             target.filter,
-            scene,
-            texels.triangles(),
+            target.triangles,
         )
     };
     let built = match rayon::ThreadPoolBuilder::new()

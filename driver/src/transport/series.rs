@@ -156,7 +156,7 @@ pub struct PreviousPass {
     storage: Storage,
     layout: Layout,
     built: Built,
-    triangles: Vec<Option<TriangleUv>>,
+    triangles: TriangleUvs,
     /// The series pass it holds.
     pass: u32,
 }
@@ -182,7 +182,22 @@ pub enum BuildError<E> {
 
 /// Each triangle's page and pixel-space corners, from the texel file's triangle table (the
 /// lightmap `prepare` rasterised, whatever UVs the scene carries), and its texel size from the
-/// scene's positions; `None` for triangles without lightmap UVs.
+/// scene's positions; `None` for triangles without lightmap UVs. 40 bytes a triangle, shared
+/// by every pass image of a bake (a clone is a reference).
+#[derive(Clone, Debug)]
+pub struct TriangleUvs(std::sync::Arc<[Option<TriangleUv>]>);
+
+impl TriangleUvs {
+    /// The table of `scene`'s triangles, `records` the texel file's triangle table.
+    pub fn new(scene: &Scene, records: &[TriangleRecord]) -> Self {
+        Self(triangle_uvs(scene, records).into())
+    }
+
+    fn get(&self, prim: u32) -> Option<&TriangleUv> {
+        self.0.get(prim as usize)?.as_ref()
+    }
+}
+
 fn triangle_uvs(scene: &Scene, records: &[TriangleRecord]) -> Vec<Option<TriangleUv>> {
     scene
         .triangles
@@ -245,7 +260,7 @@ impl PreviousPass {
             storage: Storage::Owned(words),
             layout,
             built,
-            triangles: triangle_uvs(scene, triangles),
+            triangles: TriangleUvs::new(scene, triangles),
             pass: 0,
         }
     }
@@ -263,8 +278,7 @@ impl PreviousPass {
         pages: &[PageRecord],
         source: &S,
         filter: u32,
-        scene: &Scene,
-        triangles: &[TriangleRecord],
+        triangles: &TriangleUvs,
     ) -> Result<Self, BuildError<S::Error>> {
         let err = |path: &Path, what: String| {
             BuildError::Image(PassImageError {
@@ -301,7 +315,7 @@ impl PreviousPass {
             storage: Storage::Mapped(map),
             layout,
             built,
-            triangles: triangle_uvs(scene, triangles),
+            triangles: triangles.clone(),
             pass: 0,
         })
     }
@@ -335,7 +349,7 @@ impl PreviousPass {
     /// Both layers of the previous pass at barycentrics (`b1`, `b2`) of triangle `prim`
     /// (weights of its second and third vertices); zero off the atlas.
     pub fn lookup(&self, prim: u32, b1: f32, b2: f32) -> Lookup {
-        let Some(Some(t)) = self.triangles.get(prim as usize) else {
+        let Some(t) = self.triangles.get(prim) else {
             return Lookup::default();
         };
         let [a, b, c] = t.corners;
@@ -363,7 +377,7 @@ impl PreviousPass {
     /// Whether triangle `prim`'s texels bake its winding's `front` side (or its back, when
     /// `front` is false): then its total irradiance holds the direct light arriving there.
     pub fn bakes_side(&self, prim: u32, front: bool) -> bool {
-        matches!(self.triangles.get(prim as usize), Some(Some(t)) if t.front == front)
+        matches!(self.triangles.get(prim), Some(t) if t.front == front)
     }
 
     /// Whether a ray that hit triangle `prim` on its `front` (or back) side after travelling
@@ -381,7 +395,7 @@ impl PreviousPass {
 
     /// Whether `t` is more than `texels` of triangle `prim`'s texels (false off the atlas).
     fn beyond(&self, prim: u32, t: f32, texels: f32) -> bool {
-        matches!(self.triangles.get(prim as usize), Some(Some(tri)) if t > texels * tri.texel)
+        matches!(self.triangles.get(prim), Some(tri) if t > texels * tri.texel)
     }
 
     /// Bilinear filter around `uv` (pixel centres at +0.5) over the baked pixels among its
@@ -608,8 +622,7 @@ impl PreviousPassWriter {
             &self.pages,
             &source,
             self.filter,
-            scene,
-            triangles,
+            &TriangleUvs::new(scene, triangles),
         );
         image.map_err(|e| match e {
             BuildError::Image(e) => e,
