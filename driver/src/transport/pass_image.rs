@@ -479,10 +479,6 @@ pub fn build<S: Source>(
     for (c, chunk) in chunks.iter().enumerate() {
         for (out, &(rect, _)) in std::mem::take(&mut outs).into_iter().zip(chunk.iter()) {
             let out = out?;
-            let rect = TileRect {
-                page: out.page,
-                ..rect
-            };
             let (blocks, first) = append(layout, bytes, &mut built, &out);
             if filter > 0 {
                 window.read(rect, blocks, first, out.surfels, out.totals);

@@ -190,20 +190,7 @@ pub struct TriangleUvs(std::sync::Arc<[Option<TriangleUv>]>);
 impl TriangleUvs {
     /// The table of `scene`'s triangles, `records` the texel file's triangle table.
     pub fn new(scene: &Scene, records: &[TriangleRecord]) -> Self {
-        Self(triangle_uvs(scene, records).into())
-    }
-
-    fn get(&self, prim: u32) -> Option<&TriangleUv> {
-        self.0.get(prim as usize)?.as_ref()
-    }
-}
-
-fn triangle_uvs(scene: &Scene, records: &[TriangleRecord]) -> Vec<Option<TriangleUv>> {
-    scene
-        .triangles
-        .iter()
-        .zip(records)
-        .map(|(t, r)| {
+        let uv = |(t, r): (&crate::scene::Triangle, &TriangleRecord)| {
             let (page, corners) = r.pixel_uv()?;
             let [a, b, c] = corners;
             let pixels = 0.5 * (b - a).perp_dot(c - a).abs();
@@ -218,8 +205,13 @@ fn triangle_uvs(scene: &Scene, records: &[TriangleRecord]) -> Vec<Option<Triangl
                 },
                 front: !r.texels_face_back(),
             })
-        })
-        .collect()
+        };
+        Self(scene.triangles.iter().zip(records).map(uv).collect())
+    }
+
+    fn get(&self, prim: u32) -> Option<&TriangleUv> {
+        self.0.get(prim as usize)?.as_ref()
+    }
 }
 
 impl PreviousPass {
