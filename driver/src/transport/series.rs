@@ -303,6 +303,10 @@ impl PreviousPass {
         // invariant, crate::output); it is at least `built.bytes` long, which `View` checks.
         let map = unsafe { Mmap::map(&file) }
             .map_err(|e| err(path, format!("cannot remap the pass image: {e}")))?;
+        // The lookups land anywhere in the image: a page the kernel let go is read back
+        // alone, not with the 128 KiB of readahead around it that a world larger than memory
+        // would evict again at once. Only a hint: a failure changes nothing but speed.
+        let _ = map.advise(memmap2::Advice::Random);
         Ok(Self {
             storage: Storage::Mapped(map),
             layout,
