@@ -4,7 +4,7 @@
 //! pass before the last keeps ([`SeedHistogram`], [`seeded_guide`]), and whether the pass
 //! before measured a cluster's light as flat ([`is_flat`]).
 
-use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, Guide, GuideNode, GuideParams, Record};
 use guidebake_kernels::packet::LANES;
 use wide::f32x8;
 
@@ -21,13 +21,13 @@ use super::*;
 pub(super) fn learn<'n>(
     records: &mut [Record],
     params: &GuideParams,
-    nodes: &'n mut [Node],
-    room: &mut Vec<Node>,
+    nodes: &'n mut [GuideNode],
+    room: &mut Vec<GuideNode>,
     counters: &mut GatherCounters,
 ) -> Option<Guide<'n>> {
     let needed = guide::sort_room(records.len());
     if needed > nodes.len() && needed > room.len() {
-        room.resize(needed, Node::default());
+        room.resize(needed, GuideNode::default());
     }
     let (learned, stats) = guide::build_in(records, params, nodes, room);
     if stats.total_flux.is_nan() || stats.total_flux <= 0.0 {
@@ -51,7 +51,7 @@ pub(super) fn seeded_guide<'n>(
     cells: impl ExactSizeIterator<Item = f32>,
     learning: &mut Learning,
     params: &GuideParams,
-    nodes: &'n mut [Node],
+    nodes: &'n mut [GuideNode],
 ) -> Option<Guide<'n>> {
     let side = seed_side(cells.len());
     if side == 0 {

@@ -26,7 +26,7 @@ use std::collections::HashMap;
 use glam::Vec3;
 use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
 use guidebake_kernels::estimator::Welford;
-use guidebake_kernels::guide::Node;
+use guidebake_kernels::guide::GuideNode;
 use guidebake_kernels::presort::presorted;
 
 use super::budget;
@@ -86,10 +86,10 @@ pub struct TileBaker<'w> {
     rotated: Vec<u32>,
     /// The cluster's learning records of the current iteration.
     learning: Learning,
-    nodes: Vec<Node>,
+    nodes: Vec<GuideNode>,
     /// Scratch the guide build's sort scatters through when the records outgrow `nodes`
     /// (`guide::sort_room`); grown to the largest pool the worker has met.
-    sort_room: Vec<Node>,
+    sort_room: Vec<GuideNode>,
     /// Per valid texel and iteration: the weight of `--combine cluster`.
     weights: Vec<f64>,
     batches: Vec<Welford>,
@@ -148,7 +148,7 @@ impl<'w> TileBaker<'w> {
             factors: Vec::new(),
             rotated: Vec::new(),
             learning: Learning::default(),
-            nodes: vec![Node::default(); GUIDE_CAPACITY],
+            nodes: vec![GuideNode::default(); GUIDE_CAPACITY],
             sort_room: Vec::new(),
             weights: Vec::new(),
             batches: Vec::new(),

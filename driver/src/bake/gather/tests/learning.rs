@@ -336,7 +336,7 @@ fn a_guide_seed_holds_one_cell_per_texel_and_builds_the_guide() {
         ambient: MIXED_AMBIENT,
         ..GuideParams::default()
     };
-    let mut nodes = vec![Node::default(); GUIDE_CAPACITY];
+    let mut nodes = vec![GuideNode::default(); GUIDE_CAPACITY];
     let guide = seeded_guide(cells.into_iter(), &mut learning, &params, &mut nodes)
         .expect("a lit seed guides");
     let inside = warp::pdf(&guide, [0.6, 0.3]);
