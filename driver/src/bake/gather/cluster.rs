@@ -128,8 +128,8 @@ impl<'w> TileBaker<'w> {
                 let i = valid[m as usize];
                 let t = gather_texel(&texels[i as usize], first_texel + u64::from(i), frame);
                 let learned = match (&guide, &grid) {
-                    (Some(g), _) => Some(Learned::Tree(g)),
-                    (None, Some(g)) => Some(Learned::Grid(g)),
+                    (Some(g), _) => Some(IterationGuide::Tree(g)),
+                    (None, Some(g)) => Some(IterationGuide::Grid(g)),
                     (None, None) => None,
                 };
                 if learned.is_some() {

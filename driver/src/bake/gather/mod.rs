@@ -55,7 +55,8 @@ use combine::cluster_weights;
 use counters::{WARP_TIMED_EVERY, count_warp};
 use iteration::{IterationCtx, Sinks};
 use learning::{
-    Learned, Learning, SeedHistogram, grid_sample8, is_flat, learn, learn_grid, seeded_guide,
+    GuideRecords, IterationGuide, SeedHistogram, grid_sample8, is_flat, learn, learn_grid,
+    seeded_guide,
 };
 
 /// Guide nodes per cluster: enough for a 64-texel cluster's records at the default split rule.
@@ -85,7 +86,7 @@ pub struct TileBaker<'w> {
     factors: Vec<f32>,
     rotated: Vec<u32>,
     /// The cluster's learning records of the current iteration.
-    learning: Learning,
+    learning: GuideRecords,
     nodes: Vec<GuideNode>,
     /// Scratch the guide build's sort scatters through when the records outgrow `nodes`
     /// (`guide::sort_room`); grown to the largest pool the worker has met.
@@ -147,7 +148,7 @@ impl<'w> TileBaker<'w> {
             orders,
             factors: Vec::new(),
             rotated: Vec::new(),
-            learning: Learning::default(),
+            learning: GuideRecords::default(),
             nodes: vec![GuideNode::default(); GUIDE_CAPACITY],
             sort_room: Vec::new(),
             weights: Vec::new(),

@@ -85,7 +85,7 @@ fn the_sampled_density_is_the_mixtures() {
     };
     let (g, _) = guide::build(&mut records, &params, &mut mixed_nodes);
     assert!(!g.is_uniform());
-    let ctx = IterationCtx::new(&world, &settings, 2, Some(Learned::Tree(&g)));
+    let ctx = IterationCtx::new(&world, &settings, 2, Some(IterationGuide::Tree(&g)));
     let t = gather_texel(
         &texels_on_plane(1, 0.0)[0],
         0,
