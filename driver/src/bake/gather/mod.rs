@@ -51,7 +51,6 @@ pub use counters::GatherCounters;
 
 #[cfg(test)]
 use cluster::texel_basis;
-use combine::cluster_weights;
 use counters::{WARP_TIMED_EVERY, count_warp};
 use iteration::{IterationCtx, Sinks};
 use learning::{
