@@ -525,39 +525,26 @@ fn write_city_glb(
                 |(a, b), p| (a.min(*p), b.max(*p)),
             );
             let a0 = accessors.len();
-            let mut push = |data: &[u8], target, component, count, kind, bounds| {
+            // Vertex data is f32; the indices, the one SCALAR accessor here, are u32.
+            let mut push = |data: &[u8], count: usize, kind: &str, bounds| {
+                let (target, component) = match kind {
+                    "SCALAR" => (ELEMENT_ARRAY_BUFFER, UNSIGNED_INT),
+                    _ => (ARRAY_BUFFER, FLOAT),
+                };
                 let v = buffer.push_view(data, None, Some(target));
                 accessors.push(glb::accessor(v, component, count, kind, bounds));
             };
-            let bounds = Some((lo.to_array(), hi.to_array()));
             push(
                 cast_slice(pos),
-                ARRAY_BUFFER,
-                FLOAT,
                 pos.len(),
                 "VEC3",
-                bounds,
+                Some((lo.to_array(), hi.to_array())),
             );
-            push(
-                cast_slice(nrm),
-                ARRAY_BUFFER,
-                FLOAT,
-                nrm.len(),
-                "VEC3",
-                None,
-            );
+            push(cast_slice(nrm), nrm.len(), "VEC3", None);
             if let Some(uv) = uv {
-                push(cast_slice(uv), ARRAY_BUFFER, FLOAT, uv.len(), "VEC2", None);
+                push(cast_slice(uv), uv.len(), "VEC2", None);
             }
-            let indices = (ELEMENT_ARRAY_BUFFER, UNSIGNED_INT);
-            push(
-                cast_slice(idx),
-                indices.0,
-                indices.1,
-                idx.len(),
-                "SCALAR",
-                None,
-            );
+            push(cast_slice(idx), idx.len(), "SCALAR", None);
             a0
         };
     for page in 0..pages {
