@@ -12,7 +12,7 @@
 //! (`cargo bench --bench guide -- none` prints only the round-robin medians).
 
 use criterion::{BatchSize, BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use guidebake_kernels::guide::{self, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, GuideNode, GuideParams, Record};
 use guidebake_kernels::testing::Pcg32;
 use std::hint::black_box;
 
@@ -93,7 +93,7 @@ fn record_sets(n: usize) -> Vec<Vec<Record>> {
 type BuildFn = for<'a> fn(
     &mut [Record],
     &GuideParams,
-    &'a mut [Node],
+    &'a mut [GuideNode],
 ) -> (guide::Guide<'a>, guide::BuildStats);
 
 /// The two builds compared: today's and the partitioning one before issue 15 (the test
@@ -105,7 +105,7 @@ const BUILDS: [(&str, BuildFn); 2] = [
 
 /// The builds timed round-robin over the sets ([`ROUNDS`] rounds, rotating which goes
 /// first), medians of one build's time printed, and the ratio to the partitioning build.
-fn interleaved(sets: &[Vec<Record>], storage: &mut [Node]) {
+fn interleaved(sets: &[Vec<Record>], storage: &mut [GuideNode]) {
     let params = bake_params();
     let mut work = sets[0].clone();
     let mut times = [Vec::new(), Vec::new()];
@@ -138,7 +138,7 @@ fn interleaved(sets: &[Vec<Record>], storage: &mut [Node]) {
 fn bench(c: &mut Criterion) {
     let sets: Vec<Vec<Vec<Record>>> = RECORD_COUNTS.iter().map(|&n| record_sets(n)).collect();
     // The bake's storage (`GUIDE_CAPACITY`).
-    let mut storage = vec![Node::default(); 4096];
+    let mut storage = vec![GuideNode::default(); 4096];
     for s in &sets {
         let (mut nodes, mut depth) = (0, 0);
         for recs in s {

@@ -31,7 +31,7 @@
 //! `WARP_SETS=<n>` cycles through n point sets instead of [`SETS`]).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, Guide, GuideNode, GuideParams, Record};
 use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
 use guidebake_kernels::testing::{disk_and_sky, learning_records};
@@ -65,7 +65,7 @@ fn records(previous: Option<&Guide<'_>>, n: usize, seed: u64) -> Vec<Record> {
 
 /// The learning records of the second iteration, drawn from the first guide.
 fn second_iteration_records() -> Vec<Record> {
-    let mut storage = vec![Node::default(); 4096];
+    let mut storage = vec![GuideNode::default(); 4096];
     let mut first = records(None, 256, 1);
     let (g0, _) = guide::build(&mut first, &GuideParams::default(), &mut storage);
     records(Some(&g0), 512, 2)
@@ -308,7 +308,7 @@ fn timed(
 
 fn bench(c: &mut Criterion) {
     let learned = second_iteration_records();
-    let mut storage = vec![Node::default(); 4096];
+    let mut storage = vec![GuideNode::default(); 4096];
     let mut recs = learned.clone();
     let (g, stats) = guide::build(&mut recs, &GuideParams::default(), &mut storage);
     eprintln!(

@@ -31,7 +31,7 @@ use guidebake_kernels::estimator::{
     GraybillDeal, IterationVariance, RhoAccumulator, TexelEstimate, Welford, combine_weighted,
     plain_average,
 };
-use guidebake_kernels::guide::{self, DEFAULT_AMBIENT, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, DEFAULT_AMBIENT, GuideNode, GuideParams, Record};
 use guidebake_kernels::packet::{Hit, Hit8, LANES, NO_HIT, Ray, Ray8};
 use guidebake_kernels::sobol::ONE_MINUS_EPSILON;
 use guidebake_kernels::sobol::to_unit;
@@ -339,11 +339,11 @@ pub fn guide(data: &[u8]) {
     // One node buffer per thread, reused: allocating and zeroing up to 4096 fresh nodes per
     // input (page faults included) took a third of the target's time.
     thread_local! {
-        static STORAGE: std::cell::RefCell<Vec<Node>> = const { std::cell::RefCell::new(Vec::new()) };
+        static STORAGE: std::cell::RefCell<Vec<GuideNode>> = const { std::cell::RefCell::new(Vec::new()) };
     }
     STORAGE.with_borrow_mut(|storage| {
         storage.clear();
-        storage.resize(capacity, Node::default());
+        storage.resize(capacity, GuideNode::default());
         guide_checks(&params, &mut records, count, storage, points);
     });
 }
@@ -353,7 +353,7 @@ fn guide_checks(
     params: &GuideParams,
     records: &mut [Record],
     count: usize,
-    storage: &mut [Node],
+    storage: &mut [GuideNode],
     mut points: Vec<[f32; 2]>,
 ) {
     let params = *params;

@@ -31,7 +31,7 @@ use guidebake_capi::traverse::{
     GUIDEBAKE_NO_HIT, GuidebakeBvh, GuidebakeBvhNode, GuidebakeHit8, GuidebakeRay8,
     guidebake_bvh_build, guidebake_bvh_view, guidebake_intersect8,
 };
-use guidebake_kernels::guide::{self, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, GuideNode, GuideParams, Record};
 use guidebake_kernels::mapping::sample_cosine_hemisphere;
 use guidebake_kernels::packet::{Hit8, Ray8};
 use guidebake_kernels::testing::{Pcg32, disk_and_sky};
@@ -129,9 +129,9 @@ fn sample8(c: &mut Criterion<ThreadTime>) {
             }
         })
         .collect();
-    let mut storage = vec![Node::default(); 1024];
+    let mut storage = vec![GuideNode::default(); 1024];
     let (g, _) = guide::build(&mut records.clone(), &GuideParams::default(), &mut storage);
-    let mut c_storage = vec![Node::default(); 1024];
+    let mut c_storage = vec![GuideNode::default(); 1024];
     let mut c_records: Vec<GuidebakeRecord> = records
         .iter()
         .map(|r| GuidebakeRecord {
@@ -272,7 +272,7 @@ fn intersect8(c: &mut Criterion<ThreadTime>) {
     }
     let nodes: &[GuidebakeBvhNode] = &nodes[..used];
     let rust_bvh = BvhRef::new(
-        bytemuck::cast_slice::<_, traverse::Node>(nodes),
+        bytemuck::cast_slice::<_, traverse::BinaryNode>(nodes),
         bytemuck::cast_slice::<_, Tri>(&tris),
     )
     .unwrap();

@@ -13,7 +13,7 @@
 
 use core::cmp::Ordering;
 
-use guidebake_kernels::traverse::{LEAF, Node, Tri};
+use guidebake_kernels::traverse::{BinaryNode, LEAF, Tri};
 
 /// Most triangles in a leaf.
 pub(crate) const LEAF_MAX: usize = 2;
@@ -26,8 +26,8 @@ pub(crate) fn nodes_needed(tris: usize) -> usize {
 /// Builds over `out_tris` (already holding the soup, primitive id = index) into `nodes`
 /// (at least [`nodes_needed`] long); reorders `out_tris` into leaf order; returns the node
 /// count.
-pub(crate) fn build(tris: &mut [Tri], nodes: &mut [Node]) -> usize {
-    nodes[0] = Node::EMPTY;
+pub(crate) fn build(tris: &mut [Tri], nodes: &mut [BinaryNode]) -> usize {
+    nodes[0] = BinaryNode::EMPTY;
     match tris.len() {
         0 => 1,
         1 => {
@@ -44,7 +44,13 @@ pub(crate) fn build(tris: &mut [Tri], nodes: &mut [Node]) -> usize {
 
 /// Splits `tris` (starting at triangle `first` of the whole array) into the two slots of
 /// node `index`, recursing into slots with more than [`LEAF_MAX`] triangles.
-fn split_into(tris: &mut [Tri], first: usize, nodes: &mut [Node], index: usize, next: &mut usize) {
+fn split_into(
+    tris: &mut [Tri],
+    first: usize,
+    nodes: &mut [BinaryNode],
+    index: usize,
+    next: &mut usize,
+) {
     let mid = median_split(tris);
     let (left, right) = tris.split_at_mut(mid);
     for (slot, part, start) in [(0, left, first), (1, right, first + mid)] {
@@ -59,12 +65,12 @@ fn split_into(tris: &mut [Tri], first: usize, nodes: &mut [Node], index: usize, 
         node.set_box(slot, lo.into(), hi.into());
         node.child[slot] = child as u32;
         node.meta[slot] = 0;
-        nodes[child] = Node::EMPTY;
+        nodes[child] = BinaryNode::EMPTY;
         split_into(part, start, nodes, child, next);
     }
 }
 
-fn set_leaf(node: &mut Node, slot: usize, tris: &[Tri], start: usize) {
+fn set_leaf(node: &mut BinaryNode, slot: usize, tris: &[Tri], start: usize) {
     let (lo, hi) = bounds(tris);
     node.set_box(slot, lo.into(), hi.into());
     node.child[slot] = start as u32;
@@ -133,7 +139,7 @@ mod tests {
                 })
                 .collect();
             let mut tris = soup.clone();
-            let mut nodes = vec![Node::EMPTY; nodes_needed(n)];
+            let mut nodes = vec![BinaryNode::EMPTY; nodes_needed(n)];
             let used = build(&mut tris, &mut nodes);
             assert!(used <= nodes.len(), "{n}: {used} nodes");
             let bvh = BvhRef::new(&nodes[..used], &tris).expect("valid layout");

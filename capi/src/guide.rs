@@ -21,7 +21,7 @@ use crate::{
     Fail, GuidebakeStatus, check_one, disjoint, fail, guard, load8, read_array, read_versioned,
     sampling::check_points8, slice, slice_mut, store8, write_array,
 };
-use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, Guide, GuideNode, GuideParams, Record};
 use guidebake_kernels::warp;
 use wide::f32x8;
 
@@ -171,13 +171,13 @@ const _: () = {
 /// Bytes of one guide node in caller storage.
 #[unsafe(no_mangle)]
 pub extern "C" fn guidebake_guide_node_size() -> usize {
-    size_of::<Node>()
+    size_of::<GuideNode>()
 }
 
 /// Alignment, in bytes, the guide storage must have.
 #[unsafe(no_mangle)]
 pub extern "C" fn guidebake_guide_node_align() -> usize {
-    align_of::<Node>()
+    align_of::<GuideNode>()
 }
 
 /// Nodes the warp's start table takes after the tree (see the module docs).
@@ -198,20 +198,20 @@ pub extern "C" fn guidebake_guide_params_default() -> GuidebakeGuideParams {
 /// # Safety
 /// `storage` points to `storage_bytes` writable bytes, not otherwise referenced while the
 /// guide made from it is used.
-unsafe fn nodes<'a>(storage: *mut u8, storage_bytes: usize) -> Result<&'a mut [Node], Fail> {
-    let count = storage_bytes / size_of::<Node>();
+unsafe fn nodes<'a>(storage: *mut u8, storage_bytes: usize) -> Result<&'a mut [GuideNode], Fail> {
+    let count = storage_bytes / size_of::<GuideNode>();
     if count == 0 {
         return Err(fail(
             GuidebakeStatus::Capacity,
             format_args!(
                 "`storage_bytes` is {storage_bytes}: at least one node ({} bytes) is needed",
-                size_of::<Node>()
+                size_of::<GuideNode>()
             ),
         ));
     }
     // SAFETY: the caller's contract; `slice_mut` checks null, alignment and size. Any bytes
-    // are a valid `Node` (it is Pod) and the build overwrites what it uses.
-    unsafe { slice_mut(storage.cast::<Node>(), count, "storage") }
+    // are a valid `GuideNode` (it is Pod) and the build overwrites what it uses.
+    unsafe { slice_mut(storage.cast::<GuideNode>(), count, "storage") }
 }
 
 /// # Safety

@@ -28,7 +28,7 @@ use crate::{
 use core::mem::offset_of;
 use glam::Vec3;
 use guidebake_kernels::packet::{Hit, Hit8, NO_HIT, Ray, Ray8};
-use guidebake_kernels::traverse::{self, BvhRef, LEAF, LayoutError, Node, Tri};
+use guidebake_kernels::traverse::{self, BinaryNode, BvhRef, LEAF, LayoutError, Tri};
 use wide::u32x8;
 
 /// `meta` bit of a leaf child; the low bits count its triangles.
@@ -67,12 +67,12 @@ pub struct GuidebakeTri {
 }
 
 const _: () = {
-    assert!(size_of::<GuidebakeBvhNode>() == size_of::<Node>());
-    assert!(align_of::<GuidebakeBvhNode>() == align_of::<Node>());
-    assert!(offset_of!(GuidebakeBvhNode, lo) == offset_of!(Node, lo));
-    assert!(offset_of!(GuidebakeBvhNode, hi) == offset_of!(Node, hi));
-    assert!(offset_of!(GuidebakeBvhNode, child) == offset_of!(Node, child));
-    assert!(offset_of!(GuidebakeBvhNode, meta) == offset_of!(Node, meta));
+    assert!(size_of::<GuidebakeBvhNode>() == size_of::<BinaryNode>());
+    assert!(align_of::<GuidebakeBvhNode>() == align_of::<BinaryNode>());
+    assert!(offset_of!(GuidebakeBvhNode, lo) == offset_of!(BinaryNode, lo));
+    assert!(offset_of!(GuidebakeBvhNode, hi) == offset_of!(BinaryNode, hi));
+    assert!(offset_of!(GuidebakeBvhNode, child) == offset_of!(BinaryNode, child));
+    assert!(offset_of!(GuidebakeBvhNode, meta) == offset_of!(BinaryNode, meta));
     assert!(size_of::<GuidebakeTri>() == size_of::<Tri>());
     assert!(align_of::<GuidebakeTri>() == align_of::<Tri>());
     assert!(offset_of!(GuidebakeTri, v) == offset_of!(Tri, v));
@@ -162,7 +162,7 @@ const _: () = {
 /// Alignment, in bytes, of node arrays (64).
 #[unsafe(no_mangle)]
 pub extern "C" fn guidebake_bvh_node_align() -> usize {
-    align_of::<Node>()
+    align_of::<BinaryNode>()
 }
 
 /// Array lengths [`guidebake_bvh_build`] needs for `tri_count` triangles: nodes to
@@ -257,7 +257,7 @@ pub unsafe extern "C" fn guidebake_bvh_build(
         let (verts, nodes, tris) = unsafe {
             (
                 slice(vertices, floats, "vertices")?,
-                slice_mut(nodes.cast::<Node>(), node_capacity, "nodes")?,
+                slice_mut(nodes.cast::<BinaryNode>(), node_capacity, "nodes")?,
                 slice_mut(tris.cast::<Tri>(), tri_capacity, "tris")?,
             )
         };
@@ -305,9 +305,9 @@ pub unsafe extern "C" fn guidebake_bvh_view(
     guard("guidebake_bvh_view", || {
         check_one(out, "out")?;
         // SAFETY: checked by `slice`; the contract above; layouts asserted equal.
-        let (nodes, tris): (&'static [Node], &'static [Tri]) = unsafe {
+        let (nodes, tris): (&'static [BinaryNode], &'static [Tri]) = unsafe {
             (
-                slice(nodes.cast::<Node>(), node_count, "nodes")?,
+                slice(nodes.cast::<BinaryNode>(), node_count, "nodes")?,
                 slice(tris.cast::<Tri>(), tri_count, "tris")?,
             )
         };

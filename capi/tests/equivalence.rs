@@ -16,7 +16,7 @@ use guidebake_capi::sampling::*;
 use guidebake_capi::traverse::*;
 use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
 use guidebake_kernels::estimator::{GraybillDeal, Welford, plain_average};
-use guidebake_kernels::guide::{self, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, GuideNode, GuideParams, Record};
 use guidebake_kernels::packet::{Hit8, Ray, Ray8};
 use guidebake_kernels::presort::{packet_u_x8, presorted};
 use guidebake_kernels::sobol::rotation;
@@ -49,7 +49,7 @@ fn records(rng: &mut Pcg32, n: usize) -> Vec<Record> {
 fn c_build(
     recs: &[Record],
     params: *const GuidebakeGuideParams,
-    storage: &mut [Node],
+    storage: &mut [GuideNode],
 ) -> (S, GuidebakeGuide, GuidebakeGuideStats) {
     let mut c_recs: Vec<GuidebakeRecord> = recs
         .iter()
@@ -91,14 +91,14 @@ fn guide_build_sample8_and_pdf8_match_the_kernels() {
 fn guide_matches_the_kernels(uniform: Option<f32>, second_moment: bool) {
     let mut rng = Pcg32::new(1, 20);
     let recs = records(&mut rng, 2000);
-    let mut storage = vec![Node::default(); 1024];
+    let mut storage = vec![GuideNode::default(); 1024];
     let kernel_params = GuideParams {
         uniform: uniform.unwrap_or(0.0),
         second_moment,
         ..GuideParams::default()
     };
     let (g, stats) = guide::build(&mut recs.clone(), &kernel_params, &mut storage);
-    let mut c_storage = vec![Node::default(); 1024];
+    let mut c_storage = vec![GuideNode::default(); 1024];
     let mut p = guidebake_guide_params_default();
     p.uniform = uniform.unwrap_or(0.0);
     p.second_moment = u32::from(second_moment);
@@ -157,9 +157,9 @@ fn guide_matches_the_kernels(uniform: Option<f32>, second_moment: bool) {
 fn sample_packets_equals_sample8_per_packet_and_works_in_place() {
     let mut rng = Pcg32::new(6, 20);
     let recs = records(&mut rng, 1500);
-    let mut storage = vec![Node::default(); 1024];
+    let mut storage = vec![GuideNode::default(); 1024];
     let (g, _) = guide::build(&mut recs.clone(), &GuideParams::default(), &mut storage);
-    let mut c_storage = vec![Node::default(); 1024];
+    let mut c_storage = vec![GuideNode::default(); 1024];
     let (s, h, _) = c_build(&recs, std::ptr::null(), &mut c_storage);
     assert_eq!(s, S::Ok);
     let packets = 37;
@@ -207,7 +207,7 @@ fn versioned_params_read_only_what_the_caller_knows() {
     let mut rng = Pcg32::new(2, 20);
     let recs = records(&mut rng, 3000);
     let build = |params: &GuidebakeGuideParams| {
-        let mut storage = vec![Node::default(); 2048];
+        let mut storage = vec![GuideNode::default(); 2048];
         let (s, _, st) = c_build(&recs, params, &mut storage);
         (s, st.depth)
     };
@@ -245,7 +245,7 @@ fn versioned_params_read_only_what_the_caller_knows() {
 
 #[test]
 fn handles_and_storage_are_checked() {
-    let mut storage = vec![Node::default(); 4];
+    let mut storage = vec![GuideNode::default(); 4];
     let mut handle = GuidebakeGuide { opaque: [0; 8] };
     let (x, mut o) = ([0.5f32; 8], [0.0f32; 8]);
     // SAFETY: valid arrays; the zeroed handle is refused by its magic.
@@ -520,7 +520,7 @@ fn bvh_build_and_packet_traversal_match_the_kernels() {
             S::Ok
         );
     }
-    let kernel_nodes: &[traverse::Node] = bytemuck::cast_slice(&nodes[..used]);
+    let kernel_nodes: &[traverse::BinaryNode] = bytemuck::cast_slice(&nodes[..used]);
     let kernel_tris: &[Tri] = bytemuck::cast_slice(&tris);
     let rust_bvh = BvhRef::new(kernel_nodes, kernel_tris).unwrap();
     for _ in 0..300 {

@@ -4,7 +4,7 @@
 //! 2019 §2.4). Building a good tree is obvhs's job: PLOC (Meister & Bittner 2018) plus
 //! reinsertion and leaf collapsing ([`obvhs::bvh2::builder::build_bvh2_from_tris`]). This module
 //! picks the build parameters ([`Preset`]), then flattens obvhs's binary tree into
-//! [`Node`]s (two child boxes per 64-byte node) over the triangles in leaf order ([`Tri`]s),
+//! [`BinaryNode`]s (two child boxes per 64-byte node) over the triangles in leaf order ([`Tri`]s),
 //! collapses it into [`WideNode`]s (eight child boxes per node, same leaves, the wide nodes
 //! chosen by the least surface-area cost: [`collapse`]; [`Bvh::wide`]),
 //! which every ray the bake traces walks, single or in packets (docs/traverse.md,
@@ -59,7 +59,7 @@ pub(crate) use regions::split_at_median;
 
 use glam::{Vec3, Vec3A};
 use guidebake_kernels::traverse::{
-    BvhRef, LEAF, LayoutError, Node, Tri, WideNode, WideRef, collapse, leaf_rows,
+    BinaryNode, BvhRef, LEAF, LayoutError, Tri, WideNode, WideRef, collapse, leaf_rows,
 };
 use obvhs::{
     BvhBuildParams,
@@ -174,7 +174,7 @@ pub struct Bvh {
     // On huge pages when big enough ([`huge`]).
     /// The binary tree and its triangles in leaf order, kept only by
     /// [`Bvh::build_with_binary`].
-    binary: Option<(HugeSlice<Node>, HugeSlice<Tri>)>,
+    binary: Option<(HugeSlice<BinaryNode>, HugeSlice<Tri>)>,
     wide: HugeSlice<WideNode>,
     /// The triangles as structure-of-arrays rows per wide leaf ([`leaf_rows`]): the wide
     /// tree's only copy of them.
@@ -283,7 +283,7 @@ impl Bvh {
         (
             HugeSlice<WideNode>,
             HugeSlice<f32>,
-            Option<(HugeSlice<Node>, HugeSlice<Tri>)>,
+            Option<(HugeSlice<BinaryNode>, HugeSlice<Tri>)>,
         ),
         BvhError,
     > {
@@ -322,7 +322,7 @@ impl Bvh {
     /// triangles if kept.
     pub fn bytes(&self) -> usize {
         let binary = self.binary.as_ref().map_or(0, |(nodes, tris)| {
-            std::mem::size_of_val::<[Node]>(nodes) + std::mem::size_of_val::<[Tri]>(tris)
+            std::mem::size_of_val::<[BinaryNode]>(nodes) + std::mem::size_of_val::<[Tri]>(tris)
         });
         std::mem::size_of_val::<[WideNode]>(&self.wide)
             + std::mem::size_of_val::<[f32]>(&self.rows)
@@ -363,10 +363,10 @@ fn obvhs_flattened(
     soup: &[[Vec3; 3]],
     ids: Option<&[u32]>,
     preset: Preset,
-) -> (Vec<Node>, Vec<Tri>) {
+) -> (Vec<BinaryNode>, Vec<Tri>) {
     let count = ids.map_or(soup.len(), <[u32]>::len);
     if count == 0 {
-        return (vec![Node::EMPTY], Vec::new());
+        return (vec![BinaryNode::EMPTY], Vec::new());
     }
     let id = |i: usize| ids.map_or(i, |ids| ids[i] as usize);
     let triangles: Vec<Triangle> = (0..count)
@@ -391,10 +391,10 @@ fn obvhs_flattened(
 /// Flattens obvhs's binary tree (children of inner node `i` at `first_index` and
 /// `first_index + 1`) over `count` triangles into two-child-box nodes, depth first, triangles
 /// in leaf order (`tri` of obvhs's primitive index).
-fn flatten(bvh2: &Bvh2, count: usize, tri: impl Fn(u32) -> Tri) -> (Vec<Node>, Vec<Tri>) {
-    let mut nodes = vec![Node::EMPTY];
+fn flatten(bvh2: &Bvh2, count: usize, tri: impl Fn(u32) -> Tri) -> (Vec<BinaryNode>, Vec<Tri>) {
+    let mut nodes = vec![BinaryNode::EMPTY];
     let mut tris = Vec::with_capacity(count);
-    let mut fill = |nodes: &mut Vec<Node>, ours: usize, slot: usize, from: usize| {
+    let mut fill = |nodes: &mut Vec<BinaryNode>, ours: usize, slot: usize, from: usize| {
         fill_slot(nodes, ours, slot, bvh2, from, &tri, &mut tris)
     };
     let root = &bvh2.nodes[0];
@@ -417,7 +417,7 @@ fn flatten(bvh2: &Bvh2, count: usize, tri: impl Fn(u32) -> Tri) -> (Vec<Node>, V
 /// Writes obvhs node `from` into slot `slot` of our node `ours`; for an inner node allocates
 /// its flattened node and returns `(its left child, its index)` to process.
 fn fill_slot(
-    nodes: &mut Vec<Node>,
+    nodes: &mut Vec<BinaryNode>,
     ours: usize,
     slot: usize,
     bvh2: &Bvh2,
@@ -438,7 +438,7 @@ fn fill_slot(
         None
     } else {
         let index = nodes.len();
-        nodes.push(Node::EMPTY);
+        nodes.push(BinaryNode::EMPTY);
         nodes[ours].child[slot] = index as u32;
         nodes[ours].meta[slot] = 0;
         Some((src.first_index as usize, index))

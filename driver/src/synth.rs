@@ -409,7 +409,7 @@ pub fn synth_with(n: u64, out: &Path, options: &SynthOptions) -> Result<SynthRep
     let city_triangles = first;
     let geometry = out.with_extension("glb");
     let scene = out.with_extension("toml");
-    let (triangles, geometry_fingerprint) = write_glb(&geometry, &placed, pages, &lit)?;
+    let (triangles, geometry_fingerprint) = write_city_glb(&geometry, &placed, pages, &lit)?;
     debug_assert_eq!(
         triangles.len(),
         (city_triangles + 2 * lit.len() as u32) as usize
@@ -498,62 +498,55 @@ fn write_atomically(path: &Path, bytes: &[&[u8]]) -> Result<(), SynthError> {
     crate::atomic::write_parts(path, bytes).map_err(io_err(path))
 }
 
-/// Writes one glTF mesh per page; returns the triangle table of the texel file (every face is
-/// seen from its front, where its texels face).
-fn write_glb(
+/// Writes the city as a glb ([`crate::scene::glb`]), one glTF mesh per page; returns the
+/// triangle table of the texel file (every face is seen from its front, where its texels face).
+fn write_city_glb(
     path: &Path,
     placed: &[Placed],
     pages: u32,
     windows: &[Window],
 ) -> Result<(Vec<TriangleRecord>, u64), SynthError> {
+    use crate::scene::glb::{
+        self, ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, GlbBuffer, UNSIGNED_INT,
+    };
+    use bytemuck::cast_slice;
     use serde_json::json;
     // The scene's geometry fingerprint, as `Scene::load` of the file will compute it: the
     // triangles in primitive order, each by its corners.
     let mut fingerprint = GeometryFingerprint::default();
-    let mut bin: Vec<u8> = Vec::new();
-    let (mut views, mut accessors, mut meshes, mut nodes, mut records) =
-        (vec![], vec![], vec![], vec![], vec![]);
+    let mut buffer = GlbBuffer::default();
+    let (mut accessors, mut meshes, mut nodes, mut records) = (vec![], vec![], vec![], vec![]);
     // Positions, normals, optional lightmap UVs and indices as buffer views and accessors;
     // returns the index of the first accessor (POSITION, NORMAL, [TEXCOORD_1,] indices).
-    let mut push_geometry = |bin: &mut Vec<u8>,
-                             pos: &[Vec3],
-                             nrm: &[Vec3],
-                             uv: Option<&[Vec2]>,
-                             idx: &[u32]| {
-        let mut push_view = |data: &[u8], target: u32| {
-            let offset = bin.len();
-            bin.extend_from_slice(data);
-            while !bin.len().is_multiple_of(4) {
-                bin.push(0);
+    let mut push_geometry =
+        |buffer: &mut GlbBuffer, pos: &[Vec3], nrm: &[Vec3], uv: Option<&[Vec2]>, idx: &[u32]| {
+            let (lo, hi) = pos.iter().fold(
+                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                |(a, b), p| (a.min(*p), b.max(*p)),
+            );
+            let a0 = accessors.len();
+            // Vertex data is f32; the indices, the one SCALAR accessor here, are u32.
+            let mut push = |data: &[u8], count: usize, kind: &str, bounds| {
+                let (target, component) = match kind {
+                    "SCALAR" => (ELEMENT_ARRAY_BUFFER, UNSIGNED_INT),
+                    _ => (ARRAY_BUFFER, FLOAT),
+                };
+                let v = buffer.push_view(data, None, Some(target));
+                accessors.push(glb::accessor(v, component, count, kind, bounds));
+            };
+            push(
+                cast_slice(pos),
+                pos.len(),
+                "VEC3",
+                Some((lo.to_array(), hi.to_array())),
+            );
+            push(cast_slice(nrm), nrm.len(), "VEC3", None);
+            if let Some(uv) = uv {
+                push(cast_slice(uv), uv.len(), "VEC2", None);
             }
-            views.push(
-                json!({"buffer": 0, "byteOffset": offset, "byteLength": data.len(), "target": target}),
-            );
-            views.len() - 1
+            push(cast_slice(idx), idx.len(), "SCALAR", None);
+            a0
         };
-        let (lo, hi) = pos.iter().fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(a, b), p| (a.min(*p), b.max(*p)),
-        );
-        let a0 = accessors.len();
-        let v = push_view(bytemuck::cast_slice(pos), 34962);
-        accessors.push(json!({"bufferView": v, "componentType": 5126, "count": pos.len(), "type": "VEC3", "min": lo.to_array(), "max": hi.to_array()}));
-        let v = push_view(bytemuck::cast_slice(nrm), 34962);
-        accessors.push(
-            json!({"bufferView": v, "componentType": 5126, "count": nrm.len(), "type": "VEC3"}),
-        );
-        if let Some(uv) = uv {
-            let v = push_view(bytemuck::cast_slice(uv), 34962);
-            accessors.push(
-                json!({"bufferView": v, "componentType": 5126, "count": uv.len(), "type": "VEC2"}),
-            );
-        }
-        let v = push_view(bytemuck::cast_slice(idx), 34963);
-        accessors.push(
-            json!({"bufferView": v, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
-        );
-        a0
-    };
     for page in 0..pages {
         let quads: Vec<&Placed> = placed.iter().filter(|p| p.page == page).collect();
         let (mut pos, mut nrm, mut uv, mut idx) = (vec![], vec![], vec![], vec![]);
@@ -583,7 +576,7 @@ fn write_glb(
         for t in idx.chunks_exact(3) {
             fingerprint.push(&[pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]]);
         }
-        let a0 = push_geometry(&mut bin, &pos, &nrm, Some(&uv), &idx);
+        let a0 = push_geometry(&mut buffer, &pos, &nrm, Some(&uv), &idx);
         meshes.push(json!({"name": format!("city_page{page}"), "primitives": [{
             "attributes": {"POSITION": a0, "NORMAL": a0 + 1, "TEXCOORD_1": a0 + 2},
             "indices": a0 + 3, "material": 0, "mode": 4}]}));
@@ -625,7 +618,7 @@ fn write_glb(
             for t in idx.chunks_exact(3) {
                 fingerprint.push(&[pos[t[0] as usize], pos[t[1] as usize], pos[t[2] as usize]]);
             }
-            let a0 = push_geometry(&mut bin, &pos, &nrm, None, &idx);
+            let a0 = push_geometry(&mut buffer, &pos, &nrm, None, &idx);
             primitives.push(json!({"attributes": {"POSITION": a0, "NORMAL": a0 + 1},
                 "indices": a0 + 2, "material": 1 + class, "mode": 4}));
         }
@@ -637,6 +630,7 @@ fn write_glb(
             window_triangles,
         ));
     }
+    let (bin, views) = buffer.finish();
     let doc = json!({
         "asset": {"version": "2.0", "generator": "guidebake synth"},
         "scene": 0,
@@ -649,20 +643,8 @@ fn write_glb(
         "bufferViews": views,
         "buffers": [{"byteLength": bin.len()}],
     });
-    let mut json = serde_json::to_vec(&doc).map_err(|e| io_err(path)(std::io::Error::other(e)))?;
-    while !json.len().is_multiple_of(4) {
-        json.push(b' ');
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let header = [
-        &b"glTF"[..],
-        &2u32.to_le_bytes(),
-        &(total as u32).to_le_bytes(),
-    ]
-    .concat();
-    let jh = [(json.len() as u32).to_le_bytes(), *b"JSON"].concat();
-    let bh = [(bin.len() as u32).to_le_bytes(), *b"BIN\0"].concat();
-    write_atomically(path, &[&header, &jh, &json, &bh, &bin])?;
+    let json = serde_json::to_vec(&doc).map_err(|e| io_err(path)(std::io::Error::other(e)))?;
+    glb::write(path, json, &bin).map_err(io_err(path))?;
     Ok((records, fingerprint.finish()))
 }
 

@@ -15,7 +15,7 @@ use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
 use guidebake_kernels::estimator::{
     GraybillDeal, RhoAccumulator, Welford, luminance, plain_average,
 };
-use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, Guide, GuideNode, GuideParams, Record};
 use guidebake_kernels::mapping::{orthonormal_basis, sample_cosine_hemisphere_x8};
 use guidebake_kernels::packet::{Hit8, Ray8};
 use guidebake_kernels::presort::{packet_u_x8, presorted, reorder_after_rotation_into};
@@ -105,7 +105,7 @@ fn main() {
         .enumerate()
         .map(|(i, t)| traverse::Tri::new(t.map(Vec3::from_array), i as u32))
         .collect();
-    let mut root = traverse::Node::EMPTY;
+    let mut root = traverse::BinaryNode::EMPTY;
     root.set_box(0, Vec3::new(-0.5, -0.5, 1.0), Vec3::new(0.5, 0.5, 1.0));
     root.set_box(1, Vec3::new(-3.0, -3.0, 0.0), Vec3::new(3.0, 3.0, 2.0));
     (root.child, root.meta) = ([0, 2], [LEAF | 2, LEAF | 4]);
@@ -123,7 +123,7 @@ fn main() {
 
     let order = presorted(N as u32);
     let mut packet_order = vec![0u32; N];
-    let mut storage = vec![Node::default(); 1024]; // one cluster's guide at a time
+    let mut storage = vec![GuideNode::default(); 1024]; // one cluster's guide at a time
     let mut records = Vec::<Record>::with_capacity(8 * N);
     let mut batches = vec![[Welford::new(); K]; TEXELS];
     let mut cluster_of = [0usize; TEXELS];

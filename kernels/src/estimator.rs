@@ -26,8 +26,12 @@
 //!   or per-shard accumulators), pass 2 calls [`IterationVariance::weights`] once and
 //!   [`combine_weighted`] per texel. The weights do not depend on a texel's own samples, so
 //!   this combination is unbiased and needs no ρ.
+//! - [`cluster_weights`]: per-iteration weights pooled over one cluster's texels instead of the
+//!   world's (the bake's default combination), applied per texel by [`combine_weighted`].
 //! - [`CombinationWeights`] ([`PlainAverage`], [`GraybillDeal`], [`Weighted`]): the normalised
 //!   per-batch weights each combination applies, for other per-batch means of the same samples.
+//! - [`relative_std_error`]: a texel's relative standard error over all its batches, what a
+//!   baker keeps to spend samples where the error is.
 //! - [`RhoAccumulator`]: the global sums for ρ.
 //! - [`ExactSum`]: the exact fixed-point accumulator behind every global reduction here.
 //!
@@ -513,6 +517,92 @@ fn iteration_weight(weights: &[f64]) -> impl Fn(usize, &Welford) -> f64 + '_ {
     }
 }
 
+/// The relative standard error of a texel's pooled luminance mean, `√(σ̂² / N) / μ̂` over all
+/// its batches: what a bake keeps per texel and the spatial budget and the stopping rule read.
+/// 0 when unknown (fewer than two samples, a mean that is not positive, or a result that is
+/// not finite).
+pub fn relative_std_error(batches: &[Welford]) -> f32 {
+    let all = pooled(batches);
+    match (all.luminance_variance(), all.mean_luminance()) {
+        (Some(var), Some(mean)) if mean > 0.0 && all.count() > 1 => {
+            let e = libm::sqrt(var / all.count() as f64) / mean;
+            if e.is_finite() { e as f32 } else { 0.0 }
+        }
+        _ => 0.0,
+    }
+}
+
+/// Cluster-pooled iteration weights (`--combine cluster`, the bake's default) for a cluster's
+/// `members` (indices of texels, `k` batches each in `batches`: texel `m`'s iteration `j` is
+/// `batches[m·k + j]`), written to `weights` at the same places: iteration j's weight is
+/// `n_j / max(v_j, floor)` with `v_j = Σ_texels σ̂²_j / Σ_texels μ̂²` the cluster's pooled
+/// relative per-sample variance of iteration j (σ̂²_j a texel's luminance variance in
+/// iteration j, μ̂ its mean over all iterations) and the floor a hundredth of the largest
+/// `v_j` (and of a relative standard deviation of 0.1): a batch of zeros beside noisy ones
+/// cannot take all the weight. Without any variance every iteration weighs its sample count.
+/// The weights are then applied per texel by [`combine_weighted`]. `K` bounds `k` (scratch
+/// on the stack, nothing allocated).
+///
+/// The texel's own samples are part of the pool, so its weights are not independent of
+/// its values: a firefly raises its iteration's pooled variance and lowers that iteration's
+/// weight in its own texel (−2.9 % on the ajar room, path; ρ, on by default with this
+/// combination, restores the world's mean). Leaving the texel out of its pool removes that
+/// bias but gives a firefly in an otherwise quiet iteration that iteration's large weight:
+/// measured and dropped (docs/estimator.md).
+///
+/// # Panics
+/// When `k > K`, or `batches` or `weights` hold fewer than `(m + 1)·k` entries for a member `m`.
+pub fn cluster_weights<const K: usize>(
+    members: &[u32],
+    batches: &[Welford],
+    k: usize,
+    weights: &mut [f64],
+) {
+    assert!(
+        k <= K,
+        "{k} iterations, more than the {K} cluster_weights holds"
+    );
+    let mut var = [0.0f64; K];
+    let mut mean2 = 0.0f64;
+    for &m in members {
+        let b = &batches[m as usize * k..(m as usize + 1) * k];
+        let Some(mu) = plain_average(b).luminance() else {
+            continue;
+        };
+        if !(mu.is_finite() && mu > 0.0) {
+            continue;
+        }
+        mean2 += mu * mu;
+        for (j, batch) in b.iter().enumerate() {
+            if let Some(v) = batch.luminance_variance().filter(|v| v.is_finite()) {
+                var[j] += v;
+            }
+        }
+    }
+    let mut rel = [0.0f64; K];
+    for j in 0..k {
+        rel[j] = var[j] / mean2;
+    }
+    let rel = &rel[..k];
+    let largest = rel
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    let floor = (largest * 0.01).max(0.01);
+    for &m in members {
+        for j in 0..k {
+            let b = &batches[m as usize * k + j];
+            let w = if mean2 > 0.0 && largest > 0.0 {
+                b.count() as f64 / rel[j].max(floor)
+            } else {
+                b.count() as f64
+            };
+            weights[m as usize * k + j] = w;
+        }
+    }
+}
+
 /// The global statistics of Müller's scheme for up to `K` iterations: per iteration, the sum
 /// over texels of the variance of that iteration's luminance estimate (σ̂²_k / n_k) and the
 /// number of texels contributing. Mergeable in any order with bit-identical results.
@@ -859,6 +949,83 @@ fn sub256(a: [u64; 4], b: [u64; 4]) -> [u64; 4] {
 mod tests {
     use super::*;
     use crate::testing::Pcg32;
+
+    /// A batch of grey samples (luminance = the value, up to the weights' rounding).
+    fn grey(values: &[f32]) -> Welford {
+        let mut w = Welford::new();
+        for &v in values {
+            w.push([v; 3]);
+        }
+        w
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() <= 1e-9 * b.abs().max(1.0)
+    }
+
+    #[test]
+    fn relative_std_error_pools_every_batch() {
+        // Samples 1 and 3: mean 2, unbiased variance 2, standard error √(2/2) = 1.
+        let e = relative_std_error(&[grey(&[1.0, 3.0])]);
+        assert!(close(f64::from(e), 0.5), "{e}");
+        // The same samples split over two batches: pooled first.
+        let split = relative_std_error(&[grey(&[1.0]), grey(&[3.0])]);
+        assert!(close(f64::from(split), 0.5), "{split}");
+        // Unknown: no batch, one sample, a mean of zero.
+        assert_eq!(relative_std_error(&[]), 0.0);
+        assert_eq!(relative_std_error(&[Welford::new(), grey(&[2.0])]), 0.0);
+        assert_eq!(relative_std_error(&[grey(&[0.0, 0.0, 0.0])]), 0.0);
+        // Constant light: no error.
+        assert_eq!(relative_std_error(&[grey(&[2.0; 5])]), 0.0);
+    }
+
+    #[test]
+    fn cluster_weights_divide_counts_by_pooled_relative_variance() {
+        // One texel, two iterations: samples 1, 3 (n 2, σ̂² 2) then 2, 2, 2, 2 (n 4, σ̂² 0).
+        // μ̂ = 12 / 6 = 2, so v = [2/4, 0]; the floor is max(0.5/100, 0.01) = 0.01.
+        let batches = [grey(&[1.0, 3.0]), grey(&[2.0; 4])];
+        let mut weights = [0.0; 2];
+        cluster_weights::<4>(&[0], &batches, 2, &mut weights);
+        assert!(close(weights[0], 2.0 / 0.5), "{weights:?}");
+        assert!(close(weights[1], 4.0 / 0.01), "{weights:?}");
+    }
+
+    #[test]
+    fn cluster_weights_without_variance_are_the_sample_counts() {
+        // Texels 0 and 2 of three are the cluster; texel 1's weights are left as they were.
+        let batches = [
+            grey(&[1.0; 3]),
+            grey(&[5.0; 8]),
+            grey(&[1.0, 9.0]),
+            grey(&[1.0]),
+            grey(&[0.5; 2]),
+            grey(&[0.5; 16]),
+        ];
+        let mut weights = [-1.0; 6];
+        cluster_weights::<2>(&[0, 2], &batches, 2, &mut weights);
+        assert_eq!(weights, [3.0, 8.0, -1.0, -1.0, 2.0, 16.0]);
+    }
+
+    #[test]
+    fn cluster_weights_leave_dark_texels_out_of_the_pool_but_weigh_them() {
+        // A dark texel adds nothing to Σ μ̂² nor to the variances; it still gets the weights.
+        let lit = [grey(&[1.0, 3.0]), grey(&[2.0; 4])];
+        let dark = [grey(&[0.0; 2]), grey(&[0.0; 4])];
+        let mut alone = [0.0; 2];
+        cluster_weights::<2>(&[0], &lit, 2, &mut alone);
+        let both = [lit[0], lit[1], dark[0], dark[1]];
+        let mut weights = [0.0; 4];
+        cluster_weights::<2>(&[0, 1], &both, 2, &mut weights);
+        assert_eq!(weights[..2], alone);
+        assert_eq!(weights[2..], alone);
+    }
+
+    #[test]
+    #[should_panic(expected = "more than the 2")]
+    fn cluster_weights_refuse_more_iterations_than_they_hold() {
+        let batches = [Welford::new(); 3];
+        cluster_weights::<2>(&[0], &batches, 3, &mut [0.0; 3]);
+    }
 
     #[test]
     fn the_f32_luminance_has_the_f64_weights_rounded() {

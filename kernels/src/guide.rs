@@ -46,7 +46,7 @@
 //! (a root leaf): there is nothing to learn from.
 //!
 //! # Storage and capacity
-//! The caller supplies the node array (`&mut [Node]`, at most [`MAX_NODES`] nodes are used,
+//! The caller supplies the node array (`&mut [GuideNode]`, at most [`MAX_NODES`] nodes are used,
 //! because child links are `u16`); nothing allocates. The records are sorted in place
 //! (their order changes). Before the tree is written the whole storage is the sort's
 //! scratch ([`SORT_BYTES_PER_RECORD`] bytes a record; with less room the sort runs in place,
@@ -77,7 +77,7 @@
 //! in C and C++ through the C ABI is under `examples/`, and `kernels/README.md` ("Embedding")
 //! gives the ABI's rules. The core of it: learn from one iteration's records, warp the next.
 //! ```
-//! use guidebake_kernels::guide::{self, GuideParams, Node, Record};
+//! use guidebake_kernels::guide::{self, GuideParams, GuideNode, Record};
 //! use guidebake_kernels::warp;
 //! use wide::f32x8;
 //!
@@ -88,7 +88,7 @@
 //!         Record { u, flux: if u[0] > 0.8 { 50.0 } else { 0.5 } }
 //!     })
 //!     .collect();
-//! let mut storage = vec![Node::default(); 1024]; // fixed memory, reused per cluster
+//! let mut storage = vec![GuideNode::default(); 1024]; // fixed memory, reused per cluster
 //! let (g, stats) = guide::build(&mut records, &GuideParams::default(), &mut storage);
 //! assert!(stats.nodes > 1);
 //! // One packet of eight points of [0,1)² (presorted, rotated Sobol points in a baker).
@@ -193,7 +193,7 @@ impl Default for GuideParams {
 /// `link` and `inner_kids` exist for the 8-wide warp's branch-free descent.
 #[repr(C, align(64))]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Node {
+pub struct GuideNode {
     /// Lower corner of the source rectangle.
     pub(crate) lo: [f32; 2],
     /// Upper corner of the source rectangle (exclusive).
@@ -226,7 +226,7 @@ pub struct Node {
     pub(crate) link: u32,
 }
 
-impl Node {
+impl GuideNode {
     /// `lo, hi, origin, size, pdf`: the node's first 32 bytes, what the warp's last step reads.
     #[inline(always)]
     pub(crate) fn leaf_row(&self) -> [f32; 8] {
@@ -301,12 +301,12 @@ pub const START_GRID: usize = 32;
 /// Nodes of storage the start table occupies after the tree: `START_GRID²` u16 start
 /// nodes and `START_GRID²` × 4 u16 shortcuts (10 KB).
 pub const START_TABLE_NODES: usize =
-    (START_GRID * START_GRID * 2 * 5).div_ceil(core::mem::size_of::<Node>());
+    (START_GRID * START_GRID * 2 * 5).div_ceil(core::mem::size_of::<GuideNode>());
 
 /// A built guide: a view of the caller's node storage.
 #[derive(Clone, Copy, Debug)]
 pub struct Guide<'a> {
-    nodes: &'a [Node],
+    nodes: &'a [GuideNode],
     /// The start table ([`Guide::start_table`]), empty when the storage had no room for it.
     start: &'a [u16],
     /// Per start-table cell, per quadrant of its start node: the deepest node that every
@@ -330,7 +330,7 @@ impl<'a> Guide<'a> {
     ///
     /// # Panics
     /// If `storage` is empty.
-    pub fn uniform(storage: &'a mut [Node]) -> Guide<'a> {
+    pub fn uniform(storage: &'a mut [GuideNode]) -> Guide<'a> {
         assert!(
             !storage.is_empty(),
             "guide storage must hold at least one node"
@@ -344,7 +344,7 @@ impl<'a> Guide<'a> {
     }
 
     /// The nodes in breadth-first order; index 0 is the root.
-    pub fn nodes(&self) -> &'a [Node] {
+    pub fn nodes(&self) -> &'a [GuideNode] {
         self.nodes
     }
 
@@ -385,8 +385,8 @@ impl<'a> Guide<'a> {
     }
 }
 
-fn root_leaf(count: u32) -> Node {
-    Node {
+fn root_leaf(count: u32) -> GuideNode {
+    GuideNode {
         t: [0.0; 3],
         lo: [0.0; 2],
         hi: [1.0; 2],
@@ -418,7 +418,7 @@ fn root_leaf(count: u32) -> Node {
 pub fn build<'a>(
     records: &mut [Record],
     params: &GuideParams,
-    storage: &'a mut [Node],
+    storage: &'a mut [GuideNode],
 ) -> (Guide<'a>, BuildStats) {
     build_in(records, params, storage, &mut [])
 }
@@ -429,8 +429,8 @@ pub fn build<'a>(
 pub fn build_in<'a>(
     records: &mut [Record],
     params: &GuideParams,
-    storage: &'a mut [Node],
-    room: &mut [Node],
+    storage: &'a mut [GuideNode],
+    room: &mut [GuideNode],
 ) -> (Guide<'a>, BuildStats) {
     build_with(records, params, storage, room, sort, split)
 }
@@ -441,13 +441,18 @@ pub const SORT_BYTES_PER_RECORD: usize = size_of::<Record>() + 1;
 
 /// Nodes whose bytes hold the sort's scratch for `records` records ([`build_in`]).
 pub const fn sort_room(records: usize) -> usize {
-    (records * SORT_BYTES_PER_RECORD).div_ceil(size_of::<Node>())
+    (records * SORT_BYTES_PER_RECORD).div_ceil(size_of::<GuideNode>())
 }
 
 /// Sorts the accepted records by their cells ([`cells::sort`]), scattering through `storage`
 /// (not yet written) or, where that is too small, `room`: [`SORT_BYTES_PER_RECORD`] bytes a
 /// record (the bake's 4 096 nodes hold 20 000 records); with neither it sorts in place.
-fn sort(records: &mut [Record], params: &GuideParams, storage: &mut [Node], room: &mut [Node]) {
+fn sort(
+    records: &mut [Record],
+    params: &GuideParams,
+    storage: &mut [GuideNode],
+    room: &mut [GuideNode],
+) {
     let n = records.len();
     let space = if storage.len() >= sort_room(n) {
         storage
@@ -467,7 +472,7 @@ fn sort(records: &mut [Record], params: &GuideParams, storage: &mut [Node], room
 }
 
 /// Splits a node (`records`, `nodes`, the node, its first child's index, the total flux).
-type SplitFn = fn(&mut [Record], &mut [Node], usize, usize, f64);
+type SplitFn = fn(&mut [Record], &mut [GuideNode], usize, usize, f64);
 
 /// [`build`] with its record order (`sort`, run on the accepted records before the
 /// subdivision, with the storage and the room it may scatter through) and its `split`;
@@ -475,9 +480,9 @@ type SplitFn = fn(&mut [Record], &mut [Node], usize, usize, f64);
 fn build_with<'a>(
     records: &mut [Record],
     params: &GuideParams,
-    storage: &'a mut [Node],
-    room: &mut [Node],
-    sort: fn(&mut [Record], &GuideParams, &mut [Node], &mut [Node]),
+    storage: &'a mut [GuideNode],
+    room: &mut [GuideNode],
+    sort: fn(&mut [Record], &GuideParams, &mut [GuideNode], &mut [GuideNode]),
     split: SplitFn,
 ) -> (Guide<'a>, BuildStats) {
     assert!(
@@ -545,7 +550,7 @@ fn build_with<'a>(
 }
 
 /// Sets every node's `link` and `inner_kids` (the 8-wide warp's branch-free step).
-fn set_links(nodes: &mut [Node]) {
+fn set_links(nodes: &mut [GuideNode]) {
     for i in 0..nodes.len() {
         let (link, inner_kids) = match nodes[i].first_child() {
             Some(c) => {
@@ -563,7 +568,7 @@ fn set_links(nodes: &mut [Node]) {
 }
 
 /// Fills the start table (see [`Guide::start_table`]) top-down, writing every cell once.
-fn fill_start_table(nodes: &[Node], table: &mut [u16]) {
+fn fill_start_table(nodes: &[GuideNode], table: &mut [u16]) {
     let g = START_GRID as u32;
     fill_cells(nodes, 0, [0, g], [0, g], table);
 }
@@ -582,7 +587,7 @@ fn cells_by_side(t: f32, [lo, hi]: [u32; 2]) -> ([u32; 2], [u32; 2]) {
 
 /// Writes node `i` into the cells of `[xs) × [ys)` (all of whose points reach node `i`)
 /// that straddle one of its thresholds, and recurses into the children with the rest.
-fn fill_cells(nodes: &[Node], i: usize, xs: [u32; 2], ys: [u32; 2], table: &mut [u16]) {
+fn fill_cells(nodes: &[GuideNode], i: usize, xs: [u32; 2], ys: [u32; 2], table: &mut [u16]) {
     let write = |table: &mut [u16], xs: [u32; 2], ys: [u32; 2]| {
         if xs[0] >= xs[1] {
             return;
@@ -618,7 +623,7 @@ fn fill_cells(nodes: &[Node], i: usize, xs: [u32; 2], ys: [u32; 2], table: &mut 
 /// Fills [`Guide::shortcuts`]: for each cell whose start node is interior, the four parts
 /// of the cell by the start node's thresholds, each followed down its child as far as all
 /// of its points go the same way.
-fn fill_shortcuts(nodes: &[Node], table: &[u16], shortcuts: &mut [[u16; 4]]) {
+fn fill_shortcuts(nodes: &[GuideNode], table: &[u16], shortcuts: &mut [[u16; 4]]) {
     let g = START_GRID as f32;
     for (k, (&n, s)) in table.iter().zip(shortcuts).enumerate() {
         let n = usize::from(n);
@@ -653,7 +658,7 @@ fn side([a, b]: [f32; 2], t: f32, upper: usize) -> [f32; 2] {
 /// through, given that they all reach `i` (`i` for an empty rectangle). The points of
 /// `[a, b)` all lie below `t` iff `b ≤ t` and all at or above it iff `a ≥ t`; otherwise `t`
 /// itself is one of them and `a` another, on the other side, so the test is exact.
-fn deepest_passed(nodes: &[Node], mut i: usize, xs: [f32; 2], ys: [f32; 2]) -> usize {
+fn deepest_passed(nodes: &[GuideNode], mut i: usize, xs: [f32; 2], ys: [f32; 2]) -> usize {
     if xs[0] >= xs[1] || ys[0] >= ys[1] {
         return i;
     }
@@ -731,7 +736,7 @@ fn count_leading_valid(records: &[Record]) -> usize {
 fn subdivide(
     records: &mut [Record],
     params: &GuideParams,
-    nodes: &mut [Node],
+    nodes: &mut [GuideNode],
     stats: &mut BuildStats,
     split: SplitFn,
 ) {
@@ -763,7 +768,7 @@ fn subdivide(
 /// Splits node `i` into four children at `first`. The node's records are sorted by their
 /// cells ([`cells::sort`]), so each child's records are the next sorted range: three binary
 /// searches find them, and each child's `mass` is its share of `total_flux`.
-fn split(records: &mut [Record], nodes: &mut [Node], i: usize, first: usize, total_flux: f64) {
+fn split(records: &mut [Record], nodes: &mut [GuideNode], i: usize, first: usize, total_flux: f64) {
     let n = nodes[i];
     let start = n.first as usize;
     let range = &records[start..start + n.count as usize];
@@ -799,10 +804,10 @@ fn flux_sum(records: &[Record]) -> f64 {
 
 /// Child `q` of node `n` holding the `count` records from `first`, with `share` of the
 /// accepted flux in its `mass`.
-fn child(n: &Node, q: usize, first: usize, count: usize, share: f64) -> Node {
+fn child(n: &GuideNode, q: usize, first: usize, count: usize, share: f64) -> GuideNode {
     let h = n.size * 0.5;
     let (hx, hy) = ((q & 1) as f32, (q >> 1) as f32);
-    Node {
+    GuideNode {
         origin: [n.origin[0] + h * hx, n.origin[1] + h * hy],
         size: h,
         mass: share as f32,
@@ -810,7 +815,7 @@ fn child(n: &Node, q: usize, first: usize, count: usize, share: f64) -> Node {
         count: count as u32,
         child: 0,
         depth: n.depth + 1,
-        ..Node::default()
+        ..GuideNode::default()
     }
 }
 
@@ -821,7 +826,7 @@ fn child(n: &Node, q: usize, first: usize, count: usize, share: f64) -> Node {
 /// second moment, which becomes `√(area · share)` before the floor (a uniform share stays
 /// `area`; the roots sum to at most 1, the normalization restores it). Masses are stored
 /// in f32 between passes (relative error ~1e-7, far below the sampling noise).
-fn set_masses(nodes: &mut [Node], floor: f64, second_moment: bool) {
+fn set_masses(nodes: &mut [GuideNode], floor: f64, second_moment: bool) {
     for i in (0..nodes.len()).rev() {
         let n = nodes[i];
         let m = match n.first_child() {
@@ -852,7 +857,7 @@ fn set_masses(nodes: &mut [Node], floor: f64, second_moment: bool) {
 /// thresholds split the mixed masses `uniform·area + (1 − uniform)·mass`; the smoothing
 /// works on the unmixed ones, which are replaced by the mixed ones at the end (mixing is
 /// linear in the masses, so children still sum to their parent).
-fn smooth(nodes: &mut [Node], alpha: f64, uniform: f64) {
+fn smooth(nodes: &mut [GuideNode], alpha: f64, uniform: f64) {
     let mixed = |mass: f64, size: f32| {
         if uniform > 0.0 {
             (1.0 - uniform) * mass + uniform * f64::from(size) * f64::from(size)
@@ -922,7 +927,7 @@ fn smooth(nodes: &mut [Node], alpha: f64, uniform: f64) {
 /// children). The leaf keeps the node's mass and source rectangle, so its density is still
 /// exactly that of the map as rounded; its former descendants stay in the storage but are
 /// cut off (side 0, never reached from the root, skipped by [`Guide::for_each_leaf`]).
-fn make_leaf(nodes: &mut [Node], i: usize) {
+fn make_leaf(nodes: &mut [GuideNode], i: usize) {
     if let Some(c) = nodes[i].first_child() {
         for q in 0..4 {
             cut_off(nodes, c + q);
@@ -935,7 +940,7 @@ fn make_leaf(nodes: &mut [Node], i: usize) {
 }
 
 /// A leaf's density on the square: the area of its source rectangle over its square's.
-fn leaf_pdf(n: &Node) -> f32 {
+fn leaf_pdf(n: &GuideNode) -> f32 {
     let side = |a: usize| f64::from(n.hi[a]) - f64::from(n.lo[a]);
     let size = f64::from(n.size);
     (side(0) * side(1) / (size * size)) as f32
@@ -943,13 +948,13 @@ fn leaf_pdf(n: &Node) -> f32 {
 
 /// Cuts node `k` and its subtree off the tree (see [`collapse`]); the recursion is at most
 /// [`MAX_DEPTH`] deep.
-fn cut_off(nodes: &mut [Node], k: usize) {
+fn cut_off(nodes: &mut [GuideNode], k: usize) {
     if let Some(c) = nodes[k].first_child() {
         for q in 0..4 {
             cut_off(nodes, c + q);
         }
     }
-    nodes[k] = Node {
+    nodes[k] = GuideNode {
         child: 0,
         size: 0.0,
         mass: 0.0,
@@ -1000,7 +1005,7 @@ mod tests {
 
     #[test]
     fn no_records_gives_uniform_guide() {
-        let mut storage = [Node::default(); 8];
+        let mut storage = [GuideNode::default(); 8];
         let (g, s) = build(&mut [], &GuideParams::default(), &mut storage);
         assert!(g.is_uniform());
         assert_eq!((s.nodes, s.leaves, s.accepted), (1, 1, 0));
@@ -1016,7 +1021,7 @@ mod tests {
             rec(f32::NAN, 0.1, 1.0),
             rec(0.2, 0.3, 2.0),
         ];
-        let mut storage = [Node::default(); 8];
+        let mut storage = [GuideNode::default(); 8];
         let (_, s) = build(&mut r, &GuideParams::default(), &mut storage);
         assert_eq!((s.rejected_flux, s.rejected_point, s.accepted), (3, 2, 1));
         assert_eq!(r[0], rec(0.2, 0.3, 2.0));
@@ -1084,7 +1089,7 @@ mod tests {
             alpha: 0.0,
             ..GuideParams::default()
         };
-        let mut storage = [Node::default(); 64];
+        let mut storage = [GuideNode::default(); 64];
         let (g, s) = build(&mut r, &p, &mut storage);
         let root = g.nodes()[0];
         let c = root.first_child().unwrap();
@@ -1128,7 +1133,7 @@ mod tests {
                 ..GuideParams::default()
             };
             let mut r = records();
-            let mut storage = [Node::default(); 64];
+            let mut storage = [GuideNode::default(); 64];
             let (g, _) = build(&mut r, &p, &mut storage);
             let (mut left, mut right, mut mass) = (Vec::new(), Vec::new(), 0.0);
             g.for_each_leaf(|leaf| {
@@ -1164,7 +1169,7 @@ mod tests {
             max_depth: 1,
             ..GuideParams::default()
         };
-        let mut storage = [Node::default(); 64];
+        let mut storage = [GuideNode::default(); 64];
         let (g, s) = build(&mut r, &p, &mut storage);
         assert_eq!(s.nodes, 5);
         assert!(
@@ -1189,7 +1194,7 @@ mod tests {
             alpha: 0.0,
             ..GuideParams::default()
         };
-        let mut storage = [Node::default(); 64];
+        let mut storage = [GuideNode::default(); 64];
         let (g, s) = build(&mut r, &p, &mut storage);
         assert!(s.total_flux > f64::from(f32::MAX));
         assert!(s.nodes > 1);
@@ -1208,7 +1213,7 @@ mod tests {
             alpha: 0.0,
             ..GuideParams::default()
         };
-        let mut storage = [Node::default(); 256];
+        let mut storage = [GuideNode::default(); 256];
         let (g, _) = build(&mut r, &p, &mut storage);
         let mut min_pdf = f32::MAX;
         g.for_each_leaf(|l| min_pdf = min_pdf.min(l.pdf));
@@ -1228,7 +1233,7 @@ mod tests {
             alpha: 1.0,
             ..GuideParams::default()
         };
-        let mut storage = [Node::default(); 256];
+        let mut storage = [GuideNode::default(); 256];
         let (g, s) = build(&mut r, &p, &mut storage);
         assert!(s.nodes > 5);
         g.for_each_leaf(|l| assert!((l.pdf - 1.0).abs() < 1e-5, "{l:?}"));
@@ -1236,7 +1241,7 @@ mod tests {
 
     /// The start table's oracle: each cell descends from the root while the whole cell
     /// `[cx, cx+1)/G × [cy, cy+1)/G` lies on one side of the node's thresholds.
-    fn start_node_of_cell(nodes: &[Node], cx: usize, cy: usize) -> usize {
+    fn start_node_of_cell(nodes: &[GuideNode], cx: usize, cy: usize) -> usize {
         let g = START_GRID as f32;
         let side = |t: f32, lo: f32, hi: f32| {
             if t <= lo {
@@ -1263,7 +1268,7 @@ mod tests {
     }
 
     /// Whether the root-to-leaf path of `u` (by the warp's thresholds) passes node `k`.
-    fn path_passes(nodes: &[Node], u: [f32; 2], k: usize) -> bool {
+    fn path_passes(nodes: &[GuideNode], u: [f32; 2], k: usize) -> bool {
         let mut i = 0;
         loop {
             if i == k {
@@ -1303,7 +1308,7 @@ mod tests {
             max_depth: MAX_DEPTH,
             ..GuideParams::default()
         };
-        let mut storage = [Node::default(); 2048];
+        let mut storage = [GuideNode::default(); 2048];
         let (g, s) = build(&mut r, &p, &mut storage);
         assert!(s.depth >= 12 && s.nodes > 100, "{s:?}");
         let (nodes, table) = (g.nodes(), g.start_table());
@@ -1348,7 +1353,7 @@ mod tests {
             max_depth: MAX_DEPTH,
             ..GuideParams::default()
         };
-        let mut storage = [Node::default(); 2048];
+        let mut storage = [GuideNode::default(); 2048];
         let (g, _) = build(&mut r, &p, &mut storage);
         let (nodes, table, short) = (g.nodes(), g.start_table(), g.shortcuts());
         assert_eq!(short.len(), table.len());
@@ -1402,7 +1407,7 @@ mod tests {
             let u = [rng.next_f32(), rng.next_f32()];
             rec(u[0], u[1], crate::testing::disk_and_sky(u))
         });
-        let mut storage = [Node::default(); 1024];
+        let mut storage = [GuideNode::default(); 1024];
         let (g, s) = build(&mut r, &GuideParams::default(), &mut storage);
         assert!(s.nodes > 20);
         let nodes = g.nodes();
@@ -1423,14 +1428,14 @@ mod tests {
                 }
             }
         }
-        let mut one = [Node::default(); 1];
+        let mut one = [GuideNode::default(); 1];
         let root = Guide::uniform(&mut one).nodes()[0];
         assert_eq!((root.link.wrapping_add(3), root.inner_kids), (0, 0));
         // The warp reads a leaf's eight placement fields as the node's first 32 bytes.
         let n = &nodes[nodes.len() - 1];
         let row = [n.lo, n.hi, n.origin, [n.size, n.pdf]].concat();
         assert_eq!(n.leaf_row().as_slice(), row.as_slice());
-        assert_eq!(core::mem::align_of::<Node>(), 64);
+        assert_eq!(core::mem::align_of::<GuideNode>(), 64);
     }
 
     #[test]
@@ -1438,7 +1443,7 @@ mod tests {
         let mut rng = crate::testing::Pcg32::new(3, 8);
         let recs: [Record; 256] =
             core::array::from_fn(|_| rec(rng.next_f32(), rng.next_f32(), 1.0));
-        let mut storage = [Node::default(); 1024];
+        let mut storage = [GuideNode::default(); 1024];
         let n = {
             let (g, s) = build(&mut recs.clone(), &GuideParams::default(), &mut storage);
             assert_eq!(g.start_table().len(), START_GRID * START_GRID);
@@ -1514,8 +1519,8 @@ mod tests {
     }
 
     /// A node without its build-time record offset (the two builds order records differently).
-    fn without_first(n: &Node) -> Node {
-        Node { first: 0, ..*n }
+    fn without_first(n: &GuideNode) -> GuideNode {
+        GuideNode { first: 0, ..*n }
     }
 
     /// The bake's split rule: 64-record splits, α 0.1, ambient floor 0.02.
@@ -1554,8 +1559,8 @@ mod tests {
     /// ([`assert_same_guides`]) and the same records, accepted ones first.
     fn assert_same_as_reference(records: &[Record], params: &GuideParams, capacity: usize) {
         let (mut a, mut b) = (records.to_vec(), records.to_vec());
-        let mut sa = vec![Node::default(); capacity];
-        let mut sb = vec![Node::default(); capacity];
+        let mut sa = vec![GuideNode::default(); capacity];
+        let mut sb = vec![GuideNode::default(); capacity];
         let built = build(&mut a, params, &mut sa);
         let oracle = reference::build(&mut b, params, &mut sb);
         let what = || format!("{} records, {params:?}, capacity {capacity}", records.len());
@@ -1631,10 +1636,13 @@ mod tests {
             assert!(sort_room(n) > 4096);
             let records = comparison_records(kind, n, &mut rng);
             let (mut a, mut b) = (records.clone(), records);
-            let (mut sa, mut sb) = (vec![Node::default(); 4096], vec![Node::default(); 4096]);
-            let poison = Node {
+            let (mut sa, mut sb) = (
+                vec![GuideNode::default(); 4096],
+                vec![GuideNode::default(); 4096],
+            );
+            let poison = GuideNode {
                 mass: f32::NAN,
-                ..Node::default()
+                ..GuideNode::default()
             };
             let mut room = vec![poison; sort_room(n)];
             let in_place = build(&mut a, &params, &mut sa);
@@ -1650,9 +1658,9 @@ mod tests {
         // Room too small for the accepted records (about 9 in 10): the sort runs in place
         // and leaves it alone.
         let mut records = comparison_records(1, 30_000, &mut rng);
-        let mut room = vec![Node::default(); sort_room(20_000)];
+        let mut room = vec![GuideNode::default(); sort_room(20_000)];
         let before = room.clone();
-        let mut storage = vec![Node::default(); 4096];
+        let mut storage = vec![GuideNode::default(); 4096];
         let (g, _) = build_in(&mut records, &params, &mut storage, &mut room);
         assert!(g.nodes().len() > 1);
         assert!(
@@ -1681,8 +1689,8 @@ mod tests {
                     .collect();
                 let p = GuideParams::default();
                 let (mut a, mut b) = (records.clone(), records.clone());
-                let mut sa = vec![Node::default(); 4096];
-                let mut sb = vec![Node::default(); 4096];
+                let mut sa = vec![GuideNode::default(); 4096];
+                let mut sb = vec![GuideNode::default(); 4096];
                 let (ga, ta) = build(&mut a, &p, &mut sa);
                 let (gb, tb) = reference::build(&mut b, &p, &mut sb);
                 assert_eq!(
@@ -1713,7 +1721,7 @@ mod tests {
         let mut rng = crate::testing::Pcg32::new(3, 4);
         let mut r: [Record; 512] =
             core::array::from_fn(|_| rec(rng.next_f32(), rng.next_f32(), 1.0));
-        let mut storage = [Node::default(); 7]; // room for the root and one split only
+        let mut storage = [GuideNode::default(); 7]; // room for the root and one split only
         let (g, s) = build(&mut r, &GuideParams::default(), &mut storage);
         assert_eq!(s.nodes, 5);
         assert_eq!(s.capacity_refusals, 4, "all four children wanted to split");

@@ -7,7 +7,7 @@
 //! one of two layouts; every traversal takes any [`Tree`] ([`BvhRef`], [`WideRef`] or a
 //! [`Layout`] holding either) and gives the same results on both.
 //!
-//! - **Layouts.** Binary ([`Node`]): one 64-byte cache line holds the
+//! - **Layouts.** Binary ([`BinaryNode`]): one 64-byte cache line holds the
 //!   boxes of a node's *two children* (so one node visit tests two boxes for all eight
 //!   lanes), their indices and their leaf counts. Wide ([`WideNode`], collapsed from the binary
 //!   tree by [`collapse`]): eight child boxes per 256-byte node, structure of arrays, so one
@@ -104,13 +104,13 @@ use crate::packet::{Hit, Hit8, NO_HIT, Ray, Ray8};
 use ::wide::{f32x8, u32x8};
 
 mod node;
-mod packet;
+mod packet_walk;
 mod scalar;
 mod slab;
 mod triangle;
 mod wide;
 
-use packet::{Closest, Occlusion, start8, walk8};
+use packet_walk::{Closest, Occlusion, start8, walk8};
 use scalar::{box1_at, walk1};
 use slab::{NEAR_DOWN, widened};
 use triangle::{
@@ -119,7 +119,7 @@ use triangle::{
 };
 
 use node::STACK;
-pub use node::{BVH_MAX_DEPTH, BvhRef, LEAF, LayoutError, Node, Tri};
+pub use node::{BVH_MAX_DEPTH, BinaryNode, BvhRef, LEAF, LayoutError, Tri};
 pub use wide::{INTERLEAVE_BYTES, WIDE_MAX_DEPTH, WIDTH, WideNode, WideRef};
 #[cfg(any(feature = "alloc", test))]
 pub use wide::{collapse, leaf_rows};
@@ -127,7 +127,7 @@ pub use wide::{collapse, leaf_rows};
 /// A validated BVH in one of the kernels' layouts: what the traversals walk.
 #[derive(Clone, Copy, Debug)]
 pub enum Layout<'a> {
-    /// Two child boxes per node ([`Node`]).
+    /// Two child boxes per node ([`BinaryNode`]).
     Binary(BvhRef<'a>),
     /// Eight child boxes per node ([`WideNode`]).
     Wide(WideRef<'a>),
@@ -422,13 +422,13 @@ mod tests {
     use std::vec::Vec;
 
     /// Test-only builder: median split on the longest axis, leaves of at most 3 triangles.
-    fn build(soup: &[[Vec3; 3]]) -> (Vec<Node>, Vec<Tri>) {
+    fn build(soup: &[[Vec3; 3]]) -> (Vec<BinaryNode>, Vec<Tri>) {
         let mut items: Vec<(u32, [Vec3; 3])> = soup
             .iter()
             .enumerate()
             .map(|(i, t)| (i as u32, *t))
             .collect();
-        let mut nodes = std::vec![Node::EMPTY];
+        let mut nodes = std::vec![BinaryNode::EMPTY];
         let mut tris = Vec::new();
         if items.len() <= 3 {
             fill(&mut nodes, 0, 0, &mut items, &mut tris);
@@ -461,7 +461,7 @@ mod tests {
     }
 
     fn fill(
-        nodes: &mut Vec<Node>,
+        nodes: &mut Vec<BinaryNode>,
         parent: usize,
         slot: usize,
         items: &mut [(u32, [Vec3; 3])],
@@ -476,7 +476,7 @@ mod tests {
             return;
         }
         let index = nodes.len();
-        nodes.push(Node::EMPTY);
+        nodes.push(BinaryNode::EMPTY);
         nodes[parent].child[slot] = index as u32;
         nodes[parent].meta[slot] = 0;
         split(items);
@@ -718,8 +718,8 @@ mod tests {
     }
 
     /// A root of two leaves of one triangle each, with the given boxes.
-    fn two_leaves(leaves: [(Tri, (Vec3, Vec3)); 2]) -> (Vec<Node>, Vec<Tri>) {
-        let mut root = Node::EMPTY;
+    fn two_leaves(leaves: [(Tri, (Vec3, Vec3)); 2]) -> (Vec<BinaryNode>, Vec<Tri>) {
+        let mut root = BinaryNode::EMPTY;
         for (slot, (_, (lo, hi))) in leaves.iter().enumerate() {
             root.set_box(slot, *lo, *hi);
             root.child[slot] = slot as u32;
@@ -730,7 +730,7 @@ mod tests {
 
     /// Whether the ray's slab interval on `[tmin, tmax]` meets the box `(lo, hi)`.
     fn meets(pre: &Pre, (lo, hi): (Vec3, Vec3), tmax: f32) -> bool {
-        let mut node = Node::EMPTY;
+        let mut node = BinaryNode::EMPTY;
         node.set_box(0, lo, hi);
         box1(&node, 0, pre, tmax).is_some()
     }
@@ -974,7 +974,7 @@ mod tests {
 
     #[test]
     fn layout_errors_are_reported() {
-        let mut bad = Node::EMPTY;
+        let mut bad = BinaryNode::EMPTY;
         assert_eq!(BvhRef::new(&[], &[]).unwrap_err(), LayoutError::NoNodes);
         bad.meta = [0, LEAF];
         assert_eq!(
@@ -987,13 +987,13 @@ mod tests {
             LayoutError::BadLeaf { node: 0, slot: 0 }
         );
         // A chain deeper than BVH_MAX_DEPTH.
-        let chain: Vec<Node> = (0..BVH_MAX_DEPTH as u32 + 2)
-            .map(|i| Node {
+        let chain: Vec<BinaryNode> = (0..BVH_MAX_DEPTH as u32 + 2)
+            .map(|i| BinaryNode {
                 child: [i + 1, 0],
                 meta: [0, LEAF],
-                ..Node::EMPTY
+                ..BinaryNode::EMPTY
             })
-            .chain([Node::EMPTY])
+            .chain([BinaryNode::EMPTY])
             .collect();
         assert!(matches!(
             BvhRef::new(&chain, &[]),

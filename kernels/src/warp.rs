@@ -82,7 +82,7 @@
 //! square, so it does not apply). [`invert`] has no 8-wide version: nothing on the hot path
 //! needs it.
 
-use crate::guide::{Guide, Node, START_GRID};
+use crate::guide::{Guide, GuideNode, START_GRID};
 use core::ops::{Add, Div, Mul, Sub};
 use wide::{f32x8, i32x8};
 
@@ -193,7 +193,7 @@ struct LeafData<V> {
 
 impl LeafData<f32> {
     #[inline(always)]
-    fn of(n: &Node) -> Self {
+    fn of(n: &GuideNode) -> Self {
         LeafData {
             lo: n.lo,
             hi: n.hi,
@@ -208,7 +208,7 @@ impl LeafData<f32x8> {
     /// Gathers the leaves of eight lanes: each leaf's eight fields are the first 32 bytes of
     /// its (64-byte aligned) node, one row load per lane, transposed into field vectors.
     #[inline(always)]
-    fn gather(nodes: &[Node], idx: &[usize; 8]) -> Self {
+    fn gather(nodes: &[GuideNode], idx: &[usize; 8]) -> Self {
         let rows = idx.map(|i| f32x8::from(nodes[i].leaf_row()));
         let [lo0, lo1, hi0, hi1, o0, o1, size, pdf] = f32x8::transpose(rows);
         LeafData {
@@ -222,7 +222,7 @@ impl LeafData<f32x8> {
 
     /// One leaf in every lane.
     #[inline(always)]
-    fn splat(n: &Node) -> Self {
+    fn splat(n: &GuideNode) -> Self {
         let s = |v: [f32; 2]| [f32x8::splat(v[0]), f32x8::splat(v[1])];
         LeafData {
             lo: s(n.lo),
@@ -255,7 +255,7 @@ fn place<V: Value>(leaf: &LeafData<V>, u: [V; 2]) -> ([V; 2], V) {
 /// This is Clarberg et al.'s step — x-half by the marginal, y-half by the conditional given
 /// the x-half — with the rescaling of `u` folded into the thresholds `n.t` at build time.
 #[inline(always)]
-fn child(n: &Node, x: f32, y: f32) -> usize {
+fn child(n: &GuideNode, x: f32, y: f32) -> usize {
     let right = x >= n.t[0];
     let upper = y >= n.t[1 + usize::from(right)];
     usize::from(n.child) + usize::from(right) + 2 * usize::from(upper)
@@ -263,7 +263,7 @@ fn child(n: &Node, x: f32, y: f32) -> usize {
 
 /// Descends from node `i` to the leaf containing `(x, y)`.
 #[inline(always)]
-fn leaf_from(nodes: &[Node], mut i: usize, x: f32, y: f32) -> usize {
+fn leaf_from(nodes: &[GuideNode], mut i: usize, x: f32, y: f32) -> usize {
     while nodes[i].child != 0 {
         i = child(&nodes[i], x, y);
     }
@@ -392,7 +392,7 @@ pub fn sample8(guide: &Guide<'_>, x: f32x8, y: f32x8) -> Warped8 {
 /// the uniform fast path — one 8-wide compare per axis against the node's splatted
 /// thresholds — while all lanes sit in the same node, per-lane descent from where they part.
 #[inline(never)]
-fn from_root(nodes: &[Node], x: f32x8, y: f32x8) -> Warped8 {
+fn from_root(nodes: &[GuideNode], x: f32x8, y: f32x8) -> Warped8 {
     let mut i = 0;
     while let Some(c) = nodes[i].first_child() {
         let n = &nodes[i];
@@ -426,7 +426,7 @@ const QUADRANT_BIT: [u8; 4] = [1, 2, 4, 8];
 /// one round later. The leaves are then gathered (one 32-byte row per lane, transposed)
 /// and placed 8-wide.
 #[inline(always)]
-fn descend_lanes(nodes: &[Node], mut idx: [usize; 8], x: f32x8, y: f32x8) -> Warped8 {
+fn descend_lanes(nodes: &[GuideNode], mut idx: [usize; 8], x: f32x8, y: f32x8) -> Warped8 {
     let (xs, ys) = (x.to_array(), y.to_array());
     for half in [0..4, 4..8] {
         if half.clone().fold(0, |m, l| m | nodes[idx[l]].child) == 0 {
@@ -486,7 +486,7 @@ mod tests {
     use crate::guide::{GuideParams, Record, build};
     use crate::testing::Pcg32;
 
-    fn learned(storage: &mut [Node]) -> Guide<'_> {
+    fn learned(storage: &mut [GuideNode]) -> Guide<'_> {
         // A bright disk on a dim background, learned from uniform samples.
         let mut rng = Pcg32::new(11, 2);
         let mut r: [Record; 400] = core::array::from_fn(|_| {
@@ -502,7 +502,7 @@ mod tests {
 
     #[test]
     fn uniform_guide_is_the_identity() {
-        let mut st = [Node::default(); 1];
+        let mut st = [GuideNode::default(); 1];
         let g = Guide::uniform(&mut st);
         let mut rng = Pcg32::new(1, 1);
         for _ in 0..1000 {
@@ -515,7 +515,7 @@ mod tests {
 
     #[test]
     fn sample_pdf_matches_pdf_and_points_stay_in_square() {
-        let mut st = [Node::default(); 1024];
+        let mut st = [GuideNode::default(); 1024];
         let g = learned(&mut st);
         assert!(g.nodes().len() > 20);
         let mut rng = Pcg32::new(5, 9);
@@ -535,7 +535,7 @@ mod tests {
 
     #[test]
     fn sample8_matches_scalar_bit_for_bit() {
-        let mut st = [Node::default(); 1024];
+        let mut st = [GuideNode::default(); 1024];
         let g = learned(&mut st);
         let mut rng = Pcg32::new(8, 3);
         for p in 0..2000 {
@@ -559,7 +559,7 @@ mod tests {
 
     #[test]
     fn pdf8_matches_scalar_pdf_bit_for_bit() {
-        let mut st = [Node::default(); 1024];
+        let mut st = [GuideNode::default(); 1024];
         let g = learned(&mut st);
         let mut rng = Pcg32::new(4, 12);
         let edge = [0.0, ONE_MINUS_EPSILON, 0.5, f32::from_bits(0x3effffff)];

@@ -7,7 +7,7 @@
 //! `target/chi2/<name>.txt` for a person to look at.
 
 use guidebake_kernels::guide::{
-    self, BuildStats, Guide, GuideParams, MAX_DEPTH, Node, Record, START_GRID,
+    self, BuildStats, Guide, GuideNode, GuideParams, MAX_DEPTH, Record, START_GRID,
 };
 use guidebake_kernels::sobol::ONE_MINUS_EPSILON;
 use guidebake_kernels::testing::{Pcg32, chi_square, disk_and_sky, learning_records};
@@ -31,19 +31,23 @@ fn learn_records(previous: Option<&Guide<'_>>, n: usize, seed: u64) -> Vec<Recor
 fn build<'a>(
     records: &mut [Record],
     params: GuideParams,
-    storage: &'a mut [Node],
+    storage: &'a mut [GuideNode],
 ) -> (Guide<'a>, BuildStats) {
     guide::build(records, &params, storage)
 }
 
 /// The guide learned in two iterations: uniform samples, then samples of the first guide.
-fn learned(storage: &mut [Node], capacity: usize) -> (Guide<'_>, BuildStats) {
+fn learned(storage: &mut [GuideNode], capacity: usize) -> (Guide<'_>, BuildStats) {
     learned_with(storage, capacity, 0.0)
 }
 
 /// [`learned`], the second guide mixed with the uniform density by the share `uniform`.
-fn learned_with(storage: &mut [Node], capacity: usize, uniform: f32) -> (Guide<'_>, BuildStats) {
-    let mut first = vec![Node::default(); 4096];
+fn learned_with(
+    storage: &mut [GuideNode],
+    capacity: usize,
+    uniform: f32,
+) -> (Guide<'_>, BuildStats) {
+    let mut first = vec![GuideNode::default(); 4096];
     let mut r0 = learn_records(None, 300, 1);
     let (g0, _) = build(&mut r0, GuideParams::default(), &mut first);
     let mut r1 = learn_records(Some(&g0), 600, 2);
@@ -205,7 +209,7 @@ fn check_all(name: &str, g: &Guide<'_>, seed: u64) {
 
 #[test]
 fn uniform_guide() {
-    let mut storage = [Node::default(); 1];
+    let mut storage = [GuideNode::default(); 1];
     let g = Guide::uniform(&mut storage);
     check_all("uniform", &g, 1);
 }
@@ -220,7 +224,7 @@ fn single_hot_leaf() {
             flux: 1.0,
         })
         .collect();
-    let mut storage = vec![Node::default(); 64];
+    let mut storage = vec![GuideNode::default(); 64];
     let params = GuideParams {
         max_depth: 3,
         ..GuideParams::default()
@@ -236,7 +240,7 @@ fn single_hot_leaf() {
 
 #[test]
 fn learned_anisotropic_guide() {
-    let mut storage = vec![Node::default(); 4096];
+    let mut storage = vec![GuideNode::default(); 4096];
     let (g, stats) = learned(&mut storage, 4096);
     assert_eq!(stats.rejected_flux + stats.rejected_point, 0);
     assert_eq!(stats.capacity_refusals, 0);
@@ -264,7 +268,7 @@ fn max_depth_guide() {
             flux: 1.0,
         })
         .collect();
-    let mut storage = vec![Node::default(); 1024];
+    let mut storage = vec![GuideNode::default(); 1024];
     let params = GuideParams {
         max_depth: MAX_DEPTH,
         ..GuideParams::default()
@@ -288,7 +292,7 @@ fn max_depth_guide() {
 #[test]
 fn full_capacity_guide() {
     // Room for 1 + 4 + 16 nodes and one more split: the learned radiance wants many more.
-    let mut storage = vec![Node::default(); 25];
+    let mut storage = vec![GuideNode::default(); 25];
     let (g, stats) = learned(&mut storage, 25);
     assert_eq!(stats.nodes, 25);
     assert!(stats.capacity_refusals > 0);
@@ -299,7 +303,7 @@ fn full_capacity_guide() {
 
 #[test]
 fn zero_and_nan_flux_give_the_uniform_guide() {
-    let mut storage = vec![Node::default(); 64];
+    let mut storage = vec![GuideNode::default(); 64];
     let mut rng = Pcg32::new(7, 7);
     for flux in [0.0, f32::NAN, -1.0, f32::INFINITY] {
         let mut records: Vec<Record> = (0..100)
@@ -389,11 +393,11 @@ fn coherent_packets(n: usize, rng: &mut Pcg32) -> Vec<([f32; 8], [f32; 8])> {
 
 #[test]
 fn sample8_matches_scalar_on_every_guide_and_packet_kind() {
-    let mut learned_storage = vec![Node::default(); 4096];
+    let mut learned_storage = vec![GuideNode::default(); 4096];
     let (learned_g, _) = learned(&mut learned_storage, 4096);
-    let mut full_storage = vec![Node::default(); 25];
+    let mut full_storage = vec![GuideNode::default(); 25];
     let (full_g, _) = learned(&mut full_storage, 25);
-    let mut deep_storage = vec![Node::default(); 1024];
+    let mut deep_storage = vec![GuideNode::default(); 1024];
     let mut rng = Pcg32::new(9, 9);
     let mut deep: Vec<Record> = (0..100)
         .map(|_| Record {
@@ -406,7 +410,7 @@ fn sample8_matches_scalar_on_every_guide_and_packet_kind() {
         ..GuideParams::default()
     };
     let (deep_g, _) = build(&mut deep, deep_params, &mut deep_storage);
-    let mut zero_storage = vec![Node::default(); 16];
+    let mut zero_storage = vec![GuideNode::default(); 16];
     let mut zero: Vec<Record> = (0..50)
         .map(|k| Record {
             u: [0.01 * k as f32, 0.5],
@@ -414,7 +418,7 @@ fn sample8_matches_scalar_on_every_guide_and_packet_kind() {
         })
         .collect();
     let (zero_g, _) = build(&mut zero, GuideParams::default(), &mut zero_storage);
-    let mut nan_storage = vec![Node::default(); 16];
+    let mut nan_storage = vec![GuideNode::default(); 16];
     let mut nan: Vec<Record> = (0..50)
         .map(|k| Record {
             u: [0.01 * k as f32, 0.5],
@@ -501,7 +505,7 @@ fn learning_from_guided_samples_is_unbiased() {
         alpha: 0.0,
         ..GuideParams::default()
     };
-    let mut first = vec![Node::default(); 4096];
+    let mut first = vec![GuideNode::default(); 4096];
     let mut r0 = learn_records(None, 300, 11);
     let (g0, _) = build(&mut r0, GuideParams::default(), &mut first);
     let share = |records: &[Record]| {
@@ -521,7 +525,7 @@ fn learning_from_guided_samples_is_unbiased() {
         uni += share(&ru) / runs as f64;
         gui += share(&rg) / runs as f64;
         // The built guide's masses are the record fluxes normalized: check one build too.
-        let mut storage = vec![Node::default(); 4096];
+        let mut storage = vec![GuideNode::default(); 4096];
         let (g, _) = build(&mut rg, raw, &mut storage);
         let mut total = 0.0f64;
         g.for_each_leaf(|l| total += f64::from(l.pdf * l.size * l.size));
@@ -546,9 +550,9 @@ fn learning_from_guided_samples_is_unbiased() {
 #[test]
 fn the_defensive_mixture_samples_its_density() {
     let c = 0.25f32;
-    let mut plain_storage = vec![Node::default(); 4096];
+    let mut plain_storage = vec![GuideNode::default(); 4096];
     let (plain, _) = learned(&mut plain_storage, 4096);
-    let mut storage = vec![Node::default(); 4096];
+    let mut storage = vec![GuideNode::default(); 4096];
     let (g, _) = learned_with(&mut storage, 4096, c);
     assert!(!g.is_uniform());
     let mut plain_leaves = Vec::new();

@@ -26,7 +26,9 @@ use std::marker::PhantomData;
 
 use bytemuck::Pod;
 use glam::Vec3;
-use guidebake_kernels::traverse::{BvhRef, LEAF, Node, Tri, WIDTH, WideNode, collapse, leaf_rows};
+use guidebake_kernels::traverse::{
+    BinaryNode, BvhRef, LEAF, Tri, WIDTH, WideNode, collapse, leaf_rows,
+};
 use memmap2::MmapMut;
 
 use super::{BvhError, HugeSlice, Preset, obvhs_flattened};
@@ -42,14 +44,14 @@ struct Region {
     wide: Spill<WideNode>,
     rows: Spill<f32>,
     tris: usize,
-    binary: Option<(Vec<Node>, Vec<Tri>)>,
+    binary: Option<(Vec<BinaryNode>, Vec<Tri>)>,
 }
 
 /// What [`super::Bvh`] holds: wide nodes, leaf rows and, if asked for, the binary tree.
 pub(super) struct Built {
     pub(super) wide: HugeSlice<WideNode>,
     pub(super) rows: HugeSlice<f32>,
-    pub(super) binary: Option<(HugeSlice<Node>, HugeSlice<Tri>)>,
+    pub(super) binary: Option<(HugeSlice<BinaryNode>, HugeSlice<Tri>)>,
 }
 
 /// Builds the tree over the triangles of `soup` that `ids` names (all for `None`) in regions
@@ -164,11 +166,11 @@ fn build_region(
 /// The binary tree: the top level's nodes, then each region's, its leaf slots pointing at the
 /// regions' roots.
 fn graft_binary(
-    top: &[Node],
+    top: &[BinaryNode],
     regions: &mut [Region],
     node_at: &[u32],
     tri_at: &[u32],
-) -> (HugeSlice<Node>, HugeSlice<Tri>) {
+) -> (HugeSlice<BinaryNode>, HugeSlice<Tri>) {
     let mut nodes = top.to_vec();
     for node in &mut nodes {
         for slot in 0..2 {
@@ -199,12 +201,12 @@ fn graft_binary(
 /// Cuts `ids` (a permutation of `soup`'s indices) into regions of at most `region`
 /// triangles: the top level's binary nodes (a leaf slot `LEAF | 1` at region `r`, its box the
 /// region's triangles' bounds) and each region's range of `ids`.
-fn cut(soup: &[[Vec3; 3]], ids: &mut [u32], region: usize) -> (Vec<Node>, Vec<Range<usize>>) {
+fn cut(soup: &[[Vec3; 3]], ids: &mut [u32], region: usize) -> (Vec<BinaryNode>, Vec<Range<usize>>) {
     let centroid = |i: u32| {
         let t = &soup[i as usize];
         (t[0] + t[1] + t[2]) / 3.0
     };
-    let mut nodes = vec![Node::EMPTY];
+    let mut nodes = vec![BinaryNode::EMPTY];
     let mut ranges = Vec::new();
     // (range of ids, our node, slot)
     let mut pending = vec![(0..ids.len(), 0usize, usize::MAX)];
@@ -221,7 +223,7 @@ fn cut(soup: &[[Vec3; 3]], ids: &mut [u32], region: usize) -> (Vec<Node>, Vec<Ra
         let ours = if slot == usize::MAX {
             0
         } else {
-            nodes.push(Node::EMPTY);
+            nodes.push(BinaryNode::EMPTY);
             let index = nodes.len() - 1;
             let node = &mut nodes[parent];
             node.set_box(slot, lo, hi);

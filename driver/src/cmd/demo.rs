@@ -60,7 +60,7 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
         texels.display()
     );
     let glb = args.out.join("ajar.glb");
-    write_glb(&scene, &texels, &glb)?;
+    write_room_glb(&scene, &texels, &glb)?;
     let threads = args.threads.unwrap_or_else(super::every_core);
     for (name, guiding) in [("baseline", Guiding::Off), ("guided", Guiding::Coherent)] {
         let out = args.out.join(format!("{name}.exr"));
@@ -105,7 +105,7 @@ pub fn run(args: &DemoArgs) -> Result<(), super::CmdError> {
 /// The room as a glb for engines and `guidebake view`/`render`: its lightmap UVs as
 /// `TEXCOORD_1` and [`demo_camera`] as its camera (at the views' aspect), so `render
 /// ajar.glb` and `view --scene ajar.glb` start from the demo's view.
-fn write_glb(
+fn write_room_glb(
     scene: &crate::scene::Scene,
     texels: &std::path::Path,
     glb: &std::path::Path,

@@ -35,7 +35,7 @@
 
 use glam::Vec3;
 use guidebake_kernels::estimator::luminance_f32;
-use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, Guide, GuideNode, GuideParams, Record};
 use guidebake_kernels::mapping::{SPHERE_PDF, invert_sphere_equal_area, sample_sphere_equal_area};
 use guidebake_kernels::packet::{Hit8, Ray, Ray8};
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
@@ -187,7 +187,7 @@ pub fn gather_cluster(
     settings: &GatherSettings,
 ) -> (Vec<ProbeLight>, GatherCount) {
     let schedule = settings.schedule();
-    let mut storage = vec![Node::default(); GUIDE_NODES];
+    let mut storage = vec![GuideNode::default(); GUIDE_NODES];
     let mut records: Vec<Record> = Vec::new();
     let mut count = GatherCount::default();
     // Per iteration and probe: its SH estimate and the variance of its band-0 estimate.
@@ -203,7 +203,7 @@ pub fn gather_cluster(
         } else {
             None
         };
-        let mut uniform_storage = [Node::default(); 1];
+        let mut uniform_storage = [GuideNode::default(); 1];
         let guide = match learned {
             Some(g) => g,
             None => Guide::uniform(&mut uniform_storage),

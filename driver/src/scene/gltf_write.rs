@@ -42,6 +42,9 @@
 //! ([`GlbCamera`]: `guidebake demo`'s view, which `render` and `view` then both start from).
 //! The sun, the sky and sphere lights of a TOML file are not written: glTF has no sky; keep
 //! the scene file (or the flags) for them.
+//!
+//! Both write through [`super::glb`], the one glb container writer (the binary chunk, its
+//! views and accessors, the file's framing), which `synth`'s city uses too.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -49,6 +52,7 @@ use std::path::{Path, PathBuf};
 use ::gltf::json;
 use glam::{Mat4, Vec2, Vec3};
 
+use super::glb::{self, GlbBuffer};
 use super::{Scene, SceneError};
 
 /// Why the scene could not be written.
@@ -117,7 +121,7 @@ pub fn write_glb(scene: &Scene, lightmap: &Lightmap, out: &Path) -> Result<(), W
         scene,
         lightmap,
         root: doc.as_json().clone(),
-        bin: Vec::new(),
+        bin: GlbBuffer::default(),
     };
     w.consolidate_buffers(&buffers, path.parent().unwrap_or(Path::new(".")))?;
     w.rewrite_meshes(&doc, &buffers)?;
@@ -129,7 +133,8 @@ struct Writer<'a> {
     scene: &'a Scene,
     lightmap: &'a Lightmap,
     root: json::Root,
-    bin: Vec<u8>,
+    /// The binary chunk; its views are the document's (`root.buffer_views`), not its own.
+    bin: GlbBuffer,
 }
 
 /// One source triangle the loader kept: its corners (source vertex indices, in source
@@ -147,20 +152,8 @@ impl Writer<'_> {
 
     /// Appends `bytes` to the binary chunk (4-byte aligned) as a new buffer view.
     fn push_view(&mut self, bytes: &[u8], stride: Option<usize>, target: Option<u32>) -> u32 {
-        while !self.bin.len().is_multiple_of(4) {
-            self.bin.push(0);
-        }
-        let offset = self.bin.len();
-        self.bin.extend_from_slice(bytes);
-        let mut view = serde_json::json!({
-            "buffer": 0, "byteOffset": offset, "byteLength": bytes.len(),
-        });
-        if let Some(s) = stride {
-            view["byteStride"] = s.into();
-        }
-        if let Some(t) = target {
-            view["target"] = t.into();
-        }
+        let offset = self.bin.append(bytes);
+        let view = glb::view(offset, bytes.len(), stride, target);
         let view: json::buffer::View = serde_json::from_value(view).expect("a valid view");
         self.root.buffer_views.push(view);
         (self.root.buffer_views.len() - 1) as u32
@@ -175,11 +168,7 @@ impl Writer<'_> {
     ) -> Result<(), WriteError> {
         let mut starts = Vec::with_capacity(buffers.len());
         for b in buffers {
-            while !self.bin.len().is_multiple_of(4) {
-                self.bin.push(0);
-            }
-            starts.push(self.bin.len() as u64);
-            self.bin.extend_from_slice(&b.0);
+            starts.push(self.bin.append(&b.0) as u64);
         }
         for view in &mut self.root.buffer_views {
             let start = starts[view.buffer.value()];
@@ -478,11 +467,9 @@ impl Writer<'_> {
 
     /// One buffer (the binary chunk), the JSON, written atomically.
     fn finish(mut self, out: &Path) -> Result<(), WriteError> {
-        while !self.bin.len().is_multiple_of(4) {
-            self.bin.push(0);
-        }
+        let (bin, _) = self.bin.finish();
         let buffer: json::Buffer =
-            serde_json::from_value(serde_json::json!({ "byteLength": self.bin.len() }))
+            serde_json::from_value(serde_json::json!({ "byteLength": bin.len() }))
                 .expect("a valid buffer");
         self.root.buffers = vec![buffer];
         let write_error = |message: String| WriteError::Write {
@@ -490,7 +477,7 @@ impl Writer<'_> {
             message,
         };
         let json = self.root.to_vec().map_err(|e| write_error(e.to_string()))?;
-        glb_file(out, json, self.bin).map_err(write_error)
+        glb::write(out, json, &bin).map_err(|e| write_error(e.to_string()))
     }
 }
 
@@ -605,25 +592,9 @@ pub fn write_new_with_camera(
         path: out.to_owned(),
         message,
     };
-    let mut bin: Vec<u8> = Vec::new();
-    let mut views: Vec<Value> = Vec::new();
+    use glb::{ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER, FLOAT, UNSIGNED_INT};
+    let mut buffer = GlbBuffer::default();
     let mut accessors: Vec<Value> = Vec::new();
-    let mut push_view = |bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>| -> usize {
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        let mut view = json!({ "buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len() });
-        if let Some(t) = target {
-            view["target"] = t.into();
-        }
-        bin.extend_from_slice(bytes);
-        views.push(view);
-        views.len() - 1
-    };
-    const ARRAY_BUFFER: u32 = 34962;
-    const ELEMENT_ARRAY_BUFFER: u32 = 34963;
-    const FLOAT: u32 = 5126;
-    const UNSIGNED_INT: u32 = 5125;
 
     // Materials, their base-colour images embedded once each.
     let mut images: Vec<Value> = Vec::new();
@@ -649,7 +620,7 @@ pub fn write_new_with_camera(
                                 "texture {source}: neither PNG nor JPEG, which glTF needs"
                             )));
                         };
-                        let view = push_view(&mut bin, &bytes, None);
+                        let view = buffer.push_view(&bytes, None, None);
                         images.push(json!({ "bufferView": view, "mimeType": mime }));
                         image_of.insert(source.clone(), images.len() - 1);
                         images.len() - 1
@@ -739,13 +710,9 @@ pub fn write_new_with_camera(
             );
             let count = pos.len();
             let mut attribute = |bytes: Vec<u8>, kind: &str, minmax: Option<(Vec3, Vec3)>| {
-                let view = push_view(&mut bin, &bytes, Some(ARRAY_BUFFER));
-                let mut a = json!({ "bufferView": view, "componentType": FLOAT, "count": count, "type": kind });
-                if let Some((lo, hi)) = minmax {
-                    a["min"] = json!([lo.x, lo.y, lo.z]);
-                    a["max"] = json!([hi.x, hi.y, hi.z]);
-                }
-                accessors.push(a);
+                let view = buffer.push_view(&bytes, None, Some(ARRAY_BUFFER));
+                let bounds = minmax.map(|(lo, hi)| (lo.to_array(), hi.to_array()));
+                accessors.push(glb::accessor(view, FLOAT, count, kind, bounds));
                 accessors.len() - 1
             };
             let flat3 =
@@ -771,10 +738,14 @@ pub fn write_new_with_camera(
                 );
             }
             let bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
-            let view = push_view(&mut bin, &bytes, Some(ELEMENT_ARRAY_BUFFER));
-            accessors.push(json!({
-                "bufferView": view, "componentType": UNSIGNED_INT, "count": indices.len(), "type": "SCALAR"
-            }));
+            let view = buffer.push_view(&bytes, None, Some(ELEMENT_ARRAY_BUFFER));
+            accessors.push(glb::accessor(
+                view,
+                UNSIGNED_INT,
+                indices.len(),
+                "SCALAR",
+                None,
+            ));
             primitives.push(json!({
                 "attributes": attributes,
                 "indices": accessors.len() - 1,
@@ -809,9 +780,7 @@ pub fn write_new_with_camera(
         }
         nodes.push(node);
     }
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
-    }
+    let (bin, views) = buffer.finish();
     if let Some(camera) = camera {
         let (node, camera) = camera.to_json();
         nodes.push(node);
@@ -842,21 +811,5 @@ pub fn write_new_with_camera(
         root["extensionsUsed"] = json!(["KHR_materials_emissive_strength"]);
     }
     let json = serde_json::to_vec(&root).map_err(|e| write_error(e.to_string()))?;
-    glb_file(out, json, bin).map_err(write_error)
-}
-
-/// A binary glTF of `json` and the buffer `bin`, written atomically to `out` (nothing is left
-/// there on failure); the error's message.
-fn glb_file(out: &Path, json: Vec<u8>, bin: Vec<u8>) -> Result<(), String> {
-    let glb = ::gltf::binary::Glb {
-        header: ::gltf::binary::Header {
-            magic: *b"glTF",
-            version: 2,
-            length: 0,
-        },
-        json: json.into(),
-        bin: Some(bin.into()),
-    };
-    let bytes = glb.to_vec().map_err(|e| e.to_string())?;
-    crate::atomic::write(out, bytes).map_err(|e| e.to_string())
+    glb::write(out, json, &bin).map_err(|e| write_error(e.to_string()))
 }

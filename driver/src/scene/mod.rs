@@ -449,6 +449,7 @@ pub fn ids_where(n: usize, keep: impl Fn(usize) -> bool) -> Option<Vec<u32>> {
 
 mod error;
 pub mod fingerprint;
+pub mod glb;
 mod gltf;
 pub mod gltf_write;
 mod lit;

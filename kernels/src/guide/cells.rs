@@ -6,7 +6,7 @@
 //! `15 − d` of each axis — the same answer as the comparison `u < origin + size/2` against
 //! the node's (exact, dyadic) midpoint. Sorted by the Morton order of these cells, the
 //! records of every quadtree node are one contiguous range and its four children's ranges
-//! follow each other in the quadrant order of [`super::Node`] (x low bit, y high bit).
+//! follow each other in the quadrant order of [`super::GuideNode`] (x low bit, y high bit).
 //!
 //! [`sort`] is an MSD radix sort on windows of up to four levels (256 buckets), so a record
 //! moves once per four levels instead of being partitioned twice per level: a counting sort

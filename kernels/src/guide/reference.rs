@@ -5,20 +5,20 @@
 //! and pass). [`super::build`] instead sorts the records once by their Morton cells and finds
 //! a node's children as sorted ranges; both give the same tree (see the tests in `guide`).
 
-use super::{BuildStats, Guide, GuideParams, Node, Record};
+use super::{BuildStats, Guide, GuideNode, GuideParams, Record};
 
 /// [`super::build`] with the partitioning split (the build before issue 15).
 pub fn build<'a>(
     records: &mut [Record],
     params: &GuideParams,
-    storage: &'a mut [Node],
+    storage: &'a mut [GuideNode],
 ) -> (Guide<'a>, BuildStats) {
     super::build_with(records, params, storage, &mut [], |_, _, _, _| {}, split)
 }
 
 /// Splits node `i` into four children at `first`, partitioning its records by quadrant;
 /// each child's `mass` is its share of `total_flux`.
-fn split(records: &mut [Record], nodes: &mut [Node], i: usize, first: usize, total_flux: f64) {
+fn split(records: &mut [Record], nodes: &mut [GuideNode], i: usize, first: usize, total_flux: f64) {
     let n = nodes[i];
     let ([ox, oy], size) = (n.origin, n.size);
     let h = size * 0.5;

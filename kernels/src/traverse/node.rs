@@ -1,6 +1,6 @@
 //! # traverse::node: the binary layout
 //!
-//! A [`Node`] is one 64-byte cache line holding the boxes of its *two children* (so one node
+//! A [`BinaryNode`] is one 64-byte cache line holding the boxes of its *two children* (so one node
 //! visit tests two boxes for all eight lanes of a packet), their indices and their leaf
 //! counts. A [`Tri`] stores its three vertices (not edges: the watertight test needs the
 //! vertices themselves) and its primitive id, in leaf order. [`BvhRef`] is a validated view.
@@ -24,7 +24,7 @@ pub(super) const STACK: usize = BVH_MAX_DEPTH + 2;
 /// triangles. Node 0 is the root.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C, align(64))]
-pub struct Node {
+pub struct BinaryNode {
     /// Box minima, `lo[axis][child]`.
     pub lo: [[f32; 2]; 3],
     /// Box maxima, `hi[axis][child]`.
@@ -35,10 +35,10 @@ pub struct Node {
     pub meta: [u32; 2],
 }
 
-const _: () = assert!(core::mem::size_of::<Node>() == 64);
-const _: () = assert!(core::mem::align_of::<Node>() == 64);
+const _: () = assert!(core::mem::size_of::<BinaryNode>() == 64);
+const _: () = assert!(core::mem::align_of::<BinaryNode>() == 64);
 
-impl Node {
+impl BinaryNode {
     /// A node whose two slots are empty leaves (the root of an empty tree).
     pub const EMPTY: Self = Self {
         lo: [[0.0; 2]; 3],
@@ -84,7 +84,7 @@ impl Tri {
 /// Why [`BvhRef::new`] rejected a node/triangle layout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LayoutError {
-    /// The node slice is empty (an empty tree is one [`Node::EMPTY`]).
+    /// The node slice is empty (an empty tree is one [`BinaryNode::EMPTY`]).
     NoNodes,
     /// An inner child does not point forward to an existing node.
     BadChild {
@@ -113,7 +113,7 @@ pub enum LayoutError {
 /// A validated view of a flat BVH: nodes (root first) and triangles in leaf order.
 #[derive(Clone, Copy, Debug)]
 pub struct BvhRef<'a> {
-    pub(super) nodes: &'a [Node],
+    pub(super) nodes: &'a [BinaryNode],
     pub(super) tris: &'a [Tri],
 }
 
@@ -122,7 +122,7 @@ impl<'a> BvhRef<'a> {
     ///
     /// # Errors
     /// The first [`LayoutError`] found, walking depth first from the root.
-    pub fn new(nodes: &'a [Node], tris: &'a [Tri]) -> Result<Self, LayoutError> {
+    pub fn new(nodes: &'a [BinaryNode], tris: &'a [Tri]) -> Result<Self, LayoutError> {
         if nodes.is_empty() {
             return Err(LayoutError::NoNodes);
         }
@@ -166,13 +166,13 @@ impl<'a> BvhRef<'a> {
     /// the memory sense: traversal indexes with bounds checks, so a layout that would fail
     /// `new` makes it panic (or, for a cycle, not finish), never read out of bounds; debug
     /// builds check the layout anyway.
-    pub fn new_trusted(nodes: &'a [Node], tris: &'a [Tri]) -> Self {
+    pub fn new_trusted(nodes: &'a [BinaryNode], tris: &'a [Tri]) -> Self {
         debug_assert!(Self::new(nodes, tris).is_ok(), "layout never validated");
         Self { nodes, tris }
     }
 
     /// The nodes, root first.
-    pub fn nodes(&self) -> &'a [Node] {
+    pub fn nodes(&self) -> &'a [BinaryNode] {
         self.nodes
     }
 

@@ -1,14 +1,14 @@
 //! # traverse::scalar: the conservative slab test and the single-ray walk of the binary tree
 //!
 //! [`box1`] is the reference slab test, which the binary tree's walks reproduce (8-wide in
-//! [`super::packet`]); the wide tree's walks ([`super::wide`]) test their boxes in the fused
+//! [`super::packet_walk`]); the wide tree's walks ([`super::wide`]) test their boxes in the fused
 //! form [`slab`](super::slab::slab) sets up, as conservative as [`box1`] and a few ulps looser.
 //! [`walk1`] is the scalar reference traversal of the binary layout. The slab test's slack
 //! lives in [`super::slab`].
 
 use super::slab::{NEAR_DOWN, widened};
 use super::triangle::Pre;
-use super::{BvhRef, Node, STACK, Tri};
+use super::{BinaryNode, BvhRef, STACK, Tri};
 
 /// Entry distance of slot `slot` if the ray's `[tmin, tmax]` meets its box.
 ///
@@ -16,7 +16,7 @@ use super::{BvhRef, Node, STACK, Tri};
 /// plane whose distance is NaN (`0 · ∞`: the ray runs inside that plane) does not constrain the
 /// interval, so rays along a box face are kept. `if t > near` keeps `near` for NaN `t`, as
 /// `_mm256_max_ps(t, near)` does in [`Pre8::box8`].
-pub(super) fn box1(node: &Node, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
+pub(super) fn box1(node: &BinaryNode, slot: usize, pre: &Pre, tmax: f32) -> Option<f32> {
     let lo = [0, 1, 2].map(|axis| node.lo[axis][slot]);
     let hi = [0, 1, 2].map(|axis| node.hi[axis][slot]);
     box1_at((lo, hi), pre, tmax)

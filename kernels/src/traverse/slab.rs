@@ -14,7 +14,7 @@
 //! [`slab_of`], [`plane8`] and [`met8`] take the form as a `const` parameter, so each walk is
 //! compiled once per form and chooses once a ray (or packet). A module of its own because the
 //! per-ray constants of the triangle test ([`super::triangle`]) and the walks
-//! ([`super::scalar`], [`super::packet`], [`super::wide`]) all need it, and none of them needs
+//! ([`super::scalar`], [`super::packet_walk`], [`super::wide`]) all need it, and none of them needs
 //! the others for it.
 
 use wide::f32x8;

@@ -6,14 +6,14 @@
 use std::time::Instant;
 
 use glam::Vec3;
-use guidebake_kernels::estimator::pooled;
+use guidebake_kernels::estimator::{cluster_weights, pooled};
 use guidebake_kernels::guide::{self, Guide, GuideParams};
 use guidebake_kernels::mapping::{carried_frame, orthonormal_basis};
 use guidebake_kernels::presort::presorted;
 
 use crate::bake::budget;
 use crate::bake::grid::GridGuide;
-use crate::bake::settings::{Budget, Combine, GuideTarget, Guiding};
+use crate::bake::settings::{Budget, Combine, GuideTarget, Guiding, MAX_ITERATIONS};
 use crate::bake::stopping::{self, Plan};
 use crate::texels::{FLAG_PARTIAL, TexelRecord};
 
@@ -128,8 +128,8 @@ impl<'w> TileBaker<'w> {
                 let i = valid[m as usize];
                 let t = gather_texel(&texels[i as usize], first_texel + u64::from(i), frame);
                 let learned = match (&guide, &grid) {
-                    (Some(g), _) => Some(Learned::Tree(g)),
-                    (None, Some(g)) => Some(Learned::Grid(g)),
+                    (Some(g), _) => Some(IterationGuide::Tree(g)),
+                    (None, Some(g)) => Some(IterationGuide::Grid(g)),
                     (None, None) => None,
                 };
                 if learned.is_some() {
@@ -231,7 +231,7 @@ impl<'w> TileBaker<'w> {
             }
         }
         if settings.combine == Combine::Cluster {
-            cluster_weights(members, batches, iterations as usize, weights);
+            cluster_weights::<MAX_ITERATIONS>(members, batches, iterations as usize, weights);
         }
     }
 

@@ -1,10 +1,11 @@
-//! Combining each texel's iterations (paper §2.5): Graybill–Deal, the global or cluster
-//! weights, ρ's sums, the relative error the spatial budget reads, and the directional
-//! coefficients combined with the same weights.
+//! Combining each texel's iterations (paper §2.5) with the kernels' estimators
+//! (`guidebake_kernels::estimator`): Graybill–Deal, the global or cluster weights, ρ's sums,
+//! the relative error the spatial budget reads, and the directional coefficients combined with
+//! the same weights.
 
 use guidebake_kernels::estimator::{
-    CombinationWeights, GraybillDeal, PlainAverage, TexelEstimate, Weighted, Welford,
-    combine_weighted, plain_average,
+    CombinationWeights, GraybillDeal, PlainAverage, TexelEstimate, Weighted, combine_weighted,
+    plain_average, relative_std_error,
 };
 
 use crate::bake::directional::{self, ShL1};
@@ -103,70 +104,5 @@ impl TileBaker<'_> {
             Combine::Cluster => &cluster,
         };
         out.directional[i] = directional::combine(&means, batches, weights);
-    }
-}
-
-/// The relative standard error of a texel's pooled luminance mean (0 when unknown).
-pub(super) fn relative_std_error(batches: &[Welford]) -> f32 {
-    let mut pooled = Welford::new();
-    batches.iter().for_each(|b| pooled.merge(b));
-    match (pooled.luminance_variance(), pooled.mean_luminance()) {
-        (Some(var), Some(mean)) if mean > 0.0 && pooled.count() > 1 => {
-            let e = (var / pooled.count() as f64).sqrt() / mean;
-            if e.is_finite() { e as f32 } else { 0.0 }
-        }
-        _ => 0.0,
-    }
-}
-
-/// The weights of `--combine cluster` for the cluster's `members` (indices of valid texels,
-/// `k` batches each in `batches`), written to `weights`: iteration j's weight is
-/// `n_j / max(v_j, floor)` with `v_j = Σ_texels σ̂²_j / Σ_texels μ̂²` the cluster's pooled
-/// relative per-sample variance of iteration j (σ̂²_j a texel's luminance variance in
-/// iteration j, μ̂ its mean over all iterations) and the floor a hundredth of the largest
-/// `v_j` (and of a relative standard deviation of 0.1): a batch of zeros beside noisy ones
-/// cannot take all the weight. Without any variance every iteration weighs its sample count.
-///
-/// The texel's own samples are part of the pool, so its weights are not independent of
-/// its values: a firefly raises its iteration's pooled variance and lowers that iteration's
-/// weight in its own texel (−2.9 % on the ajar room, path; ρ, on by default with this
-/// combination, restores the world's mean). Leaving the texel out of its pool removes that
-/// bias but gives a firefly in an otherwise quiet iteration that iteration's large weight:
-/// measured and dropped (docs/estimator.md).
-pub(super) fn cluster_weights(members: &[u32], batches: &[Welford], k: usize, weights: &mut [f64]) {
-    let mut var = [0.0f64; crate::bake::settings::MAX_ITERATIONS];
-    let mut mean2 = 0.0f64;
-    for &m in members {
-        let b = &batches[m as usize * k..(m as usize + 1) * k];
-        let Some(mu) = plain_average(b).luminance() else {
-            continue;
-        };
-        if !(mu.is_finite() && mu > 0.0) {
-            continue;
-        }
-        mean2 += mu * mu;
-        for (j, batch) in b.iter().enumerate() {
-            if let Some(v) = batch.luminance_variance().filter(|v| v.is_finite()) {
-                var[j] += v;
-            }
-        }
-    }
-    let rel: Vec<f64> = (0..k).map(|j| var[j] / mean2).collect();
-    let largest = rel
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .fold(0.0, f64::max);
-    let floor = (largest * 0.01).max(0.01);
-    for &m in members {
-        for j in 0..k {
-            let b = &batches[m as usize * k + j];
-            let w = if mean2 > 0.0 && largest > 0.0 {
-                b.count() as f64 / rel[j].max(floor)
-            } else {
-                b.count() as f64
-            };
-            weights[m as usize * k + j] = w;
-        }
     }
 }

@@ -39,7 +39,7 @@ pub(super) struct Sinks<'a> {
     /// The texel's gather-only samples over all iterations.
     pub(super) gathered: &'a mut Welford,
     /// The cluster's learning records, when this iteration learns.
-    pub(super) learning: Option<&'a mut Learning>,
+    pub(super) learning: Option<&'a mut GuideRecords>,
 }
 
 /// What one iteration's gather needs, borrowed.
@@ -51,7 +51,7 @@ pub(super) struct IterationCtx<'a> {
     pub(super) k: u32,
     /// The guide this iteration samples; it holds the defensive mixture with the cosine
     /// baseline ([`GuideParams::uniform`]), so its density is the mixture's.
-    pub(super) guide: Option<Learned<'a>>,
+    pub(super) guide: Option<IterationGuide<'a>>,
     /// Whether samples include the texel's next-event estimate ([`TileBaker::texel_direct`]).
     pub(super) texel_direct: bool,
 }
@@ -61,7 +61,7 @@ impl<'a> IterationCtx<'a> {
         world: &'a World,
         settings: &'a BakeSettings,
         k: u32,
-        guide: Option<Learned<'a>>,
+        guide: Option<IterationGuide<'a>>,
     ) -> Self {
         Self {
             world,
@@ -83,8 +83,8 @@ impl<'a> IterationCtx<'a> {
     #[cfg(test)]
     fn guide_pdf(&self, u: [f32; 2]) -> f32 {
         match self.guide {
-            Some(Learned::Tree(g)) => warp::pdf(g, u),
-            Some(Learned::Grid(g)) => g.pdf(u),
+            Some(IterationGuide::Tree(g)) => warp::pdf(g, u),
+            Some(IterationGuide::Grid(g)) => g.pdf(u),
             None => 1.0,
         }
     }
@@ -154,11 +154,11 @@ impl<'a> IterationCtx<'a> {
             let (x, y) = (to_unit_x8(sx), to_unit_x8(sy));
             let clock = self.warp_clock(j);
             let (wx, wy, q) = match self.guide {
-                Some(Learned::Tree(g)) => {
+                Some(IterationGuide::Tree(g)) => {
                     let w = warp::sample8(g, x, y);
                     (w.x, w.y, w.pdf)
                 }
-                Some(Learned::Grid(g)) => grid_sample8(g, x, y),
+                Some(IterationGuide::Grid(g)) => grid_sample8(g, x, y),
                 None => (x, y, f32x8::ONE),
             };
             count_warp(clock, counters);
@@ -229,11 +229,11 @@ impl<'a> IterationCtx<'a> {
                 let p = rotate(sobol_2d(j * LANES as u32 + lane as u32), rot);
                 let u = [to_unit(p[0]), to_unit(p[1])];
                 match self.guide {
-                    Some(Learned::Tree(g)) => {
+                    Some(IterationGuide::Tree(g)) => {
                         let s = warp::sample(g, u);
                         (s.u, s.pdf)
                     }
-                    Some(Learned::Grid(g)) => g.sample(u),
+                    Some(IterationGuide::Grid(g)) => g.sample(u),
                     None => (u, 1.0),
                 }
             });
@@ -375,8 +375,8 @@ impl<'a> IterationCtx<'a> {
                 let w = [0, 1, 2].map(|axis| f32x8::new(unit.map(|u| u[axis])));
                 let [x, y] = invert_cosine_hemisphere_x8(w);
                 match guide {
-                    Learned::Tree(g) => warp::pdf8(g, x, y).to_array(),
-                    Learned::Grid(g) => {
+                    IterationGuide::Tree(g) => warp::pdf8(g, x, y).to_array(),
+                    IterationGuide::Grid(g) => {
                         let (x, y) = (x.to_array(), y.to_array());
                         core::array::from_fn(|lane| g.pdf([x[lane], y[lane]]))
                     }

@@ -1,10 +1,11 @@
 //! What a cluster learns between iterations (paper §2.2–2.3): the guide built from the
-//! records ([`learn`]; the grid comparator's, [`learn_grid`]), the records pooled since the
-//! last cosine iteration and the gain `--min-gain` judges ([`Learning`]), the guide seed the
-//! pass before the last keeps ([`SeedHistogram`], [`seeded_guide`]), and whether the pass
-//! before measured a cluster's light as flat ([`is_flat`]).
+//! records ([`learn`]; the grid comparator's, [`learn_grid`]) and the one the next iteration
+//! samples ([`IterationGuide`]), the records pooled since the last cosine iteration and the
+//! gain `--min-gain` judges ([`GuideRecords`]), the guide seed the pass before the last keeps
+//! ([`SeedHistogram`], [`seeded_guide`]), and whether the pass before measured a cluster's
+//! light as flat ([`is_flat`]).
 
-use guidebake_kernels::guide::{self, Guide, GuideParams, Node, Record};
+use guidebake_kernels::guide::{self, Guide, GuideNode, GuideParams, Record};
 use guidebake_kernels::packet::LANES;
 use wide::f32x8;
 
@@ -21,13 +22,13 @@ use super::*;
 pub(super) fn learn<'n>(
     records: &mut [Record],
     params: &GuideParams,
-    nodes: &'n mut [Node],
-    room: &mut Vec<Node>,
+    nodes: &'n mut [GuideNode],
+    room: &mut Vec<GuideNode>,
     counters: &mut GatherCounters,
 ) -> Option<Guide<'n>> {
     let needed = guide::sort_room(records.len());
     if needed > nodes.len() && needed > room.len() {
-        room.resize(needed, Node::default());
+        room.resize(needed, GuideNode::default());
     }
     let (learned, stats) = guide::build_in(records, params, nodes, room);
     if stats.total_flux.is_nan() || stats.total_flux <= 0.0 {
@@ -49,9 +50,9 @@ pub(super) fn learn<'n>(
 /// or gives a uniform guide: the first iteration gathers with cosine points.
 pub(super) fn seeded_guide<'n>(
     cells: impl ExactSizeIterator<Item = f32>,
-    learning: &mut Learning,
+    learning: &mut GuideRecords,
     params: &GuideParams,
-    nodes: &'n mut [Node],
+    nodes: &'n mut [GuideNode],
 ) -> Option<Guide<'n>> {
     let side = seed_side(cells.len());
     if side == 0 {
@@ -121,14 +122,14 @@ pub(super) fn is_flat(measured: impl Iterator<Item = TexelResult>, permille: u32
 
 /// The guide an iteration samples: the paper's quadtree, or the grid comparator's bins.
 #[derive(Clone, Copy)]
-pub(super) enum Learned<'a> {
+pub(super) enum IterationGuide<'a> {
     Tree(&'a Guide<'a>),
     Grid(&'a GridGuide),
 }
 
 /// The records one iteration of a cluster learns from, and what `--min-gain` needs of them.
 #[derive(Default)]
-pub(super) struct Learning {
+pub(super) struct GuideRecords {
     /// Point and flux `lum(L) / q` of every finite sample.
     pub(super) records: Vec<Record>,
     /// `densities[i]`: the density `q` on the primary sample square that drew `records[i]`
@@ -140,7 +141,7 @@ pub(super) struct Learning {
     pub(super) pool: Vec<Record>,
 }
 
-impl Learning {
+impl GuideRecords {
     pub(super) fn clear(&mut self) {
         self.records.clear();
         self.densities.clear();
@@ -262,8 +263,8 @@ impl SeedHistogram {
     }
 
     /// Adds an iteration's records, each as its guide would learn it: `g/q`, or `g²/q` for a
-    /// second-moment guide (as [`Learning::square_fluxes`]).
-    pub(super) fn add(&mut self, learning: &Learning, second_moment: bool) {
+    /// second-moment guide (as [`GuideRecords::square_fluxes`]).
+    pub(super) fn add(&mut self, learning: &GuideRecords, second_moment: bool) {
         if self.side == 0 {
             return;
         }
@@ -295,7 +296,7 @@ impl SeedHistogram {
     }
 }
 
-/// Cells per side of the square over which [`Learning::gain`] takes the cosine
+/// Cells per side of the square over which [`GuideRecords::gain`] takes the cosine
 /// points as stratified: 64 cells, about one per sample of a texel's middle iterations at
 /// 256 spp.
 pub(super) const GAIN_STRATA: usize = 8;

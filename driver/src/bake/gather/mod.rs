@@ -26,7 +26,7 @@ use std::collections::HashMap;
 use glam::Vec3;
 use guidebake_kernels::cluster::{ClusterParams, ClusterRange, build_clusters};
 use guidebake_kernels::estimator::Welford;
-use guidebake_kernels::guide::Node;
+use guidebake_kernels::guide::GuideNode;
 use guidebake_kernels::presort::presorted;
 
 use super::budget;
@@ -51,11 +51,11 @@ pub use counters::GatherCounters;
 
 #[cfg(test)]
 use cluster::texel_basis;
-use combine::cluster_weights;
 use counters::{WARP_TIMED_EVERY, count_warp};
 use iteration::{IterationCtx, Sinks};
 use learning::{
-    Learned, Learning, SeedHistogram, grid_sample8, is_flat, learn, learn_grid, seeded_guide,
+    GuideRecords, IterationGuide, SeedHistogram, grid_sample8, is_flat, learn, learn_grid,
+    seeded_guide,
 };
 
 /// Guide nodes per cluster: enough for a 64-texel cluster's records at the default split rule.
@@ -85,11 +85,11 @@ pub struct TileBaker<'w> {
     factors: Vec<f32>,
     rotated: Vec<u32>,
     /// The cluster's learning records of the current iteration.
-    learning: Learning,
-    nodes: Vec<Node>,
+    learning: GuideRecords,
+    nodes: Vec<GuideNode>,
     /// Scratch the guide build's sort scatters through when the records outgrow `nodes`
     /// (`guide::sort_room`); grown to the largest pool the worker has met.
-    sort_room: Vec<Node>,
+    sort_room: Vec<GuideNode>,
     /// Per valid texel and iteration: the weight of `--combine cluster`.
     weights: Vec<f64>,
     batches: Vec<Welford>,
@@ -147,8 +147,8 @@ impl<'w> TileBaker<'w> {
             orders,
             factors: Vec::new(),
             rotated: Vec::new(),
-            learning: Learning::default(),
-            nodes: vec![Node::default(); GUIDE_CAPACITY],
+            learning: GuideRecords::default(),
+            nodes: vec![GuideNode::default(); GUIDE_CAPACITY],
             sort_room: Vec::new(),
             weights: Vec::new(),
             batches: Vec::new(),

@@ -64,7 +64,7 @@ pub(super) type Costs = [f32; WIDTH];
 /// opened and its two children's subtrees covered by `k` slots between them.
 #[cfg(any(feature = "alloc", test))]
 pub(super) struct SlotCosts<'b> {
-    nodes: &'b [crate::traverse::Node],
+    nodes: &'b [crate::traverse::BinaryNode],
     /// `F(n, ·)` by binary node index (computed children first: a child's index is larger).
     least: alloc::vec::Vec<Costs>,
 }
@@ -241,13 +241,13 @@ mod tests {
     use crate::packet::Ray;
     use crate::testing::Pcg32;
     use crate::traverse::Tri;
-    use crate::traverse::{Node, intersect1, occluded1};
+    use crate::traverse::{BinaryNode, intersect1, occluded1};
     use glam::Vec3;
     use std::vec::Vec;
 
     /// A binary chain as deep as [`crate::traverse::BVH_MAX_DEPTH`] allows: every node a leaf of one
     /// triangle beside the next node.
-    fn chain(depth: usize) -> (Vec<Node>, Vec<Tri>) {
+    fn chain(depth: usize) -> (Vec<BinaryNode>, Vec<Tri>) {
         let tris: Vec<Tri> = (0..=depth as u32)
             .map(|i| {
                 let x = i as f32;
@@ -261,9 +261,9 @@ mod tests {
                 )
             })
             .collect();
-        let mut nodes: Vec<Node> = (0..depth as u32)
+        let mut nodes: Vec<BinaryNode> = (0..depth as u32)
             .map(|i| {
-                let mut n = Node::EMPTY;
+                let mut n = BinaryNode::EMPTY;
                 n.set_box(
                     0,
                     Vec3::new(i as f32, 0.0, 0.0),
@@ -310,11 +310,11 @@ mod tests {
 
     /// A random binary tree of `leaves` one-triangle leaves, each slot's box the union of
     /// its subtree's (as a builder's are): split at a random point, boxes at random.
-    fn random_tree(rng: &mut Pcg32, leaves: usize) -> (Vec<Node>, Vec<Tri>) {
+    fn random_tree(rng: &mut Pcg32, leaves: usize) -> (Vec<BinaryNode>, Vec<Tri>) {
         fn grow(
             rng: &mut Pcg32,
             leaves: usize,
-            nodes: &mut Vec<Node>,
+            nodes: &mut Vec<BinaryNode>,
             tris: &mut Vec<Tri>,
         ) -> (Vec3, Vec3, u32, u32) {
             if leaves == 1 {
@@ -325,7 +325,7 @@ mod tests {
                 return (at, at + size, id, LEAF | 1);
             }
             let index = nodes.len();
-            nodes.push(Node::EMPTY);
+            nodes.push(BinaryNode::EMPTY);
             let left = 1 + (rng.next_u32() as usize) % (leaves - 1);
             let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
             for (slot, n) in [(0, left), (1, leaves - left)] {
@@ -345,7 +345,7 @@ mod tests {
     /// Every way binary node `n` can be laid out as a wide node's slots, by exhaustion: the
     /// (slots, cost) pairs of its subtree with `n` opened (and, if `open_children`, its inner
     /// children too), each inner slot kept costing its own best wide node.
-    fn layouts(nodes: &[Node], n: u32, open_children: bool) -> Vec<(usize, f64)> {
+    fn layouts(nodes: &[BinaryNode], n: u32, open_children: bool) -> Vec<(usize, f64)> {
         let of_slot = |s: usize| -> Vec<(usize, f64)> {
             let child = nodes[n as usize].child[s];
             if nodes[n as usize].meta[s] != 0 {
@@ -369,7 +369,7 @@ mod tests {
 
     /// The least sum of wide node half areas of `n`'s subtree with `n` a wide node, by
     /// exhaustion.
-    fn best_wide(nodes: &[Node], n: u32) -> f64 {
+    fn best_wide(nodes: &[BinaryNode], n: u32) -> f64 {
         let content = layouts(nodes, n, true)
             .into_iter()
             .map(|(_, c)| c)

@@ -2,7 +2,7 @@
 //! against a node's eight boxes ([`boxes8`]), the children sorted by their nearest entry
 //! ([`sort8_descending`], a sorting network), a shared stack of slots with their lanes
 //! ([`Stack8`]), and the [`Visitor`] that says what a walk does at a leaf (the binary
-//! tree's packet walk, [`crate::traverse::packet`], implements it too).
+//! tree's packet walk, [`crate::traverse::packet_walk`], implements it too).
 
 use super::*;
 use crate::packet::{LANES, mask_of, set_lanes};
@@ -128,7 +128,7 @@ pub(super) fn boxes8<const EXACT: bool>(
     (met, nearest)
 }
 
-/// What a packet walk (the binary tree's, `crate::traverse::packet`, and the wide one below) does at a
+/// What a packet walk (the binary tree's, `crate::traverse::packet_walk`, and the wide one below) does at a
 /// leaf.
 pub(in crate::traverse) trait Visitor<'a> {
     /// The live lanes at most from which the wide walk finishes the subtree of an inner

@@ -76,16 +76,16 @@ fn the_sampled_density_is_the_mixtures() {
         .collect();
     let c = settings.uniform_share();
     assert_eq!(c, 0.25, "the default mixture");
-    let mut nodes = vec![Node::default(); GUIDE_CAPACITY];
+    let mut nodes = vec![GuideNode::default(); GUIDE_CAPACITY];
     let (plain, _) = guide::build(&mut records.clone(), &GuideParams::default(), &mut nodes);
-    let mut mixed_nodes = vec![Node::default(); GUIDE_CAPACITY];
+    let mut mixed_nodes = vec![GuideNode::default(); GUIDE_CAPACITY];
     let params = GuideParams {
         uniform: c,
         ..GuideParams::default()
     };
     let (g, _) = guide::build(&mut records, &params, &mut mixed_nodes);
     assert!(!g.is_uniform());
-    let ctx = IterationCtx::new(&world, &settings, 2, Some(Learned::Tree(&g)));
+    let ctx = IterationCtx::new(&world, &settings, 2, Some(IterationGuide::Tree(&g)));
     let t = gather_texel(
         &texels_on_plane(1, 0.0)[0],
         0,

@@ -303,7 +303,7 @@ fn a_guide_seed_holds_one_cell_per_texel_and_builds_the_guide() {
         [1, 3, 4, 15, 16, 63, 64, 200].map(seed_side),
         [0, 0, 2, 2, 4, 4, 8, 8]
     );
-    let mut learning = Learning::default();
+    let mut learning = GuideRecords::default();
     // Cosine records: 90 % of the light in the cell (2, 1) of a 4 × 4 grid.
     for i in 0..1024u32 {
         let u = [
@@ -336,7 +336,7 @@ fn a_guide_seed_holds_one_cell_per_texel_and_builds_the_guide() {
         ambient: MIXED_AMBIENT,
         ..GuideParams::default()
     };
-    let mut nodes = vec![Node::default(); GUIDE_CAPACITY];
+    let mut nodes = vec![GuideNode::default(); GUIDE_CAPACITY];
     let guide = seeded_guide(cells.into_iter(), &mut learning, &params, &mut nodes)
         .expect("a lit seed guides");
     let inside = warp::pdf(&guide, [0.6, 0.3]);
@@ -447,8 +447,8 @@ fn a_guide_learns_from_every_iteration_since_the_last_cosine_one() {
         u.sort_by(f32::total_cmp);
         u
     };
-    let mut learning = Learning::default();
-    let iteration = |learning: &mut Learning, xs: &[f32]| {
+    let mut learning = GuideRecords::default();
+    let iteration = |learning: &mut GuideRecords, xs: &[f32]| {
         learning.clear();
         for &x in xs {
             learning.push(record(x), 1.0);
@@ -470,7 +470,7 @@ fn a_guide_learns_from_every_iteration_since_the_last_cosine_one() {
 fn a_second_moment_guide_learns_each_records_square_over_its_density() {
     // g = 3 drawn with q = 2: flux g/q = 1.5 becomes g²/q = 4.5; a square past f32::MAX
     // stays finite (the build drops non-finite records), at f32::MAX.
-    let mut learning = Learning::default();
+    let mut learning = GuideRecords::default();
     learning.push(
         Record {
             u: [0.1, 0.2],
@@ -498,7 +498,7 @@ fn a_second_moment_guide_learns_each_records_square_over_its_density() {
     assert_eq!(learning.records[1].u, [0.3, 0.4]);
 }
 
-/// [`Learning::gain`] against the closed form. An integrand 1 on a spike [0, 1/32)²
+/// [`GuideRecords::gain`] against the closed form. An integrand 1 on a spike [0, 1/32)²
 /// inside one stratum and 0 elsewhere: stratified cosine points leave the variance inside
 /// that stratum, a_c·p(1 − p) with a_c = 1/64, p = 1/16; a 25 % mixture with a guide of
 /// density 1024 on the spike samples it with density 768.25, variance
@@ -514,7 +514,7 @@ fn the_gain_is_the_variance_ratio_to_stratified_cosine_points() {
     };
     let records =
         |points: &[[f32; 2]], g: &dyn Fn([f32; 2]) -> f32, q: &dyn Fn([f32; 2]) -> f32| {
-            let mut learning = Learning::default();
+            let mut learning = GuideRecords::default();
             for &u in points {
                 learning.push(
                     Record {

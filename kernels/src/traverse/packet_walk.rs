@@ -1,4 +1,4 @@
-//! # traverse::packet: the 8-lane slab test and the packet walk of the binary tree
+//! # traverse::packet_walk: the 8-lane slab test and the packet walk of the binary tree
 //!
 //! One shared stack of `(child, meta)` entries with the mask of lanes that met each entry's
 //! box; when both children are met, the lanes meeting both vote with their entry distances for
@@ -11,7 +11,7 @@ use super::triangle::{
     Best8, Pre1x8, Pre8, TriAt, closest_rows, closest8, occludes_rows, occludes8, set_lane,
 };
 use super::wide::{Visitor, WideRef};
-use super::{BvhRef, Node, STACK};
+use super::{BinaryNode, BvhRef, STACK};
 use crate::packet::{Ray8, mask_of, set_lanes};
 use wide::f32x8;
 
@@ -20,7 +20,7 @@ impl Pre8 {
     /// eight lanes, near planes picked once per packet when all lanes share the direction
     /// signs (a coherent packet), per lane otherwise.
     #[inline(always)]
-    pub(super) fn box8(&self, node: &Node, slot: usize, tmax: f32x8) -> (f32x8, f32x8) {
+    pub(super) fn box8(&self, node: &BinaryNode, slot: usize, tmax: f32x8) -> (f32x8, f32x8) {
         let lo = [0, 1, 2].map(|axis| node.lo[axis][slot]);
         let hi = [0, 1, 2].map(|axis| node.hi[axis][slot]);
         self.box8_at(lo, hi, tmax)
