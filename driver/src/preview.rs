@@ -1,9 +1,13 @@
-//! `preview`: PNG figures and previews — an 8-bit RGB canvas with a few drawing primitives,
-//! linear-to-sRGB encoding and tone mapping for radiance previews, and an atomic PNG writer.
+//! `preview`: what turns pixels into PNG files — linear-to-sRGB encoding, tone mapping for
+//! radiance previews, colour helpers, and an atomic PNG writer. It draws nothing: the figures
+//! (`guidebake samples`, the bench's charts) are drawn with plotters on an RGB buffer that
+//! [`write_png_rgb8`] then writes.
 //!
-//! Every PNG guidebake writes goes through [`write_png`]: the parent directory is created,
-//! the image is written to a temporary name beside the target and renamed over it at the end,
-//! so an interrupted or failed write never leaves a partial file under the final name.
+//! A PNG written whole goes through [`write_png_rgb8`]: the parent directory is created, the
+//! image is written to a temporary name beside the target and renamed over it at the end, so
+//! an interrupted or failed write never leaves a partial file under the final name. (The page
+//! writer streams its previews row by row through the same kind of temporary name,
+//! `output/exr_pages`.)
 
 use std::path::{Path, PathBuf};
 
@@ -42,7 +46,7 @@ pub enum PreviewError {
     /// The path names no file (empty, or ends in `..` or `/`).
     #[error("output path {0} does not name a file")]
     NotAFile(PathBuf),
-    /// The canvas is empty or larger than a PNG allows.
+    /// The image is empty, or its size does not match its bytes.
     #[error("image size {width}x{height} cannot be written")]
     Size {
         /// Width in pixels.
@@ -50,105 +54,6 @@ pub enum PreviewError {
         /// Height in pixels.
         height: u32,
     },
-}
-
-/// An 8-bit sRGB image in row-major order, origin at the top left.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Canvas {
-    width: u32,
-    height: u32,
-    pixels: Vec<[u8; 3]>,
-}
-
-impl Canvas {
-    /// A `width` × `height` canvas filled with `background`.
-    pub fn new(width: u32, height: u32, background: [u8; 3]) -> Self {
-        Canvas {
-            width,
-            height,
-            pixels: vec![background; width as usize * height as usize],
-        }
-    }
-
-    /// Width in pixels.
-    pub fn width(&self) -> u32 {
-        self.width
-    }
-
-    /// Height in pixels.
-    pub fn height(&self) -> u32 {
-        self.height
-    }
-
-    /// The pixel at (x, y), or `None` outside the canvas.
-    pub fn get(&self, x: i64, y: i64) -> Option<[u8; 3]> {
-        self.index(x, y).map(|i| self.pixels[i])
-    }
-
-    fn index(&self, x: i64, y: i64) -> Option<usize> {
-        let inside =
-            (0..i64::from(self.width)).contains(&x) && (0..i64::from(self.height)).contains(&y);
-        inside.then(|| y as usize * self.width as usize + x as usize)
-    }
-
-    /// Sets the pixel at (x, y); pixels outside the canvas are ignored (clipping).
-    pub fn set(&mut self, x: i64, y: i64, color: [u8; 3]) {
-        if let Some(i) = self.index(x, y) {
-            self.pixels[i] = color;
-        }
-    }
-
-    /// Fills the rectangle [x0, x1) × [y0, y1), clipped.
-    pub fn fill_rect(&mut self, x0: i64, y0: i64, x1: i64, y1: i64, color: [u8; 3]) {
-        for y in y0.max(0)..y1.min(i64::from(self.height)) {
-            for x in x0.max(0)..x1.min(i64::from(self.width)) {
-                self.set(x, y, color);
-            }
-        }
-    }
-
-    /// A filled disk of `radius` pixels centred at (cx, cy) in pixel coordinates.
-    pub fn dot(&mut self, cx: f32, cy: f32, radius: f32, color: [u8; 3]) {
-        let r2 = radius * radius;
-        let (x0, x1) = ((cx - radius).floor() as i64, (cx + radius).ceil() as i64);
-        let (y0, y1) = ((cy - radius).floor() as i64, (cy + radius).ceil() as i64);
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                let (dx, dy) = (x as f32 + 0.5 - cx, y as f32 + 0.5 - cy);
-                if dx * dx + dy * dy <= r2 {
-                    self.set(x, y, color);
-                }
-            }
-        }
-    }
-
-    /// A one-pixel line from (x0, y0) to (x1, y1) (DDA), clipped.
-    pub fn line(&mut self, x0: f32, y0: f32, x1: f32, y1: f32, color: [u8; 3]) {
-        let steps = (x1 - x0).abs().max((y1 - y0).abs()).ceil().max(1.0) as usize;
-        for s in 0..=steps {
-            let t = s as f32 / steps as f32;
-            let (x, y) = (x0 + (x1 - x0) * t, y0 + (y1 - y0) * t);
-            self.set(x.floor() as i64, y.floor() as i64, color);
-        }
-    }
-
-    /// A one-pixel circle outline.
-    pub fn circle(&mut self, cx: f32, cy: f32, radius: f32, color: [u8; 3]) {
-        let steps = (radius * 8.0).ceil().max(16.0) as usize;
-        for s in 0..steps {
-            let phi = std::f32::consts::TAU * s as f32 / steps as f32;
-            self.set(
-                (cx + radius * phi.cos()).floor() as i64,
-                (cy + radius * phi.sin()).floor() as i64,
-                color,
-            );
-        }
-    }
-
-    /// The pixels as packed RGB bytes, row by row.
-    pub fn as_bytes(&self) -> &[u8] {
-        bytemuck::cast_slice(&self.pixels)
-    }
 }
 
 /// Linear [0, 1] to 8-bit sRGB (IEC 61966-2-1 transfer curve); NaN and negatives give 0,
@@ -201,20 +106,14 @@ pub fn hsv_to_rgb8(h: f32, s: f32, v: f32) -> [u8; 3] {
     [r, g, b].map(|c| (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)
 }
 
-/// Writes `canvas` as a PNG at `path`, atomically: creates the parent directory, writes
-/// `.<name>.tmp-<pid>` beside the target, renames it over `path`.
+/// Writes packed 8-bit RGB rows (`width * height * 3` bytes) as a PNG at `path`, atomically:
+/// creates the parent directory, writes `.<name>.tmp-<pid>` beside the target, renames it
+/// over `path`.
 ///
 /// # Errors
-/// [`PreviewError`] naming the file when the directory cannot be created, the canvas is empty,
-/// encoding or writing fails, or the rename fails. The temporary file is removed on failure.
-pub fn write_png(path: &Path, canvas: &Canvas) -> Result<(), PreviewError> {
-    write_png_rgb8(path, canvas.width, canvas.height, canvas.as_bytes())
-}
-
-/// [`write_png`] for packed 8-bit RGB rows (`width * height * 3` bytes).
-///
-/// # Errors
-/// As [`write_png`]; also [`PreviewError::Size`] when the byte count does not match.
+/// [`PreviewError`] naming the file when the directory cannot be created, the size is zero
+/// or does not match the byte count ([`PreviewError::Size`]), encoding or writing fails, or
+/// the rename fails. The temporary file is removed on failure.
 pub fn write_png_rgb8(
     path: &Path,
     width: u32,
@@ -262,17 +161,30 @@ pub fn write_png_rgb8(
 mod tests {
     use super::*;
 
+    /// A `width` × `height` image of `background` with the given pixels set, as packed RGB.
+    fn image(width: u32, height: u32, background: [u8; 3], set: &[(u32, u32, [u8; 3])]) -> Vec<u8> {
+        let mut rgb = background.repeat(width as usize * height as usize);
+        for &(x, y, c) in set {
+            let i = 3 * (y * width + x) as usize;
+            rgb[i..i + 3].copy_from_slice(&c);
+        }
+        rgb
+    }
+
     #[test]
     fn png_round_trips_and_leaves_no_temporary_file() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("nested/deeper/figure.png");
-        let mut canvas = Canvas::new(7, 5, [10, 20, 30]);
-        canvas.dot(3.5, 2.5, 1.0, [255, 0, 0]);
-        canvas.set(6, 4, [1, 2, 3]);
-        canvas.set(-1, 99, [9, 9, 9]); // clipped, no panic
-        write_png(&path, &canvas).unwrap();
+        let rgb = image(
+            7,
+            5,
+            [10, 20, 30],
+            &[(3, 2, [255, 0, 0]), (6, 4, [1, 2, 3])],
+        );
+        write_png_rgb8(&path, 7, 5, &rgb).unwrap();
         let back = image::open(&path).unwrap().to_rgb8();
         assert_eq!(back.dimensions(), (7, 5));
+        assert_eq!(back.as_raw(), &rgb);
         assert_eq!(back.get_pixel(3, 2).0, [255, 0, 0]);
         assert_eq!(back.get_pixel(6, 4).0, [1, 2, 3]);
         assert_eq!(back.get_pixel(0, 0).0, [10, 20, 30]);
@@ -285,16 +197,17 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let blocker = dir.path().join("file");
         std::fs::write(&blocker, b"x").unwrap();
-        let err = write_png(&blocker.join("a.png"), &Canvas::new(2, 2, [0; 3])).unwrap_err();
+        let black = [0u8; 12];
+        let err = write_png_rgb8(&blocker.join("a.png"), 2, 2, &black).unwrap_err();
         assert!(matches!(err, PreviewError::CreateDir { .. }), "{err}");
-        let err = write_png(&dir.path().join("e.png"), &Canvas::new(0, 3, [0; 3])).unwrap_err();
+        let err = write_png_rgb8(&dir.path().join("e.png"), 0, 3, &[]).unwrap_err();
         assert!(matches!(err, PreviewError::Size { .. }));
         let err = write_png_rgb8(&dir.path().join("s.png"), 2, 2, &[0; 11]).unwrap_err();
         assert!(matches!(err, PreviewError::Size { .. }));
         // A directory in the way of the final name: the rename fails, the temp file is gone.
         std::fs::create_dir(dir.path().join("taken.png")).unwrap();
         std::fs::write(dir.path().join("taken.png/inner"), b"x").unwrap();
-        let err = write_png(&dir.path().join("taken.png"), &Canvas::new(2, 2, [0; 3])).unwrap_err();
+        let err = write_png_rgb8(&dir.path().join("taken.png"), 2, 2, &black).unwrap_err();
         assert!(matches!(err, PreviewError::Rename { .. }), "{err}");
         let names: Vec<_> = std::fs::read_dir(dir.path())
             .unwrap()

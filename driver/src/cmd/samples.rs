@@ -1,5 +1,5 @@
 //! `guidebake samples`: the presorted Sobol packets of Silvennoinen & Sloan 2019, Figure 3,
-//! drawn to a PNG, and the packet-coherence table behind README's figure.
+//! drawn with plotters to a PNG, and the packet-coherence table behind README's figure.
 //!
 //! The figure has three columns — presorted packets as built; the same order after one
 //! texel's Cranley–Patterson rotation; and after [`reorder_after_rotation_into`] — and two
@@ -20,7 +20,12 @@ use guidebake_kernels::presort::coherence::{CoherenceRow, coherence_table, direc
 use guidebake_kernels::presort::{presorted, reorder_after_rotation_into};
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
 
-use crate::preview::{Canvas, PreviewError, categorical_color, write_png};
+use image::RgbImage;
+use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf32;
+use plotters::prelude::*;
+
+use crate::preview::{PreviewError, categorical_color, write_png_rgb8};
 
 /// Largest N the figure draws (beyond it the dots merge into a blur).
 pub const MAX_FIGURE_N: u32 = 16_384;
@@ -61,6 +66,12 @@ pub enum SamplesError {
     /// The coherence table needs at least one rotation.
     #[error("--rotations must be at least 1")]
     NoRotations,
+    /// plotters failed to draw the figure.
+    #[error("cannot draw the figure: {what}")]
+    Draw {
+        /// plotters' message.
+        what: String,
+    },
     /// Writing the PNG failed.
     #[error(transparent)]
     Preview(#[from] PreviewError),
@@ -92,7 +103,8 @@ fn run_typed(args: &SamplesArgs) -> Result<(), SamplesError> {
         (None, true) => return Ok(()),
     };
     let r = rotation(args.seed, args.texel, 0);
-    write_png(&output, &figure(args.n, r))?;
+    let image = figure(args.n, r)?;
+    write_png_rgb8(&output, image.width(), image.height(), image.as_raw())?;
     println!(
         "wrote {} (N = {}, {} packets, rotation of texel {} seed {}: {:.3}, {:.3})",
         output.display(),
@@ -133,91 +145,149 @@ pub fn format_coherence_table(rows: &[CoherenceRow], rotations: u32) -> String {
 
 const PANEL: u32 = 300;
 const MARGIN: u32 = 20;
-const BACKGROUND: [u8; 3] = [250, 250, 248];
-const FRAME: [u8; 3] = [60, 60, 60];
-const CUT: [u8; 3] = [170, 170, 170];
+const BACKGROUND: RGBColor = RGBColor(250, 250, 248);
+const FRAME: RGBColor = RGBColor(60, 60, 60);
+const CUT: RGBColor = RGBColor(170, 170, 170);
 
-/// Draws the figure for `n` samples and rotation `r` (layout in the module docs).
-pub fn figure(n: u32, r: [u32; 2]) -> Canvas {
+/// A panel of the figure: a `PANEL`-pixel square whose coordinates are the data's, y up.
+type Panel<'a> = DrawingArea<BitMapBackend<'a>, Cartesian2d<RangedCoordf32, RangedCoordf32>>;
+
+/// Draws the figure for `n` samples and rotation `r` (layout in the module docs) with
+/// plotters on an RGB buffer. It sets no text, so it needs no font (the charts register
+/// theirs: `bench/charts.rs`).
+///
+/// # Errors
+/// [`SamplesError::Draw`] with plotters' message.
+pub fn figure(n: u32, r: [u32; 2]) -> Result<RgbImage, SamplesError> {
     let presorted = presorted(n);
     let mut reordered = vec![0; n as usize];
     reorder_after_rotation_into(&presorted, r, &mut reordered);
     let columns: [(&[u32], [u32; 2]); 3] = [(&presorted, [0, 0]), (&presorted, r), (&reordered, r)];
     let cell = PANEL + 2 * MARGIN;
-    let mut canvas = Canvas::new(3 * cell, 2 * cell, BACKGROUND);
+    let size = (3 * cell, 2 * cell);
     let radius = (PANEL as f32 / (n as f32).sqrt() / 5.0).clamp(1.0, 4.0);
-    for (col, &(order, rot)) in columns.iter().enumerate() {
-        let x0 = (col as u32 * cell + MARGIN) as f32;
-        draw_square_panel(&mut canvas, x0, MARGIN as f32, order, rot, radius);
-        draw_disk_panel(&mut canvas, x0, (cell + MARGIN) as f32, order, rot, radius);
+    let mut pixels = vec![0u8; size.0 as usize * size.1 as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
+        root.fill(&BACKGROUND).map_err(draw_error)?;
+        for (col, &(order, rot)) in columns.iter().enumerate() {
+            let x0 = (col as u32 * cell + MARGIN) as i32;
+            let square = panel(&root, x0, MARGIN as i32, 0.0..1.0);
+            draw_square_panel(&square, order, rot, radius)?;
+            let disk = panel(&root, x0, (cell + MARGIN) as i32, -1.0..1.0);
+            draw_disk_panel(&disk, order, rot, radius)?;
+        }
+        root.present().map_err(draw_error)?;
     }
-    canvas
+    RgbImage::from_raw(size.0, size.1, pixels).ok_or_else(|| SamplesError::Draw {
+        what: "the figure's buffer has the wrong size".into(),
+    })
 }
 
-/// Draws `order`'s packets in `[0,1)²` (v up) into the panel at (x0, y0).
+fn draw_error(e: impl std::fmt::Display) -> SamplesError {
+    SamplesError::Draw {
+        what: e.to_string(),
+    }
+}
+
+/// The `PANEL`-pixel square at (`x0`, `y0`) with `range` on both axes, y up.
+fn panel<'a>(
+    root: &DrawingArea<BitMapBackend<'a>, Shift>,
+    x0: i32,
+    y0: i32,
+    range: std::ops::Range<f32>,
+) -> Panel<'a> {
+    let side = PANEL as i32;
+    root.apply_coord_spec(Cartesian2d::new(
+        range.clone(),
+        range,
+        (x0..x0 + side, y0 + side..y0),
+    ))
+}
+
+/// Draws `order`'s packets in `[0,1)²` (v up), the rotation's cuts and the frame.
 fn draw_square_panel(
-    canvas: &mut Canvas,
-    x0: f32,
-    y0: f32,
+    area: &Panel<'_>,
     order: &[u32],
     r: [u32; 2],
     radius: f32,
-) {
-    let size = PANEL as f32;
-    let to_px = |p: [u32; 2]| {
-        let [u, v] = p.map(to_unit);
-        (x0 + u * size, y0 + (1.0 - v) * size)
-    };
+) -> Result<(), SamplesError> {
     if r != [0, 0] {
-        let (cx, cy) = to_px(r);
-        canvas.line(cx, y0, cx, y0 + size, CUT);
-        canvas.line(x0, cy, x0 + size, cy, CUT);
+        let [u, v] = r.map(to_unit);
+        area.draw(&PathElement::new([(u, 0.0), (u, 1.0)], CUT))
+            .map_err(draw_error)?;
+        area.draw(&PathElement::new([(0.0, v), (1.0, v)], CUT))
+            .map_err(draw_error)?;
     }
-    draw_packets(canvas, order, |i| to_px(rotate(sobol_2d(i), r)), radius);
-    frame(canvas, x0, y0, size);
+    let at = |i| {
+        let [u, v] = rotate(sobol_2d(i), r).map(to_unit);
+        (u, v)
+    };
+    draw_packets(area, order, at, radius)?;
+    area.draw(&Rectangle::new([(0.0, 0.0), (1.0, 1.0)], FRAME))
+        .map_err(draw_error)
 }
 
-/// Draws `order`'s packets on the hemisphere seen from above (x right, y up).
-fn draw_disk_panel(canvas: &mut Canvas, x0: f32, y0: f32, order: &[u32], r: [u32; 2], radius: f32) {
-    let half = PANEL as f32 / 2.0;
-    let (cx, cy) = (x0 + half, y0 + half);
-    canvas.circle(cx, cy, half, FRAME);
-    draw_packets(
-        canvas,
-        order,
-        |i| {
-            let w = direction(rotate(sobol_2d(i), r));
-            (cx + w.x * half, cy - w.y * half)
-        },
-        radius,
-    );
+/// Draws `order`'s packets on the hemisphere seen from above (x right, y up) in the unit
+/// disk's outline.
+fn draw_disk_panel(
+    area: &Panel<'_>,
+    order: &[u32],
+    r: [u32; 2],
+    radius: f32,
+) -> Result<(), SamplesError> {
+    area.draw(&Circle::new((0.0, 0.0), PANEL / 2, FRAME))
+        .map_err(draw_error)?;
+    let at = |i| {
+        let w = direction(rotate(sobol_2d(i), r));
+        (w.x, w.y)
+    };
+    draw_packets(area, order, at, radius)
 }
 
-/// Each packet: spokes from its centroid to its points, then the points, in its colour.
-fn draw_packets(canvas: &mut Canvas, order: &[u32], at: impl Fn(u32) -> (f32, f32), radius: f32) {
+/// Each packet: spokes from its centroid to its points in a light tint of its colour, then
+/// the points in its colour, as disks `2 * radius` pixels across (2×2 squares below 1.5).
+fn draw_packets(
+    area: &Panel<'_>,
+    order: &[u32],
+    at: impl Fn(u32) -> (f32, f32),
+    radius: f32,
+) -> Result<(), SamplesError> {
     for (k, packet) in order.chunks(LANES).enumerate() {
-        let color = categorical_color(k);
+        let [r, g, b] = categorical_color(k);
+        let color = RGBColor(r, g, b);
+        let light = RGBColor(tint(r), tint(g), tint(b));
         let pts: Vec<(f32, f32)> = packet.iter().map(|&i| at(i)).collect();
         let m = pts.len() as f32;
-        let (mx, my) = pts
+        let centroid = pts
             .iter()
             .fold((0.0, 0.0), |(a, b), p| (a + p.0 / m, b + p.1 / m));
-        let light = color.map(|c| ((u16::from(c) + 2 * 255) / 3) as u8);
-        for &(x, y) in &pts {
-            canvas.line(mx, my, x, y, light);
+        for &p in &pts {
+            area.draw(&PathElement::new([centroid, p], light))
+                .map_err(draw_error)?;
         }
-        for &(x, y) in &pts {
-            canvas.dot(x, y, radius, color);
+        for &p in &pts {
+            if radius < 1.5 {
+                // The bitmap backend fills [x0, x1) × [y0, y1): 2×2 pixels.
+                let square = Rectangle::new([(0, 0), (2, 2)], color.filled());
+                area.draw(&(EmptyElement::at(p) + square))
+            } else {
+                // A plotters disk of radius k is 2k + 1 pixels across.
+                area.draw(&Circle::new(
+                    p,
+                    (radius - 0.5).round() as u32,
+                    color.filled(),
+                ))
+            }
+            .map_err(draw_error)?;
         }
     }
+    Ok(())
 }
 
-fn frame(canvas: &mut Canvas, x0: f32, y0: f32, size: f32) {
-    let (x1, y1) = (x0 + size, y0 + size);
-    canvas.line(x0, y0, x1, y0, FRAME);
-    canvas.line(x0, y1, x1, y1, FRAME);
-    canvas.line(x0, y0, x0, y1, FRAME);
-    canvas.line(x1, y0, x1, y1, FRAME);
+/// A channel a third of the way from `c` to white.
+fn tint(c: u8) -> u8 {
+    ((u16::from(c) + 2 * 255) / 3) as u8
 }
 
 #[cfg(test)]
@@ -261,5 +331,54 @@ mod tests {
             run_typed(&args(None, MAX_FIGURE_N + 1)),
             Err(SamplesError::BadCount { .. })
         ));
+    }
+
+    fn rgb(c: RGBColor) -> [u8; 3] {
+        [c.0, c.1, c.2]
+    }
+
+    /// One packet (N = 8), so no other covers it: each point is a disk of the packet's colour
+    /// where the point is, in every panel; the frames, the cuts and the background are there.
+    #[test]
+    fn points_are_drawn_in_their_colour_where_they_are() {
+        let r = [1 << 30, 3 << 30]; // the cuts at u = 1/4 and v = 3/4
+        let img = figure(8, r).unwrap();
+        let cell = PANEL + 2 * MARGIN;
+        assert_eq!(img.dimensions(), (3 * cell, 2 * cell));
+        let px = |x: f32, y: f32| img.get_pixel(x.floor() as u32, y.floor() as u32).0;
+        let side = PANEL as f32;
+        let colour = categorical_color(0);
+        assert_eq!(px(0.0, 0.0), rgb(BACKGROUND));
+        for (col, rot) in [[0, 0], r, r].into_iter().enumerate() {
+            let x0 = (col as u32 * cell + MARGIN) as f32;
+            let (y_square, y_disk) = (MARGIN as f32, (cell + MARGIN) as f32);
+            for i in 0..8 {
+                let [u, v] = rotate(sobol_2d(i), rot).map(to_unit);
+                // Points on the frame are covered by it (it is drawn last).
+                if [u, v].iter().all(|t| (0.01..0.99).contains(t)) {
+                    let at = px(x0 + u * side, y_square + (1.0 - v) * side);
+                    assert_eq!(
+                        at, colour,
+                        "column {col}, point {i} ({u}, {v}) in the square"
+                    );
+                }
+                let w = direction(rotate(sobol_2d(i), rot));
+                let half = side / 2.0;
+                let at = px(x0 + half * (1.0 + w.x), y_disk + half * (1.0 - w.y));
+                assert_eq!(at, colour, "column {col}, point {i} on the disk");
+            }
+            // The square's frame (its top edge) and the disk's centre row left of the rim.
+            assert_eq!(px(x0 + side / 2.0, y_square), rgb(FRAME));
+            assert_eq!(px(x0 - 2.0, y_disk + side / 2.0), rgb(BACKGROUND));
+            // The cuts: the rotated columns' squares have a grey column at u = 1/4.
+            let cut = (0..PANEL)
+                .filter(|&y| px(x0 + side / 4.0, y_square + y as f32) == rgb(CUT))
+                .count();
+            if col == 0 {
+                assert_eq!(cut, 0, "an unrotated square has no cut");
+            } else {
+                assert!(cut > PANEL as usize / 2, "column {col}: {cut} cut pixels");
+            }
+        }
     }
 }
