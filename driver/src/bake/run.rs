@@ -42,9 +42,9 @@ use crate::bvh::Preset;
 use crate::hash::fnv1a64;
 use crate::output::result_file::{FLAG_BAKED, FinishedResults, ResultFile, TexelResult};
 use crate::scene::Scene;
-use crate::texels::{FLAG_INSIDE, TexelFile};
+use crate::texels::{FLAG_INSIDE, TexelFile, TileRect};
 use crate::transport::lookup_filter::Surfel;
-use crate::transport::pass_image::{CELL, Source, SourceTexel, TileRect};
+use crate::transport::pass_image::{CELL, Source, SourceTexel};
 use crate::transport::series::{BuildError, PreviousPass, TriangleUvs};
 use crate::transport::world::World;
 

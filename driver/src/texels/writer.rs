@@ -2,7 +2,9 @@
 
 use super::*;
 
-/// A tile as the writer receives it: its rectangle and its texels in row-major pixel order.
+/// Where a tile lies: its page and the rectangle of pixels that holds its texels (the writer
+/// receives a tile's texels in it, in row-major pixel order; a series pass image reads its
+/// source's tiles by it, `transport::pass_image::Source::rect`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TileRect {
     /// Page index.

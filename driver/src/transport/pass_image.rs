@@ -35,7 +35,7 @@ use std::collections::VecDeque;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::texels::PageRecord;
+use crate::texels::{PageRecord, TileRect};
 use crate::transport::lookup_filter::{Surfel, filtered_at};
 
 /// Edge of a cell in pixels: one cell's pixels are one 64-bit mask.
@@ -318,21 +318,6 @@ pub struct SourceTexel {
     pub total: [f32; 3],
     /// What the lookups' filter knows of it (`None`: not filtered, nor a neighbour).
     pub surfel: Option<Surfel>,
-}
-
-/// Where a source tile lies: its page and its rectangle of pixels, which holds its texels.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct TileRect {
-    /// The page.
-    pub page: u32,
-    /// Left column.
-    pub x: u32,
-    /// Top row.
-    pub y: u32,
-    /// Columns.
-    pub width: u32,
-    /// Rows.
-    pub height: u32,
 }
 
 /// Where an image's texels come from, tile by tile: tiles do not overlap, and each lies on

@@ -53,12 +53,10 @@ use glam::{Vec2, Vec3};
 use memmap2::{Mmap, MmapMut};
 
 use crate::scene::Scene;
-use crate::texels::{PageRecord, TriangleRecord};
+use crate::texels::{PageRecord, TileRect, TriangleRecord};
 use crate::transport::emitters::luminance;
 use crate::transport::lookup_filter::Surfel;
-use crate::transport::pass_image::{
-    self, Built, CELL, Layout, Source, SourceTexel, TileRect, View,
-};
+use crate::transport::pass_image::{self, Built, CELL, Layout, Source, SourceTexel, View};
 
 /// Rings of pixels filled around every chart from their covered neighbours.
 pub const DILATION: u32 = 4;
