@@ -9,7 +9,8 @@
 //! The scene is generated in code, with its own lightmap charts: every planar face is one
 //! rectangular chart of its world size, shelf-packed into the unit square with a gap of
 //! [`CHART_GAP`] metres, so `prepare` at [`DEMO_TEXELS_PER_METRE`] leaves at least two empty
-//! texels between charts.
+//! texels between charts. This is the scene's authored UV set, as an artist's would be, in
+//! metres on the unit square; `prepare` keeps it as a shared atlas and packs nothing.
 
 use std::path::PathBuf;
 

@@ -340,7 +340,10 @@ fn density_for(quads: &[Quad], n: u64) -> f64 {
 }
 
 /// Shelf-packs the quads' rectangles onto pages, in quad order (which keeps a cell's quads
-/// together and neighbouring cells near each other).
+/// together and neighbouring cells near each other). Not `prepare`'s packer
+/// ([`crate::prepare::pack`]): that one orders by size, for density, and costs a pass over
+/// the skyline per rectangle; a synthetic world wants the file in world order, and 3 M
+/// rectangles at 10^8 texels in constant time each.
 fn pack(quads: &[Quad], d: f64) -> (Vec<Placed>, u32) {
     let (mut page, mut x, mut y, mut shelf) = (0u32, 0u32, 0u32, 0u32);
     let mut out = Vec::with_capacity(quads.len());

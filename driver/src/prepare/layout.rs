@@ -1,13 +1,15 @@
 //! Where every mesh's texels go (step 1 of [`super`]'s list): the shared layout of one
-//! atlas, the per-mesh layout of UV squares shelf-packed onto pages at a texel density, and
-//! the layout of meshes xatlas unwrapped, their charts packed by the skyline packer
-//! ([`super::unwrap`]); the density or page size that would fit when nothing does.
+//! atlas, the per-mesh layout of UV squares packed onto pages at a texel density, and the
+//! layout of meshes xatlas unwrapped ([`super::unwrap`]), their atlas packed onto pages with
+//! the other meshes' squares; one packer places all of them ([`super::pack`]). And the
+//! density or page size that would fit when nothing does.
 
 use glam::Vec2;
 
 use crate::scene::Scene;
 use crate::texels::{PageRecord, TILE_SIZE};
 
+use super::pack::{Place, pack_rects};
 use super::*;
 
 /// Where a mesh's lightmap UVs land on the atlas: `pixel = uv · uv_scale + uv_offset` on
@@ -158,48 +160,6 @@ pub(super) fn check_cells(
     Ok(())
 }
 
-/// A cell's place: (page, x, y).
-pub(super) type Place = (u32, u32, u32);
-
-/// Shelf packing of square cells: returns per mesh (page, x, y) and the number of pages.
-pub(super) fn shelf_pack(cells: &[Option<u32>], page: (u32, u32)) -> (Vec<Option<Place>>, u32) {
-    shelf_pack_rects(
-        &cells.iter().map(|c| c.map(|c| (c, c))).collect::<Vec<_>>(),
-        page,
-    )
-}
-
-/// Shelf packing of `(width, height)` rectangles, tallest first, each with a [`GUTTER`] on
-/// every side: returns per rectangle (page, x, y) and the number of pages.
-pub(super) fn shelf_pack_rects(
-    rects: &[Option<(u32, u32)>],
-    page: (u32, u32),
-) -> (Vec<Option<Place>>, u32) {
-    let mut order: Vec<usize> = (0..rects.len()).filter(|&i| rects[i].is_some()).collect();
-    order.sort_by_key(|&i| std::cmp::Reverse(rects[i].map(|(w, h)| (h, w))));
-    let mut out = vec![None; rects.len()];
-    let (mut p, mut x, mut y, mut shelf) = (0u32, 0u32, 0u32, 0u32);
-    for i in order {
-        let (w, h) = rects[i].unwrap_or((0, 0));
-        let (sw, sh) = (w + 2 * GUTTER, h + 2 * GUTTER);
-        if x + sw > page.0 {
-            x = 0;
-            y += shelf;
-            shelf = 0;
-        }
-        if y + sh > page.1 {
-            p += 1;
-            x = 0;
-            y = 0;
-            shelf = 0;
-        }
-        out[i] = Some((p, x + GUTTER, y + GUTTER));
-        x += sw;
-        shelf = shelf.max(sh);
-    }
-    (out, p + 1)
-}
-
 pub(super) fn per_mesh_layout(
     scene: &Scene,
     stats: &[Option<MeshUv>],
@@ -232,7 +192,8 @@ pub(super) fn per_mesh_layout(
     }
     let (places, cs, n) = loop {
         let cs = cells(stats, d, max);
-        let (places, n) = shelf_pack(&cs, page);
+        let squares: Vec<_> = cs.iter().map(|c| c.map(|c| (c, c))).collect();
+        let (places, n) = pack_rects(&squares, GUTTER, page, !one_page);
         if !one_page || n == 1 || d < 1e-9 {
             break (places, cs, n);
         }
@@ -453,7 +414,7 @@ pub(super) fn unwrap_layout(
             .map(|a| Some((a.width, a.height)))
             .chain(cs.iter().map(|c| c.map(|c| (c, c))))
             .collect();
-        let (places, n) = shelf_pack_rects(&rects, page);
+        let (places, n) = pack_rects(&rects, GUTTER, page, !one_page);
         if one_page && n > 1 {
             d *= 0.95;
             continue;

@@ -8,8 +8,8 @@
 //!    ([`MeshLayout`]). *Shared* layout: all meshes already share one atlas (the converted
 //!    Bitterli scenes, made with xatlas) — page 0, `scale` = page size. *Per-mesh* layout:
 //!    every mesh has its own 0..1 UVs (the vinc3r Cornell box) — each mesh's UV bounding
-//!    square becomes a square cell sized for the requested texel density, cells are shelf
-//!    packed (largest first, 2-texel gutter) onto pages of at most 4096². `Auto` (default)
+//!    square becomes a square cell sized for the requested texel density, cells are packed
+//!    (largest first, 2-texel gutter, [`pack`]) onto pages of at most 4096². `Auto` (default)
 //!    takes the shared layout unless texel centres of different meshes overlap in UV space.
 //! 2. **Centres.** A texel whose centre lies inside a triangle (edge functions, inclusive)
 //!    takes that triangle; where several do, the first in scene order wins.
@@ -63,6 +63,7 @@ use facing::FacingReport;
 
 pub mod facing;
 mod layout;
+pub mod pack;
 mod raster;
 pub mod shell;
 pub mod unwrap;

@@ -17,7 +17,7 @@
 //!    options. Only each triangle's chart and chart-local UVs are kept (28 bytes a
 //!    triangle); the chunk's atlas is dropped, so xatlas's memory is bounded by the chunk
 //!    size times the threads, whatever the triangle count.
-//! 4. **Pack** at a texel density ([`Charted::pack`], [`pack`]): every chart scaled to the
+//! 4. **Pack** at a texel density ([`Charted::pack`], [`super::pack`]): every chart scaled to the
 //!    density as xatlas scales it, then placed by a skyline packer of our own that keeps
 //!    at least [`PADDING`] empty texels between the texels of two charts (the dilation of
 //!    `bake` needs a gutter); charts longer than the page are scaled down to fit one.
@@ -36,11 +36,12 @@ use rayon::prelude::*;
 
 use crate::scene::Scene;
 
+use super::pack::pack_charts;
+
 pub mod chunk;
-pub mod pack;
 
 /// Empty texels the packer keeps between the texels of two charts, on every side
-/// ([`pack`]); the tests measure it on every scene here.
+/// ([`super::pack`]); the tests measure it on every scene here.
 pub const PADDING: u32 = 2;
 
 /// Triangles in one xatlas atlas at most: a bigger mesh is charted in spatial chunks
@@ -339,7 +340,7 @@ impl Charted {
         max_chart: u32,
     ) -> Result<Packed, UnwrapError> {
         let start = Instant::now();
-        let layout = pack::pack(
+        let layout = pack_charts(
             &self.uv,
             &self.chart,
             self.charts,
@@ -640,7 +641,11 @@ mod tests {
             (c, p)
         });
         let uvs = p.meshes.iter().flat_map(|(_, uvs)| uvs).map(|q| q.unwrap());
-        pack::tests::assert_charts_apart(c.chart.iter().copied().zip(uvs), PADDING, "chunked");
+        crate::prepare::pack::tests::assert_charts_apart(
+            c.chart.iter().copied().zip(uvs),
+            PADDING,
+            "chunked",
+        );
         assert!(c.charts() > 10, "{} charts", c.charts());
     }
 
