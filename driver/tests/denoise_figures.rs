@@ -11,7 +11,9 @@
 //!
 //! `GUIDEBAKE_DENOISE_SCENES` (comma-separated: `cornell`, `ajar`, `bidir`, `zdm2`; default
 //! all) picks the scenes, `GUIDEBAKE_DENOISE_CACHE` the reference cache (default
-//! `target/denoise-ref`, shared with the `denoise_rmse` example's: same page, same reference).
+//! `target/denoise-ref`, shared with the `denoise_rmse` example's: same page, same reference),
+//! `GUIDEBAKE_DENOISE_PAGE` the page edge of every scene, `GUIDEBAKE_DENOISE_IMAGES` a folder
+//! for a crop of chart borders and its error maps per scene and spp ([`crops`]).
 //! Per scene: prepare at a page of 192² (zdm2: 512²), bake the reference — `bench`'s unbiased baseline at
 //! 16 × 256 = 4096 spp, series transport, so only the estimator's noise and the filter differ
 //! — then the default settings at 64, 128, 256, 512 and 1024 spp, each finished raw; 64 and
@@ -43,9 +45,16 @@ use guidebake::texels::TexelFile;
 
 type Error = Box<dyn std::error::Error>;
 
-/// Page edge of the measurement's texel files: the À-Trous sweep's for the rooms; a level
-/// needs more to keep its thousands of charts (zdm2 has 1 114 texels at 192²).
+/// Page edge of the measurement's texel files: `GUIDEBAKE_DENOISE_PAGE` when set; else the
+/// À-Trous sweep's for the rooms, and more for a level to keep its thousands of charts (zdm2
+/// has 1 114 texels at 192²).
 fn page(name: &str) -> u32 {
+    if let Some(edge) = std::env::var("GUIDEBAKE_DENOISE_PAGE")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        return edge;
+    }
     if name == "zdm2" { 512 } else { 192 }
 }
 /// Samples finished with each denoiser; the reference has 16 × the largest.
@@ -76,11 +85,12 @@ fn scene_path(name: &str, shared: &Path, work: &Path) -> Result<PathBuf, Error> 
     })
 }
 
-/// One finish of a bake: its errors, seam edge jump and wall time.
+/// One finish of a bake: its errors, seam edge jump, wall time and values.
 struct Finished {
     stats: ErrorStats,
     edge_jump: f64,
     seconds: f64,
+    values: Vec<Option<[f32; 3]>>,
 }
 
 #[test]
@@ -181,6 +191,7 @@ fn denoiser_figures() -> Result<(), Error> {
                     stats: compare(&values, &truth)?,
                     edge_jump: seams.edge_jump(&values),
                     seconds,
+                    values,
                 })
             };
             let raw = finish(None)?;
@@ -199,6 +210,12 @@ fn denoiser_figures() -> Result<(), Error> {
                 eprintln!("{}", every_rows.last().expect("just pushed"));
                 if spp == SPP[0] {
                     oidn_64 = Some((o.stats, bake_seconds + o.seconds));
+                }
+                if let Some(dir) = std::env::var_os("GUIDEBAKE_DENOISE_IMAGES") {
+                    let png = Path::new(&dir).join(format!("{name}-{}-{spp}spp.png", page(name)));
+                    let panels = [&truth, &raw.values, &a.values, &o.values];
+                    crops::write(&png, &file, panels)?;
+                    eprintln!("{name} {spp}: {}", png.display());
                 }
                 main_rows.push(format!(
                     "| {name} | {count} | {spp} | {:.4} | {:.2} | {:.2} | {:.4} | {:.4} | {:.4} | {:.1} | +{:.2} | +{:.2} | {:.3} / {:.3} / {:.3} ({:.3}) |",
@@ -360,4 +377,127 @@ fn bake_passes(job: &BakeJob, scene: &Scene, file: &TexelFile) -> Result<PathBuf
         }
     }
     Ok(work_dir(&job.out, job.shard))
+}
+
+/// A crop of chart borders: the reference, raw, `atrous` and `oidn` (top row, tone mapped at
+/// one exposure), and each one's relative error against the reference (bottom row).
+mod crops {
+    use std::path::Path;
+
+    use guidebake::preview::{tonemap_reinhard, write_png_rgb8};
+    use guidebake::texels::TexelFile;
+
+    use super::Error;
+
+    /// Crop edge in texels, and how many pixels each texel is drawn as.
+    const EDGE: u32 = 96;
+    const ZOOM: u32 = 3;
+    /// Padding and texels outside the crop.
+    const EMPTY: [u8; 3] = [40, 48, 64];
+
+    fn luminance(v: [f32; 3]) -> f32 {
+        0.2126 * v[0] + 0.7152 * v[1] + 0.0722 * v[2]
+    }
+
+    /// A relative error as a colour: black at 0, red at 0.25, yellow at 0.5, white from 1.
+    fn ramp(e: f32) -> [u8; 3] {
+        let e = if e.is_finite() {
+            e.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        let f = |a: f32, b: f32| (255.0 * ((e - a) / (b - a)).clamp(0.0, 1.0)) as u8;
+        [f(0.0, 0.25), f(0.25, 0.5), f(0.5, 1.0)]
+    }
+
+    /// Writes the crop of page 0 where most lit texels border padding: `panels` are the
+    /// reference and the three finishes, per texel in file order.
+    pub fn write(
+        png: &Path,
+        file: &TexelFile,
+        panels: [&Vec<Option<[f32; 3]>>; 4],
+    ) -> Result<(), Error> {
+        let size = file.pages()[0];
+        let (w, h) = (size.width, size.height);
+        let mut at = vec![usize::MAX; (w * h) as usize];
+        for (i, t) in file.texels().iter().enumerate() {
+            if t.page == 0 {
+                at[(u32::from(t.pixel[1]) * w + u32::from(t.pixel[0])) as usize] = i;
+            }
+        }
+        let truth = panels[0];
+        let lit = |x: u32, y: u32| -> Option<f32> {
+            let i = at[(y * w + x) as usize];
+            (i != usize::MAX).then(|| truth[i].map_or(0.0, luminance))
+        };
+        // The window (stepped by 16) with the most luminance on texels beside padding.
+        let edge = EDGE.min(w).min(h);
+        let mut best = (0.0f64, 0, 0);
+        for y0 in (0..=h - edge).step_by(16) {
+            for x0 in (0..=w - edge).step_by(16) {
+                let mut score = 0.0;
+                for y in y0..y0 + edge {
+                    for x in x0..x0 + edge {
+                        let Some(l) = lit(x, y) else { continue };
+                        let border =
+                            [(1i32, 0i32), (-1, 0), (0, 1), (0, -1)]
+                                .iter()
+                                .any(|&(dx, dy)| {
+                                    let (nx, ny) = (x as i32 + dx, y as i32 + dy);
+                                    nx < 0
+                                        || ny < 0
+                                        || nx >= w as i32
+                                        || ny >= h as i32
+                                        || lit(nx as u32, ny as u32).is_none()
+                                });
+                        if border {
+                            score += f64::from(l);
+                        }
+                    }
+                }
+                if score > best.0 {
+                    best = (score, x0, y0);
+                }
+            }
+        }
+        let (_, x0, y0) = best;
+        // One exposure for every panel: the reference's 95th percentile maps to 0.5.
+        let mut l: Vec<f32> = truth.iter().flatten().map(|&v| luminance(v)).collect();
+        l.sort_by(f32::total_cmp);
+        let p95 = l.get(l.len() * 95 / 100).copied().unwrap_or(1.0).max(1e-6);
+        let exposure = 1.0 / p95;
+        let side = edge * ZOOM;
+        let gap = 4;
+        let (iw, ih) = (4 * side + 3 * gap, 2 * side + gap);
+        let mut rgb = vec![255u8; (iw * ih * 3) as usize];
+        for (k, panel) in panels.iter().enumerate() {
+            for y in 0..edge {
+                for x in 0..edge {
+                    let i = at[((y0 + y) * w + x0 + x) as usize];
+                    let (top, bottom) = match (i != usize::MAX).then(|| (panel[i], truth[i])) {
+                        Some((Some(v), Some(t))) => {
+                            let e = (luminance(v) - luminance(t)).abs() / luminance(t).max(1e-4);
+                            (
+                                tonemap_reinhard(v, exposure),
+                                if k == 0 { [255; 3] } else { ramp(e) },
+                            )
+                        }
+                        _ => (EMPTY, EMPTY),
+                    };
+                    for (row, colour) in [(0, top), (side + gap, bottom)] {
+                        for dy in 0..ZOOM {
+                            for dx in 0..ZOOM {
+                                let px = k as u32 * (side + gap) + x * ZOOM + dx;
+                                let py = row + y * ZOOM + dy;
+                                let o = ((py * iw + px) * 3) as usize;
+                                rgb[o..o + 3].copy_from_slice(&colour);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        write_png_rgb8(png, iw, ih, &rgb)?;
+        Ok(())
+    }
 }
