@@ -7,7 +7,10 @@ use std::path::PathBuf;
 use crate::probes::file::volume_path;
 use crate::probes::gather::{GatherSettings, ProbeTransport};
 use crate::probes::placement::{PlacementSettings, read_points};
-use crate::probes::{ProbeError, ProbeReport, ProbeSettings, bake_probes};
+use crate::probes::work::{self, work_dir};
+use crate::probes::{
+    BATCH_CLUSTERS, ProbeError, ProbeReport, ProbeSettings, WorkOptions, bake_probes,
+};
 use crate::render::Lightmap;
 use crate::scene::TextureOptions;
 use crate::texels::TexelFile;
@@ -78,6 +81,17 @@ pub struct ProbesArgs {
     /// Largest width or height a base-colour texture is kept at (as `bake`'s).
     #[arg(long, default_value_t = TextureOptions::DEFAULT_MAX_SIZE, value_parser = clap::value_parser!(u32).range(1..=65536))]
     pub max_texture_size: u32,
+    /// Continue a stopped probe bake from its work directory (OUT.bake/), baking only the
+    /// batches it lacks; refused if that work is of other settings, lights, texel file,
+    /// scene or lightmap.
+    #[arg(long)]
+    pub resume: bool,
+    /// Clusters a batch (tests: many small batches).
+    #[arg(long, hide = true, default_value_t = BATCH_CLUSTERS as u32, value_parser = clap::value_parser!(u32).range(1..=1 << 20))]
+    pub batch_clusters: u32,
+    /// Stop as Ctrl-C does after baking this many batches (tests).
+    #[arg(long, hide = true)]
+    pub stop_after_batches: Option<usize>,
     /// No summary.
     #[arg(long)]
     pub quiet: bool,
@@ -149,7 +163,9 @@ fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError
                 .reads("the lightmap's atlas preview", &preview);
         }
     }
-    files = files.writes("the probe file (-o)", &args.out);
+    files = files
+        .writes("the probe file (-o)", &args.out)
+        .writes_dir("the probe bake's work directory", &work_dir(&args.out));
     if args.volume == OnOff::On {
         for band in 0..3 {
             files = files.writes(
@@ -209,12 +225,25 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
         dering: args.dering,
         volume: args.volume == OnOff::On,
     };
+    let batch_clusters = args.batch_clusters as usize;
+    let options = WorkOptions {
+        resume: args.resume,
+        texels: args.texels.clone(),
+        record: work::record(
+            work::options(&settings, &lightmap_identity(args)?, batch_clusters),
+            &texels,
+            &scene,
+        ),
+        batch_clusters,
+        stop_after: args.stop_after_batches,
+    };
     let threads = args.threads.unwrap_or_else(super::every_core);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .map_err(|e| format!("cannot start {threads} worker threads: {e}"))?;
     let cancel = super::interrupt::cancel_flag();
+    let cooperate = super::interrupt::Cooperate::begin();
     let report = pool
         .install(|| {
             bake_probes(
@@ -223,16 +252,18 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
                 lightmap.as_ref(),
                 &args.out,
                 &settings,
+                &options,
                 cancel,
             )
         })
         .map_err(|e| -> super::CmdError {
             match e {
                 ProbeError::Invalid(m) => format!("{}: {m}", args.texels.display()).into(),
-                ProbeError::Interrupted => Box::new(super::Interrupted(e.to_string())),
+                ProbeError::Interrupted { .. } => Box::new(super::Interrupted(e.to_string())),
                 other => Box::new(other),
             }
         })?;
+    drop(cooperate);
     let stats = stats_path(&args.out);
     let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
     if let Err(e) = crate::atomic::write(&stats, json) {
@@ -241,18 +272,40 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
         }
         return Err(format!("{}: cannot write the stats: {e}", stats.display()).into());
     }
+    work::retire(&args.out)?;
     if !args.quiet {
         summary(args, &report, transport, threads);
     }
     Ok(())
 }
 
+/// What the probes read where their rays hit: the lightmap's pages, by the FNV-1a 64 of
+/// their bytes (`none` without `--lightmap`), so that `--resume` over another lightmap is
+/// refused.
+fn lightmap_identity(args: &ProbesArgs) -> Result<String, super::CmdError> {
+    let Some(lightmap) = &args.lightmap else {
+        return Ok("none".into());
+    };
+    let mut hash = crate::hash::fnv1a64(&[]);
+    for (page, _) in super::files::lightmap_files(lightmap, &args.texels) {
+        let bytes = std::fs::read(&page)
+            .map_err(|e| format!("{}: cannot read the lightmap: {e}", page.display()))?;
+        hash = crate::hash::fnv1a64_more(hash, &bytes);
+    }
+    Ok(format!("{hash:016x}"))
+}
+
 fn summary(args: &ProbesArgs, r: &ProbeReport, transport: ProbeTransport, threads: usize) {
     eprintln!(
-        "{}: {} probes in {} clusters ({} lattice and {} listed candidates, {} inside geometry skipped), {} spp {}, hits read {}; {:.2} s on {threads} threads (placement {:.2} s, gather {:.2} s, volume {:.2} s); median relative error {:.3}",
+        "{}: {} probes in {} clusters{} ({} lattice and {} listed candidates, {} inside geometry skipped), {} spp {}, hits read {}; {:.2} s on {threads} threads (placement {:.2} s, gather {:.2} s, volume {:.2} s); median relative error {:.3}",
         args.out.display(),
         r.probes,
         r.clusters,
+        if r.batches_resumed > 0 {
+            format!(", {} batches resumed", r.batches_resumed)
+        } else {
+            String::new()
+        },
         r.lattice_candidates,
         r.listed_candidates,
         r.skipped_inside_geometry,
