@@ -4,7 +4,8 @@
 //! the block not placed; the same bytes on one thread and two; bad input named, nothing
 //! written; `render` drawing the probes and a sphere they light; a bake stopped part-way
 //! (twice, or killed) and resumed writing the same bytes as one never stopped, and a resume
-//! of other settings, lights or lightmap refused with the work kept.
+//! of other settings, lights or lightmap refused with the work kept; shards merged into the
+//! bytes of one bake.
 
 use std::path::{Path, PathBuf};
 
@@ -590,5 +591,77 @@ fn a_killed_probe_bake_resumes_to_the_same_bytes() {
     for ((na, ba), (nb, bb)) in a.iter().zip(&b) {
         assert_eq!(na, nb);
         assert!(ba == bb, "{na} differs");
+    }
+}
+
+/// Shards K/N of N = 1, 2, 3, each baked by its own process (publishing nothing at the final
+/// paths), merged, write the same probe file, volume and stats (timings apart) as one process;
+/// a merge missing a shard, or with a shard of other settings, is refused (exit 1, the message
+/// naming the shard or its directory) and publishes nothing.
+#[test]
+fn shards_merge_to_the_bytes_of_one_bake() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
+    let whole_dir = dir.join("whole");
+    std::fs::create_dir_all(&whole_dir).unwrap();
+    let whole = whole_dir.join("room.probes");
+    succeeds(&probe_args(&scene, &texels, &lightmap, &whole, &[]));
+    let one = published(&whole);
+    for n in 1..=3 {
+        let sub = dir.join(format!("n{n}"));
+        std::fs::create_dir_all(&sub).unwrap();
+        let out = sub.join("room.probes");
+        let mut shards = Vec::new();
+        for k in 0..n {
+            let shard = format!("{k}/{n}");
+            succeeds(&probe_args(
+                &scene,
+                &texels,
+                &lightmap,
+                &out,
+                &["--shard", &shard],
+            ));
+            shards.push(PathBuf::from(format!("{}.shard-{k}-of-{n}", out.display())));
+            assert!(shards[k].is_dir());
+        }
+        assert_eq!(
+            std::fs::read_dir(&sub).unwrap().count(),
+            n,
+            "a shard published a file"
+        );
+        let merge = |dirs: &[PathBuf]| {
+            let mut extra = vec!["--merge"];
+            extra.extend(dirs.iter().map(|d| s(d)));
+            probe_args(&scene, &texels, &lightmap, &out, &extra)
+        };
+        if n == 3 {
+            let e = fails_with(1, &merge(&shards[..2]));
+            assert!(e.contains("shard 2/3 is missing"), "{e}");
+            let other = sub.join("other.probes");
+            succeeds(&probe_args(
+                &scene,
+                &texels,
+                &lightmap,
+                &other,
+                &["--shard", "2/3", "--spp", "32"],
+            ));
+            let other_dir = PathBuf::from(format!("{}.shard-2-of-3", other.display()));
+            let e = fails_with(
+                1,
+                &merge(&[shards[0].clone(), shards[1].clone(), other_dir.clone()]),
+            );
+            assert!(
+                e.contains(s(&other_dir)) && e.contains("--spp was 32, now 64"),
+                "{e}"
+            );
+            assert!(!out.exists() && !volume_path(&out, 0).exists());
+        }
+        succeeds(&merge(&shards));
+        assert_eq!(
+            published(&out),
+            one,
+            "{n} shards merged differ from one bake"
+        );
     }
 }

@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 
+use crate::bake::shard::Shard;
 use crate::probes::file::volume_path;
 use crate::probes::gather::{GatherSettings, ProbeTransport};
 use crate::probes::placement::{PlacementSettings, read_points};
@@ -92,6 +93,14 @@ pub struct ProbesArgs {
     /// Stop as Ctrl-C does after baking this many batches (tests).
     #[arg(long, hide = true)]
     pub stop_after_batches: Option<usize>,
+    /// Bake only shard K of N (K/N, 0-based): its contiguous run of the batches, kept in
+    /// OUT.shard-K-of-N/; no probe file. Join every shard's with --merge.
+    #[arg(long, value_name = "K/N", conflicts_with = "merge")]
+    pub shard: Option<Shard>,
+    /// Bake nothing: write the probe file (and volume, stats) from these shards' work
+    /// directories (OUT.shard-K-of-N, every K of N), the same bytes as one process's bake.
+    #[arg(long, value_name = "SHARD_DIR", num_args = 1.., conflicts_with = "resume")]
+    pub merge: Vec<PathBuf>,
     /// No summary.
     #[arg(long)]
     pub quiet: bool,
@@ -163,9 +172,13 @@ fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError
                 .reads("the lightmap's atlas preview", &preview);
         }
     }
-    files = files
-        .writes("the probe file (-o)", &args.out)
-        .writes_dir("the probe bake's work directory", &work_dir(&args.out));
+    files = files.writes("the probe file (-o)", &args.out).writes_dir(
+        "the probe bake's work directory",
+        &work_dir(&args.out, args.shard),
+    );
+    for dir in &args.merge {
+        files = files.reads("a shard's work directory (--merge)", dir);
+    }
     if args.volume == OnOff::On {
         for band in 0..3 {
             files = files.writes(
@@ -236,6 +249,8 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
         ),
         batch_clusters,
         stop_after: args.stop_after_batches,
+        shard: args.shard,
+        merge: args.merge.clone(),
     };
     let threads = args.threads.unwrap_or_else(super::every_core);
     let pool = rayon::ThreadPoolBuilder::new()
@@ -264,17 +279,36 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
             }
         })?;
     drop(cooperate);
+    if let Some(shard) = args.shard {
+        if !args.quiet {
+            eprintln!(
+                "{}: shard {shard} baked ({} of its batches resumed); once every shard is, join them with the same command, --merge and every shard's directory instead of --shard",
+                work_dir(&args.out, Some(shard)).display(),
+                report.batches_resumed
+            );
+        }
+        return Ok(());
+    }
+    publish(args, &report)?;
+    if !args.quiet {
+        summary(args, &report, transport, threads);
+    }
+    Ok(())
+}
+
+/// Writes the stats beside the probe file, then removes the work directory (not the
+/// shards' of a merge: they are the user's to delete).
+fn publish(args: &ProbesArgs, report: &ProbeReport) -> Result<(), super::CmdError> {
     let stats = stats_path(&args.out);
-    let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+    let json = serde_json::to_string_pretty(report).map_err(|e| e.to_string())?;
     if let Err(e) = crate::atomic::write(&stats, json) {
         for f in &report.files {
             let _ = std::fs::remove_file(f);
         }
         return Err(format!("{}: cannot write the stats: {e}", stats.display()).into());
     }
-    work::retire(&args.out)?;
-    if !args.quiet {
-        summary(args, &report, transport, threads);
+    if args.merge.is_empty() {
+        work::retire(&work_dir(&args.out, None))?;
     }
     Ok(())
 }
@@ -301,7 +335,9 @@ fn summary(args: &ProbesArgs, r: &ProbeReport, transport: ProbeTransport, thread
         args.out.display(),
         r.probes,
         r.clusters,
-        if r.batches_resumed > 0 {
+        if !args.merge.is_empty() {
+            format!(", merged from {} shards", args.merge.len())
+        } else if r.batches_resumed > 0 {
             format!(", {} batches resumed", r.batches_resumed)
         } else {
             String::new()

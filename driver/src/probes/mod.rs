@@ -41,6 +41,7 @@ use self::placement::{CoarseGrid, Placement, PlacementReport, PlacementSettings,
 use self::sh::Sh9;
 use self::work::{Batch, ProbeWork};
 use crate::bake::settings::Transport;
+use crate::bake::shard::Shard;
 use crate::bake::workdir::BakeRecord;
 use crate::bvh::Preset;
 use crate::render::Lightmap;
@@ -162,6 +163,12 @@ pub struct WorkOptions {
     pub batch_clusters: usize,
     /// Stop as Ctrl-C does once this run has baked this many batches (tests).
     pub stop_after: Option<usize>,
+    /// Bake only this shard's batches into its own work directory, and write no probe file
+    /// (`--shard K/N`; [`work::owned`]).
+    pub shard: Option<Shard>,
+    /// Bake nothing: assemble the probe file from these shards' work directories
+    /// (`--merge`).
+    pub merge: Vec<PathBuf>,
 }
 
 /// Places and bakes the probes of the level `texels` was prepared from, writes them to
@@ -226,11 +233,19 @@ pub fn bake_probes(
     let manifest = work::ProbeManifest::new(
         &options.texels,
         options.record.clone(),
-        report.probes,
-        report.clusters,
-        batches.len() as u64,
+        (report.probes, report.clusters, batches.len() as u64),
+        options.shard,
     );
-    let work = work::open(out, &manifest, options.resume).map_err(ProbeError::Work)?;
+    let work = if options.merge.is_empty() {
+        work::open(
+            &work::work_dir(out, options.shard),
+            &manifest,
+            options.resume,
+        )
+    } else {
+        work::open_merge(&options.merge, &manifest)
+    }
+    .map_err(ProbeError::Work)?;
     let baker = Baker {
         world: &world,
         lightmap,
@@ -239,6 +254,11 @@ pub fn bake_probes(
         dering: settings.dering,
     };
     report.batches_resumed = baker.bake_missing(&work, &batches, options, cancel)?;
+    if options.shard.is_some() {
+        report.seconds.gather = clock.elapsed().as_secs_f64();
+        report.seconds.total = all.elapsed().as_secs_f64();
+        return Ok(report);
+    }
     let header = probe_header(settings, &gather, &placement.grid);
     let (count, mut errors, coarse_sh) =
         baker.assemble(&work, &batches, out, header, settings.volume)?;
@@ -338,8 +358,10 @@ impl Baker<'_> {
         out
     }
 
-    /// Bakes and keeps every batch the work directory lacks, in order; how many it had.
-    /// Stops between batches on `cancel` (or after `options.stop_after` batches).
+    /// Bakes and keeps every batch (of the shard's, under `--shard`) the work directory
+    /// lacks, in order; how many it had. Stops between batches on `cancel` (or after
+    /// `options.stop_after` batches). A merge bakes nothing: a batch no shard holds is an
+    /// error.
     fn bake_missing(
         &self,
         work: &ProbeWork,
@@ -348,19 +370,27 @@ impl Baker<'_> {
         cancel: &AtomicBool,
     ) -> Result<u64, ProbeError> {
         let (mut resumed, mut baked) = (0, 0);
-        for (i, batch) in batches.iter().enumerate() {
-            if work.read(i, &self.positions(batch)).is_some() {
+        let mine = work::owned(options.shard, batches.len());
+        for i in mine.clone() {
+            if work.read(i, &self.positions(batches[i])).is_some() {
                 resumed += 1;
                 continue;
+            }
+            if !options.merge.is_empty() {
+                return Err(ProbeError::Work(format!(
+                    "batch {i} of {} is in none of the shards' work directories given ({}): finish the shard that bakes it (--resume) before merging",
+                    batches.len(),
+                    work::list(&options.merge)
+                )));
             }
             if cancel.load(Ordering::Relaxed) || options.stop_after == Some(baked) {
                 return Err(ProbeError::Interrupted {
                     done: (resumed + baked) as u64,
-                    total: batches.len() as u64,
+                    total: mine.len() as u64,
                     dir: work.dir().to_owned(),
                 });
             }
-            work.write(i, &self.bake(batch))
+            work.write(i, &self.bake(batches[i]))
                 .map_err(ProbeError::Write)?;
             baked += 1;
         }

@@ -6,6 +6,10 @@
 //! `--resume` checks the manifest and bakes only the missing batches. The probe file is
 //! assembled from the batches in file order only once all are there, so nothing at the
 //! final path ever looks complete before it is.
+//!
+//! A shard (`--shard K/N`, docs/probes.md, "Shards") bakes its own contiguous run of batches
+//! ([`owned`]) into `LEVEL.probes.shard-K-of-N/` and stops there; `--merge` reads the batches
+//! from every shard's directory ([`open_merge`]) and assembles the same file.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -14,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::file::{ProbeRecord, RECORD_BYTES};
 use super::gather::GatherCount;
+use crate::bake::shard::Shard;
 use crate::bake::workdir::BakeRecord;
 use crate::hash::{fnv1a64, fnv1a64_more};
 
@@ -36,21 +41,23 @@ pub struct ProbeManifest {
     pub clusters: u64,
     /// Batches of clusters, one file each when done.
     pub batches: u64,
+    /// The shard this directory holds, `[K, N]` (`None`: the whole bake).
+    pub shard: Option<[u32; 2]>,
     /// Everything that changes the probes' bits, by name, so that `--resume` of a different
     /// bake names what differs.
     pub record: BakeRecord,
 }
 
 impl ProbeManifest {
-    /// The manifest of a bake of `record` over `texels`, placing `probes` probes in
-    /// `clusters` clusters and `batches` batches.
+    /// The manifest of a bake (or of shard `shard` of one) of `record` over `texels`,
+    /// placing `probes` probes in `clusters` clusters and `batches` batches. The identity is
+    /// the bake's, the same in every shard.
     #[must_use]
     pub fn new(
         texels: &Path,
         record: BakeRecord,
-        probes: u64,
-        clusters: u64,
-        batches: u64,
+        (probes, clusters, batches): (u64, u64, u64),
+        shard: Option<Shard>,
     ) -> Self {
         Self {
             texels: texels.to_owned(),
@@ -58,6 +65,7 @@ impl ProbeManifest {
             probes,
             clusters,
             batches,
+            shard: shard.map(|s| [s.index, s.count]),
             record,
         }
     }
@@ -95,21 +103,45 @@ pub struct Batch {
     pub count: GatherCount,
 }
 
-/// The work directory of the probe file `out`: `OUT.bake/`.
+/// The work directory of the probe file `out`: `OUT.bake/`, or `OUT.shard-K-of-N/` for
+/// shard K of N.
 #[must_use]
-pub fn work_dir(out: &Path) -> PathBuf {
+pub fn work_dir(out: &Path, shard: Option<Shard>) -> PathBuf {
     let mut name = out.as_os_str().to_owned();
-    name.push(".bake");
+    match shard {
+        None => name.push(".bake"),
+        Some(s) => name.push(format!(".shard-{}-of-{}", s.index, s.count)),
+    }
     PathBuf::from(name)
 }
 
-/// An open work directory.
+/// The batches shard `shard` of `batches` bakes (all of them for `None`): one contiguous run
+/// in file order, the runs' lengths differing by at most one.
+#[must_use]
+pub fn owned(shard: Option<Shard>, batches: usize) -> std::ops::Range<usize> {
+    let Some(shard) = shard else {
+        return 0..batches;
+    };
+    let at = |k: u32| batches * k as usize / shard.count.max(1) as usize;
+    at(shard.index)..at(shard.index + 1)
+}
+
+/// `DIR1, DIR2, …`, for messages.
+#[must_use]
+pub fn list(dirs: &[PathBuf]) -> String {
+    dirs.iter()
+        .map(|d| d.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// An open work directory (for a merge, the shards' directories, read only).
 pub struct ProbeWork {
-    dir: PathBuf,
+    dirs: Vec<PathBuf>,
     id: u64,
 }
 
-/// Opens the work directory of `out` for the bake `manifest` describes: creates it (with its
+/// Opens the work directory `dir` for the bake `manifest` describes: creates it (with its
 /// manifest, appearing whole) when there is none; with `resume`, continues the one there if
 /// its manifest is this bake's. Refused, with a message naming the directory: one there
 /// without `resume` (nothing of it is touched), one of a different bake (each difference
@@ -117,14 +149,13 @@ pub struct ProbeWork {
 ///
 /// # Errors
 /// The message.
-pub fn open(out: &Path, manifest: &ProbeManifest, resume: bool) -> Result<ProbeWork, String> {
-    let dir = work_dir(out);
+pub fn open(dir: &Path, manifest: &ProbeManifest, resume: bool) -> Result<ProbeWork, String> {
     let work = ProbeWork {
-        dir: dir.clone(),
+        dirs: vec![dir.to_owned()],
         id: manifest.id(),
     };
     if !dir.exists() {
-        create(&dir, manifest)?;
+        create(dir, manifest)?;
         return Ok(work);
     }
     if !resume {
@@ -133,7 +164,7 @@ pub fn open(out: &Path, manifest: &ProbeManifest, resume: bool) -> Result<ProbeW
             dir.display()
         ));
     }
-    let found = read_manifest(&dir)?;
+    let found = read_manifest(dir)?;
     if found.probe_id != manifest.probe_id {
         return Err(format!(
             "{}: --resume of a different probe bake{}; delete {} to start over",
@@ -144,6 +175,52 @@ pub fn open(out: &Path, manifest: &ProbeManifest, resume: bool) -> Result<ProbeW
     }
     work.remove_scratch();
     Ok(work)
+}
+
+/// The shards' directories `dirs`, read only, for a merge of the bake `manifest` describes:
+/// each must be a shard of this bake (each difference named), all of one count N, every shard
+/// 0 … N − 1 given once.
+///
+/// # Errors
+/// A message naming the directory (or the shard) at fault.
+pub fn open_merge(dirs: &[PathBuf], manifest: &ProbeManifest) -> Result<ProbeWork, String> {
+    let mut seen: Vec<[u32; 2]> = Vec::new();
+    for dir in dirs {
+        let found = read_manifest(dir)?;
+        if found.probe_id != manifest.probe_id {
+            return Err(format!(
+                "{}: --merge of a shard of a different probe bake{}",
+                dir.display(),
+                what_differs(&found, manifest)
+            ));
+        }
+        let Some([k, n]) = found.shard else {
+            return Err(format!(
+                "{}: not a shard's work directory (a whole bake's: finish it with --resume)",
+                dir.display()
+            ));
+        };
+        if let Some([_, m]) = seen.first().filter(|[_, m]| *m != n) {
+            return Err(format!(
+                "{}: shard {k}/{n}, but the shards before it are of {m}",
+                dir.display()
+            ));
+        }
+        if seen.contains(&[k, n]) {
+            return Err(format!("{}: shard {k}/{n} is given twice", dir.display()));
+        }
+        seen.push([k, n]);
+    }
+    let n = seen.first().map_or(1, |[_, n]| *n);
+    if let Some(k) = (0..n).find(|k| !seen.contains(&[*k, n])) {
+        return Err(format!(
+            "shard {k}/{n} is missing: give every shard's work directory (OUT.shard-K-of-{n})"
+        ));
+    }
+    Ok(ProbeWork {
+        dirs: dirs.to_vec(),
+        id: manifest.id(),
+    })
 }
 
 /// `: --spp was 256, now 64; …`, or why the identities differ when no field says.
@@ -208,17 +285,16 @@ fn create(dir: &Path, manifest: &ProbeManifest) -> Result<(), String> {
     Ok(())
 }
 
-/// Removes the work directory of `out` once its probe file, volume and stats are written. It
+/// Removes the work directory `dir` once its probe file, volume and stats are written. It
 /// is renamed out of the way first, so a stop during the removal leaves no half-deleted work
 /// directory for `--resume` to refuse.
 ///
 /// # Errors
 /// A message naming the directory.
-pub fn retire(out: &Path) -> Result<(), String> {
-    let dir = work_dir(out);
-    let retired = crate::atomic::temporary_name(&dir);
+pub fn retire(dir: &Path) -> Result<(), String> {
+    let retired = crate::atomic::temporary_name(dir);
     let _ = std::fs::remove_dir_all(&retired);
-    std::fs::rename(&dir, &retired)
+    std::fs::rename(dir, &retired)
         .and_then(|()| std::fs::remove_dir_all(&retired))
         .map_err(|e| {
             format!(
@@ -229,19 +305,30 @@ pub fn retire(out: &Path) -> Result<(), String> {
 }
 
 impl ProbeWork {
-    /// The directory.
+    /// The directory (for a merge, the first shard's).
     #[must_use]
     pub fn dir(&self) -> &Path {
-        &self.dir
+        &self.dirs[0]
     }
 
+    /// Batch `batch`'s file in `dir`.
+    fn batch_in(dir: &Path, batch: usize) -> PathBuf {
+        dir.join(format!("batch-{batch:06}.bin"))
+    }
+
+    /// Where batch `batch` is: the first of the directories that has it (the work
+    /// directory's own path when none has).
     fn batch_path(&self, batch: usize) -> PathBuf {
-        self.dir.join(format!("batch-{batch:06}.bin"))
+        self.dirs
+            .iter()
+            .map(|d| Self::batch_in(d, batch))
+            .find(|p| p.exists())
+            .unwrap_or_else(|| Self::batch_in(self.dir(), batch))
     }
 
     /// Temporary files a stopped write left (`.NAME.tmp-PID`): never a finished batch.
     fn remove_scratch(&self) {
-        let Ok(entries) = std::fs::read_dir(&self.dir) else {
+        let Ok(entries) = std::fs::read_dir(self.dir()) else {
             return;
         };
         for entry in entries.flatten() {
@@ -256,7 +343,7 @@ impl ProbeWork {
     /// # Errors
     /// A message naming the file.
     pub fn write(&self, batch: usize, done: &Batch) -> Result<(), String> {
-        let path = self.batch_path(batch);
+        let path = Self::batch_in(self.dir(), batch);
         crate::atomic::write(&path, batch_bytes(self.id, batch, done))
             .map_err(|e| format!("{}: cannot write the probe batch: {e}", path.display()))
     }
