@@ -470,10 +470,7 @@ fn a_stopped_probe_bake_resumes_to_the_same_bytes_and_other_settings_are_refused
         assert_eq!(snapshot(dir), kept, "a refused resume changed files");
     };
     refused(&["--spp", "32"], "--spp was 64, now 32");
-    refused(
-        &["--sun", "-0.8,1,-0.2:40"],
-        "--resume of a different probe bake",
-    );
+    refused(&["--sun", "-0.8,1,-0.2:40"], "--sun was none, now");
     refused(&["--dering"], "--dering was off, now on");
     let e = fails_with(1, &probe_args(&scene, &texels, &lightmap, &out, &[]));
     assert!(e.contains(s(&work)) && e.contains("pass --resume"), "{e}");
@@ -596,8 +593,9 @@ fn a_killed_probe_bake_resumes_to_the_same_bytes() {
 
 /// Shards K/N of N = 1, 2, 3, each baked by its own process (publishing nothing at the final
 /// paths), merged, write the same probe file, volume and stats (timings apart) as one process;
-/// a merge missing a shard, or with a shard of other settings, is refused (exit 1, the message
-/// naming the shard or its directory) and publishes nothing.
+/// a merge missing a shard, with a shard of other settings or with a directory that is not a
+/// shard's is refused (exit 1, the message naming the shard or its directory), `--shard 3/3`
+/// too (exit 2), and nothing is published.
 #[test]
 fn shards_merge_to_the_bytes_of_one_bake() {
     let tmp = tempfile::tempdir().unwrap();
@@ -655,6 +653,14 @@ fn shards_merge_to_the_bytes_of_one_bake() {
                 e.contains(s(&other_dir)) && e.contains("--spp was 32, now 64"),
                 "{e}"
             );
+            let nowhere = sub.join("nowhere");
+            let e = fails_with(1, &merge(std::slice::from_ref(&nowhere)));
+            assert!(e.contains(s(&nowhere)) && e.contains("manifest"), "{e}");
+            let e = fails_with(
+                2,
+                &probe_args(&scene, &texels, &lightmap, &out, &["--shard", "3/3"]),
+            );
+            assert!(e.contains("3/3"), "{e}");
             assert!(!out.exists() && !volume_path(&out, 0).exists());
         }
         succeeds(&merge(&shards));

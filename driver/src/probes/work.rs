@@ -164,7 +164,8 @@ pub fn open(dir: &Path, manifest: &ProbeManifest, resume: bool) -> Result<ProbeW
             dir.display()
         ));
     }
-    let found = read_manifest(dir)?;
+    let found =
+        read_manifest(dir).map_err(|e| format!("{e}; delete {} to start over", dir.display()))?;
     if found.probe_id != manifest.probe_id {
         return Err(format!(
             "{}: --resume of a different probe bake{}; delete {} to start over",
@@ -249,18 +250,12 @@ fn read_manifest(dir: &Path) -> Result<ProbeManifest, String> {
     let path = manifest_path(dir);
     let text = std::fs::read_to_string(&path).map_err(|e| {
         format!(
-            "{}: cannot read the probe bake's manifest: {e}; delete {} to start over",
-            path.display(),
-            dir.display()
+            "{}: cannot read the probe bake's manifest: {e}",
+            path.display()
         )
     })?;
-    serde_json::from_str(&text).map_err(|e| {
-        format!(
-            "{}: not a probe bake's manifest ({e}); delete {} to start over",
-            path.display(),
-            dir.display()
-        )
-    })
+    serde_json::from_str(&text)
+        .map_err(|e| format!("{}: not a probe bake's manifest ({e})", path.display()))
 }
 
 /// The directory appears with its manifest or not at all: made under a temporary name and
