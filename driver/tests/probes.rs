@@ -3,7 +3,7 @@
 //! baked; a probe just above the floor against the floor's own baked texel; probes inside
 //! the block not placed; the same bytes on one thread and two; bad input named, nothing
 //! written; `render` drawing the probes and a sphere they light; a bake stopped part-way
-//! (twice, or killed) and resumed writing the same bytes as one never stopped, and a resume
+//! (twice, by Ctrl-C, or killed) and resumed writing the same bytes as one never stopped, and a resume
 //! of other settings, lights or lightmap refused with the work kept; shards merged into the
 //! bytes of one bake.
 
@@ -670,4 +670,55 @@ fn shards_merge_to_the_bytes_of_one_bake() {
             "{n} shards merged differ from one bake"
         );
     }
+}
+
+/// Ctrl-C (SIGINT) while the batches are baked: the batch in flight finishes, the command
+/// exits 130 saying how to resume, nothing is published at the final paths, and `--resume`
+/// ends with the same bytes as a bake never stopped.
+#[test]
+fn a_probe_bake_stopped_by_ctrl_c_resumes_to_the_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
+    let (whole_dir, cut_dir) = (dir.join("whole"), dir.join("cut"));
+    std::fs::create_dir_all(&whole_dir).unwrap();
+    std::fs::create_dir_all(&cut_dir).unwrap();
+    let whole = whole_dir.join("room.probes");
+    succeeds(&probe_args(&scene, &texels, &lightmap, &whole, &[]));
+    let out = cut_dir.join("room.probes");
+    let child = std::process::Command::new(BIN)
+        .args(probe_args(
+            &scene,
+            &texels,
+            &lightmap,
+            &out,
+            &["--threads", "1"],
+        ))
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first = work_dir(&out).join("batch-000001.bin");
+    let start = std::time::Instant::now();
+    while !first.exists() && start.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let sent = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let done = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&done.stderr);
+    if done.status.success() {
+        eprintln!("the bake finished before Ctrl-C reached it: only its bytes are compared");
+    } else {
+        assert_eq!(done.status.code(), Some(130), "{err}");
+        assert!(
+            err.contains("interrupted after") && err.contains("--resume"),
+            "{err}"
+        );
+        assert_eq!(std::fs::read_dir(&cut_dir).unwrap().count(), 1, "{err}");
+        succeeds(&probe_args(&scene, &texels, &lightmap, &out, &["--resume"]));
+    }
+    assert_eq!(published(&out), published(&whole));
 }

@@ -499,6 +499,26 @@ pub fn record(
 mod tests {
     use super::*;
 
+    /// The shards' runs of batches are contiguous, in order, cover every batch once, and
+    /// differ in length by at most one; the whole bake owns them all.
+    #[test]
+    fn the_shards_split_the_batches_into_contiguous_runs() {
+        for batches in 0..20 {
+            assert_eq!(owned(None, batches), 0..batches);
+            for count in 1..6 {
+                let runs: Vec<_> = (0..count)
+                    .map(|index| owned(Some(Shard { index, count }), batches))
+                    .collect();
+                assert_eq!(runs[0].start, 0);
+                assert_eq!(runs[runs.len() - 1].end, batches);
+                assert!(runs.windows(2).all(|w| w[0].end == w[1].start));
+                let lengths = runs.iter().map(ExactSizeIterator::len);
+                let (lo, hi) = (lengths.clone().min().unwrap(), lengths.max().unwrap());
+                assert!(hi - lo <= 1, "{batches} batches in {count}: {runs:?}");
+            }
+        }
+    }
+
     /// A batch reads back as written; a flipped byte, another bake's stamp or another index
     /// is not taken.
     #[test]
