@@ -1,6 +1,7 @@
 //! `guidebake probes TEXELS --scene SCENE --lightmap OUT.exr -o LEVEL.probes`: light probes
 //! placed over the level and baked with the guided gather ([`crate::probes`];
-//! docs/probes.md).
+//! docs/probes.md); `--resume` continues a stopped bake, `--shard K/N` bakes a share and
+//! `--merge` joins the shards ([`crate::probes::work`]).
 
 use std::path::PathBuf;
 
@@ -194,8 +195,10 @@ fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError
 ///
 /// # Errors
 /// A wrong command line (exit 2); an unreadable scene, texel file, lightmap or points file,
-/// a level no probe can be placed in, an unwritable output (exit 1): each named. Nothing is
-/// left behind on failure.
+/// a level no probe can be placed in, an unwritable output, a work directory there without
+/// `--resume` or of another bake, shards to merge that are not all this bake's (exit 1):
+/// each named; Ctrl-C (exit 130), the finished batches kept for `--resume`. Nothing is ever
+/// left at the final paths on failure.
 pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
     check_args(args)?;
     let files = probe_files(args)?;

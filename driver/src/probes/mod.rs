@@ -12,14 +12,15 @@
 //! - [`field`]: probes interpolated at any point, as an engine does.
 //! - [`view`]: `render`'s probes and its lit test sphere.
 //! - [`work`]: the work directory that keeps each finished batch, so that `--resume`
-//!   continues a stopped bake.
+//!   continues a stopped bake, and the shards' (`--shard`, `--merge`).
 //!
 //! [`bake_probes`] runs them in order: placement, then the clusters in batches on every core,
 //! each batch kept in the work directory as it completes (what is held is the probes'
 //! positions, one batch's results and the coarse grid's SH), then the probe file assembled
 //! from the batches in file order, then the volume. Every random number derives from (seed,
-//! probe id, iteration, sample): the file is the same bytes on any thread count, and a bake
-//! stopped and resumed writes the same bytes as one never stopped.
+//! probe id, iteration, sample): the file is the same bytes on any thread count, a bake
+//! stopped and resumed writes the same bytes as one never stopped, and N shards merged the
+//! same bytes as one process.
 
 pub mod field;
 pub mod file;
@@ -131,8 +132,8 @@ pub enum ProbeError {
     /// The BVH could not be built.
     #[error(transparent)]
     Bvh(#[from] crate::bvh::BvhError),
-    /// The work directory is another bake's, or is there without `--resume` (the message
-    /// names it).
+    /// The work directory is another bake's, or is there without `--resume`; a merge's shards
+    /// are not all of this bake, not all given, or not finished (the message names it).
     #[error("{0}")]
     Work(String),
     /// Ctrl-C (or the test hook [`WorkOptions::stop_after`]): the finished batches are kept.
@@ -175,7 +176,9 @@ pub struct WorkOptions {
 /// `out` (and the volume beside it), and reports what it did. `lightmap` is what gather hits
 /// read under [`ProbeTransport::Lightmap`]; without one they trace paths. Each batch of
 /// clusters is kept in the work directory as it finishes ([`work`]); the caller removes it
-/// ([`work::retire`]) once it has written the stats.
+/// ([`work::retire`]) once it has written the stats. Under [`WorkOptions::shard`] only the
+/// shard's batches are baked and nothing is written at `out`; under [`WorkOptions::merge`]
+/// nothing is baked and the file is assembled from the shards' batches.
 ///
 /// # Errors
 /// [`ProbeError`]: a spacing the level cannot take, a work directory of another bake, a file
@@ -230,22 +233,8 @@ pub fn bake_probes(
     let clusters: Vec<_> = placement.clusters().collect();
     report.clusters = clusters.len() as u64;
     let batches: Vec<_> = clusters.chunks(options.batch_clusters.max(1)).collect();
-    let manifest = work::ProbeManifest::new(
-        &options.texels,
-        options.record.clone(),
-        (report.probes, report.clusters, batches.len() as u64),
-        options.shard,
-    );
-    let work = if options.merge.is_empty() {
-        work::open(
-            &work::work_dir(out, options.shard),
-            &manifest,
-            options.resume,
-        )
-    } else {
-        work::open_merge(&options.merge, &manifest)
-    }
-    .map_err(ProbeError::Work)?;
+    let counts = (report.probes, report.clusters, batches.len() as u64);
+    let work = open_work(out, options, counts)?;
     let baker = Baker {
         world: &world,
         lightmap,
@@ -280,6 +269,28 @@ pub fn bake_probes(
     report.seconds.volume = clock.elapsed().as_secs_f64();
     report.seconds.total = all.elapsed().as_secs_f64();
     Ok(report)
+}
+
+/// The work directory of this bake (or shard), or the shards' for a merge, checked against
+/// the bake `options` describes, which places `counts` (probes, clusters, batches).
+fn open_work(
+    out: &Path,
+    options: &WorkOptions,
+    counts: (u64, u64, u64),
+) -> Result<ProbeWork, ProbeError> {
+    let manifest = work::ProbeManifest::new(
+        &options.texels,
+        options.record.clone(),
+        counts,
+        options.shard,
+    );
+    if options.merge.is_empty() {
+        let dir = work::work_dir(out, options.shard);
+        work::open(&dir, &manifest, options.resume)
+    } else {
+        work::open_merge(&options.merge, &manifest)
+    }
+    .map_err(ProbeError::Work)
 }
 
 /// The probe file's header for a bake of `settings` gathering with `gather`.

@@ -33,7 +33,8 @@ const BATCH_HEADER_BYTES: usize = 8 + 8 + 8 + 8 + 5 * 8 + 8;
 pub struct ProbeManifest {
     /// The texel file baked (for messages).
     pub texels: PathBuf,
-    /// [`ProbeManifest::id`] of `record`, hex: what the batch files are stamped with.
+    /// The bake's identity, hex: a hash of `record` (but its version) and the counts, what
+    /// the batch files are stamped with.
     pub probe_id: String,
     /// Probes placed.
     pub probes: u64,
