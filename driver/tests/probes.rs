@@ -2,7 +2,10 @@
 //! constant sky, with a solid block on its floor, prepared, baked, and its probes placed and
 //! baked; a probe just above the floor against the floor's own baked texel; probes inside
 //! the block not placed; the same bytes on one thread and two; bad input named, nothing
-//! written; `render` drawing the probes and a sphere they light.
+//! written; `render` drawing the probes and a sphere they light; a bake stopped part-way
+//! (twice, by Ctrl-C, or killed) and resumed writing the same bytes as one never stopped, and a resume
+//! of other settings, lights or lightmap refused with the work kept; shards merged into the
+//! bytes of one bake.
 
 use std::path::{Path, PathBuf};
 
@@ -13,7 +16,7 @@ use guidebake::scene::Scene;
 use guidebake::texels::TexelFile;
 
 mod cli;
-use cli::{fails, fails_with, s, snapshot, succeeds};
+use cli::{BIN, fails, fails_with, outcome, s, snapshot, succeeds};
 
 /// The sky's radiance.
 const SKY: f32 = 1.0;
@@ -333,4 +336,389 @@ fn bad_input_is_named_and_nothing_is_written() {
         "{e}"
     );
     assert!(!dir.join("v.png").exists());
+}
+
+/// `probes` of the room into `out` at `--spacing 0.25 --spp 64`, one cluster a batch (many
+/// batches), with `extra` options (which replace those).
+fn probe_args(
+    scene: &Path,
+    texels: &Path,
+    lightmap: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> Vec<String> {
+    let mut args: Vec<String> = [
+        "probes",
+        s(texels),
+        "--scene",
+        s(scene),
+        "--lightmap",
+        s(lightmap),
+        "-o",
+        s(out),
+        "--quiet",
+    ]
+    .iter()
+    .map(|a| (*a).to_owned())
+    .collect();
+    for [flag, value] in [
+        ["--spacing", "0.25"],
+        ["--spp", "64"],
+        ["--batch-clusters", "1"],
+    ] {
+        if !extra.contains(&flag) {
+            args.extend([flag.to_owned(), value.to_owned()]);
+        }
+    }
+    args.extend(extra.iter().map(|a| (*a).to_owned()));
+    args
+}
+
+/// The files a probe bake into `out` publishes, by name: the probe file, the volume's three
+/// images, and the stats without their timings (and the files they list, by name).
+fn published(out: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<PathBuf> = vec![out.to_owned()];
+    files.extend((0..3).map(|band| volume_path(out, band)));
+    let mut got: Vec<(String, Vec<u8>)> = files
+        .iter()
+        .map(|f| {
+            let name = f.file_name().unwrap().to_string_lossy().into_owned();
+            (name, std::fs::read(f).unwrap())
+        })
+        .collect();
+    let stats = PathBuf::from(format!("{}.json", out.display()));
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(stats).unwrap()).unwrap();
+    json.as_object_mut().unwrap().remove("seconds");
+    let names: Vec<String> = json["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| {
+            Path::new(f.as_str().unwrap())
+                .file_name()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect();
+    json["files"] = serde_json::json!(names);
+    got.push(("stats".into(), json.to_string().into_bytes()));
+    got
+}
+
+/// The work directory of the probe file `out`.
+fn work_dir(out: &Path) -> PathBuf {
+    PathBuf::from(format!("{}.bake", out.display()))
+}
+
+/// A bake of one cluster a batch, stopped after 3 batches; a resume under other settings,
+/// other lights, another lightmap, and a rerun without `--resume`, refused (exit 1, the
+/// message naming the work directory and what differs, no file changed); stopped again after
+/// 2 more on one thread, then resumed to the end on two: it writes the same probe file,
+/// volume and stats (timings apart) as a bake never stopped of 256 clusters a batch. Nothing
+/// is published at the final paths while it is stopped; the work directory is gone at the end.
+#[test]
+fn a_stopped_probe_bake_resumes_to_the_same_bytes_and_other_settings_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
+    let (whole_dir, cut_dir) = (dir.join("whole"), dir.join("cut"));
+    std::fs::create_dir_all(&whole_dir).unwrap();
+    std::fs::create_dir_all(&cut_dir).unwrap();
+    let whole = whole_dir.join("room.probes");
+    succeeds(&probe_args(
+        &scene,
+        &texels,
+        &lightmap,
+        &whole,
+        &["--batch-clusters", "256"],
+    ));
+    assert!(
+        !work_dir(&whole).exists(),
+        "a finished bake left its work directory"
+    );
+    let clusters = published(&whole);
+
+    let out = cut_dir.join("room.probes");
+    let work = work_dir(&out);
+    let e = fails_with(
+        130,
+        &probe_args(
+            &scene,
+            &texels,
+            &lightmap,
+            &out,
+            &["--stop-after-batches", "3"],
+        ),
+    );
+    assert!(
+        e.contains("interrupted after 3 of") && e.contains(s(&work)) && e.contains("--resume"),
+        "{e}"
+    );
+    assert_eq!(
+        std::fs::read_dir(&cut_dir).unwrap().count(),
+        1,
+        "a stopped bake published something beside its work directory"
+    );
+    let kept = snapshot(dir);
+    let refused = |extra: &[&str], says: &str| {
+        let mut with = vec!["--resume"];
+        with.extend(extra);
+        let e = fails_with(1, &probe_args(&scene, &texels, &lightmap, &out, &with));
+        assert!(e.contains(s(&work)) && e.contains(says), "{e}");
+        assert_eq!(snapshot(dir), kept, "a refused resume changed files");
+    };
+    refused(&["--spp", "32"], "--spp was 64, now 32");
+    refused(&["--sun", "-0.8,1,-0.2:40"], "--sun was none, now");
+    refused(&["--dering"], "--dering was off, now on");
+    let e = fails_with(1, &probe_args(&scene, &texels, &lightmap, &out, &[]));
+    assert!(e.contains(s(&work)) && e.contains("pass --resume"), "{e}");
+    assert_eq!(snapshot(dir), kept);
+    let other_map = dir.join("other.exr");
+    succeeds(&[
+        "bake",
+        s(&texels),
+        "--scene",
+        s(&scene),
+        "-o",
+        s(&other_map),
+        "--spp",
+        "64",
+        "--seed",
+        "1",
+        "--quiet",
+    ]);
+    let kept = snapshot(dir);
+    let e = fails_with(
+        1,
+        &probe_args(&scene, &texels, &other_map, &out, &["--resume"]),
+    );
+    assert!(e.contains(s(&work)) && e.contains("--lightmap was"), "{e}");
+    assert_eq!(snapshot(dir), kept);
+
+    let e = fails_with(
+        130,
+        &probe_args(
+            &scene,
+            &texels,
+            &lightmap,
+            &out,
+            &["--resume", "--threads", "1", "--stop-after-batches", "2"],
+        ),
+    );
+    assert!(e.contains("interrupted after 5 of"), "{e}");
+    assert!(!out.exists());
+    let (_, err) = succeeds(&probe_args(
+        &scene,
+        &texels,
+        &lightmap,
+        &out,
+        &["--resume", "--threads", "2"],
+    ));
+    assert!(!err.contains("warning"), "{err}");
+    assert!(!work.exists(), "a finished resume left its work directory");
+    assert_eq!(published(&out), clusters, "the resumed bake differs");
+}
+
+/// A bake killed (SIGKILL) while it runs leaves nothing at its final paths; `--resume` then
+/// ends with the same bytes as a bake never stopped.
+#[test]
+fn a_killed_probe_bake_resumes_to_the_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
+    let whole = dir.join("whole.probes");
+    succeeds(&probe_args(
+        &scene,
+        &texels,
+        &lightmap,
+        &whole,
+        &["--threads", "1"],
+    ));
+    let out = dir.join("killed.probes");
+    let mut child = std::process::Command::new(BIN)
+        .args(probe_args(
+            &scene,
+            &texels,
+            &lightmap,
+            &out,
+            &["--threads", "1"],
+        ))
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let second = work_dir(&out).join("batch-000002.bin");
+    let start = std::time::Instant::now();
+    while !second.exists() && start.elapsed().as_secs() < 120 {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let killed = child.try_wait().unwrap().is_none();
+    child.kill().unwrap();
+    child.wait().unwrap();
+    if killed {
+        assert!(
+            !out.exists() && !volume_path(&out, 0).exists(),
+            "a killed bake published its file"
+        );
+        let (code, e) = outcome(&probe_args(&scene, &texels, &lightmap, &out, &[]));
+        assert_eq!(code, Some(1), "{e}");
+        assert!(e.contains("pass --resume"), "{e}");
+    } else {
+        eprintln!("the bake finished before it could be killed: only its bytes are compared");
+    }
+    succeeds(&probe_args(&scene, &texels, &lightmap, &out, &["--resume"]));
+    let renamed = |(n, b): (String, Vec<u8>)| {
+        let b = if n == "stats" {
+            String::from_utf8(b)
+                .unwrap()
+                .replace("whole", "killed")
+                .into_bytes()
+        } else {
+            b
+        };
+        (n.replace("whole", "killed"), b)
+    };
+    let a: Vec<_> = published(&whole).into_iter().map(renamed).collect();
+    let b = published(&out);
+    assert_eq!(a.len(), b.len());
+    for ((na, ba), (nb, bb)) in a.iter().zip(&b) {
+        assert_eq!(na, nb);
+        assert!(ba == bb, "{na} differs");
+    }
+}
+
+/// Shards K/N of N = 1, 2, 3, each baked by its own process (publishing nothing at the final
+/// paths), merged, write the same probe file, volume and stats (timings apart) as one process;
+/// a merge missing a shard, with a shard of other settings or with a directory that is not a
+/// shard's is refused (exit 1, the message naming the shard or its directory), `--shard 3/3`
+/// too (exit 2), and nothing is published.
+#[test]
+fn shards_merge_to_the_bytes_of_one_bake() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
+    let whole_dir = dir.join("whole");
+    std::fs::create_dir_all(&whole_dir).unwrap();
+    let whole = whole_dir.join("room.probes");
+    succeeds(&probe_args(&scene, &texels, &lightmap, &whole, &[]));
+    let one = published(&whole);
+    for n in 1..=3 {
+        let sub = dir.join(format!("n{n}"));
+        std::fs::create_dir_all(&sub).unwrap();
+        let out = sub.join("room.probes");
+        let mut shards = Vec::new();
+        for k in 0..n {
+            let shard = format!("{k}/{n}");
+            succeeds(&probe_args(
+                &scene,
+                &texels,
+                &lightmap,
+                &out,
+                &["--shard", &shard],
+            ));
+            shards.push(PathBuf::from(format!("{}.shard-{k}-of-{n}", out.display())));
+            assert!(shards[k].is_dir());
+        }
+        assert_eq!(
+            std::fs::read_dir(&sub).unwrap().count(),
+            n,
+            "a shard published a file"
+        );
+        let merge = |dirs: &[PathBuf]| {
+            let mut extra = vec!["--merge"];
+            extra.extend(dirs.iter().map(|d| s(d)));
+            probe_args(&scene, &texels, &lightmap, &out, &extra)
+        };
+        if n == 3 {
+            let e = fails_with(1, &merge(&shards[..2]));
+            assert!(e.contains("shard 2/3 is missing"), "{e}");
+            let other = sub.join("other.probes");
+            succeeds(&probe_args(
+                &scene,
+                &texels,
+                &lightmap,
+                &other,
+                &["--shard", "2/3", "--spp", "32"],
+            ));
+            let other_dir = PathBuf::from(format!("{}.shard-2-of-3", other.display()));
+            let e = fails_with(
+                1,
+                &merge(&[shards[0].clone(), shards[1].clone(), other_dir.clone()]),
+            );
+            assert!(
+                e.contains(s(&other_dir)) && e.contains("--spp was 32, now 64"),
+                "{e}"
+            );
+            let nowhere = sub.join("nowhere");
+            let e = fails_with(1, &merge(std::slice::from_ref(&nowhere)));
+            assert!(e.contains(s(&nowhere)) && e.contains("manifest"), "{e}");
+            let e = fails_with(
+                2,
+                &probe_args(&scene, &texels, &lightmap, &out, &["--shard", "3/3"]),
+            );
+            assert!(e.contains("3/3"), "{e}");
+            assert!(!out.exists() && !volume_path(&out, 0).exists());
+        }
+        succeeds(&merge(&shards));
+        assert_eq!(
+            published(&out),
+            one,
+            "{n} shards merged differ from one bake"
+        );
+    }
+}
+
+/// Ctrl-C (SIGINT) while the batches are baked: the batch in flight finishes, the command
+/// exits 130 saying how to resume, nothing is published at the final paths, and `--resume`
+/// ends with the same bytes as a bake never stopped.
+#[test]
+fn a_probe_bake_stopped_by_ctrl_c_resumes_to_the_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
+    let (whole_dir, cut_dir) = (dir.join("whole"), dir.join("cut"));
+    std::fs::create_dir_all(&whole_dir).unwrap();
+    std::fs::create_dir_all(&cut_dir).unwrap();
+    let whole = whole_dir.join("room.probes");
+    succeeds(&probe_args(&scene, &texels, &lightmap, &whole, &[]));
+    let out = cut_dir.join("room.probes");
+    let child = std::process::Command::new(BIN)
+        .args(probe_args(
+            &scene,
+            &texels,
+            &lightmap,
+            &out,
+            &["--threads", "1"],
+        ))
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first = work_dir(&out).join("batch-000001.bin");
+    let start = std::time::Instant::now();
+    while !first.exists() && start.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let sent = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let done = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&done.stderr);
+    if done.status.success() {
+        eprintln!("the bake finished before Ctrl-C reached it: only its bytes are compared");
+    } else {
+        assert_eq!(done.status.code(), Some(130), "{err}");
+        assert!(
+            err.contains("interrupted after") && err.contains("--resume"),
+            "{err}"
+        );
+        assert_eq!(std::fs::read_dir(&cut_dir).unwrap().count(), 1, "{err}");
+        succeeds(&probe_args(&scene, &texels, &lightmap, &out, &["--resume"]));
+    }
+    assert_eq!(published(&out), published(&whole));
 }

@@ -1,13 +1,18 @@
 //! `guidebake probes TEXELS --scene SCENE --lightmap OUT.exr -o LEVEL.probes`: light probes
 //! placed over the level and baked with the guided gather ([`crate::probes`];
-//! docs/probes.md).
+//! docs/probes.md); `--resume` continues a stopped bake, `--shard K/N` bakes a share and
+//! `--merge` joins the shards ([`crate::probes::work`]).
 
 use std::path::PathBuf;
 
+use crate::bake::shard::Shard;
 use crate::probes::file::volume_path;
 use crate::probes::gather::{GatherSettings, ProbeTransport};
 use crate::probes::placement::{PlacementSettings, read_points};
-use crate::probes::{ProbeError, ProbeReport, ProbeSettings, bake_probes};
+use crate::probes::work::{self, work_dir};
+use crate::probes::{
+    BATCH_CLUSTERS, ProbeError, ProbeReport, ProbeSettings, WorkOptions, bake_probes,
+};
 use crate::render::Lightmap;
 use crate::scene::TextureOptions;
 use crate::texels::TexelFile;
@@ -78,6 +83,25 @@ pub struct ProbesArgs {
     /// Largest width or height a base-colour texture is kept at (as `bake`'s).
     #[arg(long, default_value_t = TextureOptions::DEFAULT_MAX_SIZE, value_parser = clap::value_parser!(u32).range(1..=65536))]
     pub max_texture_size: u32,
+    /// Continue a stopped probe bake from its work directory (OUT.bake/), baking only the
+    /// batches it lacks; refused if that work is of other settings, lights, texel file,
+    /// scene or lightmap.
+    #[arg(long)]
+    pub resume: bool,
+    /// Clusters a batch (tests: many small batches).
+    #[arg(long, hide = true, default_value_t = BATCH_CLUSTERS as u32, value_parser = clap::value_parser!(u32).range(1..=1 << 20))]
+    pub batch_clusters: u32,
+    /// Stop as Ctrl-C does after baking this many batches (tests).
+    #[arg(long, hide = true)]
+    pub stop_after_batches: Option<usize>,
+    /// Bake only shard K of N (K/N, 0-based): its contiguous run of the batches, kept in
+    /// OUT.shard-K-of-N/; no probe file. Join every shard's with --merge.
+    #[arg(long, value_name = "K/N", conflicts_with = "merge")]
+    pub shard: Option<Shard>,
+    /// Bake nothing: write the probe file (and volume, stats) from these shards' work
+    /// directories (OUT.shard-K-of-N, every K of N), the same bytes as one process's bake.
+    #[arg(long, value_name = "SHARD_DIR", num_args = 1.., conflicts_with = "resume")]
+    pub merge: Vec<PathBuf>,
     /// No summary.
     #[arg(long)]
     pub quiet: bool,
@@ -149,7 +173,13 @@ fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError
                 .reads("the lightmap's atlas preview", &preview);
         }
     }
-    files = files.writes("the probe file (-o)", &args.out);
+    files = files.writes("the probe file (-o)", &args.out).writes_dir(
+        "the probe bake's work directory",
+        &work_dir(&args.out, args.shard),
+    );
+    for dir in &args.merge {
+        files = files.reads("a shard's work directory (--merge)", dir);
+    }
     if args.volume == OnOff::On {
         for band in 0..3 {
             files = files.writes(
@@ -165,8 +195,10 @@ fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError
 ///
 /// # Errors
 /// A wrong command line (exit 2); an unreadable scene, texel file, lightmap or points file,
-/// a level no probe can be placed in, an unwritable output (exit 1): each named. Nothing is
-/// left behind on failure.
+/// a level no probe can be placed in, an unwritable output, a work directory there without
+/// `--resume` or of another bake, shards to merge that are not all this bake's (exit 1):
+/// each named; Ctrl-C (exit 130), the finished batches kept for `--resume`. Nothing is ever
+/// left at the final paths on failure.
 pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
     check_args(args)?;
     let files = probe_files(args)?;
@@ -209,12 +241,27 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
         dering: args.dering,
         volume: args.volume == OnOff::On,
     };
+    let batch_clusters = args.batch_clusters as usize;
+    let options = WorkOptions {
+        resume: args.resume,
+        texels: args.texels.clone(),
+        record: work::record(
+            work::options(&settings, &lightmap_identity(args)?, batch_clusters),
+            &texels,
+            &scene,
+        ),
+        batch_clusters,
+        stop_after: args.stop_after_batches,
+        shard: args.shard,
+        merge: args.merge.clone(),
+    };
     let threads = args.threads.unwrap_or_else(super::every_core);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .map_err(|e| format!("cannot start {threads} worker threads: {e}"))?;
     let cancel = super::interrupt::cancel_flag();
+    let cooperate = super::interrupt::Cooperate::begin();
     let report = pool
         .install(|| {
             bake_probes(
@@ -223,36 +270,81 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
                 lightmap.as_ref(),
                 &args.out,
                 &settings,
+                &options,
                 cancel,
             )
         })
         .map_err(|e| -> super::CmdError {
             match e {
                 ProbeError::Invalid(m) => format!("{}: {m}", args.texels.display()).into(),
-                ProbeError::Interrupted => Box::new(super::Interrupted(e.to_string())),
+                ProbeError::Interrupted { .. } => Box::new(super::Interrupted(e.to_string())),
                 other => Box::new(other),
             }
         })?;
-    let stats = stats_path(&args.out);
-    let json = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
-    if let Err(e) = crate::atomic::write(&stats, json) {
-        for f in &report.files {
-            let _ = std::fs::remove_file(f);
+    drop(cooperate);
+    if let Some(shard) = args.shard {
+        if !args.quiet {
+            eprintln!(
+                "{}: shard {shard} baked ({} of its batches resumed); once every shard is, join them with the same command, --merge and every shard's directory instead of --shard",
+                work_dir(&args.out, Some(shard)).display(),
+                report.batches_resumed
+            );
         }
-        return Err(format!("{}: cannot write the stats: {e}", stats.display()).into());
+        return Ok(());
     }
+    publish(args, &report)?;
     if !args.quiet {
         summary(args, &report, transport, threads);
     }
     Ok(())
 }
 
+/// Writes the stats beside the probe file, then removes the work directory (not the
+/// shards' of a merge: they are the user's to delete).
+fn publish(args: &ProbesArgs, report: &ProbeReport) -> Result<(), super::CmdError> {
+    let stats = stats_path(&args.out);
+    let json = serde_json::to_string_pretty(report).map_err(|e| e.to_string())?;
+    if let Err(e) = crate::atomic::write(&stats, json) {
+        for f in &report.files {
+            let _ = std::fs::remove_file(f);
+        }
+        return Err(format!("{}: cannot write the stats: {e}", stats.display()).into());
+    }
+    if args.merge.is_empty() {
+        work::retire(&work_dir(&args.out, None))?;
+    }
+    Ok(())
+}
+
+/// What the probes read where their rays hit: the lightmap's pages, by the FNV-1a 64 of
+/// their bytes (`none` without `--lightmap`), so that `--resume` over another lightmap is
+/// refused.
+fn lightmap_identity(args: &ProbesArgs) -> Result<String, super::CmdError> {
+    let Some(lightmap) = &args.lightmap else {
+        return Ok("none".into());
+    };
+    let mut hash = crate::hash::fnv1a64(&[]);
+    for (page, _) in super::files::lightmap_files(lightmap, &args.texels) {
+        let bytes = std::fs::read(&page)
+            .map_err(|e| format!("{}: cannot read the lightmap: {e}", page.display()))?;
+        hash = crate::hash::fnv1a64_more(hash, &bytes);
+    }
+    Ok(format!("{hash:016x}"))
+}
+
 fn summary(args: &ProbesArgs, r: &ProbeReport, transport: ProbeTransport, threads: usize) {
     eprintln!(
-        "{}: {} probes in {} clusters ({} lattice and {} listed candidates, {} inside geometry skipped), {} spp {}, hits read {}; {:.2} s on {threads} threads (placement {:.2} s, gather {:.2} s, volume {:.2} s); median relative error {:.3}",
+        "{}: {} probes in {} clusters{} ({} lattice and {} listed candidates, {} inside geometry skipped), {} spp {}, hits read {}; {:.2} s on {threads} threads (placement {:.2} s, gather {:.2} s, volume {:.2} s); median relative error {:.3}",
         args.out.display(),
         r.probes,
         r.clusters,
+        if !args.merge.is_empty() {
+            format!(", merged from {} shards", args.merge.len())
+        } else if r.batches_resumed > 0 {
+            format!(", {} batches resumed", r.batches_resumed)
+        } else {
+            String::new()
+        },
         r.lattice_candidates,
         r.listed_candidates,
         r.skipped_inside_geometry,

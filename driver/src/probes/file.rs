@@ -61,7 +61,7 @@ pub struct ProbeRecord {
 }
 
 impl ProbeRecord {
-    fn to_bytes(self) -> [u8; RECORD_BYTES] {
+    pub(super) fn to_bytes(self) -> [u8; RECORD_BYTES] {
         let mut words = [0f32; RECORD_BYTES / 4];
         words[..3].copy_from_slice(&self.position.to_array());
         words[3] = self.spacing;
@@ -76,7 +76,7 @@ impl ProbeRecord {
         out
     }
 
-    fn from_bytes(b: &[u8]) -> Self {
+    pub(super) fn from_bytes(b: &[u8]) -> Self {
         let w = |i: usize| f32::from_le_bytes(b[4 * i..4 * i + 4].try_into().unwrap_or([0; 4]));
         let mut sh = Sh9::default();
         for (k, c) in sh.c.iter_mut().enumerate() {
