@@ -1,4 +1,4 @@
-//! Lightmap quality on real scenes (docs/lightmaps.md): RMSE of raw and denoised lightmaps
+//! Lightmap quality on real scenes (docs/denoise.md): RMSE of raw and denoised lightmaps
 //! against a 16× reference, and the mean relative jumps across seams before and after
 //! stitching: between the seam's texel pairs, and between the two sides' bilinear values at
 //! the seam's edge points (what a shader shows).

@@ -1,4 +1,4 @@
-//! The denoiser figures of docs/lightmaps.md: raw, `atrous` and `oidn` against a 16× reference
+//! The denoiser figures of docs/denoise.md: raw, `atrous` and `oidn` against a 16× reference
 //! on real scenes, with the time each denoiser adds, the seams' edge jumps, and the spp at
 //! which the raw bake reaches the OIDN-denoised 64-spp error.
 //!
@@ -94,7 +94,7 @@ struct Finished {
 }
 
 #[test]
-#[ignore = "minutes of baking; run by hand for docs/lightmaps.md"]
+#[ignore = "minutes of baking; run by hand for docs/denoise.md"]
 fn denoiser_figures() -> Result<(), Error> {
     let Some(shared) = guidebake::test_support::shared_scenes_dir() else {
         return Ok(());

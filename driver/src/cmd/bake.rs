@@ -48,7 +48,7 @@ pub struct BakeArgs {
     /// À-Trous filter guided by each texel's position, normal and variance; `oidn`, Intel Open
     /// Image Denoise's lightmap network per chart (a build with `--features oidn`;
     /// scripts/oidn/fetch.sh). Off by default: the lightmap is then the estimator's output,
-    /// unbiased and unblurred, as the bench measures (docs/lightmaps.md).
+    /// unbiased and unblurred, as the bench measures (docs/denoise.md).
     #[arg(long, value_enum, default_value_t = Denoise::Off)]
     pub denoise: Denoise,
     /// Directional lightmaps: `sh-l1` adds per texel the L1 spherical harmonics of the

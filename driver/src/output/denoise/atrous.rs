@@ -29,7 +29,7 @@ pub const LEVELS: u32 = 2;
 /// Exponent of the normal weight.
 pub const NORMAL_POWER: i32 = 32;
 /// Luminance edge-stopping width of [`ATrous::default`], in standard errors (the sweep of
-/// docs/lightmaps.md).
+/// docs/denoise.md).
 pub const LUMINANCE_SIGMA: f32 = 2.0;
 /// The B3-spline kernel of each pass.
 const KERNEL: [f32; 5] = [1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];

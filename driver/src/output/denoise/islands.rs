@@ -18,7 +18,7 @@
 use super::{NoisyTexel, Window};
 
 /// The least cosine between the normals of two neighbouring texels of one island (about
-/// 25°; the seam finder's crease, docs/lightmaps.md).
+/// 25°; the seam finder's crease, docs/lightmaps.md, "Seams").
 pub const CREASE_COS: f32 = 0.9;
 
 /// How far apart the centres of two neighbouring texels of one island may lie, in texel

@@ -48,7 +48,7 @@ pub const ROUND: usize = 16;
 /// How many standard errors the output may move from the texel's estimate.
 pub const CLAMP_SIGMAS: f32 = 3.0;
 /// Islands of fewer texels are left as baked: on a level's tiny charts the network, seeing
-/// mostly the dilated fill, raised the error (docs/lightmaps.md).
+/// mostly the dilated fill, raised the error (docs/denoise.md).
 pub const MIN_ISLAND: usize = 32;
 /// `|L1| ≤ √3 · L0` for non-negative radiance in this SH basis (`Y1 / Y0`).
 const L1_BOUND: f32 = 1.732_050_8;
