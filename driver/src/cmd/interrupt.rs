@@ -28,7 +28,7 @@ pub fn install() {
 fn handle() {
     if COOPERATIVE.load(Ordering::SeqCst) && !CANCEL.swap(true, Ordering::SeqCst) {
         eprintln!(
-            "\nguidebake: Ctrl-C: finishing the tiles in flight and keeping the work (Ctrl-C again stops at once)"
+            "\nguidebake: Ctrl-C: finishing the work in flight (tiles, or a batch of probes) and keeping it (Ctrl-C again stops at once)"
         );
         return;
     }
