@@ -386,27 +386,7 @@ pub(super) fn unwrap_layout(
             continue;
         } else {
             // Too big for one page: an atlas per mesh, each on one page.
-            let mut atlases = Vec::with_capacity(to_unwrap.len());
-            for &m in &to_unwrap {
-                let mut c = unwrap::Charted::new(scene, &[m])?;
-                let a = c.pack(scene, d as f32, max)?;
-                per_mesh_seconds += c.seconds();
-                if !fits(&a) {
-                    let shrink = (f64::from(page.0) / f64::from(a.width + 2 * GUTTER))
-                        .min(f64::from(page.1) / f64::from(a.height + 2 * GUTTER));
-                    return Err(resolution_error(format!(
-                        "mesh '{}' unwraps to {}x{} texels at {d:.4} texels/unit, more than a page of {}x{}; --texels-per-unit {:.4} or less fits",
-                        scene.meshes[m].name,
-                        a.width,
-                        a.height,
-                        page.0,
-                        page.1,
-                        0.95 * d * shrink
-                    )));
-                }
-                atlases.push(a);
-            }
-            atlases
+            atlas_per_mesh(scene, &to_unwrap, d, (page, max), &mut per_mesh_seconds)?
         };
         let cs = cells(&kept, d, max);
         let rects: Vec<Option<(u32, u32)>> = atlases
@@ -527,6 +507,64 @@ pub(super) fn unwrap_layout(
         utilisation: 0.0,
     };
     Ok((out, pages, records, d as f32, report))
+}
+
+/// Each of the meshes `to_unwrap` unwrapped into an atlas of its own at density `d`, for pages
+/// of `page` (`max`: the longest chart). When some do not fit a page, the error names the one
+/// that needs the lowest density, how many more do not fit, and a density at which all of
+/// them were packed again and fit: charts longer than a page are scaled down to it, so an
+/// atlas's size at one density under-states what a lower one needs, and the density is
+/// lowered until they do fit (or ten tries say only where the last one stood).
+fn atlas_per_mesh(
+    scene: &Scene,
+    to_unwrap: &[usize],
+    d: f64,
+    (page, max): ((u32, u32), u32),
+    seconds: &mut f64,
+) -> Result<Vec<unwrap::Packed>, PrepareError> {
+    let shrink = |a: &unwrap::Packed| {
+        (f64::from(page.0) / f64::from(a.width + 2 * GUTTER))
+            .min(f64::from(page.1) / f64::from(a.height + 2 * GUTTER))
+    };
+    let mut atlases = Vec::with_capacity(to_unwrap.len());
+    let mut too_big = Vec::new();
+    for &m in to_unwrap {
+        let mut c = unwrap::Charted::new(scene, &[m])?;
+        let a = c.pack(scene, d as f32, max)?;
+        *seconds += c.seconds();
+        if shrink(&a) < 1.0 {
+            too_big.push((m, c, a.width, a.height, shrink(&a)));
+        }
+        atlases.push(a);
+    }
+    let Some(&(m, _, w, h, _)) = too_big.iter().min_by(|x, y| x.4.total_cmp(&y.4)) else {
+        return Ok(atlases);
+    };
+    let mut fit = d * too_big.iter().map(|t| t.4).fold(1.0, f64::min);
+    for _ in 0..10 {
+        fit *= 0.95;
+        let mut least = 1.0f64;
+        for (_, c, ..) in &mut too_big {
+            least = least.min(shrink(&c.pack(scene, fit as f32, max)?));
+        }
+        if least >= 1.0 {
+            break;
+        }
+        fit *= least;
+    }
+    let fit = (fit * 1e4).floor() / 1e4; // printed to four decimals, never above what fit
+    let others = match too_big.len() - 1 {
+        0 => String::new(),
+        1 => " (and 1 other mesh)".into(),
+        n => format!(" (and {n} other meshes)"),
+    };
+    Err(PrepareError::Resolution {
+        path: scene.path.clone(),
+        message: format!(
+            "mesh '{}'{others} unwraps to {w}x{h} texels at {d:.4} texels/unit, more than a page of {}x{}; --texels-per-unit {fit:.4} or less fits",
+            scene.meshes[m].name, page.0, page.1
+        ),
+    })
 }
 
 /// A density at which what needed `n` pages at density `d` needs at most 4096 (pages hold

@@ -422,9 +422,23 @@ mod tests {
                     .iter()
                     .all(|v| v.cmpge(Vec2::ZERO).all() && v.cmple(Vec2::ONE).all())))
         );
-        // A room alone too big for a page is an error naming it.
+        // A room alone too big for a page is an error naming it, and how many more are; the
+        // density it suggests fits every mesh.
         let e = unwrap_layout(&s, Resolution::TexelsPerUnit(450.0), &[true, true]).unwrap_err();
-        assert!(e.to_string().contains("mesh 'room' unwraps to"), "{e}");
+        let message = e.to_string();
+        assert!(
+            message.contains("mesh 'room' (and 1 other mesh) unwraps to"),
+            "{message}"
+        );
+        let fit: f32 = message
+            .rsplit("--texels-per-unit ")
+            .next()
+            .and_then(|t| t.split(' ').next())
+            .and_then(|t| t.parse().ok())
+            .unwrap_or_else(|| panic!("no density in {message}"));
+        assert!(fit < 450.0, "{message}");
+        unwrap_layout(&s, Resolution::TexelsPerUnit(fit), &[true, true])
+            .unwrap_or_else(|e| panic!("{fit} texels/unit, suggested by '{message}': {e}"));
     }
 
     /// Two 10 m squares with their own UVs over the unit square, as two meshes.
