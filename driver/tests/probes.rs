@@ -655,7 +655,10 @@ fn shards_merge_to_the_bytes_of_one_bake() {
             );
             let nowhere = sub.join("nowhere");
             let e = fails_with(1, &merge(std::slice::from_ref(&nowhere)));
-            assert!(e.contains(s(&nowhere)) && e.contains("manifest"), "{e}");
+            assert!(
+                e.contains(s(&nowhere)) && e.contains("no such shard work directory"),
+                "{e}"
+            );
             let e = fails_with(
                 2,
                 &probe_args(&scene, &texels, &lightmap, &out, &["--shard", "3/3"]),

@@ -188,6 +188,12 @@ pub fn open(dir: &Path, manifest: &ProbeManifest, resume: bool) -> Result<ProbeW
 pub fn open_merge(dirs: &[PathBuf], manifest: &ProbeManifest) -> Result<ProbeWork, String> {
     let mut seen: Vec<[u32; 2]> = Vec::new();
     for dir in dirs {
+        if !dir.is_dir() {
+            return Err(format!(
+                "{}: no such shard work directory (each --shard K/N run writes OUT.shard-K-of-N)",
+                dir.display()
+            ));
+        }
         let found = read_manifest(dir)?;
         if found.probe_id != manifest.probe_id {
             return Err(format!(
