@@ -338,6 +338,29 @@ fn bad_input_is_named_and_nothing_is_written() {
     assert!(!dir.join("v.png").exists());
 }
 
+/// Starts `guidebake` with `args` and waits until `file` (a batch of its work) exists, the
+/// command ends, or two minutes pass; `true` while it is still running.
+fn start_until(
+    args: &[String],
+    stderr: std::process::Stdio,
+    file: &Path,
+) -> (std::process::Child, bool) {
+    let mut child = std::process::Command::new(BIN)
+        .args(args)
+        .stderr(stderr)
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while !file.exists() && start.elapsed().as_secs() < 120 {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let running = child.try_wait().unwrap().is_none();
+    (child, running)
+}
+
 /// `probes` of the room into `out` at `--spacing 0.25 --spp 64`, one cluster a batch (many
 /// batches), with `extra` options (which replace those).
 fn probe_args(
@@ -537,26 +560,9 @@ fn a_killed_probe_bake_resumes_to_the_same_bytes() {
         &["--threads", "1"],
     ));
     let out = dir.join("killed.probes");
-    let mut child = std::process::Command::new(BIN)
-        .args(probe_args(
-            &scene,
-            &texels,
-            &lightmap,
-            &out,
-            &["--threads", "1"],
-        ))
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
+    let args = probe_args(&scene, &texels, &lightmap, &out, &["--threads", "1"]);
     let second = work_dir(&out).join("batch-000002.bin");
-    let start = std::time::Instant::now();
-    while !second.exists() && start.elapsed().as_secs() < 120 {
-        if child.try_wait().unwrap().is_some() {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    let killed = child.try_wait().unwrap().is_none();
+    let (mut child, killed) = start_until(&args, std::process::Stdio::null(), &second);
     child.kill().unwrap();
     child.wait().unwrap();
     if killed {
@@ -689,27 +695,16 @@ fn a_probe_bake_stopped_by_ctrl_c_resumes_to_the_same_bytes() {
     let whole = whole_dir.join("room.probes");
     succeeds(&probe_args(&scene, &texels, &lightmap, &whole, &[]));
     let out = cut_dir.join("room.probes");
-    let child = std::process::Command::new(BIN)
-        .args(probe_args(
-            &scene,
-            &texels,
-            &lightmap,
-            &out,
-            &["--threads", "1"],
-        ))
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
+    let args = probe_args(&scene, &texels, &lightmap, &out, &["--threads", "1"]);
     let first = work_dir(&out).join("batch-000001.bin");
-    let start = std::time::Instant::now();
-    while !first.exists() && start.elapsed().as_secs() < 120 {
-        std::thread::sleep(std::time::Duration::from_millis(2));
+    let (child, running) = start_until(&args, std::process::Stdio::piped(), &first);
+    if running {
+        let sent = std::process::Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(sent.success());
     }
-    let sent = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(sent.success());
     let done = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&done.stderr);
     if done.status.success() {

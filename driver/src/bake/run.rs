@@ -138,19 +138,7 @@ pub struct PhaseSeconds {
 fn bake_record(job: &BakeJob, texels: &TexelFile, scene: &Scene) -> BakeRecord {
     let mut options = job.settings.options();
     options.insert("--aux".into(), if job.aux { "on" } else { "off" }.into());
-    BakeRecord {
-        options,
-        texels: format!("{:016x}", texels.identity()),
-        geometry: format!("{:016x}", scene.geometry_fingerprint()),
-        materials: format!("{:016x}", scene.materials_fingerprint()),
-        lighting: format!("{:016x}", scene.lighting_fingerprint()),
-        lights: scene
-            .light_entries()
-            .into_iter()
-            .map(|(k, v)| (k.to_owned(), v))
-            .collect(),
-        version: env!("CARGO_PKG_VERSION").to_owned(),
-    }
+    BakeRecord::new(options, texels, scene)
 }
 
 /// The identity the bake's settings are combined with ([`BakeSettings::bake_id`]): the

@@ -81,6 +81,29 @@ pub struct BakeRecord {
 }
 
 impl BakeRecord {
+    /// The record of a bake of `options` (by the options that set them) over `texels` and
+    /// `scene`, written by this guidebake.
+    #[must_use]
+    pub fn new(
+        options: BTreeMap<String, String>,
+        texels: &crate::texels::TexelFile,
+        scene: &crate::scene::Scene,
+    ) -> Self {
+        Self {
+            options,
+            texels: format!("{:016x}", texels.identity()),
+            geometry: format!("{:016x}", scene.geometry_fingerprint()),
+            materials: format!("{:016x}", scene.materials_fingerprint()),
+            lighting: format!("{:016x}", scene.lighting_fingerprint()),
+            lights: scene
+                .light_entries()
+                .into_iter()
+                .map(|(k, v)| (k.to_owned(), v))
+                .collect(),
+            version: env!("CARGO_PKG_VERSION").to_owned(),
+        }
+    }
+
     /// What differs from `earlier` (a bake of the texel file `earlier_texels`) to this one
     /// (of `texels`), one phrase each: `--spp was 256, now 64`.
     #[must_use]

@@ -6,6 +6,7 @@
 use std::path::PathBuf;
 
 use crate::bake::shard::Shard;
+use crate::bake::workdir::BakeRecord;
 use crate::probes::file::volume_path;
 use crate::probes::gather::{GatherSettings, ProbeTransport};
 use crate::probes::placement::{PlacementSettings, read_points};
@@ -245,7 +246,7 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
     let options = WorkOptions {
         resume: args.resume,
         texels: args.texels.clone(),
-        record: work::record(
+        record: BakeRecord::new(
             work::options(&settings, &lightmap_identity(args)?, batch_clusters),
             &texels,
             &scene,

@@ -430,15 +430,20 @@ mod tests {
             message.contains("mesh 'room' (and 1 other mesh) unwraps to"),
             "{message}"
         );
-        let fit: f32 = message
+        let fit = suggested_density(&message);
+        assert!(fit < 450.0, "{message}");
+        unwrap_layout(&s, Resolution::TexelsPerUnit(fit), &[true, true])
+            .unwrap_or_else(|e| panic!("{fit} texels/unit, suggested by '{message}': {e}"));
+    }
+
+    /// The density a refusal suggests: the number after its last `--texels-per-unit`.
+    fn suggested_density(message: &str) -> f32 {
+        message
             .rsplit("--texels-per-unit ")
             .next()
             .and_then(|t| t.split(' ').next())
             .and_then(|t| t.parse().ok())
-            .unwrap_or_else(|| panic!("no density in {message}"));
-        assert!(fit < 450.0, "{message}");
-        unwrap_layout(&s, Resolution::TexelsPerUnit(fit), &[true, true])
-            .unwrap_or_else(|e| panic!("{fit} texels/unit, suggested by '{message}': {e}"));
+            .unwrap_or_else(|| panic!("names no density: {message}"))
     }
 
     /// Two 10 m squares with their own UVs over the unit square, as two meshes.
@@ -488,12 +493,7 @@ mod tests {
                 message.contains("mesh 'squares' needs a square of"),
                 "{message}"
             );
-            let fit: f32 = message
-                .rsplit("--texels-per-unit ")
-                .next()
-                .and_then(|r| r.split(' ').next())
-                .and_then(|f| f.parse().ok())
-                .unwrap_or_else(|| panic!("names a density: {message}"));
+            let fit = suggested_density(&message);
             let (_, meshes, _) = per_mesh_layout(&s, &stats, Resolution::TexelsPerUnit(fit))
                 .unwrap_or_else(|e| panic!("the density it names, {fit}, fits: {e}"));
             assert!(meshes[0].uv_scale[0] > 0.9 * 4092.0, "{:?}", meshes[0]);

@@ -430,9 +430,7 @@ fn lowest(
     bound: i32,
 ) -> Option<(i32, i32)> {
     let w = sky.len() as i32;
-    let mut best: Option<(i32, i32)> = None;
-    let mut limit = bound.saturating_sub(height); // y must stay below this
-    for x in 0..=(w - cw) {
+    leftmost_lowest(w - cw, bound.saturating_sub(height), |x, limit| {
         let mut y = 0i32;
         let k0 = (pad - x).max(0);
         let k1 = (w - x + pad).min(cw + 2 * pad);
@@ -445,15 +443,8 @@ fn lowest(
                 }
             }
         }
-        if y < limit {
-            limit = y;
-            best = Some((x, y));
-            if y == 0 {
-                break;
-            }
-        }
-    }
-    best
+        y
+    })
 }
 
 /// [`lowest`] for a rectangle (every column's footprint from row 0): `y` is the highest
@@ -461,12 +452,10 @@ fn lowest(
 /// skyline whatever the rectangle's width.
 fn lowest_flat(sky: &[i32], cw: i32, pad: i32, height: i32, bound: i32) -> Option<(i32, i32)> {
     let w = sky.len() as i32;
-    let mut limit = bound.saturating_sub(height);
-    let mut best = None;
     // Columns of the window, their skyline decreasing from front to back.
     let mut window = std::collections::VecDeque::new();
     let mut end = 0; // columns below `end` have entered the window
-    for x in 0..=(w - cw) {
+    leftmost_lowest(w - cw, bound.saturating_sub(height), |x, _| {
         let (a, b) = ((x - pad).max(0), (x + cw + pad).min(w));
         while end < b {
             while window
@@ -481,7 +470,21 @@ fn lowest_flat(sky: &[i32], cw: i32, pad: i32, height: i32, bound: i32) -> Optio
         while window.front().is_some_and(|&j| j < a) {
             window.pop_front();
         }
-        let y = window.front().map_or(0, |&j| sky[j as usize].max(0));
+        window.front().map_or(0, |&j| sky[j as usize].max(0))
+    })
+}
+
+/// The least `y` below `limit` over `x` from 0 to `last` in order, then the least `x`;
+/// `y_at(x, limit)` is `x`'s `y`, and may stop counting once it reaches the current `limit`.
+/// Stops at the first `y` of 0.
+fn leftmost_lowest(
+    last: i32,
+    mut limit: i32,
+    mut y_at: impl FnMut(i32, i32) -> i32,
+) -> Option<(i32, i32)> {
+    let mut best = None;
+    for x in 0..=last {
+        let y = y_at(x, limit);
         if y < limit {
             limit = y;
             best = Some((x, y));

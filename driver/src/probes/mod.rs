@@ -158,7 +158,7 @@ pub struct WorkOptions {
     pub resume: bool,
     /// The texel file's path, for messages.
     pub texels: PathBuf,
-    /// What the bake is made of ([`work::options`], [`work::record`]).
+    /// What the bake is made of ([`work::options`], [`BakeRecord::new`]).
     pub record: BakeRecord,
     /// Clusters a batch ([`BATCH_CLUSTERS`]).
     pub batch_clusters: usize,

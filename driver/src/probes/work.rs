@@ -480,28 +480,6 @@ pub fn options(
     .collect()
 }
 
-/// The record of a probe bake of `options` over `texels` and `scene`.
-#[must_use]
-pub fn record(
-    options: BTreeMap<String, String>,
-    texels: &crate::texels::TexelFile,
-    scene: &crate::scene::Scene,
-) -> BakeRecord {
-    BakeRecord {
-        options,
-        texels: format!("{:016x}", texels.identity()),
-        geometry: format!("{:016x}", scene.geometry_fingerprint()),
-        materials: format!("{:016x}", scene.materials_fingerprint()),
-        lighting: format!("{:016x}", scene.lighting_fingerprint()),
-        lights: scene
-            .light_entries()
-            .into_iter()
-            .map(|(k, v)| (k.to_owned(), v))
-            .collect(),
-        version: env!("CARGO_PKG_VERSION").to_owned(),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
