@@ -30,6 +30,16 @@ fn demo() -> &'static (PathBuf, PathBuf) {
     })
 }
 
+/// The browser test's own folder for what it writes (the render, the viewer's folder, the
+/// screenshot), emptied: not the demo's folder, whose snapshot the folder test compares while
+/// this one runs beside it.
+fn browser_folder() -> PathBuf {
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("viewer-browser");
+    let _ = std::fs::remove_dir_all(&out);
+    std::fs::create_dir_all(&out).unwrap();
+    out
+}
+
 /// A node's `extras.guidebake_lightmap`, checked: its page, that page's size, and the
 /// identity transform from `TEXCOORD_1` to the page's UV.
 fn lightmap_extra(extras: &serde_json::Value, pages: &[(u64, u64)]) -> u64 {
@@ -267,18 +277,8 @@ fn the_viewer_folder_holds_the_level_and_its_lightmaps_and_bad_input_writes_noth
         serde_json::from_slice(&std::fs::read(web.join("view.json")).unwrap()).unwrap();
     assert_eq!(view["exposure"], 2.0);
 
-    // The demo's folder, but for what the browser test (running beside this one) writes: its
-    // folder, and that folder's scratch name while it is written (`.browser.web.tmp-PID`).
-    let snapshot = |dir: &Path| {
-        let mut files = snapshot(dir);
-        files.retain(|p, _| {
-            !p.starts_with("browser.web")
-                && !p.to_string_lossy().starts_with(".browser.web.")
-                && p != Path::new("browser.png")
-                && p != Path::new("render.png")
-        });
-        files
-    };
+    // The browser test, running beside this one, writes into a folder of its own
+    // (`browser_folder`), so the demo's folder changes only by what this test does.
     let before = snapshot(dir);
     let mine = dir.join("mine");
     std::fs::create_dir_all(&mine).unwrap();
@@ -420,7 +420,8 @@ fn three_js_in_headless_chromium_shows_the_demo_room_as_render_does() {
     let (dir, texels) = demo();
     let glb = dir.join("ajar.glb");
     let guided = dir.join("guided.exr");
-    let rendered = dir.join("render.png");
+    let out = browser_folder();
+    let rendered = out.join("render.png");
     let (w, h) = (SHOT.0.to_string(), SHOT.1.to_string());
     let (_, err) = succeeds(&[
         "render",
@@ -446,7 +447,7 @@ fn three_js_in_headless_chromium_shows_the_demo_room_as_render_does() {
         .expect("render says its exposure")
         .to_owned();
 
-    let web = dir.join("browser.web");
+    let web = out.join("browser.web");
     let mut child = Command::new(BIN)
         .args([
             "view",
@@ -479,7 +480,7 @@ fn three_js_in_headless_chromium_shows_the_demo_room_as_render_does() {
     }
     let url = url.expect("view says where it serves");
 
-    let shot = dir.join("browser.png");
+    let shot = out.join("browser.png");
     let _ = std::fs::remove_file(&shot);
     let profile = tempfile::tempdir().unwrap();
     let mut browser = Command::new(&browser)
