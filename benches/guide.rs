@@ -96,7 +96,7 @@ type BuildFn = for<'a> fn(
     &'a mut [GuideNode],
 ) -> (guide::Guide<'a>, guide::BuildStats);
 
-/// The two builds compared: today's and the partitioning one before issue 15 (the test
+/// The two builds compared: today's and the partitioning one it replaced (the test
 /// oracle `guide::reference::build`, feature `testing`).
 const BUILDS: [(&str, BuildFn); 2] = [
     ("build", guide::build),

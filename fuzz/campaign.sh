@@ -7,7 +7,7 @@
 # - Resumes from the grown corpus: each target reads fuzz/artifacts/corpus/TARGET (written by
 #   earlier runs and campaigns, kept between them) and the checked-in seeds fuzz/corpus/TARGET,
 #   and adds new inputs to the former only.
-# - Goals (issue 22): 10^6 executions, raised to 10^7 once a target has run faster than
+# - Goals: 10^6 executions, raised to 10^7 once a target has run faster than
 #   5 000 executions per CPU second. GOAL_<target>=N fixes one (e.g. GOAL_guide=2000000),
 #   GOAL=N all of them. A target stops at its goal (libFuzzer -runs) or when the time is up,
 #   whichever is first, so the fast targets hand their core to the slow ones.

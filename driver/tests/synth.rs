@@ -112,7 +112,7 @@ fn cli_synth_then_inspect_json() {
     );
 }
 
-/// The world grows with N at a fixed texel density, and its geometry with it (issue 18): 16×
+/// The world grows with N at a fixed texel density, and its geometry with it: 16×
 /// the texels is 25× the cells (5× the grid edge) at about the same texels per metre (within
 /// 25%: box heights, so wall areas, vary from cell to cell), and one triangle per 32 texels.
 #[test]

@@ -591,7 +591,7 @@ mod tests {
     }
 
     /// Origins a subnormal distance beyond a box face at 0, rays along the other axes (the
-    /// `traverse` fuzz target, issue 22): an edge function of ~10⁻⁴⁶ rounded to 0 in `f32`
+    /// `traverse` fuzz target): an edge function of ~10⁻⁴⁶ rounded to 0 in `f32`
     /// let the triangle test accept a point outside the triangle that the box test had
     /// culled, so brute force found a hit (at `t = −0`) the BVH missed. Both now miss it.
     #[test]
@@ -666,7 +666,7 @@ mod tests {
     }
 
     /// An origin 10⁻³⁶ outside a triangle's box, on the triangle's edge once the shear has
-    /// rounded it (the `traverse` fuzz target, issue 22): brute force hits it at `t = 0`, the
+    /// rounded it (the `traverse` fuzz target): brute force hits it at `t = 0`, the
     /// box test culls it; the traversals keep to the contract ("Hits outside their own box").
     #[test]
     fn origins_rounded_onto_an_edge_by_the_shear_keep_to_the_contract() {
@@ -755,7 +755,7 @@ mod tests {
         ));
     }
 
-    /// `fuzz/corpus/traverse/contract-t-underflows-before-its-box` (issue 22): an origin
+    /// `fuzz/corpus/traverse/contract-t-underflows-before-its-box`: an origin
     /// 2.35·10⁻³⁸ above a box face at z = 0, tracing down. The triangle test's `t = T/det`
     /// underflows to 0 (its terms are ~10⁻⁵⁰), while the box is entered at 2.35·10⁻³⁸, more
     /// than the far bound's absolute slack 2⁻¹²⁶ above `t = 0`. So once another triangle was
@@ -811,7 +811,7 @@ mod tests {
         traversals_keep_to_the_contract(&BvhRef::new(&nodes, &tris).unwrap(), &r);
     }
 
-    /// `fuzz/corpus/traverse/contract-stand-in-hit-outside-its-box` (issue 22): origin and
+    /// `fuzz/corpus/traverse/contract-stand-in-hit-outside-its-box`: origin and
     /// direction both (−1.5·10⁻²⁶)·(1, 1, 1), beside two triangles of 10⁻⁶ through the
     /// origin. `t = T/det` underflows for both: prim 1 lies in the plane z = 0, one direction
     /// length behind the origin (true `t` = −1), yet comes out at `t = −0`, and prim 0 at
@@ -848,7 +848,7 @@ mod tests {
         traversals_keep_to_the_contract(&bvh, &r);
     }
 
-    /// `fuzz/corpus/traverse/contract-spatial-split-reference` (issue 22): with spatial
+    /// `fuzz/corpus/traverse/contract-spatial-split-reference`: with spatial
     /// splits (obvhs's slow presets) a leaf holds a triangle's part clipped to the leaf's
     /// box, not its whole box. Origin (−1.5·10⁻²⁶)·(1, 1, 1), direction (−1.5·10⁻²⁶,
     /// 3.8·10²², −6.5·10⁻²⁷): the watertight test rounds the ray, which passes 3·10⁻²⁶

@@ -1,4 +1,4 @@
-//! The stopping rule (`--target-error`; issue 44): spend a texel's samples only until its
+//! The stopping rule (`--target-error`): spend a texel's samples only until its
 //! estimate is as good as asked, `--spp` the cap. Production bakers stop where a texel has
 //! converged (Cycles' noise threshold); the paper's learning iterations (§2.2) are where this
 //! bake can stop, so `--iterations 8` with the doubling schedule stops at every doubling of

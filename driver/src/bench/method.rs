@@ -69,6 +69,9 @@ pub struct Levers {
     /// `--target-error` in thousandths (`+stop=20` is 0.02): the stopping rule, the rung's
     /// spp its cap; `None`: off.
     pub stop_permille: Option<u32>,
+    /// `--iterations`, where the method sets its own (`+iters=N`; else the ladder's,
+    /// `guidebake bench --iterations`).
+    pub iterations: Option<u32>,
 }
 
 impl Default for Levers {
@@ -91,12 +94,13 @@ impl Default for Levers {
             guide_target: d.guide_target,
             guide_seed: d.guide_seed,
             stop_permille: None,
+            iterations: None,
         }
     }
 }
 
 impl Levers {
-    /// The levers before issue 14: no mixture, an even schedule, splits at 4 records,
+    /// The levers before the guiding levers were added: no mixture, an even schedule, splits at 4 records,
     /// α = 25 % (the per-texel frame, which flipped at n.z = −0, is gone).
     pub fn before() -> Levers {
         Levers {
@@ -116,6 +120,7 @@ impl Levers {
             guide_target: GuideTarget::Radiance,
             guide_seed: GuideSeed::Off,
             stop_permille: None,
+            iterations: None,
         }
     }
 
@@ -170,6 +175,9 @@ impl Levers {
         }
         if self.guide_seed != d.guide_seed {
             s += &format!("+seed={}", value_name(&self.guide_seed));
+        }
+        if let Some(n) = self.iterations {
+            s += &format!("+iters={n}");
         }
         s
     }
@@ -236,7 +244,7 @@ impl Method {
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
     /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`,
     /// `transport`, `select`, `budget`, `direct`, `lookup`, `target`, `seed`); the
-    /// single word `before` stands for every lever as it was before issue 14.
+    /// single word `before` stands for every lever as it was before the guiding levers were added.
     ///
     /// # Errors
     /// A message naming the part that is not understood.
@@ -301,6 +309,7 @@ impl Method {
                 "lookup" => levers.lookup_percent = Some(number()?),
                 "filter" => levers.lookup_filter = number()?,
                 "stop" => levers.stop_permille = Some(number()?),
+                "iters" => levers.iterations = Some(number()?),
                 "target" => {
                     levers.guide_target = GuideTarget::from_str(value, true)
                         .map_err(|e| format!("{label:?}: {e}"))?;
@@ -364,7 +373,7 @@ impl Method {
         let target_error = self.levers.stop_permille.map(|p| p as f32 / 1000.0);
         BakeSettings {
             spp,
-            iterations,
+            iterations: self.levers.iterations.unwrap_or(iterations),
             transport,
             bounces,
             guiding: self.guiding,

@@ -83,7 +83,8 @@ pub struct BenchArgs {
     /// `+passes=last|every+gain=N+transport=series|path+select=…+budget=uniform|bounded|balanced|mse|relative`,
     /// `+direct=P` and `+lookup=P` for `--direct-spp` and `--lookup-spp` at P % of the rung's
     /// spp, `+target=radiance` for `--guide-target`, `+stop=N` for `--target-error` N/1000
-    /// (the rung its cap), or `+before` for every lever as before issue 14);
+    /// (the rung its cap), `+iters=N` for the method's own `--iterations`, or `+before` for
+    /// every lever as before the guiding levers);
     /// default every guiding × combine × ρ with the bake's levers. The baseline
     /// (`off/average/-`) is always run, first.
     #[arg(long, value_delimiter = ',')]

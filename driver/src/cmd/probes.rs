@@ -47,6 +47,11 @@ pub struct ProbesArgs {
     /// `lattice`: the adaptive lattice (and --points, if given); `points`: --points alone.
     #[arg(long, value_enum, default_value_t = Placement::Lattice)]
     pub placement: Placement,
+    /// Where the lattice is finer: `light` (the default) where cells hold geometry and where
+    /// the direct light of the sun and the scene's lights changes across them (a shaft of sun
+    /// through a window); `geometry`: where cells hold geometry only.
+    #[arg(long, value_enum, default_value_t = Refine::Light)]
+    pub refine: Refine,
     /// Gather samples per probe.
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(8..=1 << 20))]
     pub spp: u32,
@@ -115,6 +120,15 @@ pub enum Placement {
     Lattice,
     /// The --points alone.
     Points,
+}
+
+/// `--refine`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Refine {
+    /// Near geometry and where the direct light changes.
+    Light,
+    /// Near geometry only.
+    Geometry,
 }
 
 /// `--transport`.
@@ -230,6 +244,7 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
             spacing: args.spacing,
             points,
             lattice: args.placement == Placement::Lattice,
+            refine_light: args.refine == Refine::Light,
         },
         gather: GatherSettings {
             spp: args.spp,
@@ -335,7 +350,7 @@ fn lightmap_identity(args: &ProbesArgs) -> Result<String, super::CmdError> {
 
 fn summary(args: &ProbesArgs, r: &ProbeReport, transport: ProbeTransport, threads: usize) {
     eprintln!(
-        "{}: {} probes in {} clusters{} ({} lattice and {} listed candidates, {} inside geometry skipped), {} spp {}, hits read {}; {:.2} s on {threads} threads (placement {:.2} s, gather {:.2} s, volume {:.2} s); median relative error {:.3}",
+        "{}: {} probes in {} clusters{} ({} lattice and {} listed candidates, {} inside geometry skipped, {} cells refined for light), {} spp {}, hits read {}; {:.2} s on {threads} threads (placement {:.2} s, gather {:.2} s, volume {:.2} s); median relative error {:.3}",
         args.out.display(),
         r.probes,
         r.clusters,
@@ -349,6 +364,7 @@ fn summary(args: &ProbesArgs, r: &ProbeReport, transport: ProbeTransport, thread
         r.lattice_candidates,
         r.listed_candidates,
         r.skipped_inside_geometry,
+        r.cells_cut_for_light,
         args.spp,
         if args.guiding == OnOff::On && args.iterations > 1 {
             "guided"

@@ -81,7 +81,9 @@ pub struct ProbeReport {
     pub skipped_inside_geometry: u64,
     /// Clusters (guides learned).
     pub clusters: u64,
-    /// Rays of the inside-geometry test.
+    /// Lattice cells cut because the direct light changes across them (`--refine light`).
+    pub cells_cut_for_light: u64,
+    /// Rays of placement: the inside-geometry test and the light's test.
     pub placement_rays: u64,
     /// Gather rays.
     pub gather_rays: u64,
@@ -456,6 +458,7 @@ fn record_placement(report: &mut ProbeReport, p: &PlacementReport) {
     report.listed_candidates = p.listed_candidates;
     report.probes = p.placed;
     report.skipped_inside_geometry = p.inside_geometry;
+    report.cells_cut_for_light = p.cells_cut_for_light;
     report.placement_rays = p.rays;
 }
 

@@ -10,7 +10,8 @@
 //! probes too, each with the spacing of the finest cell it is a corner of. So a probe stands
 //! every D along the surfaces where light changes over short distances, and every 4D in the
 //! air between them, as Unreal's volumetric lightmap puts its detail cells (its "detail cell
-//! size") near geometry.
+//! size") near geometry. Where the direct light changes across a cell in open air — a shaft
+//! of sun through a window — the cell is cut too ([`LightProbe`], `--refine light`).
 //!
 //! The lattice is offset half a fine cell below the level's bounds, so no layer of probes lies
 //! in a floor or wall on them. A probe lies inside geometry where more than
@@ -28,12 +29,14 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use glam::Vec3;
-use guidebake_kernels::packet::{Hit8, NO_HIT, Ray8};
-use guidebake_kernels::traverse::intersect8;
+use guidebake_kernels::estimator::luminance_f32;
+use guidebake_kernels::packet::{Hit8, NO_HIT, Ray, Ray8};
+use guidebake_kernels::traverse::{intersect8, occluded1};
 use rayon::prelude::*;
 
 use crate::prepare::facing::INSIDE_SHARE;
 use crate::texels::{SEEN_BACK, SEEN_FRONT};
+use crate::transport::lights::AnalyticLight;
 use crate::transport::world::{World, closest_point_on_triangle};
 
 /// The default finest spacing: the level's longest side over this many cells.
@@ -46,7 +49,7 @@ pub const LEVELS: u32 = 2;
 const INSIDE_RAYS: usize = 64;
 
 /// How probes are placed.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct PlacementSettings {
     /// The finest spacing D; `None`: the level's longest side over [`DEFAULT_CELLS`].
     pub spacing: Option<f32>,
@@ -54,6 +57,20 @@ pub struct PlacementSettings {
     pub points: Vec<Vec3>,
     /// Whether the lattice is placed too (`false`: the listed points alone).
     pub lattice: bool,
+    /// Whether lattice cells are cut where the direct light changes across them too, not only
+    /// where they hold geometry (`--refine light`, the default; `--refine geometry`).
+    pub refine_light: bool,
+}
+
+impl Default for PlacementSettings {
+    fn default() -> Self {
+        PlacementSettings {
+            spacing: None,
+            points: Vec::new(),
+            lattice: false,
+            refine_light: true,
+        }
+    }
 }
 
 /// One placed probe.
@@ -124,7 +141,9 @@ pub struct PlacementReport {
     pub placed: u64,
     /// Candidates not placed because they lie inside geometry.
     pub inside_geometry: u64,
-    /// Rays the inside-geometry test traced.
+    /// Lattice cells cut because the direct light changes across them ([`LIGHT_CHANGE`]).
+    pub cells_cut_for_light: u64,
+    /// Rays the inside-geometry test and the light's test traced.
     pub rays: u64,
 }
 
@@ -197,8 +216,9 @@ pub fn place(
         points: [cells.x as u32 + 1, cells.y as u32 + 1, cells.z as u32 + 1],
     };
     let mut candidates = Vec::new();
+    let mut light = LightProbe::new(world, &grid, settings.refine_light);
     if settings.lattice {
-        candidates = lattice_points(&grid, corners, traced);
+        candidates = lattice_points(&grid, corners, traced, &mut light);
     }
     let lattice_candidates = candidates.len() as u64;
     for &p in &settings.points {
@@ -231,7 +251,8 @@ pub fn place(
         listed_candidates,
         placed: probes.len() as u64,
         inside_geometry,
-        rays: (inside.len() * INSIDE_RAYS) as u64,
+        cells_cut_for_light: light.cells_cut,
+        rays: (inside.len() * INSIDE_RAYS) as u64 + light.rays,
     };
     Ok(Placement {
         probes,
@@ -266,10 +287,18 @@ fn bounds_of(corners: &[[Vec3; 3]], traced: &[u32]) -> (Vec3, Vec3) {
 }
 
 /// The lattice's candidate points (module docs): every coarse corner, and the corners of
-/// every cell cut because it holds geometry, each with the spacing of its finest cell.
-fn lattice_points(grid: &CoarseGrid, corners: &[[Vec3; 3]], traced: &[u32]) -> Vec<PlacedProbe> {
+/// every cell cut to, each with the spacing of its finest cell. A cell is cut into eight where
+/// it holds geometry, and where its parent was cut and the direct light changes across the
+/// parent's corners ([`LightProbe`]).
+fn lattice_points(
+    grid: &CoarseGrid,
+    corners: &[[Vec3; 3]],
+    traced: &[u32],
+    light: &mut LightProbe<'_>,
+) -> Vec<PlacedProbe> {
     let fine = grid.fine;
     let limit = grid.points.map(|n| (n as i32 - 1) << LEVELS);
+    let coarse_cells = grid.points.map(|n| n as i32 - 1);
     let mut levels: BTreeMap<[i32; 3], u32> = BTreeMap::new();
     for x in 0..grid.points[0] as i32 {
         for y in 0..grid.points[1] as i32 {
@@ -279,11 +308,27 @@ fn lattice_points(grid: &CoarseGrid, corners: &[[Vec3; 3]], traced: &[u32]) -> V
         }
     }
     let held = cells_holding_geometry(grid, corners, traced);
+    // The cells of the level above whose corners are probes: every coarse cell at first.
+    let mut above: Vec<[i32; 3]> = Vec::new();
+    if light.active() {
+        for x in 0..coarse_cells[0] {
+            for y in 0..coarse_cells[1] {
+                for z in 0..coarse_cells[2] {
+                    above.push([x, y, z]);
+                }
+            }
+        }
+    }
     for level in (0..LEVELS).rev() {
         let mut cut: Vec<[i32; 3]> = held.iter().map(|c| c.map(|v| v >> level)).collect();
+        for parent in light.changing(&above, level + 1) {
+            for child in 0..8 {
+                cut.push([0, 1, 2].map(|a| parent[a] * 2 + ((child >> a) & 1)));
+            }
+        }
         cut.sort_unstable();
         cut.dedup();
-        for cell in cut {
+        for &cell in &cut {
             for corner in 0..8 {
                 let at = [0, 1, 2].map(|a| (cell[a] + ((corner >> a) & 1)) << level);
                 if (0..3).all(|a| at[a] >= 0 && at[a] <= limit[a]) {
@@ -292,6 +337,7 @@ fn lattice_points(grid: &CoarseGrid, corners: &[[Vec3; 3]], traced: &[u32]) -> V
                 }
             }
         }
+        above = cut;
     }
     levels
         .into_iter()
@@ -302,6 +348,129 @@ fn lattice_points(grid: &CoarseGrid, corners: &[[Vec3; 3]], traced: &[u32]) -> V
             lattice: Some(at),
         })
         .collect()
+}
+
+/// The light's part of placement: a cell is cut where the direct light changes across it —
+/// where its corners' unoccluded direct light from the sun and the scene's analytic lights
+/// differs by more than [`LIGHT_CHANGE`] of the brightest corner: a shaft of sun through a
+/// window, a shadow's edge in open air, the steep fall-off near a lamp. Each lattice point's
+/// light is one shadow ray per light towards its centre (deterministic), computed once.
+/// Emissive triangles and the sky are not counted (their light changes slowly in open air,
+/// and a deterministic estimate of an area light would need many rays a point).
+struct LightProbe<'a> {
+    world: &'a World,
+    grid: CoarseGrid,
+    /// Off for `--refine geometry`, and where the scene has no analytic light.
+    on: bool,
+    /// Each evaluated lattice point's direct light (luminance), by fine lattice coordinates.
+    known: BTreeMap<[i32; 3], f32>,
+    /// Cells cut because the light changes across them.
+    cells_cut: u64,
+    /// Shadow rays traced.
+    rays: u64,
+}
+
+/// A cell is cut where its darkest corner's direct light is below (1 − this) of its
+/// brightest's: half.
+pub const LIGHT_CHANGE: f32 = 0.5;
+
+impl<'a> LightProbe<'a> {
+    fn new(world: &'a World, grid: &CoarseGrid, refine_light: bool) -> Self {
+        LightProbe {
+            world,
+            grid: *grid,
+            on: refine_light && !world.lights().is_empty(),
+            known: BTreeMap::new(),
+            cells_cut: 0,
+            rays: 0,
+        }
+    }
+
+    fn active(&self) -> bool {
+        self.on
+    }
+
+    /// The cells of `cells` (of level `level`: 2^level fine cells wide) across whose corners
+    /// the direct light changes.
+    fn changing(&mut self, cells: &[[i32; 3]], level: u32) -> Vec<[i32; 3]> {
+        if !self.on || cells.is_empty() {
+            return Vec::new();
+        }
+        let corner =
+            |cell: [i32; 3], c: i32| [0, 1, 2].map(|a| (cell[a] + ((c >> a) & 1)) << level);
+        let mut needed: Vec<[i32; 3]> = cells
+            .iter()
+            .flat_map(|&cell| (0..8).map(move |c| corner(cell, c)))
+            .filter(|at| !self.known.contains_key(at))
+            .collect();
+        needed.sort_unstable();
+        needed.dedup();
+        let values: Vec<(f32, u64)> = needed
+            .par_iter()
+            .map(|at| {
+                let p = self.grid.origin
+                    + Vec3::new(at[0] as f32, at[1] as f32, at[2] as f32) * self.grid.fine;
+                direct_light(self.world, p)
+            })
+            .collect();
+        for (at, (value, rays)) in needed.into_iter().zip(values) {
+            self.known.insert(at, value);
+            self.rays += rays;
+        }
+        let out: Vec<[i32; 3]> = cells
+            .iter()
+            .copied()
+            .filter(|&cell| {
+                let (lo, hi) = (0..8).fold((f32::INFINITY, 0.0f32), |(lo, hi), c| {
+                    let v = self.known[&corner(cell, c)];
+                    (lo.min(v), hi.max(v))
+                });
+                hi > 0.0 && lo < (1.0 - LIGHT_CHANGE) * hi
+            })
+            .collect();
+        self.cells_cut += out.len() as u64;
+        out
+    }
+}
+
+/// The unoccluded direct light at `p` from the world's analytic lights (luminance of each
+/// light's irradiance on a plane facing it, one shadow ray to its centre), and the rays traced.
+fn direct_light(world: &World, p: Vec3) -> (f32, u64) {
+    let view = world.wide_bvh();
+    let mut sum = 0.0;
+    let mut rays = 0;
+    for light in world.lights() {
+        let axis = match *light {
+            AnalyticLight::Sun { to_sun, .. } => to_sun,
+            AnalyticLight::Sphere { center, .. } => (center - p).normalize_or_zero(),
+            AnalyticLight::Point { position, .. } | AnalyticLight::Spot { position, .. } => {
+                (position - p).normalize_or_zero()
+            }
+        };
+        if axis == Vec3::ZERO {
+            continue;
+        }
+        let Some(sample) = light.sample(p, axis, [0.5, 0.5]) else {
+            continue;
+        };
+        let cos = axis.dot(sample.direction);
+        if cos <= 1e-6 {
+            continue;
+        }
+        let tmax = if sample.distance.is_finite() {
+            sample.distance * (1.0 - 1e-4)
+        } else {
+            f32::INFINITY
+        };
+        rays += 1;
+        if !occluded1(&view, &Ray::new(p, sample.direction, 0.0, tmax)) {
+            let value = luminance_f32((sample.weight / cos).to_array());
+            if value.is_finite() {
+                sum += value;
+            }
+        }
+    }
+    (sum, rays)
 }
 
 /// The fine cells within half a fine cell of a traced triangle (by the distance from the
@@ -446,7 +615,7 @@ mod tests {
     use super::*;
     use crate::bvh::Preset;
     use crate::prepare::facing::seen_sides;
-    use crate::scene::{Scene, Sky};
+    use crate::scene::{Scene, Sky, Sun};
     use crate::test_support::{grey_and_lamp, outward_box_faces, quad};
 
     /// A 10 m floor under a constant sky with a solid 2 m block on it.
@@ -488,6 +657,7 @@ mod tests {
             spacing: Some(0.25),
             points: vec![Vec3::new(0.0, 1.0, 0.0), Vec3::new(3.0, 1.0, 3.0)],
             lattice: true,
+            refine_light: true,
         };
         let placed = place(&world, &corners, &[], visibility.sides(), &settings).unwrap();
         let r = placed.report;
@@ -535,6 +705,114 @@ mod tests {
                 "a cell split in two runs"
             );
         }
+    }
+
+    /// A hall 20 m square under a roof 12 m up with a 4 m hole in its middle, the sun
+    /// straight above (or none).
+    fn hall(sun: bool) -> Scene {
+        let mut triangles = quad(
+            Vec3::new(-10.0, 0.0, 10.0),
+            Vec3::new(20.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -20.0),
+            0,
+        )
+        .to_vec();
+        for (o, u, v) in [
+            ((-10.0, -10.0), (8.0, 0.0), (0.0, 20.0)),
+            ((2.0, -10.0), (8.0, 0.0), (0.0, 20.0)),
+            ((-2.0, -10.0), (4.0, 0.0), (0.0, 8.0)),
+            ((-2.0, 2.0), (4.0, 0.0), (0.0, 8.0)),
+        ] {
+            triangles.extend(quad(
+                Vec3::new(o.0, 12.0, o.1),
+                Vec3::new(u.0, 0.0, u.1),
+                Vec3::new(v.0, 0.0, v.1),
+                0,
+            ));
+        }
+        let mut scene = Scene::of_triangles("hall", triangles, grey_and_lamp(0.5, 0.0));
+        scene.sky = Sky::Constant(Vec3::ONE);
+        scene.sun = sun.then(|| Sun {
+            direction: Vec3::Y,
+            angular_radius: 0.00465,
+            irradiance: Vec3::splat(3.0),
+        });
+        scene
+    }
+
+    fn place_in(scene: &Scene, refine_light: bool) -> Placement {
+        let (visibility, _) = seen_sides(scene).unwrap();
+        let world = World::new(scene, Preset::DEFAULT).unwrap();
+        let settings = PlacementSettings {
+            spacing: Some(1.0),
+            lattice: true,
+            refine_light,
+            ..PlacementSettings::default()
+        };
+        place(
+            &world,
+            &scene.triangle_positions(),
+            &[],
+            visibility.sides(),
+            &settings,
+        )
+        .unwrap()
+    }
+
+    /// The shaft of sun through the roof's hole is refined in the open air, where no geometry
+    /// cuts a cell: probes at the finest spacing stand along its edges, and none where the light
+    /// is the same across a cell (the shadow between the shaft and the roof's edge); without
+    /// `--refine light`, or without a sun, the open air keeps the coarse spacing.
+    #[test]
+    fn probes_are_finer_where_the_light_changes_in_open_air() {
+        // Between the coarse lattice planes y = 3.5 and 7.5 no geometry lies within reach.
+        let in_air = |p: &PlacedProbe| p.position.y > 3.6 && p.position.y < 7.4;
+        let refined = place_in(&hall(true), true);
+        assert!(
+            refined.report.cells_cut_for_light > 0,
+            "{:?}",
+            refined.report
+        );
+        let air: Vec<&PlacedProbe> = refined.probes.iter().filter(|p| in_air(p)).collect();
+        assert!(
+            air.iter().any(|p| p.spacing == 1.0
+                && (p.position.x.abs() - 2.0).abs() < 1.0
+                && p.position.z.abs() < 2.0),
+            "no fine probe at the shaft's edge: {:?}",
+            air.iter()
+                .map(|p| (p.position, p.spacing))
+                .collect::<Vec<_>>()
+        );
+        let shadowed = |v: f32| v > -6.5 && v < -2.5;
+        assert!(
+            !air.iter()
+                .any(|p| shadowed(p.position.x) && shadowed(p.position.z)),
+            "a probe where the light does not change"
+        );
+        assert!(refined.report.rays > refined.report.lattice_candidates * INSIDE_RAYS as u64);
+        let one_thread = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| place_in(&hall(true), true));
+        assert_eq!(
+            one_thread.probes, refined.probes,
+            "the same on any thread count"
+        );
+
+        let coarse = place_in(&hall(true), false);
+        assert_eq!(coarse.report.cells_cut_for_light, 0);
+        assert!(
+            !coarse.probes.iter().any(in_air),
+            "geometry alone cuts no open air"
+        );
+        assert!(coarse.report.placed < refined.report.placed);
+        let sunless = place_in(&hall(false), true);
+        assert_eq!(
+            sunless.probes, coarse.probes,
+            "no analytic light: nothing to refine for"
+        );
+        assert_eq!(sunless.report.cells_cut_for_light, 0);
     }
 
     /// A spacing the level cannot take is refused with a message; a points file is read

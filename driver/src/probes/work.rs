@@ -464,6 +464,10 @@ pub fn options(
             "--placement",
             if p.lattice { "lattice" } else { "points" }.into(),
         ),
+        (
+            "--refine",
+            if p.refine_light { "light" } else { "geometry" }.into(),
+        ),
         ("--spp", g.spp.to_string()),
         ("--iterations", g.iterations.to_string()),
         ("--guiding", on_off(g.guiding)),

@@ -547,7 +547,7 @@ fn decode_image(
 }
 
 /// The `gltf` crate's readers assert an accessor's layout (a VEC4 `TEXCOORD_1` panics,
-/// found by issue 8's scene fuzz target): check what the glTF spec allows first.
+/// found by the scene fuzz target): check what the glTF spec allows first.
 fn check_accessors(b: &SceneBuilder, id: u32, prim: &::gltf::Primitive) -> Result<(), SceneError> {
     use ::gltf::Semantic;
     use ::gltf::accessor::{DataType as T, Dimensions as D};

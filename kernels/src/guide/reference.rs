@@ -7,7 +7,7 @@
 
 use super::{BuildStats, Guide, GuideNode, GuideParams, Record};
 
-/// [`super::build`] with the partitioning split (the build before issue 15).
+/// [`super::build`] with the partitioning split (the build before today's).
 pub fn build<'a>(
     records: &mut [Record],
     params: &GuideParams,

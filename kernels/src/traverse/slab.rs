@@ -9,7 +9,7 @@
 //! - **exact** ([`exact`]), for rays with an infinite inverse direction component:
 //!   [`box1`](super::scalar::box1)'s `(p − o)·inv` with the true `±∞`, bit for bit, so the
 //!   wide walks keep every box the binary walk keeps. (A finite stand-in for `∞` culled hits
-//!   beyond its reach, issue 43.)
+//!   beyond its reach.)
 //!
 //! [`slab_of`], [`plane8`] and [`met8`] take the form as a `const` parameter, so each walk is
 //! compiled once per form and chooses once a ray (or packet). A module of its own because the
@@ -59,7 +59,7 @@ const OFFSET_SLACK: f32 = 1.0 / (1u32 << 22) as f32;
 /// small that its inverse overflows) takes the exact test ([`exact`], [`plane8`]), since no
 /// finite stand-in for `∞` can be exact — `(p − o)·∞` is unbounded for any `p ≠ o`, a finite
 /// scale times a tiny `p − o` is not (a stand-in `2¹⁰⁰` with a slack `2⁶⁰` culled hits beyond
-/// `(hi − o)·2¹⁰⁰ + 2⁶⁰`, issue 43). Here an infinite `inv` gives NaN or infinite offsets.
+/// `(hi − o)·2¹⁰⁰ + 2⁶⁰`). Here an infinite `inv` gives NaN or infinite offsets.
 #[inline(always)]
 pub(super) fn slab(o: f32, inv: f32) -> [f32; 3] {
     let c = o * inv;
