@@ -720,3 +720,70 @@ fn a_probe_bake_stopped_by_ctrl_c_resumes_to_the_same_bytes() {
     }
     assert_eq!(published(&out), published(&whole));
 }
+
+/// `bake --probes` bakes the lightmap, then the probes from it: the same probe file and
+/// volume as `probes --lightmap` run after the bake. What it cannot do it refuses before
+/// baking anything: a probe file named as the lightmap, an EXR, or probes from a shard.
+#[test]
+fn bake_bakes_probes_from_the_lightmap_it_writes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (scene, texels, lightmap) = baked(dir);
+    let both = dir.join("both.exr");
+    let probes = dir.join("both.probes");
+    let bake = |extra: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = ["bake", s(&texels), "--scene", s(&scene), "-o", s(&both)]
+            .iter()
+            .map(|x| (*x).to_owned())
+            .collect();
+        a.extend(["--spp", "256", "--quiet"].map(str::to_owned));
+        a.extend(extra.iter().map(|x| (*x).to_owned()));
+        a
+    };
+    let before = snapshot(dir);
+    for (extra, says) in [
+        (vec!["--probes", s(&both)], "would overwrite the lightmap"),
+        (vec!["--probes", "x.exr"], "not an EXR"),
+        (
+            vec!["--probes", s(&probes), "--shard", "0/2"],
+            "after `guidebake merge`",
+        ),
+    ] {
+        let a = bake(&extra);
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        let err = fails_with(2, &a);
+        assert!(err.contains(says), "{err}");
+    }
+    assert_eq!(snapshot(dir), before, "refused bakes wrote nothing");
+    let a = bake(&["--probes", s(&probes)]);
+    let a: Vec<&str> = a.iter().map(String::as_str).collect();
+    succeeds(&a);
+    assert_eq!(
+        std::fs::read(&both).unwrap(),
+        std::fs::read(&lightmap).unwrap(),
+        "the lightmap as a bake without probes writes it"
+    );
+    // The default probes of `bake --probes` against `probes` with its defaults.
+    let default = dir.join("default.probes");
+    succeeds(&[
+        "probes",
+        s(&texels),
+        "--scene",
+        s(&scene),
+        "--lightmap",
+        s(&lightmap),
+        "-o",
+        s(&default),
+        "--quiet",
+    ]);
+    assert_eq!(
+        std::fs::read(&probes).unwrap(),
+        std::fs::read(&default).unwrap()
+    );
+    for band in 0..3 {
+        assert_eq!(
+            std::fs::read(volume_path(&probes, band)).unwrap(),
+            std::fs::read(volume_path(&default, band)).unwrap()
+        );
+    }
+}

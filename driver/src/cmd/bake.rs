@@ -72,6 +72,11 @@ pub struct BakeArgs {
     /// Write the bake's statistics as JSON here.
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// Light probes too: once the lightmap is written, place probes over the level and bake
+    /// them from it, into this probe file with its volume textures and stats beside it (what
+    /// `guidebake probes --lightmap OUT.exr` does with its defaults; docs/probes.md).
+    #[arg(long, value_name = "OUT.probes")]
+    pub probes: Option<PathBuf>,
     /// Worker threads (default: every core).
     #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
@@ -231,6 +236,11 @@ pub enum Rho {
 /// An interrupted bake is an error too (exit code 1) that says how to resume.
 pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
     check_denoiser(args.denoise)?;
+    let probes = args
+        .probes
+        .as_ref()
+        .map(|p| probe_args(args, p))
+        .transpose()?;
     let settings = BakeSettings {
         spp: args.spp,
         iterations: args.iterations,
@@ -313,7 +323,99 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
     if !args.quiet {
         eprintln!("{}", summary(&job, &report));
     }
-    Ok(())
+    match probes {
+        Some(p) => bake_probes(&p, &args.out),
+        None => Ok(()),
+    }
+}
+
+/// `guidebake probes`' command line for `bake --probes OUT.probes`: its defaults, the bake's
+/// texel file, scene, lights, seed, threads and `--resume`, reading the lightmap this bake
+/// writes; checked before the lightmap is baked.
+fn probe_args(
+    args: &BakeArgs,
+    out: &std::path::Path,
+) -> Result<super::probes::ProbesArgs, super::CmdError> {
+    #[derive(clap::Parser)]
+    struct Probes {
+        #[command(flatten)]
+        args: super::probes::ProbesArgs,
+    }
+    if args.shard.count > 1 || args.pass.is_some() {
+        return Err(super::usage(
+            "--probes bakes from the whole lightmap: with --shard or --pass, run `guidebake probes --lightmap OUT.exr` after `guidebake merge`",
+        ));
+    }
+    if super::files::lightmap_files(&args.out, &args.texels)
+        .iter()
+        .any(|(page, preview)| page == out || preview == out)
+        || args.stats.as_deref() == Some(out)
+    {
+        return Err(super::usage(format!(
+            "--probes {}: would overwrite the lightmap or its stats",
+            out.display()
+        )));
+    }
+    if out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
+        return Err(super::usage(format!(
+            "--probes {}: the probe file is not an EXR (name it LEVEL.probes; its volume textures are written beside it)",
+            out.display()
+        )));
+    }
+    let path = |p: &std::path::Path| p.to_string_lossy().into_owned();
+    let mut probes = <Probes as clap::Parser>::try_parse_from([
+        "probes".to_owned(),
+        path(&args.texels),
+        "--scene".to_owned(),
+        path(&args.scene),
+        "--lightmap".to_owned(),
+        path(&args.out),
+        "-o".to_owned(),
+        path(out),
+        "--seed".to_owned(),
+        args.seed.to_string(),
+        "--max-texture-size".to_owned(),
+        args.max_texture_size.to_string(),
+    ])
+    .map_err(|e| super::usage(format!("--probes: {e}")))?
+    .args;
+    probes.lights = args.lights.clone();
+    probes.threads = args.threads;
+    probes.resume = args.resume;
+    probes.quiet = args.quiet;
+    super::probes::check_args(&probes)?;
+    Ok(probes)
+}
+
+/// Bakes the probes of `bake --probes` from the lightmap just written; if they are stopped,
+/// says so, and that `guidebake probes … --resume` finishes them without baking the lightmap
+/// again.
+fn bake_probes(
+    probes: &super::probes::ProbesArgs,
+    lightmap: &std::path::Path,
+) -> Result<(), super::CmdError> {
+    super::probes::run(probes).map_err(|e| -> super::CmdError {
+        if e.downcast_ref::<super::Interrupted>().is_none() {
+            return e;
+        }
+        let lights = if probes.lights.sun.is_some() || probes.lights.sky.is_some() {
+            " and this bake's --sun and --sky"
+        } else {
+            ""
+        };
+        Box::new(super::Interrupted(format!(
+            "the lightmap {} is written; its probes were stopped, their finished batches kept in {}: finish them alone with guidebake probes {} --scene {} --lightmap {} -o {} --resume{lights}",
+            lightmap.display(),
+            crate::probes::work::work_dir(&probes.out, None).display(),
+            probes.texels.display(),
+            probes.scene.display(),
+            lightmap.display(),
+            probes.out.display(),
+        )))
+    })
 }
 
 /// What `bake` reads and writes: the texel file, the scene, a sky map and the seam sidecar;

@@ -109,7 +109,7 @@ pub struct ProbesArgs {
     #[arg(long, value_name = "SHARD_DIR", num_args = 1.., conflicts_with = "resume")]
     pub merge: Vec<PathBuf>,
     /// No summary.
-    #[arg(long)]
+    #[arg(long, short)]
     pub quiet: bool,
 }
 
@@ -147,7 +147,12 @@ fn stats_path(out: &std::path::Path) -> PathBuf {
     PathBuf::from(name)
 }
 
-fn check_args(args: &ProbesArgs) -> Result<(), super::CmdError> {
+/// The checks of `probes`' options among themselves (`bake --probes` makes them too, before
+/// its lightmap is baked).
+///
+/// # Errors
+/// A usage error naming the option.
+pub fn check_args(args: &ProbesArgs) -> Result<(), super::CmdError> {
     if let Some(d) = args.spacing.filter(|d| !(d.is_finite() && *d > 0.0)) {
         return Err(super::usage(format!(
             "--spacing {d}: a positive, finite distance in scene units"
