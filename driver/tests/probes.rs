@@ -723,7 +723,8 @@ fn a_probe_bake_stopped_by_ctrl_c_resumes_to_the_same_bytes() {
 
 /// `bake --probes` bakes the lightmap, then the probes from it: the same probe file and
 /// volume as `probes --lightmap` run after the bake. What it cannot do it refuses before
-/// baking anything: a probe file named as the lightmap, an EXR, or probes from a shard.
+/// baking anything: a probe file named as the lightmap, an EXR or the texel file, or probes
+/// from a shard.
 #[test]
 fn bake_bakes_probes_from_the_lightmap_it_writes() {
     let tmp = tempfile::tempdir().unwrap();
@@ -744,6 +745,10 @@ fn bake_bakes_probes_from_the_lightmap_it_writes() {
     for (extra, says) in [
         (vec!["--probes", s(&both)], "would overwrite the lightmap"),
         (vec!["--probes", "x.exr"], "not an EXR"),
+        (
+            vec!["--probes", s(&texels)],
+            "would overwrite the texel file",
+        ),
         (
             vec!["--probes", s(&probes), "--shard", "0/2"],
             "after `guidebake merge`",

@@ -387,6 +387,7 @@ fn probe_args(
     probes.resume = args.resume;
     probes.quiet = args.quiet;
     super::probes::check_args(&probes)?;
+    super::probes::probe_files(&probes, "--probes", true)?.check()?;
     Ok(probes)
 }
 

@@ -175,7 +175,13 @@ pub fn check_args(args: &ProbesArgs) -> Result<(), super::CmdError> {
     Ok(())
 }
 
-fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError> {
+/// What `probes` reads and writes, `-o` named as `out_flag` (`bake --probes` checks them
+/// before baking the lightmap they read: `lightmap_later` leaves the lightmap out).
+pub fn probe_files(
+    args: &ProbesArgs,
+    out_flag: &str,
+    lightmap_later: bool,
+) -> Result<super::files::Files, super::CmdError> {
     let mut files = super::files::Files::new()
         .reads("the scene (--scene)", &args.scene)
         .reads("the texel file", &args.texels);
@@ -185,7 +191,7 @@ fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError
     if let Some(map) = args.lights.sky_map() {
         files = files.reads("the sky map (--sky)", map);
     }
-    if let Some(lightmap) = &args.lightmap {
+    if let Some(lightmap) = args.lightmap.as_ref().filter(|_| !lightmap_later) {
         super::files::check_exr("--lightmap", lightmap)?;
         for (path, preview) in super::files::lightmap_files(lightmap, &args.texels) {
             files = files
@@ -193,10 +199,12 @@ fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError
                 .reads("the lightmap's atlas preview", &preview);
         }
     }
-    files = files.writes("the probe file (-o)", &args.out).writes_dir(
-        "the probe bake's work directory",
-        &work_dir(&args.out, args.shard),
-    );
+    files = files
+        .writes(format!("the probe file ({out_flag})"), &args.out)
+        .writes_dir(
+            "the probe bake's work directory",
+            &work_dir(&args.out, args.shard),
+        );
     for dir in &args.merge {
         files = files.reads("a shard's work directory (--merge)", dir);
     }
@@ -221,7 +229,7 @@ fn probe_files(args: &ProbesArgs) -> Result<super::files::Files, super::CmdError
 /// left at the final paths on failure.
 pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
     check_args(args)?;
-    let files = probe_files(args)?;
+    let files = probe_files(args, "-o", false)?;
     files.check()?;
     super::interrupt::register_outputs(files.outputs());
     let points = match &args.points {
