@@ -40,6 +40,16 @@ pub struct Usage(pub String);
 #[error("{0}")]
 pub struct Interrupted(pub String);
 
+/// `on` or `off`: an option's value where a bare flag would not do (it has a default of
+/// `on`, or reads better spelled out).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnOff {
+    /// Enabled.
+    On,
+    /// Disabled.
+    Off,
+}
+
 /// A [`Usage`] error, boxed.
 pub fn usage(message: impl Into<String>) -> CmdError {
     Box::new(Usage(message.into()))

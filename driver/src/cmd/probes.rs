@@ -18,7 +18,7 @@ use crate::render::Lightmap;
 use crate::scene::TextureOptions;
 use crate::texels::TexelFile;
 
-use super::bake::OnOff;
+use super::OnOff;
 
 /// Arguments of `guidebake probes`.
 #[derive(Debug, clap::Args)]

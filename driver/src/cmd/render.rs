@@ -10,7 +10,7 @@ use crate::render::{Camera, Inside, Lightmap, Stage, View, ViewOptions, render_w
 use crate::scene::TextureOptions;
 use crate::texels::TexelFile;
 
-use super::bake::OnOff;
+use super::OnOff;
 
 /// Arguments of `guidebake render`.
 #[derive(Debug, clap::Args)]
