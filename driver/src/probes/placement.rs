@@ -11,7 +11,7 @@
 //! every D along the surfaces where light changes over short distances, and every 4D in the
 //! air between them, as Unreal's volumetric lightmap puts its detail cells (its "detail cell
 //! size") near geometry. Where the direct light changes across a cell in open air — a shaft
-//! of sun through a window — the cell is cut too ([`LightProbe`], `--refine light`).
+//! of sun through a window — the cell is cut too ([`LightChange`], `--refine light`).
 //!
 //! The lattice is offset half a fine cell below the level's bounds, so no layer of probes lies
 //! in a floor or wall on them. A probe lies inside geometry where more than
@@ -216,7 +216,7 @@ pub fn place(
         points: [cells.x as u32 + 1, cells.y as u32 + 1, cells.z as u32 + 1],
     };
     let mut candidates = Vec::new();
-    let mut light = LightProbe::new(world, &grid, settings.refine_light);
+    let mut light = LightChange::new(world, &grid, settings.refine_light);
     if settings.lattice {
         candidates = lattice_points(&grid, corners, traced, &mut light);
     }
@@ -289,12 +289,12 @@ fn bounds_of(corners: &[[Vec3; 3]], traced: &[u32]) -> (Vec3, Vec3) {
 /// The lattice's candidate points (module docs): every coarse corner, and the corners of
 /// every cell cut to, each with the spacing of its finest cell. A cell is cut into eight where
 /// it holds geometry, and where its parent was cut and the direct light changes across the
-/// parent's corners ([`LightProbe`]).
+/// parent's corners ([`LightChange`]).
 fn lattice_points(
     grid: &CoarseGrid,
     corners: &[[Vec3; 3]],
     traced: &[u32],
-    light: &mut LightProbe<'_>,
+    light: &mut LightChange<'_>,
 ) -> Vec<PlacedProbe> {
     let fine = grid.fine;
     let limit = grid.points.map(|n| (n as i32 - 1) << LEVELS);
@@ -357,7 +357,7 @@ fn lattice_points(
 /// light is one shadow ray per light towards its centre (deterministic), computed once.
 /// Emissive triangles and the sky are not counted (their light changes slowly in open air,
 /// and a deterministic estimate of an area light would need many rays a point).
-struct LightProbe<'a> {
+struct LightChange<'a> {
     world: &'a World,
     grid: CoarseGrid,
     /// Off for `--refine geometry`, and where the scene has no analytic light.
@@ -374,9 +374,9 @@ struct LightProbe<'a> {
 /// brightest's: half.
 pub const LIGHT_CHANGE: f32 = 0.5;
 
-impl<'a> LightProbe<'a> {
+impl<'a> LightChange<'a> {
     fn new(world: &'a World, grid: &CoarseGrid, refine_light: bool) -> Self {
-        LightProbe {
+        LightChange {
             world,
             grid: *grid,
             on: refine_light && !world.lights().is_empty(),
