@@ -100,8 +100,8 @@ impl Default for Levers {
 }
 
 impl Levers {
-    /// The levers before the guiding levers were added: no mixture, an even schedule, splits at 4 records,
-    /// α = 25 % (the per-texel frame, which flipped at n.z = −0, is gone).
+    /// The levers before the guiding levers were added: no mixture, an even schedule, splits
+    /// at 4 records, α = 25 % (the per-texel frame, which flipped at n.z = −0, is gone).
     pub fn before() -> Levers {
         Levers {
             mix: 0,
@@ -243,8 +243,9 @@ impl Method {
 
     /// Parses a label as [`Self::label`] writes it: `guiding/combine/rho|-` and optional
     /// `+key=value` levers (`mix`, `schedule`, `split`, `smooth`, `passes`, `gain`,
-    /// `transport`, `select`, `budget`, `direct`, `lookup`, `target`, `seed`); the
-    /// single word `before` stands for every lever as it was before the guiding levers were added.
+    /// `transport`, `select`, `budget`, `direct`, `lookup`, `filter`, `stop`, `target`, `seed`,
+    /// `iters`); the single word `before` stands for every lever as it was before the guiding
+    /// levers were added.
     ///
     /// # Errors
     /// A message naming the part that is not understood.
