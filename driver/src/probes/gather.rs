@@ -39,7 +39,7 @@ use guidebake_kernels::guide::{self, Guide, GuideNode, GuideParams, Record};
 use guidebake_kernels::mapping::{SPHERE_PDF, invert_sphere_equal_area, sample_sphere_equal_area};
 use guidebake_kernels::packet::{Hit8, Ray, Ray8};
 use guidebake_kernels::sobol::{rotate, rotation, sobol_2d, to_unit};
-use guidebake_kernels::traverse::{intersect8, occluded1};
+use guidebake_kernels::traverse::{WideRef, intersect8, occluded1};
 use guidebake_kernels::warp;
 
 use super::sh::Sh9;
@@ -459,18 +459,14 @@ impl Probe<'_> {
         let mut sh = Sh9::default();
         let view = self.world.wide_bvh();
         for (l, light) in self.world.lights().iter().enumerate() {
-            let (axis, samples) = match *light {
-                AnalyticLight::Sun { to_sun, .. } => (to_sun, (n / 8).max(1)),
-                AnalyticLight::Sphere { center, .. } => {
-                    ((center - self.p).normalize_or_zero(), (n / 8).max(1))
-                }
-                AnalyticLight::Point { position, .. } | AnalyticLight::Spot { position, .. } => {
-                    ((position - self.p).normalize_or_zero(), 1)
-                }
-            };
+            let axis = light_axis(light, self.p);
             if axis == Vec3::ZERO {
                 continue;
             }
+            let samples = match light {
+                AnalyticLight::Point { .. } | AnalyticLight::Spot { .. } => 1,
+                AnalyticLight::Sun { .. } | AnalyticLight::Sphere { .. } => (n / 8).max(1),
+            };
             let mut sum = Sh9::default();
             for s in 0..samples {
                 let mut rng = SampleRng::new(
@@ -479,31 +475,61 @@ impl Probe<'_> {
                     self.iteration,
                     (l as u32) << 12 | s,
                 );
-                let Some(sample) = light.sample(self.p, axis, rng.pair()) else {
+                let Some((direction, value)) =
+                    light_sample_at(&view, light, self.p, axis, rng.pair())
+                else {
                     continue;
                 };
-                let cos = axis.dot(sample.direction);
-                if cos <= 1e-6 {
-                    continue;
-                }
                 count.shadow_rays += 1;
-                let tmax = if sample.distance.is_finite() {
-                    sample.distance * (1.0 - 1e-4)
-                } else {
-                    f32::INFINITY
-                };
-                if occluded1(&view, &Ray::new(self.p, sample.direction, 0.0, tmax)) {
-                    continue;
-                }
-                let value = sample.weight / cos;
-                if value.is_finite() {
-                    sum.add(sample.direction, value);
+                if let Some(value) = value {
+                    sum.add(direction, value);
                 }
             }
             sh = sh.plus(&sum.scaled(1.0 / samples as f32));
         }
         sh
     }
+}
+
+/// The axis a probe at `p` samples `light` about, its stand-in for a surface normal: towards
+/// the light's centre (the sun's direction); zero where `p` is the centre.
+pub(super) fn light_axis(light: &AnalyticLight, p: Vec3) -> Vec3 {
+    match *light {
+        AnalyticLight::Sun { to_sun, .. } => to_sun,
+        AnalyticLight::Sphere { center, .. } => (center - p).normalize_or_zero(),
+        AnalyticLight::Point { position, .. } | AnalyticLight::Spot { position, .. } => {
+            (position - p).normalize_or_zero()
+        }
+    }
+}
+
+/// A next-event sample of `light` from the point `p` about `axis` ([`light_axis`]) with the
+/// random pair `u`: `None` where it needs no shadow ray (the light cannot reach `p`, or the
+/// sample lies below `axis`'s horizon); else its direction and, where the shadow ray is
+/// unoccluded and the value finite, the radiance it brings, `weight / cos`.
+pub(super) fn light_sample_at(
+    view: &WideRef<'_>,
+    light: &AnalyticLight,
+    p: Vec3,
+    axis: Vec3,
+    u: [f32; 2],
+) -> Option<(Vec3, Option<Vec3>)> {
+    let sample = light.sample(p, axis, u)?;
+    let cos = axis.dot(sample.direction);
+    if cos <= 1e-6 {
+        return None;
+    }
+    let tmax = if sample.distance.is_finite() {
+        sample.distance * (1.0 - 1e-4)
+    } else {
+        f32::INFINITY
+    };
+    let lit = !occluded1(view, &Ray::new(p, sample.direction, 0.0, tmax));
+    let value = sample.weight / cos;
+    Some((
+        sample.direction,
+        (lit && value.is_finite()).then_some(value),
+    ))
 }
 
 #[cfg(test)]

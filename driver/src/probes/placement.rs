@@ -30,13 +30,13 @@ use std::path::Path;
 
 use glam::Vec3;
 use guidebake_kernels::estimator::luminance_f32;
-use guidebake_kernels::packet::{Hit8, NO_HIT, Ray, Ray8};
-use guidebake_kernels::traverse::{intersect8, occluded1};
+use guidebake_kernels::packet::{Hit8, NO_HIT, Ray8};
+use guidebake_kernels::traverse::intersect8;
 use rayon::prelude::*;
 
+use super::gather::{light_axis, light_sample_at};
 use crate::prepare::facing::INSIDE_SHARE;
 use crate::texels::{SEEN_BACK, SEEN_FRONT};
-use crate::transport::lights::AnalyticLight;
 use crate::transport::world::{World, closest_point_on_triangle};
 
 /// The default finest spacing: the level's longest side over this many cells.
@@ -440,31 +440,16 @@ fn direct_light(world: &World, p: Vec3) -> (f32, u64) {
     let mut sum = 0.0;
     let mut rays = 0;
     for light in world.lights() {
-        let axis = match *light {
-            AnalyticLight::Sun { to_sun, .. } => to_sun,
-            AnalyticLight::Sphere { center, .. } => (center - p).normalize_or_zero(),
-            AnalyticLight::Point { position, .. } | AnalyticLight::Spot { position, .. } => {
-                (position - p).normalize_or_zero()
-            }
-        };
+        let axis = light_axis(light, p);
         if axis == Vec3::ZERO {
             continue;
         }
-        let Some(sample) = light.sample(p, axis, [0.5, 0.5]) else {
+        let Some((_, value)) = light_sample_at(&view, light, p, axis, [0.5, 0.5]) else {
             continue;
-        };
-        let cos = axis.dot(sample.direction);
-        if cos <= 1e-6 {
-            continue;
-        }
-        let tmax = if sample.distance.is_finite() {
-            sample.distance * (1.0 - 1e-4)
-        } else {
-            f32::INFINITY
         };
         rays += 1;
-        if !occluded1(&view, &Ray::new(p, sample.direction, 0.0, tmax)) {
-            let value = luminance_f32((sample.weight / cos).to_array());
+        if let Some(value) = value {
+            let value = luminance_f32(value.to_array());
             if value.is_finite() {
                 sum += value;
             }
