@@ -723,8 +723,8 @@ fn a_probe_bake_stopped_by_ctrl_c_resumes_to_the_same_bytes() {
 
 /// `bake --probes` bakes the lightmap, then the probes from it: the same probe file and
 /// volume as `probes --lightmap` run after the bake. What it cannot do it refuses before
-/// baking anything: a probe file named as the lightmap, an EXR or the texel file, or probes
-/// from a shard.
+/// baking anything: a probe file named as the lightmap, an EXR, the texel file or a file of
+/// the scene, or probes from a shard.
 #[test]
 fn bake_bakes_probes_from_the_lightmap_it_writes() {
     let tmp = tempfile::tempdir().unwrap();
@@ -732,6 +732,7 @@ fn bake_bakes_probes_from_the_lightmap_it_writes() {
     let (scene, texels, lightmap) = baked(dir);
     let both = dir.join("both.exr");
     let probes = dir.join("both.probes");
+    let room_mtl = dir.join("room.mtl");
     let bake = |extra: &[&str]| -> Vec<String> {
         let mut a: Vec<String> = ["bake", s(&texels), "--scene", s(&scene), "-o", s(&both)]
             .iter()
@@ -749,6 +750,11 @@ fn bake_bakes_probes_from_the_lightmap_it_writes() {
             vec!["--probes", s(&texels)],
             "would overwrite the texel file",
         ),
+        (
+            vec!["--probes", s(&room_mtl)],
+            "would overwrite a file of the scene",
+        ),
+        (vec!["--probes", "x.EXR"], "not an EXR"),
         (
             vec!["--probes", s(&probes), "--shard", "0/2"],
             "after `guidebake merge`",

@@ -276,6 +276,14 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         &args.lights,
         true,
     )?;
+    if let Some(p) = &probes {
+        // The probes' files against the inputs and the scene's own files, before any baking;
+        // the lightmap they read is this bake's output.
+        let files = super::probes::probe_files(p, "--probes", true)?
+            .reads_each("a file of the scene", &notes.files_read);
+        files.check()?;
+        super::interrupt::register_outputs(files.outputs());
+    }
     if TexelFile::peek_header(&args.texels).is_some_and(|h| lights_differ(&h, &scene)) {
         eprintln!(
             "guidebake: warning: {}: prepared under other lights than this bake's (--sun, --sky, the scene's lights or emission differ); prepare decided under those which sides of each surface are baked and which texels lie inside geometry: run prepare again with the same --sun and --sky",
@@ -315,7 +323,7 @@ pub fn run(args: &BakeArgs) -> Result<(), super::CmdError> {
         eprintln!("{}", summary(&job, &report));
     }
     match probes {
-        Some(p) => bake_probes(&p, &args.out),
+        Some(p) => bake_probes(&p, &scene, &args.out),
         None => Ok(()),
     }
 }
@@ -347,15 +355,6 @@ fn probe_args(
             out.display()
         )));
     }
-    if out
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
-    {
-        return Err(super::usage(format!(
-            "--probes {}: the probe file is not an EXR (name it LEVEL.probes; its volume textures are written beside it)",
-            out.display()
-        )));
-    }
     let path = |p: &std::path::Path| p.to_string_lossy().into_owned();
     let mut probes = <Probes as clap::Parser>::try_parse_from([
         "probes".to_owned(),
@@ -377,19 +376,19 @@ fn probe_args(
     probes.threads = args.threads;
     probes.resume = args.resume;
     probes.quiet = args.quiet;
-    super::probes::check_args(&probes)?;
-    super::probes::probe_files(&probes, "--probes", true)?.check()?;
+    super::probes::check_args(&probes, "--probes")?;
     Ok(probes)
 }
 
-/// Bakes the probes of `bake --probes` from the lightmap just written; if they are stopped,
+/// Bakes the probes of `bake --probes` in `scene` from the lightmap just written; if they are stopped,
 /// says so, and that `guidebake probes … --resume` finishes them without baking the lightmap
 /// again.
 fn bake_probes(
     probes: &super::probes::ProbesArgs,
+    scene: &Scene,
     lightmap: &std::path::Path,
 ) -> Result<(), super::CmdError> {
-    super::probes::run(probes).map_err(|e| -> super::CmdError {
+    super::probes::run_on(probes, scene).map_err(|e| -> super::CmdError {
         if e.downcast_ref::<super::Interrupted>().is_none() {
             return e;
         }

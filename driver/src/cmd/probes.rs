@@ -15,7 +15,7 @@ use crate::probes::{
     BATCH_CLUSTERS, ProbeError, ProbeReport, ProbeSettings, WorkOptions, bake_probes,
 };
 use crate::render::Lightmap;
-use crate::scene::TextureOptions;
+use crate::scene::{Scene, TextureOptions};
 use crate::texels::TexelFile;
 
 use super::OnOff;
@@ -147,12 +147,12 @@ fn stats_path(out: &std::path::Path) -> PathBuf {
     PathBuf::from(name)
 }
 
-/// The checks of `probes`' options among themselves (`bake --probes` makes them too, before
-/// its lightmap is baked).
+/// The checks of `probes`' options among themselves, the probe file named as `out_flag`
+/// (`bake --probes` makes them too, before its lightmap is baked).
 ///
 /// # Errors
 /// A usage error naming the option.
-pub fn check_args(args: &ProbesArgs) -> Result<(), super::CmdError> {
+pub fn check_args(args: &ProbesArgs, out_flag: &str) -> Result<(), super::CmdError> {
     if let Some(d) = args.spacing.filter(|d| !(d.is_finite() && *d > 0.0)) {
         return Err(super::usage(format!(
             "--spacing {d}: a positive, finite distance in scene units"
@@ -166,9 +166,13 @@ pub fn check_args(args: &ProbesArgs) -> Result<(), super::CmdError> {
             "--transport lightmap needs --lightmap OUT.exr (the lightmap the probes read)",
         ));
     }
-    if args.out.extension().is_some_and(|e| e == "exr") {
+    if args
+        .out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    {
         return Err(super::usage(format!(
-            "-o {}: the probe file is not an EXR (name it LEVEL.probes; its volume textures are written beside it)",
+            "{out_flag} {}: the probe file is not an EXR (name it LEVEL.probes; its volume textures are written beside it)",
             args.out.display()
         )));
     }
@@ -228,14 +232,10 @@ pub fn probe_files(
 /// each named; Ctrl-C (exit 130), the finished batches kept for `--resume`. Nothing is ever
 /// left at the final paths on failure.
 pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
-    check_args(args)?;
+    check_args(args, "-o")?;
     let files = probe_files(args, "-o", false)?;
     files.check()?;
     super::interrupt::register_outputs(files.outputs());
-    let points = match &args.points {
-        Some(p) => read_points(p)?,
-        None => Vec::new(),
-    };
     let (scene, _) = super::scene::load_checked(
         files,
         &args.scene,
@@ -243,9 +243,22 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
         &args.lights,
         true,
     )?;
+    run_on(args, &scene)
+}
+
+/// [`run`] on `scene`, loaded under `args`' lights with its files and `args`' checked
+/// (`bake --probes` passes the scene it baked, whose files it checked against the probes').
+///
+/// # Errors
+/// As [`run`].
+pub fn run_on(args: &ProbesArgs, scene: &Scene) -> Result<(), super::CmdError> {
+    let points = match &args.points {
+        Some(p) => read_points(p)?,
+        None => Vec::new(),
+    };
     let texels = TexelFile::open(&args.texels)?;
     let lightmap = match &args.lightmap {
-        Some(path) => Some(Lightmap::load(&texels, &scene, path)?),
+        Some(path) => Some(Lightmap::load(&texels, scene, path)?),
         None => None,
     };
     let transport = match (args.transport, &lightmap) {
@@ -277,7 +290,7 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
         record: BakeRecord::new(
             work::options(&settings, &lightmap_identity(args)?, batch_clusters),
             &texels,
-            &scene,
+            scene,
         ),
         batch_clusters,
         stop_after: args.stop_after_batches,
@@ -294,7 +307,7 @@ pub fn run(args: &ProbesArgs) -> Result<(), super::CmdError> {
     let report = pool
         .install(|| {
             bake_probes(
-                &scene,
+                scene,
                 &texels,
                 lightmap.as_ref(),
                 &args.out,

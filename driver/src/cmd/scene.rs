@@ -58,18 +58,7 @@ pub fn load_lit_scene(
     lit: bool,
 ) -> Result<(Scene, LoadNotes), super::CmdError> {
     let (mut scene, notes) = Scene::load_reporting(path, textures)?;
-    // A scene loaded twice in one run (`bake --probes`) warns once.
-    static WARNED: std::sync::Mutex<Vec<std::path::PathBuf>> = std::sync::Mutex::new(Vec::new());
-    let mut warned = WARNED
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    let warnings = if warned.iter().any(|p| p == path) {
-        Vec::new()
-    } else {
-        warned.push(path.to_owned());
-        notes.warnings(path)
-    };
-    drop(warned);
+    let warnings = notes.warnings(path);
     for w in warnings.iter().take(SHOWN) {
         eprintln!("guidebake: warning: {w}");
     }
